@@ -1,0 +1,77 @@
+"""The recording chain: 3-pole anti-alias low-pass at 0.3 fs, decimation, ADC (App. A.5, A.7).
+
+The thesis amplified each signal to about +-1 V before recording; here each channel has a
+selectable full-scale range (the gain) and a ``bits``-bit converter. A sample beyond full scale
+is clipped to the end code and flagged, never wrapped.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+#: Full-scale ranges (V) a channel may be set to; programmable-gain steps.
+ADC_RANGES_V = (10.0, 5.0, 2.0, 1.0, 0.5, 0.2, 0.1, 0.05, 0.02, 0.01)
+
+
+class RangeError(ValueError):
+    """A requested ADC range is not one the converter has."""
+
+
+def check_range(channel: str, range_V: float) -> float:
+    if range_V not in ADC_RANGES_V:
+        raise RangeError(f"ADC range {range_V!r} V for {channel} is not available "
+                         f"(choose one of {', '.join(str(r) for r in ADC_RANGES_V)} V)")
+    return float(range_V)
+
+
+def quantize(v: np.ndarray, range_V: float, bits: int) -> tuple[np.ndarray, np.ndarray]:
+    """Volts -> volts on the converter's grid, and the overrange flags (|v| beyond full scale).
+
+    Codes run from -2^(bits-1) to 2^(bits-1) - 1 with LSB q = 2 range / 2^bits; the Widrow
+    quantization-noise floor is q^2 dt / 12 (App. A.7).
+    """
+    q = 2.0 * range_V / 2**bits
+    lo, hi = -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
+    code = np.rint(v / q)
+    over = (v > range_V) | (v < -range_V) | ~np.isfinite(v)
+    code = np.clip(np.nan_to_num(code, nan=0.0), lo, hi)
+    return code * q, over
+
+
+@dataclass
+class SamplingChain:
+    """Anti-alias filter at the plant's internal rate, decimation by ``oversample``, ADC."""
+
+    channels: tuple[str, ...]
+    rate_hz: float
+    oversample: int
+    fraction: float = 0.3
+    poles: int = 3
+    bits: int = 16
+
+    def __post_init__(self) -> None:
+        fs_int = self.rate_hz * self.oversample
+        self.sos = scipy.signal.butter(self.poles, self.fraction * self.rate_hz, fs=fs_int, output="sos")
+        self.zi = np.zeros((self.sos.shape[0], 2, len(self.channels)))
+        self.phase = 0  # internal samples to skip before the next kept one
+        self.ranges = {c: 10.0 for c in self.channels}
+
+    def set_range(self, channel: str, range_V: float) -> None:
+        if channel not in self.ranges:
+            raise KeyError(f"unknown channel {channel!r}")
+        self.ranges[channel] = check_range(channel, range_V)
+
+    def process(self, analog: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Filter (n_int, nch) analog volts; return (kept internal indices, volts, overrange)."""
+        filtered, self.zi = scipy.signal.sosfilt(self.sos, analog, axis=0, zi=self.zi)
+        keep = np.arange(self.phase, len(analog), self.oversample)
+        self.phase = (self.phase - len(analog)) % self.oversample
+        out = filtered[keep]
+        volts = np.empty_like(out)
+        over = np.empty(out.shape, bool)
+        for j, c in enumerate(self.channels):
+            volts[:, j], over[:, j] = quantize(out[:, j], self.ranges[c], self.bits)
+        return keep, volts, over

@@ -1,0 +1,367 @@
+"""The simulated Fixed Base Simulator: plant, noise, relays and recording chain, in blocks.
+
+``Simulator.advance(n)`` returns the next ``n`` output samples of every recorded channel, as
+the ADC would deliver them. Console-side settings (mode, caging inhibits, torquer biases,
+command and autocollimator-bias voltages, table angles) take effect at the next block; drive
+it in small blocks for fine timing. The physics is deterministic per seed and independent of
+how a run is cut into blocks.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import geometry
+from .clock import VirtualClock
+from .kernel import CompiledPlant
+from .noise import FlickerNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
+from .params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
+from .plant import (CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize,
+                    torquer_limit_V)
+from .sampling import SamplingChain
+
+log = logging.getLogger(__name__)
+
+#: Band in which Table 1 quotes the autocollimator noise-equivalent angle.
+NEA_BAND_HZ = (0.1, 100.0)
+#: Band in which the gyro pickoff noise rms is quoted (Ch. V, 0.1-200 Hz).
+PICKOFF_BAND_HZ = (0.1, 200.0)
+SPIN_READY = 0.99
+
+
+@dataclass
+class Block:
+    """``n`` samples of every channel from ``t0`` (s) at ``rate_hz``; volts as the ADC gives them."""
+
+    t0: float
+    rate_hz: float
+    channels: tuple[str, ...]
+    volts: np.ndarray            # (n, n_channels)
+    overrange: np.ndarray        # (n, n_channels) bool
+    truth: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __getitem__(self, channel: str) -> np.ndarray:
+        if channel in self.truth:
+            return self.truth[channel]
+        return self.volts[:, self.channels.index(channel)]
+
+    def __len__(self) -> int:
+        return len(self.volts)
+
+
+def ac_white_psd(nea_urad: float, corner_hz: float, w: float, zeta: float) -> float:
+    """One-sided white PSD (rad^2/Hz) of the autocollimator angle noise such that the control
+    channel (second-order filter w, zeta; eq. 3.21) shows ``nea_urad`` rms in 0.1-100 Hz
+    with a 1/f part meeting the white level at ``corner_hz`` (Table 1, Fig. 32)."""
+    f = np.geomspace(*NEA_BAND_HZ, 4000)
+    s = 2j * math.pi * f
+    h2 = np.abs(w * w / (s * s + 2 * zeta * w * s + w * w)) ** 2
+    gain = np.trapezoid((1.0 + corner_hz / f) * h2, f)
+    return (nea_urad * URAD) ** 2 / gain
+
+
+def pickoff_white_psd(rms_urad: float, lines: list) -> float:
+    """White PSD (rad^2/Hz) that with the discrete lines makes ``rms_urad`` in 0.1-200 Hz."""
+    var = (rms_urad * URAD) ** 2 - sum((a * URAD) ** 2 / 2 for _, a in lines)
+    return max(var, 0.0) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
+
+
+class _Sources:
+    """All random inputs of the plant, one independent stream each."""
+
+    def __init__(self, cfg: SimConfig, seed: int, dt: float) -> None:
+        ss = np.random.SeedSequence(seed)
+        names = ([f"nac_{a}" for a in AXES] + [f"np_{c}" for c in GYRO_CHANNELS]
+                 + [f"wrand_{c}" for c in GYRO_CHANNELS] + [f"md_{a}" for a in AXES])
+        rngs = dict(zip(names, (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(len(names)))))
+
+        def sub(name: str) -> np.random.Generator:
+            return np.random.Generator(np.random.PCG64(rngs[name].integers(2**63)))
+
+        self.parts: dict[str, list] = {}
+        for a in AC_AXES:
+            ac = cfg.autocollimator[a]
+            white = ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s,
+                                 ac.control_filter_zeta)
+            self.parts[f"nac_{a}"] = [
+                WhiteNoise(sub(f"nac_{a}"), white, dt),
+                FlickerNoise(sub(f"nac_{a}"), white * ac.flicker_corner_hz, 1e-4, 50.0, dt),
+                FlickerNoise(sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt),
+                TelegraphJumps(sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt),
+            ]
+        az = cfg.azimuth
+        level = (az.nea_urad * URAD) ** 2 / math.log(NEA_BAND_HZ[1] / NEA_BAND_HZ[0])
+        self.parts["nac_Z"] = [FlickerNoise(sub("nac_Z"), level, 1e-4, 200.0, dt)]
+        for c in GYRO_CHANNELS:
+            g = cfg.gyro[c]
+            lines = [(f, a * URAD) for f, a in g.pickoff_lines if f < 0.5 / dt]
+            self.parts[f"np_{c}"] = [
+                WhiteNoise(sub(f"np_{c}"), pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines), dt),
+                Lines(sub(f"np_{c}"), lines, dt),
+            ]
+            # Random drift (IEEE 952 conventions, one-sided PSDs): white rate 2 N^2,
+            # flicker B^2/(pi f), rate random walk K.
+            self.parts[f"wrand_{c}"] = [
+                WhiteNoise(sub(f"wrand_{c}"), 2 * (g.arw_urad_per_sqrt_s * URAD) ** 2, dt),
+                FlickerNoise(sub(f"wrand_{c}"), (g.bias_instability_urad_per_s * URAD) ** 2 / math.pi,
+                             1e-5, 1.0, dt),
+                RandomWalk(sub(f"wrand_{c}"), g.rrw_urad_per_s_per_sqrt_s * URAD, dt),
+            ]
+        for a in AXES:
+            p = cfg.platform[a]
+            # Optional platform disturbance torque (effect `platform_disturbance`): white noise
+            # through a first-order lag at the corner, scaled to the requested rms.
+            psd = (p.disturbance_torque_rms_Nm ** 2) * 4 / (2 * math.pi * p.disturbance_corner_hz) \
+                if p.disturbance_torque_rms_Nm > 0 else 0.0
+            self.parts[f"md_{a}"] = [_Lag(sub(f"md_{a}"), psd, p.disturbance_corner_hz, dt)]
+
+    def take(self, name: str, n: int) -> np.ndarray:
+        out = np.zeros(n)
+        for part in self.parts[name]:
+            out += part.take(n)
+        return out
+
+
+class _Lag:
+    """White noise of one-sided PSD ``psd`` through w/(s+w), w = 2 pi corner (exact ZOH)."""
+
+    def __init__(self, rng: np.random.Generator, psd: float, corner_hz: float, dt: float) -> None:
+        self.white = WhiteNoise(rng, psd, dt)
+        self.a = math.exp(-2 * math.pi * corner_hz * dt)
+        self.y = 0.0
+
+    def take(self, n: int) -> np.ndarray:
+        if self.white.sigma == 0.0:
+            return np.zeros(n)
+        import scipy.signal
+        y, zf = scipy.signal.lfilter([1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y])
+        self.y = float(y[-1])
+        return y
+
+
+class Simulator:
+    """The simulated rig, from the relays to the ADC.
+
+    Parameters
+    ----------
+    cfg : the rig's parameters (``SimConfig()`` is the thesis rig).
+    rate_hz : output sample rate of the ADC.
+    seed : one seed for every random source.
+    mode : relay mode at start (DESIGN.md section 4).
+    spin : gyro wheel speed at start as a fraction of operating speed; default "at speed"
+        for modes 2-6 and "stopped" for mode 1. A run started in modes 3-5 with the wheels at
+        speed starts in the caged steady state, as a rig that has been running for hours.
+    truth : also return the true platform angles ``theta_x, theta_y, theta_z`` (rad).
+    """
+
+    def __init__(self, cfg: SimConfig | None = None, rate_hz: float = 1000.0, seed: int = 0,
+                 mode: int = 3, spin: float | None = None, truth: bool = False,
+                 clock: VirtualClock | None = None) -> None:
+        self.cfg = cfg = (cfg or SimConfig()).copy()
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise ValueError(f"sample rate {rate_hz!r} Hz must be a positive number")
+        s = cfg.sampling
+        self.rate_hz = float(rate_hz)
+        self.oversample = max(s.oversample, int(math.ceil(s.min_internal_rate_hz / rate_hz)))
+        self.dt = 1.0 / (self.rate_hz * self.oversample)
+        self.clock = clock or VirtualClock()
+        self.truth = truth
+        self.step = 0  # internal steps done
+        self.relays = RelayState(mode=mode, spin=(1.0 if mode >= 2 else 0.0) if spin is None else spin)
+        self.vtd = dict.fromkeys(AXES, 0.0)
+        self.gamma_c = dict.fromkeys(AXES, 0.0)
+        self.bias = dict.fromkeys(GYRO_CHANNELS, 0.0)
+        self.sources = _Sources(cfg, seed, self.dt)
+        self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
+                                   s.anti_alias_poles, s.adc_bits)
+        for c in CHANNELS:
+            self.chain.ranges[c] = s.default_range_V
+        self._pickup = [(CHANNELS.index(p.channel), p.freq_hz, p.amplitude_V) for p in cfg.pickup
+                        if self._check_channel(p.channel)]
+        self._cache: dict[RelayState, CompiledPlant] = {}
+        self._compiled = self._compile(self.relays)
+        n_nl = len(self._compiled.nl_kind)
+        self.nl_state = np.zeros((n_nl, 2))
+        self.nl_state[:, 1] = np.nan
+        self.x = np.zeros(len(self._compiled.disc.plant.states))
+        if self.relays.spin >= SPIN_READY and self.relays.mode in (3, 4, 5):
+            self._settle()
+
+    # ------------------------------------------------------------------ console-side settings
+    @staticmethod
+    def _check_channel(name: str) -> bool:
+        if name not in CHANNELS:
+            raise ValueError(f"pickup channel {name!r} is not a recorded channel ({', '.join(CHANNELS)})")
+        return True
+
+    @property
+    def mode(self) -> int:
+        return self.relays.mode
+
+    @property
+    def time_s(self) -> float:
+        return self.step * self.dt
+
+    @property
+    def spin(self) -> float:
+        return self.relays.spin
+
+    @property
+    def gyros_at_speed(self) -> bool:
+        return self.relays.spin >= SPIN_READY
+
+    def set_mode(self, mode: int) -> None:
+        """Switch the mode relays (the console's hold/set/release is the drivers' business)."""
+        self._switch(RelayState(mode, self.relays.caging_inhibit, self.relays.spin))
+
+    def set_caging_inhibit(self, channel: str, inhibit: bool) -> None:
+        flags = list(self.relays.caging_inhibit)
+        flags[GYRO_CHANNELS.index(channel)] = bool(inhibit)
+        self._switch(RelayState(self.relays.mode, tuple(flags), self.relays.spin))
+
+    def set_torquer_bias_V(self, channel: str, volts: float) -> None:
+        self._require(channel in GYRO_CHANNELS, f"unknown gyro channel {channel!r}")
+        self.bias[channel] = float(volts)
+
+    def set_command_torque_V(self, axis: str, volts: float) -> None:
+        self._require(axis in AXES, f"unknown axis {axis!r}")
+        self.vtd[axis] = float(volts)
+
+    def set_ac_bias_V(self, axis: str, volts: float) -> None:
+        self._require(axis in AXES, f"unknown axis {axis!r}")
+        self.gamma_c[axis] = float(volts)
+
+    def set_table(self, tilt_deg: float | None = None, spindle_deg: float | None = None) -> None:
+        if tilt_deg is not None:
+            self._require(0.0 <= tilt_deg <= 90.0, f"table tilt {tilt_deg} deg outside 0..90 deg")
+            self.cfg.table.tilt_deg = float(tilt_deg)
+        if spindle_deg is not None:
+            self.cfg.table.spindle_deg = float(spindle_deg)
+
+    def set_range(self, channel: str, range_V: float) -> None:
+        self.chain.set_range(channel, range_V)
+
+    @staticmethod
+    def _require(ok: bool, msg: str) -> None:
+        if not ok:
+            raise ValueError(msg)
+
+    # ------------------------------------------------------------------ model bookkeeping
+    def _compile(self, relays: RelayState) -> CompiledPlant:
+        cp = self._cache.get(relays)
+        if cp is None:
+            cp = CompiledPlant.build(discretize(build_plant(self.cfg, relays), self.dt))
+            if len(self._cache) > 64:
+                self._cache.clear()
+            self._cache[relays] = cp
+        return cp
+
+    def _switch(self, relays: RelayState) -> None:
+        if relays != self.relays:
+            self.relays = relays
+            self._compiled = self._compile(relays)  # same state layout in every relay state
+
+    def _slow_inputs(self) -> np.ndarray:
+        cfg = self.cfg
+        axes = geometry.platform_axes_enu(math.radians(cfg.table.tilt_deg), math.radians(cfg.table.spindle_deg),
+                                          math.radians(cfg.table.base_azimuth_offset_deg))
+        w = geometry.earth_rate_platform(math.radians(cfg.site.latitude_deg), cfg.site.earth_rate_rad_per_s, axes)
+        f = geometry.specific_force_platform(axes)
+        axis_i = {"X": 0, "Y": 1, "Z": 2, "XRD": 0}
+        values = {}
+        for a in AXES:
+            values[f"vtd_{a}"] = self.vtd[a]
+            values[f"gc_{a}"] = self.gamma_c[a]
+        for c in GYRO_CHANNELS:
+            g = cfg.gyro[c]
+            drift = (g.fixed_drift_urad_per_s + g.g_drift_x_urad_per_s_per_g * f[0]
+                     + g.g_drift_y_urad_per_s_per_g * f[1] + g.g_drift_z_urad_per_s_per_g * f[2]) * URAD
+            values[f"vb_{c}"] = self.bias[c]
+            values[f"wconst_{c}"] = w[axis_i[c]] + drift
+        return np.array([values[s] for s in self._compiled.disc.plant.slow_inputs])
+
+    def _settle(self) -> None:
+        """Start in the steady state of the linear model for the present slow inputs."""
+        plant = self._compiled.disc.plant
+        slow = self._slow_inputs()
+        rhs = -plant.B[:, self._compiled.slow_cols] @ slow
+        self.x = np.linalg.lstsq(plant.A, rhs, rcond=None)[0]
+
+    def _spin_target(self) -> float:
+        return 0.0 if self.relays.mode == 1 else 1.0
+
+    # ------------------------------------------------------------------ stepping
+    def advance(self, n: int) -> Block:
+        """Simulate the next ``n`` output samples and return them as the ADC delivers them."""
+        if n < 0:
+            raise ValueError(f"sample count {n} must be >= 0")
+        t0 = self.step * self.dt  # blocks always start on an output sample
+        n_int = n * self.oversample
+        chunks = []
+        done = 0
+        while done < n_int:
+            m = n_int - done
+            if self._spin_transient():
+                m = min(m, max(1, int(0.25 / self.dt)))
+            chunks.append(self._run_internal(m))
+            done += m
+            self._evolve_spin(m * self.dt)
+        ny = len(CHANNELS)
+        y = np.concatenate(chunks) if chunks else np.zeros((0, ny + len(TRUTH_CHANNELS)))
+        analog = y[:, :ny]
+        for col, freq, amp in self._pickup:
+            k = self.step - n_int + np.arange(n_int)
+            analog[:, col] += amp * np.sin(2 * math.pi * np.mod(k * (freq * self.dt), 1.0))
+        keep, volts, over = self.chain.process(analog)
+        truth = {}
+        if self.truth:
+            for i, name in enumerate(TRUTH_CHANNELS):
+                truth[name] = y[keep, ny + i]
+        self.clock.advance_to(self.time_s)
+        return Block(t0, self.rate_hz, CHANNELS, volts, over, truth)
+
+    def _spin_transient(self) -> bool:
+        return abs(self.relays.spin - self._spin_target()) > 1e-6
+
+    def _evolve_spin(self, elapsed: float) -> None:
+        target = self._spin_target()
+        if not self._spin_transient():
+            return
+        p = self.cfg.gyros
+        tau = (p.spin_up_time_s if target > self.relays.spin else p.spin_down_time_s) / math.log(100.0)
+        spin = target + (self.relays.spin - target) * math.exp(-elapsed / tau)
+        if abs(spin - target) < 1e-3:
+            spin = target
+        spin = round(spin, 3)  # quantized so the model cache stays small
+        self._switch(RelayState(self.relays.mode, self.relays.caging_inhibit, spin))
+
+    def _run_internal(self, m: int) -> np.ndarray:
+        cp = self._compiled
+        plant = cp.disc.plant
+        u = np.zeros((m, len(cp.fast_cols)))
+        for j, i in enumerate(cp.fast_cols):
+            name = plant.inputs[i]
+            if name.startswith("corr_"):
+                continue
+            u[:, j] = self.sources.take(name, m)
+        y = np.empty((m, len(plant.outputs)))
+        cp.run(self.x, u, self._slow_inputs(), self.nl_state, y)
+        self.step += m
+        order = [plant.outputs.index(c) for c in CHANNELS + TRUTH_CHANNELS]
+        return y[:, order]
+
+    def run(self, duration_s: float, block_s: float = 10.0):
+        """Yield blocks covering ``duration_s`` seconds (rounded to whole samples)."""
+        total = int(round(duration_s * self.rate_hz))
+        per = max(1, int(round(block_s * self.rate_hz)))
+        while total > 0:
+            n = min(per, total)
+            yield self.advance(n)
+            total -= n
+
+    def torquer_limit_V(self, channel: str) -> float:
+        return torquer_limit_V(self.cfg, channel)
