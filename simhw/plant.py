@@ -363,6 +363,16 @@ def discretize(plant: Plant, dt: float) -> DiscretePlant:
     return DiscretePlant(plant, dt, E[:nx, :nx], E[:nx, nx:])
 
 
-def linearized_poles(cfg: SimConfig, mode: int = 3) -> np.ndarray:
-    """Closed-loop poles (rad/s) of the rig linearized about rest (Dahl -> spring eta To^2)."""
-    return np.linalg.eigvals(build_plant(cfg, RelayState(mode=mode)).A)
+def linearized_poles(cfg: SimConfig, mode: int = 3, axis: str | None = None) -> np.ndarray:
+    """Closed-loop poles (rad/s) of the rig linearized about rest (Dahl -> spring eta To^2).
+
+    With ``axis``, only that platform axis's stabilization loop (in the optical modes the axes
+    decouple, Ch. III H.1): the states carrying the axis in their name, except the output-only
+    instrumentation filter, the gyro channels and the caging amplifiers.
+    """
+    plant = build_plant(cfg, RelayState(mode=mode))
+    if axis is None:
+        return np.linalg.eigvals(plant.A)
+    keep = [i for i, s in enumerate(plant.states) if axis in s.split("_")[1:]
+            and not s.startswith(("acinst", "sigma_", "cage_"))]
+    return np.linalg.eigvals(plant.A[np.ix_(keep, keep)])

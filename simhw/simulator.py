@@ -172,6 +172,7 @@ class Simulator:
         self.truth = truth
         self.step = 0  # internal steps done
         self.relays = RelayState(mode=mode, spin=(1.0 if mode >= 2 else 0.0) if spin is None else spin)
+        self._spin = self.relays.spin  # exact wheel speed; the relay state holds it rounded
         self.vtd = dict.fromkeys(AXES, 0.0)
         self.gamma_c = dict.fromkeys(AXES, 0.0)
         self.bias = dict.fromkeys(GYRO_CHANNELS, 0.0)
@@ -208,11 +209,11 @@ class Simulator:
 
     @property
     def spin(self) -> float:
-        return self.relays.spin
+        return self._spin
 
     @property
     def gyros_at_speed(self) -> bool:
-        return self.relays.spin >= SPIN_READY
+        return self._spin >= SPIN_READY
 
     def set_mode(self, mode: int) -> None:
         """Switch the mode relays (the console's hold/set/release is the drivers' business)."""
@@ -325,19 +326,20 @@ class Simulator:
         return Block(t0, self.rate_hz, CHANNELS, volts, over, truth)
 
     def _spin_transient(self) -> bool:
-        return abs(self.relays.spin - self._spin_target()) > 1e-6
+        return abs(self._spin - self._spin_target()) > 1e-6
 
     def _evolve_spin(self, elapsed: float) -> None:
+        """First-order wheel run-up/run-down reaching 99 % in the configured time."""
         target = self._spin_target()
         if not self._spin_transient():
             return
         p = self.cfg.gyros
-        tau = (p.spin_up_time_s if target > self.relays.spin else p.spin_down_time_s) / math.log(100.0)
-        spin = target + (self.relays.spin - target) * math.exp(-elapsed / tau)
-        if abs(spin - target) < 1e-3:
-            spin = target
-        spin = round(spin, 3)  # quantized so the model cache stays small
-        self._switch(RelayState(self.relays.mode, self.relays.caging_inhibit, spin))
+        tau = (p.spin_up_time_s if target > self._spin else p.spin_down_time_s) / math.log(100.0)
+        self._spin = target + (self._spin - target) * math.exp(-elapsed / tau)
+        if abs(self._spin - target) < 1e-4:
+            self._spin = target
+        # The model is rebuilt for the rounded speed, so the cache of models stays small.
+        self._switch(RelayState(self.relays.mode, self.relays.caging_inhibit, round(self._spin, 3)))
 
     def _run_internal(self, m: int) -> np.ndarray:
         cp = self._compiled

@@ -1,1 +1,101 @@
-"""fbs-hil package."""
+"""The effect catalogue (DESIGN.md section 8): injectable departures from the nominal model.
+
+An effect is one module in this package that defines ``EFFECT``, an :class:`Effect`: its
+name, its parameters with defaults and priors, and ``apply``, which returns a modified copy of
+a :class:`~fbs.simhw.params.SimConfig`. ``catalogue()`` finds every module by scanning the
+package, so adding an effect is adding a file; nothing else is edited.
+
+The *nominal* model is the Ch. III plant with the gimbal-bearing torque omitted, as the
+thesis began (Ch. V F); :func:`nominal` builds it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import pkgutil
+from dataclasses import dataclass, field
+from typing import Callable
+
+from ..params import AXES, SimConfig
+
+
+@dataclass(frozen=True)
+class Param:
+    """One effect parameter: default, prior range (for fitting and random draws) and unit."""
+
+    name: str
+    default: float
+    lo: float
+    hi: float
+    log: bool = False  # draw/fit on a log scale
+    doc: str = ""
+
+
+@dataclass(frozen=True)
+class Effect:
+    name: str
+    doc: str
+    params: tuple[Param, ...]
+    apply: Callable[..., SimConfig] = field(repr=False)
+    key_param: str | None = None  # the parameter the gap workflow must recover
+
+    def inject(self, cfg: SimConfig, axis: str = "X", **values: float) -> SimConfig:
+        """A copy of ``cfg`` with this effect on ``axis``; unknown or out-of-prior values raise."""
+        if axis not in AXES:
+            raise ValueError(f"effect {self.name}: unknown axis {axis!r} (one of {', '.join(AXES)})")
+        known = {p.name: p for p in self.params}
+        for k, v in values.items():
+            if k not in known:
+                raise ValueError(f"effect {self.name}: unknown parameter {k!r} "
+                                 f"(parameters: {', '.join(known) or 'none'})")
+            p = known[k]
+            if not p.lo <= v <= p.hi:
+                raise ValueError(f"effect {self.name}: {k} = {v} outside its range {p.lo}..{p.hi}")
+        full = {p.name: p.default for p in self.params} | values
+        return self.apply(cfg.copy(), axis, **full)
+
+
+def catalogue() -> dict[str, Effect]:
+    """Every effect module in this package, by name."""
+    found: dict[str, Effect] = {}
+    for info in pkgutil.iter_modules(__path__):
+        module = importlib.import_module(f"{__name__}.{info.name}")
+        effect = getattr(module, "EFFECT", None)
+        if isinstance(effect, Effect):
+            found[effect.name] = effect
+    return dict(sorted(found.items()))
+
+
+def get(name: str) -> Effect:
+    effects = catalogue()
+    if name not in effects:
+        raise ValueError(f"unknown effect {name!r} (known: {', '.join(effects)})")
+    return effects[name]
+
+
+def parse_spec(spec: str) -> tuple[Effect, dict[str, float], str]:
+    """``name:k=v,k=v[,axis=Y]`` (the ``--effect`` option) -> (effect, values, axis)."""
+    name, _, rest = spec.partition(":")
+    effect = get(name.strip())
+    values: dict[str, float] = {}
+    axis = "X"
+    for item in filter(None, (s.strip() for s in rest.split(","))):
+        k, eq, v = item.partition("=")
+        if not eq:
+            raise ValueError(f"effect {effect.name}: expected key=value, got {item!r}")
+        if k.strip() == "axis":
+            axis = v.strip().upper()
+            continue
+        try:
+            values[k.strip()] = float(v)
+        except ValueError:
+            raise ValueError(f"effect {effect.name}: {k.strip()} = {v!r} is not a number") from None
+    return effect, values, axis
+
+
+def nominal(cfg: SimConfig | None = None) -> SimConfig:
+    """The nominal model: the rig with the gimbal-bearing torque omitted (Ch. V F)."""
+    cfg = (cfg or SimConfig()).copy()
+    for b in cfg.bearing.values():
+        b.model = "none"
+    return cfg

@@ -1,0 +1,18 @@
+"""``flicker_noise``: extra 1/f noise in the autocollimator angle (Ch. V B.3).
+
+Air turbulence in the optical path adds 1/f noise; ``corner_hz`` is where it meets the
+sensor's white (shot-noise) level. It enters the loop, like all sensor noise in Mode 3.
+"""
+
+from . import Effect, Param
+
+
+def _apply(cfg, axis, corner_hz):
+    if axis not in cfg.autocollimator:
+        raise ValueError(f"effect flicker_noise: axis {axis} has no primary autocollimator (X or Y)")
+    cfg.autocollimator[axis].extra_flicker_corner_hz = corner_hz
+    return cfg
+
+
+EFFECT = Effect("flicker_noise", __doc__.strip().splitlines()[0],
+                (Param("corner_hz", 10.0, 0.5, 100.0, log=True),), _apply, key_param="corner_hz")

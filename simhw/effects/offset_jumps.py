@@ -1,0 +1,22 @@
+"""``offset_jumps``: square-wave offsets in the autocollimator (Ch. II B.10).
+
+Two oscillators locking and slipping made the noncontrolling instrument's offset jump like a
+square wave of about 20 arcsec (100 urad) every 40-400 s. Jumps of +-``amplitude_urad`` at
+Poisson times of mean interval ``interval_s``.
+"""
+
+from . import Effect, Param
+
+
+def _apply(cfg, axis, amplitude_urad, interval_s):
+    if axis not in cfg.autocollimator:
+        raise ValueError(f"effect offset_jumps: axis {axis} has no primary autocollimator (X or Y)")
+    ac = cfg.autocollimator[axis]
+    ac.offset_jump_urad, ac.offset_jump_interval_s = amplitude_urad, interval_s
+    return cfg
+
+
+EFFECT = Effect("offset_jumps", __doc__.strip().splitlines()[0],
+                (Param("amplitude_urad", 5.0, 0.2, 200.0, log=True),
+                 Param("interval_s", 60.0, 5.0, 1000.0, log=True)),
+                _apply, key_param="amplitude_urad")

@@ -1,0 +1,20 @@
+"""``pickup_line``: electrical pickup, a sinusoid on a recorded channel (Ch. V D-E).
+
+The thesis saw 200 Hz (the gyro spin-motor drive) in its autocollimator and compensation
+signals. The line is added to the axis's autocollimator control channel as recorded.
+"""
+
+from ..params import PickupLine
+from . import Effect, Param
+
+
+def _apply(cfg, axis, freq_hz, amplitude_V):
+    channel = f"ac_{axis.lower()}_ctl" if axis in ("X", "Y") else "ac_z"
+    cfg.pickup.append(PickupLine(channel, freq_hz, amplitude_V))
+    return cfg
+
+
+EFFECT = Effect("pickup_line", __doc__.strip().splitlines()[0],
+                (Param("freq_hz", 200.0, 1.0, 450.0, log=True),
+                 Param("amplitude_V", 0.003, 1e-4, 0.1, log=True)),
+                _apply, key_param="freq_hz")

@@ -1,0 +1,18 @@
+"""``time_delay``: a pure delay in the autocollimator signal path (Pade, second order).
+
+Slow electronics or digital filtering in the sensor path; it eats phase margin and moves the
+closed-loop peak.
+"""
+
+from . import Effect, Param
+
+
+def _apply(cfg, axis, delay_s):
+    if axis not in cfg.autocollimator:
+        raise ValueError(f"effect time_delay: axis {axis} has no primary autocollimator (X or Y)")
+    cfg.autocollimator[axis].delay_s = delay_s
+    return cfg
+
+
+EFFECT = Effect("time_delay", __doc__.strip().splitlines()[0],
+                (Param("delay_s", 0.002, 1e-4, 0.02, log=True),), _apply, key_param="delay_s")
