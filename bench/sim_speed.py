@@ -50,10 +50,13 @@ AXIS_STATES = ("theta", "omega", "i", "comp1", "comp2", "comp3", "comp4", "acctl
 #: The smooth deterministic autocollimator-noise stand-in: (frequency Hz, amplitude rad, phase).
 INPUT_TONES = ((0.5, 1.0e-6, 0.3), (2.3, 0.8e-6, 1.1), (7.1, 1.2e-6, 2.0),
                (17.9, 0.7e-6, 0.7), (39.7, 0.9e-6, 2.6))
-#: solve_ivp tolerances tried, loosest first; atol is rtol times each state's magnitude.
-RTOLS = (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
-SCIPY_METHODS = ("RK45", "DOP853", "LSODA", "Radau", "BDF")
+#: solve_ivp tolerances tried, loosest first (half decades: generous to scipy); atol is
+#: rtol times each state's magnitude.
+RTOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
+SCIPY_METHODS = ("LSODA", "BDF", "Radau", "RK45", "DOP853")
+#: The reference: DOP853 at this rtol, cross-checked by LSODA at the same rtol.
 REFERENCE_RTOL = 1e-11
+COMPARE_S = 5.0
 
 
 def log(msg: str = "") -> None:
@@ -76,9 +79,23 @@ def peak_rss_mb(who: int) -> float:
 
 # ---------------------------------------------------------------------------- 1. the full rig
 
+def current_rss_mb() -> float:
+    with open("/proc/self/status") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
 def run_hour_child(repeat: int, duration_s: float) -> None:
-    """Child process: warm up, then time ``repeat`` runs of ``duration_s``; print JSON."""
+    """Child process: warm up, then time ``repeat`` fresh runs of ``duration_s``; print JSON.
+
+    Each timed run starts a new Simulator (construction untimed) and discards the blocks
+    as they come, as a streaming consumer would.
+    """
     from fbs.simhw.simulator import Simulator
+
+    rss_imports = current_rss_mb()
 
     def one_run() -> tuple[float, int, float]:
         sim = Simulator(SimConfig(), rate_hz=RATE_HZ, seed=1)
@@ -91,10 +108,10 @@ def run_hour_child(repeat: int, duration_s: float) -> None:
     warm = Simulator(SimConfig(), rate_hz=RATE_HZ, seed=1)
     for _ in warm.run(60.0, block_s=BLOCK_S):  # loads the numba cache, warms the allocator
         pass
-    rss_warm = peak_rss_mb(resource.RUSAGE_SELF)
+    del warm
     runs = [one_run() for _ in range(repeat)]
     print(json.dumps({"seconds": [r[0] for r in runs], "samples": runs[0][1], "dt": runs[0][2],
-                      "rss_after_warmup_mb": rss_warm}))
+                      "rss_imports_mb": rss_imports}))
 
 
 @dataclass
@@ -102,7 +119,7 @@ class HourResult:
     seconds: list[float]
     samples: int
     dt: float
-    rss_after_warmup_mb: float
+    rss_imports_mb: float
     peak_rss_mb: float
     duration_s: float
 
@@ -124,7 +141,7 @@ def bench_full_rig(repeat: int, duration_s: float) -> HourResult:
     if proc.returncode != 0:
         raise RuntimeError(f"hour child failed ({proc.returncode}):\n{proc.stderr}")
     data = json.loads(proc.stdout.strip().splitlines()[-1])
-    return HourResult(data["seconds"], data["samples"], data["dt"], data["rss_after_warmup_mb"],
+    return HourResult(data["seconds"], data["samples"], data["dt"], data["rss_imports_mb"],
                       peak_rss_mb(resource.RUSAGE_CHILDREN), duration_s)
 
 
@@ -267,6 +284,7 @@ class IvpRun:
     theta: np.ndarray
     seconds: float
     nfev: int
+    error: float = math.nan
 
 
 def run_ivp(ode: DahlAxisOde, t_out: np.ndarray, method: str, rtol: float,
@@ -321,8 +339,6 @@ class AxisResult:
     full_kernel_diff: float
     ref_spread: float
     chosen: IvpRun | None
-    chosen_err: float
-    tried: list[tuple[IvpRun, float]]
     corrections_idle: bool
 
     @property
@@ -334,54 +350,67 @@ class AxisResult:
         return self.ivp_s_per_s / self.zoh_s_per_s
 
 
+def zoh_outputs(zoh: ZohAxis, t_out: np.ndarray) -> np.ndarray:
+    """All outputs at the 1 kHz instants t_out (the kernel's y is C x at each step's start)."""
+    dt = zoh.compiled.disc.dt
+    step = int(round(1.0 / (RATE_HZ * dt)))  # internal steps per output sample
+    return zoh.simulate(t_out[-1] + dt)[::step][:len(t_out)]
+
+
+def loosest_passing(ode: DahlAxisOde, t_out: np.ndarray, method: str, scale: np.ndarray,
+                    ref: np.ndarray, max_err: float) -> IvpRun | None:
+    """The run at the loosest rtol of RTOLS whose error is <= max_err, or None."""
+    for rtol in RTOLS:
+        run = run_ivp(ode, t_out, method, rtol, scale)
+        run.error = rel_error(run.theta, ref)
+        log(f"    {method:6s} rtol {rtol:.0e}: error {run.error:.2e}, {run.seconds:7.3f} s, nfev {run.nfev}")
+        if run.error <= max_err:
+            return run
+    return None
+
+
+def fastest_scipy(ode: DahlAxisOde, t_out: np.ndarray, scale: np.ndarray, ref: np.ndarray,
+                  max_err: float, methods: tuple[str, ...], repeat: int) -> IvpRun | None:
+    """Over all methods, the fastest run (best of ``repeat``) at error <= max_err."""
+    best: IvpRun | None = None
+    for method in methods:
+        run = loosest_passing(ode, t_out, method, scale, ref, max_err)
+        if run is None:
+            continue
+        again = best_time(lambda: run_ivp(ode, t_out, method, run.rtol, scale), repeat - 1)
+        run.seconds = min(run.seconds, again)
+        if best is None or run.seconds < best.seconds:
+            best = run
+    return best
+
+
 def bench_axis(t_end: float, dt: float, repeat: int, methods: tuple[str, ...]) -> AxisResult:
-    cfg = SimConfig()
-    full = build_plant(cfg, RelayState(mode=3))
+    full = build_plant(SimConfig(), RelayState(mode=3))
     plant = axis_plant(full, AXIS)
     log(f"  single-axis model: {len(plant.states)} states {plant.states}")
     log(f"  inputs {plant.inputs}; nonlinearities {[nl.name for nl in plant.nonlinear]}")
     zoh = ZohAxis.build(plant, dt, AXIS)
+    full_zoh = ZohAxis.build(full, dt, AXIS)  # cross-check: the whole rig, only nac_X driven
     ode = DahlAxisOde.from_plant(plant, AXIS)
-    step = int(round(1.0 / (RATE_HZ * dt)))  # internal steps per output sample
     t_out = np.arange(int(round(t_end * RATE_HZ)) + 1) / RATE_HZ
 
-    zoh.simulate(0.1)  # compile / load the numba cache
-    y = zoh.simulate(t_out[-1] + dt)
-    theta_zoh = y[::step, zoh.theta_out][:len(t_out)]
+    zoh.simulate(0.1)  # warm-up: load the numba cache
+    y = zoh_outputs(zoh, t_out)
+    theta_zoh = y[:, zoh.theta_out]
     zoh_s = best_time(lambda: zoh.simulate(t_end), repeat)
-    idle = corrections_idle(zoh, plant, y)
-
-    full_zoh = ZohAxis.build(full, dt, AXIS)
-    full_zoh.simulate(0.1)
-    full_diff = float(np.max(np.abs(full_zoh.simulate(t_out[-1] + dt)[::step, full_zoh.theta_out][:len(t_out)]
-                                    - theta_zoh)))
+    full_diff = np.max(np.abs(zoh_outputs(full_zoh, t_out)[:, full_zoh.theta_out] - theta_zoh))
     full_s = best_time(lambda: full_zoh.simulate(t_end), repeat)
 
     scale = state_scale(zoh, ode, t_end)
-    log(f"  reference: solve_ivp rtol={REFERENCE_RTOL:g} (DOP853 and Radau) ...")
-    ref = run_ivp(ode, t_out, "DOP853", REFERENCE_RTOL, scale)
-    ref2 = run_ivp(ode, t_out, "Radau", REFERENCE_RTOL, scale)
-    spread = rel_error(ref2.theta, ref.theta)
-    zoh_err = rel_error(theta_zoh, ref.theta)
-    log(f"  reference spread (DOP853 vs Radau) {spread:.2e}; ZOH error {zoh_err:.2e}")
-
-    tried: list[tuple[IvpRun, float]] = []
-    chosen: tuple[IvpRun, float] | None = None
-    for method in methods:
-        for rtol in RTOLS:
-            run = run_ivp(ode, t_out, method, rtol, scale)
-            err = rel_error(run.theta, ref.theta)
-            tried.append((run, err))
-            log(f"    {method:6s} rtol={rtol:.0e}: error {err:.2e}, {run.seconds:7.3f} s, nfev {run.nfev}")
-            if err <= zoh_err:
-                break
-        else:
-            continue
-        run.seconds = best_time(lambda: run_ivp(ode, t_out, method, rtol, scale), repeat=2)
-        if chosen is None or run.seconds < chosen[0].seconds:
-            chosen = (run, err)
-    return AxisResult(dt, t_end, zoh_s / t_end, zoh_err, full_s / t_end, full_diff / np.sqrt(np.mean(ref.theta ** 2)),
-                      spread, chosen[0] if chosen else None, chosen[1] if chosen else math.nan, tried, idle)
+    log(f"  reference: solve_ivp DOP853 at rtol {REFERENCE_RTOL:g}, checked by LSODA ...")
+    ref = run_ivp(ode, t_out, "DOP853", REFERENCE_RTOL, scale).theta
+    spread = rel_error(run_ivp(ode, t_out, "LSODA", REFERENCE_RTOL, scale).theta, ref)
+    zoh_err = rel_error(theta_zoh, ref)
+    log(f"  reference spread {spread:.1e}; ZOH error {zoh_err:.2e}; loosest solve_ivp rtol at or below it:")
+    chosen = fastest_scipy(ode, t_out, scale, ref, zoh_err, methods, repeat=3)
+    rms = float(np.sqrt(np.mean(ref * ref)))
+    return AxisResult(dt, t_end, zoh_s / t_end, zoh_err, full_s / t_end, float(full_diff) / rms, spread,
+                      chosen, corrections_idle(zoh, plant, y))
 
 
 def corrections_idle(zoh: ZohAxis, plant: Plant, y: np.ndarray) -> bool:
@@ -415,14 +444,14 @@ def report(hour: HourResult, axis: AxisResult) -> None:
     if hour.realtime < TARGET_REALTIME:
         log(f"TARGET MISSED: real-time factor {hour.realtime:.0f}x < {TARGET_REALTIME:.0f}x")
     log(f"  peak memory (RSS)     {hour.peak_rss_mb:8.1f} MB  (child process; "
-        f"{hour.rss_after_warmup_mb:.1f} MB after warm-up)")
+        f"{hour.rss_imports_mb:.1f} MB of it after the imports alone)")
     log("-" * 78)
     log(f"single axis {AXIS}, {axis.t_end:.0f} s simulated, error = max|theta - ref| / rms(ref) at 1 kHz")
     log(f"  ZOH kernel (dt {axis.dt * 1e3:.2f} ms)  {axis.zoh_s_per_s * 1e3:10.3f} ms per simulated s, "
         f"error {axis.zoh_err:.2e}")
     log(f"  full 39-state kernel   {axis.full_kernel_s_per_s * 1e3:10.3f} ms per simulated s "
         f"(same theta_{AXIS} to {axis.full_kernel_diff:.1e})")
-    log(f"  reference spread       {axis.ref_spread:.1e} (DOP853 vs Radau at rtol {REFERENCE_RTOL:g})")
+    log(f"  reference spread       {axis.ref_spread:.1e} (DOP853 vs LSODA at rtol {REFERENCE_RTOL:g})")
     log(f"  clip/softsat corrections idle (ODE omits them): {axis.corrections_idle}")
     if axis.chosen is None:
         log(f"  no solve_ivp tolerance down to {RTOLS[-1]:g} reached the ZOH error")
@@ -430,7 +459,7 @@ def report(hour: HourResult, axis: AxisResult) -> None:
         return
     c = axis.chosen
     log(f"  solve_ivp {c.method} rtol {c.rtol:.0e}  {axis.ivp_s_per_s * 1e3:10.3f} ms per simulated s, "
-        f"error {axis.chosen_err:.2e} (fastest method at error <= ZOH's)")
+        f"error {c.error:.2e} (fastest method at error <= ZOH's)")
     ok = axis.ratio >= TARGET_VS_SCIPY
     log(f"  speed ratio vs solve_ivp {axis.ratio:8.0f} x   target >= {TARGET_VS_SCIPY:.0f}: "
         f"{verdict(ok, 'single-axis kernel')}")
@@ -458,8 +487,7 @@ def main() -> int:
     hour = bench_full_rig(repeat, duration)
     log(f"  runs: {', '.join(f'{s:.2f} s' for s in hour.seconds)}")
     log("[2/2] single axis vs solve_ivp ...")
-    axis = bench_axis(t_end=5.0 if args.quick else 10.0, dt=hour.dt, repeat=5 if args.quick else 20,
-                      methods=SCIPY_METHODS)
+    axis = bench_axis(t_end=COMPARE_S, dt=hour.dt, repeat=5 if args.quick else 20, methods=SCIPY_METHODS)
     report(hour, axis)
     return 0
 

@@ -55,7 +55,7 @@ class SamplingChain:
     def __post_init__(self) -> None:
         fs_int = self.rate_hz * self.oversample
         self.sos = scipy.signal.butter(self.poles, self.fraction * self.rate_hz, fs=fs_int, output="sos")
-        self.zi = np.zeros((self.sos.shape[0], 2, len(self.channels)))
+        self.zi: np.ndarray | None = None  # set from the first input: the filter was running
         self.phase = 0  # internal samples to skip before the next kept one
         self.ranges = {c: 10.0 for c in self.channels}
 
@@ -66,6 +66,10 @@ class SamplingChain:
 
     def process(self, analog: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Filter (n_int, nch) analog volts; return (kept internal indices, volts, overrange)."""
+        if len(analog) == 0:
+            return np.zeros(0, int), np.zeros((0, len(self.channels))), np.zeros((0, len(self.channels)), bool)
+        if self.zi is None:
+            self.zi = scipy.signal.sosfilt_zi(self.sos)[:, :, None] * analog[0][None, None, :]
         filtered, self.zi = scipy.signal.sosfilt(self.sos, analog, axis=0, zi=self.zi)
         keep = np.arange(self.phase, len(analog), self.oversample)
         self.phase = (self.phase - len(analog)) % self.oversample

@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.linalg
 
 from . import geometry
 from .clock import VirtualClock
@@ -286,11 +287,21 @@ class Simulator:
         return np.array([values[s] for s in self._compiled.disc.plant.slow_inputs])
 
     def _settle(self) -> None:
-        """Start in the steady state of the linear model for the present slow inputs."""
+        """Start in the steady state of the linear model for the present slow inputs.
+
+        A spans 1e-6 (gyro) to 1e7 (filters): a least-squares solve with a relative cutoff
+        would drop the gyro rows, so solve by LU, which pivots through the scaling.
+        """
         plant = self._compiled.disc.plant
         slow = self._slow_inputs()
         rhs = -plant.B[:, self._compiled.slow_cols] @ slow
-        self.x = np.linalg.lstsq(plant.A, rhs, rcond=None)[0]
+        try:
+            x = scipy.linalg.solve(plant.A, rhs)
+        except (scipy.linalg.LinAlgError, ValueError):
+            log.warning("mode %d has no unique steady state; starting from rest", self.mode)
+            return
+        if np.all(np.isfinite(x)):
+            self.x = x
 
     def _spin_target(self) -> float:
         return 0.0 if self.relays.mode == 1 else 1.0
