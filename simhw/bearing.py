@@ -10,6 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
+
 from .params import Bearing
 
 
@@ -38,6 +40,7 @@ def dahl_stiffness(To_Nm: float, eta_per_Nm: float) -> float:
     return eta_per_Nm * To_Nm * To_Nm
 
 
+@numba.njit(cache=True, nogil=True)
 def dahl_step(T: float, dtheta: float, To: float, eta: float) -> float:
     """Exact update of Dahl's friction torque over a monotone angle increment (eq. 5.2-5.3).
 
@@ -45,8 +48,10 @@ def dahl_step(T: float, dtheta: float, To: float, eta: float) -> float:
     dT/dtheta = eta (T + To)^2 for dtheta < 0 integrates to 1/(T + To) -= eta dtheta.
     The friction torque T opposes motion; the torque on the platform is -T.
     """
+    # At the Coulomb limit (T = +-To, reached in floating point by a large step) the
+    # reciprocal is infinite and T stays at the limit.
     if dtheta > 0.0:
-        return To - 1.0 / (1.0 / (To - T) + eta * dtheta)
+        return To if T >= To else To - 1.0 / (1.0 / (To - T) + eta * dtheta)
     if dtheta < 0.0:
-        return 1.0 / (1.0 / (T + To) - eta * dtheta) - To
+        return -To if T <= -To else 1.0 / (1.0 / (T + To) - eta * dtheta) - To
     return T

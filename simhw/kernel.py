@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .bearing import dahl_step
 from .plant import NL_CLIP, NL_DAHL, NL_SOFTSAT, NL_STOP, DiscretePlant, Lin
 
 
@@ -139,13 +140,7 @@ def _run(x, u, b_slow, y_slow, z_slow,
                 prev = nl_state[j, 1]
                 if np.isnan(prev):
                     prev = z
-                d = z - prev
-                To = p1
-                eta = nl_p[j, 1]
-                if d > 0.0:
-                    T = To - 1.0 / (1.0 / (To - T) + eta * d)
-                elif d < 0.0:
-                    T = 1.0 / (1.0 / (T + To) - eta * d) - To
+                T = dahl_step(T, z - prev, p1, nl_p[j, 1])
                 nl_state[j, 0] = T
                 nl_state[j, 1] = z
                 uk[nl_col[j]] = -T - nl_p[j, 2] * z

@@ -71,20 +71,22 @@ class FlickerNoise:
             x0 = np.sqrt(var) * rng.standard_normal(sel.sum())  # start in steady state
             self.groups.append({"dec": int(dec), "a": a, "b": b, "state": x0,
                                 "rng": np.random.Generator(np.random.PCG64(rng.integers(2**63))),
-                                "buf": np.zeros(0)})
+                                "held": np.zeros(0), "pos": 0})
 
     def take(self, n: int) -> np.ndarray:
         out = np.zeros(n)
         for g in self.groups:
-            need = n - len(g["buf"])
+            # ``held`` are slow samples not yet fully used; ``pos`` fine steps of held[0] used.
+            dec, pos = g["dec"], g["pos"]
+            need = -(-(pos + n) // dec) - len(g["held"])
             if need > 0:
-                m = -(-need // g["dec"])
-                xi = g["rng"].standard_normal((m, len(g["a"])))
-                s = np.empty(m)
+                xi = g["rng"].standard_normal((need, len(g["a"])))
+                s = np.empty(need)
                 _gm_bank(g["state"], g["a"], g["b"], xi, s)
-                g["buf"] = np.concatenate([g["buf"], np.repeat(s, g["dec"])])
-            out += g["buf"][:n]
-            g["buf"] = g["buf"][n:]
+                g["held"] = np.concatenate([g["held"], s])
+            out += g["held"][(pos + np.arange(n)) // dec]
+            used, g["pos"] = divmod(pos + n, dec)
+            g["held"] = g["held"][used:]
         return out
 
 
@@ -95,11 +97,17 @@ class RandomWalk:
         self.rng, self.step, self.value = rng, k * math.sqrt(dt), 0.0
 
     def take(self, n: int) -> np.ndarray:
-        if self.step == 0.0:
+        if self.step == 0.0 or n == 0:
             return np.zeros(n)
-        w = np.cumsum(self.step * self.rng.standard_normal(n)) + self.value
+        # The carried value starts the sum, so any cut of the run gives the same samples.
+        w = np.cumsum(np.concatenate([[self.value], self.step * self.rng.standard_normal(n)]))[1:]
         self.value = float(w[-1])
         return w
+
+
+#: The line rotation restarts from the exact phase every this many steps, counted from the
+#: run's start, so rounding never accumulates and no cut of the run changes a sample.
+_LINE_RESEED = 4096
 
 
 @numba.njit(cache=True, nogil=True)
@@ -108,10 +116,18 @@ def _lines(k0, freq_dt, amp, phase, out):
     n = out.shape[0]
     for j in range(freq_dt.shape[0]):
         w = 2.0 * np.pi * freq_dt[j]
-        start = 2.0 * np.pi * ((k0 * freq_dt[j]) % 1.0) + phase[j]
-        c, s = np.cos(start), np.sin(start)
         cw, sw = np.cos(w), np.sin(w)
+        # Resume as if rotating since the last restart point: exact whatever the block cuts.
+        kb = (k0 // _LINE_RESEED) * _LINE_RESEED
+        start = 2.0 * np.pi * ((kb * freq_dt[j]) % 1.0) + phase[j]
+        c, s = np.cos(start), np.sin(start)
+        for _ in range(k0 - kb):
+            c, s = c * cw - s * sw, s * cw + c * sw
         for k in range(n):
+            kk = k0 + k
+            if kk % _LINE_RESEED == 0:
+                start = 2.0 * np.pi * ((kk * freq_dt[j]) % 1.0) + phase[j]
+                c, s = np.cos(start), np.sin(start)
             out[k] += amp[j] * s
             c, s = c * cw - s * sw, s * cw + c * sw
 
@@ -127,8 +143,6 @@ class Lines:
 
     def take(self, n: int) -> np.ndarray:
         out = np.zeros(n)
-        # The phase restarts exactly from the integer step count at every block, so the
-        # rotation's rounding never accumulates over a long run.
         _lines(self.k, self.freq_dt, self.amp, self.phase, out)
         self.k += n
         return out
@@ -143,7 +157,7 @@ class TelegraphJumps:
         self.level = amplitude * (1 if rng.random() < 0.5 else -1)
 
     def take(self, n: int) -> np.ndarray:
-        if self.amp == 0.0:
+        if self.amp == 0.0 or n == 0:
             return np.zeros(n)
         flips = self.rng.random(n) < self.p
         sign = np.where(np.cumsum(flips) % 2 == 1, -1.0, 1.0)

@@ -288,10 +288,17 @@ def _set_fields(obj: Any, values: dict[str, Any], where: str) -> None:
         if isinstance(current, bool):
             if not isinstance(value, bool):
                 raise ConfigError(f"sim config: {name} = {value!r} must be true or false")
-        elif isinstance(current, (int, float)) and not isinstance(current, bool):
+        elif isinstance(current, int):
+            if isinstance(value, float) and math.isfinite(value) and value.is_integer():
+                value = int(value)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ConfigError(f"sim config: {name} = {value!r} must be a whole number")
+        elif isinstance(current, float):
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ConfigError(f"sim config: {name} = {value!r} must be a number")
-            value = type(current)(value) if isinstance(current, int) else float(value)
+            value = float(value)
+        elif isinstance(current, list) and not isinstance(value, list):
+            raise ConfigError(f"sim config: {name} = {value!r} must be a list")
         elif isinstance(current, str) and not isinstance(value, str):
             raise ConfigError(f"sim config: {name} = {value!r} must be a string")
         setattr(obj, key, value)
@@ -306,6 +313,9 @@ def from_dict(data: dict[str, Any], base: SimConfig | None = None) -> SimConfig:
                 raise ConfigError("sim config: [[pickup]] must be an array of tables")
             cfg.pickup = []
             for i, item in enumerate(value):
+                if not isinstance(item, dict):
+                    raise ConfigError(f"sim config: pickup[{i}] = {item!r} must be a table "
+                                      "(channel, freq_hz, amplitude_V)")
                 line = PickupLine(channel="", freq_hz=0.0, amplitude_V=0.0)
                 _set_fields(line, item, f"pickup[{i}]")
                 cfg.pickup.append(line)
@@ -341,8 +351,10 @@ def load_config(path: str | Path | None) -> SimConfig:
             data = tomllib.load(fh)
     except FileNotFoundError:
         raise ConfigError(f"sim config: file not found: {path}") from None
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ConfigError(f"sim config: {path} is not valid TOML: {exc}") from None
+    except OSError as exc:
+        raise ConfigError(f"sim config: cannot read {path}: {exc.strerror or exc}") from None
     return from_dict(data)
 
 
@@ -379,7 +391,9 @@ def validate(cfg: SimConfig) -> None:
     for name, ch in cfg.gyro.items():
         for i, line in enumerate(ch.pickoff_lines):
             if (not isinstance(line, (list, tuple)) or len(line) != 2
-                    or not all(isinstance(v, (int, float)) for v in line) or line[0] <= 0 or line[1] < 0):
+                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                               for v in line)
+                    or line[0] <= 0 or line[1] < 0):
                 raise ConfigError(f"sim config: gyro.{name}.pickoff_lines[{i}] = {line!r} must be "
                                   "[freq_hz > 0, amplitude_urad >= 0]")
         lines_var = sum(a * a / 2 for _, a in ch.pickoff_lines)
@@ -394,5 +408,8 @@ def validate(cfg: SimConfig) -> None:
     if s.oversample < 1 or s.oversample > 64:
         raise ConfigError(f"sim config: sampling.oversample = {s.oversample} is out of range (1..64)")
     for i, p in enumerate(cfg.pickup):
+        _check_range(p, f"pickup[{i}]")
         if p.freq_hz <= 0:
             raise ConfigError(f"sim config: pickup[{i}].freq_hz = {p.freq_hz} must be > 0")
+        if p.amplitude_V < 0:
+            raise ConfigError(f"sim config: pickup[{i}].amplitude_V = {p.amplitude_V} must be >= 0")

@@ -158,15 +158,26 @@ def test_peak_torque_of_eq_5_9_tends_to_the_spring_and_the_coulomb_limits():
     assert _tm_over_to(1e4) == pytest.approx(1.0, rel=1e-3)
 
 
-# --------------------------------------------------------------------------- known bug
-@pytest.mark.xfail(strict=True, raises=ZeroDivisionError,
-                   reason="BUG: once T rounds to exactly +-To (large increment), the next step in the "
-                          "same direction divides by zero")
-def test_step_from_the_coulomb_limit_stays_there():
+# --------------------------------------------------------------------------- Coulomb limit
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_step_from_the_coulomb_limit_stays_there_and_a_reversal_leaves_it(sign):
     To, eta = 0.016, 1.6e6
-    T = dahl_step(0.0, 1e12, To, eta)  # rounds to To exactly
-    assert T == To
-    assert dahl_step(T, 1e-6, To, eta) == To
+    T = dahl_step(0.0, sign * 1e12, To, eta)  # rounds to the limit exactly in floating point
+    assert T == sign * To
+    assert dahl_step(T, sign * 1e-6, To, eta) == sign * To
+    back = dahl_step(T, -sign * 1e-9, To, eta)
+    assert abs(back) < To
+    assert back == pytest.approx(sign * To - sign * 4 * dahl_stiffness(To, eta) * 1e-9, rel=1e-6)
+
+
+@settings(max_examples=100, deadline=None)
+@given(Tbar_s, st.lists(st.floats(-1e20, 1e20), min_size=1, max_size=40), To_s, eta_s)
+def test_any_increments_keep_the_torque_finite_and_within_the_coulomb_limits(tbar, slips, To, eta):
+    T = tbar * To
+    for s in slips:
+        T = dahl_step(T, s / (eta * To), To, eta)
+        # At the limit a reversal's 1/(1/(2 To)) may round an ulp or two past it; never more.
+        assert math.isfinite(T) and abs(T) <= To * (1 + 1e-15)
 
 
 # --------------------------------------------------------------------------- linear part

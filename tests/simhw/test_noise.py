@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from fbs.simhw.noise import FlickerNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
 
 DT = 1e-3
+PICKOFF_LINES = [(70.6, 3.0), (71.4, 3.0), (102.0, 4.0), (187.0, 2.0)]
 
 #: name -> factory(rng) for each source, with parameters that exercise its internals
 #: (several decimation groups for the flicker bank, several lines).
@@ -20,7 +21,7 @@ SOURCES = {
     "white": lambda rng: WhiteNoise(rng, 2.5, DT),
     "flicker": lambda rng: FlickerNoise(rng, 0.7, 1e-3, 80.0, DT),
     "random_walk": lambda rng: RandomWalk(rng, 0.3, DT),
-    "lines": lambda rng: Lines(rng, [(70.6, 3.0), (71.4, 3.0), (102.0, 4.0), (187.0, 2.0)], DT),
+    "lines": lambda rng: Lines(rng, PICKOFF_LINES, DT),
     "telegraph": lambda rng: TelegraphJumps(rng, 5.0, 0.05, DT),
 }
 
@@ -43,17 +44,9 @@ def test_samples_do_not_depend_on_how_the_run_is_cut_into_blocks(name, sizes, se
     src = _make(name, seed)
     pieces = np.concatenate([src.take(n) for n in sizes])
     assert pieces.shape == whole.shape
-    if name == "lines":  # the phase restarts from the step count each block: rounding only
-        np.testing.assert_allclose(pieces, whole, rtol=0, atol=1e-12)
-    elif name == "random_walk":  # bit-exactness is the xfail test below
-        np.testing.assert_allclose(pieces, whole, rtol=1e-12, atol=1e-15)
-    else:
-        np.testing.assert_array_equal(pieces, whole)
+    np.testing.assert_array_equal(pieces, whole)
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="BUG: RandomWalk adds the carried value after cumsum, so the rounding (1 ulp) "
-                          "depends on the block boundaries")
 def test_random_walk_is_bit_exact_across_block_boundaries():
     whole = RandomWalk(np.random.default_rng(0), 0.3, DT).take(3)
     src = RandomWalk(np.random.default_rng(0), 0.3, DT)
@@ -76,8 +69,6 @@ def test_an_empty_block_is_empty_and_changes_nothing(name):
                                rtol=0, atol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, raises=IndexError,
-                   reason="BUG: RandomWalk.take(0) and TelegraphJumps.take(0) index out[-1] of an empty array")
 @pytest.mark.parametrize("name", ["random_walk", "telegraph"])
 def test_an_empty_block_is_empty_for_stateful_sources(name):
     src = _make(name)

@@ -196,41 +196,28 @@ def test_config_error_is_a_value_error():
 
 
 # --------------------------------------------------------------------------- known bugs
-@pytest.mark.xfail(strict=True, reason="BUG: integer fields pass NaN/inf to int(): ValueError/OverflowError, "
-                                       "not ConfigError (TOML allows nan and inf)",
-                   raises=(ValueError, OverflowError))
 @pytest.mark.parametrize("value", [math.nan, math.inf])
 def test_nonfinite_value_for_integer_field_raises_config_error(value):
     with pytest.raises(ConfigError, match="sampling.adc_bits"):
         from_dict({"sampling": {"adc_bits": value}})
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a fractional value for an integer field is silently truncated "
-                                       "(adc_bits = 12.7 becomes 12)",
-                   raises=pytest.fail.Exception)
 def test_fractional_value_for_integer_field_is_rejected():
     with pytest.raises(ConfigError, match="sampling.adc_bits"):
         from_dict({"sampling": {"adc_bits": 12.7}})
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a [[pickup]] entry that is not a table raises AttributeError",
-                   raises=AttributeError)
 @pytest.mark.parametrize("item", [1, "ac_x_ctl", [200.0, 0.003]])
 def test_pickup_entry_that_is_not_a_table_raises_config_error(item):
     with pytest.raises(ConfigError, match=r"pickup\[0\]"):
         from_dict({"pickup": [item]})
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a pickoff_lines value that is not a list raises TypeError in validate()",
-                   raises=TypeError)
 def test_pickoff_lines_that_is_not_a_list_raises_config_error():
     with pytest.raises(ConfigError, match="gyro.X.pickoff_lines"):
         from_dict({"gyro": {"X": {"pickoff_lines": 5}}})
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: [[pickup]] values are never range-checked for finiteness; "
-                                       "freq_hz = nan and amplitude_V = inf are accepted",
-                   raises=pytest.fail.Exception)
 @pytest.mark.parametrize("field, value", [("freq_hz", math.nan), ("freq_hz", math.inf), ("amplitude_V", math.inf)])
 def test_nonfinite_pickup_value_raises_config_error(field, value):
     item = {"channel": "ac_x_ctl", "freq_hz": 200.0, "amplitude_V": 0.003} | {field: value}
@@ -238,8 +225,6 @@ def test_nonfinite_pickup_value_raises_config_error(field, value):
         from_dict({"pickup": [item]})
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: pickoff_lines entries accept NaN amplitude and infinite frequency",
-                   raises=pytest.fail.Exception)
 @pytest.mark.parametrize("line", [[70.6, math.nan], [math.inf, 1.0]])
 def test_nonfinite_pickoff_line_raises_config_error(line):
     with pytest.raises(ConfigError, match="gyro.X.pickoff_lines"):
@@ -286,7 +271,6 @@ _toml_like_config = st.lists(st.one_of(
 ), max_size=3).map(dict)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: see the xfail tests above (pickup entries, pickoff_lines, int fields)")
 @FAST
 @given(_toml_like_config)
 @example({"pickup": [1]})
@@ -356,8 +340,6 @@ def test_load_config_bad_value_in_file_raises_config_error_naming_the_key(tmp_pa
         load_config(path)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a file that is not UTF-8 raises UnicodeDecodeError, not ConfigError",
-                   raises=UnicodeDecodeError)
 def test_load_config_non_utf8_file_raises_config_error(tmp_path):
     path = tmp_path / "latin1.toml"
     path.write_bytes(b"[site]\n# Stanford \xe9t\xe9\nlatitude_deg = 37.0\n")
@@ -365,8 +347,6 @@ def test_load_config_non_utf8_file_raises_config_error(tmp_path):
         load_config(path)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a directory path raises IsADirectoryError, not ConfigError",
-                   raises=IsADirectoryError)
 def test_load_config_directory_raises_config_error(tmp_path):
     with pytest.raises(ConfigError):
         load_config(tmp_path)

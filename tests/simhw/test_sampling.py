@@ -221,9 +221,23 @@ def test_chunked_processing_equals_one_call(sizes, oversample, seed):
     np.testing.assert_array_equal(np.concatenate(overs), over_all)
 
 
-@pytest.mark.xfail(strict=True, raises=ValueError,
-                   reason="BUG: process() of an empty block fails inside sosfilt (so Simulator.advance(0) fails)")
-def test_processing_an_empty_block_gives_no_samples():
-    chain = SamplingChain(("a", "b"), 1000.0, 2)
+def test_processing_an_empty_block_gives_no_samples_and_keeps_the_state():
+    ref = SamplingChain(("a", "b"), 1000.0, 3)
+    x = np.random.default_rng(0).normal(size=(50, 2))
+    _, v_ref, _ = ref.process(x)
+    chain = SamplingChain(("a", "b"), 1000.0, 3)
     keep, volts, over = chain.process(np.zeros((0, 2)))
     assert keep.shape == (0,) and volts.shape == (0, 2) and over.shape == (0, 2)
+    _, v1, _ = chain.process(x[:7])
+    chain.process(np.zeros((0, 2)))
+    _, v2, _ = chain.process(x[7:])
+    np.testing.assert_array_equal(np.concatenate([v1, v2]), v_ref)
+
+
+def test_anti_alias_filter_starts_settled_on_the_first_sample():
+    chain = SamplingChain(("a", "b"), 1000.0, 2)
+    chain.set_range("b", 0.1)
+    _, volts, over = chain.process(np.tile([3.3, -0.05], (40, 1)))
+    np.testing.assert_allclose(volts[:, 0], 3.3, atol=_lsb(10.0, 16) / 2)
+    np.testing.assert_allclose(volts[:, 1], -0.05, atol=_lsb(0.1, 16) / 2)
+    assert not over.any()
