@@ -423,7 +423,7 @@ def scipy_at_accuracy(ode: DahlAxisOde, t_out: np.ndarray, scale: np.ndarray, re
         run = loosest_passing(ode, t_out, method, scale, ref, max_err)
         if run is None:
             continue
-        again = best_time(lambda: run_ivp(ode, t_out, method, run.rtol, scale), repeat - 1)
+        again = best_time(lambda m=method, r=run.rtol: run_ivp(ode, t_out, m, r, scale), repeat - 1)
         run.seconds = min(run.seconds, again)
         runs.append(run)
     return runs

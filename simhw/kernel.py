@@ -15,7 +15,7 @@ import numba
 import numpy as np
 
 from .bearing import dahl_step
-from .plant import NL_CLIP, NL_DAHL, NL_SOFTSAT, NL_STOP, DiscretePlant, Lin
+from .plant import NL_CLIP, NL_DAHL, NL_SOFTSAT, NL_STOP, DiscretePlant
 
 
 @dataclass
@@ -130,12 +130,12 @@ def _run(x, u, b_slow, y_slow, z_slow,
                 z += zu_val[q] * uk[zu_idx[q]]
             kind = nl_kind[j]
             p1 = nl_p[j, 0]
-            if kind == 0:  # NL_CLIP
+            if kind == NL_CLIP:
                 out = min(max(z, -p1), p1)
                 uk[nl_col[j]] = out - z
-            elif kind == 1:  # NL_SOFTSAT
+            elif kind == NL_SOFTSAT:
                 uk[nl_col[j]] = _softsat(z, p1, nl_p[j, 1]) - z
-            elif kind == 2:  # NL_DAHL, eq. 5.2 integrated exactly along the step's angle change
+            elif kind == NL_DAHL:  # eq. 5.2, integrated exactly along the step's angle change
                 T = nl_state[j, 0]
                 prev = nl_state[j, 1]
                 if np.isnan(prev):
@@ -144,7 +144,7 @@ def _run(x, u, b_slow, y_slow, z_slow,
                 nl_state[j, 0] = T
                 nl_state[j, 1] = z
                 uk[nl_col[j]] = -T - nl_p[j, 2] * z
-            elif kind == 3:  # NL_STOP: inelastic mechanical stop
+            elif kind == NL_STOP:  # inelastic mechanical stop
                 it = nl_sidx[j, 0]
                 iw = nl_sidx[j, 1]
                 if x[it] > p1:
@@ -180,5 +180,3 @@ def _run(x, u, b_slow, y_slow, z_slow,
         for i in range(nx):
             x[i] = xn[i]
 
-
-__all__ = ["CompiledPlant", "Csr", "Lin", "NL_CLIP", "NL_SOFTSAT", "NL_DAHL", "NL_STOP"]

@@ -258,7 +258,6 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
 
     # --- Gyros: pickoffs, torquers, caging amplifiers (II C.1.a, III A) -------------------
     gp = cfg.gyros
-    h = gp.angular_momentum_kg_m2_per_s
     bias_on = mode != 6
     for c in GYRO_CHANNELS:
         g = cfg.gyro[c]
@@ -303,7 +302,6 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         sa = (fa + fb * kb) * (1.0 / (1.0 + ka * kb))
         b.deriv[ia] = sa
         b.deriv[ib] = fb - sa * ka
-    del h
 
     # --- Platform axes: compensation, amplifier, motor, gimbal (III C-E, eq. 3.23-3.28) ---
     comp = cfg.compensation

@@ -51,13 +51,14 @@ class SamplingChain:
     fraction: float = 0.3
     poles: int = 3
     bits: int = 16
+    default_range_V: float = 10.0
 
     def __post_init__(self) -> None:
         fs_int = self.rate_hz * self.oversample
         self.sos = scipy.signal.butter(self.poles, self.fraction * self.rate_hz, fs=fs_int, output="sos")
         self.zi: np.ndarray | None = None  # set from the first input: the filter was running
         self.phase = 0  # internal samples to skip before the next kept one
-        self.ranges = {c: 10.0 for c in self.channels}
+        self.ranges = {c: check_range(c, self.default_range_V) for c in self.channels}
 
     def set_range(self, channel: str, range_V: float) -> None:
         if channel not in self.ranges:

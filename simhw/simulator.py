@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
+import scipy.signal
 
 from . import geometry
 from .clock import VirtualClock
@@ -138,8 +139,7 @@ class _Lag:
     def take(self, n: int) -> np.ndarray:
         if self.white.sigma == 0.0:
             return np.zeros(n)
-        import scipy.signal
-        y, zf = scipy.signal.lfilter([1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y])
+        y, _ = scipy.signal.lfilter([1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y])
         self.y = float(y[-1])
         return y
 
@@ -179,11 +179,11 @@ class Simulator:
         self.bias = dict.fromkeys(GYRO_CHANNELS, 0.0)
         self.sources = _Sources(cfg, seed, self.dt)
         self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
-                                   s.anti_alias_poles, s.adc_bits)
-        for c in CHANNELS:
-            self.chain.ranges[c] = s.default_range_V
-        self._pickup = [(CHANNELS.index(p.channel), p.freq_hz, p.amplitude_V) for p in cfg.pickup
-                        if self._check_channel(p.channel)]
+                                   s.anti_alias_poles, s.adc_bits, s.default_range_V)
+        for p in cfg.pickup:
+            if p.channel not in CHANNELS:
+                raise ValueError(f"pickup channel {p.channel!r} is not a recorded channel ({', '.join(CHANNELS)})")
+        self._pickup = [(CHANNELS.index(p.channel), p.freq_hz, p.amplitude_V) for p in cfg.pickup]
         self._cache: dict[RelayState, CompiledPlant] = {}
         self._compiled = self._compile(self.relays)
         n_nl = len(self._compiled.nl_kind)
@@ -194,12 +194,6 @@ class Simulator:
             self._settle()
 
     # ------------------------------------------------------------------ console-side settings
-    @staticmethod
-    def _check_channel(name: str) -> bool:
-        if name not in CHANNELS:
-            raise ValueError(f"pickup channel {name!r} is not a recorded channel ({', '.join(CHANNELS)})")
-        return True
-
     @property
     def mode(self) -> int:
         return self.relays.mode

@@ -93,6 +93,13 @@ def parse_spec(spec: str) -> tuple[Effect, dict[str, float], str]:
     return effect, values, axis
 
 
+def primary_autocollimator(cfg: SimConfig, axis: str, effect: str):
+    """The axis's primary-autocollimator parameters; only X and Y have one (Z is azimuth)."""
+    if axis not in cfg.autocollimator:
+        raise ValueError(f"effect {effect}: axis {axis} has no primary autocollimator (X or Y)")
+    return cfg.autocollimator[axis]
+
+
 def nominal(cfg: SimConfig | None = None) -> SimConfig:
     """The nominal model: the rig with the gimbal-bearing torque omitted (Ch. V F)."""
     cfg = (cfg or SimConfig()).copy()

@@ -4,13 +4,11 @@ Air turbulence in the optical path adds 1/f noise; ``corner_hz`` is where it mee
 sensor's white (shot-noise) level. It enters the loop, like all sensor noise in Mode 3.
 """
 
-from . import Effect, Param
+from . import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, corner_hz):
-    if axis not in cfg.autocollimator:
-        raise ValueError(f"effect flicker_noise: axis {axis} has no primary autocollimator (X or Y)")
-    cfg.autocollimator[axis].extra_flicker_corner_hz = corner_hz
+    primary_autocollimator(cfg, axis, "flicker_noise").extra_flicker_corner_hz = corner_hz
     return cfg
 
 

@@ -5,13 +5,11 @@ sees a resonance the rigid model lacks (the thesis had to filter its control cha
 the mount's bending frequency).
 """
 
-from . import Effect, Param
+from . import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, freq_hz, damping):
-    if axis not in cfg.autocollimator:
-        raise ValueError(f"effect mount_resonance: axis {axis} has no primary autocollimator (X or Y)")
-    ac = cfg.autocollimator[axis]
+    ac = primary_autocollimator(cfg, axis, "mount_resonance")
     ac.mount_freq_hz, ac.mount_damping = freq_hz, damping
     return cfg
 

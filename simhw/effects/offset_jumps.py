@@ -5,13 +5,11 @@ square wave of about 20 arcsec (100 urad) every 40-400 s. Jumps of +-``amplitude
 Poisson times of mean interval ``interval_s``.
 """
 
-from . import Effect, Param
+from . import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, amplitude_urad, interval_s):
-    if axis not in cfg.autocollimator:
-        raise ValueError(f"effect offset_jumps: axis {axis} has no primary autocollimator (X or Y)")
-    ac = cfg.autocollimator[axis]
+    ac = primary_autocollimator(cfg, axis, "offset_jumps")
     ac.offset_jump_urad, ac.offset_jump_interval_s = amplitude_urad, interval_s
     return cfg
 

@@ -4,13 +4,11 @@ Slow electronics or digital filtering in the sensor path; it eats phase margin a
 closed-loop peak.
 """
 
-from . import Effect, Param
+from . import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, delay_s):
-    if axis not in cfg.autocollimator:
-        raise ValueError(f"effect time_delay: axis {axis} has no primary autocollimator (X or Y)")
-    cfg.autocollimator[axis].delay_s = delay_s
+    primary_autocollimator(cfg, axis, "time_delay").delay_s = delay_s
     return cfg
 
 
