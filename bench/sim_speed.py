@@ -544,7 +544,7 @@ def main() -> int:
     log("[2/2] single axis vs solve_ivp ...")
     rep = 5 if args.quick else 20
     # On held noise the implicit methods take ~20 s per tolerance tried and are far slower
-    # than LSODA (measured: BDF 47x, Radau 66x LSODA's time); LSODA and RK45 bound the rest.
+    # than LSODA (measured: BDF 11x, Radau 16x LSODA's time); LSODA and RK45 bound the rest.
     axes = [bench_axis(NOISE_COMPARE_S, hour.dt, rep, ("LSODA", "RK45"), HeldNoise(hour.dt, NOISE_COMPARE_S + 1)),
             bench_axis(COMPARE_S, hour.dt, rep, SCIPY_METHODS, Tones())]
     report(hour, axes)
