@@ -17,6 +17,7 @@ import math
 
 import numba
 import numpy as np
+import scipy.signal
 
 
 class WhiteNoise:
@@ -133,12 +134,15 @@ def _lines(k0, freq_dt, amp, phase, out):
 
 
 class Lines:
-    """Sinusoids of fixed amplitude and random phase, phase-continuous across blocks."""
+    """Sinusoids of fixed amplitude, phase-continuous across blocks; random phases from
+    ``rng``, or all starting at ``phase`` (rad) when it is given."""
 
-    def __init__(self, rng: np.random.Generator, lines: list[tuple[float, float]], dt: float) -> None:
+    def __init__(self, rng: np.random.Generator | None, lines: list[tuple[float, float]], dt: float,
+                 phase: float | None = None) -> None:
         self.freq_dt = np.array([f * dt for f, _ in lines], float)
         self.amp = np.array([a for _, a in lines], float)
-        self.phase = rng.uniform(0, 2 * math.pi, len(lines))
+        self.phase = (np.full(len(lines), phase) if phase is not None
+                      else rng.uniform(0, 2 * math.pi, len(lines)))
         self.k = 0
 
     def take(self, n: int) -> np.ndarray:
@@ -146,6 +150,25 @@ class Lines:
         _lines(self.k, self.freq_dt, self.amp, self.phase, out)
         self.k += n
         return out
+
+
+class LagNoise:
+    """White noise through w/(s+w), w = 2 pi corner (exact ZOH), scaled to ``rms``.
+
+    The lag passes int_0^inf S/(1 + (f/fc)^2) df = S fc pi/2, so S = 2 rms^2/(pi fc).
+    """
+
+    def __init__(self, rng: np.random.Generator, rms: float, corner_hz: float, dt: float) -> None:
+        self.white = WhiteNoise(rng, 2 * rms * rms / (math.pi * corner_hz), dt)
+        self.a = math.exp(-2 * math.pi * corner_hz * dt)
+        self.y = 0.0
+
+    def take(self, n: int) -> np.ndarray:
+        if self.white.sigma == 0.0:
+            return np.zeros(n)
+        y, _ = scipy.signal.lfilter([1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y])
+        self.y = float(y[-1])
+        return y
 
 
 class TelegraphJumps:

@@ -98,9 +98,6 @@ class Plant:
     nonlinear: list[Nonlinearity]
     slow_inputs: list[str] = field(default_factory=list)
 
-    def index(self, kind: str, name: str) -> int:
-        return {"x": self.states, "u": self.inputs, "y": self.outputs}[kind].index(name)
-
 
 class _Builder:
     def __init__(self) -> None:

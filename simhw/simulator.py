@@ -15,12 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
-import scipy.signal
 
 from . import geometry
 from .clock import VirtualClock
 from .kernel import CompiledPlant
-from .noise import FlickerNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
+from .noise import FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
 from .params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
 from .plant import (CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize,
                     torquer_limit_V)
@@ -115,33 +114,14 @@ class _Sources:
             ]
         for a in AXES:
             p = cfg.platform[a]
-            # Optional platform disturbance torque (effect `platform_disturbance`): white noise
-            # through a first-order lag at the corner, scaled to the requested rms.
-            psd = (p.disturbance_torque_rms_Nm ** 2) * 4 / (2 * math.pi * p.disturbance_corner_hz) \
-                if p.disturbance_torque_rms_Nm > 0 else 0.0
-            self.parts[f"md_{a}"] = [_Lag(sub(f"md_{a}"), psd, p.disturbance_corner_hz, dt)]
+            # Optional platform disturbance torque (effect `platform_disturbance`).
+            self.parts[f"md_{a}"] = [LagNoise(sub(f"md_{a}"), p.disturbance_torque_rms_Nm, p.disturbance_corner_hz, dt)]
 
     def take(self, name: str, n: int) -> np.ndarray:
         out = np.zeros(n)
         for part in self.parts[name]:
             out += part.take(n)
         return out
-
-
-class _Lag:
-    """White noise of one-sided PSD ``psd`` through w/(s+w), w = 2 pi corner (exact ZOH)."""
-
-    def __init__(self, rng: np.random.Generator, psd: float, corner_hz: float, dt: float) -> None:
-        self.white = WhiteNoise(rng, psd, dt)
-        self.a = math.exp(-2 * math.pi * corner_hz * dt)
-        self.y = 0.0
-
-    def take(self, n: int) -> np.ndarray:
-        if self.white.sigma == 0.0:
-            return np.zeros(n)
-        y, _ = scipy.signal.lfilter([1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y])
-        self.y = float(y[-1])
-        return y
 
 
 class Simulator:
@@ -183,7 +163,9 @@ class Simulator:
         for p in cfg.pickup:
             if p.channel not in CHANNELS:
                 raise ValueError(f"pickup channel {p.channel!r} is not a recorded channel ({', '.join(CHANNELS)})")
-        self._pickup = [(CHANNELS.index(p.channel), p.freq_hz, p.amplitude_V) for p in cfg.pickup]
+        # Electrical pickup: phase zero at the run's start, on the plant's step count.
+        self._pickup = [(CHANNELS.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
+                        for p in cfg.pickup]
         self._cache: dict[RelayState, CompiledPlant] = {}
         self._compiled = self._compile(self.relays)
         n_nl = len(self._compiled.nl_kind)
@@ -319,9 +301,8 @@ class Simulator:
         ny = len(CHANNELS)
         y = np.concatenate(chunks) if chunks else np.zeros((0, ny + len(TRUTH_CHANNELS)))
         analog = y[:, :ny]
-        for col, freq, amp in self._pickup:
-            k = self.step - n_int + np.arange(n_int)
-            analog[:, col] += amp * np.sin(2 * math.pi * np.mod(k * (freq * self.dt), 1.0))
+        for col, line in self._pickup:
+            analog[:, col] += line.take(n_int)
         keep, volts, over = self.chain.process(analog)
         truth = {}
         if self.truth:
