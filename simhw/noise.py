@@ -85,7 +85,10 @@ class FlickerNoise:
                 s = np.empty(need)
                 _gm_bank(g["state"], g["a"], g["b"], xi, s)
                 g["held"] = np.concatenate([g["held"], s])
-            out += g["held"][(pos + np.arange(n)) // dec]
+            if dec == 1:
+                out += g["held"][:n]
+            else:
+                out += g["held"][(pos + np.arange(n)) // dec]
             used, g["pos"] = divmod(pos + n, dec)
             g["held"] = g["held"][used:]
         return out

@@ -27,7 +27,7 @@ def check_range(channel: str, range_V: float) -> float:
     return float(range_V)
 
 
-def quantize(v: np.ndarray, range_V: float, bits: int) -> tuple[np.ndarray, np.ndarray]:
+def quantize(v: np.ndarray, range_V: float | np.ndarray, bits: int) -> tuple[np.ndarray, np.ndarray]:
     """Volts -> volts on the converter's grid, and the overrange flags (|v| beyond full scale).
 
     Codes run from -2^(bits-1) to 2^(bits-1) - 1 with LSB q = 2 range / 2^bits; the Widrow
@@ -74,9 +74,7 @@ class SamplingChain:
         filtered, self.zi = scipy.signal.sosfilt(self.sos, analog, axis=0, zi=self.zi)
         keep = np.arange(self.phase, len(analog), self.oversample)
         self.phase = (self.phase - len(analog)) % self.oversample
-        out = filtered[keep]
-        volts = np.empty_like(out)
-        over = np.empty(out.shape, bool)
-        for j, c in enumerate(self.channels):
-            volts[:, j], over[:, j] = quantize(out[:, j], self.ranges[c], self.bits)
+        # quantize() broadcasts: one call for all channels, each with its own range.
+        ranges = np.array([self.ranges[c] for c in self.channels])
+        volts, over = quantize(filtered[keep], ranges, self.bits)
         return keep, volts, over

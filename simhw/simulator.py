@@ -74,7 +74,7 @@ def pickoff_white_psd(rms_urad: float, lines: list) -> float:
 class _Sources:
     """All random inputs of the plant, one independent stream each."""
 
-    def __init__(self, cfg: SimConfig, seed: int, dt: float) -> None:
+    def __init__(self, cfg: SimConfig, seed: int | tuple[int, int], dt: float) -> None:
         ss = np.random.SeedSequence(seed)
         names = ([f"nac_{a}" for a in AXES] + [f"np_{c}" for c in GYRO_CHANNELS]
                  + [f"wrand_{c}" for c in GYRO_CHANNELS] + [f"md_{a}" for a in AXES])
@@ -143,29 +143,21 @@ class Simulator:
                  mode: int = 3, spin: float | None = None, truth: bool = False,
                  clock: VirtualClock | None = None) -> None:
         self.cfg = cfg = (cfg or SimConfig()).copy()
-        if not (rate_hz > 0 and math.isfinite(rate_hz)):
-            raise ValueError(f"sample rate {rate_hz!r} Hz must be a positive number")
-        s = cfg.sampling
-        self.rate_hz = float(rate_hz)
-        self.oversample = max(s.oversample, int(math.ceil(s.min_internal_rate_hz / rate_hz)))
-        self.dt = 1.0 / (self.rate_hz * self.oversample)
+        self.seed = seed
         self.clock = clock or VirtualClock()
         self.truth = truth
-        self.step = 0  # internal steps done
+        self._t_base = 0.0  # time of the last rate change
+        self._rate_changes = 0
+        self._set_timebase(rate_hz)
         self.relays = RelayState(mode=mode, spin=(1.0 if mode >= 2 else 0.0) if spin is None else spin)
         self._spin = self.relays.spin  # exact wheel speed; the relay state holds it rounded
         self.vtd = dict.fromkeys(AXES, 0.0)
         self.gamma_c = dict.fromkeys(AXES, 0.0)
         self.bias = dict.fromkeys(GYRO_CHANNELS, 0.0)
-        self.sources = _Sources(cfg, seed, self.dt)
-        self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
-                                   s.anti_alias_poles, s.adc_bits, s.default_range_V)
         for p in cfg.pickup:
             if p.channel not in CHANNELS:
                 raise ValueError(f"pickup channel {p.channel!r} is not a recorded channel ({', '.join(CHANNELS)})")
-        # Electrical pickup: phase zero at the run's start, on the plant's step count.
-        self._pickup = [(CHANNELS.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
-                        for p in cfg.pickup]
+        self._set_sampling(cfg.sampling.default_range_V)
         self._cache: dict[RelayState, CompiledPlant] = {}
         self._compiled = self._compile(self.relays)
         n_nl = len(self._compiled.nl_kind)
@@ -175,6 +167,48 @@ class Simulator:
         if self.relays.spin >= SPIN_READY and self.relays.mode in (3, 4, 5):
             self._settle()
 
+    def _set_timebase(self, rate_hz: float) -> None:
+        if not (rate_hz > 0 and math.isfinite(rate_hz)):
+            raise ValueError(f"sample rate {rate_hz!r} Hz must be a positive number")
+        s = self.cfg.sampling
+        self.rate_hz = float(rate_hz)
+        self.oversample = max(s.oversample, int(math.ceil(s.min_internal_rate_hz / rate_hz)))
+        self.dt = 1.0 / (self.rate_hz * self.oversample)
+        self.step = 0  # internal steps since the last rate change
+
+    def _set_sampling(self, default_range_V: float | dict[str, float]) -> None:
+        """Noise sources, recording chain and pickup for the present step ``dt``."""
+        s = self.cfg.sampling
+        # Each time base gets its own streams, derived from the one seed.
+        seed = self.seed if self._rate_changes == 0 else (self.seed, self._rate_changes)
+        self.sources = _Sources(self.cfg, seed, self.dt)
+        self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
+                                   s.anti_alias_poles, s.adc_bits, s.default_range_V)
+        if isinstance(default_range_V, dict):
+            for c, r in default_range_V.items():
+                self.chain.set_range(c, r)
+        # Electrical pickup: phase zero at the start of the time base, on the plant's step count.
+        self._pickup = [(CHANNELS.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
+                        for p in self.cfg.pickup]
+
+    def set_rate(self, rate_hz: float) -> None:
+        """Change the output sample rate now (the ADC was reconfigured).
+
+        The physical state carries over; the plant is discretized for the new step, the noise
+        generators restart from new streams of the same seed, and the anti-alias filter starts
+        settled on the next input, as after a gap.
+        """
+        if float(rate_hz) == self.rate_hz:
+            return
+        t = self.time_s
+        ranges = dict(self.chain.ranges)
+        self._set_timebase(rate_hz)
+        self._t_base = t
+        self._rate_changes += 1
+        self._set_sampling(ranges)
+        self._cache.clear()
+        self._compiled = self._compile(self.relays)
+
     # ------------------------------------------------------------------ console-side settings
     @property
     def mode(self) -> int:
@@ -182,7 +216,7 @@ class Simulator:
 
     @property
     def time_s(self) -> float:
-        return self.step * self.dt
+        return self._t_base + self.step * self.dt
 
     @property
     def spin(self) -> float:
@@ -287,7 +321,7 @@ class Simulator:
         """Simulate the next ``n`` output samples and return them as the ADC delivers them."""
         if n < 0:
             raise ValueError(f"sample count {n} must be >= 0")
-        t0 = self.step * self.dt  # blocks always start on an output sample
+        t0 = self.time_s  # blocks always start on an output sample
         n_int = n * self.oversample
         chunks = []
         done = 0

@@ -1,0 +1,106 @@
+"""The ADC: what a driver of it offers, whatever the wire (DESIGN.md sections 2 and 5)."""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class AdcIdentity:
+    vendor: str
+    model: str
+    serial: str
+    firmware: str
+    bits: int
+    max_aggregate_rate_hz: float          # sample sets/s x channels the device can stream
+    ranges_V: tuple[float, ...]           # selectable full-scale ranges (+-V)
+    channels: tuple[str, ...]             # input names, DESIGN.md section 5
+
+
+@dataclass(frozen=True)
+class AdcConfig:
+    channels: tuple[str, ...]
+    rate_hz: float
+    ranges_V: dict[str, float]
+    frame_sets: int                       # sample sets per frame on the wire
+
+
+@dataclass(frozen=True)
+class AdcStatus:
+    streaming: bool
+    samples: int                          # sample sets sent since START (device count)
+    frames: int
+    overruns: int                         # device FIFO overflows since START
+
+
+@dataclass
+class AdcBlock:
+    """Contiguous sample sets ``first_sample ..`` of a stream; volts as converted by the ADC.
+
+    ``overrange`` marks samples at an end code (at or beyond full scale): clipped, never wrapped.
+    """
+
+    first_sample: int
+    rate_hz: float
+    t0_s: float                           # rig time of the stream's sample 0
+    channels: tuple[str, ...]
+    volts: np.ndarray                     # (n, n_channels) float64
+    overrange: np.ndarray = field(repr=False, default=None)  # (n, n_channels) bool
+
+    def __len__(self) -> int:
+        return len(self.volts)
+
+    def __getitem__(self, channel: str) -> np.ndarray:
+        return self.volts[:, self.channels.index(channel)]
+
+    @property
+    def stop_sample(self) -> int:
+        return self.first_sample + len(self.volts)
+
+    @property
+    def time_s(self) -> np.ndarray:
+        """Rig time of each sample set."""
+        return self.t0_s + (self.first_sample + np.arange(len(self.volts))) / self.rate_hz
+
+
+class Adc(abc.ABC):
+    """Configure, start, read, stop. ``read`` raises ``SampleGap`` where samples were lost."""
+
+    @abc.abstractmethod
+    def identify(self) -> AdcIdentity: ...
+
+    @abc.abstractmethod
+    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
+                  ranges_V: dict[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig: ...
+
+    @property
+    @abc.abstractmethod
+    def config(self) -> AdcConfig | None: ...
+
+    @property
+    @abc.abstractmethod
+    def streaming(self) -> bool: ...
+
+    @abc.abstractmethod
+    def start(self) -> float:
+        """Start streaming; returns the rig time of sample 0."""
+
+    @abc.abstractmethod
+    def read(self, n: int, timeout_s: float | None = None) -> AdcBlock:
+        """The next ``n`` sample sets (fewer only if a gap follows them; the next call raises it)."""
+
+    @abc.abstractmethod
+    def read_available(self) -> AdcBlock | None:
+        """Whatever has arrived, without waiting (None if nothing)."""
+
+    @abc.abstractmethod
+    def stop(self) -> AdcStatus: ...
+
+    @abc.abstractmethod
+    def status(self) -> AdcStatus: ...
+
+    @abc.abstractmethod
+    def close(self) -> None: ...

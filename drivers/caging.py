@@ -1,0 +1,47 @@
+"""The four caging-inhibit switches (II C.2): open one gyro channel's caging loop."""
+
+from __future__ import annotations
+
+import abc
+
+from . import can_protocol as cp
+from .calibration import GYRO_CHANNELS
+from .can_link import CanLink, NodeClient
+from .errors import ProtocolError, SetpointRangeError
+from .setpoints import check_name
+
+
+class CagingSwitches(abc.ABC):
+    channels = GYRO_CHANNELS
+
+    @abc.abstractmethod
+    def set_inhibit(self, channel: str, inhibit: bool) -> bool:
+        """Set one switch; returns its read-back."""
+
+    @abc.abstractmethod
+    def inhibited(self, channel: str) -> bool: ...
+
+    def clear(self) -> None:
+        for c in self.channels:
+            self.set_inhibit(c, False)
+
+
+class CanCagingSwitches(CagingSwitches):
+    def __init__(self, link: CanLink) -> None:
+        self.node = NodeClient(link, "caging")
+
+    def set_inhibit(self, channel: str, inhibit: bool) -> bool:
+        i = self.channels.index(check_name("gyro channel", channel, self.channels))
+        if not isinstance(inhibit, bool):
+            raise SetpointRangeError(f"caging inhibit for {channel} must be True or False, not {inhibit!r}; "
+                                     f"nothing was sent", value=inhibit)
+        back = bool(self.node.call(cp.OP_SET, i, int(inhibit), what=f"caging inhibit {channel} = {inhibit}"))
+        if back != inhibit:
+            fault = ProtocolError(f"CAN node 'caging': inhibit {channel} reads back {back} after setting {inhibit}")
+            self.node.link.faults.report(fault)
+            raise fault
+        return back
+
+    def inhibited(self, channel: str) -> bool:
+        i = self.channels.index(check_name("gyro channel", channel, self.channels))
+        return bool(self.node.call(cp.OP_GET, i, what=f"read caging inhibit {channel}"))

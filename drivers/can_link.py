@@ -1,0 +1,238 @@
+"""The host's end of the CAN bus: requests with acknowledgement, heartbeats both ways.
+
+``CanLink`` owns a python-can bus. It sends the host heartbeat, watches every node's
+heartbeat, matches responses to requests, and turns what the nodes say on their own
+(emergency frames, a reboot, a node that falls silent) into latched faults, so the rig goes
+safe. Heartbeats run on the wall clock: they are about the wire and the host being alive,
+not about rig time. ``NodeClient`` is one node as seen from a device driver.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+
+import can
+
+from . import can_protocol as cp
+from .errors import (DeviceLost, DeviceTimeout, InterlockError, NodeError, NodeReset,
+                     ProtocolError, SetpointRangeError)
+from .faults import FaultLatch
+
+log = logging.getLogger(__name__)
+
+
+class CanLink:
+    def __init__(self, bus: can.BusABC, nodes: list[str], *, faults: FaultLatch | None = None,
+                 heartbeat_period_s: float = 0.1, node_timeout_s: float = 1.0, reply_timeout_s: float = 0.5,
+                 channel: str = "") -> None:
+        unknown = [n for n in nodes if n not in cp.NODES]
+        if unknown:
+            raise ValueError(f"unknown CAN node(s) {unknown}; known: {', '.join(cp.NODES)}")
+        self.bus = bus
+        self.channel = channel or str(getattr(bus, "channel_info", "CAN"))
+        self.faults = faults or FaultLatch()
+        self.nodes = list(nodes)
+        self.heartbeat_period_s = heartbeat_period_s
+        self.node_timeout_s = node_timeout_s
+        self.reply_timeout_s = reply_timeout_s
+        self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
+        self._pending: dict[tuple[int, int], list] = {}
+        self._seq = dict.fromkeys(cp.NODES.values(), 0)
+        self._last_hb: dict[int, float] = {}
+        self._operational: set[int] = set()
+        self._lost: set[int] = set()
+        self._counter = 0
+        self._stop = threading.Event()
+        self.bad_messages = 0
+        self._notifier = can.Notifier(bus, [self._on_message], timeout=0.05)
+        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="can-heartbeat", daemon=True)
+        self._hb_thread.start()
+
+    # ------------------------------------------------------------------ receive
+    def _on_message(self, msg: can.Message) -> None:
+        try:
+            self._handle(msg)
+        except Exception:  # the notifier thread must survive anything a frame can do
+            log.exception("CAN receive handler failed on %s", msg)
+
+    def _handle(self, msg: can.Message) -> None:
+        if msg.is_error_frame:
+            log.warning("CAN %s: bus error frame %s", self.channel, msg)
+            return
+        try:
+            m = cp.decode(msg.arbitration_id, msg.data, msg.is_extended_id)
+        except ProtocolError as exc:
+            self.bad_messages += 1
+            ours = any(msg.arbitration_id == base + cp.NODES[n]
+                       for n in self.nodes for base in (cp.RESPONSE_BASE, cp.HEARTBEAT_BASE, cp.EMCY_BASE))
+            if ours:
+                self.faults.report(ProtocolError(f"CAN {self.channel}: {exc}"))
+            else:
+                log.warning("CAN %s: ignored foreign frame: %s", self.channel, exc)
+            return
+        if isinstance(m, cp.Response):
+            with self._lock:
+                slot = self._pending.get((m.node, m.seq))
+                if slot is not None:
+                    slot[1] = m
+                    slot[0].set()
+                    return
+            log.warning("CAN %s: unexpected response %s (late or duplicate)", self.channel, m)
+        elif isinstance(m, cp.Heartbeat):
+            if m.node == 0:
+                return  # another host's heartbeat (or our own echo)
+            self._on_heartbeat(m)
+        elif isinstance(m, cp.Emergency):
+            name = cp.NODE_NAMES[m.node]
+            self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) reports an error: {m.text()} "
+                                         f"(code 0x{m.code:04x}, detail {m.detail}); the rig went safe",
+                                         node=name, code=m.code))
+
+    def _on_heartbeat(self, m: cp.Heartbeat) -> None:
+        name = cp.NODE_NAMES[m.node]
+        self._last_hb[m.node] = time.monotonic()
+        was_up = m.node in self._operational
+        if m.state == cp.HB_OPERATIONAL:
+            self._operational.add(m.node)
+        elif m.state == cp.HB_BOOT and was_up:
+            self._operational.discard(m.node)
+            self.faults.report(NodeReset(f"CAN node '{name}' (id {m.node}) rebooted and lost its set-points; "
+                                         f"the rig went safe"))
+        elif m.state == cp.HB_SAFE and was_up:
+            self._operational.discard(m.node)
+            self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) latched its safe state by itself",
+                                         node=name))
+
+    # ------------------------------------------------------------------ heartbeat and watch
+    def _heartbeat_loop(self) -> None:
+        t_start = time.monotonic()
+        while not self._stop.wait(self.heartbeat_period_s):
+            self._counter += 1
+            try:
+                self._send(*cp.encode_heartbeat(cp.Heartbeat(0, cp.HB_OPERATIONAL, 0, self._counter)))
+            except DeviceLost as exc:
+                self.faults.report(exc)
+                return
+            now = time.monotonic()
+            for name in self.nodes:
+                node = cp.NODES[name]
+                last = self._last_hb.get(node, t_start)
+                if node not in self._lost and now - last > self.node_timeout_s:
+                    self._lost.add(node)
+                    self._operational.discard(node)
+                    self.faults.report(DeviceLost(
+                        f"CAN node '{name}' (id {node}) is silent: no heartbeat for {now - last:.1f} s "
+                        f"(limit {self.node_timeout_s:g} s); check its cable and power; the rig went safe"))
+
+    def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
+        """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            missing = [n for n in self.nodes if cp.NODES[n] not in self._last_hb]
+            if not missing:
+                return
+            if time.monotonic() > deadline:
+                raise DeviceLost(f"CAN {self.channel}: no heartbeat from node(s) "
+                                 f"{', '.join(f'{n} (id {cp.NODES[n]})' for n in missing)} within {timeout_s:g} s; "
+                                 f"check the bus wiring, termination and node power")
+            time.sleep(0.01)
+
+    def node_state(self, name: str) -> str:
+        node = cp.NODES[name]
+        if node in self._lost:
+            return "lost"
+        return "operational" if node in self._operational else "not operational"
+
+    # ------------------------------------------------------------------ send / request
+    def _send(self, arbitration_id: int, data: bytes) -> None:
+        msg = can.Message(arbitration_id=arbitration_id, data=data, is_extended_id=False)
+        try:
+            with self._send_lock:
+                self.bus.send(msg, timeout=self.reply_timeout_s)
+        except (can.CanError, OSError, ValueError) as exc:
+            raise DeviceLost(f"CAN {self.channel}: cannot send frame 0x{arbitration_id:03x} ({exc}); "
+                             f"is the interface up?") from exc
+
+    def request(self, name: str, op: int, index: int = 0, value: int = 0,
+                timeout_s: float | None = None) -> cp.Response:
+        node = cp.NODES[name]
+        timeout_s = self.reply_timeout_s if timeout_s is None else timeout_s
+        with self._lock:
+            seq = self._seq[node] = (self._seq[node] + 1) & 0xFF
+            slot = self._pending[(node, seq)] = [threading.Event(), None]
+        try:
+            try:
+                self._send(*cp.encode_request(cp.Request(node, seq, op, index, value)))
+            except DeviceLost as exc:
+                self.faults.report(exc)
+                raise
+            if not slot[0].wait(timeout_s):
+                fault = DeviceTimeout(f"CAN node '{name}' (id {node}) did not answer {cp.OPS[op]} index {index} "
+                                      f"within {timeout_s:g} s; the rig went safe")
+                self.faults.report(fault)
+                raise fault
+        finally:
+            with self._lock:
+                self._pending.pop((node, seq), None)
+        resp: cp.Response = slot[1]
+        if resp.op != op or resp.index != index:
+            fault = ProtocolError(f"CAN node '{name}' answered {cp.OPS.get(resp.op, resp.op)} index {resp.index} "
+                                  f"to {cp.OPS[op]} index {index} (seq {seq})")
+            self.faults.report(fault)
+            raise fault
+        return resp
+
+    def close(self) -> None:
+        self._stop.set()
+        self._hb_thread.join(timeout=1.0)
+        try:
+            self._notifier.stop(timeout=1.0)
+        finally:
+            self.bus.shutdown()
+
+
+class NodeClient:
+    """One node as a device driver sees it: checked requests, typed refusals."""
+
+    def __init__(self, link: CanLink, name: str) -> None:
+        self.link = link
+        self.name = name
+        self.node_id = cp.NODES[name]
+
+    def call(self, op: int, index: int = 0, value: int = 0, *, what: str = "", check_faults: bool = True) -> int:
+        """Send a request; return the node's read-back value or raise its refusal as a typed error."""
+        if check_faults:
+            self.link.faults.check()
+        resp = self.link.request(self.name, op, index, value)
+        if resp.status == cp.ST_OK:
+            return resp.value
+        what = what or f"{cp.OPS[op]} index {index} value {value}"
+        text = f"CAN node '{self.name}' refused {what}: {cp.STATUS_TEXT[resp.status]}"
+        if resp.status == cp.ST_RANGE:
+            raise SetpointRangeError(text, value=value)
+        if resp.status in (cp.ST_INTERLOCK, cp.ST_LATCHED, cp.ST_NOT_HELD):
+            err = InterlockError(text)
+            err.detail = resp.value  # type: ignore[attr-defined]
+            raise err
+        fault = ProtocolError(text)
+        self.link.faults.report(fault)
+        raise fault
+
+    def identify(self) -> int:
+        """Check the node is the kind expected; return its firmware version."""
+        value = self.call(cp.OP_IDENT, check_faults=False)
+        kind = (value >> 16) & 0xFF
+        if kind != cp.NODE_TYPES[self.name]:
+            names = {v: k for k, v in cp.NODE_TYPES.items()}
+            raise ProtocolError(f"CAN node id {self.node_id} identifies as '{names.get(kind, hex(kind))}', "
+                                f"expected '{self.name}'; check the node ids")
+        return value & 0xFFFF
+
+    def clear(self) -> None:
+        self.call(cp.OP_CLEAR, check_faults=False)
+
+    def safe(self) -> None:
+        self.call(cp.OP_SAFE, check_faults=False)

@@ -1,0 +1,44 @@
+"""The rig's clock (DESIGN.md section 2: time belongs to the rig).
+
+Procedures wait and timestamp with ``rig.clock``, never ``time.sleep``: on hardware it is
+the wall clock; on the simulated rig (``simhw.rig_server.SimClock``) it is simulated time,
+which in virtual mode advances only as far as someone waits or asks for data.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Protocol
+
+
+class RigClock(Protocol):
+    #: True when time advances on demand (simulation), not by itself.
+    virtual: bool
+
+    def now(self) -> float:
+        """Seconds of rig time since the rig was opened (or the simulation started)."""
+
+    def sleep(self, seconds: float) -> None:
+        """Wait ``seconds`` of rig time."""
+
+    def demand(self, t: float) -> None:
+        """Someone will wait for data up to rig time ``t``: a virtual clock runs to it."""
+
+
+class WallClock:
+    """Real hardware: monotonic wall time from when the rig was opened."""
+
+    virtual = False
+
+    def __init__(self) -> None:
+        self._t0 = time.monotonic()
+
+    def now(self) -> float:
+        return time.monotonic() - self._t0
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+    def demand(self, t: float) -> None:
+        pass

@@ -1,0 +1,134 @@
+"""The relay driver: the six modes, switched as on the thesis's console (II C.2 (2), Ch. II D).
+
+The operator holds the mode register, sets the select switches and releases: the register
+clocks the selected mode in only on release, and never clocks modes 0 or 7 (the alarm
+lights instead). Modes 4 and 5 need the gyros at speed and caged.
+"""
+
+from __future__ import annotations
+
+import abc
+import logging
+from dataclasses import dataclass
+
+from . import can_protocol as cp
+from .calibration import GYRO_CHANNELS
+from .can_link import CanLink, NodeClient
+from .errors import DriverError, InterlockError, ModeNotAllowed
+
+log = logging.getLogger(__name__)
+
+MODES = {1: "gyro off", 2: "gyro spin-up", 3: "autocollimator control", 4: "gyro control, 4-channel caging",
+         5: "gyro control, 3-channel caging", 6: "external"}
+#: Gyro channels that must be caged before each gyro-control mode (mode 5 cages all but Z).
+CAGED_FOR_MODE = {4: ("X", "Y", "Z", "XRD"), 5: ("X", "Y", "XRD")}
+SAFE_MODE = 1
+
+
+@dataclass(frozen=True)
+class RelayStatus:
+    mode: int
+    selected: int
+    held: bool
+    alarm: bool
+    at_speed: dict[str, bool]
+    caged: dict[str, bool]
+    spin_fraction: float      # slowest wheel, fraction of operating speed
+
+
+def check_mode(mode: object) -> int:
+    if isinstance(mode, bool) or not isinstance(mode, int) or mode not in MODES:
+        raise ModeNotAllowed(mode)  # type: ignore[arg-type]
+    return mode
+
+
+def interlock_reason(mode: int, status: RelayStatus) -> str | None:
+    """Why ``mode`` may not be entered now (None if it may)."""
+    if mode not in CAGED_FOR_MODE:
+        return None
+    why = []
+    if not all(status.at_speed.values()):
+        slow = [c for c, ok in status.at_speed.items() if not ok]
+        why.append(f"gyros not at speed ({', '.join(slow)}; wheels at {100 * status.spin_fraction:.0f} % "
+                   f"of operating speed; spin up in mode 2)")
+    uncaged = [c for c in CAGED_FOR_MODE[mode] if not status.caged[c]]
+    if uncaged:
+        why.append(f"gyro channel(s) {', '.join(uncaged)} not caged (mode {status.mode}; cage in mode 3 "
+                   f"with caging not inhibited and the pickoffs at null)")
+    return f"mode {mode} refused: " + "; ".join(why) if why else None
+
+
+class RelayDriver(abc.ABC):
+    #: Reason the last selection was refused (the console's alarm lamp), or None.
+    alarm: str | None = None
+
+    @abc.abstractmethod
+    def hold(self) -> None: ...
+
+    @abc.abstractmethod
+    def select(self, mode: int) -> None: ...
+
+    @abc.abstractmethod
+    def release(self) -> int:
+        """Clock the selection in; returns the mode now in force."""
+
+    @abc.abstractmethod
+    def status(self) -> RelayStatus: ...
+
+    def set_mode(self, mode: int) -> int:
+        """Hold, select, release, with the interlocks checked first; returns the new mode."""
+        try:
+            mode = check_mode(mode)
+        except ModeNotAllowed as exc:
+            self.alarm = str(exc)
+            raise
+        why = interlock_reason(mode, self.status())
+        if why:
+            self.alarm = why
+            raise InterlockError(why)
+        self.hold()
+        try:
+            self.select(mode)
+        except BaseException:
+            try:
+                self.release()  # a refused selection leaves the register as it was
+            except DriverError as exc:
+                log.warning("release after a refused selection failed: %s", exc)
+            raise
+        now = self.release()
+        self.alarm = None
+        return now
+
+
+class CanRelayDriver(RelayDriver):
+    def __init__(self, link: CanLink) -> None:
+        self.node = NodeClient(link, "relay")
+
+    def hold(self) -> None:
+        self.node.call(cp.OP_HOLD, what="HOLD")
+
+    def select(self, mode: int) -> None:
+        try:
+            mode = check_mode(mode)
+        except ModeNotAllowed as exc:
+            self.alarm = str(exc)
+            raise
+        self.node.call(cp.OP_SELECT, 0, mode, what=f"SELECT mode {mode}")
+
+    def release(self) -> int:
+        try:
+            return self.node.call(cp.OP_RELEASE, what="RELEASE")
+        except InterlockError as exc:
+            bits = getattr(exc, "detail", 0)
+            why = [w for b, w in ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"), (cp.WHY_NOT_CAGED, "gyros not caged"))
+                   if bits & b]
+            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else "")) from None
+
+    def status(self) -> RelayStatus:
+        w = self.node.call(cp.OP_STATUS, what="STATUS")
+        return RelayStatus(
+            mode=(w >> cp.ST_MODE_SHIFT) & 7, selected=(w >> cp.ST_SELECT_SHIFT) & 7,
+            held=bool(w & cp.ST_HELD), alarm=bool(w & cp.ST_ALARM),
+            at_speed={c: bool(w >> (cp.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+            caged={c: bool(w >> (cp.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+            spin_fraction=((w >> cp.ST_SPIN_SHIFT) & 0xFF) / 100.0)

@@ -1,0 +1,341 @@
+"""The rig: every device driver in one object, its clock, its faults, and the safe state.
+
+``open_rig(url)`` connects to a rig (DESIGN.md section 2)::
+
+    sim                                  the loopback rig, virtual time, cold (mode 1, wheels stopped)
+    sim?realtime=1&seed=3&warm=1         paced to the wall clock; started in mode 3, caged
+    sim?config=F.toml&table=manual       a sim config; a hand-cranked table (the operator is asked)
+    serial:///dev/ttyACM0?can=socketcan:can0[&baud=2000000][&table=manual|can]
+
+Faults that happen off the caller's thread (a node falls silent, the ADC port vanishes) are
+latched (``rig.faults``); the rig goes to the safe state at once, and every later call
+raises the fault. Refusals (``SetpointRangeError``, ``InterlockError``) change nothing, so
+they do not move the rig. ``close`` always leaves the rig safe.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from dataclasses import dataclass, field
+from typing import Callable
+from urllib.parse import parse_qsl, urlsplit
+
+import can
+
+from . import can_protocol as cp
+from .adc import Adc
+from .caging import CagingSwitches, CanCagingSwitches
+from .calibration import RigCalibration
+from .can_link import CanLink, NodeClient
+from .clock import RigClock, WallClock
+from .command import CanCommandDac, CommandDac
+from .errors import DriverError
+from .faults import FaultLatch
+from .relay import SAFE_MODE, CanRelayDriver, RelayDriver
+from .serial_adc import SerialAdc
+from .table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
+from .torquer import CanTorquerDac, TorquerDac
+
+log = logging.getLogger(__name__)
+
+#: An event listener gets (rig time s, kind, text); the recorder writes them to /events.
+EventListener = Callable[[float, str, str], None]
+
+
+@dataclass
+class SafeReport:
+    """What going safe achieved; ``ok`` only if every step was done and read back."""
+
+    done: list[str] = field(default_factory=list)
+    failed: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed
+
+
+class Rig:
+    def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
+                 caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
+                 safe_nodes: list[NodeClient] = (), closers: list[Callable[[], None]] = (),
+                 emulator=None) -> None:
+        self.url = url
+        self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
+        self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
+        #: the simulated rig's server, for fault injection in tests; None on hardware
+        self.emulator = emulator
+        self._safe_nodes = list(safe_nodes)
+        self._closers = list(closers)
+        self._listeners: list[EventListener] = []
+        self._safe_lock = threading.Lock()
+        self._safe_thread: threading.Thread | None = None
+        self.closed = False
+        faults.on_fault(self._on_fault)
+
+    # ------------------------------------------------------------------ events
+    def subscribe(self, listener: EventListener) -> None:
+        self._listeners.append(listener)
+
+    def unsubscribe(self, listener: EventListener) -> None:
+        if listener in self._listeners:
+            self._listeners.remove(listener)
+
+    def event(self, kind: str, text: str) -> None:
+        t = self.clock.now()
+        log.info("rig event at %.3f s: %s: %s", t, kind, text)
+        for fn in list(self._listeners):
+            try:
+                fn(t, kind, text)
+            except Exception:  # a listener's trouble is not the rig's
+                log.exception("event listener failed")
+
+    # ------------------------------------------------------------------ commands with events
+    def set_mode(self, mode: int) -> int:
+        try:
+            now = self.relays.set_mode(mode)
+        except DriverError as exc:
+            self.event("alarm", str(exc))
+            raise
+        self.event("mode", f"mode {now}")
+        return now
+
+    def set_torquer_bias_V(self, channel: str, volts: float) -> float:
+        back = self.torquers.set_bias_V(channel, volts)
+        self.event("setpoint", f"torquer bias {channel} = {back:+.6f} V")
+        return back
+
+    def set_command_torque_V(self, axis: str, volts: float) -> float:
+        back = self.commands.set_command_torque_V(axis, volts)
+        self.event("setpoint", f"command torque V_Td {axis} = {back:+.6f} V")
+        return back
+
+    def set_ac_bias_V(self, axis: str, volts: float) -> float:
+        back = self.commands.set_ac_bias_V(axis, volts)
+        self.event("setpoint", f"autocollimator bias gamma_c {axis} = {back:+.6f} V")
+        return back
+
+    def set_caging_inhibit(self, channel: str, inhibit: bool) -> bool:
+        back = self.caging.set_inhibit(channel, inhibit)
+        self.event("setpoint", f"caging inhibit {channel} = {'on' if back else 'off'}")
+        return back
+
+    def move_table(self, tilt_deg: float | None = None, spindle_deg: float | None = None) -> TablePosition:
+        pos = self.table.move_to(tilt_deg, spindle_deg)
+        self.event("table", f"table tilt {pos.tilt_deg:.4f} deg, spindle {pos.spindle_deg:.4f} deg")
+        return pos
+
+    # ------------------------------------------------------------------ time
+    def now(self) -> float:
+        return self.clock.now()
+
+    def wait(self, seconds: float) -> None:
+        self.faults.check()
+        self.clock.sleep(seconds)
+        self.faults.check()
+
+    def wait_until(self, predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.5,
+                   what: str = "condition") -> float:
+        """Poll ``predicate`` every ``poll_s`` of rig time; returns the rig time it came true."""
+        t_end = self.clock.now() + timeout_s
+        while not predicate():
+            if self.clock.now() >= t_end:
+                from .errors import DeviceTimeout
+                raise DeviceTimeout(f"{what} not reached within {timeout_s:g} s of rig time")
+            self.wait(poll_s)
+        return self.clock.now()
+
+    # ------------------------------------------------------------------ safety
+    def check(self) -> None:
+        self.faults.check()
+
+    def _on_fault(self, fault: DriverError) -> None:
+        # Runs on whichever thread saw the fault (maybe the CAN receive thread, which the
+        # safe-state requests need): go safe on a thread of its own.
+        self.event("error", str(fault))
+        t = threading.Thread(target=self.safe, name="rig-safe", daemon=True)
+        self._safe_thread = t
+        t.start()
+
+    def safe(self) -> SafeReport:
+        """Mode 1, every bias and command zero, caging switches released; each step read back."""
+        with self._safe_lock:
+            report = SafeReport()
+            for node in self._safe_nodes:
+                try:
+                    node.safe()
+                    report.done.append(f"{node.name} safe")
+                except DriverError as exc:
+                    report.failed.append(f"{node.name}: {exc}")
+            for name, check in (("mode 1", self._mode_is_safe), ("outputs zero", self._outputs_zero)):
+                try:
+                    if check():
+                        report.done.append(f"{name} read back")
+                    else:
+                        report.failed.append(f"{name} not read back")
+                except DriverError as exc:
+                    report.failed.append(f"{name}: {exc}")
+            if report.ok:
+                log.info("rig safe: %s", "; ".join(report.done))
+            else:
+                log.error("rig NOT fully safe: %s", "; ".join(report.failed))
+            self.event("safe", "safe state reached" if report.ok else "safe state incomplete: "
+                       + "; ".join(report.failed))
+            return report
+
+    def _mode_is_safe(self) -> bool:
+        return self._raw("relay", cp.OP_GET, 0) == SAFE_MODE
+
+    def _outputs_zero(self) -> bool:
+        return (all(self._raw("torquer", cp.OP_GET, i) == 0 for i in range(4))
+                and all(self._raw("command", cp.OP_GET, i) == 0 for i in range(6)))
+
+    def _raw(self, name: str, op: int, index: int) -> int:
+        for node in self._safe_nodes:
+            if node.name == name:
+                return node.call(op, index, check_faults=False)
+        raise DriverError(f"no node {name!r} on this rig")
+
+    def is_safe(self) -> bool:
+        """Read back mode and outputs (works while a fault is latched)."""
+        return self._mode_is_safe() and self._outputs_zero()
+
+    def close(self) -> SafeReport | None:
+        if self.closed:
+            return None
+        self.closed = True
+        if self._safe_thread is not None:
+            self._safe_thread.join(timeout=10.0)
+        report = self.safe()
+        for closer in [self.adc.close, *self._closers]:
+            try:
+                closer()
+            except Exception:  # closing must finish even when a device is gone
+                log.exception("closing %s failed", closer)
+        return report
+
+    def __enter__(self) -> "Rig":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+# ---------------------------------------------------------------------------- open_rig
+_SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog"}
+_SERIAL_KEYS = {"can", "baud", "table"}
+
+
+def _flag(key: str, value: str) -> bool:
+    if value.lower() in ("1", "true", "yes", "on"):
+        return True
+    if value.lower() in ("0", "false", "no", "off"):
+        return False
+    raise ValueError(f"rig URL: {key}={value!r} must be 1 or 0")
+
+
+def open_rig(url: str = "sim", *, operator: Operator | None = None,
+             calibration: RigCalibration | None = None) -> Rig:
+    """Connect to the rig at ``url`` (see the module docstring); raises DriverError/ValueError."""
+    parts = urlsplit(url)
+    params = dict(parse_qsl(parts.query, keep_blank_values=True))
+    kind = parts.scheme or parts.path
+    if kind == "sim" and (parts.path in ("sim", "") or parts.scheme == "sim"):
+        return _open_sim(url, params, operator, calibration)
+    if kind == "serial":
+        return _open_serial(url, parts.path, params, operator, calibration)
+    raise ValueError(f"rig URL {url!r}: unknown rig; use 'sim[?realtime=1&seed=N&warm=1&config=F.toml&table=manual]' "
+                     f"or 'serial:///dev/ttyACM0?can=socketcan:can0'")
+
+
+def _check_keys(url: str, params: dict, allowed: set[str]) -> None:
+    unknown = sorted(set(params) - allowed)
+    if unknown:
+        raise ValueError(f"rig URL {url!r}: unknown parameter(s) {', '.join(unknown)} "
+                         f"(known: {', '.join(sorted(allowed))})")
+
+
+def _open_sim(url: str, params: dict, operator: Operator | None, calibration: RigCalibration | None) -> Rig:
+    from fbs.simhw.params import load_config
+    from fbs.simhw.rig_server import SimRigServer
+
+    _check_keys(url, params, _SIM_KEYS)
+    table = params.get("table", "can")
+    if table not in ("can", "manual"):
+        raise ValueError(f"rig URL {url!r}: table={table!r} must be 'can' or 'manual'")
+    try:
+        seed = int(params.get("seed", "0"))
+        speed = float(params.get("speed", "1"))
+        watchdog = float(params.get("watchdog", "1"))
+    except ValueError as exc:
+        raise ValueError(f"rig URL {url!r}: {exc}") from None
+    cfg = load_config(params.get("config"))
+    server = SimRigServer(cfg, seed=seed, realtime=_flag("realtime", params.get("realtime", "0")), speed=speed,
+                          warm=_flag("warm", params.get("warm", "0")), watchdog_s=watchdog)
+    try:
+        bus = can.Bus(interface="virtual", channel=server.can_channel, receive_own_messages=False)
+        if table == "manual":
+            t = server.sim.cfg.table
+            tab = ("manual", operator or terminal_operator, TablePosition(t.tilt_deg, t.spindle_deg % 360.0))
+        else:
+            tab = ("can",)
+        rig = _assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
+                        node_timeout_s=watchdog, closers=[server.stop], emulator=server)
+    except BaseException:
+        server.stop()
+        raise
+    return rig
+
+
+def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
+                 calibration: RigCalibration | None) -> Rig:
+    _check_keys(url, params, _SERIAL_KEYS)
+    if not path:
+        raise ValueError(f"rig URL {url!r}: no serial device path (e.g. serial:///dev/ttyACM0?can=socketcan:can0)")
+    iface, _, channel = params.get("can", "").partition(":")
+    if not iface or not channel:
+        raise ValueError(f"rig URL {url!r}: give the CAN interface as can=<interface>:<channel>, e.g. can=socketcan:can0")
+    table = params.get("table", "manual")
+    if table not in ("can", "manual"):
+        raise ValueError(f"rig URL {url!r}: table={table!r} must be 'can' or 'manual'")
+    try:
+        baud = int(params.get("baud", "2000000"))
+    except ValueError as exc:
+        raise ValueError(f"rig URL {url!r}: {exc}") from None
+    try:
+        bus = can.Bus(interface=iface, channel=channel)
+    except (can.CanError, OSError, ValueError, ImportError) as exc:
+        from .errors import DeviceLost
+        raise DeviceLost(f"cannot open CAN interface {iface}:{channel}: {exc}") from exc
+    tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
+    return _assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)
+
+
+def _assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
+              calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
+              closers: list | None = None, emulator=None) -> Rig:
+    faults = FaultLatch()
+    calibration = calibration or RigCalibration()
+    names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
+    link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s)
+    adc = None
+    try:
+        link.wait_for_nodes()
+        clients = [NodeClient(link, n) for n in names]
+        for c in clients:
+            c.identify()
+            c.clear()  # a node latched safe by an earlier session's end starts fresh
+        adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate)
+        tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
+        rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=CanTorquerDac(link, calibration),
+                  commands=CanCommandDac(link, calibration), caging=CanCagingSwitches(link), table=tab,
+                  clock=clock, faults=faults, safe_nodes=[c for c in clients if c.name != "table"],
+                  closers=[link.close, *(closers or [])], emulator=emulator)
+    except BaseException:
+        if adc is not None:
+            adc.close()
+        link.close()
+        raise
+    log.info("rig %s open: ADC %s %s on %s; CAN nodes %s on %s", url, adc.identity.model, adc.identity.serial,
+             adc_port, ", ".join(names), channel)
+    return rig

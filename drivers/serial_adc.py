@@ -1,0 +1,455 @@
+"""The ADC over a serial line (pyserial): the protocol of ``adc_protocol`` / docs/protocol.md 1.
+
+A reader thread drains the port, decodes frames and replies, checks every frame's CRC,
+sequence counter and first-sample index, and queues the samples. Lost or corrupted frames
+become ``SampleGap`` items at their exact sample positions, so ``read`` raises them in stream
+order and never splices across them. Replies go to the command in flight.
+
+On a virtual (simulated) clock a full buffer holds the reader back, and with it the
+simulation; on hardware it is a host overrun, reported as a gap like any other loss.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from collections import deque
+
+import numpy as np
+import serial
+
+from .adc import Adc, AdcBlock, AdcConfig, AdcIdentity, AdcStatus
+from .adc_protocol import (CODE_MAX, CODE_MIN, FLAG_OVERRUN, MAX_CHANNELS, MAX_SETS, Frame, Reply,
+                           StreamDecoder, encode_command)
+from .clock import RigClock, WallClock
+from .errors import (DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SampleGap,
+                     SetpointRangeError)
+from .faults import FaultLatch
+
+log = logging.getLogger(__name__)
+
+#: Default frame length: about 10 ms of samples.
+FRAME_SECONDS = 0.01
+
+
+def _err_from_reply(reply: Reply, what: str) -> DriverError:
+    text = f"the ADC refused {what}: {reply.verb} {reply.text}"
+    if reply.verb == "RANGE":
+        return SetpointRangeError(text)
+    if reply.verb in ("BUSY", "STATE"):
+        return InterlockError(text)
+    if reply.verb in ("SYNTAX", "UNKNOWN"):
+        return ProtocolError(text)
+    return DriverError(text)
+
+
+class SerialAdc(Adc):
+    """Driver of the FBS ADC on a serial port (a USB CDC device, or the simulator's pty)."""
+
+    def __init__(self, port: str, *, clock: RigClock | None = None, faults: FaultLatch | None = None,
+                 baudrate: int = 2_000_000, reply_timeout_s: float = 2.0, stall_timeout_s: float = 3.0,
+                 buffer_s: float = 120.0) -> None:
+        self.port = port
+        self.clock = clock or WallClock()
+        self.faults = faults or FaultLatch()
+        self.reply_timeout_s = reply_timeout_s
+        self.stall_timeout_s = stall_timeout_s
+        self.buffer_s = buffer_s
+        try:
+            self.ser = serial.Serial(port, baudrate=baudrate, timeout=0.05, write_timeout=reply_timeout_s)
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise DeviceLost(f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
+                             f"the device path and that no other program holds the port") from exc
+        self._decoder = StreamDecoder()
+        self._replies: queue.Queue = queue.Queue()
+        self._cmd_lock = threading.Lock()
+        self._cond = threading.Condition()
+        self._items: deque = deque()        # (first_sample, codes) or SampleGap / ProtocolError
+        self._buffered = 0                  # sample sets held in _items
+        self._capacity = 0
+        self._rx_streaming = False          # between the START and STOP replies, as the reader sees it
+        self._next_sample = 0
+        self._next_seq = 0
+        self._bad_data: str | None = None   # decode error since the last good frame
+        self._read_pos = 0
+        self._t0 = 0.0
+        self._config: AdcConfig | None = None
+        self._last_rx = time.monotonic()
+        self._closed = False
+        self._stopping = False              # STOP sent: a full buffer may no longer hold the reader
+        self._thread = threading.Thread(target=self._reader, name="adc-reader", daemon=True)
+        self._thread.start()
+        try:
+            self.identity = self.identify()
+        except DriverError:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ reader thread
+    def _reader(self) -> None:
+        while not self._closed:
+            try:
+                waiting = self.ser.in_waiting
+                data = self.ser.read(waiting if waiting > 0 else 1)
+            except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
+                if not self._closed:
+                    self._lost(DeviceLost(f"ADC on {self.port}: the serial device went away ({exc}); "
+                                          f"check the cable and power, then reopen the rig"))
+                return
+            if not data:
+                continue
+            self._last_rx = time.monotonic()
+            self._decoder.feed(data)
+            for item in self._decoder.items():
+                if isinstance(item, Frame):
+                    self._on_frame(item)
+                elif isinstance(item, Reply):
+                    self._on_reply(item)
+                else:
+                    self._on_bad_bytes(item)
+
+    def _on_reply(self, reply: Reply) -> None:
+        if reply.ok and reply.verb == "START":
+            with self._cond:
+                self._items.clear()
+                self._buffered = 0
+                self._next_sample = self._next_seq = self._read_pos = 0
+                self._bad_data = None
+                self._rx_streaming = True
+        elif reply.ok and reply.verb == "STOP":
+            with self._cond:
+                sent = int(reply.fields.get("samples", self._next_sample))
+                if self._rx_streaming and sent > self._next_sample:
+                    self._push(SampleGap(self._next_sample, sent, self._bad_data or "frames lost before STOP"))
+                    self._next_sample = sent
+                self._rx_streaming = False
+                self._cond.notify_all()
+        self._replies.put(reply)
+
+    def _on_bad_bytes(self, err: ProtocolError) -> None:
+        log.warning("ADC on %s: %s", self.port, err)
+        if self._rx_streaming:
+            self._bad_data = self._bad_data or str(err)
+        else:
+            self._replies.put(err)
+
+    def _on_frame(self, frame: Frame) -> None:
+        with self._cond:
+            if not self._rx_streaming:
+                log.warning("ADC on %s: frame seq %d outside a stream, ignored", self.port, frame.seq)
+                return
+            cfg = self._config
+            if cfg is not None and frame.n_channels != len(cfg.channels):
+                self._bad_data = (f"bad length: frame seq {frame.seq} carries {frame.n_channels} channels, "
+                                  f"{len(cfg.channels)} are configured")
+                return
+            first = frame.first_sample
+            if first < self._next_sample:
+                self._push(ProtocolError(f"ADC frame seq {frame.seq} starts at sample {first}, before sample "
+                                         f"{self._next_sample} already received; the device's counters are "
+                                         f"inconsistent"))
+                return
+            if first > self._next_sample:
+                if self._bad_data:
+                    reason = f"corrupted frame(s): {self._bad_data}"
+                elif frame.seq != self._next_seq:
+                    reason = (f"frame(s) seq {self._next_seq}..{(frame.seq - 1) & 0xFFFFFFFF} missing "
+                              f"(sequence counter)")
+                else:
+                    reason = "sample index jumped (frame counter consistent)"
+                if frame.flags & FLAG_OVERRUN:
+                    reason += "; the device reports a FIFO overrun"
+                self._push(SampleGap(self._next_sample, first, reason))
+            self._bad_data = None
+            self._push((first, frame.codes))
+            self._next_sample = first + frame.n_sets
+            self._next_seq = (frame.seq + 1) & 0xFFFFFFFF
+
+    def _push(self, item) -> None:
+        """Queue an item (caller holds _cond). A full buffer: wait (virtual clock) or overrun."""
+        if isinstance(item, tuple):
+            n = len(item[1])
+            while self._buffered + n > self._capacity and not self._closed:
+                if not self.clock.virtual or self._stopping:
+                    first = item[0]
+                    log.error("ADC host buffer full: samples %d..%d dropped", first, first + n - 1)
+                    self._merge_gap(SampleGap(first, first + n, "host buffer overrun: the application did "
+                                                                "not read the stream in time"))
+                    return
+                self._cond.wait(0.05)
+            self._buffered += n
+        self._items.append(item)
+        self._cond.notify_all()
+
+    def _merge_gap(self, gap: SampleGap) -> None:
+        last = self._items[-1] if self._items else None
+        if isinstance(last, SampleGap) and last.stop == gap.start and last.reason == gap.reason:
+            self._items[-1] = SampleGap(last.start, gap.stop, gap.reason)
+        else:
+            self._items.append(gap)
+        self._cond.notify_all()
+
+    def _lost(self, fault: DriverError) -> None:
+        with self._cond:
+            self._rx_streaming = False
+            self._cond.notify_all()
+        self.faults.report(fault)
+
+    # ------------------------------------------------------------------ commands
+    def _command(self, verb: str, *args: object, what: str | None = None) -> Reply:
+        self.faults.check()
+        if self._closed:
+            raise DeviceLost(f"ADC on {self.port} is closed")
+        what = what or " ".join([verb, *map(str, args)])
+        with self._cmd_lock:
+            while not self._replies.empty():
+                stale = self._replies.get_nowait()
+                log.warning("ADC on %s: stale reply dropped: %s", self.port, stale)
+            try:
+                self.ser.write(encode_command(verb, *args))
+            except (serial.SerialException, OSError) as exc:
+                fault = DeviceLost(f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away")
+                self._lost(fault)
+                raise fault from exc
+            try:
+                reply = self._replies.get(timeout=self.reply_timeout_s)
+            except queue.Empty:
+                fault = DeviceTimeout(f"ADC on {self.port}: no reply to {what!r} within {self.reply_timeout_s:g} s"
+                                      + (f" (last bad data: {self._bad_data})" if self._bad_data else ""))
+                self.faults.report(fault)
+                raise fault from None
+        if isinstance(reply, ProtocolError):
+            fault = ProtocolError(f"ADC on {self.port}: bad reply to {what!r}: {reply}")
+            self.faults.report(fault)
+            raise fault
+        keyword = verb.rstrip("?")
+        if reply.ok and reply.verb != keyword:
+            fault = ProtocolError(f"ADC on {self.port}: unexpected reply 'OK {reply.verb} {reply.text}' to {what!r}")
+            self.faults.report(fault)
+            raise fault
+        if not reply.ok:
+            raise _err_from_reply(reply, what)
+        return reply
+
+    def identify(self) -> AdcIdentity:
+        r = self._command("IDN?")
+        ch = self._command("CHAN?")
+        try:
+            return AdcIdentity(
+                vendor=r.field("vendor"), model=r.field("model"), serial=r.field("serial"),
+                firmware=r.field("fw"), bits=int(r.field("bits")),
+                max_aggregate_rate_hz=float(r.field("max_rate_hz")),
+                ranges_V=tuple(float(v) for v in r.field("ranges").split(",")),
+                channels=tuple(ch.words[0].split(",")) if ch.words else ())
+        except ValueError as exc:
+            raise ProtocolError(f"ADC on {self.port}: identity reply {r.text!r} is malformed: {exc}") from exc
+
+    @property
+    def config(self) -> AdcConfig | None:
+        return self._config
+
+    @property
+    def streaming(self) -> bool:
+        return self._rx_streaming
+
+    def configure(self, channels, rate_hz, ranges_V=None, frame_sets=None) -> AdcConfig:
+        ident = self.identity
+        channels = tuple(channels)
+        # Everything is checked before the first byte goes out.
+        if self._rx_streaming:
+            raise InterlockError("the ADC is streaming; stop it before reconfiguring")
+        if not channels:
+            raise SetpointRangeError("no ADC channels chosen", value=channels, limit=ident.channels)
+        if len(channels) > MAX_CHANNELS:
+            raise SetpointRangeError(f"{len(channels)} channels requested; a frame carries at most {MAX_CHANNELS}",
+                                     value=len(channels), limit=MAX_CHANNELS)
+        for c in channels:
+            if c not in ident.channels:
+                raise SetpointRangeError(f"ADC channel {c!r} does not exist (channels: {', '.join(ident.channels)})",
+                                         value=c, limit=ident.channels)
+        dup = {c for c in channels if channels.count(c) > 1}
+        if dup:
+            raise SetpointRangeError(f"ADC channel(s) {', '.join(sorted(dup))} chosen twice", value=channels)
+        try:
+            rate = float(rate_hz)
+        except (TypeError, ValueError):
+            raise SetpointRangeError(f"ADC sample rate {rate_hz!r} is not a number", value=rate_hz) from None
+        limit = ident.max_aggregate_rate_hz / len(channels)
+        if not (math.isfinite(rate) and 0 < rate <= limit):
+            raise SetpointRangeError(f"ADC sample rate {rate_hz!r} Hz is outside 0 < rate <= {limit:g} Hz "
+                                     f"({ident.max_aggregate_rate_hz:g} samples/s shared by {len(channels)} channels)",
+                                     value=rate_hz, limit=limit)
+        if ranges_V is None:
+            ranges_V = max(ident.ranges_V)
+        ranges = dict.fromkeys(channels, ranges_V) if not isinstance(ranges_V, dict) else dict(ranges_V)
+        for c, r in ranges.items():
+            if c not in channels:
+                raise SetpointRangeError(f"range given for {c!r}, which is not among the chosen channels",
+                                         value=c, limit=channels)
+            if r not in ident.ranges_V:
+                raise SetpointRangeError(f"ADC range {r!r} V for {c} is not available (ranges: "
+                                         f"{', '.join(f'{v:g}' for v in ident.ranges_V)} V)", value=r,
+                                         limit=ident.ranges_V)
+        for c in channels:
+            ranges.setdefault(c, max(ident.ranges_V))
+        if frame_sets is None:
+            frame_sets = int(min(MAX_SETS, max(1, round(rate * FRAME_SECONDS))))
+        if not (isinstance(frame_sets, int) and 1 <= frame_sets <= MAX_SETS):
+            raise SetpointRangeError(f"frame length {frame_sets!r} sample sets is outside 1..{MAX_SETS}",
+                                     value=frame_sets, limit=MAX_SETS)
+        r = self._command("CONF", "CHAN", ",".join(channels))
+        self._expect(r, ["CHAN", ",".join(channels)])
+        r = self._command("CONF", "RATE", f"{rate:.9g}")
+        try:
+            got_rate = float(r.words[1])
+        except (IndexError, ValueError):
+            raise ProtocolError(f"ADC on {self.port}: rate reply {r.text!r} is malformed") from None
+        if abs(got_rate - rate) > 1e-9 * rate:
+            raise SetpointRangeError(f"the ADC set {got_rate:g} Hz for the requested {rate:g} Hz; choose a rate "
+                                     f"its clock can divide exactly", value=rate, limit=got_rate)
+        for c in channels:
+            self._expect(self._command("CONF", "RANGE", c, f"{ranges[c]:g}"), ["RANGE", c, f"{ranges[c]:g}"])
+        self._expect(self._command("CONF", "FRAME", frame_sets), ["FRAME", str(frame_sets)])
+        self._config = AdcConfig(channels, rate, ranges, frame_sets)
+        self._scale = np.array([ranges[c] / 32768.0 for c in channels])
+        return self._config
+
+    def _expect(self, reply: Reply, words: list[str]) -> None:
+        if list(reply.words[:len(words)]) != words:
+            fault = ProtocolError(f"ADC on {self.port}: configuration echo 'OK {reply.verb} {reply.text}' does not "
+                                  f"match the request {' '.join(words)!r}")
+            self.faults.report(fault)
+            raise fault
+
+    def start(self) -> float:
+        cfg = self._config
+        if cfg is None:
+            raise InterlockError("configure the ADC (channels, rate, ranges) before starting it")
+        if self._rx_streaming:
+            raise InterlockError("the ADC is already streaming")
+        with self._cond:
+            self._capacity = max(int(self.buffer_s * cfg.rate_hz), 4 * cfg.frame_sets)
+        self._command("START")
+        self._t0 = self.clock.now()
+        self._last_rx = time.monotonic()
+        return self._t0
+
+    def stop(self) -> AdcStatus:
+        self._stopping = True
+        try:
+            r = self._command("STOP")
+        finally:
+            self._stopping = False
+        return self._status_from(r, streaming=False)
+
+    def status(self) -> AdcStatus:
+        r = self._command("STAT?")
+        return self._status_from(r, streaming=r.fields.get("state") == "streaming")
+
+    def _status_from(self, r: Reply, streaming: bool) -> AdcStatus:
+        try:
+            return AdcStatus(streaming, int(r.fields.get("samples", 0)), int(r.fields.get("frames", 0)),
+                             int(r.fields.get("overruns", 0)))
+        except ValueError:
+            raise ProtocolError(f"ADC on {self.port}: status reply {r.text!r} is malformed") from None
+
+    # ------------------------------------------------------------------ data
+    def _contiguous(self) -> tuple[int, bool]:
+        """Sets available before the next gap (or the end), and whether a gap/error follows them."""
+        n = 0
+        for item in self._items:
+            if not isinstance(item, tuple):
+                return n, True
+            n += len(item[1])
+        return n, False
+
+    def read(self, n: int, timeout_s: float | None = None) -> AdcBlock:
+        if not (isinstance(n, (int, np.integer)) and n > 0):
+            raise ValueError(f"read {n!r} sample sets: the count must be a positive integer")
+        cfg = self._config
+        if cfg is None:
+            raise InterlockError("the ADC is not configured")
+        self.clock.demand(self._t0 + (self._read_pos + n) / cfg.rate_hz)
+        t_start = time.monotonic()
+        with self._cond:
+            while True:
+                self.faults.check()
+                if self._items and not isinstance(self._items[0], tuple):
+                    item = self._items.popleft()
+                    if isinstance(item, SampleGap):
+                        self._read_pos = item.stop
+                    raise item
+                avail, blocked = self._contiguous()
+                if avail >= n or (avail and (blocked or not self._rx_streaming)):
+                    return self._take(min(n, avail))
+                if not self._rx_streaming:
+                    raise InterlockError(f"the ADC stream has ended at sample {self._read_pos}; start it again")
+                now = time.monotonic()
+                if timeout_s is not None and now - t_start > timeout_s:
+                    raise DeviceTimeout(f"ADC on {self.port}: {n} sample sets not received within {timeout_s:g} s")
+                if now - max(self._last_rx, t_start) > self.stall_timeout_s:
+                    fault = DeviceTimeout(f"ADC on {self.port} stalled: no data for {self.stall_timeout_s:g} s while "
+                                          f"streaming at {cfg.rate_hz:g} Hz (last sample {self._read_pos}); "
+                                          f"check the device and the cable")
+                    self._cond.release()
+                    try:
+                        self._lost(fault)
+                    finally:
+                        self._cond.acquire()
+                    raise fault
+                self._cond.wait(0.05)
+
+    def read_available(self) -> AdcBlock | None:
+        with self._cond:
+            self.faults.check()
+            if self._items and not isinstance(self._items[0], tuple):
+                item = self._items.popleft()
+                if isinstance(item, SampleGap):
+                    self._read_pos = item.stop
+                raise item
+            avail, _ = self._contiguous()
+            return self._take(avail) if avail else None
+
+    def _take(self, n: int) -> AdcBlock:
+        """Pop n sets (caller holds _cond and has checked they are contiguous)."""
+        parts, got = [], 0
+        first = self._items[0][0]
+        while got < n:
+            start, codes = self._items[0]
+            k = min(n - got, len(codes))
+            parts.append(codes[:k])
+            if k == len(codes):
+                self._items.popleft()
+            else:
+                self._items[0] = (start + k, codes[k:])
+            got += k
+        self._buffered -= n
+        self._read_pos = first + n
+        self._cond.notify_all()
+        codes = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        cfg = self._config
+        volts = codes * self._scale
+        over = (codes == CODE_MIN) | (codes == CODE_MAX)
+        return AdcBlock(first, cfg.rate_hz, self._t0, cfg.channels, volts, over)
+
+    # ------------------------------------------------------------------ lifetime
+    def close(self) -> None:
+        if self._closed:
+            return
+        if self._rx_streaming and self.faults.fault is None:
+            try:
+                self.stop()
+            except DriverError as exc:
+                log.warning("ADC on %s: stop on close failed: %s", self.port, exc)
+        self._closed = True
+        with self._cond:
+            self._cond.notify_all()
+        try:
+            self.ser.close()
+        except Exception:  # closing a port that already went away
+            pass
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=2.0)

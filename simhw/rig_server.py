@@ -1,0 +1,205 @@
+"""The loopback rig: the simulator behind real wires (a pty for the ADC, a virtual CAN bus).
+
+``SimRigServer`` owns a ``Simulator`` and one physics thread that advances it block by
+block. Every device emulation (``AdcDevice``, the CAN nodes) changes the physics only
+through ``submit``, which runs at the next block boundary on the physics thread, so the
+simulator is never touched by two threads.
+
+Time: with ``realtime`` the simulation is paced to the wall clock and runs by itself, like
+hardware. Otherwise time is *virtual*: the physics advances only as far as someone has asked
+for it, by waiting (``SimClock.sleep``) or by reading ADC data (``SimClock.demand``), so a
+procedure finishes as fast as the simulation can run, and a command sent while the host is
+busy lands at a well-defined rig time.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+import uuid
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from fbs.drivers.errors import DeviceLost, DeviceTimeout
+
+from .adc_device import AdcDevice
+from .can_nodes import CanNodeHost
+from .clock import PacedClock, VirtualClock
+from .params import GYRO_CHANNELS, SimConfig
+from .simulator import Simulator
+
+log = logging.getLogger(__name__)
+
+#: The relay driver's null detector: a channel counts as caged when its pickoff, averaged
+#: over about a second, stays below this (V at the demodulator; ~50 urad at Kg ~6 mV/urad).
+CAGED_NULL_V = 0.3
+NULL_AVERAGE_S = 1.0
+_PICKOFF = {"X": "gyro_x", "Y": "gyro_y", "Z": "gyro_z", "XRD": "gyro_xrd"}
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """What the node electronics can see of the rig, refreshed every block."""
+
+    time_s: float = 0.0
+    mode: int = 1
+    spin: float = 0.0
+    at_speed: bool = False
+    caged: dict[str, bool] = field(default_factory=lambda: dict.fromkeys(GYRO_CHANNELS, False))
+
+
+class SimRigServer:
+    def __init__(self, cfg: SimConfig | None = None, *, seed: int = 0, realtime: bool = False, speed: float = 1.0,
+                 warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 0.1,
+                 paced_block_s: float = 0.01, watchdog_s: float = 1.0) -> None:
+        self.seed = seed
+        self.paced = realtime
+        self.max_block_s = max_block_s
+        self.paced_block_s = paced_block_s
+        self._wall0 = time.monotonic()
+        clock = PacedClock(speed) if realtime else VirtualClock()
+        self.sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=3 if warm else 1,
+                             spin=None if warm else 0.0, clock=clock)
+        self._cond = threading.Condition()
+        self._pending: list[Callable[[Simulator], None]] = []
+        self._demand = 0.0
+        self._time = self.sim.time_s
+        self._null = {c: (0.0 if warm else 1.0) for c in GYRO_CHANNELS}
+        self.snapshot = self._snap(None)
+        self.error: BaseException | None = None
+        self.stall_reason = ""
+        self._stop = threading.Event()
+        self.adc = AdcDevice(self)
+        self.can_channel = f"fbs-sim-{uuid.uuid4().hex[:12]}"
+        self.nodes = CanNodeHost(self, self.can_channel, watchdog_s=watchdog_s)
+        self.clock = SimClock(self)
+        self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
+        self._thread.start()
+
+    @property
+    def adc_port(self) -> str:
+        return self.adc.port
+
+    def wall(self) -> float:
+        return time.monotonic() - self._wall0
+
+    # ------------------------------------------------------------------ for the devices
+    def submit(self, fn: Callable[[Simulator], None]) -> None:
+        """Run ``fn(sim)`` on the physics thread before the next block."""
+        with self._cond:
+            self._pending.append(fn)
+            self._cond.notify_all()
+
+    def demand(self, t: float) -> None:
+        with self._cond:
+            if t > self._demand:
+                self._demand = t
+                self._cond.notify_all()
+
+    @property
+    def time_s(self) -> float:
+        return self._time
+
+    def inject(self, device: str, fault: str, **kw) -> None:
+        """Fault injection for tests: ``device`` is ``adc`` or a CAN node name."""
+        if device == "adc":
+            self.adc.inject(fault, **kw)
+        else:
+            self.nodes.inject(device, fault, **kw)
+
+    def wait_time(self, t: float, stall_s: float = 10.0) -> None:
+        """Block until rig time reaches ``t``; a clear error if it stops advancing."""
+        with self._cond:
+            last, since = self._time, time.monotonic()
+            while self._time < t - 1e-9:
+                if self.error is not None:
+                    raise DeviceLost(f"the simulated rig stopped: {self.error!r}")
+                if self._stop.is_set():
+                    raise DeviceLost("the simulated rig was closed")
+                self._cond.wait(0.05)
+                if self._time != last:
+                    last, since = self._time, time.monotonic()
+                elif time.monotonic() - since > stall_s:
+                    raise DeviceTimeout(f"rig time stalled at {self._time:.3f} s while waiting for {t:.3f} s"
+                                        + (f": {self.stall_reason}" if self.stall_reason else ""))
+
+    # ------------------------------------------------------------------ physics thread
+    def _run(self) -> None:
+        sim = self.sim
+        try:
+            while not self._stop.is_set():
+                with self._cond:
+                    todo, self._pending = self._pending, []
+                    for fn in todo:
+                        fn(sim)
+                    if self.paced:
+                        n = max(1, round(self.paced_block_s * sim.rate_hz))
+                    else:
+                        n = min(math.ceil((self._demand - sim.time_s) * sim.rate_hz - 1e-6),
+                                max(1, round(self.max_block_s * sim.rate_hz)))
+                        if n <= 0:
+                            if not todo:
+                                self._cond.wait(0.05)
+                            continue
+                block = sim.advance(n)
+                self.snapshot = self._snap(block)
+                self.stall_reason = "the ADC stream is not being read (device FIFO full)"
+                self.adc.on_block(block)
+                self.stall_reason = ""
+                with self._cond:
+                    self._time = sim.time_s
+                    self._cond.notify_all()
+        except BaseException as exc:  # the rig dies loudly: devices go silent, waiters are told
+            log.exception("simulated rig: physics thread failed")
+            self.error = exc
+            self.adc.disconnect()
+            for n in self.nodes.nodes.values():
+                n.connected = False
+            with self._cond:
+                self._cond.notify_all()
+
+    def _snap(self, block) -> Snapshot:
+        sim = self.sim
+        if block is not None and len(block):
+            alpha = min(1.0, len(block) / sim.rate_hz / NULL_AVERAGE_S)
+            for c, name in _PICKOFF.items():
+                self._null[c] += alpha * (float(np.mean(np.abs(block[name]))) - self._null[c])
+        ready = sim.gyros_at_speed
+        caged = {c: bool(ready and sim.mode in (3, 4, 5) and not sim.relays.caging_inhibit[i]
+                         and self._null[c] < CAGED_NULL_V)
+                 for i, c in enumerate(GYRO_CHANNELS)}
+        return Snapshot(sim.time_s, sim.mode, sim.spin, ready, caged)
+
+    def stop(self) -> None:
+        self._stop.set()
+        with self._cond:
+            self._cond.notify_all()
+        self.adc.close()
+        self._thread.join(timeout=5.0)
+        self.nodes.close()
+
+
+class SimClock:
+    """The simulated rig's clock (``drivers.clock.RigClock``): rig time is simulated time."""
+
+    def __init__(self, server: SimRigServer) -> None:
+        self.server = server
+        self.virtual = not server.paced
+
+    def now(self) -> float:
+        return self.server.time_s
+
+    def demand(self, t: float) -> None:
+        if self.virtual:
+            self.server.demand(t)
+
+    def sleep(self, seconds: float) -> None:
+        if not seconds > 0:
+            return
+        target = self.now() + seconds
+        self.demand(target)
+        self.server.wait_time(target)
