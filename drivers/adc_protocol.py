@@ -99,15 +99,15 @@ def frame_size(n_sets: int, n_channels: int) -> int:
     return HEADER_SIZE + 2 * n_sets * n_channels + CRC_SIZE
 
 
-def _check_header(ftype: int, c: int, n: int, expect_channels: int | None) -> str | None:
+def _check_header(ftype: int, c: int, n: int, expect_channels: int | None, max_sets: int = MAX_SETS) -> str | None:
     if ftype != TYPE_SAMPLES:
         return f"unknown frame type 0x{ftype:02x}"
     if not 1 <= c <= MAX_CHANNELS:
         return f"bad length: channel count {c} outside 1..{MAX_CHANNELS}"
     if expect_channels is not None and c != expect_channels:
         return f"bad length: frame carries {c} channels, {expect_channels} are configured"
-    if not 1 <= n <= MAX_SETS:
-        return f"bad length: {n} sample sets outside 1..{MAX_SETS}"
+    if not 1 <= n <= max_sets:
+        return f"bad length: {n} sample sets outside 1..{max_sets}"
     return None
 
 
@@ -139,7 +139,7 @@ def _finish_frame(buf: bytes | bytearray, pos: int, c: int, n: int, flags: int, 
 
 
 # --------------------------------------------------------------------------- replies
-_PRINTABLE = re.compile(rb"^[\x20-\x7e]*$")
+_PRINTABLE = re.compile(rb"[\x20-\x7e]*\Z")  # \Z, not $: "$" also matches before a final "\n"
 
 
 def decode_reply(line: bytes) -> Reply:
@@ -188,8 +188,11 @@ class StreamDecoder:
     a run of garbage gives one error, not one per byte.
     """
 
-    def __init__(self, expect_channels: int | None = None) -> None:
+    def __init__(self, expect_channels: int | None = None, max_sets: int = MAX_SETS) -> None:
+        # What the host configured: a header claiming more is rejected at once, so a false
+        # sync pair cannot make the decoder wait for a huge bogus frame.
         self.expect_channels = expect_channels
+        self.max_sets = max_sets
         self.buf = bytearray()
         self.pos = 0
         self.offset = 0  # stream offset of buf[0]
@@ -243,7 +246,7 @@ class StreamDecoder:
                 if avail < HEADER_SIZE:
                     return None
                 _, ftype, c, n, flags, seq, first = HEADER.unpack_from(buf, pos)
-                problem = _check_header(ftype, c, n, self.expect_channels)
+                problem = _check_header(ftype, c, n, self.expect_channels, self.max_sets)
                 if problem:
                     err = self._error(problem)
                     if err:

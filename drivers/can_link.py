@@ -46,6 +46,9 @@ class CanLink:
         self._lost: set[int] = set()
         self._counter = 0
         self._stop = threading.Event()
+        #: When the host cannot reach a node to make it safe, it stops its heartbeat: every
+        #: node's watchdog then trips and the nodes go safe by themselves.
+        self.heartbeat_suspended = False
         self.bad_messages = 0
         self._notifier = can.Notifier(bus, [self._on_message], timeout=0.05)
         self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="can-heartbeat", daemon=True)
@@ -73,6 +76,8 @@ class CanLink:
             else:
                 log.warning("CAN %s: ignored foreign frame: %s", self.channel, exc)
             return
+        if m.node and cp.NODE_NAMES[m.node] not in self.nodes:
+            return  # a node this rig does not use (a motorized table when the table is manual)
         if isinstance(m, cp.Response):
             with self._lock:
                 slot = self._pending.get((m.node, m.seq))
@@ -109,10 +114,11 @@ class CanLink:
     # ------------------------------------------------------------------ heartbeat and watch
     def _heartbeat_loop(self) -> None:
         t_start = time.monotonic()
-        while not self._stop.wait(self.heartbeat_period_s):
+        while True:  # the first heartbeat goes out at once: it arms the nodes' watchdogs
             self._counter += 1
             try:
-                self._send(*cp.encode_heartbeat(cp.Heartbeat(0, cp.HB_OPERATIONAL, 0, self._counter)))
+                if not self.heartbeat_suspended:
+                    self._send(*cp.encode_heartbeat(cp.Heartbeat(0, cp.HB_OPERATIONAL, 0, self._counter)))
             except DeviceLost as exc:
                 self.faults.report(exc)
                 return
@@ -126,6 +132,8 @@ class CanLink:
                     self.faults.report(DeviceLost(
                         f"CAN node '{name}' (id {node}) is silent: no heartbeat for {now - last:.1f} s "
                         f"(limit {self.node_timeout_s:g} s); check its cable and power; the rig went safe"))
+            if self._stop.wait(self.heartbeat_period_s):
+                return
 
     def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
@@ -139,6 +147,9 @@ class CanLink:
                                  f"{', '.join(f'{n} (id {cp.NODES[n]})' for n in missing)} within {timeout_s:g} s; "
                                  f"check the bus wiring, termination and node power")
             time.sleep(0.01)
+
+    def mark_operational(self, name: str) -> None:
+        self._operational.add(cp.NODES[name])
 
     def node_state(self, name: str) -> str:
         node = cp.NODES[name]
@@ -232,7 +243,10 @@ class NodeClient:
         return value & 0xFFFF
 
     def clear(self) -> None:
+        """Clear a latched or freshly booted node. From its answer on it counts as up, so a
+        reboot is caught even before its first operational heartbeat arrives."""
         self.call(cp.OP_CLEAR, check_faults=False)
+        self.link.mark_operational(self.name)
 
     def safe(self) -> None:
         self.call(cp.OP_SAFE, check_faults=False)

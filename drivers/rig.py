@@ -58,13 +58,14 @@ class SafeReport:
 class Rig:
     def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
                  caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
-                 safe_nodes: list[NodeClient] = (), closers: list[Callable[[], None]] = (),
-                 emulator=None) -> None:
+                 link: CanLink | None = None, safe_nodes: list[NodeClient] = (),
+                 closers: list[Callable[[], None]] = (), emulator=None) -> None:
         self.url = url
         self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
         self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
         #: the simulated rig's server, for fault injection in tests; None on hardware
         self.emulator = emulator
+        self.link = link
         self._safe_nodes = list(safe_nodes)
         self._closers = list(closers)
         self._listeners: list[EventListener] = []
@@ -167,7 +168,8 @@ class Rig:
                     report.done.append(f"{node.name} safe")
                 except DriverError as exc:
                     report.failed.append(f"{node.name}: {exc}")
-            for name, check in (("mode 1", self._mode_is_safe), ("outputs zero", self._outputs_zero)):
+            for name, check in (("mode 1", self._mode_is_safe),
+                                ("biases, commands zero and caging released", self._outputs_zero)):
                 try:
                     if check():
                         report.done.append(f"{name} read back")
@@ -179,6 +181,9 @@ class Rig:
                 log.info("rig safe: %s", "; ".join(report.done))
             else:
                 log.error("rig NOT fully safe: %s", "; ".join(report.failed))
+                if self.link is not None and not self.link.heartbeat_suspended:
+                    self.link.heartbeat_suspended = True
+                    report.failed.append("host heartbeat stopped: the nodes' watchdogs will make them safe")
             self.event("safe", "safe state reached" if report.ok else "safe state incomplete: "
                        + "; ".join(report.failed))
             return report
@@ -188,7 +193,8 @@ class Rig:
 
     def _outputs_zero(self) -> bool:
         return (all(self._raw("torquer", cp.OP_GET, i) == 0 for i in range(4))
-                and all(self._raw("command", cp.OP_GET, i) == 0 for i in range(6)))
+                and all(self._raw("command", cp.OP_GET, i) == 0 for i in range(6))
+                and all(self._raw("caging", cp.OP_GET, i) == 0 for i in range(4)))
 
     def _raw(self, name: str, op: int, index: int) -> int:
         for node in self._safe_nodes:
@@ -329,7 +335,7 @@ def _assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: Rig
         tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
         rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=CanTorquerDac(link, calibration),
                   commands=CanCommandDac(link, calibration), caging=CanCagingSwitches(link), table=tab,
-                  clock=clock, faults=faults, safe_nodes=[c for c in clients if c.name != "table"],
+                  clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
                   closers=[link.close, *(closers or [])], emulator=emulator)
     except BaseException:
         if adc is not None:

@@ -31,8 +31,9 @@ from .faults import FaultLatch
 
 log = logging.getLogger(__name__)
 
-#: Default frame length: about 10 ms of samples.
+#: Default frame length: about 10 ms of samples; at most a second, so the stall check holds.
 FRAME_SECONDS = 0.01
+MAX_FRAME_SECONDS = 1.0
 
 
 def _err_from_reply(reply: Reply, what: str) -> DriverError:
@@ -42,7 +43,7 @@ def _err_from_reply(reply: Reply, what: str) -> DriverError:
     if reply.verb in ("BUSY", "STATE"):
         return InterlockError(text)
     if reply.verb in ("SYNTAX", "UNKNOWN"):
-        return ProtocolError(text)
+        return ProtocolError(text + " (host and device disagree on the protocol)")
     return DriverError(text)
 
 
@@ -84,6 +85,9 @@ class SerialAdc(Adc):
         self._thread.start()
         try:
             self.identity = self.identify()
+            if self._command("STAT?").fields.get("state") == "streaming":
+                log.warning("ADC on %s was still streaming (an earlier session ended abruptly); stopping it", port)
+                self._command("STOP")
         except DriverError:
             self.close()
             raise
@@ -120,8 +124,12 @@ class SerialAdc(Adc):
                 self._bad_data = None
                 self._rx_streaming = True
         elif reply.ok and reply.verb == "STOP":
-            with self._cond:
+            try:
                 sent = int(reply.fields.get("samples", self._next_sample))
+            except ValueError:
+                self._replies.put(ProtocolError(f"STOP reply {reply.text!r}: samples= is not an integer"))
+                return
+            with self._cond:
                 if self._rx_streaming and sent > self._next_sample:
                     self._push(SampleGap(self._next_sample, sent, self._bad_data or "frames lost before STOP"))
                     self._next_sample = sent
@@ -148,10 +156,19 @@ class SerialAdc(Adc):
                 return
             first = frame.first_sample
             if first < self._next_sample:
-                self._push(ProtocolError(f"ADC frame seq {frame.seq} starts at sample {first}, before sample "
-                                         f"{self._next_sample} already received; the device's counters are "
-                                         f"inconsistent"))
+                fault = ProtocolError(f"ADC frame seq {frame.seq} starts at sample {first}, before sample "
+                                      f"{self._next_sample} already received; the device's counters are "
+                                      f"inconsistent")
+                self._push(fault)
+                self._cond.release()
+                try:
+                    self.faults.report(fault)
+                finally:
+                    self._cond.acquire()
                 return
+            if first == self._next_sample and frame.seq != self._next_seq:
+                log.warning("ADC on %s: frame seq %d, expected %d, with contiguous samples", self.port,
+                            frame.seq, self._next_seq)
             if first > self._next_sample:
                 if self._bad_data:
                     reason = f"corrupted frame(s): {self._bad_data}"
@@ -231,7 +248,10 @@ class SerialAdc(Adc):
             self.faults.report(fault)
             raise fault
         if not reply.ok:
-            raise _err_from_reply(reply, what)
+            err = _err_from_reply(reply, what)
+            if not isinstance(err, (SetpointRangeError, InterlockError)):
+                self.faults.report(err)  # the device is not the one the host speaks to
+            raise err
         return reply
 
     def identify(self) -> AdcIdentity:
@@ -261,6 +281,7 @@ class SerialAdc(Adc):
         # Everything is checked before the first byte goes out.
         if self._rx_streaming:
             raise InterlockError("the ADC is streaming; stop it before reconfiguring")
+        self._config = None  # until the device has confirmed every setting
         if not channels:
             raise SetpointRangeError("no ADC channels chosen", value=channels, limit=ident.channels)
         if len(channels) > MAX_CHANNELS:
@@ -297,24 +318,31 @@ class SerialAdc(Adc):
             ranges.setdefault(c, max(ident.ranges_V))
         if frame_sets is None:
             frame_sets = int(min(MAX_SETS, max(1, round(rate * FRAME_SECONDS))))
-        if not (isinstance(frame_sets, int) and 1 <= frame_sets <= MAX_SETS):
-            raise SetpointRangeError(f"frame length {frame_sets!r} sample sets is outside 1..{MAX_SETS}",
-                                     value=frame_sets, limit=MAX_SETS)
+        max_sets = int(min(MAX_SETS, max(1, rate * MAX_FRAME_SECONDS)))
+        if not (isinstance(frame_sets, int) and 1 <= frame_sets <= max_sets):
+            raise SetpointRangeError(f"frame length {frame_sets!r} sample sets is outside 1..{max_sets} (at most "
+                                     f"{MAX_SETS} sets and {MAX_FRAME_SECONDS:g} s per frame)",
+                                     value=frame_sets, limit=max_sets)
         r = self._command("CONF", "CHAN", ",".join(channels))
         self._expect(r, ["CHAN", ",".join(channels)])
+        rate = float(f"{rate:.9g}")  # as it goes on the wire
         r = self._command("CONF", "RATE", f"{rate:.9g}")
         try:
             got_rate = float(r.words[1])
         except (IndexError, ValueError):
-            raise ProtocolError(f"ADC on {self.port}: rate reply {r.text!r} is malformed") from None
-        if abs(got_rate - rate) > 1e-9 * rate:
-            raise SetpointRangeError(f"the ADC set {got_rate:g} Hz for the requested {rate:g} Hz; choose a rate "
-                                     f"its clock can divide exactly", value=rate, limit=got_rate)
+            got_rate = float("nan")
+        if not got_rate == rate:
+            # A device that cannot make a rate exactly must refuse it (ERR RANGE), not change it.
+            fault = ProtocolError(f"ADC on {self.port}: rate echo {r.text!r} does not match the requested {rate:.9g} Hz")
+            self.faults.report(fault)
+            raise fault
         for c in channels:
             self._expect(self._command("CONF", "RANGE", c, f"{ranges[c]:g}"), ["RANGE", c, f"{ranges[c]:g}"])
         self._expect(self._command("CONF", "FRAME", frame_sets), ["FRAME", str(frame_sets)])
-        self._config = AdcConfig(channels, rate, ranges, frame_sets)
         self._scale = np.array([ranges[c] / 32768.0 for c in channels])
+        self._decoder.expect_channels = len(channels)
+        self._decoder.max_sets = frame_sets
+        self._config = AdcConfig(channels, rate, ranges, frame_sets)
         return self._config
 
     def _expect(self, reply: Reply, words: list[str]) -> None:
@@ -372,7 +400,10 @@ class SerialAdc(Adc):
         cfg = self._config
         if cfg is None:
             raise InterlockError("the ADC is not configured")
-        self.clock.demand(self._t0 + (self._read_pos + n) / cfg.rate_hz)
+        # A lost frame is only noticed when the next one arrives, so ask a virtual clock for a
+        # frame more than needed, and for more still while nothing comes.
+        ahead = cfg.frame_sets
+        self.clock.demand(self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz)
         t_start = time.monotonic()
         with self._cond:
             while True:
@@ -400,7 +431,9 @@ class SerialAdc(Adc):
                     finally:
                         self._cond.acquire()
                     raise fault
-                self._cond.wait(0.05)
+                if not self._cond.wait(0.05) and self.clock.virtual:
+                    ahead = min(2 * ahead, int(10 * cfg.rate_hz) + cfg.frame_sets)
+                    self.clock.demand(self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz)
 
     def read_available(self) -> AdcBlock | None:
         with self._cond:

@@ -7,6 +7,7 @@ import logging
 import sys
 from pathlib import Path
 
+from fbs.drivers.errors import DriverError
 from fbs.simhw import effects as effect_catalogue
 from fbs.simhw.params import ConfigError, load_config
 
@@ -44,6 +45,20 @@ def _demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _record(args: argparse.Namespace) -> int:
+    from fbs.daq.recorder import record
+    from fbs.drivers.rig import open_rig
+
+    channels = [c for c in args.channels.split(",") if c] if args.channels else None
+    with open_rig(args.rig) as rig:
+        rig.set_mode(args.mode)  # disallowed modes and interlocks are refused here, with the reason
+        result = record(rig, args.out, duration_s=args.duration, rate_hz=args.rate, channels=channels)
+    lost = f", {result.lost} samples lost in {len(result.gaps)} gap(s)" if result.gaps else ""
+    print(f"wrote {result.path}: mode {args.mode}, {result.samples} samples at {result.rate_hz:g} Hz, "
+          f"status {result.status}{lost}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fbs", description="Fixed Base Simulator HIL: DAQ, procedures, simulation.")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
@@ -61,6 +76,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, help="output .h5 file")
     s.set_defaults(func=_simulate)
 
+    r = sub.add_parser("record", help="record the rig's ADC channels to an fbs-run file")
+    r.add_argument("--rig", default="sim", help="rig URL (default: the simulated rig, 'sim')")
+    r.add_argument("--mode", type=int, required=True, help="mode to record in (1-6; the rig checks interlocks)")
+    r.add_argument("--duration", type=float, required=True, help="seconds")
+    r.add_argument("--rate", type=float, required=True, help="sample rate per channel, Hz")
+    r.add_argument("--channels", help="comma-separated channel names (default: all)")
+    r.add_argument("--out", required=True, help="output .h5 file")
+    r.set_defaults(func=_record)
+
     d = sub.add_parser("demo", help="the main job on the simulated rig")
     d.add_argument("--out", default="out")
     d.add_argument("--sim-config")
@@ -76,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
-    except (ConfigError, ValueError, OSError) as exc:
+    except (ConfigError, ValueError, OSError, DriverError) as exc:
         print(f"fbs {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -108,6 +108,10 @@ class AdcDevice:
         self._stop.set()
         with self._fifo_cond:
             self._fifo_cond.notify_all()
+        # Stop our threads before the descriptors go, so none acts on a reused fd number.
+        for t in self._threads:
+            if t is not threading.current_thread():
+                t.join(timeout=1.0)
         for fd in (self.master, self._slave):
             try:
                 os.close(fd)
@@ -118,7 +122,9 @@ class AdcDevice:
     def _put(self, data: bytes, control: bool = False) -> bool:
         """Queue bytes for the writer. Returns False if a data frame was dropped (FIFO full)."""
         with self._fifo_cond:
-            while self._fifo_bytes + len(data) > self._fifo_limit and not control and self._connected:
+            # An empty FIFO always takes a frame, however large.
+            while (self._fifo_bytes and self._fifo_bytes + len(data) > self._fifo_limit and not control
+                   and self._connected):
                 if self.server.paced:
                     return False
                 self._fifo_cond.wait(0.05)
@@ -128,7 +134,7 @@ class AdcDevice:
 
     def _reply(self, text: str) -> None:
         if self._take_fault("bad_reply"):
-            text = "HELLO from a confused device"
+            text = "OK HELLO from a confused device"
         self._put(text.encode("ascii") + b"\r\n", control=True)
 
     def _write_loop(self) -> None:
@@ -146,7 +152,10 @@ class AdcDevice:
                     n = os.write(self.master, view)
                     view = view[n:]
                 except BlockingIOError:
-                    select.select([], [self.master], [], 0.05)
+                    try:
+                        select.select([], [self.master], [], 0.05)
+                    except (OSError, ValueError):
+                        return
                 except OSError as exc:
                     if exc.errno in (errno.EIO, errno.EBADF):
                         return
@@ -183,8 +192,7 @@ class AdcDevice:
         self.seq = (self.seq + 1) & 0xFFFFFFFF
         self.samples += len(chunk)
         if self._stalled() or self._take_fault("drop"):
-            self._overrun_flag = False
-            return
+            return  # lost on the way (or never sent): the counters still advanced
         flags = FLAG_OVERRUN if self._overrun_flag else 0
         if self._take_fault("bad_length"):
             data = encode_frame(seq, first, np.concatenate([chunk, chunk[:, :1]], axis=1), flags)
@@ -223,7 +231,8 @@ class AdcDevice:
                 try:
                     self._handle(decode_command(line))
                 except ProtocolError as exc:
-                    self._reply(f"ERR SYNTAX {exc}"[:250])
+                    code = "UNKNOWN" if str(exc).startswith("unknown command") else "SYNTAX"
+                    self._reply(f"ERR {code} {exc}"[:250])
                 except Exception as exc:  # a device answers, it does not die
                     log.exception("simulated ADC: command %r failed", line)
                     self._reply(f"ERR INTERNAL {type(exc).__name__}")
@@ -246,6 +255,9 @@ class AdcDevice:
         elif cmd.verb == "START":
             if self.streaming:
                 self._reply("ERR STATE already streaming")
+            elif self.rate_hz * len(self.channels) > self.max_aggregate_rate_hz:
+                self._reply(f"ERR RANGE {len(self.channels)} channels at {self.rate_hz:g} Hz exceed "
+                            f"{self.max_aggregate_rate_hz:g} samples/s")
             else:
                 self.server.submit(lambda sim: self.begin())
         elif cmd.verb == "STOP":
@@ -264,11 +276,9 @@ class AdcDevice:
         if what == "CHAN" and len(a) == 2:
             chans = tuple(a[1].split(","))
             bad = [c for c in chans if c not in CHANNELS]
+            # The channels x rate limit is checked at START, so CONF order does not matter.
             if bad or not chans or len(set(chans)) != len(chans) or len(chans) > MAX_CHANNELS:
                 self._reply(f"ERR RANGE channel list {a[1][:80]} (unknown: {','.join(bad)[:80]})")
-            elif self.rate_hz * len(chans) > self.max_aggregate_rate_hz:
-                self._reply(f"ERR RANGE {len(chans)} channels at {self.rate_hz:g} Hz exceed "
-                            f"{self.max_aggregate_rate_hz:g} samples/s")
             else:
                 self.channels = chans
                 self._reply(f"OK CONF CHAN {','.join(chans)}")
@@ -277,8 +287,8 @@ class AdcDevice:
                 rate = float(a[1])
             except ValueError:
                 rate = float("nan")
-            if not (rate > 0 and rate * len(self.channels) <= self.max_aggregate_rate_hz):
-                self._reply(f"ERR RANGE rate {a[1]} Hz (0 < rate x channels <= {self.max_aggregate_rate_hz:g})")
+            if not (0 < rate <= self.max_aggregate_rate_hz):
+                self._reply(f"ERR RANGE rate {a[1]} Hz (0 < rate <= {self.max_aggregate_rate_hz:g})")
             else:
                 self.rate_hz = rate
                 self.server.submit(lambda sim: sim.set_rate(rate))
@@ -310,5 +320,3 @@ class AdcDevice:
 
     def close(self) -> None:
         self.disconnect()
-        for t in self._threads:
-            t.join(timeout=1.0)

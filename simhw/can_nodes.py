@@ -42,10 +42,15 @@ class SimNode:
         self.server = server
         self.node_id = cp.NODES[self.name]
         self.latched = False
+        self.booting = True  # announces BOOT until the host's CLEAR
         self.stalled = False
         self.connected = True
         self.silent_since = 0.0
         self.bad_response = 0
+        self.attach()
+
+    def attach(self) -> None:
+        """The node as the host finds it when the rig is opened."""
         self.power_on()
 
     # Subclasses: registers, their safe values, and requests.
@@ -62,17 +67,19 @@ class SimNode:
         if req.op == cp.OP_IDENT:
             return cp.ST_OK, (cp.NODE_TYPES[self.name] << 16) | FIRMWARE
         if req.op == cp.OP_CLEAR:
-            self.latched = False
+            self.latched = self.booting = False
             return cp.ST_OK, 0
         if req.op == cp.OP_SAFE:
             self.go_safe()
             return cp.ST_OK, 0
-        if self.latched and req.op not in (cp.OP_GET, cp.OP_STATUS):
+        if (self.latched or self.booting) and req.op not in (cp.OP_GET, cp.OP_STATUS):
             return cp.ST_LATCHED, 0
         return self.on_request(req)
 
     @property
     def hb_state(self) -> int:
+        if self.booting:
+            return cp.HB_BOOT  # repeated, so one lost frame cannot hide a reboot
         return cp.HB_SAFE if self.latched else cp.HB_OPERATIONAL
 
     hb_flags = 0
@@ -91,6 +98,11 @@ class RelayNode(SimNode):
     """Mode register, select switches, hold; the interlocks of modes 4 and 5 (Ch. II D)."""
 
     name = "relay"
+
+    def attach(self) -> None:
+        # The rig may have been running for hours: the register holds the mode in force.
+        self.mode = self.selected = self.server.sim.mode
+        self.held = self.alarm = False
 
     def go_safe(self) -> None:
         self.mode = self.selected = 1
@@ -290,6 +302,7 @@ class CanNodeHost:
                 n.bad_response += 1
             elif fault == "reset":
                 n.latched = False
+                n.booting = True
                 n.power_on()
                 self._send(*cp.encode_heartbeat(cp.Heartbeat(n.node_id, cp.HB_BOOT, 0, 0)))
             elif fault == "error":
@@ -314,12 +327,23 @@ class CanNodeHost:
             try:
                 m = cp.decode(msg.arbitration_id, msg.data, msg.is_extended_id)
             except ProtocolError as exc:
-                log.warning("simulated CAN nodes: ignored bad frame: %s", exc)
+                self._refuse(msg, exc)
                 continue
             if isinstance(m, cp.Heartbeat) and m.node == 0:
                 self._last_host_hb = time.monotonic()
             elif isinstance(m, cp.Request):
                 self._answer(m)
+
+    def _refuse(self, msg: can.Message, exc: ProtocolError) -> None:
+        """A request-shaped frame with an unknown opcode is answered BAD_OP; other junk is ignored."""
+        node = msg.arbitration_id - cp.REQUEST_BASE
+        n = self._by_id.get(node)
+        if n is None or msg.is_extended_id or len(msg.data) != 8 or not n.connected or n.stalled:
+            log.warning("simulated CAN nodes: ignored bad frame: %s", exc)
+            return
+        data = bytearray(msg.data)
+        data[3] = cp.ST_BAD_OP
+        self._send(cp.RESPONSE_BASE + node, bytes(data))
 
     def _answer(self, req: cp.Request) -> None:
         with self._lock:

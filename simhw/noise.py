@@ -52,7 +52,7 @@ class FlickerNoise:
     def __init__(self, rng: np.random.Generator, level: float, f_lo: float, f_hi: float, dt: float) -> None:
         self.level, self.dt = level, dt
         self.groups: list[dict] = []
-        self.pending = np.zeros(0)
+        self.ahead = np.zeros(0)
         if level <= 0:
             return
         f_hi = min(f_hi, 0.2 / dt)
@@ -74,7 +74,19 @@ class FlickerNoise:
                                 "rng": np.random.Generator(np.random.PCG64(rng.integers(2**63))),
                                 "held": np.zeros(0), "pos": 0})
 
+    #: Samples are made ahead in chunks of this many steps, always on the same grid from the
+    #: run's start, so the output does not depend on how callers cut the run into blocks.
+    CHUNK = 4096
+
     def take(self, n: int) -> np.ndarray:
+        if not self.groups:
+            return np.zeros(n)
+        while len(self.ahead) < n:
+            self.ahead = np.concatenate([self.ahead, self._generate(self.CHUNK)])
+        out, self.ahead = self.ahead[:n], self.ahead[n:]
+        return out
+
+    def _generate(self, n: int) -> np.ndarray:
         out = np.zeros(n)
         for g in self.groups:
             # ``held`` are slow samples not yet fully used; ``pos`` fine steps of held[0] used.

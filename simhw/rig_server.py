@@ -35,8 +35,10 @@ from .simulator import Simulator
 log = logging.getLogger(__name__)
 
 #: The relay driver's null detector: a channel counts as caged when its pickoff, averaged
-#: over about a second, stays below this (V at the demodulator; ~50 urad at Kg ~6 mV/urad).
-CAGED_NULL_V = 0.3
+#: over about a second, stays below this (V at the demodulator; ~170 urad at Kg ~6 mV/urad,
+#: well inside the +-1 mrad linear range, and above the steady offset of XRD's
+#: proportional-only caging loop, ~0.34 V).
+CAGED_NULL_V = 1.0
 NULL_AVERAGE_S = 1.0
 _PICKOFF = {"X": "gyro_x", "Y": "gyro_y", "Z": "gyro_z", "XRD": "gyro_xrd"}
 

@@ -32,6 +32,8 @@ NEA_BAND_HZ = (0.1, 100.0)
 #: Band in which the gyro pickoff noise rms is quoted (Ch. V, 0.1-200 Hz).
 PICKOFF_BAND_HZ = (0.1, 200.0)
 SPIN_READY = 0.99
+#: Wheel-speed resolution of the plant model during run-up and run-down.
+SPIN_MODEL_STEP = 0.1
 
 
 @dataclass
@@ -358,8 +360,10 @@ class Simulator:
         self._spin = target + (self._spin - target) * math.exp(-elapsed / tau)
         if abs(self._spin - target) < 1e-4:
             self._spin = target
-        # The model is rebuilt for the rounded speed, so the cache of models stays small.
-        self._switch(RelayState(self.relays.mode, self.relays.caging_inhibit, round(self._spin, 3)))
+        # The model is rebuilt for the speed rounded to SPIN_MODEL_STEP: each rebuild costs a
+        # matrix exponential (~0.1 s), and nothing is measured while the wheels run up.
+        spin = round(round(self._spin / SPIN_MODEL_STEP) * SPIN_MODEL_STEP, 6)
+        self._switch(RelayState(self.relays.mode, self.relays.caging_inhibit, spin))
 
     def _run_internal(self, m: int) -> np.ndarray:
         cp = self._compiled

@@ -1,0 +1,48 @@
+"""The recorder on the loopback rig: gaps stay gaps, faults close the file with their reason."""
+
+from __future__ import annotations
+
+import threading
+
+import h5py
+import numpy as np
+import pytest
+
+from fbs.daq.recorder import record
+from fbs.drivers.errors import DeviceLost
+from fbs.drivers.rig import open_rig
+
+pytestmark = pytest.mark.slow
+
+
+def test_a_dropped_frame_is_nan_with_a_gap_event(tmp_path):
+    with open_rig("sim?warm=1") as rig:
+        rig.emulator.inject("adc", "drop")  # the stream's first frame (samples 0..9 at 1 kHz)
+        result = record(rig, tmp_path / "r.h5", duration_s=1.0, rate_hz=1000.0, channels=["gyro_x", "ac_x_ctl"])
+    assert result.gaps == [(0, 10, result.gaps[0][2])] and "missing" in result.gaps[0][2]
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        x = f["channels/gyro_x"][()]
+        assert len(x) == 1000 and np.isnan(x[:10]).all() and np.isfinite(x[10:]).all()
+        kinds = [k.decode() for k in f["events"]["kind"]]
+        assert "gap" in kinds
+        gap = f["events"][kinds.index("gap")]
+        assert gap["time"] == 0.0 and b"ADC samples 0..9 lost" in gap["text"]
+        assert f.attrs["status"] == "complete"
+
+
+def test_a_lost_node_aborts_the_recording_and_the_rig_goes_safe(tmp_path):
+    rig = open_rig("sim?warm=1")
+    try:
+        pull = threading.Timer(0.5, rig.emulator.inject, ("relay", "disconnect"))
+        pull.start()  # the relay node's cable comes out while the recording runs
+        with pytest.raises(DeviceLost, match="relay"):
+            record(rig, tmp_path / "r.h5", duration_s=600.0, rate_hz=1000.0, channels=["gyro_x"])
+        with h5py.File(tmp_path / "r.h5", "r") as f:
+            assert f.attrs["status"].startswith("aborted: DeviceLost: CAN node 'relay' (id 1) is silent")
+            kinds = [k.decode() for k in f["events"]["kind"]]
+            assert "error" in kinds
+            assert len(f["channels/gyro_x"]) > 0
+        nodes = rig.emulator.nodes.nodes
+        assert not any(nodes["torquer"].values.values()) and not any(nodes["command"].values.values())
+    finally:
+        rig.close()
