@@ -30,7 +30,7 @@ from .calibration import RigCalibration
 from .can_link import CanLink, NodeClient
 from .clock import RigClock, WallClock
 from .command import CanCommandDac, CommandDac
-from .errors import DriverError
+from .errors import DeviceLost, DeviceTimeout, DriverError
 from .faults import FaultLatch
 from .relay import SAFE_MODE, CanRelayDriver, RelayDriver
 from .serial_adc import SerialAdc
@@ -141,7 +141,6 @@ class Rig:
         t_end = self.clock.now() + timeout_s
         while not predicate():
             if self.clock.now() >= t_end:
-                from .errors import DeviceTimeout
                 raise DeviceTimeout(f"{what} not reached within {timeout_s:g} s of rig time")
             self.wait(poll_s)
         return self.clock.now()
@@ -311,7 +310,6 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
     try:
         bus = can.Bus(interface=iface, channel=channel)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
-        from .errors import DeviceLost
         raise DeviceLost(f"cannot open CAN interface {iface}:{channel}: {exc}") from exc
     tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
     return _assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)

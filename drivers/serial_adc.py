@@ -127,6 +127,9 @@ class SerialAdc(Adc):
             try:
                 sent = int(reply.fields.get("samples", self._next_sample))
             except ValueError:
+                with self._cond:
+                    self._rx_streaming = False
+                    self._cond.notify_all()
                 self._replies.put(ProtocolError(f"STOP reply {reply.text!r}: samples= is not an integer"))
                 return
             with self._cond:
@@ -149,12 +152,7 @@ class SerialAdc(Adc):
             if not self._rx_streaming:
                 log.warning("ADC on %s: frame seq %d outside a stream, ignored", self.port, frame.seq)
                 return
-            cfg = self._config
-            if cfg is not None and frame.n_channels != len(cfg.channels):
-                self._bad_data = (f"bad length: frame seq {frame.seq} carries {frame.n_channels} channels, "
-                                  f"{len(cfg.channels)} are configured")
-                return
-            first = frame.first_sample
+            first = frame.first_sample  # the decoder has checked the channel count
             if first < self._next_sample:
                 fault = ProtocolError(f"ADC frame seq {frame.seq} starts at sample {first}, before sample "
                                       f"{self._next_sample} already received; the device's counters are "
@@ -281,7 +279,6 @@ class SerialAdc(Adc):
         # Everything is checked before the first byte goes out.
         if self._rx_streaming:
             raise InterlockError("the ADC is streaming; stop it before reconfiguring")
-        self._config = None  # until the device has confirmed every setting
         if not channels:
             raise SetpointRangeError("no ADC channels chosen", value=channels, limit=ident.channels)
         if len(channels) > MAX_CHANNELS:
@@ -323,6 +320,7 @@ class SerialAdc(Adc):
             raise SetpointRangeError(f"frame length {frame_sets!r} sample sets is outside 1..{max_sets} (at most "
                                      f"{MAX_SETS} sets and {MAX_FRAME_SECONDS:g} s per frame)",
                                      value=frame_sets, limit=max_sets)
+        self._config = None  # from the first byte on, until the device has confirmed every setting
         r = self._command("CONF", "CHAN", ",".join(channels))
         self._expect(r, ["CHAN", ",".join(channels)])
         rate = float(f"{rate:.9g}")  # as it goes on the wire
@@ -382,7 +380,9 @@ class SerialAdc(Adc):
             return AdcStatus(streaming, int(r.fields.get("samples", 0)), int(r.fields.get("frames", 0)),
                              int(r.fields.get("overruns", 0)))
         except ValueError:
-            raise ProtocolError(f"ADC on {self.port}: status reply {r.text!r} is malformed") from None
+            fault = ProtocolError(f"ADC on {self.port}: status reply {r.text!r} is malformed")
+            self.faults.report(fault)
+            raise fault from None
 
     # ------------------------------------------------------------------ data
     def _contiguous(self) -> tuple[int, bool]:

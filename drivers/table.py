@@ -123,7 +123,9 @@ class CanTable(RotaryTable):
         pos = self.position()
         for got, value in ((pos.tilt_deg, tilt), (pos.spindle_deg, spindle)):
             if value is not None and abs((got - value + 180.0) % 360.0 - 180.0) > 1e-3:
-                raise DriverError(f"rotary table stopped at {got:.6f} deg, commanded {value:.6f} deg")
+                fault = DriverError(f"rotary table stopped at {got:.6f} deg, commanded {value:.6f} deg")
+                self.node.link.faults.report(fault)
+                raise fault
         return pos
 
     def position(self) -> TablePosition:

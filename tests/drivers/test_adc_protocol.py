@@ -22,7 +22,7 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-import fbs.drivers.adc_protocol as adc_protocol
+from fbs.drivers import adc_protocol
 from fbs.drivers.adc_protocol import (
     CODE_MAX,
     CODE_MIN,
@@ -572,7 +572,7 @@ def test_stream_fed_one_byte_at_a_time():
     f0 = encode_frame(0, 0, np.array([[0x5AA5, 0x0A4F]], dtype=np.uint16).view(np.int16))  # sync + "O\n" in data
     f1 = encode_frame(1, 1, np.full((3, 2), -1, np.int16))
     data = b"OK START\r\n" + f0 + f1 + b"ERR STATE not streaming\n" + f0
-    d, items = _run_stream([data[i:i + 1] for i in range(len(data))])
+    _, items = _run_stream([data[i:i + 1] for i in range(len(data))])
     kinds = [type(i).__name__ for i in items]
     assert kinds == ["Reply", "Frame", "Frame", "Reply", "Frame"]
     assert items[1].codes.view(np.uint16).tolist() == [[0x5AA5, 0x0A4F]]

@@ -112,12 +112,12 @@ def test_unknown_reply_is_a_protocol_error_and_the_rig_goes_safe(rig):
 
 
 def test_adc_stall_is_a_device_timeout_and_the_rig_goes_safe(rig):
-    pos = stream(rig)
+    stream(rig)
     rig.adc.stall_timeout_s = 0.5
     rig.emulator.inject("adc", "stall")
     with pytest.raises(DeviceTimeout, match=r"stalled: no data for 0\.5 s while streaming at 1000 Hz"):
         for _ in range(1000):
-            pos = rig.adc.read(100).stop_sample
+            rig.adc.read(100)
     assert emulated_nodes_safe(rig)
     assert isinstance(rig.faults.fault, DeviceTimeout)
 

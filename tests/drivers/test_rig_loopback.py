@@ -218,3 +218,26 @@ def test_bad_rig_url_is_named():
         open_rig("tcp://x")
     with pytest.raises(ValueError, match="can=<interface>:<channel>"):
         open_rig("serial:///dev/ttyUSB9")
+
+
+def test_paced_rig_runs_by_itself():
+    """``sim?realtime=1``: the rig's clock runs with the wall clock, not on demand."""
+    rig = open_rig("sim?realtime=1&warm=1")
+    try:
+        assert rig.clock.virtual is False
+        rig.adc.configure(["gyro_x", "ac_x_ctl"], 1000.0)
+        t0 = rig.adc.start()
+        b = rig.adc.read(200)
+        assert b.first_sample == 0 and len(b) == 200
+        assert rig.now() >= t0 + 0.2
+        rig.adc.stop()
+    finally:
+        rig.close()
+
+
+def test_terminal_operator_without_a_terminal_says_so(monkeypatch):
+    import io
+    monkeypatch.setattr("sys.stdin", io.StringIO(""))
+    table = ManualTable()
+    with pytest.raises(OperatorAbort, match="needs an operator, but there is no terminal"):
+        table.move_to(spindle_deg=30.0)
