@@ -197,6 +197,7 @@ class StreamDecoder:
         self.pos = 0
         self.offset = 0  # stream offset of buf[0]
         self._bad = False  # inside a run of bytes already reported
+        self._quiet_error: ProtocolError | None = None
 
     def feed(self, data: bytes) -> None:
         if self.pos > 1 << 16:
@@ -205,7 +206,23 @@ class StreamDecoder:
             self.pos = 0
         self.buf += data
 
+    def pending(self) -> int:
+        """Bytes held that do not yet make a whole unit."""
+        return len(self.buf) - self.pos
+
+    def quiet(self) -> None:
+        """The line went quiet with bytes held: a frame still waiting for its body will not be
+        completed (its length field was corrupted), so report it and decode what follows."""
+        if self.pending() and self.buf[self.pos] == 0xA5:
+            err = self._error(f"bad length: frame header at stream offset {self.offset + self.pos} claims more "
+                              f"bytes than arrived before the line went quiet")
+            if err is not None:
+                self._quiet_error = err
+
     def items(self):
+        err, self._quiet_error = self._quiet_error, None
+        if err is not None:
+            yield err
         while True:
             item = self._next()
             if item is None:

@@ -34,6 +34,8 @@ log = logging.getLogger(__name__)
 #: Default frame length: about 10 ms of samples; at most a second, so the stall check holds.
 FRAME_SECONDS = 0.01
 MAX_FRAME_SECONDS = 1.0
+#: No byte for this long while a frame is incomplete: the frame will not be completed.
+QUIET_S = 0.25
 
 
 def _err_from_reply(reply: Reply, what: str) -> DriverError:
@@ -104,16 +106,24 @@ class SerialAdc(Adc):
                                           f"check the cable and power, then reopen the rig"))
                 return
             if not data:
+                # A frame cut short (corrupted length field) would hold back what follows,
+                # such as the STOP reply, for ever: after a quiet spell, give it up.
+                if self._decoder.pending() and time.monotonic() - self._last_rx > QUIET_S:
+                    self._decoder.quiet()
+                    self._dispatch()
                 continue
             self._last_rx = time.monotonic()
             self._decoder.feed(data)
-            for item in self._decoder.items():
-                if isinstance(item, Frame):
-                    self._on_frame(item)
-                elif isinstance(item, Reply):
-                    self._on_reply(item)
-                else:
-                    self._on_bad_bytes(item)
+            self._dispatch()
+
+    def _dispatch(self) -> None:
+        for item in self._decoder.items():
+            if isinstance(item, Frame):
+                self._on_frame(item)
+            elif isinstance(item, Reply):
+                self._on_reply(item)
+            else:
+                self._on_bad_bytes(item)
 
     def _on_reply(self, reply: Reply) -> None:
         if reply.ok and reply.verb == "START":

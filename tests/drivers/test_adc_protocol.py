@@ -3,9 +3,11 @@
 Acceptance point: hypothesis fuzzes the frame and reply parsers, and any byte string gives
 either a valid frame (or reply) or a :class:`ProtocolError`, never another exception and never
 a hang. Inputs are bounded and every fuzz test runs under a hypothesis deadline, so a parser
-that loops for long fails the test instead of passing slowly. Every "valid" result is checked
-against the bytes it came from (a decoded frame re-encodes to exactly its input), so a parser
-that accepted junk would fail too.
+that is slow fails the test instead of passing slowly; the stream decoder, the one parser with
+a loop, also runs under ``_ProgressGuard``, which turns a loop that stops consuming input into
+an AssertionError instead of a hung test run. Every "valid" result is checked against the bytes
+it came from (a decoded frame re-encodes to exactly its input), so a parser that accepted junk
+would fail too.
 """
 
 from __future__ import annotations
@@ -83,7 +85,7 @@ def _item_key(item):
     return ("error", str(item))
 
 
-def _run_stream(chunks, expect_channels=None):
+def _run_stream(chunks, expect_channels=None, max_sets=MAX_SETS):
     """Feed chunks one by one and collect every item, checking the decoder's invariants.
 
     * items() always ends (it is a finite generator; ``islice`` turns an endless one into a
@@ -91,7 +93,7 @@ def _run_stream(chunks, expect_channels=None):
     * the stream position (``offset + pos``) only moves forward and never passes the bytes fed;
     * the decoder never runs long without consuming input (``_ProgressGuard``).
     """
-    d = StreamDecoder(expect_channels)
+    d = StreamDecoder(expect_channels, max_sets)
     fed = 0
     last = 0
     out = []
@@ -584,8 +586,9 @@ def test_stream_fed_one_byte_at_a_time():
                  st.lists(st.one_of(mutated_frames(), header_prefixed(), reply_like, st.binary(max_size=20)),
                           max_size=6).map(b"".join)),
        st.lists(st.integers(0, 10**6), max_size=8),
-       st.none() | st.integers(1, 4))
-def test_stream_decoder_on_any_bytes_yields_finitely_many_valid_items_and_only_moves_forward(data, cuts, expect):
+       st.none() | st.integers(1, 4), st.sampled_from([MAX_SETS, 1, 3, 6]))
+def test_stream_decoder_on_any_bytes_yields_finitely_many_valid_items_and_only_moves_forward(data, cuts, expect,
+                                                                                             max_sets):
     """Any bytes, any split: only Frames, Replies or ProtocolErrors, finitely many, position monotone.
 
     Each Frame is CRC-valid and is exactly the bytes just before the decoder's new position,
@@ -593,7 +596,7 @@ def test_stream_decoder_on_any_bytes_yields_finitely_many_valid_items_and_only_m
     (the chunked output is a prefix of the output for the whole input fed at once). The decoder
     never runs long without consuming input (``_ProgressGuard``).
     """
-    d = StreamDecoder(expect)
+    d = StreamDecoder(expect, max_sets)
     fed, items = 0, []
     with _ProgressGuard(d):
         for chunk in _cut(data, cuts):
@@ -608,6 +611,7 @@ def test_stream_decoder_on_any_bytes_yields_finitely_many_valid_items_and_only_m
                     assert data[here - size:here] == encode_frame(item.seq, item.first_sample, item.codes, item.flags)
                     if expect is not None:
                         assert item.n_channels == expect
+                    assert item.n_sets <= max_sets
                 elif isinstance(item, Reply):
                     assert data[here - 1:here] == b"\n"
                 else:
@@ -616,7 +620,7 @@ def test_stream_decoder_on_any_bytes_yields_finitely_many_valid_items_and_only_m
                 items.append(item)
                 before = here
             assert len(items) <= fed
-    _, whole = _run_stream([data], expect)
+    _, whole = _run_stream([data], expect, max_sets)
     chunked = [_item_key(i) for i in items]
     assert chunked == [_item_key(i) for i in whole][:len(chunked)]
 
@@ -777,17 +781,38 @@ def test_decoder_discards_consumed_bytes_on_a_long_stream():
     assert d.offset + d.pos == 100 * len(frame)
 
 
-@pytest.mark.xfail(strict=True, reason="BUG: a corrupted length field makes StreamDecoder hold back every later "
-                                       "frame and reply until the claimed length (up to 262168 bytes) arrives")
-def test_frames_and_reply_after_a_corrupted_length_field_are_not_held_back():
-    """A bit flip in the set count (4 -> 2052 sets) must not swallow the next frame and the STOP reply.
+def test_length_field_beyond_the_configured_frame_is_rejected_at_once():
+    """Configured for 2 channels x at most 4 sets, a set count flipped 4 -> 2052 fails at the header.
 
-    Today the decoder waits for 2052 x 2 x 2 + 24 bytes before checking the CRC, so when the
-    device stops streaming right after, `OK STOP` never comes out (SerialAdc.stop() would time out).
+    So the next frame and the STOP reply come out at once instead of waiting for 8 KB of data.
     """
     f1 = encode_frame(0, 0, np.zeros((4, 2), np.int16))
     f2 = encode_frame(1, 4, np.ones((4, 2), np.int16))
     bad = bytearray(f1)
     bad[5] ^= 0x08
-    _, items = _run_stream([bytes(bad) + f2 + b"OK STOP samples=8\n"])
+    _, items = _run_stream([bytes(bad) + f2 + b"OK STOP samples=8\n"], expect_channels=2, max_sets=4)
     assert [type(i).__name__ for i in items] == ["ProtocolError", "Frame", "Reply"]
+    assert str(items[0]).startswith("bad length: 2052 sample sets outside 1..4")
+    assert items[1].seq == 1 and items[2].verb == "STOP"
+
+
+def test_reply_after_a_short_frame_with_a_corrupted_length_field_is_not_held_back():
+    """The last, short frame of a stream (2 of 10 sets) has its set count flipped 2 -> 10.
+
+    The header passes (10 <= the configured 10 sets), so the decoder waits for
+    10 x 8 x 2 + 24 = 184 bytes; only the 40-byte STOP reply follows, and the device then falls
+    silent. The reader tells the decoder the line went quiet (``quiet()``), which gives the
+    frame up and lets the reply out.
+    """
+    full = encode_frame(0, 0, np.zeros((10, 8), np.int16))
+    bad = bytearray(encode_frame(1, 10, np.ones((2, 8), np.int16)))
+    bad[4] ^= 0x08
+    stop = b"OK STOP samples=12 frames=2 overruns=0\n"
+    d, items = _run_stream([full + bytes(bad) + stop], expect_channels=8, max_sets=10)
+    assert [type(i).__name__ for i in items] == ["Frame"]  # held back until the line goes quiet
+    d.quiet()
+    items += list(d.items())
+    assert [type(i).__name__ for i in items] == ["Frame", "ProtocolError", "Reply"]
+    assert "bad length" in str(items[1]) and items[2].fields["samples"] == "12"
+    d.quiet()  # nothing held: nothing more to say
+    assert list(d.items()) == []
