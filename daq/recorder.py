@@ -55,11 +55,11 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
     result = RecordResult(Path(path), 0, cfg.rate_hz, "recording")
     pending: list[tuple[float, str, str]] = []
     lock = threading.Lock()
-    t0 = [0.0]
+    t0 = 0.0  # rig time of sample 0, set by start() before the listener is subscribed
 
     def on_event(t: float, kind: str, text: str) -> None:  # any thread; written by the loop
         with lock:
-            pending.append((t - t0[0], kind, text))
+            pending.append((t - t0, kind, text))
 
     def flush_events() -> None:
         with lock:
@@ -69,7 +69,7 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
 
     status = "complete"
     try:
-        t0[0] = rig.adc.start()
+        t0 = rig.adc.start()
         rig.subscribe(on_event)
         writer.event(0.0, "start", f"recording {len(channels)} channels at {cfg.rate_hz:g} Hz, mode {mode}")
         pos = 0

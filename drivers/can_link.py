@@ -49,7 +49,6 @@ class CanLink:
         #: When the host cannot reach a node to make it safe, it stops its heartbeat: every
         #: node's watchdog then trips and the nodes go safe by themselves.
         self.heartbeat_suspended = False
-        self.bad_messages = 0
         self._notifier = can.Notifier(bus, [self._on_message], timeout=0.05)
         self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="can-heartbeat", daemon=True)
         self._hb_thread.start()
@@ -68,7 +67,6 @@ class CanLink:
         try:
             m = cp.decode(msg.arbitration_id, msg.data, msg.is_extended_id)
         except ProtocolError as exc:
-            self.bad_messages += 1
             ours = any(msg.arbitration_id == base + cp.NODES[n]
                        for n in self.nodes for base in (cp.RESPONSE_BASE, cp.HEARTBEAT_BASE, cp.EMCY_BASE))
             if ours:
@@ -150,12 +148,6 @@ class CanLink:
 
     def mark_operational(self, name: str) -> None:
         self._operational.add(cp.NODES[name])
-
-    def node_state(self, name: str) -> str:
-        node = cp.NODES[name]
-        if node in self._lost:
-            return "lost"
-        return "operational" if node in self._operational else "not operational"
 
     # ------------------------------------------------------------------ send / request
     def _send(self, arbitration_id: int, data: bytes) -> None:

@@ -75,13 +75,17 @@ class RelayDriver(abc.ABC):
     @abc.abstractmethod
     def status(self) -> RelayStatus: ...
 
-    def set_mode(self, mode: int) -> int:
-        """Hold, select, release, with the interlocks checked first; returns the new mode."""
+    def _checked(self, mode: object) -> int:
+        """``check_mode``, lighting the alarm on a disallowed mode."""
         try:
-            mode = check_mode(mode)
+            return check_mode(mode)
         except ModeNotAllowed as exc:
             self.alarm = str(exc)
             raise
+
+    def set_mode(self, mode: int) -> int:
+        """Hold, select, release, with the interlocks checked first; returns the new mode."""
+        mode = self._checked(mode)
         why = interlock_reason(mode, self.status())
         if why:
             self.alarm = why
@@ -108,11 +112,7 @@ class CanRelayDriver(RelayDriver):
         self.node.call(cp.OP_HOLD, what="HOLD")
 
     def select(self, mode: int) -> None:
-        try:
-            mode = check_mode(mode)
-        except ModeNotAllowed as exc:
-            self.alarm = str(exc)
-            raise
+        mode = self._checked(mode)
         self.node.call(cp.OP_SELECT, 0, mode, what=f"SELECT mode {mode}")
 
     def release(self) -> int:

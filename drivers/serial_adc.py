@@ -168,11 +168,7 @@ class SerialAdc(Adc):
                                       f"{self._next_sample} already received; the device's counters are "
                                       f"inconsistent")
                 self._push(fault)
-                self._cond.release()
-                try:
-                    self.faults.report(fault)
-                finally:
-                    self._cond.acquire()
+                self._report_unlocked(fault, stream_lost=False)
                 return
             if first == self._next_sample and frame.seq != self._next_seq:
                 log.warning("ADC on %s: frame seq %d, expected %d, with contiguous samples", self.port,
@@ -417,12 +413,7 @@ class SerialAdc(Adc):
         t_start = time.monotonic()
         with self._cond:
             while True:
-                self.faults.check()
-                if self._items and not isinstance(self._items[0], tuple):
-                    item = self._items.popleft()
-                    if isinstance(item, SampleGap):
-                        self._read_pos = item.stop
-                    raise item
+                self._raise_queued()
                 avail, blocked = self._contiguous()
                 if avail >= n or (avail and (blocked or not self._rx_streaming)):
                     return self._take(min(n, avail))
@@ -435,11 +426,7 @@ class SerialAdc(Adc):
                     fault = DeviceTimeout(f"ADC on {self.port} stalled: no data for {self.stall_timeout_s:g} s while "
                                           f"streaming at {cfg.rate_hz:g} Hz (last sample {self._read_pos}); "
                                           f"check the device and the cable")
-                    self._cond.release()
-                    try:
-                        self._lost(fault)
-                    finally:
-                        self._cond.acquire()
+                    self._report_unlocked(fault, stream_lost=True)
                     raise fault
                 if not self._cond.wait(0.05) and self.clock.virtual:
                     ahead = min(2 * ahead, int(10 * cfg.rate_hz) + cfg.frame_sets)
@@ -447,14 +434,30 @@ class SerialAdc(Adc):
 
     def read_available(self) -> AdcBlock | None:
         with self._cond:
-            self.faults.check()
-            if self._items and not isinstance(self._items[0], tuple):
-                item = self._items.popleft()
-                if isinstance(item, SampleGap):
-                    self._read_pos = item.stop
-                raise item
+            self._raise_queued()
             avail, _ = self._contiguous()
             return self._take(avail) if avail else None
+
+    def _raise_queued(self) -> None:
+        """Raise a latched fault, or the gap or error at the head of the queue (caller holds _cond)."""
+        self.faults.check()
+        if self._items and not isinstance(self._items[0], tuple):
+            item = self._items.popleft()
+            if isinstance(item, SampleGap):
+                self._read_pos = item.stop
+            raise item
+
+    def _report_unlocked(self, fault: DriverError, *, stream_lost: bool) -> None:
+        """Latch ``fault`` (and end the stream if ``stream_lost``) with _cond, which the caller
+        holds, released: the latch's listeners must not wait on this driver's lock."""
+        self._cond.release()
+        try:
+            if stream_lost:
+                self._lost(fault)
+            else:
+                self.faults.report(fault)
+        finally:
+            self._cond.acquire()
 
     def _take(self, n: int) -> AdcBlock:
         """Pop n sets (caller holds _cond and has checked they are contiguous)."""

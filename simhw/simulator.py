@@ -159,7 +159,7 @@ class Simulator:
         for p in cfg.pickup:
             if p.channel not in CHANNELS:
                 raise ValueError(f"pickup channel {p.channel!r} is not a recorded channel ({', '.join(CHANNELS)})")
-        self._set_sampling(cfg.sampling.default_range_V)
+        self._set_sampling()
         self._cache: dict[RelayState, CompiledPlant] = {}
         self._compiled = self._compile(self.relays)
         n_nl = len(self._compiled.nl_kind)
@@ -178,17 +178,16 @@ class Simulator:
         self.dt = 1.0 / (self.rate_hz * self.oversample)
         self.step = 0  # internal steps since the last rate change
 
-    def _set_sampling(self, default_range_V: float | dict[str, float]) -> None:
-        """Noise sources, recording chain and pickup for the present step ``dt``."""
+    def _set_sampling(self, ranges: dict[str, float] | None = None) -> None:
+        """Noise sources, recording chain (with ``ranges`` kept) and pickup for the present step ``dt``."""
         s = self.cfg.sampling
         # Each time base gets its own streams, derived from the one seed.
         seed = self.seed if self._rate_changes == 0 else (self.seed, self._rate_changes)
         self.sources = _Sources(self.cfg, seed, self.dt)
         self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
                                    s.anti_alias_poles, s.adc_bits, s.default_range_V)
-        if isinstance(default_range_V, dict):
-            for c, r in default_range_V.items():
-                self.chain.set_range(c, r)
+        for c, r in (ranges or {}).items():
+            self.chain.set_range(c, r)
         # Electrical pickup: phase zero at the start of the time base, on the plant's step count.
         self._pickup = [(CHANNELS.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
                         for p in self.cfg.pickup]
