@@ -3,13 +3,21 @@
 Lost samples are never spliced over: the file keeps one time base from t = 0, the missing
 samples are NaN, and a ``gap`` event gives their exact positions and the reason. Rig events
 (mode changes, set-points, faults, the safe state) land in ``/events`` on the file's time
-base. Any exception closes the file "aborted: <why>" and is raised again.
+base. The file streams in SWMR mode with a flush at least every ``flush_s`` (``RunWriter``);
+blocks are read ``block_s`` at a time, so a sample waits at most about ``block_s + flush_s``
+before it is on disk.
+
+Any exception (a device fault, Ctrl-C, a full disk) puts the rig in the safe state, closes
+the file "aborted: <why>" and is raised again. The file is created before the ADC starts, so
+an unwritable path fails before anything moves.
 """
 
 from __future__ import annotations
 
+import datetime as _dt
 import logging
 import threading
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -19,7 +27,7 @@ import numpy as np
 from fbs.drivers.errors import DriverError, SampleGap
 from fbs.drivers.rig import Rig
 
-from .runfile import RunWriter
+from .runfile import RunFileError, RunWriter, abort_status
 
 log = logging.getLogger(__name__)
 
@@ -39,8 +47,9 @@ class RecordResult:
 
 def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
            channels: list[str] | tuple[str, ...] | None = None,
-           ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.5,
-           procedure: str | None = None, meta: Mapping[str, Any] | None = None) -> RecordResult:
+           ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.25, flush_s: float = 0.5,
+           procedure: str | None = None, meta: Mapping[str, Any] | None = None,
+           overwrite: bool = False) -> RecordResult:
     if not duration_s > 0:
         raise ValueError(f"record duration {duration_s!r} s must be > 0")
     channels = tuple(channels or rig.adc.identity.channels)
@@ -51,7 +60,7 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
     meta = dict(meta or {}) | {"adc": {"channels": list(cfg.channels), "rate_hz": cfg.rate_hz,
                                        "ranges_V": cfg.ranges_V, "identity": rig.adc.identity.__dict__}}
     writer = RunWriter(path, rig=rig.url, mode=mode, rate_hz=cfg.rate_hz, channels=dict.fromkeys(channels, "V"),
-                       procedure=procedure, meta=meta)
+                       procedure=procedure, meta=meta, overwrite=overwrite, flush_s=flush_s)
     result = RecordResult(Path(path), 0, cfg.rate_hz, "recording")
     pending: list[tuple[float, str, str]] = []
     lock = threading.Lock()
@@ -71,6 +80,7 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
     try:
         t0 = rig.adc.start()
         rig.subscribe(on_event)
+        writer.set_meta("acquisition", _start_stamp(rig, t0))
         writer.event(0.0, "start", f"recording {len(channels)} channels at {cfg.rate_hz:g} Hz, mode {mode}")
         pos = 0
         while pos < total:
@@ -78,12 +88,12 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
                 block = rig.adc.read(min(per, total - pos))
             except SampleGap as gap:
                 stop = min(gap.stop, total)
-                writer.append({c: np.full(stop - pos, np.nan) for c in channels})
+                writer.append_missing(stop - pos)
                 writer.event(gap.start / cfg.rate_hz, "gap", str(gap))
                 result.gaps.append((gap.start, gap.stop, gap.reason))
                 pos = stop
                 continue
-            writer.append({c: block[c] for c in channels})
+            writer.append(block.volts)
             over = block.overrange.any(axis=0)
             for j in np.flatnonzero(over):
                 k = int(block.overrange[:, j].argmax())
@@ -93,8 +103,11 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
             flush_events()
         rig.adc.stop()
         result.samples = pos
+        flush_events()
+        writer.close(status)
     except BaseException as exc:
-        status = "aborted: " + ("interrupted" if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}")
+        status = abort_status(exc)
+        _go_safe(rig, exc)
         raise
     finally:
         rig.unsubscribe(on_event)
@@ -103,10 +116,33 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
                 rig.adc.stop()
             except DriverError as exc:
                 log.warning("stopping the ADC after an abort failed: %s", exc)
-        try:
-            flush_events()
-        finally:
-            writer.close(status)
+        if writer.is_open:
+            try:
+                if writer.failed is None:
+                    flush_events()
+            except RunFileError as exc:
+                log.error("events after the abort were not written: %s", exc)
+            finally:
+                writer.close(status)
+        result.samples = result.samples or writer.samples
         result.status = status
-        result.samples = result.samples or writer.n
     return result
+
+
+def _start_stamp(rig: Rig, t0: float) -> dict[str, Any]:
+    """When sample 0 was taken: rig time, and the wall clock when the rig runs in real time."""
+    stamp: dict[str, Any] = {"start_rig_s": t0, "clock": "virtual" if rig.clock.virtual else "wall"}
+    if not rig.clock.virtual:
+        start = time.time() - (rig.clock.now() - t0)
+        stamp["start_unix_s"] = start
+        stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.timezone.utc).isoformat(timespec="microseconds")
+    return stamp
+
+
+def _go_safe(rig: Rig, exc: BaseException) -> None:
+    """Every abort leaves the rig safe (mode 1, biases zero), whatever stopped the recording."""
+    if isinstance(exc, RunFileError):
+        log.error("%s; putting the rig in the safe state", exc)
+    report = rig.safe()
+    if not report.ok:
+        log.error("the rig did not confirm the safe state: %s", "; ".join(report.failed))

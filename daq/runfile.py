@@ -1,12 +1,27 @@
-"""The "fbs-run" HDF5 layout, version 1 (DESIGN.md section 6), and a writer for it.
+"""The "fbs-run" HDF5 layout, version 1 (DESIGN.md section 6), and its streaming writer.
 
 Root attributes ``format``, ``format_version``, ``created``, ``rig``, ``mode`` and optionally
 ``axis``, ``procedure``, ``status``; group ``/channels`` with one 1-D float dataset per
 channel (attributes ``units``, ``sample_rate_hz``), all on one time base from t = 0; optional
 ``/events`` (time, kind, text) and ``/meta`` (JSON strings). Readable with plain h5py.
 
-The writer appends blocks to chunked, resizable datasets and always leaves a status: a run
-that ends by an exception is closed "aborted: <why>".
+How the writer keeps data safe:
+
+* The file is written in SWMR mode (HDF5 single-writer/multiple-reader), so the console and
+  other processes read it while it grows (``h5py.File(path, "r", swmr=True)``), and a writer
+  killed at any moment leaves a file whose metadata is consistent up to its last flush.
+* Samples are buffered channel-major and written, with the pending events, at least every
+  ``flush_s`` seconds of wall time (0.5 s by default) or when ``buffer_bytes`` fill; each
+  flush ends in ``H5Fflush``. A killed writer loses at most the unflushed part.
+* Event strings are fixed-length (variable-length strings live in the global heap, which a
+  killed SWMR writer can leave unreadable): ``kind`` up to 32 bytes, ``text`` up to 1024
+  bytes of UTF-8; a longer text is cut at a character boundary and ends in "[cut]".
+* ``status`` is "recording" while the writer has the file; ``close`` sets "complete" or
+  "aborted: <why>". A file still saying "recording" whose writer is gone was not closed:
+  ``fbs recover`` (``daq.recover``) makes it open with plain ``h5py.File(path)`` again.
+* An existing file is never overwritten unless asked (``overwrite=True``).
+* Chunked datasets go straight to disk (no chunk cache): whole chunks are not copied into
+  a cache first, and a partial chunk at a flush is written where it belongs.
 """
 
 from __future__ import annotations
@@ -14,9 +29,12 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import logging
+import os
+import socket
+import time
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Mapping
+from typing import Any, Callable, Mapping
 
 import h5py
 import numpy as np
@@ -27,100 +45,288 @@ log = logging.getLogger(__name__)
 
 FORMAT = "fbs-run"
 FORMAT_VERSION = 1
-EVENT_DTYPE = np.dtype([("time", "f8"), ("kind", h5py.string_dtype()), ("text", h5py.string_dtype())])
+STATUS_RECORDING = "recording"
+STATUS_COMPLETE = "complete"
+KIND_BYTES = 32
+TEXT_BYTES = 1024
+EVENT_DTYPE = np.dtype([("time", "f8"),
+                        ("kind", h5py.string_dtype("utf-8", KIND_BYTES)),
+                        ("text", h5py.string_dtype("utf-8", TEXT_BYTES))])
+_CUT = " [cut]"
 
 
 class RunFileError(OSError):
-    """The run file cannot be created or written; the message says where and why."""
+    """The run file cannot be created, written or read; the message says which file and why."""
+
+
+def fit_utf8(text: str, limit: int) -> bytes:
+    """``text`` as UTF-8 in at most ``limit`` bytes; cut at a character boundary, marked."""
+    raw = text.encode("utf-8")
+    if len(raw) <= limit:
+        return raw
+    cut = raw[:limit - len(_CUT)].decode("utf-8", errors="ignore").encode("utf-8")
+    return cut + _CUT.encode()
+
+
+def abort_status(exc: BaseException) -> str:
+    """The ``status`` a run ended by ``exc`` gets."""
+    why = "interrupted" if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}"
+    return f"aborted: {why}"
+
+
+def chunk_samples(rate_hz: float, flush_s: float) -> int:
+    """Chunk length: about one flush's worth of samples, a power of two in [1024, 65536].
+
+    Small enough that a slow run does not rewrite a large partial chunk at every flush,
+    large enough that a fast one writes few chunks.
+    """
+    want = max(1.0, rate_hz * flush_s)
+    return int(min(65536, max(1024, 2 ** int(np.ceil(np.log2(want))))))
+
+
+def _write_hint(exc: BaseException) -> str:
+    text = str(exc)
+    if "errno = 28" in text or "No space left" in text:
+        return "the disk is full"
+    if "errno = 27" in text or "File too large" in text:
+        return "the file size limit was reached"
+    if "errno = 5" in text or "Input/output error" in text:
+        return "the disk reported an I/O error (removed?)"
+    return "disk full, removed, or read-only?"
 
 
 class RunWriter:
-    """Append-only writer of one run file. Use as a context manager."""
+    """Streaming writer of one run file. Use as a context manager, from one thread.
+
+    ``channels`` maps each channel name to its units, in the order of the columns that
+    ``append`` takes. Until the first ``append``/``event``/``flush`` the file is not yet in
+    SWMR mode and ``set_meta``/``set_attr`` may still add to it.
+    """
 
     def __init__(self, path: str | Path, *, rig: str, mode: int, rate_hz: float,
                  channels: Mapping[str, str], axis: str | None = None, procedure: str | None = None,
-                 meta: Mapping[str, Any] | None = None, chunk: int = 4096) -> None:
+                 meta: Mapping[str, Any] | None = None, overwrite: bool = False,
+                 flush_s: float = 0.5, buffer_bytes: int = 16 << 20,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        if not (np.isfinite(rate_hz) and rate_hz > 0):
+            raise ValueError(f"sample rate {rate_hz!r} Hz must be a positive number")
+        if not channels:
+            raise ValueError("a run file needs at least one channel")
+        bad = [c for c in channels if not c or "/" in c or c in (".", "..")]
+        if bad:
+            raise ValueError(f"channel name(s) {bad} cannot name an HDF5 dataset (empty, '/', '.' or '..')")
+        if not flush_s > 0:
+            raise ValueError(f"flush interval {flush_s!r} s must be > 0")
         self.path = Path(path)
         self.rate_hz = float(rate_hz)
+        self.names = tuple(channels)
+        self.flush_s = float(flush_s)
+        self._clock = clock
+        self._swmr = False
+        self._open(overwrite)
+        try:
+            self._layout(rig, mode, channels, axis, procedure, meta or {})
+        except BaseException:
+            self.f.close()
+            raise
+        n_ch = len(self.names)
+        self._cap = max(1, int(buffer_bytes) // (8 * n_ch))
+        self._buf = np.empty((n_ch, self._cap))   # channel-major: each channel's run is contiguous
+        self._k = 0                               # samples buffered
+        self.flushed = 0                          # samples on disk (visible to SWMR readers)
+        self._events: list[tuple[float, bytes, bytes]] = []
+        self._n_events = 0
+        self._failed: str | None = None
+        self._last_flush = clock()
+
+    # ------------------------------------------------------------------ creation
+    def _open(self, overwrite: bool) -> None:
+        if self.path.is_dir():
+            raise RunFileError(f"cannot create run file {self.path}: it is a directory")
+        if self.path.exists() and not overwrite:
+            raise RunFileError(f"{self.path} exists; a recording is never overwritten: choose another "
+                               "file name or remove it")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.f = h5py.File(self.path, "w")
-        except OSError as exc:
+            self.f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest", rdcc_nbytes=0)
+        except (OSError, ValueError) as exc:
             raise RunFileError(f"cannot create run file {self.path}: {exc}") from exc
+
+    def _layout(self, rig: str, mode: int, channels: Mapping[str, str], axis: str | None,
+                procedure: str | None, meta: Mapping[str, Any]) -> None:
         a = self.f.attrs
         a["format"] = FORMAT
         a["format_version"] = FORMAT_VERSION
         a["created"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
         a["rig"] = rig
         a["mode"] = int(mode)
-        a["status"] = "recording"
+        a["status"] = STATUS_RECORDING
+        a["writer"] = f"fbs-hil {__version__}, pid {os.getpid()} on {socket.gethostname()}"
         if axis is not None:
             a["axis"] = axis
         if procedure is not None:
             a["procedure"] = procedure
         g = self.f.create_group("channels")
-        self.datasets = {}
+        chunk = chunk_samples(self.rate_hz, self.flush_s)
+        self.datasets = []
         for name, units in channels.items():
             ds = g.create_dataset(name, shape=(0,), maxshape=(None,), dtype="f8", chunks=(chunk,))
             ds.attrs["units"] = units
             ds.attrs["sample_rate_hz"] = self.rate_hz
-            self.datasets[name] = ds
+            self.datasets.append(ds)
         self.events = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE,
-                                            chunks=(256,))
-        m = self.f.create_group("meta")
-        m.attrs["software_version"] = json.dumps({"fbs-hil": __version__})
-        for k, v in (meta or {}).items():
-            m.attrs[k] = json.dumps(v)
-        self.n = 0
+                                            chunks=(64,))
+        self.meta = self.f.create_group("meta")
+        self.meta.attrs["software_version"] = json.dumps({"fbs-hil": __version__})
+        for k, v in meta.items():
+            self.set_meta(k, v)
 
-    def append(self, columns: Mapping[str, np.ndarray]) -> None:
-        """Append one block: every channel of the file, equal lengths."""
-        lengths = {len(v) for v in columns.values()}
-        if set(columns) != set(self.datasets) or len(lengths) != 1:
-            raise ValueError("a block must hold every channel of the run, all of one length")
-        n = lengths.pop()
-        try:
-            for name, ds in self.datasets.items():
-                ds.resize((self.n + n,))
-                ds[self.n:] = columns[name]
-        except OSError as exc:
-            raise RunFileError(f"writing {self.path} failed (disk full or removed?): {exc}") from exc
-        self.n += n
+    def set_meta(self, name: str, value: Any) -> None:
+        """Store ``value`` as JSON in ``/meta`` (before streaming starts)."""
+        self._before_streaming("meta")
+        self.meta.attrs[name] = json.dumps(value, default=str)
+
+    def set_attr(self, name: str, value: Any) -> None:
+        """Set a root attribute (before streaming starts)."""
+        self._before_streaming("attribute")
+        self.f.attrs[name] = value
+
+    def _before_streaming(self, what: str) -> None:
+        if self._swmr:
+            raise RuntimeError(f"{self.path}: a {what} can only be added before the first sample or event "
+                               "(SWMR files cannot grow new objects)")
+
+    # ------------------------------------------------------------------ streaming
+    @property
+    def samples(self) -> int:
+        """Samples appended so far (flushed or buffered)."""
+        return self.flushed + self._k
+
+    def append(self, block: np.ndarray | Mapping[str, np.ndarray]) -> None:
+        """Append samples: an (n, n_channels) array in channel order, or every channel by name."""
+        if isinstance(block, Mapping):
+            if set(block) != set(self.names):
+                raise ValueError(f"a block must hold exactly the channels {self.names}, got {tuple(block)}")
+            lengths = {len(block[c]) for c in self.names}
+            if len(lengths) != 1:
+                raise ValueError(f"channel blocks of different lengths {sorted(lengths)}")
+            cols = np.stack([np.asarray(block[c], dtype=float) for c in self.names])
+        else:
+            a = np.asarray(block, dtype=float)
+            if a.ndim != 2 or a.shape[1] != len(self.names):
+                raise ValueError(f"a block must be (n, {len(self.names)}), got shape {a.shape}")
+            cols = a.T
+        self._put(cols)
+
+    def append_missing(self, n: int) -> None:
+        """``n`` lost samples on every channel: written as NaN, never spliced over."""
+        if n < 0:
+            raise ValueError(f"cannot append {n} samples")
+        while n:
+            m = min(n, self._cap)
+            self._put(None, m)
+            n -= m
+
+    def _put(self, cols: np.ndarray | None, n: int | None = None) -> None:
+        self._check_ok()
+        n = cols.shape[1] if cols is not None else n
+        pos = 0
+        while pos < n:
+            m = min(n - pos, self._cap - self._k)
+            dst = self._buf[:, self._k:self._k + m]
+            if cols is None:
+                dst.fill(np.nan)
+            else:
+                dst[...] = cols[:, pos:pos + m]
+            self._k += m
+            pos += m
+            if self._k == self._cap:
+                self.flush()
+        if self._clock() - self._last_flush >= self.flush_s:
+            self.flush()
 
     def event(self, time_s: float, kind: str, text: str) -> None:
-        k = len(self.events)
-        self.events.resize((k + 1,))
-        self.events[k] = (time_s, kind, text)
+        """Add an event; it reaches the file with the next flush."""
+        self._check_ok()
+        self._events.append((float(time_s), fit_utf8(kind, KIND_BYTES), fit_utf8(text, TEXT_BYTES)))
+        if self._clock() - self._last_flush >= self.flush_s:
+            self.flush()
 
-    def close(self, status: str = "complete") -> None:
+    def flush(self) -> None:
+        """Write the buffered samples and events and flush the file (readers see them)."""
+        self._check_ok()
+        try:
+            if not self._swmr:
+                self.f.swmr_mode = True
+                self._swmr = True
+            k, n0 = self._k, self.flushed
+            if k:
+                for i, ds in enumerate(self.datasets):
+                    ds.resize((n0 + k,))
+                    ds.write_direct(self._buf, np.s_[i, :k], np.s_[n0:n0 + k])
+            if self._events:
+                new = np.array(self._events, dtype=EVENT_DTYPE)
+                self.events.resize((self._n_events + len(new),))
+                self.events[self._n_events:] = new
+            self.f.flush()
+        except (OSError, ValueError) as exc:
+            self._failed = (f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples 0..{n0} "
+                            f"({n0 / self.rate_hz:.3f} s) were flushed before")
+            raise RunFileError(self._failed) from exc
+        self._n_events += len(self._events)
+        self._events.clear()
+        self.flushed += k
+        self._k = 0
+        self._last_flush = self._clock()
+
+    @property
+    def failed(self) -> str | None:
+        """Why writing failed, if it did (the writer then refuses more data)."""
+        return self._failed
+
+    @property
+    def is_open(self) -> bool:
+        return bool(self.f.id.valid)
+
+    def _check_ok(self) -> None:
+        if self._failed:
+            raise RunFileError(self._failed)
+        if not self.f.id.valid:
+            raise RunFileError(f"{self.path} is closed")
+
+    # ------------------------------------------------------------------ closing
+    def close(self, status: str = STATUS_COMPLETE) -> None:
+        """Flush, close, and set the root ``status``. Idempotent.
+
+        SWMR files cannot take attribute changes, so the file is closed and reopened for the
+        status. If the last flush fails the status says so and the error is raised; samples
+        flushed before stay in the file.
+        """
         if not self.f.id.valid:
             return
-        self.f.attrs["status"] = status
-        self.f.close()
+        error: RunFileError | None = None
+        if not self._failed:
+            try:
+                self.flush()
+            except RunFileError as exc:
+                error = exc
+        if self._failed and not status.startswith("aborted"):
+            status = f"aborted: {self._failed}"
+        try:
+            self.f.close()
+        except OSError as exc:  # a broken file still gets its status attempt below
+            log.error("closing %s failed: %s", self.path, exc)
+        try:
+            with h5py.File(self.path, "r+") as f:
+                f.attrs["status"] = status
+        except OSError as exc:
+            log.error("could not set the status of %s to %r: %s; `fbs recover %s` can do it later",
+                      self.path, status, exc, self.path)
+        if error is not None:
+            raise error
 
     def __enter__(self) -> "RunWriter":
         return self
 
     def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:
-        if ev is None:
-            self.close("complete")
-        else:
-            why = "interrupted" if isinstance(ev, KeyboardInterrupt) else f"{type(ev).__name__}: {ev}"
-            self.close(f"aborted: {why}")
-
-
-def read_channels(path: str | Path, names: list[str] | None = None) -> tuple[dict[str, np.ndarray], float]:
-    """Whole channels of a run file, and the common sample rate."""
-    with h5py.File(path, "r") as f:
-        if f.attrs.get("format") != FORMAT:
-            raise RunFileError(f"{path} is not an {FORMAT} file (format = {f.attrs.get('format')!r})")
-        g = f["channels"]
-        names = list(g) if names is None else names
-        missing = [n for n in names if n not in g]
-        if missing:
-            raise RunFileError(f"{path} lacks channel(s) {', '.join(missing)} (has {', '.join(g)})")
-        data = {n: g[n][()] for n in names}
-        rates = {float(g[n].attrs["sample_rate_hz"]) for n in names}
-    if len(rates) != 1:
-        raise RunFileError(f"{path}: channels have different sample rates {sorted(rates)}")
-    return data, rates.pop()
+        self.close(STATUS_COMPLETE if ev is None else abort_status(ev))

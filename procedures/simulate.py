@@ -7,7 +7,8 @@ import logging
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from fbs.daq.runfile import RunWriter, read_channels
+from fbs.daq.reader import read_channels
+from fbs.daq.runfile import RunWriter
 from fbs.daq.spectra import band_rms, dip_frequency, psd
 from fbs.simhw.params import SimConfig, to_dict
 from fbs.simhw.plant import CHANNELS, TRUTH_CHANNELS
@@ -26,7 +27,9 @@ def simulate_to_file(cfg: SimConfig, out: str | Path, *, mode: int, duration_s: 
     units = {c: "V" for c in CHANNELS} | ({t: "rad" for t in TRUTH_CHANNELS} if truth else {})
     meta = {"configuration": to_dict(cfg), "seed": seed, "effects": effects or [],
             "calibration": {}, "source": "fbs simulate (virtual time, no drivers)"}
-    with RunWriter(out, rig="sim-offline", mode=mode, rate_hz=rate_hz, channels=units, meta=meta) as w:
+    # a simulation is reproducible from its seed and config, so an old output may be replaced
+    with RunWriter(out, rig="sim-offline", mode=mode, rate_hz=rate_hz, channels=units, meta=meta,
+                   overwrite=True) as w:
         w.event(0.0, "mode", f"mode {mode}")
         for e in effects or []:
             w.event(0.0, "effect", e)
