@@ -106,6 +106,9 @@ def _open(path: Path) -> tuple[h5py.File, bool]:
     try:
         return h5py.File(path, "r"), False
     except OSError as exc:
+        if "truncated file" in str(exc):
+            raise RunFileError(f"cannot open {path}: its writer failed while extending it (disk full?): {exc}; "
+                               f"`fbs recover {path}` repairs it") from exc
         if "already open for write" not in str(exc) and "unable to lock" not in str(exc).lower():
             raise RunFileError(f"cannot open {path}: {exc}") from exc
     try:

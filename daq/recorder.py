@@ -4,8 +4,8 @@ Lost samples are never spliced over: the file keeps one time base from t = 0, th
 samples are NaN, and a ``gap`` event gives their exact positions and the reason. Rig events
 (mode changes, set-points, faults, the safe state) land in ``/events`` on the file's time
 base. The file streams in SWMR mode with a flush at least every ``flush_s`` (``RunWriter``);
-blocks are read ``block_s`` at a time, so a sample waits at most about ``block_s + flush_s``
-before it is on disk.
+blocks are read ``block_s`` at a time, so a sample is on disk at most about
+``2 block_s + flush_s`` (0.7 s by default) after it was taken.
 
 Any exception (a device fault, Ctrl-C, a full disk) puts the rig in the safe state, closes
 the file "aborted: <why>" and is raised again. The file is created before the ADC starts, so
@@ -17,7 +17,6 @@ from __future__ import annotations
 import datetime as _dt
 import logging
 import threading
-import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -47,7 +46,7 @@ class RecordResult:
 
 def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
            channels: list[str] | tuple[str, ...] | None = None,
-           ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.25, flush_s: float = 0.5,
+           ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1, flush_s: float = 0.5,
            procedure: str | None = None, meta: Mapping[str, Any] | None = None,
            overwrite: bool = False) -> RecordResult:
     if not duration_s > 0:
@@ -130,10 +129,10 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
 
 
 def _start_stamp(rig: Rig, t0: float) -> dict[str, Any]:
-    """When sample 0 was taken: rig time, and the wall clock when the rig runs in real time."""
+    """When sample 0 was taken: rig time, and wall-clock time unless the rig's time is virtual."""
     stamp: dict[str, Any] = {"start_rig_s": t0, "clock": "virtual" if rig.clock.virtual else "wall"}
-    if not rig.clock.virtual:
-        start = time.time() - (rig.clock.now() - t0)
+    start = rig.clock.unix_time(t0)
+    if start is not None:
         stamp["start_unix_s"] = start
         stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.timezone.utc).isoformat(timespec="microseconds")
     return stamp

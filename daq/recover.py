@@ -98,8 +98,13 @@ def read_superblock(path: str | Path) -> Superblock:
 
 
 def clear_open_flags(path: str | Path) -> Superblock:
-    """Clear the superblock's open-for-write flags and set its end of file to the file's
-    size (``h5clear -s --increment=0``). Returns the superblock as it was."""
+    """Clear the superblock's open-for-write flags and make its end-of-file address agree
+    with the file (``h5clear -s --increment=0``). Returns the superblock as it was.
+
+    A stale address below the file's size is raised to it. One above it (the writer's
+    last extension failed: disk full) is met by zero-filling the file up to it; HDF5's
+    metadata checksums then catch any structure that the failed write left incomplete.
+    """
     path = Path(path)
     sb = read_superblock(path)
     size = path.stat().st_size
@@ -108,6 +113,9 @@ def clear_open_flags(path: str | Path) -> Superblock:
         raw = bytearray(fh.read(48))
         raw[11] = 0
         base = int.from_bytes(raw[12:20], "little")
+        if sb.eof > size - base:
+            fh.truncate(base + sb.eof)
+            log.warning("%s: zero-filled %d bytes up to the recorded end of file", path, base + sb.eof - size)
         raw[28:36] = max(sb.eof, size - base).to_bytes(8, "little")
         raw[44:48] = lookup3(bytes(raw[:44])).to_bytes(4, "little")
         fh.seek(sb.offset)
@@ -115,6 +123,12 @@ def clear_open_flags(path: str | Path) -> Superblock:
         fh.flush()
         os.fsync(fh.fileno())
     return sb
+
+
+def needs_repair(path: str | Path) -> bool:
+    """Marked open for writing, or shorter than its recorded end of file."""
+    sb = read_superblock(path)
+    return sb.flags != 0 or sb.eof > Path(path).stat().st_size - sb.offset
 
 
 @dataclass
@@ -134,23 +148,32 @@ class Recovery:
                 f"kept{pad}; status {self.status!r}; opens with plain h5py now")
 
 
+def _refuse_if_writer_alive(path: Path) -> None:
+    try:
+        with RunFile(path) as run:       # opens in SWMR mode, as a live writer's file must be
+            alive = run.writer_alive()
+            writer = run.attrs.get("writer", "?")
+    except RunFileError as exc:          # unreadable even so: no live writer keeps it that way
+        log.warning("%s: cannot tell whether its writer runs (%s); repairing", path, exc)
+        return
+    if alive:
+        raise RunFileError(f"{path}: its writer ({writer}) is still running; stop it first "
+                           "(or pass force if that process is not the writer)")
+
+
 def recover(path: str | Path, *, force: bool = False) -> Recovery:
     """Make a file left by a dead writer open with plain h5py, keeping every flushed sample."""
     path = Path(path)
-    with RunFile(path) as run:       # checks the layout; opens in SWMR mode if flagged
-        alive = run.writer_alive()
-        writer = run.attrs.get("writer", "?")
-        status = run.attrs.get("status", "")
-    if alive and not force:
-        raise RunFileError(f"{path}: its writer ({writer}) is still running; stop it first "
-                           "(or pass force if that process is not the writer)")
-    sb = read_superblock(path)
-    was_open = sb.flags != 0
+    was_open = needs_repair(path)
     if was_open:
-        clear_open_flags(path)
+        if read_superblock(path).flags and not force:
+            _refuse_if_writer_alive(path)
+        sb = clear_open_flags(path)
         log.info("%s: cleared open-for-write flags 0x%02x", path, sb.flags)
     padded: dict[str, int] = {}
     with h5py.File(path, "r+") as f:
+        status = f.attrs.get("status", "")
+        status = status.decode() if isinstance(status, bytes) else str(status)
         g = f["channels"]
         rate = float(g[next(iter(g))].attrs["sample_rate_hz"])
         lengths = {c: g[c].shape[0] for c in g}
@@ -166,9 +189,10 @@ def recover(path: str | Path, *, force: bool = False) -> Recovery:
             ev.resize((k + 1,))
             lo = min(lengths.values())
             ev[k] = (lo / rate, fit_utf8("gap", KIND_BYTES),
-                     fit_utf8(f"samples {lo}..{n} of {', '.join(padded)} lost when the writer died", TEXT_BYTES))
-        if status == STATUS_RECORDING or was_open:
-            status = (f"aborted: the writer died before closing the file; {n} samples "
+                     fit_utf8(f"samples {lo}..{n} of {', '.join(padded)} lost when the writer stopped", TEXT_BYTES))
+        if was_open or status == STATUS_RECORDING:
+            why = status[len("aborted: "):] + "; " if status.startswith("aborted: ") else ""
+            status = (f"aborted: {why}not closed by its writer (killed, or its disk filled); {n} samples "
                       f"({n / rate:.3f} s) were flushed and kept")
             f.attrs["status"] = status
     return Recovery(path, was_open, n, rate, padded, status)

@@ -95,6 +95,22 @@ def _write_hint(exc: BaseException) -> str:
     return "disk full, removed, or read-only?"
 
 
+def check_new_path(path: str | Path, overwrite: bool = False) -> None:
+    """Raise ``RunFileError`` unless a run file can be created at ``path`` (its folder is
+    made if missing). Call it before moving the rig, so a bad ``--out`` fails first."""
+    path = Path(path)
+    if path.is_dir():
+        raise RunFileError(f"cannot create run file {path}: it is a directory")
+    if path.exists() and not overwrite:
+        raise RunFileError(f"{path} exists; a recording is never overwritten: choose another file name or remove it")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunFileError(f"cannot create run file {path}: {exc}") from exc
+    if not os.access(path.parent, os.W_OK):
+        raise RunFileError(f"cannot create run file {path}: folder {path.parent} is not writable")
+
+
 class RunWriter:
     """Streaming writer of one run file. Use as a context manager, from one thread.
 
@@ -141,13 +157,8 @@ class RunWriter:
 
     # ------------------------------------------------------------------ creation
     def _open(self, overwrite: bool) -> None:
-        if self.path.is_dir():
-            raise RunFileError(f"cannot create run file {self.path}: it is a directory")
-        if self.path.exists() and not overwrite:
-            raise RunFileError(f"{self.path} exists; a recording is never overwritten: choose another "
-                               "file name or remove it")
+        check_new_path(self.path, overwrite)
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
             self.f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest", rdcc_nbytes=0)
         except (OSError, ValueError) as exc:
             raise RunFileError(f"cannot create run file {self.path}: {exc}") from exc
@@ -314,12 +325,12 @@ class RunWriter:
             status = f"aborted: {self._failed}"
         try:
             self.f.close()
-        except OSError as exc:  # a broken file still gets its status attempt below
+        except (OSError, RuntimeError) as exc:  # h5py raises either; the status attempt still follows
             log.error("closing %s failed: %s", self.path, exc)
         try:
             with h5py.File(self.path, "r+") as f:
                 f.attrs["status"] = status
-        except OSError as exc:
+        except (OSError, RuntimeError) as exc:
             log.error("could not set the status of %s to %r: %s; `fbs recover %s` can do it later",
                       self.path, status, exc, self.path)
         if error is not None:

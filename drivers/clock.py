@@ -24,6 +24,10 @@ class RigClock(Protocol):
     def demand(self, t: float) -> None:
         """Someone will wait for data up to rig time ``t``: a virtual clock runs to it."""
 
+    def unix_time(self, t: float) -> float | None:
+        """Wall-clock (Unix) time of rig time ``t``; None for a virtual clock. On a paced
+        simulation it is the earliest time ``t`` can be reached (the rig may lag)."""
+
 
 class WallClock:
     """Real hardware: monotonic wall time from when the rig was opened."""
@@ -42,3 +46,6 @@ class WallClock:
 
     def demand(self, t: float) -> None:
         pass
+
+    def unix_time(self, t: float) -> float:
+        return time.time() - (self.now() - t)

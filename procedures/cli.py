@@ -11,6 +11,8 @@ from fbs.drivers.errors import DriverError
 from fbs.simhw import effects as effect_catalogue
 from fbs.simhw.params import ConfigError, load_config
 
+from . import inspect
+
 log = logging.getLogger("fbs")
 
 
@@ -47,9 +49,11 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace) -> int:
     from fbs.daq.recorder import record
+    from fbs.daq.runfile import check_new_path
     from fbs.drivers.rig import open_rig
 
     channels = [c for c in args.channels.split(",") if c] if args.channels else None
+    check_new_path(args.out)  # a bad --out fails before the rig moves
     with open_rig(args.rig) as rig:
         rig.set_mode(args.mode)  # disallowed modes and interlocks are refused here, with the reason
         result = record(rig, args.out, duration_s=args.duration, rate_hz=args.rate, channels=channels)
@@ -91,6 +95,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--duration", type=float, default=300.0)
     d.add_argument("--seed", type=int, default=0)
     d.set_defaults(func=_demo)
+
+    inspect.add_parser(sub)
     return p
 
 

@@ -22,6 +22,10 @@ class VirtualClock:
     def advance_to(self, t: float) -> None:
         self.now = t
 
+    def unix_time(self, t: float) -> float | None:
+        """Wall-clock time of simulated time ``t``: none, time here is not the wall's."""
+        return None
+
 
 class PacedClock(VirtualClock):
     """Simulated time advances no faster than wall time (scaled by ``speed``)."""
@@ -34,6 +38,11 @@ class PacedClock(VirtualClock):
             raise ValueError(f"clock speed {speed} must be > 0")
         self.speed = speed
         self._t0 = time.monotonic()
+        self._unix0 = time.time()
+
+    def unix_time(self, t: float) -> float:
+        """The earliest wall-clock (Unix) time at which simulated time ``t`` is reached."""
+        return self._unix0 + t / self.speed
 
     def advance_to(self, t: float) -> None:
         delay = self._t0 + t / self.speed - time.monotonic()

@@ -199,6 +199,9 @@ class SimClock:
         if self.virtual:
             self.server.demand(t)
 
+    def unix_time(self, t: float) -> float | None:
+        return self.server.sim.clock.unix_time(t)
+
     def sleep(self, seconds: float) -> None:
         if not seconds > 0:
             return

@@ -1,0 +1,132 @@
+"""Files left by a killed writer: they open in SWMR mode, and ``recover`` makes them plain again."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import h5py
+import numpy as np
+import pytest
+
+from fbs.daq.reader import RunFile
+from fbs.daq.recover import clear_open_flags, lookup3, read_superblock, recover
+from fbs.daq.runfile import RunFileError, RunWriter
+
+# The writer flushes 300 samples, buffers 50 more, and is killed: the 300 must survive.
+KILLED_WRITER = textwrap.dedent("""
+    import os, signal, sys
+    import numpy as np
+    from fbs.daq.runfile import RunWriter
+    w = RunWriter(sys.argv[1], rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"})
+    x = np.arange(700, dtype=float).reshape(350, 2)
+    w.append(x[:300])
+    w.event(1.0, "step", "before the kill")
+    w.flush()
+    w.append(x[300:])
+    print("flushed", flush=True)
+    if len(sys.argv) > 2:
+        sys.stdin.readline()          # stay alive until told
+    os.kill(os.getpid(), signal.SIGKILL)
+""")
+
+# Low-level: the writer dies between resizing channel a and channel b.
+UNEVEN_WRITER = textwrap.dedent("""
+    import os, signal, sys
+    import h5py, numpy as np
+    from fbs.daq.runfile import RunWriter
+    w = RunWriter(sys.argv[1], rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"})
+    w.append(np.ones((100, 2)))
+    w.flush()
+    a = w.datasets[0]
+    a.resize((150,)); a[100:] = 2.0
+    w.f.flush()
+    os.kill(os.getpid(), signal.SIGKILL)
+""")
+
+
+def _run(script: str, path, *extra) -> None:
+    p = subprocess.run([sys.executable, "-c", script, str(path), *extra], capture_output=True, text=True, timeout=60)
+    assert p.returncode == -9, p.stderr
+
+
+def test_lookup3_matches_bob_jenkins_published_values_and_hdf5():
+    # the self-test values printed by lookup3.c's driver5()
+    assert lookup3(b"") == 0xDEADBEEF
+    assert lookup3(b"", 0xDEADBEEF) == 0xBD5B7DDE
+    assert lookup3(b"Four score and seven years ago") == 0x17770551
+    assert lookup3(b"Four score and seven years ago", 1) == 0xCD628161
+
+
+def test_a_fresh_files_superblock_checksum_verifies(tmp_path):
+    with h5py.File(tmp_path / "x.h5", "w", libver="latest") as f:
+        f["x"] = np.zeros(3)
+    sb = read_superblock(tmp_path / "x.h5")        # raises on a checksum mismatch
+    assert sb.version >= 2 and sb.flags == 0
+
+
+def test_a_killed_writers_file_keeps_every_flushed_sample_and_recovers(tmp_path):
+    p = tmp_path / "killed.h5"
+    _run(KILLED_WRITER, p)
+    with pytest.raises(OSError, match="already open for write"):
+        h5py.File(p, "r")                            # what HDF5 says about a file left open
+    with h5py.File(p, "r", swmr=True) as f:          # plain h5py, SWMR-read
+        np.testing.assert_array_equal(f["channels/a"][()], np.arange(0, 600, 2))
+        assert f.attrs["status"] == "recording" and f.attrs["format"] == "fbs-run"
+    with RunFile(p) as run:
+        assert run.swmr and run.n_samples == 300
+        assert run.status.startswith("aborted: the writer died")   # its pid is gone
+        assert [e.text for e in run.events] == ["before the kill"]
+    rec = recover(p)
+    assert rec.was_open and rec.samples == 300 and not rec.padded
+    assert "300 samples (3.000 s)" in rec.status
+    with h5py.File(p, "r") as f:                     # plain open works again
+        np.testing.assert_array_equal(f["channels/b"][()], np.arange(1, 600, 2))
+        assert f.attrs["status"] == rec.status
+    assert read_superblock(p).flags == 0
+    again = recover(p)
+    assert not again.was_open and "nothing to do" in again.summary()
+
+
+def test_channels_cut_short_by_the_kill_are_padded_with_nan_not_truncated(tmp_path):
+    p = tmp_path / "uneven.h5"
+    _run(UNEVEN_WRITER, p)
+    rec = recover(p)
+    assert rec.samples == 150 and rec.padded == {"b": 50}
+    with RunFile(p) as run:
+        a, b = run.read(["a", "b"])
+        assert (a[100:] == 2.0).all() and np.isnan(b[100:]).all() and (b[:100] == 1.0).all()
+        gap = [e for e in run.events if e.kind == "gap"]
+        assert gap and gap[0].time_s == 1.0 and "samples 100..150 of b" in gap[0].text
+
+
+def test_recover_refuses_while_the_writer_runs(tmp_path):
+    p = tmp_path / "live.h5"
+    proc = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(p), "wait"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "flushed"
+        with pytest.raises(RunFileError, match=f"pid {proc.pid} .* is still running"):
+            recover(p)
+        assert read_superblock(p).flags != 0         # untouched
+    finally:
+        proc.communicate("go\n", timeout=30)
+    assert recover(p).samples == 300
+
+
+def test_a_damaged_superblock_is_not_touched(tmp_path):
+    p = tmp_path / "x.h5"
+    with RunWriter(p, rig="t", mode=1, rate_hz=1.0, channels={"a": "V"}) as w:
+        w.append(np.zeros((1, 1)))
+    raw = bytearray(p.read_bytes())
+    raw[20] ^= 0xFF
+    p.write_bytes(bytes(raw))
+    with pytest.raises(RunFileError, match="checksum mismatch"):
+        clear_open_flags(p)
+    assert p.read_bytes() == bytes(raw)
+    q = tmp_path / "not.h5"
+    q.write_bytes(os.urandom(4096))
+    with pytest.raises(RunFileError, match="no HDF5 signature"):
+        read_superblock(q)

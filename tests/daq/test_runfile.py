@@ -1,0 +1,158 @@
+"""The streaming writer: layout, flush policy, refusal to overwrite, abort status, event strings."""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from fbs.daq.runfile import (EVENT_DTYPE, TEXT_BYTES, RunFileError, RunWriter, check_new_path, chunk_samples,
+                             fit_utf8)
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 0.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def _writer(path, clock=None, **kw) -> RunWriter:
+    kw = {"rig": "test", "mode": 3, "rate_hz": 100.0, "channels": {"a": "V", "b": "rad"}} | kw
+    return RunWriter(path, clock=clock or Clock(), **kw)
+
+
+def test_a_closed_file_follows_the_layout_and_opens_with_plain_h5py(tmp_path):
+    rng = np.random.default_rng(1)
+    x = rng.standard_normal((250, 2))
+    with _writer(tmp_path / "r.h5", axis="X", procedure="unit", meta={"calibration": {"K": 1.5}}) as w:
+        w.set_meta("acquisition", {"start_rig_s": 2.0})
+        w.append(x[:100])
+        w.append({"a": x[100:200, 0], "b": x[100:200, 1]})
+        w.append_missing(7)
+        w.append(x[200:])
+        w.event(1.0, "mode", "mode 3")
+    with h5py.File(tmp_path / "r.h5", "r") as f:   # plain: no SWMR flag, no recovery
+        a = f.attrs
+        assert (a["format"], a["format_version"], a["rig"], a["mode"], a["axis"], a["procedure"], a["status"]) == \
+            ("fbs-run", 1, "test", 3, "X", "unit", "complete")
+        assert a["created"].endswith("+00:00") and "pid" in a["writer"]
+        ga, gb = f["channels/a"], f["channels/b"]
+        assert ga.attrs["units"] == "V" and gb.attrs["units"] == "rad" and ga.attrs["sample_rate_hz"] == 100.0
+        assert ga.dtype == np.float64 and ga.ndim == 1 and ga.maxshape == (None,) and ga.chunks
+        np.testing.assert_array_equal(ga[:200], x[:200, 0])
+        assert np.isnan(gb[200:207]).all()
+        np.testing.assert_array_equal(gb[207:], x[200:, 1])
+        assert f["events"][0]["kind"] == b"mode" and f["events"][0]["time"] == 1.0
+        assert json.loads(f["meta"].attrs["calibration"]) == {"K": 1.5}
+        assert json.loads(f["meta"].attrs["acquisition"]) == {"start_rig_s": 2.0}
+        assert "fbs-hil" in json.loads(f["meta"].attrs["software_version"])
+
+
+def test_samples_reach_the_file_when_the_flush_interval_passes_or_the_buffer_fills(tmp_path):
+    clock = Clock()
+    w = _writer(tmp_path / "r.h5", clock, flush_s=0.5, buffer_bytes=16 * 100)   # 100 samples of 2 channels
+    w.append(np.zeros((30, 2)))
+    assert (w.flushed, w.samples) == (0, 30)
+    clock.t = 0.49
+    w.append(np.zeros((30, 2)))
+    assert w.flushed == 0
+    clock.t = 0.5
+    w.append(np.zeros((10, 2)))
+    assert w.flushed == 70                       # the interval passed: everything went out
+    w.append(np.ones((250, 2)))                  # fills the buffer twice within the interval
+    assert w.flushed == 270 and w.samples == 320
+    clock.t = 1.0
+    w.event(0.9, "note", "operator note")       # an event alone also flushes when due
+    assert w.flushed == 320
+    w.close()
+    with h5py.File(tmp_path / "r.h5") as f:
+        assert len(f["channels/a"]) == 320 and f["channels/a"][70:320].sum() == 250
+        assert len(f["events"]) == 1
+
+
+def test_set_meta_is_refused_once_streaming(tmp_path):
+    with _writer(tmp_path / "r.h5") as w:
+        w.append(np.zeros((1, 2)))
+        w.flush()
+        with pytest.raises(RuntimeError, match="before the first sample"):
+            w.set_meta("late", 1)
+
+
+def test_an_existing_file_is_never_overwritten_unless_asked(tmp_path):
+    p = tmp_path / "r.h5"
+    with _writer(p) as w:
+        w.append(np.ones((5, 2)))
+    with pytest.raises(RunFileError, match="exists; a recording is never overwritten"):
+        _writer(p)
+    with h5py.File(p) as f:
+        assert len(f["channels/a"]) == 5     # untouched
+    with _writer(p, overwrite=True) as w:
+        w.append(np.ones((2, 2)))
+    with h5py.File(p) as f:
+        assert len(f["channels/a"]) == 2
+
+
+def test_bad_paths_are_named(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(RunFileError, match="afile"):
+        check_new_path(tmp_path / "afile" / "r.h5")
+    with pytest.raises(RunFileError, match="is a directory"):
+        _writer(tmp_path)
+
+
+def test_an_exception_closes_the_file_aborted_with_the_reason(tmp_path):
+    with pytest.raises(ZeroDivisionError):
+        with _writer(tmp_path / "r.h5") as w:
+            w.append(np.ones((3, 2)))
+            raise ZeroDivisionError("division by zero")
+    with h5py.File(tmp_path / "r.h5") as f:
+        assert f.attrs["status"] == "aborted: ZeroDivisionError: division by zero"
+        assert len(f["channels/a"]) == 3
+
+
+@pytest.mark.parametrize("block, match", [(np.zeros((3, 3)), r"\(n, 2\)"), ({"a": np.zeros(3)}, "exactly the channels"),
+                                          ({"a": np.zeros(3), "b": np.zeros(4)}, "different lengths")])
+def test_malformed_blocks_are_refused(tmp_path, block, match):
+    with _writer(tmp_path / "r.h5") as w:
+        with pytest.raises(ValueError, match=match):
+            w.append(block)
+
+
+def test_bad_construction_arguments_are_refused_before_a_file_exists(tmp_path):
+    for kw, match in [({"rate_hz": 0.0}, "sample rate"), ({"channels": {}}, "at least one channel"),
+                      ({"channels": {"a/b": "V"}}, "cannot name"), ({"flush_s": 0}, "flush interval")]:
+        with pytest.raises(ValueError, match=match):
+            _writer(tmp_path / "r.h5", **kw)
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_chunks_track_one_flush_of_samples():
+    assert chunk_samples(10.0, 0.5) == 1024
+    assert chunk_samples(10_000.0, 0.5) == 8192
+    assert chunk_samples(1e6, 0.5) == 65536
+
+
+@given(st.text(max_size=2000), st.integers(8, 1100))
+def test_fit_utf8_keeps_short_text_and_cuts_long_text_at_a_character(text, limit):
+    out = fit_utf8(text, limit)
+    assert len(out) <= limit
+    decoded = out.decode("utf-8")           # never a broken character
+    if len(text.encode()) <= limit:
+        assert decoded == text
+    else:
+        assert decoded.endswith(" [cut]") and text.startswith(decoded[:-len(" [cut]")])
+
+
+def test_a_long_event_text_is_cut_and_marked(tmp_path):
+    with _writer(tmp_path / "r.h5") as w:
+        w.event(0.0, "error", "é" * TEXT_BYTES)
+    with h5py.File(tmp_path / "r.h5") as f:
+        assert f["events"].dtype == EVENT_DTYPE
+        text = f["events"][0]["text"].decode()
+        assert text.endswith("[cut]") and len(text.encode()) <= TEXT_BYTES
