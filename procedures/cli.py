@@ -11,7 +11,7 @@ from fbs.drivers.errors import DriverError
 from fbs.simhw import effects as effect_catalogue
 from fbs.simhw.params import ConfigError, load_config
 
-from . import inspect
+from . import inspect, spectra
 
 log = logging.getLogger("fbs")
 
@@ -97,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.set_defaults(func=_demo)
 
     inspect.add_parser(sub)
+    spectra.add_parser(sub)
     return p
 
 

@@ -1,0 +1,157 @@
+"""Spectral plots as the thesis draws them (App. A.8), written straight to PNG files.
+
+* ``plot_psd``: log-log PSD of one channel, shown as octave-band averages (bands each
+  twice as wide as the one below) with the points greater than three times their band's
+  average drawn as well, so discrete lines are not averaged away (App. A.8); a shaded
+  chi-square 95 % interval of the band averages from Welch's EDOF (App. A.4).
+* ``plot_coherence``: magnitude-squared coherence of a pair (eq. 4.44) on a linear 0..1
+  axis against log frequency, raw and octave-band averaged, with the level below which
+  the estimate is consistent with zero coherence.
+
+Matplotlib is used through ``matplotlib.figure.Figure`` and the Agg canvas only: no
+``pyplot``, so nothing is left in a global figure registry and no GUI backend is touched.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from .octave import OctaveBands, band_average_dof, octave_bands
+from .spectra import psd_confidence
+
+__all__ = ["coherence_significance", "plot_coherence", "plot_psd", "psd_units_label"]
+
+log = logging.getLogger(__name__)
+
+FIGSIZE = (9.0, 5.5)
+DPI = 120
+
+
+def psd_units_label(units: str, scaling: str = "density") -> str:
+    """``'V'`` -> ``'V²/Hz'``; compound units are bracketed: ``'m/s'`` -> ``'(m/s)²/Hz'``."""
+    u = units.strip() or "unit"
+    sq = f"({u})²" if any(c in u for c in "/*· ^") else f"{u}²"
+    return f"{sq}/Hz" if scaling == "density" else sq
+
+
+def coherence_significance(n_segments: float, alpha: float = 0.05) -> float:
+    r"""The magnitude-squared coherence that an estimate from ``n_segments`` independent
+    segments of two incoherent Gaussian signals exceeds with probability ``alpha``:
+    :math:`1 - \alpha^{1/(K-1)}` (from :math:`P(\hat\gamma^2 > c) = (1 - c)^{K-1}`, [BP]).
+    1 for a single segment, where the estimate is identically 1 (eq. 4.50)."""
+    if n_segments <= 1:
+        return 1.0
+    return float(1.0 - alpha ** (1.0 / (n_segments - 1.0)))
+
+
+def _strongest_distinct(f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float = 0.25) -> list[tuple[float, float]]:
+    """The ``n`` largest points whose frequencies differ from every stronger one chosen by
+    more than the fraction ``spacing`` (one label per line or cluster, so labels do not overlap)."""
+    out: list[tuple[float, float]] = []
+    for i in np.argsort(p)[::-1]:
+        if all(abs(f[i] - g) > spacing * g for g, _ in out):
+            out.append((float(f[i]), float(p[i])))
+            if len(out) == n:
+                break
+    return out
+
+
+def _new_figure() -> tuple[Figure, object]:
+    fig = Figure(figsize=FIGSIZE, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig, fig.add_subplot()
+
+
+def _save(fig: Figure, out: str | Path) -> Path:
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=DPI, format="png")
+    log.debug("wrote %s", out)
+    return out
+
+
+def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, window="hann",
+             nperseg: int, nfft: int | None = None, title: str = "", factor: float = 3.0,
+             level: float = 0.95, scaling: str = "density", bands: OctaveBands | None = None) -> Path:
+    """Write the App. A.8 log-log PSD plot of one channel to ``out`` (PNG); returns the path.
+
+    ``f``, ``p``: the one-sided Welch PSD; ``dof``: its per-bin EDOF
+    (``spectra.equivalent_dof``); ``window``, ``nperseg``, ``nfft``: the Welch options, for
+    the EDOF of a band average (``octave.band_average_dof``); ``title``: the first title
+    line (file, rate, segments...). ``bands`` may be passed if already computed with the
+    same ``factor``. Pass the bins to display: ``fbs spectra`` leaves out the unpaired
+    Nyquist bin of an even FFT length (one-sided, it holds half its neighbours' density).
+    """
+    f = np.asarray(f, dtype=float)
+    p = np.asarray(p, dtype=float)
+    b = bands if bands is not None else octave_bands(f, p, factor=factor)
+    fig, ax = _new_figure()
+    ok = np.isfinite(b.average) & (b.average > 0)
+    if ok.any():
+        nu = band_average_dof(dof, b.count[ok], window=window, nperseg=nperseg, nfft=nfft)
+        lo, hi = psd_confidence(b.average[ok], nu, level)
+        ax.fill_between(b.f_center[ok], lo, hi, color="C0", alpha=0.2, linewidth=0,
+                        label=f"{level:.0%} χ² interval of the band average (EDOF ν = {dof:.0f} per bin)")
+        ax.loglog(b.f_center[ok], b.average[ok], "o-", color="C0", markersize=4,
+                  label="octave-band average (bands double in width)")
+        kept = b.kept_p > 0
+        ax.loglog(b.kept_f[kept], b.kept_p[kept], "^", color="C3", markersize=5, linestyle="none",
+                  label=f"points > {factor:g} × band average ({int(kept.sum())})")
+        for fk, pk in _strongest_distinct(b.kept_f[kept], b.kept_p[kept]):
+            ax.annotate(f"{fk:.4g} Hz", (fk, pk), textcoords="offset points", xytext=(4, 4), fontsize=8,
+                        color="C3")
+        ax.legend(loc="best", fontsize=8)
+    else:
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.text(0.5, 0.5, "no positive PSD values to plot", transform=ax.transAxes, ha="center")
+    ax.grid(True, which="major", alpha=0.5)
+    ax.grid(True, which="minor", alpha=0.15)
+    ax.set_xlabel("frequency (Hz)")
+    what = "PSD" if scaling == "density" else "power spectrum"
+    ax.set_ylabel(f"{what} ({psd_units_label(units, scaling)})")
+    ax.set_title(f"{title}\n{channel}: {what}, App. A.8 octave-band display" if title else
+                 f"{channel}: {what}", fontsize=10)
+    try:
+        return _save(fig, out)
+    finally:
+        fig.clear()
+
+
+def plot_coherence(out: str | Path, f, coh, *, pair: tuple[str, str], n_segments: int, title: str = "",
+                   alpha: float = 0.05) -> Path:
+    """Write the coherence plot of one pair to ``out`` (PNG); returns the path.
+
+    Linear 0..1 against log frequency: the raw estimate faintly, its octave-band average
+    (App. A.8) with markers, and the ``1 - alpha`` significance level for zero coherence
+    with ``n_segments`` averaged (``coherence_significance``). With overlapped segments
+    (Welch, 50 %) the segments are not quite independent, so this level is a little low.
+    """
+    f = np.asarray(f, dtype=float)
+    coh = np.asarray(coh, dtype=float)
+    pos = f > 0
+    b = octave_bands(f, coh)
+    fig, ax = _new_figure()
+    ax.semilogx(f[pos], coh[pos], "-", color="0.55", linewidth=0.6, alpha=0.6, label="coherence (per bin)")
+    ok = np.isfinite(b.average)
+    ax.semilogx(b.f_center[ok], b.average[ok], "o-", color="C0", markersize=4, label="octave-band average")
+    sig = coherence_significance(n_segments, alpha)
+    ax.axhline(sig, color="C3", linestyle="--", linewidth=1.0,
+               label=f"{1 - alpha:.0%} significance of zero coherence, K = {n_segments}: {sig:.3f}")
+    ax.set_ylim(0.0, 1.03)   # a coherence of 1 stays visible above the frame's top
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel(f"coherence γ² {pair[0]}–{pair[1]} (dimensionless)")
+    ax.grid(True, which="major", alpha=0.5)
+    ax.grid(True, which="minor", alpha=0.15)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(f"{title}\ncoherence {pair[0]} – {pair[1]} (eq. 4.44)" if title else
+                 f"coherence {pair[0]} – {pair[1]}", fontsize=10)
+    try:
+        return _save(fig, out)
+    finally:
+        fig.clear()
