@@ -1,5 +1,10 @@
 """Record the rig's ADC stream into an "fbs-run" file (drivers -> daq -> HDF5).
 
+``Acquisition`` is one continuous recording that a procedure runs alongside its commands:
+every second of rig time a procedure spends passes through ``acquire``, which reads the
+ADC, writes the file and hands the samples back, so commands land between blocks and the
+file's time base is the ADC's. ``record`` is the plain case: acquire for a duration.
+
 Lost samples are never spliced over: the file keeps one time base from t = 0, the missing
 samples are NaN, and a ``gap`` event gives their exact positions and the reason. Rig events
 (mode changes, set-points, faults, the safe state) land in ``/events`` on the file's time
@@ -19,6 +24,7 @@ import logging
 import threading
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import TracebackType
 from typing import Any, Mapping
 
 import numpy as np
@@ -26,7 +32,7 @@ import numpy as np
 from fbs.drivers.errors import DriverError, SampleGap
 from fbs.drivers.rig import Rig
 
-from .runfile import RunFileError, RunWriter, abort_status
+from .runfile import STATUS_COMPLETE, RunFileError, RunWriter, abort_status
 
 log = logging.getLogger(__name__)
 
@@ -44,88 +50,150 @@ class RecordResult:
         return sum(stop - start for start, stop, _ in self.gaps)
 
 
+class Acquisition:
+    """The ADC streaming into one run file for as long as the ``with`` block lasts."""
+
+    def __init__(self, rig: Rig, path: str | Path, *, rate_hz: float,
+                 channels: list[str] | tuple[str, ...] | None = None,
+                 ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1,
+                 flush_s: float = 0.5, procedure: str | None = None, axis: str | None = None,
+                 meta: Mapping[str, Any] | None = None, overwrite: bool = False) -> None:
+        self.rig = rig
+        self.channels = tuple(channels or rig.adc.identity.channels)
+        self.cfg = rig.adc.configure(self.channels, rate_hz, ranges_V)
+        self.rate_hz = self.cfg.rate_hz
+        self.block = max(1, int(round(block_s * self.rate_hz)))
+        self.mode = rig.relays.status().mode
+        meta = dict(meta or {}) | {"adc": {"channels": list(self.cfg.channels), "rate_hz": self.rate_hz,
+                                           "ranges_V": self.cfg.ranges_V, "identity": rig.adc.identity.__dict__}}
+        self.writer = RunWriter(path, rig=rig.url, mode=self.mode, rate_hz=self.rate_hz,
+                                channels=dict.fromkeys(self.channels, "V"), procedure=procedure, axis=axis,
+                                meta=meta, overwrite=overwrite, flush_s=flush_s)
+        self.result = RecordResult(Path(path), 0, self.rate_hz, "recording")
+        self.pos = 0                    # samples acquired (the next sample's index)
+        self.t0 = 0.0                   # rig time of sample 0
+        self._pending: list[tuple[float, str, str]] = []
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ lifetime
+    def __enter__(self) -> "Acquisition":
+        try:
+            self.t0 = self.rig.adc.start()
+            self.rig.subscribe(self._on_event)
+            self.writer.set_meta("acquisition", _start_stamp(self.rig, self.t0))
+            self.writer.event(0.0, "start", f"recording {len(self.channels)} channels at {self.rate_hz:g} Hz, "
+                              f"mode {self.mode}")
+        except BaseException as exc:
+            self.__exit__(type(exc), exc, exc.__traceback__)
+            raise
+        return self
+
+    def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:
+        status = STATUS_COMPLETE
+        try:
+            if ev is None:
+                self.rig.adc.stop()
+                self._flush_events()
+                self.writer.close(status)
+        except BaseException as exc:   # a failure while finishing is an abort like any other
+            ev = exc
+            raise
+        finally:
+            if ev is not None:
+                status = abort_status(ev)
+                _go_safe(self.rig, ev)
+            self._finish(status)
+
+    def _finish(self, status: str) -> None:
+        self.rig.unsubscribe(self._on_event)
+        if self.rig.adc.streaming and self.rig.faults.fault is None:
+            try:
+                self.rig.adc.stop()
+            except DriverError as exc:
+                log.warning("stopping the ADC after an abort failed: %s", exc)
+        if self.writer.is_open:
+            try:
+                if self.writer.failed is None:
+                    self._flush_events()
+            except RunFileError as exc:
+                log.error("events after the abort were not written: %s", exc)
+            finally:
+                self.writer.close(status)
+        self.result.samples = self.pos
+        self.result.status = status
+
+    # ------------------------------------------------------------------ events
+    def _on_event(self, t: float, kind: str, text: str) -> None:  # any thread; written by the loop
+        with self._lock:
+            self._pending.append((t - self.t0, kind, text))
+
+    def _flush_events(self) -> None:
+        with self._lock:
+            items, self._pending[:] = list(self._pending), []
+        for e in items:
+            self.writer.event(*e)
+
+    def note(self, kind: str, text: str, time_s: float | None = None) -> None:
+        """A procedure's event, at ``time_s`` on the file's time base (default: now)."""
+        self.writer.event(self.time_s if time_s is None else time_s, kind, text)
+
+    @property
+    def time_s(self) -> float:
+        """File time of the next sample."""
+        return self.pos / self.rate_hz
+
+    # ------------------------------------------------------------------ data
+    def acquire(self, duration_s: float, *, keep: bool = True) -> np.ndarray | None:
+        """Acquire ``duration_s`` of samples; with ``keep`` return them as (n, n_channels),
+        lost samples NaN (as in the file)."""
+        return self.acquire_samples(int(round(duration_s * self.rate_hz)), keep=keep)
+
+    def acquire_samples(self, n: int, *, keep: bool = True) -> np.ndarray | None:
+        out = np.empty((n, len(self.channels))) if keep else None
+        base = self.pos
+        end = base + n
+        while self.pos < end:
+            start = self.pos
+            try:
+                block = self.rig.adc.read(min(self.block, end - self.pos))
+            except SampleGap as gap:
+                stop = min(gap.stop, end)
+                self.writer.append_missing(stop - start)
+                self.writer.event(gap.start / self.rate_hz, "gap", str(gap))
+                self.result.gaps.append((gap.start, gap.stop, gap.reason))
+                if out is not None:
+                    out[start - base:stop - base] = np.nan
+                self.pos = stop
+                continue
+            self.writer.append(block.volts)
+            if out is not None:
+                out[start - base:block.stop_sample - base] = block.volts
+            self._overrange_events(block)
+            self.pos = block.stop_sample
+            self._flush_events()
+        return out
+
+    def _overrange_events(self, block) -> None:
+        over = block.overrange.any(axis=0)
+        for j in np.flatnonzero(over):
+            k = int(block.overrange[:, j].argmax())
+            self.writer.event((block.first_sample + k) / self.rate_hz, "overrange",
+                              f"{self.channels[j]}: {int(block.overrange[:, j].sum())} samples at full scale")
+
+
 def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
            channels: list[str] | tuple[str, ...] | None = None,
            ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1, flush_s: float = 0.5,
            procedure: str | None = None, meta: Mapping[str, Any] | None = None,
            overwrite: bool = False) -> RecordResult:
+    """Record ``duration_s`` seconds of the ADC to ``path``; returns what was written."""
     if not duration_s > 0:
         raise ValueError(f"record duration {duration_s!r} s must be > 0")
-    channels = tuple(channels or rig.adc.identity.channels)
-    cfg = rig.adc.configure(channels, rate_hz, ranges_V)
-    total = int(round(duration_s * cfg.rate_hz))
-    per = max(1, int(round(block_s * cfg.rate_hz)))
-    mode = rig.relays.status().mode
-    meta = dict(meta or {}) | {"adc": {"channels": list(cfg.channels), "rate_hz": cfg.rate_hz,
-                                       "ranges_V": cfg.ranges_V, "identity": rig.adc.identity.__dict__}}
-    writer = RunWriter(path, rig=rig.url, mode=mode, rate_hz=cfg.rate_hz, channels=dict.fromkeys(channels, "V"),
-                       procedure=procedure, meta=meta, overwrite=overwrite, flush_s=flush_s)
-    result = RecordResult(Path(path), 0, cfg.rate_hz, "recording")
-    pending: list[tuple[float, str, str]] = []
-    lock = threading.Lock()
-    t0 = 0.0  # rig time of sample 0, set by start() before the listener is subscribed
-
-    def on_event(t: float, kind: str, text: str) -> None:  # any thread; written by the loop
-        with lock:
-            pending.append((t - t0, kind, text))
-
-    def flush_events() -> None:
-        with lock:
-            items, pending[:] = list(pending), []
-        for e in items:
-            writer.event(*e)
-
-    status = "complete"
-    try:
-        t0 = rig.adc.start()
-        rig.subscribe(on_event)
-        writer.set_meta("acquisition", _start_stamp(rig, t0))
-        writer.event(0.0, "start", f"recording {len(channels)} channels at {cfg.rate_hz:g} Hz, mode {mode}")
-        pos = 0
-        while pos < total:
-            try:
-                block = rig.adc.read(min(per, total - pos))
-            except SampleGap as gap:
-                stop = min(gap.stop, total)
-                writer.append_missing(stop - pos)
-                writer.event(gap.start / cfg.rate_hz, "gap", str(gap))
-                result.gaps.append((gap.start, gap.stop, gap.reason))
-                pos = stop
-                continue
-            writer.append(block.volts)
-            over = block.overrange.any(axis=0)
-            for j in np.flatnonzero(over):
-                k = int(block.overrange[:, j].argmax())
-                writer.event((block.first_sample + k) / cfg.rate_hz, "overrange",
-                             f"{channels[j]}: {int(block.overrange[:, j].sum())} samples at full scale")
-            pos = block.stop_sample
-            flush_events()
-        rig.adc.stop()
-        result.samples = pos
-        flush_events()
-        writer.close(status)
-    except BaseException as exc:
-        status = abort_status(exc)
-        _go_safe(rig, exc)
-        raise
-    finally:
-        rig.unsubscribe(on_event)
-        if rig.adc.streaming and rig.faults.fault is None:
-            try:
-                rig.adc.stop()
-            except DriverError as exc:
-                log.warning("stopping the ADC after an abort failed: %s", exc)
-        if writer.is_open:
-            try:
-                if writer.failed is None:
-                    flush_events()
-            except RunFileError as exc:
-                log.error("events after the abort were not written: %s", exc)
-            finally:
-                writer.close(status)
-        result.samples = result.samples or writer.samples
-        result.status = status
-    return result
+    acq = Acquisition(rig, path, rate_hz=rate_hz, channels=channels, ranges_V=ranges_V, block_s=block_s,
+                      flush_s=flush_s, procedure=procedure, meta=meta, overwrite=overwrite)
+    with acq:
+        acq.acquire(duration_s, keep=False)
+    return acq.result
 
 
 def _start_stamp(rig: Rig, t0: float) -> dict[str, Any]:

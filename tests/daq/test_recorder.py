@@ -46,3 +46,28 @@ def test_a_lost_node_aborts_the_recording_and_the_rig_goes_safe(tmp_path):
         assert not any(nodes["torquer"].values.values()) and not any(nodes["command"].values.values())
     finally:
         rig.close()
+
+
+def test_an_acquisition_hands_back_what_it_writes_and_places_commands_on_the_file_time_base(tmp_path):
+    from fbs.daq.reader import RunFile
+    from fbs.daq.recorder import Acquisition
+
+    with open_rig("sim?warm=1") as rig:
+        with Acquisition(rig, tmp_path / "a.h5", rate_hz=1000.0, channels=["gyro_x", "torq_x"],
+                         procedure="unit") as acq:
+            first = acq.acquire(0.5)
+            rig.set_torquer_bias_V("X", 0.2)            # lands between blocks, at file time 0.5 s
+            acq.note("step", "bias step")
+            rig.emulator.inject("adc", "drop")          # a frame the device sends next (10 samples) is lost
+            second = acq.acquire(0.5)
+        assert acq.result.status == "complete" and acq.result.samples == 1000
+        (a, b, _), = acq.result.gaps
+    with RunFile(tmp_path / "a.h5") as run:
+        on_disk = run.read(["gyro_x", "torq_x"]).T
+        events = {e.kind: e for e in run.events}
+        assert run.attrs["procedure"] == "unit"
+    np.testing.assert_array_equal(np.vstack([first, second]), on_disk)
+    lost = np.isnan(second).all(axis=1)
+    assert b - a == 10 and lost[a - 500:b - 500].all() and lost.sum() == 10 and np.isfinite(first).all()
+    # the command's rig time: after the samples read so far, before the device's next block
+    assert 0.5 <= events["setpoint"].time_s <= 0.6 and events["step"].time_s == 0.5
