@@ -234,7 +234,9 @@ class RunFile:
         stop = n if stop is None else stop
         if not 0 <= start <= stop <= n:
             raise ValueError(f"samples {start}..{stop} are outside {self.path} (0..{n})")
-        out = np.empty((len(channels), stop - start))
+        # NaN, not np.empty: HDF5 leaves the buffer alone where a chunk was never written
+        # (fill_time "never", or a writer that died between extending and writing)
+        out = np.full((len(channels), stop - start), np.nan)
         for i, c in enumerate(channels):
             if stop > start:
                 self._group[c].read_direct(out, np.s_[start:stop], np.s_[i, :])

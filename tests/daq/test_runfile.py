@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import h5py
 import numpy as np
@@ -58,22 +60,45 @@ def test_samples_reach_the_file_when_the_flush_interval_passes_or_the_buffer_fil
     clock = Clock()
     w = _writer(tmp_path / "r.h5", clock, flush_s=0.5, buffer_bytes=16 * 100)   # 100 samples of 2 channels
     w.append(np.zeros((30, 2)))
+    w.sync()
     assert (w.flushed, w.samples) == (0, 30)
     clock.t = 0.49
     w.append(np.zeros((30, 2)))
+    w.sync()
     assert w.flushed == 0
     clock.t = 0.5
     w.append(np.zeros((10, 2)))
+    w.sync()                                     # the write thread has done what was handed over
     assert w.flushed == 70                       # the interval passed: everything went out
     w.append(np.ones((250, 2)))                  # fills the buffer twice within the interval
+    w.sync()
     assert w.flushed == 270 and w.samples == 320
     clock.t = 1.0
     w.event(0.9, "note", "operator note")       # an event alone also flushes when due
+    w.sync()
     assert w.flushed == 320
     w.close()
     with h5py.File(tmp_path / "r.h5") as f:
         assert len(f["channels/a"]) == 320 and f["channels/a"][70:320].sum() == 250
         assert len(f["events"]) == 1
+
+
+def test_a_live_reader_does_not_keep_the_status_from_being_set(tmp_path):
+    p = tmp_path / "r.h5"
+    w = _writer(p)
+    w.append(np.ones((5, 2)))
+    w.flush()
+    code = ("import sys, time, h5py; f = h5py.File(sys.argv[1], 'r', swmr=True); print('open', flush=True); "
+            "sys.stdin.readline()")
+    reader = subprocess.Popen([sys.executable, "-c", code, str(p)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        assert reader.stdout.readline().strip() == "open"
+        w.close()
+    finally:
+        reader.communicate("\n", timeout=30)
+    with h5py.File(p) as f:
+        assert f.attrs["status"] == "complete" and len(f["channels/b"]) == 5
 
 
 def test_set_meta_is_refused_once_streaming(tmp_path):
