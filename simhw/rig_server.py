@@ -54,6 +54,20 @@ class Snapshot:
     caged: dict[str, bool] = field(default_factory=lambda: dict.fromkeys(GYRO_CHANNELS, False))
 
 
+_COMPILED: set[float] = set()   # sample rates whose kernels this process has compiled or loaded
+
+
+def _compile_kernels(cfg: SimConfig | None, rate_hz: float) -> None:
+    """Compile (or load from numba's cache) the simulator's kernels before any device thread
+    runs: a cold compile holds the GIL for seconds, and an ADC that cannot answer START for
+    that long looks dead to the driver. A throwaway simulator runs a few samples."""
+    if rate_hz in _COMPILED:
+        return
+    for _ in Simulator(cfg, rate_hz=rate_hz, seed=0, mode=3, spin=None).run(0.01, 0.01):
+        pass
+    _COMPILED.add(rate_hz)
+
+
 class SimRigServer:
     def __init__(self, cfg: SimConfig | None = None, *, seed: int = 0, realtime: bool = False, speed: float = 1.0,
                  warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 0.1,
@@ -63,6 +77,7 @@ class SimRigServer:
         self.max_block_s = max_block_s
         self.paced_block_s = paced_block_s
         self._wall0 = time.monotonic()
+        _compile_kernels(cfg, rate_hz)
         clock = PacedClock(speed) if realtime else VirtualClock()
         self.sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=3 if warm else 1,
                              spin=None if warm else 0.0, clock=clock)
