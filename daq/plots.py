@@ -67,12 +67,18 @@ def _new_figure() -> tuple[Figure, object]:
     return fig, fig.add_subplot()
 
 
-def _save(fig: Figure, out: str | Path) -> Path:
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=DPI, format="png")
-    log.debug("wrote %s", out)
-    return out
+def _finish(fig: Figure, ax, out: str | Path) -> Path:
+    """Grid the axes, write the PNG and free the figure; returns the path."""
+    ax.grid(True, which="major", alpha=0.5)
+    ax.grid(True, which="minor", alpha=0.15)
+    try:
+        out = Path(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=DPI, format="png")
+        log.debug("wrote %s", out)
+        return out
+    finally:
+        fig.clear()
 
 
 def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, window="hann",
@@ -110,17 +116,12 @@ def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, win
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.text(0.5, 0.5, "no positive PSD values to plot", transform=ax.transAxes, ha="center")
-    ax.grid(True, which="major", alpha=0.5)
-    ax.grid(True, which="minor", alpha=0.15)
     ax.set_xlabel("frequency (Hz)")
     what = "PSD" if scaling == "density" else "power spectrum"
     ax.set_ylabel(f"{what} ({psd_units_label(units, scaling)})")
     ax.set_title(f"{title}\n{channel}: {what}, App. A.8 octave-band display" if title else
                  f"{channel}: {what}", fontsize=10)
-    try:
-        return _save(fig, out)
-    finally:
-        fig.clear()
+    return _finish(fig, ax, out)
 
 
 def plot_coherence(out: str | Path, f, coh, *, pair: tuple[str, str], n_segments: int, title: str = "",
@@ -146,12 +147,7 @@ def plot_coherence(out: str | Path, f, coh, *, pair: tuple[str, str], n_segments
     ax.set_ylim(0.0, 1.03)   # a coherence of 1 stays visible above the frame's top
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"coherence γ² {pair[0]}–{pair[1]} (dimensionless)")
-    ax.grid(True, which="major", alpha=0.5)
-    ax.grid(True, which="minor", alpha=0.15)
     ax.legend(loc="best", fontsize=8)
     ax.set_title(f"{title}\ncoherence {pair[0]} – {pair[1]} (eq. 4.44)" if title else
                  f"coherence {pair[0]} – {pair[1]}", fontsize=10)
-    try:
-        return _save(fig, out)
-    finally:
-        fig.clear()
+    return _finish(fig, ax, out)

@@ -32,7 +32,7 @@ import numpy as np
 from fbs.drivers.errors import DriverError, SampleGap
 from fbs.drivers.rig import Rig
 
-from .runfile import STATUS_COMPLETE, RunFileError, RunWriter, abort_status
+from .runfile import STATUS_COMPLETE, STATUS_RECORDING, RunFileError, RunWriter, abort_status
 
 log = logging.getLogger(__name__)
 
@@ -69,7 +69,7 @@ class Acquisition:
         self.writer = RunWriter(path, rig=rig.url, mode=self.mode, rate_hz=self.rate_hz,
                                 channels=dict.fromkeys(self.channels, "V"), procedure=procedure, axis=axis,
                                 meta=meta, overwrite=overwrite, flush_s=flush_s)
-        self.result = RecordResult(Path(path), 0, self.rate_hz, "recording")
+        self.result = RecordResult(Path(path), 0, self.rate_hz, STATUS_RECORDING)
         self.pos = 0                    # samples acquired (the next sample's index)
         self.t0 = 0.0                   # rig time of sample 0
         self._pending: list[tuple[float, str, str]] = []

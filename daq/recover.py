@@ -67,8 +67,13 @@ def lookup3(data: bytes, initval: int = 0) -> int:
 class Superblock:
     offset: int          # where the signature is (0, 512, 1024, ...)
     version: int
-    flags: int
-    eof: int
+    flags: int           # file-consistency flags: non-zero while a writer has the file
+    base: int            # base address: file addresses count from here
+    eof: int             # end-of-file address, relative to base
+
+    def needs_repair(self, file_size: int) -> bool:
+        """Marked open for writing, or shorter than its recorded end of file."""
+        return self.flags != 0 or self.eof > file_size - self.base
 
 
 def read_superblock(path: str | Path) -> Superblock:
@@ -94,7 +99,8 @@ def read_superblock(path: str | Path) -> Superblock:
     stored = int.from_bytes(raw[44:48], "little")
     if lookup3(raw[:44]) != stored:
         raise RunFileError(f"{path}: superblock checksum mismatch; the file is damaged beyond this repair")
-    return Superblock(offset, version, raw[11], int.from_bytes(raw[28:36], "little"))
+    return Superblock(offset, version, raw[11], int.from_bytes(raw[12:20], "little"),
+                      int.from_bytes(raw[28:36], "little"))
 
 
 def clear_open_flags(path: str | Path) -> Superblock:
@@ -112,23 +118,16 @@ def clear_open_flags(path: str | Path) -> Superblock:
         fh.seek(sb.offset)
         raw = bytearray(fh.read(48))
         raw[11] = 0
-        base = int.from_bytes(raw[12:20], "little")
-        if sb.eof > size - base:
-            fh.truncate(base + sb.eof)
-            log.warning("%s: zero-filled %d bytes up to the recorded end of file", path, base + sb.eof - size)
-        raw[28:36] = max(sb.eof, size - base).to_bytes(8, "little")
+        if sb.eof > size - sb.base:
+            fh.truncate(sb.base + sb.eof)
+            log.warning("%s: zero-filled %d bytes up to the recorded end of file", path, sb.base + sb.eof - size)
+        raw[28:36] = max(sb.eof, size - sb.base).to_bytes(8, "little")
         raw[44:48] = lookup3(bytes(raw[:44])).to_bytes(4, "little")
         fh.seek(sb.offset)
         fh.write(raw)
         fh.flush()
         os.fsync(fh.fileno())
     return sb
-
-
-def needs_repair(path: str | Path) -> bool:
-    """Marked open for writing, or shorter than its recorded end of file."""
-    sb = read_superblock(path)
-    return sb.flags != 0 or sb.eof > Path(path).stat().st_size - sb.offset
 
 
 @dataclass
@@ -164,11 +163,12 @@ def _refuse_if_writer_alive(path: Path) -> None:
 def recover(path: str | Path, *, force: bool = False) -> Recovery:
     """Make a file left by a dead writer open with plain h5py, keeping every flushed sample."""
     path = Path(path)
-    was_open = needs_repair(path)
+    sb = read_superblock(path)
+    was_open = sb.needs_repair(path.stat().st_size)
     if was_open:
-        if read_superblock(path).flags and not force:
+        if sb.flags and not force:
             _refuse_if_writer_alive(path)
-        sb = clear_open_flags(path)
+        clear_open_flags(path)
         log.info("%s: cleared open-for-write flags 0x%02x", path, sb.flags)
     padded: dict[str, int] = {}
     with h5py.File(path, "r+") as f:

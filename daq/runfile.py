@@ -126,8 +126,8 @@ class RunWriter:
     """Streaming writer of one run file. Use as a context manager, from one thread.
 
     ``channels`` maps each channel name to its units, in the order of the columns that
-    ``append`` takes. Until the first ``append``/``event``/``flush`` the file is not yet in
-    SWMR mode and ``set_meta``/``set_attr`` may still add to it.
+    ``append`` takes. Until the first flush (``flush_s`` after creation, a full buffer, or
+    ``flush``) the file is not yet in SWMR mode and ``set_meta`` may still add to it.
     """
 
     def __init__(self, path: str | Path, *, rig: str, mode: int, rate_hz: float,
@@ -211,19 +211,11 @@ class RunWriter:
             self.set_meta(k, v)
 
     def set_meta(self, name: str, value: Any) -> None:
-        """Store ``value`` as JSON in ``/meta`` (before streaming starts)."""
-        self._before_streaming("meta")
-        self.meta.attrs[name] = json.dumps(value, default=str)
-
-    def set_attr(self, name: str, value: Any) -> None:
-        """Set a root attribute (before streaming starts)."""
-        self._before_streaming("attribute")
-        self.f.attrs[name] = value
-
-    def _before_streaming(self, what: str) -> None:
+        """Store ``value`` as JSON in ``/meta`` (before the first flush)."""
         if self._swmr:
-            raise RuntimeError(f"{self.path}: a {what} can only be added before the first sample or event "
+            raise RuntimeError(f"{self.path}: a meta can only be added before the first sample or event "
                                "(SWMR files cannot grow new objects)")
+        self.meta.attrs[name] = json.dumps(value, default=str)
 
     # ------------------------------------------------------------------ streaming
     @property

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from fbs.daq.reader import RunFile
 from fbs.daq.recover import recover
+from fbs.daq.runfile import STATUS_RECORDING
 
 MAX_EVENTS = 200
 
@@ -28,7 +29,7 @@ def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
         lines.append(f"  status: {run.status}")
         if "writer" in a:
             alive = {True: "still running", False: "gone", None: "on another host"}[run.writer_alive()]
-            lines.append(f"  writer: {a['writer']} ({alive})" if a.get("status") == "recording"
+            lines.append(f"  writer: {a['writer']} ({alive})" if a.get("status") == STATUS_RECORDING
                          else f"  writer: {a['writer']}")
         if run.swmr:
             lines.append("  opened in SWMR mode: the file is open for writing, or its writer died "
