@@ -57,13 +57,14 @@ class Acquisition:
                  channels: list[str] | tuple[str, ...] | None = None,
                  ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1,
                  flush_s: float = 0.5, procedure: str | None = None, axis: str | None = None,
-                 meta: Mapping[str, Any] | None = None, overwrite: bool = False) -> None:
+                 meta: Mapping[str, Any] | None = None, overwrite: bool = False, mode: int | None = None) -> None:
         self.rig = rig
         self.channels = tuple(channels or rig.adc.identity.channels)
         self.cfg = rig.adc.configure(self.channels, rate_hz, ranges_V)
         self.rate_hz = self.cfg.rate_hz
         self.block = max(1, int(round(block_s * self.rate_hz)))
-        self.mode = rig.relays.status().mode
+        # The file's mode is the one the run is about (a procedure may start by switching to it).
+        self.mode = rig.relays.status().mode if mode is None else mode
         meta = dict(meta or {}) | {"adc": {"channels": list(self.cfg.channels), "rate_hz": self.rate_hz,
                                            "ranges_V": self.cfg.ranges_V, "identity": rig.adc.identity.__dict__}}
         self.writer = RunWriter(path, rig=rig.url, mode=self.mode, rate_hz=self.rate_hz,

@@ -1,8 +1,13 @@
-"""What the host must know about the rig to check set-points before sending them.
+"""What the host knows about the rig before it measures anything: its data sheet.
 
-These are the rig's nominal values (DESIGN.md section 3; thesis Table 4, II C.1.a(1)), used
-only for limits, never as measurement results: the torquer bias limit is the voltage that
-torques at 3.5 x earth rate with the nominal torquer scale factor.
+These are the instrument constants a lab takes from data sheets and earlier calibrations
+(DESIGN.md section 3; thesis Ch. II-III, Tables 1 and 4): the site, the platform's inertia,
+motor and amplifier constants, the autocollimator scale factors. Drivers use them to check
+set-points before sending them (the torquer bias limit is the voltage that torques at
+3.5 x earth rate with the *nominal* torquer scale factor); procedures use them to turn volts
+into torques and angles. The quantities the calibration procedures measure (K_TO, K_g,
+drift, the bearing's To and eta, the table's azimuth offset) are here only as nominal values
+for limits and as a last-resort fallback, never as results.
 """
 
 from __future__ import annotations
@@ -15,12 +20,59 @@ EARTH_RATE_RAD_PER_S = 7.292115e-5
 
 
 @dataclass(frozen=True)
+class PlatformConstants:
+    """One gimbal axis (Ch. III C-E): what turns the power-amplifier input into torque."""
+
+    inertia_kg_m2: float
+    damping_Nms: float            # gyro-gimbal viscous damping on the platform, D (eq. 3.31)
+    amp_gain: float               # Kp
+    motor_Nm_per_A: float         # Km
+    back_emf_V_s: float           # Kb
+    armature_ohm: float           # Ra
+
+    @property
+    def torque_per_pa_V(self) -> float:
+        """N m of motor torque per volt at the power-amplifier input, Kp Km / Ra (eq. 3.24-3.27)."""
+        return self.amp_gain * self.motor_Nm_per_A / self.armature_ohm
+
+    @property
+    def viscous_Nms(self) -> float:
+        """All viscous torque per rad/s: gyro damping plus the motor's back-EMF, D + Km Kb / Ra."""
+        return self.damping_Nms + self.motor_Nm_per_A * self.back_emf_V_s / self.armature_ohm
+
+
+@dataclass(frozen=True)
+class AutocollimatorConstants:
+    """Primary autocollimator scale factors (Table 1)."""
+
+    control_mV_per_urad: float
+    inst_mV_per_urad: float
+
+
+def _platform_defaults() -> dict[str, PlatformConstants]:
+    return {"X": PlatformConstants(0.70, 1.02, 302.0, 0.53, 0.53, 23.0),
+            "Y": PlatformConstants(0.25, 0.51, 164.0, 0.53, 0.53, 23.0),
+            "Z": PlatformConstants(0.52, 0.51, 333.0, 0.53, 0.53, 23.0)}
+
+
+def _ac_defaults() -> dict[str, AutocollimatorConstants]:
+    return {"X": AutocollimatorConstants(5.70, 5.63), "Y": AutocollimatorConstants(5.99, 5.92)}
+
+
+@dataclass(frozen=True)
 class RigCalibration:
     torquer_scale_urad_per_s_per_V: dict[str, float] = field(
         default_factory=lambda: {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0})
+    #: nominal pickoff scale factors: a fallback when no stopwatch result is at hand
+    pickoff_scale_mV_per_urad: dict[str, float] = field(
+        default_factory=lambda: {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74})
     max_torquing_earth_rates: float = 3.5
     dac_range_V: float = 10.0
     dac_bits: int = 16
+    latitude_deg: float = 37.43
+    earth_rate_rad_per_s: float = EARTH_RATE_RAD_PER_S
+    platform: dict[str, PlatformConstants] = field(default_factory=_platform_defaults)
+    autocollimator: dict[str, AutocollimatorConstants] = field(default_factory=_ac_defaults)
 
     @property
     def dac_lsb_V(self) -> float:

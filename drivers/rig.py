@@ -63,6 +63,8 @@ class Rig:
         self.url = url
         self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
         self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
+        #: the rig's data sheet (instrument constants, set-point limits)
+        self.calibration = torquers.calibration
         #: the simulated rig's server, for fault injection in tests; None on hardware
         self.emulator = emulator
         self.link = link
@@ -275,6 +277,9 @@ def _open_sim(url: str, params: dict, operator: Operator | None, calibration: Ri
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     cfg = load_config(params.get("config"))
+    if calibration is None:
+        from fbs.simhw.datasheet import rig_calibration
+        calibration = rig_calibration(cfg)
     server = SimRigServer(cfg, seed=seed, realtime=_flag("realtime", params.get("realtime", "0")), speed=speed,
                           warm=_flag("warm", params.get("warm", "0")), watchdog_s=watchdog)
     try:

@@ -70,7 +70,7 @@ def _compile_kernels(cfg: SimConfig | None, rate_hz: float) -> None:
 
 class SimRigServer:
     def __init__(self, cfg: SimConfig | None = None, *, seed: int = 0, realtime: bool = False, speed: float = 1.0,
-                 warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 0.1,
+                 warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 1.0,
                  paced_block_s: float = 0.01, watchdog_s: float = 1.0) -> None:
         self.seed = seed
         self.paced = realtime

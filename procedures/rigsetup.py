@@ -1,0 +1,83 @@
+"""Getting the rig into a procedure's operating state, and waiting for it to settle, with
+all the time passing through the recording (so it is in the file and an abort is honoured)."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from fbs.drivers.errors import DeviceTimeout
+
+from .runner import Context
+
+log = logging.getLogger(__name__)
+
+
+def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_s: float = 600.0,
+                   poll_s: float = 2.0) -> dict:
+    """Mode 3 with the wheels at speed and every channel caged (II D): spin up in mode 2 if
+    needed, then mode 3, then wait for the relay driver's null detectors."""
+    rig = ctx.rig
+    st = rig.relays.status()
+    t0 = ctx.time_s
+    if st.mode == 3 and all(st.at_speed.values()) and all(st.caged.values()):
+        return {"already": True, "waited_s": 0.0}
+    if not all(st.at_speed.values()):
+        if st.mode != 2:
+            rig.set_mode(2)
+        _poll(ctx, lambda s: all(s.at_speed.values()), spin_timeout_s, poll_s, "gyro wheels at speed")
+    if rig.relays.status().mode != 3:
+        rig.set_mode(3)
+    _poll(ctx, lambda s: all(s.caged.values()), cage_timeout_s, poll_s, "every gyro channel caged in mode 3")
+    return {"already": False, "waited_s": round(ctx.time_s - t0, 3)}
+
+
+def _poll(ctx: Context, ok, timeout_s: float, poll_s: float, what: str) -> None:
+    t_end = ctx.time_s + timeout_s
+    while not ok(ctx.rig.relays.status()):
+        if ctx.time_s >= t_end:
+            raise DeviceTimeout(f"{what}: not reached within {timeout_s:g} s of rig time")
+        ctx.acquire(poll_s, keep=False)
+
+
+@dataclass
+class Settled:
+    waited_s: float
+    slope_V_per_s: np.ndarray     # per channel, over the last window
+
+
+def wait_settled(ctx: Context, columns: list[int], *, tol_V: float | np.ndarray, window_s: float = 40.0,
+                 chunk_s: float = 2.0, min_s: float = 20.0, timeout_s: float = 900.0) -> Settled:
+    """Acquire until the listed channels have settled, decided from the data: a straight line
+    through the last ``window_s`` of ``chunk_s`` means changes by less than ``tol_V`` over the
+    window, or by less than three standard errors of its slope (no significant trend left)."""
+    tol = np.broadcast_to(np.asarray(tol_V, float), (len(columns),))
+    n_win = max(3, int(round(window_s / chunk_s)))
+    means: list[np.ndarray] = []
+    t0 = ctx.time_s
+    while True:
+        block = ctx.acquire(chunk_s)[:, columns]
+        means.append(np.nanmean(block, axis=0))
+        waited = ctx.time_s - t0
+        if len(means) >= n_win and waited >= min_s:
+            y = np.array(means[-n_win:])
+            t = (np.arange(n_win) - (n_win - 1) / 2) * chunk_s
+            slope = t @ (y - y.mean(axis=0)) / (t @ t)
+            resid = y - y.mean(axis=0) - np.outer(t, slope)
+            se = np.sqrt((resid ** 2).sum(axis=0) / (n_win - 2) / (t @ t))
+            change = np.abs(slope) * window_s
+            if np.all((change < tol) | (np.abs(slope) < 3 * se)):
+                return Settled(waited, slope)
+        if waited >= timeout_s:
+            raise DeviceTimeout(f"not settled after {timeout_s:g} s of rig time (last trend "
+                                f"{np.array2string(np.abs(slope) * window_s if len(means) >= n_win else np.nan, precision=4)} V "
+                                f"over {window_s:g} s, tolerance {np.array2string(tol, precision=4)} V)")
+
+
+def mean_and_stderr(x: np.ndarray, batches: int = 10) -> tuple[np.ndarray, np.ndarray]:
+    """Column means and their standard errors by batch means (robust to correlated noise)."""
+    n = len(x) // batches * batches
+    b = np.nanmean(x[:n].reshape(batches, n // batches, -1), axis=1)
+    return np.nanmean(x, axis=0), b.std(axis=0, ddof=1) / np.sqrt(batches)

@@ -1,0 +1,450 @@
+"""The procedure runner: named steps, progress, measurements with limits, abort to safe.
+
+A procedure (``Procedure``) is a plan: a generator of ``Step`` objects, each a name, a plain
+function of the run's ``Context`` and the rig time it is expected to take. The runner drives
+the plan (as bluesky's RunEngine drives a plan) inside one continuous recording
+(``fbs.daq.recorder.Acquisition``), so every command and every sample of the procedure lands
+in one "fbs-run" file with a ``step`` event at each step's start and a ``step-done`` event,
+carrying the step's JSON result, at its end. After the last step the procedure's ``analyze``
+turns the step results and the file into measurements, which are checked against their
+limits (as OpenHTF's measurements with validators) for the pass/fail verdict.
+
+Abort: Ctrl-C, an exception, a device fault or ``Context.abort`` (the console's button) ends
+the recording: the rig goes to the safe state and the file is closed "aborted: <why>"
+(``Acquisition`` does both); the summary lists the steps done. ``resume`` starts a new run
+from an aborted file: its completed data steps are taken over (their results re-recorded as
+``step-done`` events marked ``resumed``), setup steps run again, the rest run normally.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+import json
+import logging
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, ClassVar, Iterator, Mapping
+
+import numpy as np
+
+from fbs.daq.reader import RunFile
+from fbs.daq.recorder import Acquisition
+from fbs.daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
+from fbs.drivers.rig import Rig
+
+log = logging.getLogger(__name__)
+
+EVENT_STEP = "step"
+EVENT_STEP_DONE = "step-done"
+EVENT_MEASUREMENT = "measurement"
+
+
+class ProcedureAborted(Exception):
+    """The operator (or a supervisor) asked the procedure to stop."""
+
+
+class ProcedureError(Exception):
+    """The procedure cannot go on: what happened and what to do, in words."""
+
+
+# ---------------------------------------------------------------------------- measurements
+@dataclass
+class Measurement:
+    """One measured value with its limits; ``passed`` is None when it has no limits."""
+
+    name: str
+    value: float | None
+    units: str = ""
+    lo: float | None = None
+    hi: float | None = None
+    stderr: float | None = None
+    note: str = ""
+
+    @property
+    def passed(self) -> bool | None:
+        if self.lo is None and self.hi is None:
+            return None
+        if self.value is None or not math.isfinite(self.value):
+            return False
+        return (self.lo is None or self.value >= self.lo) and (self.hi is None or self.value <= self.hi)
+
+    def limits_text(self) -> str:
+        if self.lo is not None and self.hi is not None:
+            return f"{self.lo:.6g} .. {self.hi:.6g}"
+        if self.lo is not None:
+            return f">= {self.lo:.6g}"
+        if self.hi is not None:
+            return f"<= {self.hi:.6g}"
+        return ""
+
+    def to_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self) | {"passed": self.passed}
+
+
+@dataclass
+class Figure:
+    """A plot for the report: ``draw(path)`` writes a PNG there."""
+
+    name: str
+    caption: str
+    draw: Callable[[Path], None]
+
+
+@dataclass
+class Analysis:
+    """What a procedure concludes: the JSON summary values (DESIGN.md section 7), the
+    measurements with limits, figures and free Markdown for the report."""
+
+    values: dict[str, Any]
+    measurements: list[Measurement] = field(default_factory=list)
+    figures: list[Figure] = field(default_factory=list)
+    markdown: str = ""
+
+
+# ---------------------------------------------------------------------------- steps, progress
+@dataclass
+class Step:
+    name: str
+    run: Callable[["Context"], Any]
+    #: expected rig seconds, for progress and time remaining
+    expected_s: float = 1.0
+    #: a setup step puts the rig in a state and runs again on resume; a data step is taken over
+    setup: bool = False
+
+
+@dataclass(frozen=True)
+class Progress:
+    procedure: str
+    step: str
+    index: int                    # 0-based index of the current step
+    n_steps: int
+    fraction: float               # 0..1 of the expected rig time
+    elapsed_rig_s: float
+    remaining_rig_s: float
+    remaining_wall_s: float | None  # from the rig-time speed seen so far (None until measurable)
+
+
+ProgressListener = Callable[[Progress], None]
+
+
+# ---------------------------------------------------------------------------- procedure
+class Procedure(abc.ABC):
+    """A scripted procedure. Subclasses set the class attributes and write ``plan`` and
+    ``analyze``; ``fbs.procedures.catalogue`` finds them by their module's ``PROCEDURE``."""
+
+    name: ClassVar[str]                  # CLI name, e.g. "earth-rate"
+    title: ClassVar[str]
+    json_keys: ClassVar[tuple[str, ...]]  # DESIGN.md section 7, "file" included
+    Params: ClassVar[type]                # a dataclass of the procedure's parameters
+    mode: ClassVar[int] = 3
+
+    def __init__(self, params: Any = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        self.params = params if params is not None else self.Params()
+        #: summaries of earlier procedures (by name), e.g. the earth-rate K_TO a stopwatch run uses
+        self.prior = dict(prior or {})
+
+    # what to record
+    @abc.abstractmethod
+    def channels(self) -> tuple[str, ...]: ...
+
+    rate_hz: float = 100.0
+    block_s: float = 1.0
+    axis: str | None = None
+
+    @abc.abstractmethod
+    def plan(self, ctx: "Context") -> Iterator[Step]:
+        """The steps, in order (a generator; it may look at ``ctx.results`` of earlier steps)."""
+
+    @abc.abstractmethod
+    def analyze(self, ctx: "Context") -> Analysis:
+        """After the steps: measurements from ``ctx.results`` and ``ctx.path``."""
+
+    def params_json(self) -> dict[str, Any]:
+        return dataclasses.asdict(self.params)
+
+    @classmethod
+    def params_from(cls, data: Mapping[str, Any]) -> Any:
+        names = {f.name: f for f in dataclasses.fields(cls.Params)}
+        unknown = sorted(set(data) - set(names))
+        if unknown:
+            raise ValueError(f"{cls.name}: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(names)})")
+        return cls.Params(**data)
+
+
+# ---------------------------------------------------------------------------- context
+class Context:
+    """What a step sees: the rig, the recording, earlier results, and helpers that keep the
+    progress current and honour an abort request."""
+
+    def __init__(self, proc: Procedure, rig: Rig, acq: Acquisition, *, progress: ProgressListener | None,
+                 abort: threading.Event) -> None:
+        self.proc, self.rig, self.acq = proc, rig, acq
+        self.params = proc.params
+        self.results: dict[str, Any] = {}
+        self.path = acq.result.path
+        self._progress = progress
+        self._abort = abort
+        self.step: Step | None = None
+        self.index = 0
+        self.steps: list[Step] = []
+        self._done_s = 0.0          # expected seconds of the finished steps
+        self._step_t0 = 0.0         # file time the current step began
+        self._wall0 = time.monotonic()
+        self._rig0 = 0.0
+
+    # time and data
+    @property
+    def time_s(self) -> float:
+        """File time of the next sample (s)."""
+        return self.acq.time_s
+
+    def acquire(self, duration_s: float, *, keep: bool = True, chunk_s: float = 5.0) -> np.ndarray | None:
+        """Acquire ``duration_s`` (all channels, (n, c) volts, NaN where lost), checking for an
+        abort and reporting progress every ``chunk_s``."""
+        n_total = int(round(duration_s * self.acq.rate_hz))
+        chunk = max(1, int(round(chunk_s * self.acq.rate_hz)))
+        out = np.empty((n_total, len(self.acq.channels))) if keep else None
+        done = 0
+        while done < n_total:
+            self.check()
+            n = min(chunk, n_total - done)
+            block = self.acq.acquire_samples(n, keep=keep)
+            if out is not None:
+                out[done:done + n] = block
+            done += n
+            self.report()
+        return out
+
+    def column(self, name: str) -> int:
+        return self.acq.channels.index(name)
+
+    def note(self, text: str, kind: str = "note") -> None:
+        self.acq.note(kind, text)
+
+    # abort
+    def check(self) -> None:
+        self.rig.check()
+        if self._abort.is_set():
+            raise ProcedureAborted("aborted by the operator")
+
+    # progress
+    def report(self) -> None:
+        if self._progress is None or self.step is None:
+            return
+        total = sum(s.expected_s for s in self.steps) or 1.0
+        in_step = min(self.time_s - self._step_t0, self.step.expected_s)
+        elapsed = self._done_s + in_step
+        remaining = max(0.0, total - elapsed)
+        wall = time.monotonic() - self._wall0
+        rig_run = self.time_s - self._rig0
+        speed = rig_run / wall if wall > 1.0 and rig_run > 0 else None
+        try:
+            self._progress(Progress(self.proc.name, self.step.name, self.index, len(self.steps),
+                                    min(1.0, elapsed / total), self.time_s, remaining,
+                                    remaining / speed if speed else None))
+        except Exception:  # a listener's trouble is not the procedure's
+            log.exception("progress listener failed")
+
+
+# ---------------------------------------------------------------------------- summary
+@dataclass
+class RunSummary:
+    procedure: str
+    file: Path | None
+    status: str                      # "complete" | "aborted: <why>"
+    verdict: str                     # "pass" | "fail" | "aborted" | "error"
+    values: dict[str, Any] = field(default_factory=dict)
+    measurements: list[Measurement] = field(default_factory=list)
+    steps_done: list[str] = field(default_factory=list)
+    steps_resumed: list[str] = field(default_factory=list)
+    steps_planned: list[str] = field(default_factory=list)
+    params: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+    report: Path | None = None
+    analysis: Analysis | None = None
+
+    @property
+    def exit_code(self) -> int:
+        """DESIGN.md section 7: 0 pass, 1 limits failed, 2 aborted or error."""
+        return {"pass": 0, "fail": 1}.get(self.verdict, 2)
+
+    def json_values(self, keys: tuple[str, ...]) -> dict[str, Any]:
+        """Exactly the keys of DESIGN.md section 7 (None where not measured)."""
+        out = {k: self.values.get(k) for k in keys}
+        if "file" in keys:
+            out["file"] = str(self.file) if self.file else None
+        return out
+
+    def to_json(self) -> dict[str, Any]:
+        return {"procedure": self.procedure, "file": str(self.file) if self.file else None, "status": self.status,
+                "verdict": self.verdict, "values": self.values,
+                "measurements": [m.to_json() for m in self.measurements], "steps_done": self.steps_done,
+                "steps_resumed": self.steps_resumed, "steps_planned": self.steps_planned,
+                "params": self.params, "error": self.error,
+                "report": str(self.report) if self.report else None}
+
+
+def next_free(out_dir: Path, stem: str, suffix: str = ".h5") -> Path:
+    """``stem.h5``, else ``stem-2.h5``, ...: a procedure never overwrites an earlier run."""
+    path = out_dir / f"{stem}{suffix}"
+    n = 2
+    while path.exists() or path.with_suffix(".json").exists():
+        path = out_dir / f"{stem}-{n}{suffix}"
+        n += 1
+    return path
+
+
+# ---------------------------------------------------------------------------- resume
+@dataclass
+class Resumed:
+    path: Path
+    procedure: str
+    params: dict[str, Any]
+    results: dict[str, Any]
+
+
+def load_resume(path: str | Path, procedure: str) -> Resumed:
+    """The completed steps of an aborted run of ``procedure`` (from its ``step-done`` events)."""
+    path = Path(path)
+    with RunFile(path) as rf:
+        status = rf.status
+        meta = rf.meta
+        events = rf.events
+    info = meta.get("procedure") if isinstance(meta, dict) else None
+    if not isinstance(info, dict) or "name" not in info:
+        raise ProcedureError(f"--resume {path}: not a procedure run (no /meta/procedure)")
+    if info["name"] != procedure:
+        raise ProcedureError(f"--resume {path}: that file is a {info['name']!r} run, not {procedure!r}")
+    if status == STATUS_COMPLETE:
+        raise ProcedureError(f"--resume {path}: that run is complete; nothing to resume")
+    results: dict[str, Any] = {}
+    for e in events:
+        if e.kind == EVENT_STEP_DONE:
+            try:
+                item = json.loads(e.text)
+            except json.JSONDecodeError:
+                raise ProcedureError(f"--resume {path}: a step-done event at {e.time_s:.3f} s is not JSON "
+                                     f"(cut at {len(e.text)} bytes?)") from None
+            results[item["step"]] = item.get("result")
+    return Resumed(path, procedure, dict(info.get("params", {})), results)
+
+
+# ---------------------------------------------------------------------------- the runner
+def run_procedure(proc: Procedure, rig: Rig, out_dir: str | Path, *, resume: Resumed | None = None,
+                  progress: ProgressListener | None = None, abort: threading.Event | None = None,
+                  report: bool = True) -> RunSummary:
+    """Run ``proc`` on ``rig``, recording to a new file in ``out_dir``; never raises for an
+    abort or a failure of the procedure: the summary says what happened (exit code 2)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = next_free(out_dir, proc.name)
+    abort = abort or threading.Event()
+    summary = RunSummary(proc.name, path, "aborted: not started", "error", params=proc.params_json())
+    meta = {"procedure": {"name": proc.name, "title": proc.title, "params": proc.params_json(),
+                          "resumed_from": str(resume.path) if resume else None},
+            "calibration": dataclasses.asdict(rig.calibration),
+            "prior": {k: dict(v) for k, v in proc.prior.items()}}
+    ctx: Context | None = None
+    try:
+        acq = Acquisition(rig, path, rate_hz=proc.rate_hz, channels=proc.channels(), block_s=proc.block_s,
+                          procedure=proc.name, axis=proc.axis, meta=meta, mode=proc.mode)
+    except (RunFileError, OSError, ValueError) as exc:
+        summary.file = None
+        summary.status = f"aborted: {exc}"
+        summary.error = str(exc)
+        _finish_report(proc, summary, None, out_dir, report)
+        return summary
+    try:
+        with acq:
+            ctx = Context(proc, rig, acq, progress=progress, abort=abort)
+            ctx._rig0 = acq.time_s
+            ctx.steps = list(proc.plan(ctx))
+            summary.steps_planned = [s.name for s in ctx.steps]
+            for i, step in enumerate(ctx.steps):
+                ctx.index, ctx.step = i, step
+                ctx._step_t0 = ctx.time_s
+                ctx.check()
+                if resume is not None and not step.setup and step.name in resume.results:
+                    result = resume.results[step.name]
+                    acq.note(EVENT_STEP_DONE, json.dumps({"step": step.name, "result": result,
+                                                          "resumed": str(resume.path)}, default=_jsonable))
+                    summary.steps_resumed.append(step.name)
+                else:
+                    acq.note(EVENT_STEP, f"{i + 1}/{len(ctx.steps)} {step.name}")
+                    log.info("%s: step %d/%d: %s", proc.name, i + 1, len(ctx.steps), step.name)
+                    result = step.run(ctx)
+                    acq.note(EVENT_STEP_DONE, _step_done_text(step.name, result))
+                ctx.results[step.name] = result
+                summary.steps_done.append(step.name)
+                ctx._done_s += step.expected_s
+                ctx.report()
+        summary.status = acq.result.status
+    except BaseException as exc:  # noqa: B036 - Ctrl-C included: the summary must say what was done
+        summary.status = acq.result.status if acq.result.status.startswith("aborted") else abort_status(exc)
+        summary.verdict = "aborted"
+        summary.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, KeyboardInterrupt) else "interrupted (Ctrl-C)"
+        log.error("%s aborted in step %r: %s; rig safe: %s", proc.name, ctx.step.name if ctx and ctx.step else "-",
+                  summary.error, _safe_text(rig))
+        _finish_report(proc, summary, None, out_dir, report)
+        return summary
+    try:
+        analysis = proc.analyze(ctx)
+    except KeyboardInterrupt:
+        summary.verdict, summary.error = "aborted", "interrupted (Ctrl-C) during the analysis"
+        _finish_report(proc, summary, None, out_dir, report)
+        return summary
+    except Exception as exc:
+        log.exception("%s: analysis failed", proc.name)
+        summary.verdict, summary.error = "error", f"analysis failed: {type(exc).__name__}: {exc}"
+        _finish_report(proc, summary, None, out_dir, report)
+        return summary
+    summary.analysis = analysis
+    summary.values = analysis.values
+    summary.measurements = analysis.measurements
+    summary.verdict = "fail" if any(m.passed is False for m in analysis.measurements) else "pass"
+    _finish_report(proc, summary, analysis, out_dir, report)
+    return summary
+
+
+def _step_done_text(name: str, result: Any) -> str:
+    text = json.dumps({"step": name, "result": result}, default=_jsonable, separators=(",", ":"))
+    if len(text.encode()) > TEXT_BYTES:  # a cut result could not be resumed from: a bug in the procedure
+        raise ProcedureError(f"step {name!r}: its result is {len(text.encode())} bytes of JSON, more than an "
+                             f"event holds ({TEXT_BYTES}); keep step results small")
+    return text
+
+
+def _safe_text(rig: Rig) -> str:
+    try:
+        return "yes" if rig.is_safe() else "NO"
+    except Exception as exc:  # the rig may be gone: say so, do not hide the abort
+        return f"unknown ({exc})"
+
+
+def _finish_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None, out_dir: Path,
+                   report: bool) -> None:
+    from .report import write_report
+
+    stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem
+    try:
+        (out_dir / f"{stem}.json").write_text(json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n")
+        if report:
+            summary.report = write_report(proc, summary, analysis, out_dir / f"{stem}.md")
+    except Exception as exc:  # a report that cannot be written must not hide the run's outcome
+        log.error("%s: the summary/report could not be written: %s", proc.name, exc)
+
+
+def _jsonable(obj: Any) -> Any:
+    if isinstance(obj, (np.floating, np.integer)):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    if dataclasses.is_dataclass(obj):
+        return dataclasses.asdict(obj)
+    raise TypeError(f"{type(obj).__name__} is not JSON serializable")

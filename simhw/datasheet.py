@@ -1,0 +1,26 @@
+"""The simulated rig's data sheet: the instrument constants a lab would know beforehand.
+
+``rig_calibration(cfg)`` publishes, for a sim config, what a real rig's calibration file
+holds (``fbs.drivers.calibration``): site, platform inertia, motor and amplifier constants,
+autocollimator scale factors. It deliberately does *not* publish what the procedures
+measure: torquer and pickoff scale factors, drifts, bearing friction and the table's azimuth
+offset stay at their nominal (thesis) values, whatever the config says, so a procedure run
+against another config must find those by measurement.
+"""
+
+from __future__ import annotations
+
+from fbs.drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
+
+from .params import AC_AXES, AXES, SimConfig
+
+
+def rig_calibration(cfg: SimConfig) -> RigCalibration:
+    platform = {a: PlatformConstants(inertia_kg_m2=p.inertia_kg_m2, damping_Nms=p.gyro_damping_Nms,
+                                     amp_gain=p.amp_gain, motor_Nm_per_A=p.motor_torque_Nm_per_A,
+                                     back_emf_V_s=p.back_emf_V_s, armature_ohm=p.armature_ohm)
+                for a, p in ((a, cfg.platform[a]) for a in AXES)}
+    ac = {a: AutocollimatorConstants(cfg.autocollimator[a].control_scale_mV_per_urad,
+                                     cfg.autocollimator[a].inst_scale_mV_per_urad) for a in AC_AXES}
+    return RigCalibration(latitude_deg=cfg.site.latitude_deg, earth_rate_rad_per_s=cfg.site.earth_rate_rad_per_s,
+                          platform=platform, autocollimator=ac)
