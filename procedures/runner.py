@@ -70,7 +70,7 @@ class Measurement:
             return None
         if self.value is None or not math.isfinite(self.value):
             return False
-        return (self.lo is None or self.value >= self.lo) and (self.hi is None or self.value <= self.hi)
+        return bool((self.lo is None or self.value >= self.lo) and (self.hi is None or self.value <= self.hi))
 
     def limits_text(self) -> str:
         if self.lo is not None and self.hi is not None:
@@ -439,7 +439,7 @@ def _finish_report(proc: Procedure, summary: RunSummary, analysis: Analysis | No
 
 
 def _jsonable(obj: Any) -> Any:
-    if isinstance(obj, (np.floating, np.integer)):
+    if isinstance(obj, (np.floating, np.integer, np.bool_)):
         return obj.item()
     if isinstance(obj, np.ndarray):
         return obj.tolist()

@@ -1,0 +1,360 @@
+"""Dahl's solid-friction model of the gimbal bearings and its identification (thesis Ch. V F).
+
+The model (eq. 5.1-5.2): the bearing's friction torque T changes only with the angle,
+
+    dT/dtheta = eta (T - To)^2    (thetadot > 0)                              # eq. 5.2a
+    dT/dtheta = eta (T + To)^2    (thetadot < 0)                              # eq. 5.2b
+
+To the running (Coulomb) torque, eta a constant; for small motion it is a spring of stiffness
+eta To^2, for large motion Coulomb friction of level To (after eq. 5.3). Over any monotone
+piece of the angle it integrates in closed form (eq. 5.3):
+
+    1 / (To - T) = eta theta + c1    (thetadot > 0)                           # eq. 5.3a
+    1 / (To + T) = -eta theta + c2   (thetadot < 0)                           # eq. 5.3b
+
+so ``dahl_torque`` is exact along any sampled angle (the angle taken as piecewise monotone
+between samples), whatever the step.
+
+Identification (the ``hysteresis`` procedure, ``fbs analyze hysteresis``):
+
+* the bearing torque is what the motor applies less what accelerates and damps the platform,
+  ``T = (Kp Km / Ra) V_pa - (D + Km Kb / Ra) thetadot - I thetaddot`` (eq. 3.23-3.27), every
+  constant from the rig's data sheet (``bearing_torque``);
+* the sinusoidal command is cut into cycles of constant amplitude (``find_segments``);
+* To and eta are fitted by integrating eq. 5.2 along the whole measured angle (so the
+  bearing's memory across amplitude changes is modelled too) and matching the measured torque
+  in least squares, with one torque offset per amplitude (``fit_dahl``);
+* loops are averaged synchronously over the cycles of each amplitude (``synchronous_average``)
+  for the torque-angle plots (Figs. 51, 53, 54) and the describing function (eq. 5.12,
+  Fig. 57, ``describing_function``).
+
+SI inside (rad, N m, s); units are in the names at the edges.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+import scipy.optimize
+import scipy.signal
+
+
+# ---------------------------------------------------------------------------- the model
+@numba.njit(cache=True, nogil=True)
+def _dahl_path(theta: np.ndarray, To: float, eta: float, T0: float) -> np.ndarray:
+    out = np.empty(theta.shape[0])
+    T = T0
+    out[0] = T
+    for k in range(1, theta.shape[0]):
+        d = theta[k] - theta[k - 1]
+        if d > 0.0:      # eq. 5.3a: 1/(To - T) grows by eta d
+            T = To if T >= To else To - 1.0 / (1.0 / (To - T) + eta * d)
+        elif d < 0.0:    # eq. 5.3b: 1/(To + T) grows by eta |d|
+            T = -To if T <= -To else 1.0 / (1.0 / (T + To) - eta * d) - To
+        out[k] = T
+    return out
+
+
+def dahl_torque(theta_rad: np.ndarray, To_Nm: float, eta_per_Nm: float, T0_Nm: float = 0.0) -> np.ndarray:
+    """Dahl friction torque (N m) along a sampled angle path (rad), starting at ``T0_Nm``:
+    eq. 5.2 integrated exactly (eq. 5.3) over each monotone step between samples."""
+    theta = np.ascontiguousarray(theta_rad, dtype=float)
+    if theta.ndim != 1 or len(theta) == 0:
+        raise ValueError("dahl_torque: theta must be a non-empty 1-D array")
+    if not (To_Nm > 0 and eta_per_Nm > 0):
+        raise ValueError(f"dahl_torque: To = {To_Nm!r} N m and eta = {eta_per_Nm!r} /N m must be > 0")
+    if not abs(T0_Nm) <= To_Nm:
+        raise ValueError(f"dahl_torque: initial torque {T0_Nm!r} N m is outside +-To = {To_Nm!r} N m")
+    return _dahl_path(theta, float(To_Nm), float(eta_per_Nm), float(T0_Nm))
+
+
+def stiffness(To_Nm: float, eta_per_Nm: float) -> float:
+    """Small-motion stiffness eta To^2 (N m/rad), after eq. 5.3."""
+    return eta_per_Nm * To_Nm * To_Nm
+
+
+def peak_torque_normalized(theta_o_bar: np.ndarray | float) -> np.ndarray | float:
+    """Tm/To of the symmetric loop of normalized amplitude theta_o_bar = eta To theta_o (eq. 5.9)."""
+    x = np.asarray(theta_o_bar, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # (sqrt(1 + 4 x^2) - 1) / (2 x), written without the cancellation at small x
+        tm = np.where(x > 0, 2.0 * x / (np.sqrt(1.0 + 4.0 * x * x) + 1.0), 0.0)
+    return tm if tm.ndim else float(tm)
+
+
+def loop_normalized(theta_o_bar: float, theta_bar: np.ndarray, increasing: bool) -> np.ndarray:
+    """The symmetric steady loop T/To against theta_bar = eta To theta in -theta_o_bar..theta_o_bar,
+    on its increasing (eq. 5.8a) or decreasing (eq. 5.8b) branch."""
+    tm = peak_torque_normalized(theta_o_bar)
+    s = 1.0 - tm * tm
+    th = np.asarray(theta_bar, dtype=float)
+    if increasing:
+        return (tm * tm + s * th) / (1.0 + s * th)        # eq. 5.8a
+    return -(tm * tm - s * th) / (1.0 - s * th)          # eq. 5.8b
+
+
+def describing_function(theta_o_bar: np.ndarray | float) -> np.ndarray | complex:
+    """Normalized sinusoidal-input describing function (T_D/theta_o) e^{j phi} / (eta To^2) of
+    Dahl's model at normalized amplitude theta_o_bar = eta To theta_o (eq. 5.12, Fig. 57).
+
+    The real part is the in-phase (spring) part, the imaginary part the part in quadrature,
+    leading the angle (dissipation). 1 for theta_o_bar << 1 (a spring of stiffness eta To^2),
+    j 4 / (pi theta_o_bar) for theta_o_bar >> 1 (Coulomb friction). As printed, eq. 5.12 reads
+    ``sqrt(1 - [(1 - Tm)^2 theta_o])`` in the real part; the integral (5.10) gives
+    sqrt(1 - [(1 - Tm^2) theta_o]^2) = sqrt(1 - Tm^2) (since (1 - Tm^2) theta_o = Tm by
+    eq. 5.9), which is what is evaluated here (and checked against quadrature in the tests).
+    """
+    x = np.asarray(theta_o_bar, dtype=float)
+    if np.any(~(x > 0)):
+        raise ValueError("describing_function: theta_o_bar must be > 0")
+    tm = np.asarray(peak_torque_normalized(x))
+    c = np.sqrt(1.0 - tm * tm)
+    # 1/sqrt(1 - Tm^2) - 1 and ln((1 + Tm)/(1 - Tm)) - 2 Tm, both without cancellation at small x
+    inv_m1 = tm * tm / (c * (1.0 + c))
+    small = x < 1e-3
+    # series for small x: Re -> 1 - 3x^2/2.., Im -> (8/(3 pi)) x - ..; exact formula elsewhere
+    with np.errstate(divide="ignore", invalid="ignore"):
+        re = np.where(small, 1.0 - 1.5 * x * x, 2.0 / (x * x) * inv_m1)
+        log_term = np.log1p(tm) - np.log1p(-tm)
+        im = np.where(small, 8.0 / (3.0 * math.pi) * x,
+                      (4.0 / math.pi - 2.0 / (math.pi * x) * log_term) / x)
+    out = re + 1j * im
+    return out if out.ndim else complex(out)
+
+
+# ---------------------------------------------------------------------------- signals
+def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, order: int = 4) -> np.ndarray:
+    """Zero-phase Butterworth low-pass (forward and backward): no lag between channels."""
+    if not 0 < cutoff_hz < 0.5 * fs_hz:
+        raise ValueError(f"low-pass cutoff {cutoff_hz:g} Hz must be between 0 and half the sample rate "
+                         f"({0.5 * fs_hz:g} Hz)")
+    sos = scipy.signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
+    return scipy.signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=-1)
+
+
+def shift(x: np.ndarray, fs_hz: float, advance_s: float) -> np.ndarray:
+    """``x(t + advance_s)`` of a smooth signal by linear interpolation (ends held)."""
+    if advance_s == 0.0:
+        return np.asarray(x, dtype=float)
+    n = np.arange(len(x), dtype=float)
+    return np.interp(n + advance_s * fs_hz, n, x)
+
+
+def bearing_torque(pa_V: np.ndarray, theta_rad: np.ndarray, fs_hz: float, *, torque_per_pa_Nm_per_V: float,
+                   viscous_Nms: float, inertia_kg_m2: float) -> np.ndarray:
+    """The bearing's friction torque (N m) from the power-amplifier input and the angle:
+
+        T = (Kp Km / Ra) V_pa - (D + Km Kb / Ra) thetadot - I thetaddot       (eq. 3.23-3.27)
+
+    i.e. the motor torque less the platform's viscous and inertial torques. Both inputs should
+    be low-passed the same way beforehand (the derivatives amplify noise)."""
+    omega = np.gradient(theta_rad) * fs_hz
+    alpha = np.gradient(omega) * fs_hz
+    return torque_per_pa_Nm_per_V * np.asarray(pa_V) - viscous_Nms * omega - inertia_kg_m2 * alpha
+
+
+# ---------------------------------------------------------------------------- cycles
+@dataclass(frozen=True)
+class Segment:
+    """Cycles of one command amplitude: samples ``start .. stop`` (the kept, settled cycles),
+    ``lead_start`` where the amplitude began (settling cycles included)."""
+
+    start: int
+    stop: int
+    lead_start: int
+    n_cycles: int
+    command_amplitude: float        # in the command's units (V)
+
+
+def command_frequency(cmd: np.ndarray, fs_hz: float) -> float:
+    """The frequency (Hz) of the sinusoidal command: the periodogram's peak, refined on a fine
+    grid around it."""
+    x = np.asarray(cmd, dtype=float)
+    x = x - np.mean(x)
+    n = len(x)
+    if n < 8 or not np.any(x):
+        raise ValueError("the command channel carries no sinusoid (it is constant or too short)")
+    nfft = 1 << int(math.ceil(math.log2(4 * n)))
+    spec = np.abs(np.fft.rfft(x, nfft))
+    f = np.fft.rfftfreq(nfft, 1.0 / fs_hz)
+    lo = 2.0 / (n / fs_hz)            # at least two cycles in the record
+    spec[f < lo] = 0.0
+    k = int(np.argmax(spec))
+    if spec[k] == 0.0:
+        raise ValueError("the command channel carries no sinusoid of at least two cycles")
+    df = fs_hz / nfft
+    grid = np.linspace(max(lo, f[k] - 2 * df), f[k] + 2 * df, 81)
+    # decimate for the fine search: a mean over blocks keeps the low frequencies
+    step = max(1, int(fs_hz / (40.0 * f[k])))
+    m = n // step
+    xd = x[:m * step].reshape(m, step).mean(axis=1)
+    td = (np.arange(m) * step + (step - 1) / 2) / fs_hz
+    power = [abs(np.dot(xd, np.exp(-2j * math.pi * g * td))) for g in grid]
+    return float(grid[int(np.argmax(power))])
+
+
+def cycle_fits(x: np.ndarray, fs_hz: float, freq_hz: float, start: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Window boundaries (one period each, from ``start``) and per window the complex
+    first-harmonic amplitude (x ~ Re(A e^{j w t}), t from sample 0) and residual rms."""
+    per = fs_hz / freq_hz
+    n_win = int((len(x) - start) // per)
+    bounds = start + np.rint(np.arange(n_win + 1) * per).astype(int)
+    amps = np.empty(n_win, complex)
+    resid = np.empty(n_win)
+    w = 2 * math.pi * freq_hz / fs_hz
+    for i in range(n_win):
+        a, b = bounds[i], bounds[i + 1]
+        k = np.arange(a, b)
+        M = np.column_stack([np.cos(w * k), -np.sin(w * k), np.ones(len(k))])
+        coef, *_ = np.linalg.lstsq(M, x[a:b], rcond=None)
+        amps[i] = coef[0] + 1j * coef[1]
+        resid[i] = np.sqrt(np.mean((x[a:b] - M @ coef) ** 2))
+    return bounds, amps, resid
+
+
+def find_segments(cmd: np.ndarray, fs_hz: float, freq_hz: float, *, settle_cycles: int = 1,
+                  min_cycles: int = 2, tolerance: float = 0.1) -> list[Segment]:
+    """Runs of consecutive command cycles with the same amplitude (within ``tolerance``); the
+    first ``settle_cycles`` of each run are left out of the kept cycles."""
+    cmd = np.asarray(cmd, dtype=float)
+    bounds, amps, resid = cycle_fits(cmd, fs_hz, freq_hz)
+    if len(amps) == 0:
+        return []
+    mag = np.abs(amps)
+    active = (mag > 1e-3 * mag.max()) & (resid < 0.3 * mag)
+    segs: list[Segment] = []
+    i = 0
+    while i < len(mag):
+        if not active[i]:
+            i += 1
+            continue
+        j = i + 1
+        while j < len(mag) and active[j] and abs(mag[j] / mag[i] - 1.0) < tolerance:
+            j += 1
+        kept = j - i - settle_cycles
+        if kept >= min_cycles:
+            segs.append(Segment(int(bounds[i + settle_cycles]), int(bounds[j]), int(bounds[i]), kept,
+                                float(np.median(mag[i:j]))))
+        i = j
+    return segs
+
+
+def synchronous_average(x: np.ndarray, fs_hz: float, freq_hz: float, start: int, stop: int,
+                        bins: int = 200) -> np.ndarray:
+    """The mean cycle of ``x[start:stop]`` in ``bins`` phase bins (phase from ``start``), so a
+    period need not be a whole number of samples."""
+    k = np.arange(start, stop)
+    phase = ((k - start) * freq_hz / fs_hz) % 1.0
+    idx = np.minimum((phase * bins).astype(int), bins - 1)
+    counts = np.bincount(idx, minlength=bins)
+    if np.any(counts == 0):
+        raise ValueError(f"synchronous average: {stop - start} samples do not fill {bins} phase bins")
+    return np.bincount(idx, weights=np.asarray(x, dtype=float)[start:stop], minlength=bins) / counts
+
+
+def first_harmonic(cycle: np.ndarray) -> complex:
+    """Complex amplitude A of the fundamental of one uniformly sampled period: x ~ Re(A e^{j psi})."""
+    n = len(cycle)
+    return complex(2.0 / n * np.sum(np.asarray(cycle) * np.exp(-2j * math.pi * np.arange(n) / n)))
+
+
+# ---------------------------------------------------------------------------- the fit
+@dataclass
+class DahlFit:
+    To_Nm: float
+    eta_per_Nm: float
+    To_se_Nm: float
+    eta_se_per_Nm: float
+    stiffness_Nm_per_rad: float
+    stiffness_se_Nm_per_rad: float
+    offsets_Nm: list[float]            # one per segment
+    residual_rms_Nm: list[float]       # one per segment
+    model_Nm: np.ndarray = field(repr=False)   # the fitted torque (offsets included), on the fitted range
+    start: int = 0                     # sample index of model_Nm[0]
+    n_eval: int = 0                    # residual samples used (decimated)
+    cost_evaluations: int = 0
+    correlation: float = 0.0           # correlation coefficient of the To and eta estimates
+
+
+def fit_dahl(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
+             smooth_hz: float | None = None, decimate: int = 1, To0_Nm: float | None = None,
+             eta0_per_Nm: float | None = None) -> DahlFit:
+    """Least-squares To and eta: eq. 5.2 integrated along ``theta_rad`` from the first segment's
+    start, compared with ``torque_Nm`` on each segment's kept cycles, one free torque offset per
+    segment (solved exactly for each trial To, eta). With ``smooth_hz`` the model torque gets
+    the same zero-phase low-pass as the measured torque had. ``decimate`` thins the residual
+    samples (to about the low-pass's Nyquist interval, so they are nearly independent: the
+    standard errors assume so).
+
+    Standard errors are from the Jacobian in log(To), log(eta) with the residual variance
+    (delta method for the stiffness eta To^2)."""
+    if not segments:
+        raise ValueError("no cycles of constant amplitude to fit")
+    theta = np.asarray(theta_rad, dtype=float)
+    torque = np.asarray(torque_Nm, dtype=float)
+    a0 = min(s.lead_start for s in segments)
+    b0 = max(s.stop for s in segments)
+    th = theta[a0:b0]
+    idx = [np.arange(s.start - a0, s.stop - a0, max(1, decimate)) for s in segments]
+    meas = [torque[a0 + i] for i in idx]
+    if To0_Nm is None:
+        # a start from the data: the largest loop's torque half-range is close to To
+        To0_Nm = max(0.5 * float(np.ptp(m)) for m in meas)
+    if eta0_per_Nm is None:
+        # and the smallest loop's slope is close to eta To^2
+        s = min(range(len(segments)), key=lambda k: np.ptp(th[idx[k]]))
+        slope = float(np.polyfit(th[idx[s]], meas[s], 1)[0])
+        eta0_per_Nm = max(slope, 1e-3 * To0_Nm / max(np.ptp(th), 1e-12)) / To0_Nm ** 2
+    evals = 0
+
+    def model(p: np.ndarray) -> np.ndarray:
+        To, eta = math.exp(p[0]), math.exp(p[1])
+        T = _dahl_path(th, To, eta, 0.0)
+        if smooth_hz is not None:
+            T = lowpass(T, fs_hz, smooth_hz)
+        return T
+
+    def residuals(p: np.ndarray) -> np.ndarray:
+        nonlocal evals
+        evals += 1
+        T = model(p)
+        out = []
+        for i, m in zip(idx, meas):
+            r = T[i] - m
+            out.append(r - r.mean())     # the segment's offset, solved exactly
+        return np.concatenate(out)
+
+    p0 = np.array([math.log(To0_Nm), math.log(eta0_per_Nm)])
+    sol = scipy.optimize.least_squares(residuals, p0, method="lm", x_scale=np.array([1.0, 1.0]),
+                                       diff_step=1e-4, max_nfev=400)
+    if not np.all(np.isfinite(sol.x)):
+        raise ValueError("the Dahl fit did not converge (non-finite parameters)")
+    To, eta = math.exp(sol.x[0]), math.exp(sol.x[1])
+    r = sol.fun
+    dof = max(1, len(r) - 2 - len(segments))
+    s2 = float(r @ r) / dof
+    J = sol.jac
+    try:
+        cov = np.linalg.inv(J.T @ J) * s2     # in (log To, log eta)
+    except np.linalg.LinAlgError:
+        cov = np.full((2, 2), np.nan)
+    se_lnTo, se_lneta = np.sqrt(np.abs(np.diag(cov)))
+    # stiffness k = eta To^2: ln k = ln eta + 2 ln To
+    g = np.array([2.0, 1.0])
+    se_lnk = float(np.sqrt(abs(g @ cov @ g)))
+    k = stiffness(To, eta)
+    T = model(sol.x)
+    offsets, rms = [], []
+    for i, m in zip(idx, meas):
+        d = m - T[i]
+        offsets.append(float(d.mean()))
+        rms.append(float(np.sqrt(np.mean((d - d.mean()) ** 2))))
+    full = T.copy()
+    for s, off in zip(segments, offsets):
+        full[s.lead_start - a0:s.stop - a0] += off
+    corr = float(cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])) if np.all(np.isfinite(cov)) and cov[0, 0] > 0 else 0.0
+    return DahlFit(To, eta, To * se_lnTo, eta * se_lneta, k, k * se_lnk, offsets, rms, full, a0,
+                   len(r), evals, corr)

@@ -1,0 +1,275 @@
+"""The ``survey`` procedure (Ch. V E): dip of the autocollimator control spectrum and the
+gyro-deduced platform rms, against the simulated rig's own truth.
+
+Acceptance (issue 5 point 6):
+A. default sim rig: the dip within 0.3 Hz of sqrt(eta To^2 / I) / 2 pi, the gyro-deduced
+   rms within 20 % of sqrt(true^2 + pickoff noise^2) in the same band (0.4-15 Hz); the
+   report sets both beside the thesis's 1.6 / 3.6 urad and 3.5 Hz.
+B. the same tolerances on sim configs with other bearing (eta, To) and pickoff-noise values.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import threading
+
+import numpy as np
+import pytest
+
+from fbs.daq.filespectra import run_csd_matrix
+from fbs.daq.reader import RunFile
+from fbs.daq.runfile import RunWriter
+from fbs.daq.spectra import band_rms, psd, welch_csd_matrix
+from fbs.procedures.calibrations import catalogue
+from fbs.procedures.calibrations.survey import (Params, Survey, _Span, find_dip, merge_spans, pickoff_scales)
+from fbs.procedures.runner import load_resume, run_procedure
+from fbs.simhw.params import SimConfig, load_config
+from fbs.simhw.simulator import Simulator, pickoff_white_psd
+
+DIP_TOL_HZ = 0.3
+RMS_TOL = 0.20
+
+
+# ---------------------------------------------------------------------------- fast: pieces
+def _notch_psd(f, f0, zeta_num=0.02, zeta_den=0.4, slope=1.0):
+    """A notch at f0 on a gentle slope: |(s^2 + 2 zn w0 s + w0^2) / (s^2 + 2 zd w0 s + w0^2)|^2."""
+    s = 2j * np.pi * f
+    w0 = 2 * np.pi * f0
+    h = (s * s + 2 * zeta_num * w0 * s + w0 * w0) / (s * s + 2 * zeta_den * w0 * s + w0 * w0)
+    return np.abs(h) ** 2 * (1.0 + f) ** slope
+
+
+@pytest.mark.parametrize("f0", [1.7, 3.85, 6.2, 11.3])
+def test_find_dip_locates_a_noisy_notch_below_the_bin_spacing(f0):
+    f = np.arange(0, 500, 1 / 16)
+    rng = np.random.default_rng(1)
+    p = _notch_psd(f, f0) * rng.chisquare(68, f.size) / 68        # a Welch estimate with 68 EDOF
+    d = find_dip(f, p, 0.5, 30.0, 0.5)
+    assert d is not None
+    assert abs(d.freq_hz - f0) < 0.1
+    assert d.depth_db > 10
+
+
+def test_find_dip_reports_no_notch_on_a_sloping_spectrum():
+    f = np.arange(0, 500, 1 / 16)
+    rng = np.random.default_rng(2)
+    p = (1.0 + (f / 8.0) ** 2) ** -1 * rng.chisquare(68, f.size) / 68
+    d = find_dip(f, p, 0.5, 30.0, 0.5)
+    assert d is None or d.depth_db < 3.0
+
+
+def test_merge_spans_joins_adjacent_pieces_of_one_file_only():
+    pieces = [{"file": "a.h5", "start": 0, "stop": 10}, {"file": "a.h5", "start": 10, "stop": 20},
+              {"file": "b.h5", "start": 5, "stop": 15}, {"file": "b.h5", "start": 20, "stop": 30}]
+    assert merge_spans(pieces) == [("a.h5", 0, 20), ("b.h5", 5, 15), ("b.h5", 20, 30)]
+
+
+def test_pickoff_scale_comes_from_the_stopwatch_else_nominal():
+    nominal = {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74}
+    assert pickoff_scales({}, nominal) == ({"X": 6.03, "Y": 6.70}, {"X": "nominal", "Y": "nominal"})
+    prior = {"stopwatch": {"K_g_mV_per_urad": {"X": 7.1, "Y": None, "Z": 7.0, "XRD": 5.0}}}
+    assert pickoff_scales(prior, nominal) == ({"X": 7.1, "Y": 6.70}, {"X": "stopwatch", "Y": "nominal"})
+
+
+def test_span_view_gives_the_welch_matrix_of_that_slice(tmp_path):
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((2, 5000))
+    x[1] += 0.5 * x[0]
+    path = tmp_path / "r.h5"
+    with RunWriter(path, rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"}) as w:
+        w.append({"a": x[0], "b": x[1]})
+    with RunFile(path) as rf:
+        got = run_csd_matrix(_Span(rf, 1234, 4321), ["a", "b"], nperseg=256)
+    f, S = welch_csd_matrix(x[:, 1234:4321], 100.0, nperseg=256, detrend="linear")
+    np.testing.assert_allclose(got.f, f)
+    np.testing.assert_allclose(got.S, S, rtol=1e-10, atol=1e-14)
+
+
+def test_procedure_is_catalogued_with_the_design_json_keys():
+    assert catalogue()["survey"] is Survey
+    assert Survey.json_keys == ("platform_rms_urad", "dip_hz", "file")
+    s = Survey()
+    assert s.rate_hz == 1000.0 and s.mode == 3
+    assert {"ac_x_ctl", "ac_y_ctl", "gyro_x", "gyro_y"} <= set(s.channels())
+
+
+def test_params_are_checked():
+    with pytest.raises(ValueError, match="band"):
+        Params(band_lo_hz=20.0, band_hi_hz=15.0)
+    with pytest.raises(ValueError, match="segment"):
+        Params(duration_s=10.0, seg_s=16.0)
+
+
+# ---------------------------------------------------------------------------- truth
+def expected_values(cfg: SimConfig, params: Params, seed: int = 11) -> dict:
+    """What the survey should find on ``cfg``: the bearing resonance sqrt(eta To^2 / I) / 2 pi,
+    and sqrt(true platform rms^2 + pickoff noise rms^2) in the survey's band, the truth from an
+    offline simulation of the same config (another noise realization)."""
+    lo, hi = params.band_lo_hz, params.band_hi_hz
+    sim = Simulator(cfg, rate_hz=params.rate_hz, seed=seed, mode=3, truth=True)
+    theta = {a: [] for a in "XY"}
+    for block in sim.run(params.duration_s, 10.0):
+        for a in "XY":
+            theta[a].append(block[f"theta_{a.lower()}"])
+    out: dict = {"resonance_hz": {}, "true_rms_urad": {}, "noise_rms_urad": {}, "expected_rms_urad": {}}
+    for a in "XY":
+        b = cfg.bearing[a]
+        out["resonance_hz"][a] = math.sqrt(b.eta_per_Nm * b.To_Nm ** 2 / cfg.platform[a].inertia_kg_m2) / (2 * math.pi)
+        f, p = psd(np.concatenate(theta[a]) * 1e6, params.rate_hz, seg_s=params.seg_s)
+        true = band_rms(f, p, lo, hi)
+        g = cfg.gyro[a]
+        white = pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines) * 1e12        # urad^2/Hz
+        lines = sum(amp ** 2 / 2 for fl, amp in g.pickoff_lines if lo <= fl <= hi)
+        noise = math.sqrt(white * (hi - lo) + lines)
+        out["true_rms_urad"][a], out["noise_rms_urad"][a] = true, noise
+        out["expected_rms_urad"][a] = math.hypot(true, noise)
+    return out
+
+
+def check(summary, expected, label=""):
+    assert summary.exit_code == 0, (summary.error, [m.to_json() for m in summary.measurements])
+    v = summary.json_values(Survey.json_keys)
+    assert set(v) == {"platform_rms_urad", "dip_hz", "file"}
+    lines = [label]
+    for a in "XY":
+        dip, res = v["dip_hz"][a], expected["resonance_hz"][a]
+        rms, exp = v["platform_rms_urad"][a], expected["expected_rms_urad"][a]
+        lines.append(f"{a}: dip {dip:.3f} Hz vs sqrt(k/I)/2pi {res:.3f} Hz ({dip - res:+.3f}); gyro-deduced "
+                     f"{rms:.3f} urad vs expected {exp:.3f} (true {expected['true_rms_urad'][a]:.3f}, pickoff noise "
+                     f"{expected['noise_rms_urad'][a]:.3f}) ratio {rms / exp:.3f}")
+    print("\n".join(lines))
+    for a in "XY":
+        assert abs(v["dip_hz"][a] - expected["resonance_hz"][a]) < DIP_TOL_HZ, lines
+        assert abs(v["platform_rms_urad"][a] / expected["expected_rms_urad"][a] - 1) < RMS_TOL, lines
+    return v
+
+
+# ---------------------------------------------------------------------------- slow: the sim rig
+@pytest.mark.slow
+def test_acceptance_a_default_rig(tmp_path):
+    from fbs.drivers.rig import open_rig
+
+    params = Params()
+    with open_rig("sim?warm=1&seed=3") as rig:
+        s = run_procedure(Survey(params), rig, tmp_path)
+    check(s, expected_values(SimConfig(), params), "default rig")
+    # the JSON summary the CLI prints has exactly the design keys
+    saved = json.loads((tmp_path / "survey.json").read_text())
+    assert saved["verdict"] == "pass"
+    # the report sets the results beside the thesis's figures, and says the Kg was nominal
+    md = (tmp_path / "survey.md").read_text()
+    assert "| 1.6 | 3.6 |" in md and "| 3.5 |" in md
+    assert "nominal" in md and "no stopwatch result" in md
+    assert (tmp_path / "survey-dip.png").stat().st_size > 10_000
+    assert (tmp_path / "survey-coherence-ac_x_ctl-gyro_x.png").exists()
+
+
+def _random_configs(n: int = 3, seed: int = 20250):
+    """Per axis: bearing resonance f and To (so eta = I (2 pi f)^2 / To^2) and the pickoff noise,
+    drawn once. In config 1 the true motion matters as much as the pickoff noise: no pickoff
+    lines and a low white level. Config 2 has other pickoff scale factors, measured by a
+    (pretend) stopwatch run passed as the prior."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        quiet = k == 1
+        c = {"fX": rng.uniform(2.0, 7.0), "fY": rng.uniform(3.5, 11.0), "ToX": rng.uniform(0.010, 0.025),
+             "ToY": rng.uniform(0.010, 0.025),
+             "nX": rng.uniform(0.8, 2.0) if quiet else rng.uniform(5.0, 12.0),
+             "nY": rng.uniform(0.8, 2.0) if quiet else rng.uniform(6.0, 20.0),
+             "MdX": 0.0, "MdY": 0.0,
+             "KgX": 7.2 if k == 2 else None, "KgY": 5.4 if k == 2 else None}
+        out.append(c)
+    return out
+
+
+def _toml(c: dict) -> str:
+    inertia = {"X": 0.70, "Y": 0.25}
+    parts = []
+    for a in "XY":
+        f, to = c[f"f{a}"], c[f"To{a}"]
+        eta = inertia[a] * (2 * math.pi * f) ** 2 / to ** 2
+        parts.append(f"[bearing.{a}]\nTo_Nm = {to!r}\neta_per_Nm = {eta!r}\n")
+        g = f"[gyro.{a}]\npickoff_noise_rms_urad = {c[f'n{a}']!r}\n"
+        if c[f"n{a}"] < 4.5:   # the default lines alone carry 4.4 urad rms
+            g += "pickoff_lines = []\n"
+        if c[f"Kg{a}"] is not None:
+            g += f"pickoff_scale_mV_per_urad = {c[f'Kg{a}']!r}\n"
+        parts.append(g)
+        if c[f"Md{a}"]:
+            parts.append(f"[platform.{a}]\ndisturbance_torque_rms_Nm = {c[f'Md{a}']!r}\n")
+    return "\n".join(parts)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("k", range(3))
+def test_acceptance_b_other_configs(tmp_path, k):
+    from fbs.drivers.rig import open_rig
+
+    c = _random_configs()[k]
+    cfg_path = tmp_path / "cfg.toml"
+    cfg_path.write_text(_toml(c))
+    cfg = load_config(cfg_path)
+    params = Params()
+    prior = {}
+    if c["KgX"] is not None:
+        prior = {"stopwatch": {"K_g_mV_per_urad": {"X": c["KgX"], "Y": c["KgY"], "Z": 7.51, "XRD": 5.74}}}
+    reference = {"source": "test reference", "platform_rms_urad": {"X": 9.87, "Y": 6.54}, "dip_hz": {"X": 1.23}}
+    with open_rig(f"sim?warm=1&seed={20 + k}&config={cfg_path}") as rig:
+        s = run_procedure(Survey(params, prior=prior, reference=reference), rig, tmp_path / "out")
+    check(s, expected_values(cfg, params, seed=30 + k), f"config {k}: {c}")
+    md = (tmp_path / "out" / "survey.md").read_text()
+    assert "test reference" in md and "9.87" in md
+    if prior:
+        assert s.values["pickoff_scale_source"] == {"X": "stopwatch", "Y": "stopwatch"}
+        assert "no stopwatch result" not in md
+
+
+@pytest.mark.slow
+def test_an_aborted_survey_resumes_with_the_pieces_already_recorded(tmp_path):
+    """Abort during the third piece; the resumed run records only the rest and analyses all
+    300 s, the first pieces from the aborted file."""
+    from fbs.drivers.rig import open_rig
+
+    params = Params()
+    stop = threading.Event()
+
+    def listener(progress):
+        if progress.step == "record 3/5":
+            stop.set()
+
+    with open_rig("sim?warm=1&seed=4") as rig:
+        first = run_procedure(Survey(params), rig, tmp_path, progress=listener, abort=stop)
+        assert first.verdict == "aborted"
+        assert first.steps_done[-2:] == ["record 1/5", "record 2/5"]
+        resumed = load_resume(first.file, "survey")
+        second = run_procedure(Survey(params), rig, tmp_path, resume=resumed)
+    assert second.exit_code == 0, second.error
+    assert second.steps_resumed == ["record 1/5", "record 2/5"]
+    assert second.values["record_s"] == pytest.approx(300.0)
+    check(second, expected_values(SimConfig(), params), "resumed")
+
+
+@pytest.mark.slow
+def test_a_platform_disturbance_torque_keeps_the_rms_right_but_moves_the_dip(tmp_path):
+    """Limitation (docs/procedures/survey.md): a torque disturbance drives the platform through a
+    path with no zero at the bearing resonance, so it fills the notch and the spectrum's minimum
+    moves off sqrt(k/I)/2 pi. The gyro-deduced rms still holds; the dip is only printed."""
+    from fbs.drivers.rig import open_rig
+
+    c = {"fX": 3.85, "fY": 6.2, "ToX": 0.016, "ToY": 0.016, "nX": 1.5, "nY": 1.5, "MdX": 1.0e-3, "MdY": 0.8e-3,
+         "KgX": None, "KgY": None}
+    cfg_path = tmp_path / "cfg.toml"
+    cfg_path.write_text(_toml(c))
+    cfg = load_config(cfg_path)
+    params = Params()
+    with open_rig(f"sim?warm=1&seed=9&config={cfg_path}") as rig:
+        s = run_procedure(Survey(params), rig, tmp_path / "out", report=False)
+    exp = expected_values(cfg, params, seed=19)
+    v = s.values
+    for a in "XY":
+        print(f"{a}: dip {v['dip_hz'][a]} Hz ({v['dip_depth_db'][a]:.1f} dB) vs {exp['resonance_hz'][a]:.3f}; rms "
+              f"{v['platform_rms_urad'][a]:.3f} vs {exp['expected_rms_urad'][a]:.3f} (true {exp['true_rms_urad'][a]:.3f})")
+        assert exp["true_rms_urad"][a] > 2 * exp["noise_rms_urad"][a]      # truth-dominated
+        assert abs(v["platform_rms_urad"][a] / exp["expected_rms_urad"][a] - 1) < RMS_TOL
