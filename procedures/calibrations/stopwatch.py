@@ -1,0 +1,417 @@
+"""``stopwatch``: the pickoff scale factor K_g by the stopwatch method (thesis II C.1.a(6)).
+
+With one channel's caging inhibited and its precession nulled by the torquer bias, a bias
+step dV_T makes the float precess at K_TO dV_T, and the pickoff ramps at K_g K_TO dV_T.
+The time dt for the pickoff to change by a set amount dV_g gives
+
+    K_g = dV_g / (dt dV_T K_TO)                                             (II C.1.a(6))
+
+Per channel, all decided from the data and read back from the ADC:
+
+1. Caged reference: the settled torquer output V_T0 is exactly the null torquer voltage.
+2. Caging inhibited; the bias-to-torquer-output gain g is measured with one small bias step
+   (the output follows the bias at once with the loop open), then the bias set so the output
+   equals V_T0, and the residual precession checked from the pickoff slope and trimmed until it
+   is below ``null_tolerance_urad_per_s``.
+3. Ramps: bias steps of +-dV_T (rate ``ramp_rate_urad_per_s`` with the K_TO in use) drive the
+   pickoff back and forth between levels ``V_g0 +- dV_g/2`` (``V_g0`` the null position); each
+   ramp's time between the two level crossings (of a ``smooth_s`` moving average) is one
+   stopwatch reading. A repetition is a ramp down and a ramp up; their mean cancels a
+   residual rate (the spread is that of the repetitions).
+4. Elastic restraint (h/k): the float's restraint pulls it back toward the null at
+   (sigma - sigma_0)/(h/k). For a ramp from -D to +D about the null, u' = r - u/tau gives
+   r = (D/tau) coth(dt / 2 tau), so the corrected value is the naive one times
+   x coth x, x = dt / (2 tau): the symmetric ramps keep the correction to second order.
+   tau comes from a least-squares fit of the whole open-loop record:
+
+       V_g(t) - V_g(t_0) = a int (V_T - V_T0) dt + c (t - t_0) - k int (V_g - V_g0) dt
+
+   (a = K_g K_TO, the least-squares ramp slope; c the residual null rate; k = 1/tau), which
+   the holds between ramps, where only the restraint moves the pickoff, make well determined.
+5. Restore: caging released with the bias still holding the null, the bias slewed to zero
+   while the loop takes over, settled.
+
+K_TO is taken from ``Params.kto_urad_per_s_per_V``, else an earlier earth-rate result
+(``prior``), else the rig's nominal data-sheet value, and the report says which.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from fbs.daq.reader import RunFile
+from fbs.drivers.calibration import GYRO_CHANNELS
+
+from ..plotting import new_figure, save_figure
+from ..rigsetup import bring_to_mode3, wait_settled
+from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+
+
+@dataclass
+class Params:
+    channels: list[str] = field(default_factory=lambda: list(GYRO_CHANNELS))
+    #: K_TO per channel (urad/s/V); empty: the earth-rate result, else the data sheet's nominal
+    kto_urad_per_s_per_V: dict[str, float] = field(default_factory=dict)
+    delta_pickoff_V: float = 2.0
+    #: fast enough that the gyro's random drift (a few tenths of urad/s over minutes on Z) is a
+    #: small part of the ramp rate; a down-up pair cancels what is left
+    ramp_rate_urad_per_s: float = 20.0
+    #: a repetition is a ramp down and a ramp up: their mean cancels any residual rate
+    repetitions: int = 3
+    hold_s: float = 20.0
+    null_s: float = 20.0
+    null_tolerance_urad_per_s: float = 0.1
+    smooth_s: float = 1.0
+    restore_s: float = 100.0
+    rate_hz: float = 200.0
+    #: limits: K_g within this fraction of the data sheet's nominal; repetition spread
+    kg_tolerance: float = 0.25
+    max_spread: float = 0.02
+
+    def __post_init__(self) -> None:
+        bad = [c for c in self.channels if c not in GYRO_CHANNELS]
+        if bad or not self.channels:
+            raise ValueError(f"stopwatch: channels {self.channels} must be some of {', '.join(GYRO_CHANNELS)}")
+        if not 1 <= int(self.repetitions) <= 50:
+            raise ValueError(f"stopwatch: repetitions = {self.repetitions} must be 1..50")
+        if not 0.05 <= self.delta_pickoff_V <= 8.0:
+            raise ValueError(f"stopwatch: delta_pickoff_V = {self.delta_pickoff_V} V must be 0.05..8 V "
+                             f"(the pickoff's linear range is about +-6 V)")
+        if not 0.1 <= self.ramp_rate_urad_per_s <= 100.0:
+            raise ValueError(f"stopwatch: ramp_rate_urad_per_s = {self.ramp_rate_urad_per_s} must be 0.1..100")
+        for name in ("hold_s", "null_s", "smooth_s", "restore_s", "rate_hz", "null_tolerance_urad_per_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"stopwatch: {name} = {getattr(self, name)} must be > 0")
+
+
+class Stopwatch(Procedure):
+    name = "stopwatch"
+    title = "Pickoff scale factor by the stopwatch method (II C.1.a(6))"
+    json_keys = ("K_g_mV_per_urad", "file")
+    Params = Params
+    mode = 3
+    block_s = 0.5
+
+    def __init__(self, params: Params | None = None, **kw) -> None:
+        super().__init__(params, **kw)
+        self.rate_hz = self.params.rate_hz
+        if len(self.params.channels) == 1:
+            self.axis = self.params.channels[0]
+
+    def channels(self) -> tuple[str, ...]:
+        return tuple(f"gyro_{c.lower()}" for c in GYRO_CHANNELS) + tuple(f"torq_{c.lower()}" for c in GYRO_CHANNELS)
+
+    def kto(self, ctx: Context, ch: str) -> tuple[float, str]:
+        if ch in self.params.kto_urad_per_s_per_V:
+            return float(self.params.kto_urad_per_s_per_V[ch]), "given"
+        er = self.prior.get("earth-rate", {}).get("K_TO_urad_per_s_per_V") or {}
+        if er.get(ch) is not None:
+            return float(er[ch]), "earth-rate"
+        return float(ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch]), "nominal"
+
+    def plan(self, ctx: Context) -> Iterator[Step]:
+        p = self.params
+        per = 200.0 + p.null_s * 2 + (2 * p.repetitions + 1) * (p.hold_s + 45.0) + p.restore_s
+        yield Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True)
+        for ch in p.channels:
+            yield Step(f"channel {ch}", lambda c, ch=ch: self.channel(c, ch), expected_s=per)
+
+    # ------------------------------------------------------------------ one channel
+    def channel(self, ctx: Context, ch: str) -> dict:
+        p, rig = self.params, ctx.rig
+        kto, source = self.kto(ctx, ch)
+        kg_nom = rig.calibration.pickoff_scale_mV_per_urad[ch] * 1e-3      # V/urad, only to trim the null
+        gcol, tcol = ctx.column(f"gyro_{ch.lower()}"), ctx.column(f"torq_{ch.lower()}")
+        rec = _Record(gcol, tcol)
+
+        # 1. caged reference
+        if rig.caging.inhibited(ch):
+            rig.set_caging_inhibit(ch, False)
+        rig.set_torquer_bias_V(ch, 0.0)
+        wait_settled(ctx, [tcol], tol_V=3e-4, min_s=60.0, window_s=40.0)
+        vt0 = float(np.nanmean(ctx.acquire(p.null_s)[:, tcol]))
+
+        # 2. open the loop, measure the bias gain, null the precession
+        t_open = ctx.time_s
+        rig.set_caging_inhibit(ch, True)
+        skip = max(10, int(0.05 * p.rate_hz))   # the ADC's anti-alias filter settling after a step
+        m0 = float(np.nanmean(rec.take(ctx, 0.5)[skip:, 1]))
+        probe = 0.5 if vt0 <= 0 else -0.5
+        rig.set_torquer_bias_V(ch, probe)
+        m1 = float(np.nanmean(rec.take(ctx, 0.5)[skip:, 1]))
+        gain = (m1 - m0) / probe
+        if not abs(gain) > 1e-3:
+            raise ProcedureError(f"stopwatch {ch}: the torquer output did not follow the bias (gain {gain:.3g} V/V); "
+                                 f"check the torquer bias wiring and the caging-inhibit switch")
+        bias = rig.set_torquer_bias_V(ch, (vt0 - m0) / gain)
+        tol = p.null_tolerance_urad_per_s * kg_nom
+        for trim in range(5):
+            data = rec.take(ctx, p.null_s)
+            slope = _slope(data[:, 0], 1.0 / p.rate_hz)
+            if abs(slope) < tol or trim == 4:
+                break  # a residual beyond the tolerance fails its measurement; the down-up pairs cancel it
+            bias = rig.set_torquer_bias_V(ch, bias - slope / (kg_nom * kto * gain))
+        vt_null = float(np.nanmean(data[:, 1]))
+        vg0 = float(np.nanmean(data[-int(p.smooth_s * p.rate_hz):, 0]))
+        t_null = ctx.time_s
+
+        # 3. ramps between vg0 -+ dV_g/2
+        step_bias = p.ramp_rate_urad_per_s / (kto * abs(gain))
+        half = p.delta_pickoff_V / 2
+        lo, hi = vg0 - half, vg0 + half
+        margin = 0.15 * half
+        expected = p.delta_pickoff_V / (kg_nom * p.ramp_rate_urad_per_s)
+        ramps = []
+        direction = +1
+        self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), hi + margin, direction, expected)
+        rec.hold(ctx, ch, bias, p.hold_s)
+        for _ in range(2 * p.repetitions):
+            direction = -direction
+            target = (lo - margin) if direction < 0 else (hi + margin)
+            i0 = rec.n
+            self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), target, direction, 2 * expected)
+            t, vg, vt = rec.arrays(i0)
+            dt = _crossing_interval(t, vg, lo, hi, direction, p.smooth_s, p.rate_hz)
+            ramps.append([direction, round(dt, 5), round(float(np.nanmean(vt) - vt_null), 7)])
+            rec.hold(ctx, ch, bias, p.hold_s)
+        # back to the null position
+        back = -1 if rec.last_vg() > vg0 else +1
+        self._ramp(ctx, rec, ch, bias, step_bias * back * np.sign(gain), vg0, back, 2 * expected)
+        rig.set_torquer_bias_V(ch, bias)
+        t_end = ctx.time_s
+        fit = _restraint_fit(*rec.arrays(rec.index_at(t_null)), vt_null=vt_null, vg0=vg0, dt_s=0.5)
+
+        # 5. restore: the loop takes over from the bias
+        rig.set_caging_inhibit(ch, False)
+        n_steps = max(1, int(p.restore_s))
+        for i in range(n_steps):
+            rig.set_torquer_bias_V(ch, bias * (1 - (i + 1) / n_steps))
+            ctx.acquire(p.restore_s / n_steps, keep=False)
+        wait_settled(ctx, [tcol], tol_V=1e-3, min_s=30.0, window_s=30.0)
+        return {"ch": ch, "kto": kto, "kto_from": source, "gain": round(gain, 6), "vt_null": round(vt_null, 6),
+                "vg0": round(vg0, 5), "null_slope": slope, "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
+                "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit}
+
+    def _ramp(self, ctx: Context, rec: "_Record", ch: str, bias: float, step: float, target: float, direction: int,
+              expected_s: float) -> None:
+        """Bias step until the smoothed pickoff passes ``target`` in ``direction``."""
+        ctx.rig.set_torquer_bias_V(ch, bias + step)
+        t_end = ctx.time_s + 4 * expected_s + 10.0
+        while (rec.last_vg() - target) * direction < 0:
+            if ctx.time_s > t_end:
+                raise ProcedureError(f"stopwatch {ch}: the pickoff did not reach {target:+.3f} V within "
+                                     f"{4 * expected_s + 10:.0f} s of the bias step (now {rec.last_vg():+.3f} V); "
+                                     f"is the channel's caging inhibited and the gyro at speed?")
+            rec.take(ctx, 0.5)
+
+    # ------------------------------------------------------------------ analysis
+    def analyze(self, ctx: Context) -> Analysis:
+        p = self.params
+        results = {ch: ctx.results[f"channel {ch}"] for ch in p.channels}
+        per = {ch: channel_result(r) for ch, r in results.items()}
+        cal = ctx.rig.calibration
+        ms: list[Measurement] = []
+        for ch, r in per.items():
+            nom = cal.pickoff_scale_mV_per_urad[ch]
+            ms.append(Measurement(f"K_g {ch} (stopwatch, mean of {len(r.repetitions)} repetitions)", r.kg, "mV/urad",
+                                  nom * (1 - p.kg_tolerance), nom * (1 + p.kg_tolerance), r.kg_se))
+            ms.append(Measurement(f"K_g {ch} repetition spread (std/mean)", r.spread, "", hi=p.max_spread))
+            ms.append(Measurement(f"K_g {ch} least-squares ramp slope", r.kg_ls, "mV/urad", stderr=r.kg_ls_se))
+            ms.append(Measurement(f"h/k {ch} (fitted)", r.tau_s, "s", stderr=r.tau_se))
+            ms.append(Measurement(f"restraint correction {ch}", r.correction * 100, "%"))
+            ms.append(Measurement(f"residual null rate {ch}", r.null_rate_urad_per_s, "urad/s",
+                                  -p.null_tolerance_urad_per_s, p.null_tolerance_urad_per_s))
+        values = {"K_g_mV_per_urad": {ch: r.kg for ch, r in per.items()}}
+        figs = [Figure(f"ramps-{ch.lower()}", f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
+                       lambda path, ch=ch: plot_channel(path, ctx.path, ch, results[ch])) for ch in p.channels]
+        return Analysis(values, ms, figs, markdown=_markdown(per))
+
+
+# ---------------------------------------------------------------------------- data kept by a channel step
+class _Record:
+    """The channel's pickoff and torquer samples with their file times, kept in memory."""
+
+    def __init__(self, gcol: int, tcol: int) -> None:
+        self.cols = [gcol, tcol]
+        self.t: list[np.ndarray] = []
+        self.x: list[np.ndarray] = []
+        self.n = 0
+
+    def take(self, ctx: Context, seconds: float) -> np.ndarray:
+        t0 = ctx.time_s
+        data = ctx.acquire(seconds)[:, self.cols]
+        self.t.append(t0 + np.arange(len(data)) / ctx.acq.rate_hz)
+        self.x.append(data)
+        self.n += len(data)
+        return data
+
+    def hold(self, ctx: Context, ch: str, bias: float, seconds: float) -> None:
+        ctx.rig.set_torquer_bias_V(ch, bias)
+        self.take(ctx, seconds)
+
+    def last_vg(self) -> float:
+        """Mean pickoff over the last chunk taken (a 0.5 s average while ramping)."""
+        return float(np.nanmean(self.x[-1][:, 0]))
+
+    def arrays(self, start: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t, x = np.concatenate(self.t)[start:], np.concatenate(self.x)[start:]
+        return t, x[:, 0], x[:, 1]
+
+    def index_at(self, time_s: float) -> int:
+        return int(np.searchsorted(np.concatenate(self.t), time_s))
+
+
+def _slope(y: np.ndarray, dt: float) -> float:
+    """Least-squares slope of equally spaced samples (V/s), NaNs skipped."""
+    t = np.arange(len(y)) * dt
+    ok = np.isfinite(y)
+    t, y = t[ok], y[ok]
+    tc = t - t.mean()
+    return float(tc @ (y - y.mean()) / (tc @ tc))
+
+
+def _smooth(y: np.ndarray, n: int) -> np.ndarray:
+    """Centred moving average over n samples (edges shortened)."""
+    n = max(1, n)
+    c = np.concatenate([[0.0], np.cumsum(y)])
+    i = np.arange(len(y))
+    lo = np.clip(i - n // 2, 0, len(y))
+    hi = np.clip(i - n // 2 + n, 0, len(y))
+    return (c[hi] - c[lo]) / (hi - lo)
+
+
+def _crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
+                       rate_hz: float) -> float:
+    """Time between the smoothed pickoff's crossings of the two levels (linear interpolation)."""
+    s = _smooth(vg, int(round(smooth_s * rate_hz)))
+    first, second = (lo, hi) if direction > 0 else (hi, lo)
+
+    def cross(level: float) -> float:
+        beyond = (s - level) * direction >= 0
+        idx = np.flatnonzero(beyond[1:] & ~beyond[:-1])
+        if len(idx) == 0:
+            raise ProcedureError(f"stopwatch: the pickoff never crossed {level:+.4f} V during a ramp")
+        i = idx[0]
+        return float(t[i] + (level - s[i]) / (s[i + 1] - s[i]) * (t[i + 1] - t[i]))
+
+    return cross(second) - cross(first)
+
+
+def _restraint_fit(t: np.ndarray, vg: np.ndarray, vt: np.ndarray, *, vt_null: float, vg0: float,
+                   dt_s: float) -> dict:
+    """Least squares of V_g(t) - V_g(t0) = a int(V_T - V_T0) + c (t - t0) - k int(V_g - V_g0) (+ offset),
+    on ``dt_s`` means (module docstring, step 4)."""
+    step = t[1] - t[0]
+    n = max(1, int(round(dt_s / step)))
+    m = len(t) // n * n
+    tm = t[:m].reshape(-1, n).mean(axis=1)
+    g = vg[:m].reshape(-1, n)
+    gm, vtm = np.nanmean(g, axis=1), np.nanmean(vt[:m].reshape(-1, n), axis=1)
+    it = np.concatenate([[0.0], np.cumsum((vtm[1:] + vtm[:-1]) / 2 - vt_null) * np.diff(tm)])
+    ig = np.concatenate([[0.0], np.cumsum((gm[1:] + gm[:-1]) / 2 - vg0) * np.diff(tm)])
+    design = np.column_stack([np.ones_like(tm), it, tm - tm[0], -ig])
+    ok = np.isfinite(gm) & np.isfinite(it) & np.isfinite(ig)
+    coef, *_ = np.linalg.lstsq(design[ok], gm[ok], rcond=None)
+    resid = gm[ok] - design[ok] @ coef
+    cov = np.linalg.inv(design[ok].T @ design[ok]) * (resid @ resid) / max(1, ok.sum() - 4)
+    se = np.sqrt(np.diag(cov))
+    return {"a": float(coef[1]), "a_se": float(se[1]), "c": float(coef[2]), "k": float(coef[3]),
+            "k_se": float(se[3]), "rms": float(np.sqrt(np.mean(resid ** 2)))}
+
+
+# ---------------------------------------------------------------------------- results
+@dataclass
+class ChannelResult:
+    channel: str
+    kto: float
+    kto_from: str
+    readings: list[float]          # corrected stopwatch K_g per ramp, mV/urad
+    naive: list[float]             # uncorrected
+    repetitions: list[float]       # mean of each down-up pair
+    asymmetry: float               # (up - down) / mean: a rate offset during the ramps
+    kg: float
+    kg_se: float
+    spread: float
+    kg_ls: float
+    kg_ls_se: float
+    tau_s: float | None
+    tau_se: float | None
+    correction: float              # mean (corrected / naive - 1)
+    null_rate_urad_per_s: float
+
+
+def channel_result(r: dict) -> ChannelResult:
+    """Stopwatch readings (with the restraint correction x coth x) from a channel step's result."""
+    kto = r["kto"]
+    fit = r["fit"]
+    k, k_se = fit["k"], fit["k_se"]
+    resolved = k > 0 and k > 2 * k_se
+    tau = 1.0 / k if resolved else None
+    naive, corrected = [], []
+    for _direction, dt, dvt in r["ramps"]:
+        kg = r["dVg"] / (dt * abs(dvt) * kto) * 1e3                         # II C.1.a(6), V/urad -> mV/urad
+        x = dt / (2 * tau) if tau else 0.0
+        naive.append(kg)
+        corrected.append(kg * (x / math.tanh(x) if x > 0 else 1.0))
+    reps = [float(np.mean(corrected[i:i + 2])) for i in range(0, len(corrected) - 1, 2)]
+    up = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d > 0]
+    down = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d < 0]
+    kg = float(np.mean(reps))
+    spread = float(np.std(reps, ddof=1) / kg) if len(reps) > 1 else 0.0
+    kg_ls = abs(fit["a"]) / kto * 1e3
+    return ChannelResult(r["ch"], kto, r["kto_from"], corrected, naive, reps,
+                         float((np.mean(up) - np.mean(down)) / kg) if up and down else 0.0, kg,
+                         kg * spread / math.sqrt(len(reps)) if len(reps) > 1 else float("nan"), spread,
+                         kg_ls, fit["a_se"] / kto * 1e3, tau, (k_se / k ** 2) if resolved else None,
+                         float(np.mean(np.array(corrected) / np.array(naive)) - 1.0),
+                         r["null_slope"] / (kg * 1e-3))
+
+
+def _markdown(per: dict[str, ChannelResult]) -> str:
+    lines = ["## Results", "",
+             "| channel | K_g stopwatch (mV/urad) | spread | up - down | K_g least squares | h/k fitted (s) | "
+             "restraint correction | residual null rate (urad/s) | K_TO used (urad/s/V) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for ch, r in per.items():
+        tau = "not resolved" if r.tau_s is None else f"{r.tau_s:.0f} ± {r.tau_se:.0f}"
+        lines.append(f"| {ch} | {r.kg:.4f} ± {r.kg_se:.4f} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
+                     f"{r.kg_ls:.4f} ± "
+                     f"{r.kg_ls_se:.4f} | {tau} | {100 * r.correction:+.3f} % | {r.null_rate_urad_per_s:+.4f} | "
+                     f"{r.kto:.4g} ({r.kto_from}) |")
+    nominal = [ch for ch, r in per.items() if r.kto_from == "nominal"]
+    if nominal:
+        lines += ["", f"**K_TO for {', '.join(nominal)} is the data sheet's nominal value**, not a measurement: "
+                  "run `fbs run earth-rate` first (same --out) for measured K_g."]
+    lines += ["", "Readings per ramp (corrected / uncorrected, mV/urad):", ""]
+    for ch, r in per.items():
+        lines.append(f"- {ch}: " + ", ".join(f"{c:.4f} / {n:.4f}" for c, n in zip(r.readings, r.naive)))
+    lines += ["", "The ramps run between levels symmetric about the null position, so the elastic restraint's "
+              "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record."]
+    return "\n".join(lines)
+
+
+def plot_channel(path: Path, run: Path, ch: str, r: dict) -> None:
+    t0, _, t1 = r["t"]
+    with RunFile(run) as rf:
+        block = rf.slice_s(t0, t1, [f"gyro_{ch.lower()}", f"torq_{ch.lower()}"])
+    fig, axes = new_figure(2, 1, figsize=(10, 6))
+    data = block.data
+    t = (block.start + np.arange(len(block))) / block.rate_hz
+    axes[0, 0].plot(t, data[0], lw=0.5)
+    for level in (r["vg0"] - r["dVg"] / 2, r["vg0"] + r["dVg"] / 2):
+        axes[0, 0].axhline(level, color="k", ls="--", lw=0.8)
+    axes[0, 0].set_ylabel(f"gyro_{ch.lower()} (V)")
+    axes[1, 0].plot(t, data[1], lw=0.8)
+    axes[1, 0].set_ylabel(f"torq_{ch.lower()} (V)")
+    axes[1, 0].set_xlabel("file time (s)")
+    for ax in axes[:, 0]:
+        ax.grid(True, alpha=0.4)
+    save_figure(fig, path)
+
+
+PROCEDURE = Stopwatch
