@@ -5,13 +5,12 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
-from pathlib import Path
 
 from fbs.drivers.errors import DriverError
 from fbs.simhw import effects as effect_catalogue
 from fbs.simhw.params import ConfigError, load_config
 
-from . import inspect, spectra
+from . import demo, inspect, run, spectra
 
 log = logging.getLogger("fbs")
 
@@ -29,21 +28,6 @@ def _simulate(args: argparse.Namespace) -> int:
                             seed=args.seed, truth=args.truth, effects=applied)
     print(f"wrote {path}: mode {args.mode}, {args.duration:g} s at {args.rate:g} Hz"
           + (f", effects {', '.join(applied)}" if applied else ""))
-    return 0
-
-
-def _demo(args: argparse.Namespace) -> int:
-    from .simulate import simulate_to_file, summarize_mode3
-
-    cfg = load_config(args.sim_config)
-    out = Path(args.out)
-    path = simulate_to_file(cfg, out / "mode3.h5", mode=3, duration_s=args.duration, rate_hz=1000.0,
-                            seed=args.seed, truth=True)
-    summary = summarize_mode3(path, cfg)
-    print(f"fbs demo: simulated rig (thesis defaults), file {path}")
-    for line in summary.lines():
-        print(line)
-    print("  thesis (Ch. V E): dip 3.5 Hz (X), ~6 Hz (Y); gyro-deduced platform rms 1.6 (X) / 3.6 (Y) urad")
     return 0
 
 
@@ -89,15 +73,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output .h5 file")
     r.set_defaults(func=_record)
 
-    d = sub.add_parser("demo", help="the main job on the simulated rig")
-    d.add_argument("--out", default="out")
-    d.add_argument("--sim-config")
-    d.add_argument("--duration", type=float, default=300.0)
-    d.add_argument("--seed", type=int, default=0)
-    d.set_defaults(func=_demo)
-
     inspect.add_parser(sub)
     spectra.add_parser(sub)
+    run.add_parser(sub)
+    demo.add_parser(sub)
     return p
 
 

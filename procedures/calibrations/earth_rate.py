@@ -185,20 +185,22 @@ def _lstsq(design: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return coef, cov, resid
 
 
-def _trend(t_s: np.ndarray | None, n: int) -> np.ndarray:
-    """The drift-trend regressor: station time, centred, in hours (zeros if no times)."""
-    if t_s is None:
+def _trend(order: np.ndarray | None, n: int) -> np.ndarray:
+    """The drift-trend regressor: the stations' visiting order, centred (none if not given).
+    The order, not the time, so that stations taken over by ``--resume`` from another file
+    (another time base) still line up; the stations of a group take about equal times."""
+    if order is None:
         return np.zeros((n, 0))
-    t = np.asarray(t_s, float)
-    return ((t - t.mean()) / 3600.0)[:, None]
+    k = np.asarray(order, float)
+    return (k - k.mean())[:, None]
 
 
 def fit_horizontal(ch: str, psi_deg: np.ndarray, volts: np.ndarray, omega_h: float,
-                   t_s: np.ndarray | None = None) -> ChannelFit:
+                   order: np.ndarray | None = None) -> ChannelFit:
     """Fit ``V = a cos psi + b sin psi + c [+ e t]`` and map to K_TO, d, psi0 (module docstring).
-    The optional term ``e t`` (station time) keeps a slow drift trend out of a, b and c."""
+    The optional term ``e t`` (t the visiting order) keeps a slow drift trend out of a, b and c."""
     psi = np.radians(psi_deg)
-    design = np.column_stack([np.cos(psi), np.sin(psi), np.ones_like(psi), _trend(t_s, len(psi))])
+    design = np.column_stack([np.cos(psi), np.sin(psi), np.ones_like(psi), _trend(order, len(psi))])
     coef, cov, resid = _lstsq(design, volts)
     a, b, c = coef[:3]
     cov = cov[:3, :3]
@@ -223,9 +225,9 @@ def omega_z(tilt_deg: np.ndarray, latitude_deg: float, earth_rate: float, psi0_d
 
 
 def fit_vertical(ch: str, tilt_deg: np.ndarray, volts: np.ndarray, omega: np.ndarray,
-                 t_s: np.ndarray | None = None) -> ChannelFit:
+                 order: np.ndarray | None = None) -> ChannelFit:
     """Fit ``V = alpha Omega_z + beta [+ e t]``: K_TO = -1/alpha, d = -beta K_TO."""
-    design = np.column_stack([omega, np.ones_like(omega), _trend(t_s, len(omega))])
+    design = np.column_stack([omega, np.ones_like(omega), _trend(order, len(omega))])
     coef, cov, resid = _lstsq(design, volts)
     alpha, beta = coef[:2]
     cov = cov[:2, :2]
@@ -242,14 +244,14 @@ def fit_earth_rate(azimuth_stations: list[dict], tilt_stations: list[dict], *, l
                    earth_rate_rad_per_s: float) -> dict[str, ChannelFit]:
     omega_h = earth_rate_rad_per_s * math.cos(math.radians(latitude_deg))
     psi = np.array([s["spindle"] for s in azimuth_stations])
-    t_az = np.array([np.mean(s["t"]) for s in azimuth_stations])
-    fits = {ch: fit_horizontal(ch, psi, np.array([s["V"][ch] for s in azimuth_stations]), omega_h, t_az)
+    fits = {ch: fit_horizontal(ch, psi, np.array([s["V"][ch] for s in azimuth_stations]), omega_h,
+                               np.arange(len(psi)))
             for ch in HORIZONTAL}
     psi0 = float(np.mean([fits[c].psi0_deg for c in HORIZONTAL]))
     tilt = np.array([s["tilt"] for s in tilt_stations])
     fits["Z"] = fit_vertical("Z", tilt, np.array([s["V"]["Z"] for s in tilt_stations]),
                              omega_z(tilt, latitude_deg, earth_rate_rad_per_s, psi0),
-                             np.array([np.mean(s["t"]) for s in tilt_stations]))
+                             np.arange(len(tilt)))
     return {ch: fits[ch] for ch in GYRO_CHANNELS}
 
 
@@ -275,7 +277,7 @@ def _markdown(fits: dict[str, ChannelFit], stations: list[dict], names) -> str:
         psi0 = "-" if f.psi0_deg is None else f"{f.psi0_deg:.4f} ± {f.psi0_se:.4f}"
         lines.append(f"| {ch} | {f.kto_urad_per_s_per_V:.5g} ± {f.kto_se:.2g} | {f.drift_urad_per_s:.4g} ± "
                      f"{f.drift_se:.2g} | {psi0} | {f.residual_rms_V * 1e3:.3f} | {f.swept} |")
-    lines += ["", "Each fit has a term linear in station time as well, so a slow drift trend over the run "
+    lines += ["", "Each fit has a term linear in the stations' visiting order as well, so a slow drift trend over the run "
               "does not bias the scale factor.", "", "Z is the spindle axis, so its rate does not change with the spindle angle; it was calibrated "
               "with the spindle at 90 deg and the table tilted (module docstring).", "",
               "## Stations", "", "| station | tilt | spindle | settled after (s) | " +

@@ -2,7 +2,6 @@
 
 import subprocess
 import sys
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -102,10 +101,3 @@ def test_bad_arguments_fail_with_a_clear_message(tmp_path, args, message):
     r = run("simulate", *args, "--out", str(tmp_path / "x.h5"))
     assert r.returncode == 2
     assert message in r.stderr
-
-
-def test_demo_prints_a_mode3_summary(tmp_path):
-    r = run("demo", "--out", str(tmp_path / "out"), "--duration", "60")
-    assert r.returncode == 0, r.stderr
-    assert "Mode 3" in r.stdout and "dip_x_hz" in r.stdout and "true_rms_x_urad" in r.stdout
-    assert Path(tmp_path / "out" / "mode3.h5").exists()
