@@ -70,10 +70,11 @@ class Params:
     max_residual_V: float = 5e-3
 
     def __post_init__(self) -> None:
-        if not 3 <= int(self.n_azimuths) <= 72:
-            raise ValueError(f"earth-rate: n_azimuths = {self.n_azimuths} must be 3..72 (the fit has 3 unknowns)")
-        if len(self.z_tilts_deg) < 3:
-            raise ValueError(f"earth-rate: z_tilts_deg {self.z_tilts_deg} needs at least 3 tilts")
+        if not 5 <= int(self.n_azimuths) <= 72:
+            raise ValueError(f"earth-rate: n_azimuths = {self.n_azimuths} must be 5..72 (the fit has 4 unknowns "
+                             f"and needs residuals for its standard errors)")
+        if len(self.z_tilts_deg) < 4:
+            raise ValueError(f"earth-rate: z_tilts_deg {self.z_tilts_deg} needs at least 4 tilts (3 unknowns)")
         for t in self.z_tilts_deg:
             if not 0.0 <= t <= 90.0:
                 raise ValueError(f"earth-rate: tilt {t} deg is outside the table's 0..90 deg")

@@ -66,6 +66,9 @@ class Params:
     hold_s: float = 20.0
     null_s: float = 20.0
     null_tolerance_urad_per_s: float = 0.1
+    #: limit on the residual: a few % of the ramp rate (the down-up pairs cancel it; Z's random
+    #: drift wanders by a few tenths of urad/s over minutes, so a tighter null does not hold)
+    max_null_rate_urad_per_s: float = 0.5
     smooth_s: float = 1.0
     restore_s: float = 100.0
     rate_hz: float = 200.0
@@ -225,7 +228,7 @@ class Stopwatch(Procedure):
             ms.append(Measurement(f"h/k {ch} (fitted)", r.tau_s, "s", stderr=r.tau_se))
             ms.append(Measurement(f"restraint correction {ch}", r.correction * 100, "%"))
             ms.append(Measurement(f"residual null rate {ch}", r.null_rate_urad_per_s, "urad/s",
-                                  -p.null_tolerance_urad_per_s, p.null_tolerance_urad_per_s))
+                                  -p.max_null_rate_urad_per_s, p.max_null_rate_urad_per_s))
         values = {"K_g_mV_per_urad": {ch: r.kg for ch, r in per.items()}}
         figs = [Figure(f"ramps-{ch.lower()}", f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
                        lambda path, ch=ch: plot_channel(path, ctx.path, ch, results[ch])) for ch in p.channels]

@@ -1,0 +1,204 @@
+"""The procedure runner on the loopback rig: steps and their events, measurements and the
+verdict, progress, every abort path (Ctrl-C, an exception, a device fault, the operator's
+abort) leaving the rig safe and the file "aborted: <why>", and resume."""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from fbs.daq.reader import RunFile
+from fbs.drivers.rig import open_rig
+from fbs.procedures.calibrations import catalogue
+from fbs.procedures.runner import (Analysis, Measurement, Procedure, ProcedureError, Step, load_resume, next_free,
+                                   run_procedure)
+
+pytestmark = pytest.mark.slow
+
+
+@dataclass
+class ToyParams:
+    n_data_steps: int = 3
+    step_s: float = 2.0
+    bias_V: float = 0.3
+    limit_lo: float = -10.0
+
+
+class Toy(Procedure):
+    """Biases torquer X, records, and measures the mean torquer output (a real measurement)."""
+
+    name = "toy"
+    title = "toy procedure for the runner tests"
+    json_keys = ("mean_V", "file")
+    Params = ToyParams
+    rate_hz = 50.0
+
+    def __init__(self, params=None, *, fail_in: str | None = None, **kw) -> None:
+        super().__init__(params, **kw)
+        self.fail_in = fail_in
+        self.setup_runs = 0
+
+    def channels(self):
+        return ("torq_x", "gyro_x")
+
+    def plan(self, ctx):
+        yield Step("setup", self.setup, expected_s=1.0, setup=True)
+        for i in range(self.params.n_data_steps):
+            yield Step(f"data {i}", lambda c, i=i: self.data(c, i), expected_s=self.params.step_s)
+
+    def setup(self, ctx):
+        self.setup_runs += 1
+        ctx.rig.set_caging_inhibit("X", True)
+        ctx.rig.set_torquer_bias_V("X", self.params.bias_V)
+        ctx.acquire(1.0, keep=False)
+        return {"ok": True}
+
+    def data(self, ctx, i):
+        if self.fail_in == f"data {i}":
+            raise ProcedureError(f"toy failure in data {i}")
+        x = ctx.acquire(self.params.step_s)
+        return {"i": i, "mean": float(np.nanmean(x[:, 0]))}
+
+    def analyze(self, ctx):
+        means = [ctx.results[f"data {i}"]["mean"] for i in range(self.params.n_data_steps)]
+        m = float(np.mean(means))
+        return Analysis({"mean_V": m}, [Measurement("mean torquer X", m, "V", lo=self.params.limit_lo, hi=10.0)])
+
+
+@pytest.fixture
+def rig():
+    with open_rig("sim?warm=1&seed=1&watchdog=5") as r:
+        yield r
+
+
+def _mode(rig) -> int:
+    return rig.relays.status().mode
+
+
+def test_steps_events_measurements_and_verdict(rig, tmp_path):
+    seen = []
+    s = run_procedure(Toy(), rig, tmp_path, progress=seen.append)
+    assert s.verdict == "pass" and s.exit_code == 0 and s.status == "complete"
+    assert s.steps_done == ["setup", "data 0", "data 1", "data 2"]
+    # a bias of 0.3 V through the open loop: the torquer reads a real, non-zero output
+    assert abs(s.values["mean_V"]) > 0.1
+    with RunFile(s.file) as rf:
+        assert rf.attrs["procedure"] == "toy" and rf.status == "complete"
+        kinds = [e.kind for e in rf.events]
+        done = [json.loads(e.text) for e in rf.events if e.kind == "step-done"]
+        assert rf.meta["procedure"]["params"]["n_data_steps"] == 3
+        assert "calibration" in rf.meta
+    assert kinds.count("step") == 4 and [d["step"] for d in done] == s.steps_done
+    assert done[1]["result"]["i"] == 0
+    # progress: fractions rise to 1, with step names
+    assert seen and seen[-1].fraction == pytest.approx(1.0) and seen[-1].step == "data 2"
+    assert all(b.fraction >= a.fraction - 1e-12 for a, b in zip(seen, seen[1:]))
+    # report and JSON summary beside the file
+    assert s.report.exists() and "mean torquer X" in s.report.read_text()
+    assert json.loads(s.file.with_suffix(".json").read_text())["verdict"] == "pass"
+    assert s.json_values(Toy.json_keys) == {"mean_V": s.values["mean_V"], "file": str(s.file)}
+
+
+def test_limits_failed_gives_exit_code_1(rig, tmp_path):
+    s = run_procedure(Toy(ToyParams(limit_lo=9.0)), rig, tmp_path)
+    assert s.verdict == "fail" and s.exit_code == 1
+    assert s.measurements[0].passed is False and "**FAIL**" in s.report.read_text()
+
+
+def _assert_aborted_and_safe(rig, s, why: str) -> None:
+    assert s.verdict == "aborted" and s.exit_code == 2
+    assert s.status.startswith("aborted: ") and why in s.status
+    assert _mode(rig) == 1 and rig.is_safe()
+    assert rig.torquers.bias_V("X") == 0.0 and not rig.caging.inhibited("X")
+    with RunFile(s.file) as rf:
+        assert rf.status == s.status
+        assert any(e.kind == "safe" for e in rf.events)
+    assert "Steps not done" in s.report.read_text()
+
+
+def test_ctrl_c_aborts_to_the_safe_state(rig, tmp_path):
+    calls = []
+
+    def ctrl_c(p):  # the listener runs on the procedure's thread: a KeyboardInterrupt as from SIGINT
+        calls.append(p)
+        if p.step == "data 1":
+            raise KeyboardInterrupt
+
+    s = run_procedure(Toy(), rig, tmp_path, progress=ctrl_c)
+    _assert_aborted_and_safe(rig, s, "interrupted")
+    assert s.steps_done == ["setup", "data 0"] and s.error == "interrupted (Ctrl-C)"
+
+
+def test_an_exception_in_a_step_aborts_with_its_reason(rig, tmp_path):
+    s = run_procedure(Toy(fail_in="data 2"), rig, tmp_path)
+    _assert_aborted_and_safe(rig, s, "toy failure in data 2")
+    assert s.steps_done == ["setup", "data 0", "data 1"]
+
+
+def test_a_device_fault_aborts(rig, tmp_path):
+    def fault(p):
+        if p.step == "data 1":
+            rig.emulator.inject("adc", "disconnect")
+
+    s = run_procedure(Toy(ToyParams(step_s=4.0)), rig, tmp_path, progress=fault)
+    assert s.verdict == "aborted" and s.status.startswith("aborted: ")
+    assert "DeviceLost" in s.status and "ADC" in s.status
+    # every later driver call raises the latched fault; the read-back of the safe state does not
+    assert rig.is_safe() and rig.emulator.nodes.nodes["relay"].mode == 1
+
+
+def test_operator_abort_event(rig, tmp_path):
+    stop = threading.Event()
+    s = run_procedure(Toy(), rig, tmp_path, abort=stop,
+                      progress=lambda p: stop.set() if p.step == "data 0" else None)
+    _assert_aborted_and_safe(rig, s, "aborted by the operator")
+
+
+def test_resume_takes_over_done_data_steps_and_reruns_setup(rig, tmp_path):
+    first = run_procedure(Toy(fail_in="data 2"), rig, tmp_path)
+    assert first.verdict == "aborted"
+    resumed = load_resume(first.file, "toy")
+    assert set(resumed.results) == {"setup", "data 0", "data 1"}
+    toy = Toy(Toy.params_from(resumed.params))
+    s = run_procedure(toy, rig, tmp_path, resume=resumed)
+    assert s.verdict == "pass" and s.file != first.file and s.file.name == "toy-2.h5"
+    assert s.steps_resumed == ["data 0", "data 1"] and toy.setup_runs == 1
+    with RunFile(s.file) as rf:
+        assert rf.meta["procedure"]["resumed_from"] == str(first.file)
+        taken = [json.loads(e.text) for e in rf.events if e.kind == "step-done" and "resumed" in e.text]
+    assert [t["step"] for t in taken] == ["data 0", "data 1"]
+    assert taken[0]["result"] == resumed.results["data 0"]
+    # the aborted file is kept as it was
+    with RunFile(first.file) as rf:
+        assert rf.status.startswith("aborted: ")
+
+
+def test_resume_refuses_complete_or_foreign_runs(rig, tmp_path):
+    s = run_procedure(Toy(ToyParams(n_data_steps=1)), rig, tmp_path)
+    with pytest.raises(ProcedureError, match="complete; nothing to resume"):
+        load_resume(s.file, "toy")
+    with pytest.raises(ProcedureError, match="is a 'toy' run, not 'earth-rate'"):
+        load_resume(s.file, "earth-rate")
+
+
+def test_next_free_never_reuses_a_name(tmp_path):
+    assert next_free(tmp_path, "x").name == "x.h5"
+    (tmp_path / "x.h5").write_bytes(b"")
+    (tmp_path / "x-2.json").write_text("{}")
+    assert next_free(tmp_path, "x").name == "x-3.h5"
+
+
+def test_catalogue_finds_every_procedure_and_keys_are_design_section_7():
+    design = {"earth-rate": ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"),
+              "stopwatch": ("K_g_mV_per_urad", "file"),
+              "hysteresis": ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "file"),
+              "survey": ("platform_rms_urad", "dip_hz", "file"),
+              "drift": ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file")}
+    procs = catalogue()
+    assert set(procs) == set(design)
+    for name, keys in design.items():
+        assert tuple(procs[name].json_keys) == keys
