@@ -86,7 +86,8 @@ class Rig:
 
     def event(self, kind: str, text: str) -> None:
         t = self.clock.now()
-        log.info("rig event at %.3f s: %s: %s", t, kind, text)
+        # set-points can come a hundred a second (a swept bias): debug, the rest info
+        log.log(logging.DEBUG if kind == "setpoint" else logging.INFO, "rig event at %.3f s: %s: %s", t, kind, text)
         for fn in list(self._listeners):
             try:
                 fn(t, kind, text)

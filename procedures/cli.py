@@ -10,7 +10,7 @@ from fbs.drivers.errors import DriverError
 from fbs.simhw import effects as effect_catalogue
 from fbs.simhw.params import ConfigError, load_config
 
-from . import demo, inspect, run, spectra
+from . import analyze, demo, inspect, run, spectra
 
 log = logging.getLogger("fbs")
 
@@ -77,6 +77,7 @@ def build_parser() -> argparse.ArgumentParser:
     spectra.add_parser(sub)
     run.add_parser(sub)
     demo.add_parser(sub)
+    analyze.add_parser(sub)
     return p
 
 

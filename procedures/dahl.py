@@ -192,8 +192,23 @@ def command_frequency(cmd: np.ndarray, fs_hz: float) -> float:
     m = n // step
     xd = x[:m * step].reshape(m, step).mean(axis=1)
     td = (np.arange(m) * step + (step - 1) / 2) / fs_hz
-    power = [abs(np.dot(xd, np.exp(-2j * math.pi * g * td))) for g in grid]
-    return float(grid[int(np.argmax(power))])
+    power = np.array([abs(np.dot(xd, np.exp(-2j * math.pi * g * td))) for g in grid])
+    f0 = float(grid[int(np.argmax(power))])
+    # the periodogram's peak is pulled by the amplitude steps (leakage from -f): refine from the
+    # phase advance of the fundamental from one cycle to the next
+    for _ in range(2):
+        _, amps, _ = cycle_fits(x, fs_hz, f0)
+        if len(amps) < 2:
+            break
+        m = np.abs(amps)
+        # pairs of whole cycles at one amplitude (a cycle with a step in it has a biased phase)
+        same = np.abs(m[1:] - m[:-1]) < 0.05 * np.maximum(m[1:], m[:-1])
+        w = np.where(same, m[1:] * m[:-1], 0.0)
+        if not np.any(w > 0):
+            break
+        dphi = np.angle(amps[1:] * np.conj(amps[:-1]))
+        f0 += float(np.sum(w * dphi) / np.sum(w)) / (2 * math.pi) * f0
+    return f0
 
 
 def cycle_fits(x: np.ndarray, fs_hz: float, freq_hz: float, start: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -216,16 +231,35 @@ def cycle_fits(x: np.ndarray, fs_hz: float, freq_hz: float, start: int = 0) -> t
 
 
 def find_segments(cmd: np.ndarray, fs_hz: float, freq_hz: float, *, settle_cycles: int = 1,
-                  min_cycles: int = 2, tolerance: float = 0.1) -> list[Segment]:
+                  min_cycles: int = 2, tolerance: float = 0.1, offsets: int = 16) -> list[Segment]:
     """Runs of consecutive command cycles with the same amplitude (within ``tolerance``); the
-    first ``settle_cycles`` of each run are left out of the kept cycles."""
+    first ``settle_cycles`` of each run are left out of the kept cycles. The one-period windows
+    are laid from each of ``offsets`` starting points within the first period; the grid that
+    keeps most cycles, and of those the one whose kept cycles are the cleanest sinusoids (no
+    amplitude step inside), wins."""
     cmd = np.asarray(cmd, dtype=float)
-    bounds, amps, resid = cycle_fits(cmd, fs_hz, freq_hz)
+    per = fs_hz / freq_hz
+    best: list[Segment] = []
+    best_key = (0, 0.0)
+    for k in range(max(1, offsets)):
+        segs, misfit = _segments_from(cmd, fs_hz, freq_hz, int(round(k * per / max(1, offsets))), settle_cycles,
+                                      min_cycles, tolerance)
+        key = (sum(s.n_cycles for s in segs), -misfit)
+        if key > best_key:
+            best, best_key = segs, key
+    return best
+
+
+def _segments_from(cmd: np.ndarray, fs_hz: float, freq_hz: float, start: int, settle_cycles: int,
+                   min_cycles: int, tolerance: float) -> tuple[list[Segment], float]:
+    """The segments on one window grid, and the worst relative sine-fit residual of their kept cycles."""
+    bounds, amps, resid = cycle_fits(cmd, fs_hz, freq_hz, start)
     if len(amps) == 0:
-        return []
+        return [], 0.0
     mag = np.abs(amps)
     active = (mag > 1e-3 * mag.max()) & (resid < 0.3 * mag)
     segs: list[Segment] = []
+    misfit = 0.0
     i = 0
     while i < len(mag):
         if not active[i]:
@@ -238,8 +272,9 @@ def find_segments(cmd: np.ndarray, fs_hz: float, freq_hz: float, *, settle_cycle
         if kept >= min_cycles:
             segs.append(Segment(int(bounds[i + settle_cycles]), int(bounds[j]), int(bounds[i]), kept,
                                 float(np.median(mag[i:j]))))
+            misfit = max(misfit, float(np.max(resid[i + settle_cycles:j] / mag[i + settle_cycles:j])))
         i = j
-    return segs
+    return segs, misfit
 
 
 def synchronous_average(x: np.ndarray, fs_hz: float, freq_hz: float, start: int, stop: int,
@@ -264,58 +299,75 @@ def first_harmonic(cycle: np.ndarray) -> complex:
 # ---------------------------------------------------------------------------- the fit
 @dataclass
 class DahlFit:
+    """Least-squares Dahl parameters and how well they explain the measured torque."""
+
     To_Nm: float
     eta_per_Nm: float
     To_se_Nm: float
     eta_se_per_Nm: float
     stiffness_Nm_per_rad: float
     stiffness_se_Nm_per_rad: float
-    offsets_Nm: list[float]            # one per segment
-    residual_rms_Nm: list[float]       # one per segment
-    model_Nm: np.ndarray = field(repr=False)   # the fitted torque (offsets included), on the fitted range
-    start: int = 0                     # sample index of model_Nm[0]
-    n_eval: int = 0                    # residual samples used (decimated)
-    cost_evaluations: int = 0
-    correlation: float = 0.0           # correlation coefficient of the To and eta estimates
+    correlation: float                 # of the To and eta estimates
+    offsets_Nm: list[float]            # the torque offset of each segment
+    residual_rms_Nm: list[float]       # of each segment's kept cycles
+    residual_rms_total_Nm: float
+    model_Nm: np.ndarray = field(repr=False)   # fitted torque, offsets included, samples start..stop
+    start: int = 0
+    stop: int = 0
+    path_cutoff_hz: float | None = None
+    n_independent: int = 0             # residual samples counted as independent for the errors
+    evaluations: int = 0
 
 
-def fit_dahl(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
-             smooth_hz: float | None = None, decimate: int = 1, To0_Nm: float | None = None,
-             eta0_per_Nm: float | None = None) -> DahlFit:
-    """Least-squares To and eta: eq. 5.2 integrated along ``theta_rad`` from the first segment's
-    start, compared with ``torque_Nm`` on each segment's kept cycles, one free torque offset per
-    segment (solved exactly for each trial To, eta). With ``smooth_hz`` the model torque gets
-    the same zero-phase low-pass as the measured torque had. ``decimate`` thins the residual
-    samples (to about the low-pass's Nyquist interval, so they are nearly independent: the
-    standard errors assume so).
+def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]) -> tuple[float, float]:
+    """To from the largest loop's torque half-range, eta To^2 from the smallest loop's slope."""
+    spans = [float(np.ptp(th[i])) for i in idx]
+    big, small = int(np.argmax(spans)), int(np.argmin(spans))
+    To0 = 0.5 * float(np.ptp(meas[big]))
+    if not To0 > 0:
+        raise ValueError("the measured torque does not change over the cycles (a flat power-amplifier input?)")
+    slope = float(np.polyfit(th[idx[small]], meas[small], 1)[0]) if spans[small] > 0 else 0.0
+    # no usable slope (noise): a spring that reaches To over a tenth of the smallest amplitude
+    k0 = slope if slope > 0 else To0 / max(0.05 * spans[small], 1e-12)
+    return To0, k0 / To0 ** 2
 
-    Standard errors are from the Jacobian in log(To), log(eta) with the residual variance
-    (delta method for the stiffness eta To^2)."""
+
+def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
+             smooth_hz: float | None = None, step: int = 1, independent_every: int = 1,
+             start: tuple[float, float] | None = None) -> DahlFit:
+    """Least-squares To and eta of eq. 5.2 integrated along ``path_rad`` (the angle the bearing
+    is taken to follow) against ``torque_Nm`` (the measured bearing torque, ``bearing_torque``).
+
+    The integration starts at the first segment's settling cycles (from T = 0; the bearing
+    forgets its initial state within a half-cycle of amplitude >> 1 / (eta To)) and runs
+    through every segment, so the memory the bearing carries from one amplitude to the next is
+    modelled. The residual is taken on each segment's kept cycles, every ``step``-th sample,
+    less one free torque offset per segment (solved exactly for each trial To, eta: the
+    power amplifier's offset, slow disturbances). With ``smooth_hz`` the model torque gets the
+    zero-phase low-pass the measured torque had.
+
+    Standard errors are from the Jacobian in (ln To, ln eta) and the residual variance, each
+    residual sample counting for ``step / independent_every`` of an independent one (the
+    low-passed residual is correlated over about fs / (2 smooth_hz) samples); they are
+    statistical only. The stiffness eta To^2 gets the delta method."""
     if not segments:
         raise ValueError("no cycles of constant amplitude to fit")
-    theta = np.asarray(theta_rad, dtype=float)
+    theta = np.asarray(path_rad, dtype=float)
     torque = np.asarray(torque_Nm, dtype=float)
     a0 = min(s.lead_start for s in segments)
     b0 = max(s.stop for s in segments)
-    th = theta[a0:b0]
-    idx = [np.arange(s.start - a0, s.stop - a0, max(1, decimate)) for s in segments]
+    th = np.ascontiguousarray(theta[a0:b0])
+    if not (np.all(np.isfinite(th)) and np.all(np.isfinite(torque[a0:b0]))):
+        raise ValueError("the angle or the torque has non-finite samples (lost data) in the cycles to fit")
+    step = max(1, int(step))
+    idx = [np.arange(s.start - a0, s.stop - a0, step) for s in segments]
     meas = [torque[a0 + i] for i in idx]
-    if To0_Nm is None:
-        # a start from the data: the largest loop's torque half-range is close to To
-        To0_Nm = max(0.5 * float(np.ptp(m)) for m in meas)
-    if eta0_per_Nm is None:
-        # and the smallest loop's slope is close to eta To^2
-        s = min(range(len(segments)), key=lambda k: np.ptp(th[idx[k]]))
-        slope = float(np.polyfit(th[idx[s]], meas[s], 1)[0])
-        eta0_per_Nm = max(slope, 1e-3 * To0_Nm / max(np.ptp(th), 1e-12)) / To0_Nm ** 2
+    To0, eta0 = start if start is not None else _initial_guess(th, meas, idx)
     evals = 0
 
     def model(p: np.ndarray) -> np.ndarray:
-        To, eta = math.exp(p[0]), math.exp(p[1])
-        T = _dahl_path(th, To, eta, 0.0)
-        if smooth_hz is not None:
-            T = lowpass(T, fs_hz, smooth_hz)
-        return T
+        T = _dahl_path(th, math.exp(p[0]), math.exp(p[1]), 0.0)
+        return lowpass(T, fs_hz, smooth_hz) if smooth_hz is not None else T
 
     def residuals(p: np.ndarray) -> np.ndarray:
         nonlocal evals
@@ -327,25 +379,29 @@ def fit_dahl(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segmen
             out.append(r - r.mean())     # the segment's offset, solved exactly
         return np.concatenate(out)
 
-    p0 = np.array([math.log(To0_Nm), math.log(eta0_per_Nm)])
-    sol = scipy.optimize.least_squares(residuals, p0, method="lm", x_scale=np.array([1.0, 1.0]),
-                                       diff_step=1e-4, max_nfev=400)
-    if not np.all(np.isfinite(sol.x)):
-        raise ValueError("the Dahl fit did not converge (non-finite parameters)")
+    p0 = np.array([math.log(To0), math.log(eta0)])
+    span = math.log(1e3)
+    sol = scipy.optimize.least_squares(residuals, p0, method="trf", bounds=(p0 - span, p0 + span),
+                                       diff_step=1e-4, x_scale=np.array([0.1, 0.1]), max_nfev=200)
+    if not np.all(np.isfinite(sol.x)) or not np.all(np.isfinite(sol.fun)):
+        raise ValueError("the Dahl fit did not converge (non-finite parameters or residuals)")
     To, eta = math.exp(sol.x[0]), math.exp(sol.x[1])
     r = sol.fun
-    dof = max(1, len(r) - 2 - len(segments))
-    s2 = float(r @ r) / dof
-    J = sol.jac
+    n_ind = max(3, int(len(r) * step / max(1, independent_every)))
+    dof = max(1, n_ind - 2 - len(segments))
+    s2 = float(r @ r) / len(r) * n_ind / dof
+    J = sol.jac * math.sqrt(n_ind / len(r))     # as if n_ind independent samples
     try:
-        cov = np.linalg.inv(J.T @ J) * s2     # in (log To, log eta)
+        cov = np.linalg.inv(J.T @ J) * s2
     except np.linalg.LinAlgError:
         cov = np.full((2, 2), np.nan)
-    se_lnTo, se_lneta = np.sqrt(np.abs(np.diag(cov)))
-    # stiffness k = eta To^2: ln k = ln eta + 2 ln To
-    g = np.array([2.0, 1.0])
-    se_lnk = float(np.sqrt(abs(g @ cov @ g)))
+    var = np.diag(cov)
+    se_ln = np.sqrt(np.where(var >= 0, var, np.nan))
+    g = np.array([2.0, 1.0])                    # ln k = 2 ln To + ln eta
     k = stiffness(To, eta)
+    se_lnk = float(np.sqrt(max(float(g @ cov @ g), 0.0))) if np.all(np.isfinite(cov)) else math.nan
+    corr = float(cov[0, 1] / math.sqrt(var[0] * var[1])) if np.all(np.isfinite(cov)) and var[0] > 0 and var[1] > 0 \
+        else math.nan
     T = model(sol.x)
     offsets, rms = [], []
     for i, m in zip(idx, meas):
@@ -355,6 +411,62 @@ def fit_dahl(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segmen
     full = T.copy()
     for s, off in zip(segments, offsets):
         full[s.lead_start - a0:s.stop - a0] += off
-    corr = float(cov[0, 1] / math.sqrt(cov[0, 0] * cov[1, 1])) if np.all(np.isfinite(cov)) and cov[0, 0] > 0 else 0.0
-    return DahlFit(To, eta, To * se_lnTo, eta * se_lneta, k, k * se_lnk, offsets, rms, full, a0,
-                   len(r), evals, corr)
+    return DahlFit(To, eta, To * float(se_ln[0]), eta * float(se_ln[1]), k, k * se_lnk, corr, offsets, rms,
+                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals)
+
+
+@dataclass
+class PathScan:
+    """The fit at each trial bandwidth of the angle path (``fit_dahl_path``)."""
+
+    cutoff_hz: list[float]
+    residual_rms_Nm: list[float]
+    To_Nm: list[float]
+    eta_per_Nm: list[float]
+    best: int
+
+
+def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
+                  smooth_hz: float, cutoffs_hz: list[float], step: int = 1,
+                  independent_every: int = 1) -> tuple[DahlFit, PathScan]:
+    """``fit_dahl`` along the measured angle low-passed at each of ``cutoffs_hz``; the fit that
+    explains the torque best (least residual) is returned, with the scan.
+
+    Why a choice: eq. 5.2 is a hysteresis, so the torque depends on every reversal of the
+    angle. The platform really moves in the servo's band (its response to the sensor's noise,
+    the steps of the command DAC), and the bearing follows those small reversals; above it the
+    instrumentation channel shows mostly its own noise, which is no motion at all. Too low a
+    cutoff drops real reversals, too high a one adds false ones; both spoil the fit, so the
+    residual finds the band the data support."""
+    if not cutoffs_hz:
+        raise ValueError("no trial cutoffs for the angle path")
+    cutoffs_hz = sorted(float(c) for c in cutoffs_hz)
+    fits: list[DahlFit] = []
+    guess = None
+    for fc in cutoffs_hz:
+        path = lowpass(theta_rad, fs_hz, fc)
+        fit = fit_dahl(path, torque_Nm, segments, fs_hz, smooth_hz=smooth_hz, step=step,
+                       independent_every=independent_every, start=guess)
+        fit.path_cutoff_hz = float(fc)
+        fits.append(fit)
+        guess = (fit.To_Nm, fit.eta_per_Nm)
+    best = int(np.argmin([f.residual_rms_total_Nm for f in fits]))
+    if 0 < best < len(fits) - 1:
+        # refine: the vertex of the parabola in log(cutoff) through the best and its neighbours
+        x = np.log([cutoffs_hz[best - 1], cutoffs_hz[best], cutoffs_hz[best + 1]])
+        y = np.array([fits[best + d].residual_rms_total_Nm for d in (-1, 0, 1)])
+        c2, c1, _ = np.polyfit(x, y, 2)
+        if c2 > 0:
+            fc = float(np.exp(-c1 / (2 * c2)))
+            fit = fit_dahl(lowpass(theta_rad, fs_hz, fc), torque_Nm, segments, fs_hz, smooth_hz=smooth_hz,
+                           step=step, independent_every=independent_every,
+                           start=(fits[best].To_Nm, fits[best].eta_per_Nm))
+            fit.path_cutoff_hz = fc
+            if fit.residual_rms_total_Nm < fits[best].residual_rms_total_Nm:
+                order = int(np.searchsorted(cutoffs_hz, fc))
+                cutoffs_hz = list(cutoffs_hz[:order]) + [fc] + list(cutoffs_hz[order:])
+                fits.insert(order, fit)
+                best = order
+    scan = PathScan([float(c) for c in cutoffs_hz], [f.residual_rms_total_Nm for f in fits],
+                    [f.To_Nm for f in fits], [f.eta_per_Nm for f in fits], best)
+    return fits[best], scan

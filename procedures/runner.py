@@ -154,6 +154,8 @@ class Procedure(abc.ABC):
     rate_hz: float = 100.0
     block_s: float = 1.0
     axis: str | None = None
+    #: ADC full-scale ranges (+-V) per channel; None: the largest
+    ranges_V: dict[str, float] | None = None
 
     @abc.abstractmethod
     def plan(self, ctx: "Context") -> Iterator[Step]:
@@ -350,7 +352,8 @@ def run_procedure(proc: Procedure, rig: Rig, out_dir: str | Path, *, resume: Res
             "prior": {k: dict(v) for k, v in proc.prior.items()}}
     ctx: Context | None = None
     try:
-        acq = Acquisition(rig, path, rate_hz=proc.rate_hz, channels=proc.channels(), block_s=proc.block_s,
+        acq = Acquisition(rig, path, rate_hz=proc.rate_hz, channels=proc.channels(), ranges_V=proc.ranges_V,
+                          block_s=proc.block_s,
                           procedure=proc.name, axis=proc.axis, meta=meta, mode=proc.mode)
     except (RunFileError, OSError, ValueError) as exc:
         summary.file = None

@@ -71,10 +71,11 @@ AXES = ("X", "Y")
 
 #: The thesis's figures (Klinger 1974, Ch. V E.1-2, Figs. 42/45), for the report's reference
 #: column only; the measurement never uses them. The Y dip is "around 6 Hz" and broad (Fig. 45).
+#: Values are numbers or display strings.
 THESIS_REFERENCE: dict[str, Any] = {
     "source": "Klinger (1974) Ch. V E",
     "platform_rms_urad": {"X": 1.6, "Y": 3.6},
-    "dip_hz": {"X": 3.5, "Y": 6.0},
+    "dip_hz": {"X": 3.5, "Y": "≈6, broad"},
 }
 
 
@@ -117,7 +118,8 @@ class Params:
         if self.settle_s < 0:
             raise ValueError(f"survey: settle_s = {self.settle_s} must be >= 0")
         if self.seg_s > self.duration_s:
-            raise ValueError(f"survey: a Welch segment of {self.seg_s} s is longer than the record ({self.duration_s} s)")
+            raise ValueError(f"survey: a Welch segment of {self.seg_s} s is longer than the record "
+                             f"({self.duration_s} s)")
         nyq = self.rate_hz / 2
         if not 0 < self.band_lo_hz < self.band_hi_hz <= nyq:
             raise ValueError(f"survey: band {self.band_lo_hz}..{self.band_hi_hz} Hz must lie in 0..{nyq:g} Hz")
@@ -390,7 +392,7 @@ class Survey(Procedure):
         dref = ref.get("dip_hz") or {}
 
         def r(v, fmt=".3g"):
-            return "-" if v is None else format(v, fmt)
+            return "-" if v is None else v if isinstance(v, str) else format(v, fmt)
 
         lines = ["## Survey", "",
                  f"Record: {csd.seconds:.0f} s at {csd.fs:g} Hz; Welch, Hann segments of {csd.nperseg / csd.fs:g} s "
@@ -415,8 +417,11 @@ class Survey(Procedure):
         lines += ["The gyro-deduced platform rms is the thesis's estimate (Ch. V E.2): the pickoff spectrum "
                   f"divided by Kg^2 and integrated over {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, taken as the platform "
                   "rms above 0.4 Hz because the platform does not respond above the loop bandwidth. It credits "
-                  "all pickoff noise in the band to platform motion, so it is an upper bound on the true motion, "
-                  "sqrt(true^2 + pickoff noise^2) in the band.", ""]
+                  "all pickoff noise in the band to platform motion, so it over-states the true motion: it "
+                  "measures sqrt(true^2 + pickoff noise^2) in the band (docs/procedures/survey.md).", ""]
+        src_file = (self.prior.get("stopwatch") or {}).get("_from")
+        if any(kg_src[a] == "stopwatch" for a in AXES):
+            lines += [f"Kg from the stopwatch summary{f' `{src_file}`' if src_file else ''}.", ""]
         nominal = [a for a in AXES if kg_src[a] == "nominal"]
         if nominal:
             lines += [f"**Note:** no stopwatch result was given for {', '.join(nominal)}: the pickoff scale factor "

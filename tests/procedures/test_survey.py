@@ -269,7 +269,8 @@ def test_a_platform_disturbance_torque_keeps_the_rms_right_but_moves_the_dip(tmp
     exp = expected_values(cfg, params, seed=19)
     v = s.values
     for a in "XY":
-        print(f"{a}: dip {v['dip_hz'][a]} Hz ({v['dip_depth_db'][a]:.1f} dB) vs {exp['resonance_hz'][a]:.3f}; rms "
-              f"{v['platform_rms_urad'][a]:.3f} vs {exp['expected_rms_urad'][a]:.3f} (true {exp['true_rms_urad'][a]:.3f})")
+        print(f"{a}: dip {v['dip_hz'][a]} Hz ({v['dip_depth_db'][a]:.1f} dB) vs {exp['resonance_hz'][a]:.3f}; "
+              f"rms {v['platform_rms_urad'][a]:.3f} vs {exp['expected_rms_urad'][a]:.3f} "
+              f"(true {exp['true_rms_urad'][a]:.3f})")
         assert exp["true_rms_urad"][a] > 2 * exp["noise_rms_urad"][a]      # truth-dominated
         assert abs(v["platform_rms_urad"][a] / exp["expected_rms_urad"][a] - 1) < RMS_TOL
