@@ -12,8 +12,8 @@ reads off the IEEE 952 noise terms:
   the power-law noise identified at each averaging time by the lag-1 autocorrelation
   method (``allantools.autocorr_noise_id``, Riley and Greenhall 2004), and the chi-square
   interval ``allantools.confidence_interval`` (NIST SP 1065 eq. 45). The noise ID needs at
-  least 30 averages; longer averaging times keep the last identified type (as Stable32
-  does with its fall-back), so their intervals are approximate.
+  least 30 averages; longer averaging times keep the last identified type, so their
+  intervals are approximate.
 * ``read_arw``: angle random walk N, the white-rate term, from the tau^-1/2 line
   sigma(tau) = N / sqrt(tau) through a stated tau range (IEEE Std 952-1997, Annex C: N is
   the line's value at tau = 1 s). The line's slope fitted freely is returned too: if it is
@@ -22,15 +22,19 @@ reads off the IEEE 952 noise terms:
 * ``read_bias_instability``: B = (minimum of the Allan deviation) / 0.664 (IEEE 952
   Annex C: flicker rate noise of one-sided PSD B^2 / (pi f) has the flat Allan floor
   sqrt(2 ln 2 / pi) B = 0.664 B). The minimum is taken over averaging times with enough
-  degrees of freedom; when it is at the longest of them and the curve still falls there,
-  the floor was not reached and B is an upper bound.
+  degrees of freedom (counted for flicker noise, what the floor is); when it is at the
+  longest of them and significantly below the curve a few octaves earlier, the floor was
+  not reached and B is an upper bound.
 * ``null_stability``: the peak-to-peak wander of block averages (the thesis' "24-hour null
   stability", Table 1) over the record, and an estimate for a longer span from the Allan
   deviation (``wander_variance``).
 
 References: IEEE Std 952-1997 (R2008), Annex C "Allan variance method of data reduction";
-W. J. Riley, *Handbook of Frequency Stability Analysis*, NIST SP 1065 (2008): sections 5.2.4
-(overlapping ADEV), 5.3 (confidence intervals, eq. 45; Greenhall's EDF), 5.5 (noise ID).
+W. J. Riley, *Handbook of Frequency Stability Analysis*, NIST SP 1065 (2008): eq. 11
+(overlapping ADEV), eq. 45 (chi-square interval), its test suite (NBS-14, pp. 107-108);
+C. A. Greenhall and W. J. Riley, "Uncertainty of stability variances based on finite
+differences" (PTTI 2003) for the EDF; W. J. Riley and C. A. Greenhall, "Power law noise
+identification using the lag 1 autocorrelation" (EFTF 2004).
 """
 
 from __future__ import annotations
@@ -66,9 +70,28 @@ class AllanResult:
     n_samples: int               # samples in all segments
     ci: float = ONE_SIGMA
     overlapping: bool = True
+    segment_lengths: tuple[int, ...] = ()
 
     def usable(self, min_edf: float) -> np.ndarray:
         return np.isfinite(self.dev) & (self.edf >= min_edf)
+
+    def edf_for(self, alpha: int) -> np.ndarray:
+        """Greenhall EDF at every tau had the noise been of type ``alpha`` throughout."""
+        return np.array([_edf(alpha, int(round(t * self.rate_hz)), self.segment_lengths, self.overlapping)
+                         for t in self.tau_s])
+
+    def interval(self, i: int, edf: float, ci: float | None = None) -> tuple[float, float]:
+        """The interval (default: the result's ``ci`` level) of the deviation at index ``i``
+        for ``edf`` degrees of freedom."""
+        lo, hi = allantools.confidence_interval(self.dev[i], edf, self.ci if ci is None else ci)
+        return float(lo), float(hi)
+
+
+def _edf(alpha: int, m: int, lengths: Sequence[int], overlapping: bool) -> float:
+    """Greenhall's EDF (``allantools.edf_greenhall``, d = 2) summed over independent segments."""
+    return float(sum(allantools.edf_greenhall(alpha=int(alpha), d=2, m=int(m), N=int(n) + 1,
+                                              overlapping=overlapping, modified=False)
+                     for n in lengths if n + 1 > 2 * m))
 
 
 def octave_taus(n_samples: int, rate_hz: float, max_fraction: float = 0.25) -> np.ndarray:
@@ -124,7 +147,6 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
     keep = count > 0
     m_all, sumsq, count = m_all[keep], sumsq[keep], count[keep]
     dev = np.sqrt(sumsq / count)
-    n_phase = [len(s) + 1 for s in segs]
 
     # noise type per tau (on the longest segment), then Greenhall's EDF summed over segments
     alpha = np.zeros(len(m_all), dtype=np.int64)
@@ -136,18 +158,14 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
             last = min(2, max(-2, last))   # the Allan variance converges for alpha > -3
             identified[i] = True
         alpha[i] = last
-    edf = np.zeros(len(m_all))
+    lengths = tuple(len(s) for s in segs)
+    edf = np.array([_edf(int(a), int(m), lengths, overlapping) for a, m in zip(alpha, m_all)])
     lo = np.full(len(m_all), np.nan)
     hi = np.full(len(m_all), np.nan)
-    for i, m in enumerate(m_all):
-        for n in n_phase:
-            if n > 2 * m:
-                edf[i] += allantools.edf_greenhall(alpha=int(alpha[i]), d=2, m=int(m), N=int(n),
-                                                   overlapping=overlapping, modified=False)
-        if edf[i] > 0:
-            lo[i], hi[i] = allantools.confidence_interval(dev[i], edf[i], ci)
+    for i in np.flatnonzero(edf > 0):
+        lo[i], hi[i] = allantools.confidence_interval(dev[i], edf[i], ci)
     return AllanResult(m_all / rate_hz, dev, lo, hi, edf, count, alpha, identified, rate_hz,
-                       sum(len(s) for s in segs), ci, overlapping)
+                       sum(lengths), ci, overlapping, lengths)
 
 
 # ---------------------------------------------------------------------------- read-offs
@@ -206,27 +224,44 @@ class BiasInstabilityReadoff:
         return (self.hi - self.lo) / 2
 
 
-def read_bias_instability(res: AllanResult, *, min_edf: float = 4.0, min_tau_s: float = 0.0,
-                          falling_slope: float = -0.25) -> BiasInstabilityReadoff:
-    """B = min sigma / 0.664 over the averaging times >= ``min_tau_s`` with at least
-    ``min_edf`` degrees of freedom (IEEE 952 Annex C). The floor counts as reached unless
-    the minimum is at the longest such tau and the last octave still falls faster than
-    ``falling_slope`` (log-log)."""
-    ok = res.usable(min_edf) & (res.tau_s >= min_tau_s)
-    if ok.sum() < 2:
-        raise ValueError(f"fewer than two Allan points with EDF >= {min_edf:g} at tau >= {min_tau_s:g} s "
-                         f"(record too short)")
+def read_bias_instability(res: AllanResult, *, min_edf: float = 10.0, min_tau_s: float = 0.0,
+                          back_octaves: int = 3) -> BiasInstabilityReadoff:
+    """B = min sigma / 0.664 over the averaging times >= ``min_tau_s`` where the estimate
+    has at least ``min_edf`` degrees of freedom (IEEE 952 Annex C). ``min_tau_s`` keeps the
+    read-off beyond where the floor can be the quantity's own (e.g. a loop's time constants).
+
+    The degrees of freedom (and the interval) here are Greenhall's for flicker rate noise
+    (alpha = -1) at every tau, the noise the floor is: the identified type is unreliable
+    with the few averages of the longest taus, and a white-noise identification there
+    would claim several times the degrees of freedom, letting a low outlier of the
+    scatter pose as the floor. The minimum of a scattered curve still leans low, the more
+    so the more points it is taken over.
+
+    The floor counts as reached unless the minimum is at the longest usable tau *and* lies
+    significantly below the curve ``back_octaves`` octaves earlier (any usable tau, the 95 %
+    intervals of the two do not overlap): a curve still falling there (white rate noise falls by
+    2^(-3/2) = 0.35 in three octaves) has not shown its floor, and B is then an upper
+    bound. Comparing across several octaves, not one, keeps the scatter of the long-tau
+    points from deciding it."""
+    edf = res.edf_for(-1)
+    usable = np.isfinite(res.dev) & (edf >= min_edf)
+    ok = usable & (res.tau_s >= min_tau_s)
+    if not ok.any():
+        raise ValueError(f"no Allan point with EDF >= {min_edf:g} (flicker) at tau >= {min_tau_s:g} s "
+                         f"(record too short: the longest such tau is "
+                         f"{res.tau_s[usable].max() if usable.any() else 0:g} s)")
     idx = np.flatnonzero(ok)
     i = idx[int(np.argmin(res.dev[idx]))]
+    lo, hi = res.interval(i, edf[i])
     reached = True
-    if i == idx[-1]:
-        j = idx[-2]
-        slope = math.log(res.dev[i] / res.dev[j]) / math.log(res.tau_s[i] / res.tau_s[j])
-        reached = slope > falling_slope
+    earlier = np.flatnonzero(usable & (res.tau_s < res.tau_s[i]))
+    if i == idx[-1] and len(earlier):
+        target = res.tau_s[i] / 2 ** back_octaves
+        j = earlier[int(np.argmin(np.abs(np.log(res.tau_s[earlier] / target))))]
+        reached = not res.interval(i, edf[i], 0.95)[1] < res.interval(j, edf[j], 0.95)[0]
     s = float(res.dev[i])
-    return BiasInstabilityReadoff(s / FLICKER_FLOOR, float(res.lo[i]) / FLICKER_FLOOR,
-                                  float(res.hi[i]) / FLICKER_FLOOR, float(res.tau_s[i]), s, reached,
-                                  float(res.tau_s[idx[-1]]))
+    return BiasInstabilityReadoff(s / FLICKER_FLOOR, lo / FLICKER_FLOOR, hi / FLICKER_FLOOR, float(res.tau_s[i]), s,
+                                  reached, float(res.tau_s[idx[-1]]))
 
 
 # ---------------------------------------------------------------------------- null stability
@@ -274,14 +309,15 @@ class NullStability:
 
 
 def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanResult, *, avg_s: float = 100.0,
-                   span_s: float = 86400.0, min_edf: float = 4.0) -> NullStability:
+                   span_s: float = 86400.0, min_edf: float = 10.0) -> NullStability:
     """Peak-to-peak of the ``avg_s`` means over the record, and an estimate for ``span_s``.
 
     If the record is shorter than ``span_s`` the peak-to-peak is scaled by the ratio of the
     expected rms wander of the averages over ``span_s`` to that over the record
     (``wander_variance``): the range-to-rms ratio of the record is assumed to carry over
     (it grows slowly with the number of averages, so this leans low). The Allan deviation
-    is taken as measured up to the longest tau with ``min_edf`` degrees of freedom and
+    is taken as measured up to the longest tau with ``min_edf`` degrees of freedom (for
+    flicker noise, as ``read_bias_instability``) and
     continued beyond it as a power law with the slope of its last octave clamped to
     0 .. +1/2 (flat for flicker rate noise, +1/2 for rate random walk); a slow trend or
     temperature cycle the record did not see is not in the estimate.
@@ -291,7 +327,7 @@ def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanRes
         raise ValueError(f"fewer than two {avg_s:g}-s averages in the record")
     p2p = float(means.max() - means.min())
     record_s = len(means) * avg_s
-    ok = res.usable(min_edf)
+    ok = np.isfinite(res.dev) & (res.edf_for(-1) >= min_edf)   # as read_bias_instability
     t, d = res.tau_s[ok], res.dev[ok]
     if len(t) < 2:
         raise ValueError("too few usable Allan points for the null-stability estimate")

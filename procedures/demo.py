@@ -21,22 +21,14 @@ from typing import Any, Callable
 
 from fbs.simhw.params import SimConfig, load_config
 
+from . import thesis
 from .calibrations import get
 from .report import fmt
 from .runner import RunSummary, run_procedure
 
 log = logging.getLogger(__name__)
 
-#: The thesis's figures (Klinger 1974): K_TO, K_g (II C.1.a), bearing (Ch. V F), survey (Ch. V E).
-THESIS: dict[str, Any] = {
-    "K_TO_urad_per_s_per_V": {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0},
-    "K_g_mV_per_urad": {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74},
-    "To_Nm": {"X": 0.016, "Y": 0.016},
-    "eta_per_Nm": {"X": 1.6e6, "Y": 1.48e6},
-    "stiffness_Nm_per_rad": {"X": 410.0, "Y": 380.0},
-    "platform_rms_urad": {"X": 1.6, "Y": 3.6},
-    "dip_hz": {"X": 3.5, "Y": None},
-}
+THESIS = thesis.FIGURES
 
 
 @dataclass

@@ -12,7 +12,11 @@ The earth-rate component is constant on a fixed table, so the wander of ``r`` is
   wraps ``allantools``);
 * the angle random walk N from the tau^-1/2 line through ``arw_tau_lo_s .. arw_tau_hi_s``
   (IEEE 952 Annex C), with the freely fitted slope as the check that it is a white-rate region;
-* the bias instability B = (flat minimum of the Allan deviation) / 0.664 (IEEE 952);
+* the caging loop's proportional gain G_p (torquing rate per pickoff angle, from the recorded
+  pickoff and torquer channels above the loop's bandwidth) and the white rate N_loop the
+  pickoff's output makes through it;
+* the bias instability B = (flat minimum of the Allan deviation) / 0.664 (IEEE 952), read at
+  tau >= ``bi_min_loop_tc`` loop time constants 1/G_p, where the torquer follows the drift;
 * the null stability in the style of the thesis' Table 1 (peak-to-peak wander over 24 hours):
   the peak-to-peak of ``average_s`` means of r over the record, labelled with the record length,
   and an estimate for 24 hours from the Allan deviation when the record is shorter
@@ -69,13 +73,23 @@ class Params:
     #: settle: the torquing rate changes by less than this over ``settle_window_s`` (urad/s)
     settle_tol_urad_per_s: float = 0.02
     settle_window_s: float = 40.0
-    settle_min_s: float = 60.0
+    settle_min_s: float = 120.0
     settle_timeout_s: float = 900.0
     #: the tau^-1/2 (white-rate) fit range for the angle random walk (s)
     arw_tau_lo_s: float = 0.4
     arw_tau_hi_s: float = 1.6
+    #: the bias instability is read at tau >= this many caging-loop time constants 1/G_p, G_p the
+    #: loop's proportional gain (torquing rate per pickoff angle) measured from the record: the
+    #: torquer follows the drift only below the loop's bandwidth, and a PI loop's overshoot lifts
+    #: the flicker's Allan deviation above its floor for a while beyond it (docs/procedures/drift.md)
+    bi_min_loop_tc: float = 10.0
+    #: band (Hz) where G_p is measured, well above the loop's bandwidth: from loop_band_lo_hz to
+    #: loop_band_hi_frac x the sample rate (both channels pass the same anti-alias filter)
+    loop_band_lo_hz: float = 0.2
+    loop_band_hi_frac: float = 0.2
     #: Allan points with fewer equivalent degrees of freedom are not used for the read-offs
-    min_edf: float = 4.0
+    #: (for the bias instability: Greenhall's EDF for flicker rate noise, allan.read_bias_instability)
+    min_edf: float = 10.0
     #: null stability: the means averaged over this long, and the span the estimate is for
     average_s: float = 100.0
     null_span_s: float = 86400.0
@@ -94,6 +108,11 @@ class Params:
             raise ValueError(f"drift: the ARW fit starts at {self.arw_tau_lo_s:g} s = "
                              f"{self.arw_tau_lo_s * self.rate_hz:g} samples at {self.rate_hz:g} Hz; it must start at "
                              f">= {MIN_ARW_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
+        if not 0 < self.loop_band_lo_hz < self.loop_band_hi_frac * self.rate_hz <= 0.5 * self.rate_hz:
+            raise ValueError(f"drift: loop-gain band {self.loop_band_lo_hz:g} .. "
+                             f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty or beyond Nyquist")
+        if self.bi_min_loop_tc < 0:
+            raise ValueError("drift: bi_min_loop_tc must be >= 0")
         if not self.average_s > 0 or not self.null_span_s >= self.average_s:
             raise ValueError("drift: need 0 < average_s <= null_span_s")
 
@@ -229,22 +248,22 @@ class Drift(Procedure):
         kto, kto_source = self.kto(ctx)
         chunks, total, lost, rate = self.load(spans)
         record_s = total / rate
-        res = analyze_channels(chunks, rate, kto, p)
+        cal = ctx.rig.calibration
+        prior_kg = self.prior.get("stopwatch", {}).get("K_g_mV_per_urad") or {}
+        kg = {ch: float(prior_kg.get(ch) or cal.pickoff_scale_mV_per_urad[ch]) for ch in GYRO_CHANNELS}
+        res = analyze_channels(chunks, rate, kto, p, kg)
         ms: list[Measurement] = [
             Measurement("record length", record_s, "s", lo=p.min_record_s,
                         note=f"{sum(1 for n in self.chunk_names() if ctx.results.get(n))} of "
                              f"{len(self.chunk_names())} chunks in {len(spans)} continuous stretch(es)"),
             Measurement("samples lost", lost / max(total, 1), "fraction", hi=p.max_lost_fraction),
         ]
-        for ch, r in res.items():
+        for r in res.values():
             ms += r.measurements(p)
         values = {
             "bias_instability_urad_per_s": {ch: r.bi.B if r.bi else None for ch, r in res.items()},
             "arw_urad_per_sqrt_s": {ch: r.arw.N if r.arw else None for ch, r in res.items()},
         }
-        cal = ctx.rig.calibration
-        prior_kg = self.prior.get("stopwatch", {}).get("K_g_mV_per_urad") or {}
-        kg = {ch: float(prior_kg.get(ch) or cal.pickoff_scale_mV_per_urad[ch]) for ch in GYRO_CHANNELS}
         pickoff = {}
         for ch in GYRO_CHANNELS:
             v = np.concatenate(chunks[_pickoff(ch)])
@@ -272,6 +291,8 @@ class ChannelDrift:
     bi: allan.BiasInstabilityReadoff | None
     null: allan.NullStability | None
     problems: list[str]
+    loop: LoopGain | None = None
+    bi_min_tau_s: float = 0.0
 
     def measurements(self, p: Params) -> list[Measurement]:
         ch = self.channel
@@ -288,10 +309,17 @@ class ChannelDrift:
             b = self.bi
             floor = "floor reached" if b.floor_reached else "floor NOT reached (still falling): upper bound"
             out.append(Measurement(f"bias instability {ch}", b.B, "urad/s", lo=0.0, stderr=b.stderr,
-                                   note=f"min sigma {b.sigma_min:.4g} urad/s at tau {b.tau_min_s:g} s / 0.664; "
-                                        f"{floor}"))
+                                   note=f"min sigma {b.sigma_min:.4g} urad/s at tau {b.tau_min_s:g} s / 0.664 "
+                                        f"(tau >= {self.bi_min_tau_s:.3g} s); {floor}"))
         else:
             out.append(Measurement(f"bias instability {ch}", None, "urad/s", lo=0.0, note="; ".join(self.problems)))
+        if self.loop is not None:
+            lg = self.loop
+            out.append(Measurement(f"caging loop gain G_p {ch}", lg.gain_per_s, "1/s",
+                                   note=f"torquing rate per pickoff angle, "
+                                        f"{lg.band_hz[0]:.3g}..{lg.band_hz[1]:.3g} Hz; "
+                                        f"pickoff output {lg.pickoff_asd:.3g} urad/sqrt(Hz) there, through it: "
+                                        f"N_loop {lg.white_rate:.3g} urad/sqrt(s)"))
         if self.null is not None:
             n = self.null
             out.append(Measurement(f"null stability {ch}, p-p of {n.avg_s:g}-s means over {_hours(n.record_s)}",
@@ -303,23 +331,89 @@ class ChannelDrift:
         return out
 
 
+@dataclass
+class LoopGain:
+    """The caging loop's proportional gain, seen in the record: above the loop's bandwidth the
+    torquing rate r = -K_TO V_T is G_p times the pickoff angle a = V_g / K_g (the amplifier is
+    a filter of the pickoff voltage), so G_p = |S_ar / S_aa| there (H1). The pickoff's noise
+    in that band, through G_p, is the torquer's white rate: N_loop = G_p sqrt(S_aa / 2)."""
+
+    gain_per_s: float            # G_p (urad/s per urad)
+    pickoff_asd: float           # sqrt(S_aa) in the band, urad/sqrt(Hz)
+    coherence: float             # mean magnitude-squared coherence in the band
+    band_hz: tuple[float, float]
+
+    @property
+    def time_constant_s(self) -> float:
+        return 1.0 / self.gain_per_s
+
+    @property
+    def white_rate(self) -> float:
+        """N_loop (urad/sqrt(s)) the pickoff noise makes through the proportional path."""
+        return self.gain_per_s * self.pickoff_asd / math.sqrt(2.0)
+
+
+def measure_loop_gain(torq_segs: list[np.ndarray], pick_segs: list[np.ndarray], rate_hz: float,
+                      band_hz: tuple[float, float], max_samples: int = 2 ** 17) -> LoopGain | None:
+    """G_p from the longest common gap-free stretch (rate r, pickoff angle a); None if the
+    stretch is too short for a spectrum resolving the band."""
+    from scipy.signal import csd, welch
+
+    pairs = [(r, a) for r, a in zip(torq_segs, pick_segs) if len(r) == len(a)]
+    if not pairs:
+        return None
+    r, a = max(pairs, key=lambda ra: len(ra[0]))
+    r, a = r[:max_samples], a[:max_samples]
+    nper = 1
+    while nper * 2 <= len(r) // 8 and rate_hz / (nper * 2) >= band_hz[0] / 10:
+        nper *= 2
+    f = np.fft.rfftfreq(nper, 1 / rate_hz)
+    sel = (f >= band_hz[0]) & (f <= band_hz[1])
+    if nper < 64 or sel.sum() < 3:
+        return None
+    _, s_aa = welch(a, rate_hz, nperseg=nper)
+    _, s_rr = welch(r, rate_hz, nperseg=nper)
+    _, s_ar = csd(a, r, rate_hz, nperseg=nper)
+    h = s_ar[sel] / s_aa[sel]
+    coh = np.abs(s_ar[sel]) ** 2 / (s_aa[sel] * s_rr[sel])
+    return LoopGain(float(np.median(np.abs(h))), float(np.sqrt(np.mean(s_aa[sel]))), float(np.mean(coh)),
+                    (float(f[sel][0]), float(f[sel][-1])))
+
+
 def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: dict[str, float],
-                     p: Params) -> dict[str, ChannelDrift]:
+                     p: Params, kg_mV_per_urad: dict[str, float] | None = None) -> dict[str, ChannelDrift]:
+    """Per channel: rate r = -K_TO V (urad/s) split at gaps, its Allan deviation and read-offs.
+    With the pickoff chunks and ``kg_mV_per_urad`` the loop gain is measured as well and the
+    bias instability is read beyond ``p.bi_min_loop_tc`` loop time constants; without, beyond
+    the ARW range."""
     out = {}
+    band = (p.loop_band_lo_hz, p.loop_band_hi_frac * rate_hz)
     for ch in GYRO_CHANNELS:
-        segs = [s for c in chunks[_torq(ch)] for s in allan.split_finite(-kto[ch] * c)]
+        torq = chunks[_torq(ch)]
+        segs = [s for c in torq for s in allan.split_finite(-kto[ch] * c)]
         if not segs:
             raise ProcedureError(f"channel {ch}: no gap-free data in the record")
         mean = float(np.average([s.mean() for s in segs], weights=[len(s) for s in segs]))
         res = allan.allan_deviation(segs, rate_hz)
         problems: list[str] = []
+        loop = None
+        if kg_mV_per_urad is not None and _pickoff(ch) in chunks:
+            # the same gap-free stretches of both channels (a lost sample set is lost on all)
+            both = [np.vstack([-kto[ch] * t, 1e3 * g / kg_mV_per_urad[ch]])
+                    for t, g in zip(torq, chunks[_pickoff(ch)])]
+            runs = [b[:, a:z] for b in both for a, z in _finite_runs(np.isfinite(b).all(axis=0))]
+            loop = measure_loop_gain([b[0] for b in runs], [b[1] for b in runs], rate_hz, band)
+            if loop is None:
+                problems.append("loop gain: record too short for a spectrum in the band; bias instability "
+                                "read beyond the ARW range instead")
+        bi_min_tau = p.bi_min_loop_tc * loop.time_constant_s if loop else p.arw_tau_hi_s
         arw = bi = null = None
         try:
             arw = allan.read_arw(res, (p.arw_tau_lo_s, p.arw_tau_hi_s), min_edf=p.min_edf)
         except ValueError as exc:
             problems.append(f"ARW: {exc}")
         try:
-            bi = allan.read_bias_instability(res, min_edf=p.min_edf, min_tau_s=p.arw_tau_hi_s)
+            bi = allan.read_bias_instability(res, min_edf=p.min_edf, min_tau_s=bi_min_tau)
         except ValueError as exc:
             problems.append(f"bias instability: {exc}")
         try:
@@ -327,8 +421,13 @@ def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: d
                                         min_edf=p.min_edf)
         except ValueError as exc:
             problems.append(f"null stability: {exc}")
-        out[ch] = ChannelDrift(ch, kto[ch], mean, res, arw, bi, null, problems)
+        out[ch] = ChannelDrift(ch, kto[ch], mean, res, arw, bi, null, problems, loop, bi_min_tau)
     return out
+
+
+def _finite_runs(ok: np.ndarray) -> list[tuple[int, int]]:
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
 # ---------------------------------------------------------------------------- report
@@ -341,27 +440,35 @@ def _markdown(res: dict[str, ChannelDrift], p: Params, kto: dict[str, float], kt
              f"Record: {_hours(record_s)} of the torquer outputs in Mode 3 at {p.rate_hz:g} Hz "
              f"({lost} of {total} samples lost); rate r = -K_TO V_T, K_TO from the {kto_source}: "
              + ", ".join(f"{c} {kto[c]:.4g}" for c in GYRO_CHANNELS) + " urad/s/V.", nominal_note,
-             "| channel | ARW N (urad/sqrt s) | fit tau (s) | free slope | bias instability B (urad/s) | "
-             "tau at min (s) | floor | mean rate (urad/s) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| channel | ARW N (urad/sqrt s) | fit tau (s) | free slope | N_loop (urad/sqrt s) | "
+             "bias instability B (urad/s) | read at tau >= (s) | tau at min (s) | floor | mean rate (urad/s) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for ch, r in res.items():
         a, b = r.arw, r.bi
         arw = (f"{a.N:.4g} ({a.lo:.3g}..{a.hi:.3g})", f"{a.tau_range_s[0]:g}..{a.tau_range_s[1]:g}",
                f"{a.slope:+.2f}" + ("" if a.white_region else " (not -1/2)")) if a else ("-", "-", "-")
-        bis = (f"{b.B:.4g} ({b.lo:.3g}..{b.hi:.3g})", f"{b.tau_min_s:g}",
-               "reached" if b.floor_reached else "not reached: upper bound") if b else ("-", "-", "-")
-        lines.append(f"| {ch} | {' | '.join(arw)} | {' | '.join(bis)} | {r.mean_rate:+.4g} |")
+        nloop = f"{r.loop.white_rate:.3g}" if r.loop else "-"
+        bis = (f"{b.B:.4g} ({b.lo:.3g}..{b.hi:.3g})", f"{r.bi_min_tau_s:.3g}", f"{b.tau_min_s:g}",
+               "reached" if b.floor_reached else "not reached: upper bound") if b else ("-", "-", "-", "-")
+        lines.append(f"| {ch} | {' | '.join(arw)} | {nloop} | {' | '.join(bis)} | {r.mean_rate:+.4g} |")
     lines += ["", "Intervals are 68 % (one sigma) chi-square intervals from Greenhall's equivalent degrees of "
               "freedom. N is the value at tau = 1 s of the tau^-1/2 line through the stated range "
-              f"(IEEE 952 Annex C); B is the minimum Allan deviation at tau >= {p.arw_tau_hi_s:g} s with "
-              f"EDF >= {p.min_edf:g}, divided by 0.664.", "",
+              "(IEEE 952 Annex C); B is the minimum Allan deviation at tau >= the \"read at\" column with "
+              f"at least {p.min_edf:g} degrees of freedom for flicker noise, divided by 0.664; \"not reached\" means "
+              "the minimum is at the longest such tau and significantly below the curve three octaves earlier, so "
+              "B is an upper bound.", "",
               "**What the short-tau slope is.** The torquer output is the caging loop's output: above the "
-              "loop's bandwidth its proportional path passes the pickoff noise (rate = proportional gain x "
+              "loop's bandwidth its proportional path passes the pickoff noise (rate = proportional gain G_p x "
               "pickoff noise angle, a white rate), and below it the loop passes the platform's own motion "
               "about the input axis. So N here is the white-rate level of the caged channel, an upper bound "
-              "on the gyro's angle random walk, not the gyro's alone. The bias-instability floor is the "
-              "gyro's where these contributions have fallen below it (they fall as 1/tau beyond the loop's "
-              "time constant).", "",
+              "on the gyro's angle random walk, not the gyro's alone. N_loop is that white rate as the "
+              "record shows it: G_p (measured as the torquing rate per pickoff angle above the loop's "
+              "bandwidth) times the pickoff's noise there, over sqrt(2). Where N is close to N_loop, the "
+              "short-tau slope is the loop's, and the gyro's own N is not visible under it. ", "",
+              f"**Where B is read.** The torquer follows the drift only below the loop's bandwidth, and a PI "
+              f"loop's overshoot lifts the flicker's Allan deviation above its floor for several time "
+              f"constants beyond it, so B is read at tau >= {p.bi_min_loop_tc:g} loop time constants 1/G_p "
+              "(measured per channel); the loop's own contributions fall as 1/tau there.", "",
               f"## Null stability ({p.average_s:g}-s means; thesis Table 1 style, peak-to-peak)", "",
               f"| channel | p-p over the record (urad/s) | record | {_hours(p.null_span_s)} p-p (urad/s) | how |",
               "|---|---|---|---|---|"]
@@ -407,14 +514,15 @@ def plot_allan(path: Path, res: dict[str, ChannelDrift], p: Params) -> None:
         if r.arw is not None:
             t = np.array(r.arw.tau_range_s)
             ax.plot(t, r.arw.N / np.sqrt(t), "--", color=c, lw=2.5, alpha=0.6)
-        if r.bi is not None:
-            ax.axhline(r.bi.sigma_min, color=c, ls=":", lw=1)
+        if r.bi is not None:   # the floor over the taus it was read from, the minimum ringed
+            ax.plot([r.bi_min_tau_s, r.bi.tau_max_s], [r.bi.sigma_min] * 2, ":", color=c, lw=1.5)
+            ax.plot([r.bi.tau_min_s], [r.bi.sigma_min], "o", mfc="none", mec=c, ms=10)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("averaging time tau (s)")
     ax.set_ylabel("Allan deviation of -K_TO V_T (urad/s)")
     ax.set_title(f"Drift stability, Mode 3 (dashed: tau^-1/2 fit {p.arw_tau_lo_s:g}..{p.arw_tau_hi_s:g} s; "
-                 "dotted: floor 0.664 B)", fontsize=10)
+                 "dotted: floor 0.664 B over the taus it is read from)", fontsize=10)
     ax.grid(True, which="major", alpha=0.5)
     ax.grid(True, which="minor", alpha=0.15)
     ax.legend()
@@ -424,13 +532,15 @@ def plot_allan(path: Path, res: dict[str, ChannelDrift], p: Params) -> None:
 def plot_null(path: Path, res: dict[str, ChannelDrift], p: Params) -> None:
     fig, axes = new_figure(figsize=(9.0, 5.0))
     ax = axes.flat[0]
+    span = max((r.null.record_s for r in res.values() if r.null is not None), default=0.0)
+    unit, unit_name = (3600.0, "h") if span >= 7200 else (60.0, "min")
     for ch, r in res.items():
         if r.null is None or len(r.null.means) == 0:
             continue
         m = r.null.means
-        t = (np.arange(len(m)) + 0.5) * p.average_s / 3600.0
+        t = (np.arange(len(m)) + 0.5) * p.average_s / unit
         ax.plot(t, m - m.mean(), ".-", color=COLORS.get(ch), label=f"{ch}: p-p {r.null.peak_to_peak:.3g} urad/s")
-    ax.set_xlabel("time in the record (h; gaps and resumes closed up)")
+    ax.set_xlabel(f"time in the record ({unit_name}; gaps and resumes closed up)")
     ax.set_ylabel(f"{p.average_s:g}-s mean rate - record mean (urad/s)")
     ax.grid(True, alpha=0.4)
     ax.legend(fontsize=8)

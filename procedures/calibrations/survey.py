@@ -39,7 +39,7 @@ the survey gives:
   X - Y gyro (Fig. 49), as App. A.8 plots.
 
 The measurement uses no thesis result. The thesis's numbers (1.6 / 3.6 urad, the 3.5 Hz
-X dip) appear only in the report, as a reference column (``THESIS_REFERENCE``, or whatever
+X dip) appear only in the report, as a reference column (``fbs.procedures.thesis.SURVEY``, or whatever
 the caller passes as ``reference``).
 
 The record is taken in steps of ``piece_s`` so an aborted survey can be resumed: each step
@@ -65,18 +65,11 @@ from fbs.daq.spectra import band_rms, coherence
 
 from ..plotting import new_figure, save_figure
 from ..rigsetup import bring_to_mode3
+from .. import thesis
 from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 AXES = ("X", "Y")
 
-#: The thesis's figures (Klinger 1974, Ch. V E.1-2, Figs. 42/45), for the report's reference
-#: column only; the measurement never uses them. The Y dip is "around 6 Hz" and broad (Fig. 45).
-#: Values are numbers or display strings.
-THESIS_REFERENCE: dict[str, Any] = {
-    "source": "Klinger (1974) Ch. V E",
-    "platform_rms_urad": {"X": 1.6, "Y": 3.6},
-    "dip_hz": {"X": 3.5, "Y": "≈6, broad"},
-}
 
 
 def ac_ctl(axis: str) -> str:
@@ -287,7 +280,7 @@ class Survey(Procedure):
         super().__init__(params, **kw)
         self.rate_hz = self.params.rate_hz
         #: the report's reference column (never used by the measurement)
-        self.reference = dict(THESIS_REFERENCE if reference is None else reference)
+        self.reference = dict(thesis.SURVEY if reference is None else reference)
         self._pieces: list[str] = []
 
     def channels(self) -> tuple[str, ...]:

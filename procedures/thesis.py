@@ -1,0 +1,26 @@
+"""The thesis's reported figures (Klinger 1974), for the reference columns of reports only.
+
+Procedures never measure with these: they are what a report sets a measurement beside.
+K_TO and K_g: II C.1.a (Table 4); bearing To, eta and stiffness: Ch. V F; closed-loop
+platform rms and the autocollimator spectrum's dip: Ch. V E.1-2 (Figs. 42, 45).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+SURVEY: dict[str, Any] = {
+    "source": "thesis (Ch. V E)",
+    "platform_rms_urad": {"X": 1.6, "Y": 3.6},
+    "dip_hz": {"X": 3.5, "Y": "≈6, broad"},
+}
+
+FIGURES: dict[str, Any] = {
+    "K_TO_urad_per_s_per_V": {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0},
+    "K_g_mV_per_urad": {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74},
+    "To_Nm": {"X": 0.016, "Y": 0.016},
+    "eta_per_Nm": {"X": 1.6e6, "Y": 1.48e6},
+    "stiffness_Nm_per_rad": {"X": 410.0, "Y": 380.0},
+    "platform_rms_urad": SURVEY["platform_rms_urad"],
+    "dip_hz": SURVEY["dip_hz"],
+}
