@@ -206,7 +206,8 @@ def test_cli_human_output_and_out_dir(tmp_path, capsys):
 def test_cli_errors_exit_2(tmp_path, capsys):
     path = write_sweep(tmp_path / "s.h5")
     assert cli(["analyze", "hysteresis", str(path), "--axis", "Z"]) == 2
-    assert "no instrumentation autocollimator" in capsys.readouterr().out + capsys.readouterr().err
+    cap = capsys.readouterr()
+    assert "no instrumentation autocollimator" in cap.out + cap.err
 
 
 # ---------------------------------------------------------------------------- fast: the procedure
