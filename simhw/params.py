@@ -75,7 +75,7 @@ class PlatformAxis:
     armature_H: float = _f(0.023, lo=0.0, lo_open=True)            # La
     stop_deg: float = _f(25.0, lo=0.0, lo_open=True)
     disturbance_torque_rms_Nm: float = _f(0.0, lo=0.0)  # effect `platform_disturbance`
-    disturbance_corner_hz: float = _f(1.0, lo=0.0, lo_open=True)
+    disturbance_corner_hz: float = _f(5.0, lo=0.0, lo_open=True)  # as the effect and docs/simhw.md 6
 
 
 @dataclass
