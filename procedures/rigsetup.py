@@ -3,7 +3,6 @@ all the time passing through the recording (so it is in the file and an abort is
 
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -11,8 +10,6 @@ import numpy as np
 from fbs.drivers.errors import DeviceTimeout
 
 from .runner import Context
-
-log = logging.getLogger(__name__)
 
 
 def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_s: float = 600.0,

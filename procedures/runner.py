@@ -132,6 +132,16 @@ ProgressListener = Callable[[Progress], None]
 
 
 # ---------------------------------------------------------------------------- procedure
+def prior_value(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channel: str,
+                nominal: float) -> tuple[float, str]:
+    """An earlier ``procedure``'s measured ``key`` for ``channel`` (e.g. earth-rate's K_TO for X),
+    else the data sheet's ``nominal``; with where it came from (``procedure`` or "nominal")."""
+    v = (((prior.get(procedure) or {}).get(key)) or {}).get(channel)
+    if v is not None and math.isfinite(float(v)) and float(v) > 0:
+        return float(v), procedure
+    return float(nominal), "nominal"
+
+
 class Procedure(abc.ABC):
     """A scripted procedure. Subclasses set the class attributes and write ``plan`` and
     ``analyze``; ``fbs.procedures.catalogue`` finds them by their module's ``PROCEDURE``."""

@@ -54,7 +54,7 @@ from fbs.drivers.calibration import GYRO_CHANNELS
 from .. import allan
 from ..plotting import new_figure, save_figure
 from ..rigsetup import bring_to_mode3, wait_settled
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, prior_value
 
 log = logging.getLogger(__name__)
 
@@ -160,16 +160,11 @@ class Drift(Procedure):
     # ------------------------------------------------------------------ steps
     def kto(self, ctx: Context) -> tuple[dict[str, float], str]:
         """K_TO per channel (urad/s/V) and where it came from."""
-        prior = self.prior.get("earth-rate", {}).get("K_TO_urad_per_s_per_V") or {}
         nominal = ctx.rig.calibration.torquer_scale_urad_per_s_per_V
-        out, used_nominal = {}, []
-        for ch in GYRO_CHANNELS:
-            v = prior.get(ch)
-            if v is not None and math.isfinite(float(v)) and float(v) != 0.0:
-                out[ch] = float(v)
-            else:
-                out[ch] = float(nominal[ch])
-                used_nominal.append(ch)
+        got = {ch: prior_value(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", ch, nominal[ch])
+               for ch in GYRO_CHANNELS}
+        out = {ch: v for ch, (v, _) in got.items()}
+        used_nominal = [ch for ch, (_, src) in got.items() if src == "nominal"]
         if not used_nominal:
             source = "earth-rate result (prior run)"
         elif len(used_nominal) == len(GYRO_CHANNELS):
@@ -249,8 +244,9 @@ class Drift(Procedure):
         chunks, total, lost, rate = self.load(spans)
         record_s = total / rate
         cal = ctx.rig.calibration
-        prior_kg = self.prior.get("stopwatch", {}).get("K_g_mV_per_urad") or {}
-        kg = {ch: float(prior_kg.get(ch) or cal.pickoff_scale_mV_per_urad[ch]) for ch in GYRO_CHANNELS}
+        got_kg = {ch: prior_value(self.prior, "stopwatch", "K_g_mV_per_urad", ch, cal.pickoff_scale_mV_per_urad[ch])
+                  for ch in GYRO_CHANNELS}
+        kg = {ch: v for ch, (v, _) in got_kg.items()}
         res = analyze_channels(chunks, rate, kto, p, kg)
         ms: list[Measurement] = [
             Measurement("record length", record_s, "s", lo=p.min_record_s,
@@ -269,7 +265,8 @@ class Drift(Procedure):
             v = np.concatenate(chunks[_pickoff(ch)])
             v = v[np.isfinite(v)] * 1e3 / kg[ch]
             pickoff[ch] = (float(v.mean()), float(v.std())) if len(v) else (math.nan, math.nan)
-        md = _markdown(res, p, kto, kto_source, record_s, lost, total, pickoff, bool(prior_kg))
+        md = _markdown(res, p, kto, kto_source, record_s, lost, total, pickoff,
+                       any(src != "nominal" for _, src in got_kg.values()))
         figures = [
             Figure("allan", "Overlapping Allan deviation of the torquing rate -K_TO V_T per channel, with 68 % "
                    "confidence intervals (Greenhall EDF), the tau^-1/2 fit (ARW) and the bias-instability floor",

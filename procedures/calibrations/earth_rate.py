@@ -186,6 +186,11 @@ def _lstsq(design: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, n
     return coef, cov, resid
 
 
+def _delta_se(gradient: np.ndarray, cov: np.ndarray) -> float:
+    """Standard error of a function of the coefficients by the delta method."""
+    return float(math.sqrt(max(0.0, gradient @ cov @ gradient)))
+
+
 def _trend(order: np.ndarray | None, n: int) -> np.ndarray:
     """The drift-trend regressor: the stations' visiting order, centred (none if not given).
     The order, not the time, so that stations taken over by ``--resume`` from another file
@@ -213,10 +218,9 @@ def fit_horizontal(ch: str, psi_deg: np.ndarray, volts: np.ndarray, omega_h: flo
     d_kto = -omega_h / amp ** 3 * np.array([a, b, 0.0])
     drift = -c * kto
     d_drift = -c * d_kto + np.array([0.0, 0.0, -kto])
-    se = lambda g: float(math.sqrt(max(0.0, g @ cov @ g)))  # noqa: E731 - delta method
-    return ChannelFit(ch, kto / URAD, se(d_kto) / URAD, drift / URAD, se(d_drift) / URAD,
-                      math.degrees(psi0), math.degrees(se(d_psi0)), np.asarray(psi_deg), volts, volts - resid,
-                      float(np.sqrt(np.mean(resid ** 2))), "spindle")
+    return ChannelFit(ch, kto / URAD, _delta_se(d_kto, cov) / URAD, drift / URAD,
+                      _delta_se(d_drift, cov) / URAD, math.degrees(psi0), math.degrees(_delta_se(d_psi0, cov)),
+                      np.asarray(psi_deg), volts, volts - resid, float(np.sqrt(np.mean(resid ** 2))), "spindle")
 
 
 def omega_z(tilt_deg: np.ndarray, latitude_deg: float, earth_rate: float, psi0_deg: float = 0.0) -> np.ndarray:
@@ -236,9 +240,9 @@ def fit_vertical(ch: str, tilt_deg: np.ndarray, volts: np.ndarray, omega: np.nda
     d_kto = np.array([1.0 / alpha ** 2, 0.0])
     drift = -beta * kto
     d_drift = np.array([-beta / alpha ** 2, -kto])
-    se = lambda g: float(math.sqrt(max(0.0, g @ cov @ g)))  # noqa: E731
-    return ChannelFit(ch, kto / URAD, se(d_kto) / URAD, drift / URAD, se(d_drift) / URAD, None, None,
-                      np.asarray(tilt_deg), volts, volts - resid, float(np.sqrt(np.mean(resid ** 2))), "tilt")
+    return ChannelFit(ch, kto / URAD, _delta_se(d_kto, cov) / URAD, drift / URAD,
+                      _delta_se(d_drift, cov) / URAD, None, None, np.asarray(tilt_deg), volts, volts - resid,
+                      float(np.sqrt(np.mean(resid ** 2))), "tilt")
 
 
 def fit_earth_rate(azimuth_stations: list[dict], tilt_stations: list[dict], *, latitude_deg: float,

@@ -49,7 +49,7 @@ from fbs.drivers.calibration import GYRO_CHANNELS
 
 from ..plotting import new_figure, save_figure
 from ..rigsetup import bring_to_mode3, wait_settled
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, prior_value
 
 
 @dataclass
@@ -112,10 +112,8 @@ class Stopwatch(Procedure):
     def kto(self, ctx: Context, ch: str) -> tuple[float, str]:
         if ch in self.params.kto_urad_per_s_per_V:
             return float(self.params.kto_urad_per_s_per_V[ch]), "given"
-        er = self.prior.get("earth-rate", {}).get("K_TO_urad_per_s_per_V") or {}
-        if er.get(ch) is not None:
-            return float(er[ch]), "earth-rate"
-        return float(ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch]), "nominal"
+        return prior_value(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", ch,
+                           ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch])
 
     def plan(self, ctx: Context) -> Iterator[Step]:
         p = self.params

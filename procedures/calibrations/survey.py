@@ -66,7 +66,7 @@ from fbs.daq.spectra import band_rms, coherence
 from ..plotting import new_figure, save_figure
 from ..rigsetup import bring_to_mode3
 from .. import thesis
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, prior_value
 
 AXES = ("X", "Y")
 
@@ -256,15 +256,8 @@ def spans_csd(spans: Sequence[tuple[str, int, int]], channels: Sequence[str], se
 def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]
                    ) -> tuple[dict[str, float], dict[str, str]]:
     """Kg (mV/urad) per axis and where it came from: the stopwatch summary if given, else nominal."""
-    measured = (prior.get("stopwatch") or {}).get("K_g_mV_per_urad") or {}
-    scales, source = {}, {}
-    for a in AXES:
-        v = measured.get(a)
-        if v is not None and math.isfinite(float(v)) and float(v) > 0:
-            scales[a], source[a] = float(v), "stopwatch"
-        else:
-            scales[a], source[a] = float(nominal[a]), "nominal"
-    return scales, source
+    got = {a: prior_value(prior, "stopwatch", "K_g_mV_per_urad", a, nominal[a]) for a in AXES}
+    return {a: v for a, (v, _) in got.items()}, {a: src for a, (_, src) in got.items()}
 
 
 # ---------------------------------------------------------------------------- the procedure
