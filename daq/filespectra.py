@@ -153,9 +153,10 @@ def used_segments_dof(window, nperseg: int, noverlap: int, used: np.ndarray) -> 
 
 def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperseg: int,
                    noverlap: int | None = None, nfft: int | None = None, window="hann",
-                   detrend="linear", scaling: Scaling = "density", read_bytes: int = READ_BYTES,
-                   batch_bytes: int = BATCH_BYTES) -> RunCsd:
-    """Welch cross-spectral matrix of ``channels`` of a run file, in bounded memory.
+                   detrend="linear", scaling: Scaling = "density", start: int = 0, stop: int | None = None,
+                   read_bytes: int = READ_BYTES, batch_bytes: int = BATCH_BYTES) -> RunCsd:
+    """Welch cross-spectral matrix of ``channels`` of a run file (samples ``start .. stop``,
+    default all), in bounded memory.
 
     The options are those of ``spectra.welch_csd_matrix`` (one-sided; ``noverlap``
     defaults to ``nperseg // 2``, ``nfft`` to ``nperseg``) except that ``detrend``
@@ -168,8 +169,8 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     if not isinstance(run, RunFile):
         with RunFile(run) as opened:
             return run_csd_matrix(opened, channels, nperseg=nperseg, noverlap=noverlap, nfft=nfft,
-                                  window=window, detrend=detrend, scaling=scaling, read_bytes=read_bytes,
-                                  batch_bytes=batch_bytes)
+                                  window=window, detrend=detrend, scaling=scaling, start=start, stop=stop,
+                                  read_bytes=read_bytes, batch_bytes=batch_bytes)
     channels = tuple(channels)
     if not channels:
         raise ValueError("no channels given")
@@ -183,7 +184,11 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
         raise ValueError(f"scaling={scaling!r} must be 'density' or 'spectrum'")
     if detrend not in ("constant", "linear", False, None):
         raise ValueError(f"detrend={detrend!r} must be 'constant', 'linear' or False")
-    fs, n = run.rate_hz, run.n_samples
+    fs = run.rate_hz
+    start, stop = int(start), run.n_samples if stop is None else min(int(stop), run.n_samples)
+    if not 0 <= start <= stop:
+        raise ValueError(f"samples {start}..{stop} are not a span of {run.path} ({run.n_samples} samples)")
+    n = stop - start
     nperseg = int(nperseg)
     if nperseg < 1:
         raise ValueError(f"nperseg={nperseg} is not a positive integer")
@@ -201,7 +206,7 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     f = None
     for g0 in range(0, K, per_read):
         g1 = min(K, g0 + per_read)
-        buf = run.read(channels, g0 * step, (g1 - 1) * step + nperseg)
+        buf = run.read(channels, start + g0 * step, start + (g1 - 1) * step + nperseg)
         good = _good_segments(buf, g1 - g0, step, nperseg)
         used[g0:g1] = good
         for s, e in _runs(good):

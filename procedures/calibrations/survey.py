@@ -168,28 +168,6 @@ def find_dip(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, smooth_hz
     return Dip(freq, depth, float(f[i]))
 
 
-class _Span(RunFile):
-    """Samples ``start .. stop`` of an open run file, seen as a run file of its own, so that
-    ``run_csd_matrix`` (which walks a whole file) can average the segments of one span in
-    bounded memory. Nothing is opened or closed here: the owner closes ``run``."""
-
-    def __init__(self, run: RunFile, start: int, stop: int) -> None:  # no super().__init__: nothing to open
-        self._run, self._start = run, int(start)
-        self._stop = min(int(stop), run.n_samples)
-        self.path, self.channels, self.rate_hz, self.units = run.path, run.channels, run.rate_hz, run.units
-
-    @property
-    def n_samples(self) -> int:
-        return max(0, self._stop - self._start)
-
-    def read(self, channels: Sequence[str] | None = None, start: int = 0, stop: int | None = None) -> np.ndarray:
-        n = self.n_samples
-        stop = n if stop is None else stop
-        if not 0 <= start <= stop <= n:
-            raise ValueError(f"samples {start}..{stop} are outside the span of {n} samples")
-        return self._run.read(channels, self._start + start, self._start + stop)
-
-
 def merge_spans(pieces: Sequence[Mapping[str, Any]]) -> list[tuple[str, int, int]]:
     """(file, start, stop) of the recorded pieces, adjacent pieces of one file merged."""
     out: list[list] = []
@@ -232,13 +210,13 @@ def spans_csd(spans: Sequence[tuple[str, int, int]], channels: Sequence[str], se
         try:
             with RunFile(file) as rf:
                 nperseg = int(round(seg_s * rf.rate_hz))
-                span = _Span(rf, start, stop)
-                if span.n_samples < nperseg:
+                n = max(0, min(stop, rf.n_samples) - start)
+                if n < nperseg:
                     notes.append(f"{Path(file).name} samples {start}..{stop}: shorter than one {seg_s:g} s segment, "
                                  f"left out")
                     continue
-                parts.append(run_csd_matrix(span, channels, nperseg=nperseg))
-                seconds += span.n_samples / rf.rate_hz
+                parts.append(run_csd_matrix(rf, channels, nperseg=nperseg, start=start, stop=stop))
+                seconds += n / rf.rate_hz
         except (OSError, ValueError) as exc:  # RunFileError is an OSError: a resumed piece's file may be gone
             notes.append(f"{Path(file).name} samples {start}..{stop}: not read ({exc})")
     if not parts:

@@ -167,3 +167,18 @@ def test_memory_stays_a_small_fraction_of_a_100_MB_file(tmp_path):
     assert res.segments_used == n_segments(n, 4096, 2048)
     assert np.median(res.psd("a")[1:-1]) == pytest.approx(2 / 1000.0, rel=0.02)   # unit white noise
     assert peak < 0.25 * size, f"peak {peak / 1e6:.1f} MB for a {size / 1e6:.0f} MB file"
+
+
+def test_a_span_of_the_file_gives_the_welch_matrix_of_that_slice(tmp_path):
+    """start/stop: a procedure's record is one span of a file that also holds its setup."""
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((2, 5000))
+    x[1] += 0.5 * x[0]
+    path = tmp_path / "r.h5"
+    with RunWriter(path, rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"}) as w:
+        w.append({"a": x[0], "b": x[1]})
+    with RunFile(path) as rf:
+        got = run_csd_matrix(rf, ["a", "b"], nperseg=256, start=1234, stop=4321)
+    f, S = welch_csd_matrix(x[:, 1234:4321], 100.0, nperseg=256, detrend="linear")
+    np.testing.assert_allclose(got.f, f)
+    np.testing.assert_allclose(got.S, S, rtol=1e-10, atol=1e-14)

@@ -17,12 +17,9 @@ import threading
 import numpy as np
 import pytest
 
-from fbs.daq.filespectra import run_csd_matrix
-from fbs.daq.reader import RunFile
-from fbs.daq.runfile import RunWriter
-from fbs.daq.spectra import band_rms, psd, welch_csd_matrix
+from fbs.daq.spectra import band_rms, psd
 from fbs.procedures.calibrations import catalogue
-from fbs.procedures.calibrations.survey import (Params, Survey, _Span, find_dip, merge_spans, pickoff_scales)
+from fbs.procedures.calibrations.survey import (Params, Survey, find_dip, merge_spans, pickoff_scales)
 from fbs.procedures.runner import load_resume, run_procedure
 from fbs.simhw.params import SimConfig, load_config
 from fbs.simhw.simulator import Simulator, pickoff_white_psd
@@ -70,20 +67,6 @@ def test_pickoff_scale_comes_from_the_stopwatch_else_nominal():
     assert pickoff_scales({}, nominal) == ({"X": 6.03, "Y": 6.70}, {"X": "nominal", "Y": "nominal"})
     prior = {"stopwatch": {"K_g_mV_per_urad": {"X": 7.1, "Y": None, "Z": 7.0, "XRD": 5.0}}}
     assert pickoff_scales(prior, nominal) == ({"X": 7.1, "Y": 6.70}, {"X": "stopwatch", "Y": "nominal"})
-
-
-def test_span_view_gives_the_welch_matrix_of_that_slice(tmp_path):
-    rng = np.random.default_rng(3)
-    x = rng.standard_normal((2, 5000))
-    x[1] += 0.5 * x[0]
-    path = tmp_path / "r.h5"
-    with RunWriter(path, rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"}) as w:
-        w.append({"a": x[0], "b": x[1]})
-    with RunFile(path) as rf:
-        got = run_csd_matrix(_Span(rf, 1234, 4321), ["a", "b"], nperseg=256)
-    f, S = welch_csd_matrix(x[:, 1234:4321], 100.0, nperseg=256, detrend="linear")
-    np.testing.assert_allclose(got.f, f)
-    np.testing.assert_allclose(got.S, S, rtol=1e-10, atol=1e-14)
 
 
 def test_procedure_is_catalogued_with_the_design_json_keys():
