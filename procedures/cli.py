@@ -11,6 +11,7 @@ from fbs.simhw import effects as effect_catalogue
 from fbs.simhw.params import ConfigError, load_config
 
 from . import analyze, demo, inspect, run, spectra
+from .gap import cli as gap_cli
 
 log = logging.getLogger("fbs")
 
@@ -47,6 +48,12 @@ def _record(args: argparse.Namespace) -> int:
     return 0
 
 
+def _console(args: argparse.Namespace) -> int:
+    from fbs.console.app import run_console  # Textual is imported only for the console
+
+    return run_console(args.rig, args.out)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fbs", description="Fixed Base Simulator HIL: DAQ, procedures, simulation.")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
@@ -73,11 +80,20 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output .h5 file")
     r.set_defaults(func=_record)
 
+    c = sub.add_parser("console", help="the operator console (Textual): meters, modes, set-points, recording, "
+                                       "procedures, spectra")
+    c.add_argument("--rig", default="sim?realtime=1",
+                   help="rig URL (default: the simulated rig paced to the wall clock, 'sim?realtime=1')")
+    c.add_argument("--out", default="out", help="directory for recordings, procedure runs and console.log "
+                                                "(default: out)")
+    c.set_defaults(func=_console)
+
     inspect.add_parser(sub)
     spectra.add_parser(sub)
     run.add_parser(sub)
     demo.add_parser(sub)
     analyze.add_parser(sub)
+    gap_cli.add_parser(sub)
     return p
 
 

@@ -20,6 +20,19 @@ import numpy as np
 import scipy.signal
 
 
+def held_psd(s_norm: np.ndarray, dt: float) -> np.ndarray:
+    """One-sided PSD (units^2/Hz) of a sequence held over steps ``dt`` from its per-sample
+    two-sided spectrum ``s_norm`` = sum_k R[k] e^(-j w k): the plant's exact ZOH model sees the
+    held sequence, so its output PSD is |H(e^(j w))|^2 times this. White of variance s^2 gives
+    2 s^2 dt, the ``psd`` it was made from."""
+    return 2.0 * dt * np.asarray(s_norm)
+
+
+def _ar1_norm(a: np.ndarray | float, var_in: np.ndarray | float, w: np.ndarray) -> np.ndarray:
+    """Per-sample spectrum of x[n] = a x[n-1] + e[n], var(e) = var_in: var_in / |1 - a e^(-jw)|^2."""
+    return var_in / np.abs(1.0 - a * np.exp(-1j * w)) ** 2
+
+
 class WhiteNoise:
     """Band-limited white noise held over each step: one-sided PSD ``psd`` up to Nyquist."""
 
@@ -31,6 +44,14 @@ class WhiteNoise:
         if self.sigma == 0.0:
             return np.zeros(n)
         return self.sigma * self.rng.standard_normal(n)
+
+    def spectrum_key(self) -> tuple:
+        """Everything the spectrum depends on (model-gap caches spectra by it)."""
+        return ("WhiteNoise", self.sigma)
+
+    def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
+        """One-sided PSD of the held sequence, 2 dt S(w) (see :func:`held_psd`)."""
+        return held_psd(np.full(np.shape(f), self.sigma**2), dt)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -50,29 +71,63 @@ class FlickerNoise:
     PER_DECADE = 2.5
 
     def __init__(self, rng: np.random.Generator, level: float, f_lo: float, f_hi: float, dt: float) -> None:
-        self.level, self.dt = level, dt
-        self.groups: list[dict] = []
+        self.level, self.f_lo, self.f_hi, self.dt = level, f_lo, f_hi, dt
+        self.rng = rng
+        self._groups: list[dict] | None = None
         self.ahead = np.zeros(0)
-        if level <= 0:
-            return
-        f_hi = min(f_hi, 0.2 / dt)
-        n = max(2, int(math.ceil(math.log10(f_hi / f_lo) * self.PER_DECADE)) + 1)
-        fc = np.geomspace(f_lo, f_hi, n)
+
+    def _bank(self) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+        """The lags, deterministic: (decimation, a, b, stationary variance) per group."""
+        if self.level <= 0:
+            return []
+        dt = self.dt
+        f_hi = min(self.f_hi, 0.2 / dt)
+        n = max(2, int(math.ceil(math.log10(f_hi / self.f_lo) * self.PER_DECADE)) + 1)
+        fc = np.geomspace(self.f_lo, f_hi, n)
         d = math.log(fc[1] / fc[0])
-        q = 4 * math.pi * d * level * fc
+        q = 4 * math.pi * d * self.level * fc
         # Group lags by decimation (power of two) so each runs at >= 40 x its corner.
         decim = np.maximum(1, 2 ** np.floor(np.log2(1.0 / (40.0 * fc * dt)))).astype(np.int64)
+        out = []
         for dec in sorted(set(decim.tolist())):
             sel = decim == dec
-            h = dt * dec
             w = 2 * math.pi * fc[sel]
-            a = np.exp(-w * h)
+            a = np.exp(-w * dt * dec)
             var = q[sel] / (2 * w)  # stationary variance of each lag
-            b = np.sqrt(var * (1 - a * a))
-            x0 = np.sqrt(var) * rng.standard_normal(sel.sum())  # start in steady state
-            self.groups.append({"dec": int(dec), "a": a, "b": b, "state": x0,
-                                "rng": np.random.Generator(np.random.PCG64(rng.integers(2**63))),
-                                "held": np.zeros(0), "pos": 0})
+            out.append((int(dec), a, np.sqrt(var * (1 - a * a)), var))
+        return out
+
+    @property
+    def groups(self) -> list[dict]:
+        """The running lags, made on first use (the random draws happen then, in a fixed order)."""
+        if self._groups is None:
+            self._groups = []
+            for dec, a, b, var in self._bank():
+                x0 = np.sqrt(var) * self.rng.standard_normal(len(a))  # start in steady state
+                self._groups.append({"dec": dec, "a": a, "b": b, "state": x0,
+                                     "rng": np.random.Generator(np.random.PCG64(self.rng.integers(2**63))),
+                                     "held": np.zeros(0), "pos": 0})
+        return self._groups
+
+    def spectrum_key(self) -> tuple:
+        return ("FlickerNoise", self.level, self.f_lo, self.f_hi, self.dt)
+
+    def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
+        """One-sided PSD of the bank as the plant sees it: each group is a set of AR(1) lags at
+        step ``dec dt``, held for ``dec`` steps; a held sequence has per-sample spectrum
+        |P(w)|^2 S_x(dec w) / dec with P the ``dec``-step box (zero-order-hold upsampling)."""
+        f = np.asarray(f, float)
+        w = 2 * np.pi * f * dt
+        total = np.zeros_like(f)
+        for dec, a_all, b_all, _ in self._bank():
+            sx = sum(_ar1_norm(a, b * b, dec * w) for a, b in zip(a_all, b_all))
+            if dec > 1:
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    box = np.where(np.abs(np.sin(w / 2)) < 1e-300, float(dec * dec),
+                                   (np.sin(dec * w / 2) / np.sin(w / 2)) ** 2)
+                sx = sx * box / dec
+            total += sx
+        return held_psd(total, dt)
 
     #: Samples are made ahead in chunks of this many steps, always on the same grid from the
     #: run's start, so the output does not depend on how callers cut the run into blocks.
@@ -120,6 +175,15 @@ class RandomWalk:
         self.value = float(w[-1])
         return w
 
+    def spectrum_key(self) -> tuple:
+        return ("RandomWalk", self.step)
+
+    def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
+        """step^2 / |1 - e^(-jw)|^2: the random walk's (improper) spectrum, infinite at f = 0."""
+        w = 2 * np.pi * np.asarray(f, float) * dt
+        with np.errstate(divide="ignore"):
+            return held_psd(_ar1_norm(1.0, self.step**2, w), dt)
+
 
 #: The line rotation restarts from the exact phase every this many steps, counted from the
 #: run's start, so rounding never accumulates and no cut of the run changes a sample.
@@ -166,6 +230,17 @@ class Lines:
         self.k += n
         return out
 
+    def spectrum_key(self) -> tuple:
+        return ("Lines",)
+
+    def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
+        """Deterministic: no continuous spectrum (the sinusoids are given by :meth:`lines`)."""
+        return np.zeros(np.shape(f))
+
+    def lines(self, dt: float) -> list[tuple[float, float]]:
+        """The sinusoids as (frequency Hz, amplitude)."""
+        return [(fd / dt, a) for fd, a in zip(self.freq_dt, self.amp)]
+
 
 class LagNoise:
     """White noise through w/(s+w), w = 2 pi corner (exact ZOH), scaled to ``rms``.
@@ -185,6 +260,13 @@ class LagNoise:
         self.y = float(y[-1])
         return y
 
+    def spectrum_key(self) -> tuple:
+        return ("LagNoise", self.a, self.white.sigma)
+
+    def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
+        w = 2 * np.pi * np.asarray(f, float) * dt
+        return held_psd(_ar1_norm(self.a, ((1 - self.a) * self.white.sigma) ** 2, w), dt)
+
 
 class TelegraphJumps:
     """Random offset steps of +-amplitude at Poisson times (the thesis's locked-oscillator
@@ -202,3 +284,13 @@ class TelegraphJumps:
         out = self.level * sign
         self.level = float(out[-1])
         return out
+
+    def spectrum_key(self) -> tuple:
+        return ("TelegraphJumps", self.amp, self.p)
+
+    def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
+        """A random telegraph signal flipping with probability p per step has autocorrelation
+        A^2 (1 - 2p)^|k|: an AR(1) spectrum with r = 1 - 2p and innovation variance A^2 (1 - r^2)."""
+        w = 2 * np.pi * np.asarray(f, float) * dt
+        r = 1.0 - 2.0 * self.p
+        return held_psd(_ar1_norm(r, self.amp**2 * (1 - r * r), w), dt)

@@ -73,10 +73,11 @@ def pickoff_white_psd(rms_urad: float, lines: list) -> float:
     return max(var, 0.0) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
 
 
-class _Sources:
+class Sources:
     """All random inputs of the plant, one independent stream each."""
 
     def __init__(self, cfg: SimConfig, seed: int | tuple[int, int], dt: float) -> None:
+        self.dt = dt
         ss = np.random.SeedSequence(seed)
         names = ([f"nac_{a}" for a in AXES] + [f"np_{c}" for c in GYRO_CHANNELS]
                  + [f"wrand_{c}" for c in GYRO_CHANNELS] + [f"md_{a}" for a in AXES])
@@ -124,6 +125,33 @@ class _Sources:
         for part in self.parts[name]:
             out += part.take(n)
         return out
+
+    @property
+    def names(self) -> list[str]:
+        return list(self.parts)
+
+    def spectrum(self, name: str, f: np.ndarray, cache: dict | None = None) -> dict[str, np.ndarray]:
+        """One-sided PSD (units^2/Hz) of input ``name`` as the plant's ZOH model sees it, by kind
+        of source ("WhiteNoise", "FlickerNoise", ...), without deterministic lines: |H|^2 times
+        their sum is the output's PSD (the model-gap workflow's expected spectra). With
+        ``cache`` (a dict the caller keeps, for one frequency array), each source's spectrum is
+        computed once per set of its parameters."""
+        out: dict[str, np.ndarray] = {}
+        for part in self.parts[name]:
+            kind = type(part).__name__
+            if cache is None:
+                sp = part.spectrum(f, self.dt)
+            else:
+                key = part.spectrum_key() + (self.dt,)
+                sp = cache.get(key)
+                if sp is None:
+                    sp = cache[key] = part.spectrum(f, self.dt)
+            out[kind] = out.get(kind, 0.0) + sp
+        return out
+
+    def lines(self, name: str) -> list[tuple[float, float]]:
+        """Deterministic sinusoids of input ``name``: (frequency Hz, amplitude)."""
+        return [ln for part in self.parts[name] if hasattr(part, "lines") for ln in part.lines(self.dt)]
 
 
 class Simulator:
@@ -183,7 +211,7 @@ class Simulator:
         s = self.cfg.sampling
         # Each time base gets its own streams, derived from the one seed.
         seed = self.seed if self._rate_changes == 0 else (self.seed, self._rate_changes)
-        self.sources = _Sources(self.cfg, seed, self.dt)
+        self.sources = Sources(self.cfg, seed, self.dt)
         self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
                                    s.anti_alias_poles, s.adc_bits, s.default_range_V)
         for c, r in (ranges or {}).items():

@@ -5,6 +5,12 @@ name, its parameters with defaults and priors, and ``apply``, which returns a mo
 a :class:`~fbs.simhw.params.SimConfig`. ``catalogue()`` finds every module by scanning the
 package, so adding an effect is adding a file; nothing else is edited.
 
+For the model-gap workflow an effect may also say which parameters the spectra identify
+(``fit``; default all) and where to start looking (``guess``: given the workflow's evidence, an
+object with ``peaks_hz`` (narrow excesses, strongest first), ``steps_urad`` (offset steps seen in
+the time domain) and ``duration_s``, a list of parameter dicts; a value of a parameter not in
+``fit`` holds it at that value).
+
 The *nominal* model is the Ch. III plant with the gimbal-bearing torque omitted, as the
 thesis began (Ch. V F); :func:`nominal` builds it.
 """
@@ -14,7 +20,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Any, Callable
 
 from ..params import AXES, SimConfig
 
@@ -38,6 +44,14 @@ class Effect:
     params: tuple[Param, ...]
     apply: Callable[..., SimConfig] = field(repr=False)
     key_param: str | None = None  # the parameter the gap workflow must recover
+    fit: tuple[str, ...] | None = None  # parameters the spectra identify (None: all)
+    guess: Callable[[Any], list[dict[str, float]]] | None = field(default=None, repr=False)
+    derive: Callable[[dict[str, float]], dict[str, float]] | None = field(default=None, repr=False)  # params as applied
+
+    @property
+    def fit_params(self) -> tuple[Param, ...]:
+        names = self.fit if self.fit is not None else tuple(p.name for p in self.params)
+        return tuple(p for p in self.params if p.name in names)
 
     def inject(self, cfg: SimConfig, axis: str = "X", **values: float) -> SimConfig:
         """A copy of ``cfg`` with this effect on ``axis``; unknown or out-of-prior values raise."""

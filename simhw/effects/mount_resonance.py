@@ -14,6 +14,11 @@ def _apply(cfg, axis, freq_hz, damping):
     return cfg
 
 
+def _guess(evidence) -> list[dict[str, float]]:
+    # a lightly damped mode is a narrow peak: start at each excess the comparison found
+    return [{"freq_hz": f} for f in evidence.peaks_hz[:4] if 10.0 <= f <= 300.0]
+
+
 EFFECT = Effect("mount_resonance", __doc__.strip().splitlines()[0],
                 (Param("freq_hz", 60.0, 10.0, 300.0, log=True), Param("damping", 0.05, 0.005, 0.5, log=True)),
-                _apply, key_param="freq_hz")
+                _apply, key_param="freq_hz", guess=_guess)

@@ -14,7 +14,18 @@ def _apply(cfg, axis, amplitude_urad, interval_s):
     return cfg
 
 
+def _guess(evidence) -> list[dict[str, float]]:
+    # Spectra see only amplitude^2 / interval; the steps seen in the time domain give both.
+    # Each jump is a swing of 2 x amplitude (+a to -a).
+    steps = sorted(abs(s) for s in evidence.steps_urad)
+    if not steps:
+        return []
+    amp = steps[len(steps) // 2] / 2
+    interval = evidence.duration_s / len(steps)
+    return [{"amplitude_urad": min(max(amp, 0.2), 200.0), "interval_s": min(max(interval, 5.0), 1000.0)}]
+
+
 EFFECT = Effect("offset_jumps", __doc__.strip().splitlines()[0],
                 (Param("amplitude_urad", 5.0, 0.2, 200.0, log=True),
                  Param("interval_s", 60.0, 5.0, 1000.0, log=True)),
-                _apply, key_param="amplitude_urad")
+                _apply, key_param="amplitude_urad", fit=("amplitude_urad",), guess=_guess)

@@ -14,7 +14,12 @@ def _apply(cfg, axis, freq_hz, amplitude_V):
     return cfg
 
 
+def _guess(evidence) -> list[dict[str, float]]:
+    # a line is narrow: start at each narrow excess the comparison found
+    return [{"freq_hz": f} for f in evidence.peaks_hz[:4] if 1.0 <= f <= 450.0]
+
+
 EFFECT = Effect("pickup_line", __doc__.strip().splitlines()[0],
                 (Param("freq_hz", 200.0, 1.0, 450.0, log=True),
                  Param("amplitude_V", 0.003, 1e-4, 0.1, log=True)),
-                _apply, key_param="freq_hz")
+                _apply, key_param="freq_hz", guess=_guess)

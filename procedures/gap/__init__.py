@@ -1,0 +1,1 @@
+"""The model-gap workflow (DESIGN.md sections 7-8)."""
