@@ -1,0 +1,374 @@
+"""``fbs console``: the operator console (Textual), successor of the thesis's control console.
+
+Panels (F1-F6): meters, modes, set-points, recording, procedures, spectra; the status line
+on top shows rig, mode, alarm, recording and procedure on every panel. The rig lives on one
+thread of its own (``RigWorker``); this UI thread only queues commands, copies the worker's
+``LiveState`` on a timer (``refresh_s``) and handles its posted outcomes, so it never waits
+on a device. See docs/console.md.
+"""
+
+from __future__ import annotations
+
+import logging
+import signal
+from pathlib import Path
+
+from textual import work
+from textual.app import App, ComposeResult
+from textual.binding import Binding
+from textual.message import Message
+from textual.widgets import Footer, TabbedContent, TabPane
+
+from fbs.drivers.calibration import RigCalibration
+
+from .feeds import Feed
+from .limits import SetpointLimits
+from .logfeed import FeedHandler
+from .meterdata import MeterSnapshot, MeterStore, MeterSpec, permanent_meters
+from .meters import MeterPanel
+from .modes import ModePanel
+from .operator import ConsoleOperator, OperatorQuestion
+from .operatorscreen import OperatorScreen
+from .procedures import ProcedurePanel, parse_param_text
+from .recording import RecordingPanel, default_path
+from .rigworker import RigWorker
+from .setpoints import SetpointPanel
+from .spectra import SpectraPanel
+from .state import (CommandOutcome, ProcedureEnded, RecordingEnded, RigFailed, RigFault, RigReady,
+                    WorkerStopped)
+from .statusbar import StatusBar
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RIG = "sim?realtime=1"
+#: (id, tab title, key); the tab titles carry their keys, for an operator without a footer
+PANELS = (("meters", "Meters", "f1"), ("modes", "Modes", "f2"), ("setpoints", "Set-pts", "f3"),
+          ("recording", "Record", "f4"), ("procedures", "Procs", "f5"), ("spectra", "Spectra", "f6"))
+PANEL_KEYS = Binding.Group("panel")
+
+
+class RigNews(Message):
+    """Something the rig thread (or the manual-table operator) posted."""
+
+    def __init__(self, item: object) -> None:
+        super().__init__()
+        self.item = item
+
+
+class ConsoleApp(App[int]):
+    CSS_PATH = str(Path(__file__).with_name("styles.tcss"))  # absolute: subclasses live elsewhere
+    TITLE = "fbs console"
+    ENABLE_COMMAND_PALETTE = False
+    BINDINGS = [Binding(key, f"panel('{pid}')", title, group=PANEL_KEYS) for pid, title, key in PANELS] + [
+        Binding("q", "quit", "quit"),
+        Binding("ctrl+q", "quit", "quit", show=False, priority=True),
+    ]
+
+    def __init__(self, rig_url: str = DEFAULT_RIG, *, out_dir: str | Path = "out", live_meters: bool = True,
+                 refresh_s: float = 0.08, meter_rate_hz: float = 200.0) -> None:
+        super().__init__()
+        self.rig_url = rig_url
+        self.out_dir = Path(out_dir)
+        self.live_meters = live_meters
+        self.refresh_s = refresh_s
+        self.meter_store = MeterStore()
+        self.log_feed: Feed[str] = Feed(5000)
+        self.operator = ConsoleOperator()
+        self.worker_ = RigWorker(rig_url, out_dir=self.out_dir, post=self._from_worker, meters=self.meter_store,
+                                 operator=self.operator, meter_rate_hz=meter_rate_hz)
+        # the data sheet's nominal constants until the rig gives its own: the panel is up at once
+        self.specs: tuple[MeterSpec, ...] = permanent_meters(RigCalibration())
+        self.limits: SetpointLimits | None = None
+        self.outcomes: list[CommandOutcome] = []   # every outcome, newest last (tests read it)
+        self.stopped: WorkerStopped | None = None
+        self.last_summary = None
+        self._quitting = False
+        self._meter_seq = -1
+        self._handler = FeedHandler(self.log_feed)
+        self.catalogue: dict[str, type] = {}
+        self._saved_level = logging.NOTSET
+
+    # ------------------------------------------------------------------ layout
+    def compose(self) -> ComposeResult:
+        yield StatusBar(self.rig_url, id="status")
+        with TabbedContent(initial="meters"):
+            for pid, title, key in PANELS:
+                with TabPane(f"{key.upper()} {title}", id=pid):
+                    yield self._panel(pid)
+        yield Footer(compact=True)
+
+    def _panel(self, pid: str):
+        return {"meters": lambda: MeterPanel(id="meters-panel"), "modes": lambda: ModePanel(id="modes-panel"),
+                "setpoints": lambda: SetpointPanel(id="setpoints-panel"),
+                "recording": lambda: RecordingPanel(id="recording-panel"),
+                "procedures": lambda: ProcedurePanel(id="procedures-panel"),
+                "spectra": lambda: SpectraPanel(id="spectra-panel")}[pid]()
+
+    def on_mount(self) -> None:
+        # the panels, looked up once: a modal screen on top hides them from query_one
+        self.w_status = self.query_one("#status", StatusBar)
+        self.w_meters = self.query_one("#meters-panel", MeterPanel)
+        self.w_modes = self.query_one("#modes-panel", ModePanel)
+        self.w_setpoints = self.query_one("#setpoints-panel", SetpointPanel)
+        self.w_recording = self.query_one("#recording-panel", RecordingPanel)
+        self.w_procedures = self.query_one("#procedures-panel", ProcedurePanel)
+        self.w_spectra = self.query_one("#spectra-panel", SpectraPanel)
+        logging.getLogger().addHandler(self._handler)
+        # the live log shows the procedures' INFO records, whatever the host program configured
+        pkg = logging.getLogger("fbs")
+        self._saved_level = pkg.level
+        if pkg.getEffectiveLevel() > logging.INFO:
+            pkg.setLevel(logging.INFO)
+        self.operator.ask = lambda q: self.post_message(RigNews(q))
+        # the rig's start (numba kernels loading, holding the GIL) and the procedures' imports
+        # wait for the first frame: the operator sees the panel at once
+        self.call_after_refresh(self._start_background)
+        self.set_interval(self.refresh_s, self.refresh_live)
+        self.w_meters.show(self.specs, MeterSnapshot(0))
+        self.w_meters.focus()
+        self._install_signals()
+
+    def _start_background(self) -> None:
+        if not self.worker_.stopped.is_set():
+            self.worker_.start()
+        self._load_catalogue()
+
+    @work(thread=True, exclusive=True, group="catalogue")
+    def _load_catalogue(self) -> None:
+        # the procedures import the analysis stack (seconds): off the UI thread, so the meter
+        # panel is up at once
+        cat = _catalogue()
+        self.call_from_thread(self._catalogue_loaded, cat)
+
+    def _catalogue_loaded(self, cat: dict[str, type]) -> None:
+        self.catalogue = cat
+        self.w_procedures.set_catalogue(cat)
+
+    def _install_signals(self) -> None:
+        # SIGTERM, or SIGHUP when an SSH session drops: quit the same way as the quit key
+        try:
+            import asyncio
+            loop = asyncio.get_running_loop()
+            for sig in (signal.SIGTERM, signal.SIGHUP):
+                loop.add_signal_handler(sig, lambda s=sig: self._signalled(s))
+        except (RuntimeError, NotImplementedError, ValueError):  # not the main thread (tests): nothing to do
+            pass
+
+    def _signalled(self, sig: int) -> None:
+        log.warning("console got signal %s: going safe and quitting", signal.Signals(sig).name)
+        self.worker_.request_shutdown(f"the console got {signal.Signals(sig).name}")
+        self._quitting = True
+
+    def on_unmount(self) -> None:
+        # Every way out (quit key, crash, signal) passes here: the rig goes safe and any
+        # recording is closed with its status before the app is gone.
+        exc = getattr(self, "_exception", None)
+        reason = (f"the console crashed: {type(exc).__name__}: {exc}" if exc is not None
+                  else "the operator quit the console")
+        self.worker_.shutdown(reason)
+        logging.getLogger().removeHandler(self._handler)
+        logging.getLogger("fbs").setLevel(self._saved_level)
+
+    # ------------------------------------------------------------------ keys
+    def action_panel(self, pid: str) -> None:
+        self.query_one(TabbedContent).active = pid
+        self.query_one(f"#{pid}-panel").focus()
+
+    def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
+        # a panel shown (by key or by mouse) takes the focus, so its keys work at once
+        pane = event.pane
+        if pane.id and (self.focused is None or pane not in self.focused.ancestors_with_self):
+            self.query_one(f"#{pane.id}-panel").focus()
+
+    async def action_quit(self) -> None:
+        if self._quitting or self.worker_.stopped.is_set():
+            self.exit(0)
+            return
+        self._quitting = True
+        self.w_status.note = "quitting: rig going safe…"
+        self.worker_.request_shutdown("the operator quit the console")
+        # a rig that never answers must not hold the console open; on_unmount waits once more
+        self.set_timer(30.0, lambda: self.exit(0))
+
+    # ------------------------------------------------------------------ from the rig thread
+    def _from_worker(self, item: object) -> None:
+        self.post_message(RigNews(item))
+
+    def on_rig_news(self, msg: RigNews) -> None:
+        item = msg.item
+        if isinstance(item, RigReady):
+            self.specs = permanent_meters(item.calibration)
+            self.limits = SetpointLimits(item.calibration)
+            self.w_setpoints.set_limits(self.limits)
+            self.w_meters.set_channels(item.channels)
+        elif isinstance(item, RigFailed):
+            self.w_status.note = item.text
+            self.notify(item.text, title="rig not open", severity="error", timeout=30)
+        elif isinstance(item, CommandOutcome):
+            self.outcomes.append(item)
+            self._outcome(item)
+        elif isinstance(item, RecordingEnded):
+            self.w_spectra.last_file = item.path
+            self.notify(f"{item.path}: {item.status}", title="recording closed",
+                        severity="information" if item.status == "complete" else "error", timeout=8)
+        elif isinstance(item, ProcedureEnded):
+            self.last_summary = item.summary
+            self.w_procedures.log_lines(self.log_feed.drain())
+            self.w_procedures.finished(item.summary)
+            if item.summary.file is not None:
+                self.w_spectra.last_file = item.summary.file
+        elif isinstance(item, RigFault):
+            self.notify(f"{item.text}\nsafe state: {item.safe}", title="DEVICE FAULT", severity="error",
+                        timeout=60)
+        elif isinstance(item, WorkerStopped):
+            self.stopped = item
+            if self._quitting:
+                self.exit(0)
+        elif isinstance(item, OperatorQuestion):
+            self.push_screen(OperatorScreen(item), item.reply)
+
+    def _outcome(self, o: CommandOutcome) -> None:
+        if o.what in ("hold", "release", "safe state") or o.what.startswith("select"):
+            self.w_modes.last(o.text, o.ok)
+        elif o.what.startswith(("torquer", "command", "autocollimator", "caging")):
+            self.w_setpoints.message(o.text if o.ok else f"refused: {o.text}", o.ok)
+        if not o.ok:
+            self.notify(o.text, title=f"{o.what} refused", severity="error", timeout=8)
+
+    # ------------------------------------------------------------------ the refresh timer
+    def refresh_live(self) -> None:
+        if not self.is_running:
+            return
+        snap = self.worker_.state.get()
+        self.w_status.show(snap)
+        if self.live_meters:
+            meters = self.w_meters
+            m = self.meter_store.snapshot(meters.chart_channels)
+            if m.seq != self._meter_seq:
+                self._meter_seq = m.seq
+                meters.show(self.specs, m)
+        self.w_modes.show(snap)
+        self.w_setpoints.show(snap)
+        self.w_recording.show(snap)
+        events = self.worker_.events.drain()
+        if events:
+            self.w_recording.log_events(events)
+        procs = self.w_procedures
+        if procs.running:
+            procs.show(snap.procedure)
+            procs.log_lines(self.log_feed.drain())
+        else:
+            self.log_feed.drain()  # only a procedure's log is shown live
+
+    def show_meter_frame(self, snap: MeterSnapshot) -> None:
+        """Draw a given meter snapshot (pinned screens in tests: live_meters=False)."""
+        self.w_meters.show(self.specs, snap)
+
+    # ------------------------------------------------------------------ panel requests
+    def _refuse_if_busy(self) -> bool:
+        why = self.worker_.busy
+        if why:
+            self.notify(why, title="refused", severity="warning", timeout=6)
+            return True
+        return False
+
+    def on_mode_panel_command(self, msg: ModePanel.Command) -> None:
+        if msg.what == "safe":  # the safe state is never refused (it aborts a procedure first)
+            if self.worker_.state.get().phase == "procedure":
+                self.worker_.abort_procedure()
+                return
+            self.worker_.go_safe()
+            return
+        if self._refuse_if_busy():
+            return
+        {"hold": self.worker_.hold, "release": self.worker_.release,
+         "select": lambda: self.worker_.select(msg.mode)}[msg.what]()
+
+    def on_setpoint_panel_request(self, msg: SetpointPanel.Request) -> None:
+        if self._refuse_if_busy():
+            return
+        w = self.worker_
+        if msg.kind == "torq":
+            w.set_torquer_bias(msg.key, msg.value, msg.slew)
+        elif msg.kind == "vtd":
+            w.set_command_torque(msg.key, msg.value)
+        elif msg.kind == "gc":
+            w.set_ac_bias(msg.key, msg.value)
+        elif msg.kind == "cage":
+            w.set_caging_inhibit(msg.key, bool(msg.value))
+
+    def on_recording_panel_start(self, msg: RecordingPanel.Start) -> None:
+        if self._refuse_if_busy():
+            return
+        try:
+            rate = float(msg.rate)
+            if not rate > 0:
+                raise ValueError
+        except ValueError:
+            self.notify(f"sample rate {msg.rate!r} is not a positive number of Hz", severity="error")
+            return
+        path = Path(msg.path.strip()) if msg.path.strip() else default_path(self.out_dir)
+        channels = tuple(c.strip() for c in msg.channels.split(",") if c.strip()) or None
+        if channels == ("all",):
+            channels = None
+        self.worker_.start_recording(path, rate, channels)
+
+    def on_recording_panel_stop(self, msg: RecordingPanel.Stop) -> None:
+        self.worker_.stop_recording()
+
+    def on_procedure_panel_run(self, msg: ProcedurePanel.Run) -> None:
+        if self._refuse_if_busy():
+            return
+        if self.worker_.state.get().phase == "recording":
+            self.notify("a recording is running: stop it (f4, f8) before a procedure, which records its own file",
+                        title="refused", severity="warning", timeout=6)
+            return
+        cls = self.catalogue.get(msg.name)
+        if cls is None:
+            self.notify(f"no procedure {msg.name!r}" if self.catalogue else "the procedures are still loading",
+                        severity="error")
+            return
+        try:
+            proc = parse_param_text(cls, msg.params)
+        except (ValueError, TypeError) as exc:  # refused before the rig is touched
+            self.notify(str(exc), title="parameters refused", severity="error", timeout=10)
+            return
+        self.log_feed.drain()
+        self.w_procedures.started(proc.name)
+        self.worker_.run_procedure(proc)
+
+    def on_procedure_panel_abort(self, msg: ProcedurePanel.Abort) -> None:
+        if not self.worker_.abort_procedure():
+            self.notify("no procedure is running", severity="warning", timeout=4)
+
+
+def _catalogue() -> dict[str, type]:
+    from fbs.procedures.calibrations import catalogue
+
+    return catalogue()
+
+
+def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
+    """Run the console in this terminal; the rig is safe and closed when this returns."""
+    out = Path(out_dir)
+    # The terminal belongs to the console: log records go to a file and the live log, never
+    # to stderr (Textual draws on it).
+    root = logging.getLogger()
+    saved = root.handlers[:], root.level
+    out.mkdir(parents=True, exist_ok=True)
+    file_handler = logging.FileHandler(out / "console.log")
+    file_handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    root.handlers[:] = [file_handler]
+    root.setLevel(logging.INFO)
+    app = ConsoleApp(rig_url, out_dir=out)
+    try:
+        app.run()
+    finally:
+        app.worker_.shutdown("the console exited")  # already done by on_unmount; a no-op then
+        root.handlers[:] = saved[0]
+        root.setLevel(saved[1])
+        file_handler.close()
+    stopped = app.stopped
+    if stopped is not None:
+        print(f"fbs console: rig closed ({stopped.reason}); safe state: {stopped.safe}")
+    return app.return_code or 0

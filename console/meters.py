@@ -1,0 +1,143 @@
+"""The meter panel (thesis II C.2): the ten permanent meters, and two live strip charts."""
+
+from __future__ import annotations
+
+import math
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.widgets import Sparkline, Static
+
+from .meterdata import MeterSnapshot, MeterSpec
+
+#: the bar of a meter spans the ADC's +-10 V, like the needle of a zero-centre panel meter
+BAR_HALF = 14
+FULL_SCALE_V = 10.0
+
+
+def _bar(volts: float) -> str:
+    k = max(-BAR_HALF, min(BAR_HALF, round(volts / FULL_SCALE_V * BAR_HALF)))
+    left = " " * (BAR_HALF + min(k, 0)) + "█" * (-min(k, 0))
+    right = "█" * max(k, 0) + " " * (BAR_HALF - max(k, 0))
+    return left + "│" + right
+
+
+def _num(x: float | None, width: int, digits: int) -> str:
+    if x is None or not math.isfinite(x):
+        return "—".rjust(width)
+    return f"{x:+{width}.{digits}f}" if abs(x) < 10 ** (width - digits - 2) else f"{x:+{width}.3g}"
+
+
+class MeterTable(Static):
+    """Ten rows: meter, engineering value and units, the raw volts, a zero-centre bar."""
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.specs: tuple[MeterSpec, ...] = ()
+        self.snap = MeterSnapshot(0)
+        self.paints = 0              # how many times the table was drawn (the benchmark counts it)
+
+    def show(self, specs: tuple[MeterSpec, ...], snap: MeterSnapshot) -> None:
+        self.specs, self.snap = specs, snap
+        self.refresh()
+
+    def render(self) -> Text:
+        self.paints += 1
+        t = Text(no_wrap=True, overflow="crop")
+        t.append(f"{'meter':<12}{'value':>11} {'units':<7}{'volts':>10}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}\n",
+                 style="bold")
+        if not self.specs:
+            t.append("waiting for the rig…")
+            return t
+        for i, s in enumerate(self.specs):
+            v = self.snap.volts.get(s.channel)
+            eng = None if v is None else s.eng(v)
+            t.append(f"{s.label:<12}")
+            t.append(_num(eng, 11, 2), style="bold")
+            t.append(f" {s.units:<7}{_num(v, 10, 4)}  ")
+            t.append(_bar(v) if v is not None and math.isfinite(v) else " " * BAR_HALF + "│" + " " * BAR_HALF,
+                     style="cyan")
+            if i < len(self.specs) - 1:
+                t.append("\n")
+        return t
+
+
+class StripChart(Vertical):
+    """One live strip chart of a selectable channel (a strip-chart recorder's pen)."""
+
+    DEFAULT_CSS = """
+    StripChart { height: 4; }
+    StripChart > .chart-title { height: 1; }
+    StripChart > Sparkline { height: 3; }
+    """
+
+    def __init__(self, name: str, channel: str, point_s: float = 0.2, **kw) -> None:
+        super().__init__(**kw)
+        self.point_s = point_s
+        self.chart_name = name
+        self.channel = channel
+
+    def compose(self) -> ComposeResult:
+        yield Static(f"chart {self.chart_name}: {self.channel}", classes="chart-title")
+        yield Sparkline([], summary_function=max)
+
+    def on_mount(self) -> None:
+        self._title = self.query_one(".chart-title", Static)
+        self._spark = self.query_one(Sparkline)
+
+    def show(self, points: tuple[float, ...]) -> None:
+        pts = [p for p in points if math.isfinite(p)]
+        title = f"chart {self.chart_name}: {self.channel}"
+        if pts:
+            title += f"   {min(pts):+.4f} .. {max(pts):+.4f} V over the last {len(pts) * self.point_s:.0f} s"
+        self._title.update(title, layout=False)
+        self._spark.data = pts
+
+
+class MeterPanel(Vertical, can_focus=True):
+    BINDINGS = [
+        Binding("c", "cycle('A')", "chart A"),
+        Binding("v", "cycle('B')", "chart B"),
+        Binding("p", "pause", "pause"),
+    ]
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.channels: tuple[str, ...] = ("gyro_x", "gyro_y", "gyro_z", "gyro_xrd", "torq_x", "torq_y", "torq_z",
+                                          "torq_xrd", "ac_x_ctl", "ac_y_ctl")
+        self.paused = False
+
+    def compose(self) -> ComposeResult:
+        yield MeterTable(id="meter-table")
+        yield StripChart("A", "gyro_x", id="chart-a")
+        yield StripChart("B", "torq_x", id="chart-b")
+
+    def set_channels(self, channels: tuple[str, ...]) -> None:
+        self.channels = channels
+
+    @property
+    def chart_channels(self) -> tuple[str, str]:
+        return self._charts[0].channel, self._charts[1].channel
+
+    def on_mount(self) -> None:
+        self._table = self.query_one(MeterTable)
+        self._charts = (self.query_one("#chart-a", StripChart), self.query_one("#chart-b", StripChart))
+
+    def show(self, specs: tuple[MeterSpec, ...], snap: MeterSnapshot) -> None:
+        if self.paused:
+            return
+        self._table.show(specs, snap)
+        for chart in self._charts:
+            chart.show(snap.history.get(chart.channel, ()))
+
+    def action_cycle(self, which: str) -> None:
+        chart = self.query_one(f"#chart-{which.lower()}", StripChart)
+        i = self.channels.index(chart.channel) if chart.channel in self.channels else -1
+        chart.channel = self.channels[(i + 1) % len(self.channels)]
+        chart.show(())
+
+    def action_pause(self) -> None:
+        self.paused = not self.paused
+        self.notify("meters paused" if self.paused else "meters live", timeout=2)

@@ -1,0 +1,107 @@
+"""The mode panel: hold, select, release (II C.2 (2), Ch. II D), the alarm lamp, interlocks."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.binding import Binding
+from textual.containers import Vertical
+from textual.message import Message
+from textual.widgets import Static
+
+from fbs.drivers.relay import CAGED_FOR_MODE, MODES, interlock_reason
+
+from .state import Snapshot
+
+SELECT = Binding.Group("select", compact=True)
+#: the mode switches' labels, short enough for one row at 80 columns
+SHORT = {1: "gyro off", 2: "spin-up", 3: "AC ctl", 4: "gyro 4ch", 5: "gyro 3ch", 6: "ext"}
+
+
+class ModePanel(Vertical, can_focus=True):
+    BINDINGS = [Binding("h", "hold", "hold")] + [
+        Binding(str(m), f"select({m})", f"select {m}", group=SELECT) for m in range(8)] + [
+        Binding("r", "release", "release"),
+        Binding("s", "safe", "safe"),
+    ]
+
+    class Command(Message):
+        """The operator asked for a mode command (``what`` is hold, select, release or safe)."""
+
+        def __init__(self, what: str, mode: int | None = None) -> None:
+            super().__init__()
+            self.what, self.mode = what, mode
+
+    def compose(self) -> ComposeResult:
+        yield Static(id="mode-now")
+        yield Static(id="mode-lamps")
+        yield Static(id="mode-alarm")
+        yield Static(id="mode-gyros")
+        yield Static(id="mode-interlocks")
+        yield Static(id="mode-last")
+        yield Static("h hold · 1-6 select (0, 7: alarm) · r release · s safe (mode 1, zero outputs)",
+                     id="mode-help")
+
+    def action_hold(self) -> None:
+        self.post_message(self.Command("hold"))
+
+    def action_select(self, mode: int) -> None:
+        self.post_message(self.Command("select", mode))
+
+    def action_release(self) -> None:
+        self.post_message(self.Command("release"))
+
+    def action_safe(self) -> None:
+        self.post_message(self.Command("safe"))
+
+    def last(self, text: str, ok: bool) -> None:
+        self.query_one("#mode-last", Static).update(Text(text, style="green" if ok else "bold red"))
+
+    _shown: tuple = ()
+
+    def show(self, snap: Snapshot) -> None:
+        key = (snap.relay, snap.alarm, snap.fault)
+        if key == self._shown:
+            return
+        self._shown = key
+        st = snap.relay
+        if st is None:
+            self.query_one("#mode-now", Static).update("mode: —")
+            return
+        now = Text()
+        now.append(f"MODE {st.mode}", style="bold reverse")
+        now.append(f"  {MODES.get(st.mode, '?')}    ")
+        now.append("HELD" if st.held else "not held", style="bold yellow" if st.held else "dim")
+        now.append(f"   selected {st.selected}")
+        self.query_one("#mode-now", Static).update(now)
+        lamps = Text()
+        for m, name in SHORT.items():
+            style = "bold reverse green" if m == st.mode else ("underline yellow" if st.held and m == st.selected
+                                                               else "dim")
+            lamps.append(f" {m} {name} ", style=style)
+            lamps.append(" ")
+        self.query_one("#mode-lamps", Static).update(lamps)
+        alarm = Text()
+        lit = snap.alarm or (snap.fault and f"device fault: {snap.fault}")
+        if lit:
+            alarm.append(" ALARM ", style="bold white on red")
+            alarm.append(f" {lit}", style="bold red")
+        else:
+            alarm.append(" alarm ", style="dim reverse")
+            alarm.append(" off", style="dim")
+        self.query_one("#mode-alarm", Static).update(alarm)
+        gy = Text("gyros at speed / caged: ")
+        for c in st.at_speed:
+            gy.append(f"{c} ")
+            for ok in (st.at_speed[c], st.caged[c]):
+                gy.append("✓" if ok else "✗", style="green" if ok else "bold yellow")
+            gy.append("  ")
+        gy.append(f"wheels {100 * st.spin_fraction:.0f} %")
+        self.query_one("#mode-gyros", Static).update(gy)
+        il = Text()
+        for m in CAGED_FOR_MODE:
+            why = interlock_reason(m, st)
+            il.append(f"mode {m}: ")
+            il.append("allowed" if why is None else why.split(": ", 1)[1], style="green" if why is None else "yellow")
+            il.append("\n")
+        self.query_one("#mode-interlocks", Static).update(il)

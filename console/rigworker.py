@@ -1,0 +1,583 @@
+"""The one thread that owns the rig.
+
+Every call that reaches hardware happens here, so the UI thread never waits on a device.
+The UI hands over commands (``submit`` puts a closure on a queue) and reads ``LiveState``;
+outcomes come back through ``post`` (the app turns them into Textual messages).
+
+Each tick (``tick_s``, 50 ms) the thread
+
+* runs the queued commands (mode switches, set-points, start/stop recording, a procedure);
+* reads the ADC up to "now": the idle meter stream (all channels at ``meter_rate_hz``) or
+  the recording (``daq.recorder.Acquisition``, the operator's channels and rate). "Now" is
+  the wall clock in both time modes, so a virtual-time rig is paced like a real one while
+  the console watches it; every block passes the meter tap (``TappedAdc``);
+* moves slewing torquer biases one step (``Slew``), and polls the relay status and the
+  set-point read-backs.
+
+A procedure runs on this thread too (``run_procedure``, blocking the loop): the UI refuses
+other commands meanwhile, and aborts through a ``threading.Event`` that needs no queue.
+
+Safe-state guarantees: a device fault is latched by the drivers (the rig goes safe by
+itself); here it ends any recording "aborted: <fault>" and stops the thread's commands.
+``request_shutdown`` (quit, or the app crashing) aborts a running procedure, closes a
+recording "aborted: ConsoleClosed: <why>", and closes the rig, which leaves it safe; so does
+any exception on this thread (the ``finally`` of ``_run``).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Callable
+
+from fbs.drivers.errors import DriverError, InterlockError, SampleGap, SetpointRangeError
+from fbs.drivers.relay import MODES, interlock_reason
+from fbs.drivers.rig import Rig, open_rig
+
+from .adctap import TappedAdc
+from .feeds import Feed
+from .meterdata import MeterStore
+from .operator import ConsoleOperator
+from .slew import Slew
+from .state import (CommandOutcome, LiveState, ProcedureEnded, ProcedureInfo, RecordingEnded, RecordingInfo,
+                    RigEventItem, RigFailed, RigFault, RigReady, WorkerStopped)
+
+log = logging.getLogger(__name__)
+
+#: Refusals change nothing on the rig (drivers/errors.py); anything else is a fault.
+REFUSALS = (SetpointRangeError, InterlockError, ValueError, OSError)
+
+
+class ConsoleClosed(Exception):
+    """The console closed a recording it had open (quit, crash): the file's status says why."""
+
+
+class Refused(Exception):
+    """The console itself refuses a command in the present state (nothing was sent)."""
+
+
+@dataclass
+class Command:
+    what: str
+    run: Callable[[], str]
+
+
+class RigWorker:
+    def __init__(self, url: str, *, out_dir: str | Path, post: Callable[[object], None], meters: MeterStore,
+                 events: Feed[RigEventItem] | None = None, operator: ConsoleOperator | None = None,
+                 meter_rate_hz: float = 200.0, tick_s: float = 0.05, status_every_s: float = 0.5,
+                 readback_every_s: float = 1.0) -> None:
+        self.url = url
+        self.out_dir = Path(out_dir)
+        self.post_event = post
+        self.meters = meters
+        self.events: Feed[RigEventItem] = events if events is not None else Feed()
+        self.operator = operator
+        self.meter_rate_hz = meter_rate_hz
+        self.tick_s = tick_s
+        self.status_every_s = status_every_s
+        self.readback_every_s = readback_every_s
+        self.state = LiveState()
+        self.rig: Rig | None = None
+        self._queue: queue.Queue[Command | None] = queue.Queue()
+        self._stop = threading.Event()
+        self._stop_reason = ""
+        self._abort = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="console-rig", daemon=True)
+        self._acq = None                       # fbs.daq.recorder.Acquisition while recording
+        self._streaming = False                # the idle meter stream (or the recording) is running
+        self._stream_rate = 0.0
+        self._stream_pos = 0
+        self._stream_wall0 = 0.0
+        self._slews: dict[str, Slew] = {}
+        self._next_status = 0.0
+        self._next_readback = 0.0
+        self._fault_handled = False
+        self.stopped = threading.Event()
+
+    # ================================================================== UI side (any thread)
+    def start(self) -> None:
+        self._thread.start()
+
+    def submit(self, what: str, run: Callable[[], str]) -> None:
+        self._queue.put(Command(what, run))
+
+    def request_shutdown(self, reason: str) -> None:
+        """Abort a procedure, close a recording "aborted: <reason>", leave the rig safe, stop."""
+        if not self._stop.is_set():
+            self._stop_reason = reason
+            self._stop.set()
+            self._abort.set()
+            if self.operator is not None:
+                self.operator.close()
+            self._queue.put(None)  # wake the thread
+
+    def shutdown(self, reason: str, timeout_s: float = 30.0) -> bool:
+        """``request_shutdown`` and wait for the thread; True when it finished."""
+        self.request_shutdown(reason)
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
+    def abort_procedure(self) -> bool:
+        snap = self.state.get()
+        if snap.procedure is None:
+            return False
+        self._abort.set()
+        self.state.update(procedure=replace(snap.procedure, aborting=True))
+        return True
+
+    @property
+    def busy(self) -> str | None:
+        """Why commands are refused now (a procedure owns the rig, a fault, closed), or None."""
+        snap = self.state.get()
+        if snap.phase == "procedure":
+            return f"procedure {snap.procedure.name if snap.procedure else ''} is running: abort it first (f8)"
+        if snap.phase == "fault":
+            return f"the rig is faulted and safe ({snap.fault}); quit and reopen the console"
+        if snap.phase in ("opening", "closed"):
+            return f"the rig is {snap.phase}"
+        return None
+
+    # -- commands (each runs on the rig thread)
+    def hold(self) -> None:
+        self.submit("hold", self._hold)
+
+    def select(self, mode: int) -> None:
+        self.submit(f"select mode {mode}", lambda: self._select(mode))
+
+    def release(self) -> None:
+        self.submit("release", self._release)
+
+    def go_safe(self) -> None:
+        self.submit("safe state", self._go_safe)
+
+    def set_torquer_bias(self, channel: str, volts: float, slew_V_per_s: float) -> None:
+        self.submit(f"torquer bias {channel}", lambda: self._slew_to(channel, volts, slew_V_per_s))
+
+    def set_command_torque(self, axis: str, volts: float) -> None:
+        self.submit(f"command torque {axis}", lambda: self._set_output("vtd", axis, volts))
+
+    def set_ac_bias(self, axis: str, volts: float) -> None:
+        self.submit(f"autocollimator bias {axis}", lambda: self._set_output("gc", axis, volts))
+
+    def set_caging_inhibit(self, channel: str, inhibit: bool) -> None:
+        self.submit(f"caging inhibit {channel}", lambda: self._caging(channel, inhibit))
+
+    def start_recording(self, path: Path, rate_hz: float, channels: tuple[str, ...] | None) -> None:
+        self.submit("start recording", lambda: self._start_recording(path, rate_hz, channels))
+
+    def stop_recording(self) -> None:
+        self.submit("stop recording", self._stop_recording)
+
+    def run_procedure(self, proc) -> None:
+        """Run a ``Procedure`` instance (parameters already parsed) into ``out_dir``."""
+        prev = self.state.get().phase
+        if prev == "ready":  # the UI refuses other commands from now on (``busy``)
+            self.state.update(phase="procedure", procedure=ProcedureInfo(proc.name))
+        self.submit(f"procedure {proc.name}", lambda: self._run_procedure(proc, prev))
+
+    # ================================================================== the rig thread
+    def _post(self, item: object) -> None:
+        try:
+            self.post_event(item)
+        except Exception:  # the UI may be gone (shutting down): the rig thread goes on
+            log.debug("could not post %r", item, exc_info=True)
+
+    def _note(self, kind: str, text: str) -> None:
+        self.events.put(RigEventItem(None, kind, text))
+
+    def _on_rig_event(self, t: float, kind: str, text: str) -> None:
+        self.events.put(RigEventItem(t, kind, text))
+
+    def _run(self) -> None:
+        reason = ""
+        try:
+            try:
+                rig = open_rig(self.url, operator=self.operator)
+            except Exception as exc:  # a bad URL or a missing device: say so, nothing to make safe
+                log.error("cannot open the rig %s: %s", self.url, exc)
+                self.state.update(phase="closed", fault=f"cannot open the rig {self.url}: {exc}")
+                self._post(RigFailed(f"cannot open the rig {self.url}: {exc}"))
+                return
+            self.rig = rig
+            rig.adc = TappedAdc(rig.adc, self.meters)
+            rig.subscribe(self._on_rig_event)
+            self.state.update(phase="ready")
+            self._note("console", f"rig {self.url} open ({'virtual' if rig.clock.virtual else 'paced'} time)")
+            self._post(RigReady(self.url, rig.calibration, tuple(rig.adc.identity.channels), rig.clock.virtual))
+            self._guard(self._start_meter_stream)
+            self._guard(lambda: self._poll(force=True))
+            while not self._stop.is_set():
+                self._serve(time.monotonic() + self.tick_s)
+                if self._stop.is_set():
+                    break
+                self._tick()
+        except BaseException as exc:  # noqa: B036 - whatever kills this thread, the rig goes safe below
+            log.exception("the console's rig thread failed")
+            reason = f"the console's rig thread failed: {type(exc).__name__}: {exc}"
+        finally:
+            self._close(self._stop_reason or reason or "console closed")
+
+    def _serve(self, until: float) -> None:
+        """Run queued commands until ``until`` (monotonic s)."""
+        while True:
+            left = until - time.monotonic()
+            try:
+                cmd = self._queue.get(timeout=max(0.0, left)) if left > 0 else self._queue.get_nowait()
+            except queue.Empty:
+                return
+            if cmd is None or self._stop.is_set():
+                return
+            self._execute(cmd)
+
+    def _execute(self, cmd: Command) -> None:
+        if self.state.get().phase in ("fault", "closed"):
+            self._post(CommandOutcome(cmd.what, False, self.busy or "the rig is not available"))
+            return
+        try:
+            text = cmd.run()
+        except Refused as exc:
+            self._post(CommandOutcome(cmd.what, False, str(exc)))
+        except REFUSALS as exc:
+            log.info("%s refused: %s", cmd.what, exc)
+            self._post(CommandOutcome(cmd.what, False, str(exc)))
+            if isinstance(exc, DriverError):
+                self._check_fault()
+        except DriverError as exc:
+            log.error("%s failed: %s", cmd.what, exc)
+            self._post(CommandOutcome(cmd.what, False, str(exc)))
+            self._check_fault()
+        else:
+            self._post(CommandOutcome(cmd.what, True, text))
+
+    def _guard(self, fn: Callable[[], object]) -> None:
+        """Run ``fn``; a driver error there is a fault (or logged), never the end of the thread."""
+        try:
+            fn()
+        except DriverError as exc:
+            log.error("%s", exc)
+            self._check_fault()
+
+    def _tick(self) -> None:
+        if self._check_fault():
+            return
+        try:
+            self._stream_due()
+        except BaseException as exc:  # noqa: B036 - the recording is closed with its status, then we go on
+            if self._acq is not None:
+                self._end_recording(exc)
+            elif not isinstance(exc, DriverError):
+                raise
+            else:
+                log.error("meter stream: %s", exc)
+                self._streaming = False
+            self._check_fault()
+            return
+        self._guard(self._advance_slews)
+        self._guard(self._poll)
+
+    # ------------------------------------------------------------------ streaming
+    def _start_meter_stream(self) -> None:
+        rig = self.rig
+        channels = tuple(rig.adc.identity.channels)
+        cfg = rig.adc.configure(channels, self.meter_rate_hz)
+        rig.adc.start()
+        self._begin_stream(cfg.rate_hz)
+
+    def _begin_stream(self, rate_hz: float) -> None:
+        self._streaming = True
+        self._stream_rate = rate_hz
+        self._stream_pos = 0
+        self._stream_wall0 = time.monotonic()
+
+    def _stop_meter_stream(self) -> None:
+        if self._streaming and self._acq is None:
+            self._streaming = False
+            try:
+                self.rig.adc.stop()
+            finally:
+                self.meters.clear()
+
+    def _stream_due(self) -> None:
+        if not self._streaming:
+            return
+        # Samples up to a little before now: a paced rig delivers ~10 ms frames, and asking
+        # for samples not yet taken would block this thread (and the commands) until they are.
+        due = int((time.monotonic() - self._stream_wall0 - 0.03) * self._stream_rate) - self._stream_pos
+        if due <= 0:
+            return
+        if due > 2 * self._stream_rate and self.rig.clock.virtual:
+            # a virtual rig slower than the wall clock: skip ahead (nothing is lost, the
+            # simulation only computes what is read), so the commands are not starved
+            self._stream_wall0 += (due - self._stream_rate) / self._stream_rate
+            due = int(self._stream_rate)
+        due = min(due, int(2 * self._stream_rate))
+        if self._acq is not None:
+            self._acq.acquire_samples(due, keep=False)
+            self._stream_pos = self._acq.pos
+            r = self._acq.result
+            self.state.update(recording=RecordingInfo(r.path, self._acq.rate_hz, self._acq.channels,
+                                                      self._acq.time_s, self._acq.pos, len(r.gaps), r.lost))
+            return
+        try:
+            block = self.rig.adc.read(due)
+            self._stream_pos = block.stop_sample
+        except SampleGap as gap:  # the meters skip it; only a recording has to account for it
+            self._note("gap", f"meter stream: {gap}")
+            self._stream_pos = gap.stop
+
+    # ------------------------------------------------------------------ recording
+    def _start_recording(self, path: Path, rate_hz: float, channels: tuple[str, ...] | None) -> str:
+        from fbs.daq.recorder import Acquisition
+        from fbs.daq.runfile import check_new_path
+
+        if self._acq is not None:
+            raise Refused(f"already recording to {self._acq.result.path}; stop it first")
+        check_new_path(path)  # a bad name is refused before the meter stream stops
+        self._stop_meter_stream()
+        try:
+            acq = Acquisition(self.rig, path, rate_hz=rate_hz, channels=channels, block_s=0.05,
+                              meta={"console": {"rig": self.url}})
+            acq.__enter__()
+        except BaseException:
+            self._guard(self._start_meter_stream)
+            raise
+        self._acq = acq
+        self._begin_stream(acq.rate_hz)
+        self.state.update(phase="recording", recording=RecordingInfo(Path(path), acq.rate_hz, acq.channels))
+        return f"recording {len(acq.channels)} channels at {acq.rate_hz:g} Hz to {path}"
+
+    def _stop_recording(self) -> str:
+        if self._acq is None:
+            raise Refused("not recording")
+        info = self._end_recording(None)
+        self._guard(self._start_meter_stream)
+        return f"recording closed: {info.path}, {info.samples} samples, status {info.status}"
+
+    def _end_recording(self, exc: BaseException | None) -> RecordingInfo:
+        """Close the recording: "complete" without ``exc``; else "aborted: <exc>" and the rig
+        safe (``Acquisition.__exit__`` does both)."""
+        acq, self._acq = self._acq, None
+        self._streaming = False
+        try:
+            if exc is None:
+                acq.__exit__(None, None, None)
+            else:
+                acq.__exit__(type(exc), exc, exc.__traceback__)
+        except BaseException as late:  # noqa: B036 - closing failed: the file says aborted, go on
+            log.error("closing the recording failed: %s", late)
+        r = acq.result
+        info = RecordingInfo(r.path, acq.rate_hz, acq.channels, acq.time_s, acq.pos, len(r.gaps), r.lost, r.status)
+        self.state.update(phase="ready" if self.state.get().phase == "recording" else self.state.get().phase,
+                          recording=info, last_file=r.path)
+        self._note("recording", f"{r.path}: {r.status}, {acq.pos} samples, {len(r.gaps)} gap(s)")
+        self._post(RecordingEnded(r.path, r.status, acq.pos, len(r.gaps)))
+        if exc is not None:
+            self._slews.clear()
+        return info
+
+    # ------------------------------------------------------------------ procedure
+    def _run_procedure(self, proc, prev: str = "ready") -> str:
+        from fbs.procedures.run import find_prior
+        from fbs.procedures.runner import run_procedure
+
+        try:
+            if self._acq is not None:
+                raise Refused(f"recording to {self._acq.result.path}: stop it before running a procedure")
+            proc.prior = find_prior(self.out_dir) | dict(proc.prior)
+            self._stop_meter_stream()
+            self._slews.clear()
+            self._abort.clear()
+            if self._stop.is_set():
+                raise Refused("the console is closing")
+            from fbs.procedures.runner import next_free
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            # the file run_procedure will pick (it takes the same next free name), shown while it runs
+            self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))
+            log.info("procedure %s starting (parameters %s)", proc.name, proc.params_json())
+            summary = run_procedure(proc, self.rig, self.out_dir, progress=self._on_progress, abort=self._abort)
+        except BaseException:
+            self.state.update(phase=prev if prev in ("ready", "recording") else "ready", procedure=None)
+            if not self._stop.is_set() and self._acq is None and not self._streaming:
+                self._guard(self._start_meter_stream)
+            raise
+        self.state.update(phase="ready", procedure=None, last_file=summary.file)
+        self._post(ProcedureEnded(summary))
+        self._note("procedure", f"{proc.name}: {summary.verdict} ({summary.status}); file {summary.file}")
+        if not self._check_fault() and not self._stop.is_set():
+            self._guard(self._start_meter_stream)
+            self._guard(lambda: self._poll(force=True))
+        return f"{proc.name}: {summary.verdict}, status {summary.status}"
+
+    def _on_progress(self, p) -> None:
+        cur = self.state.get().procedure
+        self.state.update(procedure=ProcedureInfo(p.procedure, p.step, p.index, p.n_steps, p.fraction,
+                                                  p.remaining_rig_s, p.remaining_wall_s,
+                                                  cur.file if cur else None, bool(cur and cur.aborting)))
+
+    # ------------------------------------------------------------------ modes
+    def _hold(self) -> str:
+        self.rig.relays.hold()
+        self._poll(force=True)
+        return "mode switches held: select a mode (1-6), then release"
+
+    def _select(self, mode: int) -> str:
+        relays = self.rig.relays
+        try:
+            relays.select(mode)
+        except InterlockError as exc:
+            # a disallowed mode (0, 7) lights the alarm; selecting without hold is refused
+            if mode not in MODES:
+                self.state.update(alarm=str(exc))
+                self.rig.event("alarm", str(exc))
+            raise
+        relays.alarm = None
+        self.state.update(alarm=None)
+        self._poll(force=True)
+        return f"mode {mode} ({MODES[mode]}) selected: release to switch"
+
+    def _release(self) -> str:
+        relays = self.rig.relays
+        status = relays.status()
+        why = interlock_reason(status.selected, status) if status.held else None
+        try:
+            now = relays.release()
+        except InterlockError as exc:
+            text = why or str(exc)
+            if status.held:  # a refused mode change lights the alarm with its reason
+                relays.alarm = text
+                self.state.update(alarm=text)
+                self.rig.event("alarm", text)
+            self._poll(force=True)
+            raise InterlockError(text) from None
+        relays.alarm = None
+        self.state.update(alarm=None)
+        self.rig.event("mode", f"mode {now}")
+        self._poll(force=True)
+        return f"mode {now} ({MODES.get(now, '?')}) in force"
+
+    def _go_safe(self) -> str:
+        self._slews.clear()
+        report = self.rig.safe()
+        self.state.update(alarm=None, slewing={})
+        self._poll(force=True)
+        if not report.ok:
+            raise DriverError("safe state incomplete: " + "; ".join(report.failed))
+        return "safe state: mode 1, biases and commands zero, caging released (read back)"
+
+    # ------------------------------------------------------------------ set-points
+    def _slew_to(self, channel: str, volts: float, rate: float) -> str:
+        rig = self.rig
+        rig.torquers.check_bias(channel, volts)  # refused here, before the ramp starts
+        now = rig.torquers.bias_V(channel)
+        self._slews[channel] = Slew(channel, volts, rate, now, rig.now())
+        self.state.update(slewing={c: s.target_V for c, s in self._slews.items()})
+        return f"torquer bias {channel}: slewing {now:+.4f} -> {volts:+.4f} V at {rate:g} V/s"
+
+    def _advance_slews(self) -> None:
+        if not self._slews:
+            return
+        t = self.rig.now()
+        back = dict(self.state.get().readback)
+        for ch, s in list(self._slews.items()):
+            v = s.step(t)
+            back[f"torq {ch}"] = self.rig.set_torquer_bias_V(ch, v)
+            if s.done:
+                del self._slews[ch]
+                self._note("setpoint", f"torquer bias {ch} at {back[f'torq {ch}']:+.4f} V (read back)")
+        self.state.update(readback=back, slewing={c: s.target_V for c, s in self._slews.items()})
+
+    def _set_output(self, kind: str, axis: str, volts: float) -> str:
+        rig = self.rig
+        if kind == "vtd":
+            back = rig.set_command_torque_V(axis, volts)
+            what = "command torque V_Td"
+        else:
+            back = rig.set_ac_bias_V(axis, volts)
+            what = "autocollimator bias gamma_c"
+        self.state.update(readback=dict(self.state.get().readback) | {f"{kind} {axis}": back})
+        return f"{what} {axis} = {back:+.4f} V (read back)"
+
+    def _caging(self, channel: str, inhibit: bool) -> str:
+        back = self.rig.set_caging_inhibit(channel, inhibit)
+        self.state.update(caging=dict(self.state.get().caging) | {channel: back})
+        return f"caging {channel} {'inhibited' if back else 'enabled'} (read back)"
+
+    # ------------------------------------------------------------------ polling
+    def _poll(self, force: bool = False) -> None:
+        rig = self.rig
+        now = time.monotonic()
+        changes: dict = {}
+        if force or now >= self._next_status:
+            self._next_status = now + self.status_every_s
+            changes["relay"] = rig.relays.status()
+            changes["rig_time_s"] = rig.now()
+        if force or now >= self._next_readback:
+            self._next_readback = now + self.readback_every_s
+            back = {f"torq {c}": rig.torquers.bias_V(c) for c in rig.torquers.channels}
+            for a in rig.commands.axes:
+                back[f"vtd {a}"] = rig.commands.command_torque_V(a)
+                back[f"gc {a}"] = rig.commands.ac_bias_V(a)
+            changes["readback"] = back
+            changes["caging"] = {c: rig.caging.inhibited(c) for c in rig.caging.channels}
+        if changes:
+            self.state.update(**changes)
+
+    # ------------------------------------------------------------------ faults and the end
+    def _check_fault(self) -> bool:
+        """True if a device fault is latched; the first time, end everything and tell the UI."""
+        rig = self.rig
+        if rig is None or rig.faults.fault is None:
+            return False
+        if self._fault_handled:
+            return True
+        self._fault_handled = True
+        fault = rig.faults.fault
+        log.error("rig fault: %s", fault)
+        if self._acq is not None:
+            self._end_recording(fault)
+        self._streaming = False
+        self._slews.clear()
+        self.meters.clear()
+        safe = _safe_text(rig)
+        self.state.update(phase="fault", fault=str(fault), slewing={})
+        self._note("fault", f"{fault}; safe state: {safe}")
+        self._post(RigFault(str(fault), safe))
+        return True
+
+    def _close(self, reason: str) -> None:
+        rig, safe = self.rig, "no rig"
+        try:
+            if rig is not None:
+                if self._acq is not None:
+                    self._end_recording(ConsoleClosed(reason))
+                elif self._streaming and rig.faults.fault is None:
+                    try:
+                        rig.adc.stop()
+                    except DriverError as exc:
+                        log.warning("stopping the meter stream: %s", exc)
+                self._streaming = False
+                rig.unsubscribe(self._on_rig_event)
+                report = rig.close()
+                safe = ("yes (read back)" if report is None or report.ok
+                        else "INCOMPLETE: " + "; ".join(report.failed))
+                log.info("console closed the rig (%s); safe state: %s", reason, safe)
+        except BaseException as exc:  # noqa: B036 - report it; the nodes' watchdogs are the last resort
+            log.exception("closing the rig failed")
+            safe = f"unknown ({type(exc).__name__}: {exc})"
+        finally:
+            self.state.update(phase="closed")
+            self.stopped.set()
+            self._post(WorkerStopped(reason, safe))
+
+
+def _safe_text(rig: Rig) -> str:
+    try:
+        return "yes (read back)" if rig.is_safe() else "NOT confirmed"
+    except Exception as exc:  # the device that failed may be the one to ask
+        return f"unknown ({exc})"

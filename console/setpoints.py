@@ -1,0 +1,126 @@
+"""The set-point panel: caging-inhibit switches, torquer biases (with slew), autocollimator
+biases and command torques, each with its range and the rig's read-back.
+
+A typed value is checked here with the drivers' own rules (``limits.SetpointLimits``); a bad
+entry is refused with the drivers' message, naming the value and the limit, and nothing goes
+to the rig thread.
+"""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.app import ComposeResult
+from textual.containers import Horizontal, VerticalScroll
+from textual.message import Message
+from textual.widgets import Checkbox, Input, Static
+
+from fbs.drivers.calibration import AXES, GYRO_CHANNELS
+from fbs.drivers.errors import SetpointRangeError
+
+from .limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, SetpointLimits
+from .state import Snapshot
+
+
+class SetpointPanel(VerticalScroll, can_focus=True):
+    class Request(Message):
+        """A checked set-point for the rig thread: ``kind`` torq | vtd | gc | cage."""
+
+        def __init__(self, kind: str, key: str, value: float | bool, slew: float = 0.0) -> None:
+            super().__init__()
+            self.kind, self.key, self.value, self.slew = kind, key, value, slew
+
+    def __init__(self, **kw) -> None:
+        super().__init__(**kw)
+        self.limits: SetpointLimits | None = None
+        self._back: dict[str, Static] = {}
+        self._boxes: dict[str, Checkbox] = {}
+        self._shown: tuple = ()
+
+    def on_mount(self) -> None:
+        # looked up once: the refresh timer runs ten times a second
+        for w in self.query(".sp-back").results(Static):
+            _, kind, key = (w.id or "").split("-", 2)
+            self._back[f"{kind} {key}"] = w
+        self._boxes = {c: self.query_one(f"#cage-{c}", Checkbox) for c in GYRO_CHANNELS}
+
+    def compose(self) -> ComposeResult:
+        with Horizontal(classes="sp-row"):
+            yield Static("caging inhibit", classes="sp-label")
+            for c in GYRO_CHANNELS:
+                yield Checkbox(c, id=f"cage-{c}", compact=True)
+        yield Static("torquer bias (V)   set             range           read-back", classes="sp-head")
+        for c in GYRO_CHANNELS:
+            yield from self._row("torq", c, f"  gyro {c}")
+        with Horizontal(classes="sp-row"):
+            yield Static("  slew (V/s)", classes="sp-label")
+            yield Input(f"{SLEW_DEFAULT_V_PER_S:g}", id="slew", compact=True, classes="sp-input")
+            yield Static(f"{SLEW_MIN_V_PER_S:g}..{SLEW_MAX_V_PER_S:g}", classes="sp-range")
+        yield Static("autocollimator bias gamma_c (V)", classes="sp-head")
+        for a in AXES:
+            yield from self._row("gc", a, f"  axis {a}")
+        yield Static("command torque V_Td (V)", classes="sp-head")
+        for a in AXES:
+            yield from self._row("vtd", a, f"  axis {a}")
+        yield Static(id="sp-message")
+
+    def _row(self, kind: str, key: str, label: str) -> ComposeResult:
+        with Horizontal(classes="sp-row"):
+            yield Static(label, classes="sp-label")
+            yield Input(placeholder="volts", id=f"{kind}-{key}", compact=True, classes="sp-input")
+            yield Static("", id=f"range-{kind}-{key}", classes="sp-range")
+            yield Static("—", id=f"back-{kind}-{key}", classes="sp-back")
+
+    def set_limits(self, limits: SetpointLimits) -> None:
+        self.limits = limits
+        for c in GYRO_CHANNELS:
+            self.query_one(f"#range-torq-{c}", Static).update(f"+-{limits.torquer_limit_V(c):.4g} V")
+        for a in AXES:
+            for kind in ("gc", "vtd"):
+                self.query_one(f"#range-{kind}-{a}", Static).update(f"+-{limits.dac_range_V():g} V")
+
+    def message(self, text: str, ok: bool) -> None:
+        self.query_one("#sp-message", Static).update(Text(text, style="green" if ok else "bold red"))
+
+    def on_input_submitted(self, event: Input.Submitted) -> None:
+        event.stop()
+        if self.limits is None or event.input.id is None:
+            self.message("the rig is not open yet", False)
+            return
+        kind, _, key = event.input.id.partition("-")
+        try:
+            if kind == "slew":
+                rate = self.limits.slew(event.value)
+                self.message(f"torquer bias slew {rate:g} V/s", True)
+                return
+            rate = self.limits.slew(self.query_one("#slew", Input).value)
+            value = {"torq": self.limits.torquer_bias, "gc": self.limits.ac_bias,
+                     "vtd": self.limits.command_torque}[kind](key, event.value)
+        except SetpointRangeError as exc:  # refused here: nothing goes to the rig
+            self.message(f"refused: {exc}", False)
+            self.notify(str(exc), title="set-point refused", severity="error", timeout=6)
+            return
+        self.post_message(self.Request(kind, key, value, rate))
+
+    def on_checkbox_changed(self, event: Checkbox.Changed) -> None:
+        event.stop()
+        if event.checkbox.id and event.checkbox.id.startswith("cage-"):
+            self.post_message(self.Request("cage", event.checkbox.id[5:], bool(event.value)))
+
+    def show(self, snap: Snapshot) -> None:
+        key = (snap.readback, snap.slewing, snap.caging)
+        if key == self._shown:
+            return
+        self._shown = key
+        for name, v in snap.readback.items():
+            kind, ch = name.split(" ")
+            text = f"{v:+.4f} V"
+            if kind == "torq" and ch in snap.slewing:
+                text += f"  slewing -> {snap.slewing[ch]:+.4f}"
+            w = self._back.get(name)
+            if w is not None:
+                w.update(text, layout=False)
+        for c, inhibited in snap.caging.items():
+            box = self._boxes[c]
+            if box.value != inhibited:
+                with box.prevent(Checkbox.Changed):  # a read-back is not an operator's request
+                    box.value = inhibited

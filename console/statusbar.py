@@ -1,0 +1,48 @@
+"""The top line: rig, mode, alarm lamp, recording and procedure at a glance, on every panel."""
+
+from __future__ import annotations
+
+from rich.text import Text
+from textual.widgets import Static
+
+from fbs.drivers.relay import MODES
+
+from .state import Snapshot
+
+
+class StatusBar(Static):
+    def __init__(self, url: str, **kw) -> None:
+        super().__init__(**kw)
+        self.url = url
+        self.note = ""
+        self._shown: tuple = ()
+
+    def show(self, snap: Snapshot) -> None:
+        rec = snap.recording
+        key = (snap.relay, snap.phase, snap.fault, snap.alarm, self.note,
+               int(rec.elapsed_s) if rec else None,
+               round(100 * snap.procedure.fraction) if snap.procedure else None)
+        if key == self._shown:
+            return
+        self._shown = key
+        t = Text(no_wrap=True, overflow="ellipsis")
+        t.append(f" {self.url} ", style="bold")
+        st = snap.relay
+        if st is not None:
+            t.append(f" MODE {st.mode} ", style="bold reverse")
+            t.append(f" {MODES.get(st.mode, '?')[:22]} ")
+            if st.held:
+                t.append(" HELD ", style="bold black on yellow")
+        else:
+            t.append(f" {snap.phase} ")
+        if snap.fault:
+            t.append(" FAULT ", style="bold white on red")
+        elif snap.alarm:
+            t.append(" ALARM ", style="bold white on red")
+        if snap.phase == "recording" and snap.recording is not None:
+            t.append(f" REC {snap.recording.elapsed_s:.0f} s ", style="bold white on red")
+        if snap.procedure is not None:
+            t.append(f" {snap.procedure.name} {100 * snap.procedure.fraction:.0f} % ", style="bold black on cyan")
+        if self.note:
+            t.append(f" {self.note}", style="bold yellow")
+        self.update(t, layout=False)
