@@ -20,7 +20,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from .calibrations import catalogue, get
+from .calibrations import get, module_names
 from .runner import Procedure, ProcedureError, load_resume, run_procedure
 
 log = logging.getLogger(__name__)
@@ -141,7 +141,10 @@ def _log_progress(p) -> None:
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     r = sub.add_parser("run", help="run a procedure unattended (exit 0 pass, 1 limits failed, 2 aborted/error)")
-    r.add_argument("procedure", choices=list(catalogue()), help="the procedure")
+    # Named, not imported: importing every procedure (allantools, matplotlib) would cost every
+    # `fbs` command ~2 s; an unknown name is refused by get() with the known ones listed.
+    r.add_argument("procedure", metavar="PROCEDURE",
+                   help="the procedure (" + ", ".join(m.replace("_", "-") for m in module_names()) + ")")
     r.add_argument("--rig", default="sim", help="rig URL (default: the simulated rig, 'sim')")
     r.add_argument("--sim-config", help="TOML sim config for the simulated rig")
     r.add_argument("--axis", help="the axis or gyro channel to measure (procedure-dependent)")

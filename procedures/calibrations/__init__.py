@@ -20,6 +20,11 @@ def catalogue() -> dict[str, type[Procedure]]:
     return dict(sorted(found.items()))
 
 
+def module_names() -> list[str]:
+    """The procedure modules' names, without importing them."""
+    return sorted(info.name for info in pkgutil.iter_modules(__path__))
+
+
 def get(name: str) -> type[Procedure]:
     procs = catalogue()
     if name not in procs:
