@@ -112,6 +112,10 @@ class FlickerNoise:
     def spectrum_key(self) -> tuple:
         return ("FlickerNoise", self.level, self.f_lo, self.f_hi, self.dt)
 
+    def initial(self) -> float:
+        """The bank's value at the start (its lags' steady-state draws)."""
+        return float(sum(g["state"].sum() for g in self.groups))
+
     def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
         """One-sided PSD of the bank as the plant sees it: each group is a set of AR(1) lags at
         step ``dec dt``, held for ``dec`` steps; a held sequence has per-sample spectrum
@@ -263,6 +267,9 @@ class LagNoise:
     def spectrum_key(self) -> tuple:
         return ("LagNoise", self.a, self.white.sigma)
 
+    def initial(self) -> float:
+        return self.y
+
     def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
         w = 2 * np.pi * np.asarray(f, float) * dt
         return held_psd(_ar1_norm(self.a, ((1 - self.a) * self.white.sigma) ** 2, w), dt)
@@ -287,6 +294,9 @@ class TelegraphJumps:
 
     def spectrum_key(self) -> tuple:
         return ("TelegraphJumps", self.amp, self.p)
+
+    def initial(self) -> float:
+        return self.level if self.amp else 0.0
 
     def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
         """A random telegraph signal flipping with probability p per step has autocorrelation

@@ -126,6 +126,10 @@ class Sources:
             out += part.take(n)
         return out
 
+    def initial(self, name: str) -> float:
+        """The slowly varying part of input ``name`` at t = 0 (white noise and lines count 0)."""
+        return float(sum(getattr(part, "initial", lambda: 0.0)() for part in self.parts[name]))
+
     @property
     def names(self) -> list[str]:
         return list(self.parts)
@@ -334,6 +338,11 @@ class Simulator:
         plant = self._compiled.disc.plant
         slow = self._slow_inputs()
         rhs = -plant.B[:, self._compiled.slow_cols] @ slow
+        # The slow noise (offset jumps, 1/f, disturbance) already has a value at t = 0: the
+        # platform has been following it, so it is part of the steady state too.
+        for name in self.sources.names:
+            if name in plant.inputs:
+                rhs -= plant.B[:, plant.inputs.index(name)] * self.sources.initial(name)
         try:
             x = scipy.linalg.solve(plant.A, rhs)
         except (scipy.linalg.LinAlgError, ValueError):

@@ -34,7 +34,8 @@ def _gap(args: argparse.Namespace) -> int:
               f"{f.gap_before_db:.2f} -> {f.gap_after_db:.2f} dB on its bands")
     if res.unexplained:
         print("  a significant departure remains that no catalogue effect explains")
-    print(f"  gap {res.gap_before_db:.2f} dB before, {res.gap_after_db:.2f} dB after (simulated models, located bands)")
+    print(f"  gap {res.gap_before_db:.2f} dB before, {res.gap_after_db:.2f} dB after (models' expected spectra, "
+          f"located bands)" + (f"; simulated runs {res.sim_gaps[0]:.2f} -> {res.sim_gaps[1]:.2f} dB" if res.sim_gaps else ""))
     for b in res.located[:8]:
         print(f"  departs: {b.channel} {b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz, {b.deviation_db:+.1f} dB at {b.peak_hz:.4g} Hz")
     if res.steps:

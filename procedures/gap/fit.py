@@ -122,8 +122,12 @@ class Fitter:
     def base(self, cfg: SimConfig) -> NuisanceFit:
         return fit_nuisance(self.P, self.dof, self.model(cfg))
 
-    def fit(self, effect: Effect, base_cfg: SimConfig, evidence: Any) -> EffectFit | None:
-        """The maximum-likelihood fit of ``effect`` on ``base_cfg``; None if it does not apply."""
+    def fit(self, effect: Effect, base_cfg: SimConfig, evidence: Any, *, refine: bool = True,
+            errors: bool = True, start: dict[str, float] | None = None) -> EffectFit | None:
+        """The maximum-likelihood fit of ``effect`` on ``base_cfg``; None if it does not apply.
+        Without ``refine``, the best of the starting points (a screening); without ``errors``,
+        no curvature (NaN uncertainties). ``start``: begin from these values instead of the
+        prior grid and the guesses."""
         fitted = effect.fit_params
         held: dict[str, float] = {p.name: p.default for p in effect.params if p not in fitted}
         guesses = effect.guess(evidence) if effect.guess else []
@@ -154,26 +158,26 @@ class Fitter:
         else:
             n = self.grid_points if d == 1 else max(3, int(round(self.grid_points ** (1 / d) + 1)))
             axes = [np.linspace(0.5 / n, 1 - 0.5 / n, n)] * d
-            starts = [np.array(s) for s in product(*axes)]
-            for g in guesses:
+            starts = [np.array(s) for s in product(*axes)] if start is None else []
+            for g in guesses if start is None else [start]:
                 t = np.array([_to_unit(p, g.get(p.name, p.default)) for p in fitted])
                 starts.append(np.clip(t, 0.0, 1.0))
             scored = sorted(starts, key=evaluate)
             best_t, best_v = scored[0], evaluate(scored[0])
             # Refine the best two: small simplex, as the best start already sits in its basin.
-            for t0 in scored[:2]:
+            for t0 in scored[:1] if refine else []:
                 simplex = np.vstack([t0] + [t0 + 0.02 * np.eye(d)[i] for i in range(d)])
                 res = scipy.optimize.minimize(evaluate, t0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * d,
                                               options={"initial_simplex": np.clip(simplex, 0, 1), "xatol": 2e-4,
-                                                       "fatol": 0.01, "maxfev": 50 * d})
+                                                       "fatol": 0.02, "maxfev": 40 * d})
                 if res.fun < best_v:
                     best_t, best_v = np.clip(res.x, 0, 1), res.fun
         nll, nf, cfg = cache[tuple(np.round(np.clip(best_t, 0, 1), 9))]
         params = {p.name: _from_unit(p, t) for p, t in zip(fitted, best_t)} | held
         if effect.derive is not None:
             params = effect.derive(params)
-        errors = self._errors(evaluate, best_t, fitted)
-        return EffectFit(effect.name, params, errors, nll, nf.scales, d, cfg, nf.S)
+        errs = self._errors(evaluate, best_t, fitted) if errors else {p.name: float("nan") for p in fitted}
+        return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S)
 
     @staticmethod
     def _errors(evaluate, t: np.ndarray, fitted: tuple[Param, ...]) -> dict[str, float]:

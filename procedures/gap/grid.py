@@ -85,7 +85,7 @@ def _bin_correlation(window: np.ndarray, max_lag: int = 4) -> np.ndarray:
 
 
 def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz: float = 0.25,
-              f_hi_fraction: float = 0.45, bands_per_octave: int = 24) -> Grid:
+              f_hi_fraction: float = 0.3, bands_per_octave: int = 24) -> Grid:
     """Bins from ``f_lo_hz`` (at least the 4th bin, clear of the detrend's leakage) to
     ``f_hi_fraction`` of the rate, in 1/``bands_per_octave``-octave bands."""
     if not (rate_hz > 0 and math.isfinite(rate_hz)):

@@ -70,8 +70,11 @@ def markdown(res: GapResult) -> str:
     if not res.significant:
         lines += ["No band departs from the nominal model beyond confidence and no offset step was found: "
                   "effect **none**, `significant: false`.", ""]
-    lines += [f"Gap (rms of measured over simulated model, dB, on the located bands): **{res.gap_before_db:.2f} dB** "
-              f"before, **{res.gap_after_db:.2f} dB** after.", ""]
+    lines += [f"Gap (rms of measured over model, dB, on the located bands; the models' expected spectra): "
+              f"**{res.gap_before_db:.2f} dB** before, **{res.gap_after_db:.2f} dB** after.", ""]
+    if res.sim_gaps is not None:
+        lines += [f"Against the simulated runs `model_before.h5` and `model_after.h5` (one realization each): "
+                  f"{res.sim_gaps[0]:.2f} dB before, {res.sim_gaps[1]:.2f} dB after.", ""]
     if res.findings:
         lines += ["## Effects, in the order found", "",
                   "| # | effect | parameters | BIC score | margin over runner-up | gap closed on its bands |",

@@ -15,7 +15,8 @@ def _apply(cfg, axis, amplitude_urad, interval_s):
 
 
 def _guess(evidence) -> list[dict[str, float]]:
-    # Spectra see only amplitude^2 / interval; the steps seen in the time domain give both.
+    # Spectra see only amplitude^2 / interval, so both come from the steps seen in the time
+    # domain (the fit holds them; the spectra then score the candidate).
     # Each jump is a swing of 2 x amplitude (+a to -a).
     steps = sorted(abs(s) for s in evidence.steps_urad)
     if not steps:
@@ -28,4 +29,4 @@ def _guess(evidence) -> list[dict[str, float]]:
 EFFECT = Effect("offset_jumps", __doc__.strip().splitlines()[0],
                 (Param("amplitude_urad", 5.0, 0.2, 200.0, log=True),
                  Param("interval_s", 60.0, 5.0, 1000.0, log=True)),
-                _apply, key_param="amplitude_urad", fit=("amplitude_urad",), guess=_guess)
+                _apply, key_param="amplitude_urad", fit=(), guess=_guess)
