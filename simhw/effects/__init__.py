@@ -9,7 +9,8 @@ For the model-gap workflow an effect may also say which parameters the spectra i
 (``fit``; default all) and where to start looking (``guess``: given the workflow's evidence, an
 object with ``peaks_hz`` (narrow excesses, strongest first), ``steps_urad`` (offset steps seen in
 the time domain) and ``duration_s``, a list of parameter dicts; a value of a parameter not in
-``fit`` holds it at that value).
+``fit`` holds it at that value), and how its parameters read as applied (``derive``: e.g. a
+bearing's eta follows from its stiffness and To).
 
 The *nominal* model is the Ch. III plant with the gimbal-bearing torque omitted, as the
 thesis began (Ch. V F); :func:`nominal` builds it.
