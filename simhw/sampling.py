@@ -7,6 +7,7 @@ is clipped to the end code and flagged, never wrapped.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +42,19 @@ def quantize(v: np.ndarray, range_V: float | np.ndarray, bits: int) -> tuple[np.
     return code * q, over
 
 
+def internal_rate(sampling, rate_hz: float) -> tuple[int, float]:
+    """(oversample, internal step dt) for output rate ``rate_hz``: ``sampling.oversample`` times
+    the output rate, and at least ``sampling.min_internal_rate_hz``."""
+    m = max(sampling.oversample, int(math.ceil(sampling.min_internal_rate_hz / rate_hz)))
+    return m, 1.0 / (rate_hz * m)
+
+
+def anti_alias_sos(poles: int, fraction: float, rate_hz: float, oversample: int) -> np.ndarray:
+    """The ``poles``-pole Butterworth low-pass at ``fraction`` of the output rate, designed at the
+    internal rate (App. A.5)."""
+    return scipy.signal.butter(poles, fraction * rate_hz, fs=rate_hz * oversample, output="sos")
+
+
 @dataclass
 class SamplingChain:
     """Anti-alias filter at the plant's internal rate, decimation by ``oversample``, ADC."""
@@ -54,8 +68,7 @@ class SamplingChain:
     default_range_V: float = 10.0
 
     def __post_init__(self) -> None:
-        fs_int = self.rate_hz * self.oversample
-        self.sos = scipy.signal.butter(self.poles, self.fraction * self.rate_hz, fs=fs_int, output="sos")
+        self.sos = anti_alias_sos(self.poles, self.fraction, self.rate_hz, self.oversample)
         self.zi: np.ndarray | None = None  # set from the first input: the filter was running
         self.phase = 0  # internal samples to skip before the next kept one
         self.ranges = {c: check_range(c, self.default_range_V) for c in self.channels}

@@ -23,7 +23,7 @@ from .noise import FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, Wh
 from .params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
 from .plant import (CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize,
                     torquer_limit_V)
-from .sampling import SamplingChain
+from .sampling import SamplingChain, internal_rate
 
 log = logging.getLogger(__name__)
 
@@ -206,8 +206,7 @@ class Simulator:
             raise ValueError(f"sample rate {rate_hz!r} Hz must be a positive number")
         s = self.cfg.sampling
         self.rate_hz = float(rate_hz)
-        self.oversample = max(s.oversample, int(math.ceil(s.min_internal_rate_hz / rate_hz)))
-        self.dt = 1.0 / (self.rate_hz * self.oversample)
+        self.oversample, self.dt = internal_rate(s, self.rate_hz)
         self.step = 0  # internal steps since the last rate change
 
     def _set_sampling(self, ranges: dict[str, float] | None = None) -> None:

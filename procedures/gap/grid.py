@@ -125,15 +125,13 @@ def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz:
     return Grid(float(rate_hz), nperseg, noverlap, K, bins, band, lo, hi, dof, eval_bins, band[eval_bins])
 
 
-def band_spectra(x: np.ndarray, grid: Grid) -> np.ndarray:
-    """Band-averaged one-sided Welch PSD of each row of ``x`` (n_channels, n) -> (n_channels, n_bands)."""
-    _, p = psd(np.atleast_2d(x), grid.rate_hz, nperseg=grid.nperseg, noverlap=grid.noverlap,
-               window="hann", detrend="linear")
-    return grid.band_mean(p[..., grid.bins])
-
-
 def bin_spectra(x: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
-    """The analysed Welch bins themselves: (f, p[n_channels, n_bins]) for plots."""
+    """The analysed Welch bins: (f, p[n_channels, n_bins]), one-sided density."""
     f, p = psd(np.atleast_2d(x), grid.rate_hz, nperseg=grid.nperseg, noverlap=grid.noverlap,
                window="hann", detrend="linear")
     return f[grid.bins], p[..., grid.bins]
+
+
+def band_spectra(x: np.ndarray, grid: Grid) -> np.ndarray:
+    """Band-averaged one-sided Welch PSD of each row of ``x`` (n_channels, n) -> (n_channels, n_bands)."""
+    return grid.band_mean(bin_spectra(x, grid)[1])

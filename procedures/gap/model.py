@@ -27,11 +27,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 import scipy.signal
 
 from fbs.simhw.params import SimConfig
 from fbs.simhw.plant import RelayState, build_plant, discretize
+from fbs.simhw.sampling import anti_alias_sos, internal_rate
 from fbs.simhw.simulator import Sources
 
 from .grid import Grid
@@ -99,13 +99,6 @@ def linearized(cfg: SimConfig) -> SimConfig:
     return out
 
 
-def internal_rate(cfg: SimConfig, rate_hz: float) -> tuple[int, float]:
-    """(oversample, dt) the simulator uses for output rate ``rate_hz``."""
-    s = cfg.sampling
-    m = max(s.oversample, int(math.ceil(s.min_internal_rate_hz / rate_hz)))
-    return m, 1.0 / (rate_hz * m)
-
-
 def relays_for(mode: int) -> RelayState:
     return RelayState(mode=mode, spin=1.0 if mode >= 2 else 0.0)
 
@@ -126,27 +119,9 @@ def _aliases(f: np.ndarray, fs: float, m: int) -> list[np.ndarray]:
 
 
 def frequency_response(Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
-    """H(z) = C (zI - Ad)^-1 Bd + D at each z: (n_z, n_out, n_in).
-
-    Modal form (one eigendecomposition, then a diagonal solve per frequency), checked against a
-    direct solve at a few points; where the eigenvectors are too ill-conditioned for that to
-    agree, a batched direct solve for every z.
-    """
-    lam, V = np.linalg.eig(Ad)
-    try:
-        CV = C @ V
-        VB = np.linalg.solve(V, Bd)
-    except np.linalg.LinAlgError:
-        CV = None
+    """H(z) = C (zI - Ad)^-1 Bd + D at each z: (n_z, n_out, n_in), by a batched direct solve
+    (for plants whose modes are too ill-conditioned for ``zoh_response_modal``)."""
     n = Ad.shape[0]
-    if CV is not None:
-        G = 1.0 / (z[:, None] - lam[None, :])
-        H = (G[:, None, :] * CV[None, :, :]) @ VB + D
-        probe = np.unique(np.linspace(0, len(z) - 1, 5).astype(int))
-        direct = C @ np.linalg.solve(z[probe, None, None] * np.eye(n) - Ad, Bd) + D
-        scale = np.abs(direct).max(axis=(1, 2), keepdims=True) + 1e-300
-        if np.all(np.abs(H[probe] - direct) / scale < 1e-6):
-            return H
     return C @ np.linalg.solve(z[:, None, None] * np.eye(n) - Ad, Bd) + D
 
 
@@ -277,8 +252,7 @@ class SpectralModel:
         key = (fs, m, s.anti_alias_poles, s.anti_alias_fraction)
         sos = self._aa_cache.get(key)
         if sos is None:
-            sos = self._aa_cache[key] = scipy.signal.butter(s.anti_alias_poles, s.anti_alias_fraction * fs,
-                                                            fs=fs * m, output="sos")
+            sos = self._aa_cache[key] = anti_alias_sos(s.anti_alias_poles, s.anti_alias_fraction, fs, m)
 
         def aa2(f: np.ndarray) -> np.ndarray:
             return np.abs(scipy.signal.sosfreqz(sos, worN=np.nan_to_num(np.atleast_1d(f), nan=0.0), fs=fs * m)[1]) ** 2
@@ -286,7 +260,7 @@ class SpectralModel:
 
     def __call__(self, cfg: SimConfig) -> ModelSpectrum:
         grid, fs = self.grid, self.grid.rate_hz
-        m, dt = internal_rate(cfg, fs)
+        m, dt = internal_rate(cfg.sampling, fs)
         f_eval = grid.f[grid.eval_bins]
         probe = _aliases(f_eval, fs, m)
         spectra, line_list = self._sources(cfg, m, dt, probe)
@@ -347,7 +321,7 @@ def step_response(cfg: SimConfig, mode: int, input_name: str, channels: tuple[st
                   duration_s: float, t_step_s: float) -> np.ndarray:
     """Response of ``channels`` (n_channels, n) as recorded at ``rate_hz`` (anti-alias filter and
     decimation included) to a unit step of plant input ``input_name`` at ``t_step_s``, from rest."""
-    m, dt = internal_rate(cfg, rate_hz)
+    m, dt = internal_rate(cfg.sampling, rate_hz)
     plant = build_plant(cfg, relays_for(mode))
     disc = discretize(plant, dt)
     rows = [plant.outputs.index(c) for c in channels]
@@ -362,6 +336,5 @@ def step_response(cfg: SimConfig, mode: int, input_name: str, channels: tuple[st
         u = 1.0 if k >= k_step else 0.0
         y[k] = C @ x + d * u
         x = disc.Ad @ x + b * u
-    sos = scipy.signal.butter(cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction * rate_hz,
-                              fs=rate_hz * m, output="sos")
+    sos = anti_alias_sos(cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction, rate_hz, m)
     return scipy.signal.sosfilt(sos, y, axis=0)[::m].T

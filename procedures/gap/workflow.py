@@ -26,7 +26,7 @@ import numpy as np
 from fbs.daq.reader import RunFile
 from fbs.daq.runfile import RunWriter
 from fbs.simhw import effects as catalogue
-from fbs.simhw.params import SimConfig, load_config, to_dict
+from fbs.simhw.params import Sampling, SimConfig, load_config, to_dict
 from fbs.simhw.plant import AXIS_OF_CHANNEL, CHANNELS
 from fbs.simhw.sampling import ADC_RANGES_V
 from fbs.simhw.simulator import Simulator
@@ -130,10 +130,9 @@ def load_record(path: str | Path, axis: str | None = None) -> Record:
                                 f"(cut the record) or re-record")
     steps = np.array([lsb(x) for x in data])
     keep = []
-    bits = 16
     for c, x, q in zip(wanted, data, steps):
-        full = q * 2 ** (bits - 1)
-        clipped = int(np.sum(np.abs(x) >= full - 1.5 * q)) if q > 0 and _adc_range(q, 0.0, bits) == full else 0
+        full = _range_from_lsb(q, Sampling().adc_bits)
+        clipped = int(np.sum(np.abs(x) >= full - 1.5 * q)) if full else 0
         if clipped:
             warnings.append(f"{c} excluded: {clipped} samples at the ADC's full scale (+-{full:g} V): clipped "
                             f"spectra are not the rig's; record it on a wider range")
@@ -285,16 +284,21 @@ def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = N
     return np.concatenate(chunks).T
 
 
-def _adc_range(q: float, peak: float, bits: int) -> float:
-    """The measured channel's ADC range from its LSB; for data not on a grid, the finest range
-    that holds its peak with margin."""
+def _range_from_lsb(q: float, bits: int) -> float | None:
+    """The ADC range whose LSB is ``q`` (2 range / 2^bits), if it is one the converter has."""
     if q > 0:
         full = q * 2 ** (bits - 1)
         for r in ADC_RANGES_V:
             if abs(r - full) <= 0.01 * r:
                 return r
+    return None
+
+
+def _adc_range(q: float, peak: float, bits: int) -> float:
+    """The measured channel's ADC range from its LSB; for data not on a grid, the finest range
+    that holds its peak with margin."""
     fits = [r for r in ADC_RANGES_V if r >= 1.5 * peak]
-    return min(fits) if fits else max(ADC_RANGES_V)
+    return _range_from_lsb(q, bits) or (min(fits) if fits else max(ADC_RANGES_V))
 
 
 def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | None = None,
