@@ -25,6 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from .prealloc import release
 from .reader import RunFile
 from .runfile import EVENT_DTYPE, KIND_BYTES, STATUS_RECORDING, TEXT_BYTES, RunFileError, fit_utf8
 
@@ -195,4 +196,9 @@ def recover(path: str | Path, *, force: bool = False) -> Recovery:
             status = (f"aborted: {why}not closed by its writer (killed, or its disk filled); {n} samples "
                       f"({n / rate:.3f} s) were flushed and kept")
             f.attrs["status"] = status
+    if was_open:
+        try:
+            release(path)               # the dead writer's space reserved past the end
+        except OSError as exc:
+            log.warning("%s: could not return the disk space reserved past its end: %s", path, exc)
     return Recovery(path, was_open, n, rate, padded, status)

@@ -3,15 +3,18 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
+import time
 
 import h5py
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from fbs.daq.prealloc import Preallocator
 from fbs.daq.runfile import (EVENT_DTYPE, TEXT_BYTES, RunFileError, RunWriter, check_new_path, chunk_samples,
                              fit_utf8)
 
@@ -56,7 +59,7 @@ def test_a_closed_file_follows_the_layout_and_opens_with_plain_h5py(tmp_path):
         assert "fbs-hil" in json.loads(f["meta"].attrs["software_version"])
 
 
-def test_samples_reach_the_file_when_the_flush_interval_passes_or_the_buffer_fills(tmp_path):
+def test_samples_are_written_when_the_buffer_fills_and_flushed_when_the_interval_passes(tmp_path):
     clock = Clock()
     w = _writer(tmp_path / "r.h5", clock, flush_s=0.5, buffer_bytes=16 * 100)   # 100 samples of 2 channels
     w.append(np.zeros((30, 2)))
@@ -70,13 +73,13 @@ def test_samples_reach_the_file_when_the_flush_interval_passes_or_the_buffer_fil
     w.append(np.zeros((10, 2)))
     w.sync()                                     # the write thread has done what was handed over
     assert w.flushed == 70                       # the interval passed: everything went out
-    w.append(np.ones((250, 2)))                  # fills the buffer twice within the interval
-    w.sync()
-    assert w.flushed == 270 and w.samples == 320
+    w.append(np.ones((250, 2)))                  # buffers fill within the interval, ending on
+    w.sync()                                     # multiples of their size: 70..100, 100..200, 200..300
+    assert (w.written, w.flushed, w.samples) == (300, 70, 320)   # written, not yet flushed
     clock.t = 1.0
     w.event(0.9, "note", "operator note")       # an event alone also flushes when due
     w.sync()
-    assert w.flushed == 320
+    assert w.flushed == w.written == 320
     w.close()
     with h5py.File(tmp_path / "r.h5") as f:
         assert len(f["channels/a"]) == 320 and f["channels/a"][70:320].sum() == 250
@@ -160,7 +163,7 @@ def test_bad_construction_arguments_are_refused_before_a_file_exists(tmp_path):
 def test_chunks_track_one_flush_of_samples():
     assert chunk_samples(10.0, 0.5) == 1024
     assert chunk_samples(10_000.0, 0.5) == 8192
-    assert chunk_samples(1e6, 0.5) == 65536
+    assert chunk_samples(1e6, 0.5) == 131072
 
 
 @given(st.text(max_size=2000), st.integers(8, 1100))
@@ -181,3 +184,88 @@ def test_a_long_event_text_is_cut_and_marked(tmp_path):
         assert f["events"].dtype == EVENT_DTYPE
         text = f["events"][0]["text"].decode()
         assert text.endswith("[cut]") and len(text.encode()) <= TEXT_BYTES
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 5000), st.booleans()), min_size=1, max_size=12),
+       st.integers(1000, 6000))
+def test_any_sequence_of_appends_and_flushes_reads_back_exactly(tmp_path_factory, steps, cap):
+    """Whole chunks (1024 samples here) go by H5Dwrite_chunk, partial ones by H5Dwrite, from any
+    alignment a buffer of ``cap`` samples and flushes at any point leave them in."""
+    p = tmp_path_factory.mktemp("w") / "r.h5"
+    clock = Clock()
+    rng = np.random.default_rng(len(steps) * cap)
+    sent = []
+    with _writer(p, clock, buffer_bytes=16 * cap) as w:
+        for n, flush_due in steps:
+            x = rng.standard_normal((n, 2))
+            sent.append(x)
+            if flush_due:
+                clock.t += 0.5
+            w.append(x)
+    x = np.concatenate(sent)
+    with h5py.File(p) as f:
+        assert f["channels/a"].chunks == (1024,)
+        np.testing.assert_array_equal(f["channels/a"][:], x[:, 0])
+        np.testing.assert_array_equal(f["channels/b"][:], x[:, 1])
+
+
+class _LayoutFails(RunWriter):
+    def _layout(self, *args) -> None:
+        raise OSError("Unable to create group (file write failed: errno = 28, error message = 'No space left')")
+
+
+def test_a_layout_that_fails_on_the_write_thread_is_raised_by_the_next_call(tmp_path):
+    p = tmp_path / "r.h5"
+    w = _LayoutFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock())
+    with pytest.raises(RunFileError, match=r"laying out .*r\.h5 failed \(the disk is full\)"):
+        w.flush()
+    w.close("aborted: the layout failed")
+    with h5py.File(p) as f:
+        assert f.attrs["status"] == "aborted: the layout failed"
+
+
+class _WriteFails(RunWriter):
+    def _write_channel(self, did, x, n0) -> None:
+        raise OSError("Can't write data (file write failed: errno = 28, error message = 'No space left')")
+
+
+def test_close_raises_a_write_failure_that_no_call_reported(tmp_path):
+    p = tmp_path / "r.h5"
+    w = _WriteFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock(), buffer_bytes=8 * 10)
+    w.append(np.zeros((10, 1)))          # a full buffer: handed to the write thread, which fails
+    while w.failed is None:              # the failure is on the write thread; no call has seen it
+        time.sleep(0.001)
+    with pytest.raises(RunFileError, match="the disk is full"):
+        w.close()
+    with h5py.File(p) as f:
+        assert f.attrs["status"].startswith("aborted: writing") and len(f["channels/a"]) == 0
+
+
+def _fallocate_works(folder) -> bool:
+    probe = folder / "probe.bin"
+    probe.write_bytes(b"\0")
+    fd = os.open(probe, os.O_RDWR)
+    try:
+        pre = Preallocator(fd, 1 << 20)
+        pre.reserve(1)
+        return pre.enabled and os.fstat(fd).st_blocks * 512 >= 1 << 20
+    finally:
+        os.close(fd)
+        probe.unlink()
+
+
+def test_disk_space_is_reserved_ahead_while_recording_and_returned_at_close(tmp_path):
+    if not _fallocate_works(tmp_path):
+        pytest.skip("this filesystem cannot reserve space (fallocate)")
+    p = tmp_path / "r.h5"
+    w = _writer(p)
+    w.append(np.ones((100, 2)))
+    w.flush()
+    st = os.stat(p)
+    assert st.st_blocks * 512 - st.st_size > 512 << 10     # a 1 MiB step, the size unchanged by it
+    w.close()
+    st = os.stat(p)
+    assert st.st_blocks * 512 < st.st_size + (64 << 10)
+    with h5py.File(p) as f:
+        np.testing.assert_array_equal(f["channels/a"][:], np.ones(100))
