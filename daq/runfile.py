@@ -16,8 +16,7 @@ How the writer keeps data safe:
   was not yet flushed: ``flushed`` counts the samples readers are sure to see.
 * The writing is done by one thread of the writer's own, from the second of two buffers,
   while the caller fills the first: a slow disk delays the acquisition only when a whole
-  buffer is waiting. An error there (disk full) is raised by the caller's next call. The
-  file is created by the constructor (a bad path fails there) but laid out on that thread.
+  buffer is waiting. An error there (disk full) is raised by the caller's next call.
 * Event strings are fixed-length (variable-length strings live in the global heap, which a
   killed SWMR writer can leave unreadable): ``kind`` up to 32 bytes, ``text`` up to 1024
   bytes of UTF-8; a longer text is cut at a character boundary and ends in "[cut]".
@@ -66,6 +65,8 @@ EVENT_DTYPE = np.dtype([("time", "f8"),
                         ("kind", h5py.string_dtype("utf-8", KIND_BYTES)),
                         ("text", h5py.string_dtype("utf-8", TEXT_BYTES))])
 _CUT = " [cut]"
+_F8 = h5t.py_create(np.dtype("<f8"))        # the channels' type, for h5py's low-level calls
+_VSTR = h5py.string_dtype()                 # str attributes as attrs[...] = "..." stores them
 #: Rows transposed into the channel-major buffer at a time: a tile (128 KiB at 16 channels)
 #: stays in cache while it is scattered, ~25 % faster than one big strided copy.
 _TILE = 1024
@@ -176,9 +177,12 @@ class RunWriter:
         self._failed: str | None = None
         self._closed = False
         self._last_flush = clock()
-        # laid out on the write thread while the caller's first samples fill the buffer
-        self._inflight = self._pool.submit(self._lay_out, rig, mode, dict(channels), axis, procedure,
-                                           dict(meta or {}))
+        try:
+            self._layout(rig, mode, channels, axis, procedure, meta or {})
+        except (OSError, ValueError, RuntimeError, TypeError) as exc:
+            self.f.close()
+            self.path.unlink(missing_ok=True)       # ours, just made, and holding nothing yet
+            raise RunFileError(f"cannot lay out run file {self.path} ({_write_hint(exc)}): {exc}") from exc
 
     # ------------------------------------------------------------------ creation
     def _open(self, overwrite: bool) -> None:
@@ -187,16 +191,6 @@ class RunWriter:
             self.f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest", rdcc_nbytes=0)
         except (OSError, ValueError) as exc:
             raise RunFileError(f"cannot create run file {self.path}: {exc}") from exc
-
-    def _lay_out(self, rig: str, mode: int, channels: Mapping[str, str], axis: str | None,
-                 procedure: str | None, meta: Mapping[str, Any]) -> None:
-        """On the write thread: root attributes, channels, events and meta; the caller's next
-        call raises if this failed."""
-        try:
-            self._layout(rig, mode, channels, axis, procedure, meta)
-        except (OSError, ValueError, RuntimeError, TypeError) as exc:
-            self._failed = f"laying out {self.path} failed ({_write_hint(exc)}): {exc}"
-            raise RunFileError(self._failed) from exc
 
     def _layout(self, rig: str, mode: int, channels: Mapping[str, str], axis: str | None,
                 procedure: str | None, meta: Mapping[str, Any]) -> None:
@@ -235,16 +229,13 @@ class RunWriter:
         row = 8 * len(self.names)
         step = min(2 * self._cap * row, max(1 << 20, int(2 * self.rate_hz) * row))
         self._space = Preallocator(self.f.id.get_vfd_handle(), step)
-        self._spare.fill(0.0)       # its pages faulted in here, not by the caller's second buffer
 
     def set_meta(self, name: str, value: Any) -> None:
         """Store ``value`` as JSON in ``/meta`` (before the first flush)."""
         if self._swmr:
             raise RuntimeError(f"{self.path}: a meta can only be added before the first sample or event "
                                "(SWMR files cannot grow new objects)")
-        text = json.dumps(value, default=str)
-        self.sync()                 # the layout, on the write thread
-        self.meta.attrs[name] = text
+        self.meta.attrs[name] = json.dumps(value, default=str)
 
     # ------------------------------------------------------------------ streaming
     @property
@@ -285,6 +276,8 @@ class RunWriter:
             m = min(n - pos, self._room() - self._k)
             if cols is None:
                 self._buf[:, self._k:self._k + m].fill(np.nan)
+            elif cols.strides[1] == cols.itemsize:       # channel-major already (ADC blocks are)
+                self._buf[:, self._k:self._k + m] = cols[:, pos:pos + m]
             else:
                 for j in range(0, m, _TILE):
                     e = min(m, j + _TILE)
@@ -356,11 +349,22 @@ class RunWriter:
         except (OSError, ValueError, RuntimeError) as exc:
             self._failed = (f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples 0..{self.flushed} "
                             f"({self.flushed / self.rate_hz:.3f} s) were flushed before")
+            self._roll_back(n0)
             raise RunFileError(self._failed) from exc
         self._n_events += len(events)
         self.written = n0 + k
         if flush:
             self.flushed = self.written
+
+    def _roll_back(self, n0: int) -> None:
+        """After a failed write: no channel keeps an extent past ``n0``, where samples that never
+        reached the disk would read as zeros. Best effort: the disk may refuse this too."""
+        for ds in self.datasets:
+            try:
+                if ds.id.shape[0] > n0:
+                    ds.id.set_extent((n0,))
+            except (OSError, ValueError, RuntimeError) as exc:
+                log.warning("%s: could not take channel %s back to %d samples: %s", self.path, ds.name, n0, exc)
 
     def _write_channel(self, did: h5d.DatasetID, x: np.ndarray, n0: int) -> None:
         """Extend one channel's dataset by ``x`` at ``n0``. Whole chunks go straight to the file
@@ -442,10 +446,6 @@ class RunWriter:
 
     def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:
         self.close(STATUS_COMPLETE if ev is None else abort_status(ev))
-
-
-_F8 = h5t.py_create(np.dtype("<f8"))
-_VSTR = h5py.string_dtype()
 
 
 def _put_attr(oid: h5d.DatasetID, name: str, value: np.ndarray) -> None:

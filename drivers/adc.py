@@ -40,6 +40,8 @@ class AdcStatus:
 class AdcBlock:
     """Contiguous sample sets ``first_sample ..`` of a stream; volts as converted by the ADC.
 
+    ``volts`` is indexed [sample, channel] but laid out channel by channel (``volts.T`` is
+    C-contiguous): each channel's samples are contiguous, as a run file stores them.
     ``overrange`` marks samples at an end code (at or beyond full scale): clipped, never wrapped.
     """
 
@@ -47,7 +49,7 @@ class AdcBlock:
     rate_hz: float
     t0_s: float                           # rig time of the stream's sample 0
     channels: tuple[str, ...]
-    volts: np.ndarray                     # (n, n_channels) float64
+    volts: np.ndarray                     # (n, n_channels) float64, channel-major in memory
     overrange: np.ndarray = field(repr=False, default=None)  # (n, n_channels) bool
 
     def __len__(self) -> int:

@@ -215,14 +215,13 @@ class _LayoutFails(RunWriter):
         raise OSError("Unable to create group (file write failed: errno = 28, error message = 'No space left')")
 
 
-def test_a_layout_that_fails_on_the_write_thread_is_raised_by_the_next_call(tmp_path):
+def test_a_layout_that_fails_is_a_clear_error_and_leaves_no_file(tmp_path):
     p = tmp_path / "r.h5"
-    w = _LayoutFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock())
-    with pytest.raises(RunFileError, match=r"laying out .*r\.h5 failed \(the disk is full\)"):
-        w.flush()
-    w.close("aborted: the layout failed")
-    with h5py.File(p) as f:
-        assert f.attrs["status"] == "aborted: the layout failed"
+    with pytest.raises(RunFileError, match=r"cannot lay out run file .*r\.h5 \(the disk is full\)"):
+        _LayoutFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock())
+    assert not p.exists()
+    with _writer(p) as w:                  # and the name can be used again
+        w.append(np.ones((2, 2)))
 
 
 class _WriteFails(RunWriter):
@@ -269,3 +268,26 @@ def test_disk_space_is_reserved_ahead_while_recording_and_returned_at_close(tmp_
     assert st.st_blocks * 512 < st.st_size + (64 << 10)
     with h5py.File(p) as f:
         np.testing.assert_array_equal(f["channels/a"][:], np.ones(100))
+
+
+class _ThirdChannelFails(RunWriter):
+    def _write_channel(self, did, x, n0) -> None:
+        if n0 and h5py.h5i.get_name(did).endswith(b"/c"):
+            did.set_extent((n0 + len(x),))      # extended, then the disk refuses the data
+            raise OSError("Can't write data (file write failed: errno = 28, error message = 'No space left')")
+        super()._write_channel(did, x, n0)
+
+
+def test_a_failed_write_leaves_no_channel_claiming_samples_it_lacks(tmp_path):
+    p = tmp_path / "r.h5"
+    w = _ThirdChannelFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V", "c": "V"},
+                           clock=Clock())
+    w.append(np.ones((40, 3)))
+    w.flush()
+    w.append(np.full((25, 3), 2.0))
+    with pytest.raises(RunFileError, match=r"the disk is full.*Samples 0\.\.40 \(0\.400 s\) were flushed"):
+        w.flush()
+    w.close("aborted: disk full")
+    with h5py.File(p) as f:
+        assert [len(f["channels"][c]) for c in "abc"] == [40, 40, 40]   # not 65 with zeros in c
+        assert (f["channels/c"][:] == 1.0).all()

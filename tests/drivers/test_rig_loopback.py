@@ -46,6 +46,7 @@ def test_adc_configure_stream_and_stop(rig):
     while pos < 6000:
         b = rig.adc.read(1500)
         assert b.first_sample == pos and b.channels == chans
+        assert b.volts.shape == (len(b), 16) and b.volts.T.flags.c_contiguous   # channel-major in memory
         got.append(b.volts)
         pos = b.stop_sample
     status = rig.adc.stop()
@@ -57,6 +58,9 @@ def test_adc_configure_stream_and_stop(rig):
         pos = b.stop_sample
     assert pos == status.samples  # every sample the device sent arrived, none twice
     v = np.concatenate(got)
+    lsb = np.array([ranges[c] / 32768.0 for c in chans])
+    codes = np.rint(v / lsb)
+    assert np.array_equal(codes * lsb, v) and codes.min() >= -32768 and codes.max() <= 32767   # each its own range
     # The autocollimator noise (NEA ~0.45 urad x 5.7 mV/urad) is resolved on the 0.1 V range.
     ac = v[:, chans.index("ac_x_ctl")]
     assert 1e-3 < np.std(ac) < 1e-2
