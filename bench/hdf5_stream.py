@@ -16,9 +16,8 @@ How it is measured, all in this run:
   ADC driver delivers them, channel by channel (``drivers.adc.AdcBlock.volts``: it converts
   codes to volts that way, at the same cost), so they are slices of a Fortran-ordered copy
   of the array made once, outside the timing; the bulk side writes the C-ordered array, its
-  own fastest case. Timed from the RunWriter's construction to
-  the end of ``close()`` (which sets the status and returns the unused reserved space),
-  inclusive. The sample rate given to the writer (``--rate-hz``, default the
+  own fastest case. Timed from the RunWriter's construction to the end of ``close()`` (which
+  sets the status and returns the unused reserved space), inclusive. The sample rate given to the writer (``--rate-hz``, default the
   thesis ADC's 140 kHz) only sets the chunk length (``runfile.chunk_samples``); the blocks
   are fed as fast as the writer takes them.
 * The baseline: ``with h5py.File(p, "w") as f: f.create_dataset("x", data=array)``, one
@@ -33,8 +32,8 @@ How it is measured, all in this run:
   run to take; the cold episodes then land on the primes (their median and worst are
   printed). Everything runs once to warm up, then ``--rounds`` rounds of [bulk, streaming,
   streaming fed row-major blocks, streaming with a small ``flush_s``, bulk into reserved space]
-  are interleaved, the order rotating every round so no
-  side always follows the same neighbour.
+  are interleaved, the order rotating every round so no side always follows the same
+  neighbour.
 * The statistic: the ratio of the medians (bulk median time / streaming median time = the
   streaming throughput as a fraction of the bulk throughput); PASS if >= 0.70. Medians, as in
   the other benches, so that an occasional slow run on either side does not decide; the
@@ -46,10 +45,9 @@ How it is measured, all in this run:
 * Information, not judged: the same streaming fed row-major (C-ordered) blocks, as a caller
   other than the ADC driver may, and the transpose ``append`` then makes into the
   channel-major buffer, timed alone in every round (the writer overlaps it with the HDF5
-  writes on its own thread); the
-  bulk write again into disk space reserved first as the writer reserves it
-  (``daq.prealloc``), to show how much of the streaming's speed is that reservation and what
-  the bulk write would gain from it; the same streaming with ``flush_s`` forced small
+  writes on its own thread); the bulk write again into disk space reserved first as the
+  writer reserves it (``daq.prealloc``), to show how much of the streaming's speed is that
+  reservation and what the bulk write would gain from it; the same streaming with ``flush_s`` forced small
   (``--small-flush-s``, 0.05 s; note that ``chunk_samples`` then picks shorter chunks too), and
   the writer's peak extra memory during one untimed streaming run: the tracemalloc peak
   (Python and numpy allocations: the buffer, block copies; not HDF5's own C allocations)

@@ -47,6 +47,11 @@ UNEVEN_WRITER = textwrap.dedent("""
 """)
 
 
+def _allocated_past_end(path) -> int:
+    st = os.stat(path)
+    return st.st_blocks * 512 - st.st_size
+
+
 def _run(script: str, path, *extra) -> None:
     p = subprocess.run([sys.executable, "-c", script, str(path), *extra], capture_output=True, text=True, timeout=60)
     assert p.returncode == -9, p.stderr
@@ -79,9 +84,11 @@ def test_a_killed_writers_file_keeps_every_flushed_sample_and_recovers(tmp_path)
         assert run.swmr and run.n_samples == 300
         assert run.status.startswith("aborted: the writer died")   # its pid is gone
         assert [e.text for e in run.events] == ["before the kill"]
+    reserved = _allocated_past_end(p)                # the writer reserves space ahead (1 MiB here)
     rec = recover(p)
     assert rec.was_open and rec.samples == 300 and not rec.padded
     assert "300 samples (3.000 s)" in rec.status
+    assert _allocated_past_end(p) < min(reserved, 64 << 10) + 4096   # returned by recover
     with h5py.File(p, "r") as f:                     # plain open works again
         np.testing.assert_array_equal(f["channels/b"][()], np.arange(1, 600, 2))
         assert f.attrs["status"] == rec.status
