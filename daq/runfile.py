@@ -183,6 +183,10 @@ class RunWriter:
             self.f.close()
             self.path.unlink(missing_ok=True)       # ours, just made, and holding nothing yet
             raise RunFileError(f"cannot lay out run file {self.path} ({_write_hint(exc)}): {exc}") from exc
+        # disk reserved ahead: about 2 s of data, at least 1 MiB, at most two buffers
+        row = 8 * n_ch
+        self._space = Preallocator(self.f.id.get_vfd_handle(),
+                                   min(2 * self._cap * row, max(1 << 20, int(2 * self.rate_hz) * row)))
 
     # ------------------------------------------------------------------ creation
     def _open(self, overwrite: bool) -> None:
@@ -225,10 +229,6 @@ class RunWriter:
         self.meta.attrs["software_version"] = json.dumps({"fbs-hil": __version__})
         for k, v in meta.items():
             self.meta.attrs[k] = json.dumps(v, default=str)
-        # about 2 s of data, at least 1 MiB, at most two buffers
-        row = 8 * len(self.names)
-        step = min(2 * self._cap * row, max(1 << 20, int(2 * self.rate_hz) * row))
-        self._space = Preallocator(self.f.id.get_vfd_handle(), step)
 
     def set_meta(self, name: str, value: Any) -> None:
         """Store ``value`` as JSON in ``/meta`` (before the first flush)."""

@@ -233,8 +233,10 @@ def test_close_raises_a_write_failure_that_no_call_reported(tmp_path):
     p = tmp_path / "r.h5"
     w = _WriteFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock(), buffer_bytes=8 * 10)
     w.append(np.zeros((10, 1)))          # a full buffer: handed to the write thread, which fails
-    while w.failed is None:              # the failure is on the write thread; no call has seen it
+    deadline = time.monotonic() + 60     # a hang guard, not a timing assert
+    while w.failed is None and time.monotonic() < deadline:   # on the write thread; no call has seen it
         time.sleep(0.001)
+    assert w.failed is not None
     with pytest.raises(RunFileError, match="the disk is full"):
         w.close()
     with h5py.File(p) as f:
