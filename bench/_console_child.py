@@ -28,9 +28,9 @@ def cpu_s() -> float:
 
 
 def console(args) -> dict:
-    from fbs.console.app import ConsoleApp, RigNews
-    from fbs.console.meters import MeterTable
-    from fbs.console.state import RecordingEnded, RigReady
+    from console.app import ConsoleApp, RigNews
+    from console.meters import MeterTable
+    from console.state import RecordingEnded, RigReady
 
     out: dict = {}
 
@@ -60,8 +60,8 @@ def console(args) -> dict:
 
 
 def baseline(args) -> dict:
-    from fbs.daq.recorder import record
-    from fbs.drivers.rig import open_rig
+    from daq.recorder import record
+    from drivers.rig import open_rig
 
     with open_rig(args.rig) as rig:
         t0, c0 = time.monotonic(), cpu_s()

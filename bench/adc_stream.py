@@ -146,8 +146,8 @@ def device_main(conn, max_agg_hz: float) -> None:
     A closed pipe (the parent died) also ends it.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    from fbs.simhw.adc_device import AdcDevice
-    from fbs.simhw.plant import CHANNELS
+    from simhw.adc_device import AdcDevice
+    from simhw.plant import CHANNELS
 
     server = _StandInServer(CHANNELS)
     dev = AdcDevice(server, max_aggregate_rate_hz=max_agg_hz)
@@ -320,7 +320,7 @@ class Trial:
     @property
     def wire_mb_s(self) -> float:
         """Bytes per second through the pty at the nominal rate (frames with header and CRC)."""
-        from fbs.drivers.adc_protocol import frame_size
+        from drivers.adc_protocol import frame_size
         return frame_size(self.frame_sets, N_CHANNELS) * self.rate_hz / self.frame_sets / 1e6
 
     @property
@@ -343,8 +343,8 @@ class _Checker:
 
 
 def run_trial(device: Device, agg_hz: float, duration_s: float, checker_codes: np.ndarray) -> Trial:
-    from fbs.drivers.errors import DriverError, SampleGap
-    from fbs.drivers.serial_adc import SerialAdc
+    from drivers.errors import DriverError, SampleGap
+    from drivers.serial_adc import SerialAdc
 
     tr = Trial(agg_hz, duration_s)
     checker = _Checker(checker_codes)
@@ -495,7 +495,7 @@ def main() -> int:
     t_start = time.monotonic()
     log(f"adc_stream: numpy {np.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; "
         f"trials {trial_s:g} s at {', '.join(fmt_rate(r) for r in rates)}; confirmation {confirm_s:g} s")
-    from fbs.simhw.plant import CHANNELS
+    from simhw.plant import CHANNELS
     codes = expected_codes(noise_volts(len(CHANNELS))[:, :N_CHANNELS])
     trials: list[Trial] = []
     confirms: list[Trial] = []

@@ -40,7 +40,7 @@ import numpy as np
 import scipy
 import scipy.signal
 
-from fbs.daq.spectra import coherence, welch_csd_matrix
+from daq.spectra import coherence, welch_csd_matrix
 
 N_CHANNELS = 8
 FS = 1000.0

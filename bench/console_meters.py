@@ -5,7 +5,7 @@ times a second and the console process uses less than half a core.
 
 How it is measured, all in this run:
 
-* The console is the real one (``fbs.console.app.ConsoleApp`` with Textual's real terminal
+* The console is the real one (``console.app.ConsoleApp`` with Textual's real terminal
   driver) in a child process whose terminal is a pseudo-terminal of 80x24 (``TERM`` xterm-
   256color); this process drains the terminal's output as a terminal emulator would. The
   rig is the paced simulated rig, ``sim?realtime=1`` (the console's default), which runs in

@@ -2,7 +2,7 @@
 
 One 300 s, 1 kHz, 4-channel Mode-3 file (axis X: ac_x_ctl, ac_x_inst, gyro_x, pa_x) with a
 hidden bearing (the thesis's case; the most expensive, as every candidate's search runs and
-two effects' worth of passes follow), analysed end to end by ``fbs.procedures.gap.analyse``:
+two effects' worth of passes follow), analysed end to end by ``procedures.analysis.gap.analyse``:
 reading, spectra, the fits of every catalogue effect, the before/after simulations. The
 baseline measured in the same run is one simulation of the same record (what the workflow
 would cost if it only simulated the nominal model once). Target: at most 60 s on 2 cores.
@@ -26,9 +26,9 @@ def main() -> int:
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "procedures" / "gap"))
     from conftest import make_hidden  # the suite's file maker: simhw run, axis channels, lab ranges
 
-    from fbs.procedures.gap.workflow import analyse
-    from fbs.simhw import effects
-    from fbs.simhw.simulator import Simulator
+    from procedures.analysis.gap.workflow import analyse
+    from simhw import effects
+    from simhw.simulator import Simulator
 
     with tempfile.TemporaryDirectory() as d:
         path = make_hidden(Path(d) / "bearing.h5", ["bearing_friction:stiffness_Nm_per_rad=410"], seed=3)

@@ -17,9 +17,9 @@ How it is measured, all in this run:
   codes to volts that way, at the same cost), so they are slices of a Fortran-ordered copy
   of the array made once, outside the timing; the bulk side writes the C-ordered array, its
   own fastest case. Timed from the RunWriter's construction to the end of ``close()`` (which
-  sets the status and returns the unused reserved space), inclusive. The sample rate given to the writer (``--rate-hz``, default the
-  thesis ADC's 140 kHz) only sets the chunk length (``runfile.chunk_samples``); the blocks
-  are fed as fast as the writer takes them.
+  sets the status and returns the unused reserved space), inclusive.
+  The sample rate given to the writer (``--rate-hz``, default the thesis ADC's 140 kHz) only sets
+  the chunk length (``runfile.chunk_samples``); the blocks are fed as fast as the writer takes them.
 * The baseline: ``with h5py.File(p, "w") as f: f.create_dataset("x", data=array)``, one
   contiguous 2-D dataset, timed from the open to the end of the close, inclusive.
 * Both write into one temporary directory on the repository's filesystem, each file deleted
@@ -74,8 +74,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from fbs.daq.prealloc import Preallocator, release
-from fbs.daq.runfile import RunWriter, chunk_samples
+from daq.prealloc import Preallocator, release
+from daq.runfile import RunWriter, chunk_samples
 
 REPO = Path(__file__).resolve().parent.parent
 N_CHANNELS = 16
@@ -339,7 +339,8 @@ def main() -> int:
     for s in sides:
         log(f"{labels[s]:32s} best {best[s]:6.3f} s  median {med[s]:6.3f} s   "
             f"{size / MB / med[s]:7.0f} MB/s median ({size / MB / best[s]:.0f} MB/s best)")
-    log(f"read back: {'exact, status complete, ' + str(N_CHANNELS) + ' 1-D float64 channels' if not problems else 'PROBLEMS: ' + '; '.join(problems)}")
+    verdict = f"exact, status complete, {N_CHANNELS} 1-D float64 channels" if not problems else "PROBLEMS: " + "; ".join(problems)
+    log(f"read back: {verdict}")
     log(f"writer memory (untimed run): tracemalloc peak {mem_peak / MB:.1f} MB = {mem_peak / size:.3f} x the data, "
         f"{mem_peak / BUFFER_BYTES:.2f} x the {BUFFER_BYTES >> 20} MiB buffer")
     med_copy = statistics.median(copy_times)

@@ -34,10 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from fbs.simhw.kernel import CompiledPlant
-from fbs.simhw.params import SimConfig
-from fbs.simhw.plant import (NL_DAHL, Lin, Nonlinearity, Plant, RelayState, build_plant,
-                             discretize)
+from simhw.kernel import CompiledPlant
+from simhw.params import SimConfig
+from simhw.plant import NL_DAHL, Lin, Nonlinearity, Plant, RelayState, build_plant, discretize
 
 RATE_HZ = 1000.0
 HOUR_S = 3600.0
@@ -98,7 +97,7 @@ def run_hour_child(repeat: int, duration_s: float) -> None:
     Each timed run starts a new Simulator (construction untimed) and discards the blocks
     as they come, as a streaming consumer would.
     """
-    from fbs.simhw.simulator import Simulator
+    from simhw.simulator import Simulator
 
     rss_imports = current_rss_mb()
 
@@ -257,7 +256,7 @@ class ZohAxis:
     n_slow: int
 
     @classmethod
-    def build(cls, plant: Plant, dt: float, axis: str) -> "ZohAxis":
+    def build(cls, plant: Plant, dt: float, axis: str) -> ZohAxis:
         cp = CompiledPlant.build(discretize(plant, dt))
         nac = list(cp.fast_cols).index(plant.inputs.index(f"nac_{axis}"))
         return cls(cp, nac, plant.outputs.index(f"theta_{axis.lower()}"), len(cp.slow_cols))

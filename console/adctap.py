@@ -10,9 +10,8 @@ from __future__ import annotations
 
 import logging
 
-from fbs.drivers.adc import Adc, AdcBlock, AdcConfig, AdcIdentity, AdcStatus
-
-from .meterdata import MeterStore
+from console.meterdata import MeterStore
+from drivers.adc import Adc, AdcBlock, AdcConfig, AdcIdentity, AdcStatus
 
 log = logging.getLogger(__name__)
 

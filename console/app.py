@@ -19,26 +19,27 @@ from textual.binding import Binding
 from textual.message import Message
 from textual.widgets import Footer, TabbedContent, TabPane
 
-from fbs.drivers.calibration import RigCalibration
-
-from .feeds import Feed
-from .limits import SetpointLimits
-from .logfeed import FeedHandler
-from .meterdata import MeterSnapshot, MeterStore, MeterSpec, permanent_meters
-from .meters import MeterPanel
-from .modes import ModePanel
-from .operator import ConsoleOperator, OperatorQuestion
-from .operatorscreen import OperatorScreen
-from .procedures import ProcedurePanel, parse_param_text
-from .recording import RecordingPanel, default_path
-from .rigworker import RigWorker
-from .setpoints import SetpointPanel
-from .spectra import SpectraPanel
-from .state import (CommandOutcome, ProcedureEnded, RecordingEnded, RigFailed, RigFault, RigReady,
-                    WorkerStopped)
-from .statusbar import StatusBar
+from console.feeds import Feed
+from console.limits import SetpointLimits
+from console.logfeed import FeedHandler
+from console.meterdata import MeterSnapshot, MeterSpec, MeterStore, permanent_meters
+from console.meters import MeterPanel
+from console.modes import ModePanel
+from console.operator import ConsoleOperator, OperatorQuestion
+from console.operatorscreen import OperatorScreen
+from console.procedures import ProcedurePanel, parse_param_text
+from console.recording import RecordingPanel, default_path
+from console.rigworker import RigWorker
+from console.setpoints import SetpointPanel
+from console.spectra import SpectraPanel
+from console.state import CommandOutcome, ProcedureEnded, RecordingEnded, RigFailed, RigFault, RigReady, WorkerStopped
+from console.statusbar import StatusBar
+from drivers.calibration import RigCalibration
 
 log = logging.getLogger(__name__)
+
+#: the packages whose INFO records the live log shows
+_PACKAGES = ("drivers", "simhw", "daq", "procedures", "console")
 
 DEFAULT_RIG = "sim?realtime=1"
 #: (id, tab title, key); the tab titles carry their keys, for an operator without a footer
@@ -86,7 +87,7 @@ class ConsoleApp(App[int]):
         self._meter_seq = -1
         self._handler = FeedHandler(self.log_feed)
         self.catalogue: dict[str, type] = {}
-        self._saved_level = logging.NOTSET
+        self._saved_levels: dict[str, int] = {}
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
@@ -115,10 +116,12 @@ class ConsoleApp(App[int]):
         self.w_spectra = self.query_one("#spectra-panel", SpectraPanel)
         logging.getLogger().addHandler(self._handler)
         # the live log shows the procedures' INFO records, whatever the host program configured
-        pkg = logging.getLogger("fbs")
-        self._saved_level = pkg.level
-        if pkg.getEffectiveLevel() > logging.INFO:
-            pkg.setLevel(logging.INFO)
+        self._saved_levels = {}
+        for name in _PACKAGES:
+            pkg = logging.getLogger(name)
+            self._saved_levels[name] = pkg.level
+            if pkg.getEffectiveLevel() > logging.INFO:
+                pkg.setLevel(logging.INFO)
         self.operator.ask = lambda q: self.post_message(RigNews(q))
         # the rig's start (numba kernels loading, holding the GIL) and the procedures' imports
         # wait for the first frame: the operator sees the panel at once
@@ -167,7 +170,8 @@ class ConsoleApp(App[int]):
                   else "the operator quit the console")
         self.worker_.shutdown(reason)
         logging.getLogger().removeHandler(self._handler)
-        logging.getLogger("fbs").setLevel(self._saved_level)
+        for name, level in self._saved_levels.items():
+            logging.getLogger(name).setLevel(level)
 
     # ------------------------------------------------------------------ keys
     def action_panel(self, pid: str) -> None:
@@ -343,7 +347,7 @@ class ConsoleApp(App[int]):
 
 
 def _catalogue() -> dict[str, type]:
-    from fbs.procedures.calibrations import catalogue
+    from procedures.calibrations import catalogue
 
     return catalogue()
 

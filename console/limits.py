@@ -11,10 +11,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fbs.drivers.calibration import RigCalibration
-from fbs.drivers.command import CommandDac
-from fbs.drivers.setpoints import check_value
-from fbs.drivers.torquer import TorquerDac
+from drivers.calibration import RigCalibration
+from drivers.command import CommandDac
+from drivers.setpoints import check_value
+from drivers.torquer import TorquerDac
 
 #: torquer bias slew rate limits (V/s): slow enough for the caging loops to follow, and a
 #: ramp never takes longer than a few minutes across the whole range

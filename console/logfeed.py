@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 
-from .feeds import Feed
+from console.feeds import Feed
 
 
 class FeedHandler(logging.Handler):

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fbs.drivers.calibration import GYRO_CHANNELS, RigCalibration
+from drivers.calibration import GYRO_CHANNELS, RigCalibration
 
 
 @dataclass(frozen=True)

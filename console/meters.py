@@ -10,7 +10,7 @@ from textual.binding import Binding
 from textual.containers import Vertical
 from textual.widgets import Sparkline, Static
 
-from .meterdata import MeterSnapshot, MeterSpec
+from console.meterdata import MeterSnapshot, MeterSpec
 
 #: the bar of a meter spans the ADC's +-10 V, like the needle of a zero-centre panel meter
 BAR_HALF = 14

@@ -9,9 +9,8 @@ from textual.containers import Vertical
 from textual.message import Message
 from textual.widgets import Static
 
-from fbs.drivers.relay import CAGED_FOR_MODE, MODES, interlock_reason
-
-from .state import Snapshot
+from console.state import Snapshot
+from drivers.relay import CAGED_FOR_MODE, MODES, interlock_reason
 
 SELECT = Binding.Group("select", compact=True)
 #: the mode switches' labels, short enough for one row at 80 columns

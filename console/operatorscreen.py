@@ -8,7 +8,7 @@ from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Input, Static
 
-from .operator import OperatorQuestion
+from console.operator import OperatorQuestion
 
 
 class OperatorScreen(ModalScreen[str]):

@@ -15,7 +15,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Input, ProgressBar, RichLog, Select, Static
 
-from .state import ProcedureInfo
+from console.state import ProcedureInfo
 
 
 def _fmt_s(s: float | None) -> str:
@@ -36,7 +36,7 @@ def defaults_text(proc_cls) -> str:
 
 def parse_param_text(proc_cls, text: str):
     """``k=v k=v`` (values as in ``fbs run --param``: JSON when it parses) -> the procedure."""
-    from fbs.procedures.run import parse_params
+    from procedures.params import parse_params
 
     try:
         specs = shlex.split(text, posix=False)  # keep quotes: values are JSON (channels=["X"])

@@ -11,7 +11,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Input, RichLog, Static
 
-from .state import RecordingInfo, RigEventItem, Snapshot
+from console.state import RecordingInfo, RigEventItem, Snapshot
 
 
 class RecordingPanel(Vertical, can_focus=True):
@@ -92,6 +92,6 @@ def _ended(r: RecordingInfo) -> Text:
 
 def default_path(out_dir: Path) -> Path:
     """The next free ``recording.h5`` name in ``out_dir`` (a recording is never overwritten)."""
-    from fbs.procedures.runner import next_free
+    from procedures.runner import next_free
 
     return next_free(out_dir, "recording")

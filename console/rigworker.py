@@ -30,21 +30,31 @@ import logging
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
-from fbs.drivers.errors import DriverError, InterlockError, SampleGap, SetpointRangeError
-from fbs.drivers.relay import MODES, interlock_reason
-from fbs.drivers.rig import Rig, open_rig
-
-from .adctap import TappedAdc
-from .feeds import Feed
-from .meterdata import MeterStore
-from .operator import ConsoleOperator
-from .slew import Slew
-from .state import (CommandOutcome, LiveState, ProcedureEnded, ProcedureInfo, RecordingEnded, RecordingInfo,
-                    RigEventItem, RigFailed, RigFault, RigReady, WorkerStopped)
+from console.adctap import TappedAdc
+from console.feeds import Feed
+from console.meterdata import MeterStore
+from console.operator import ConsoleOperator
+from console.slew import Slew
+from console.state import (
+    CommandOutcome,
+    LiveState,
+    ProcedureEnded,
+    ProcedureInfo,
+    RecordingEnded,
+    RecordingInfo,
+    RigEventItem,
+    RigFailed,
+    RigFault,
+    RigReady,
+    WorkerStopped,
+)
+from drivers.errors import DriverError, InterlockError, SampleGap, SetpointRangeError
+from drivers.relay import MODES, interlock_reason
+from drivers.rig import Rig, open_rig
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +98,7 @@ class RigWorker:
         self._stop_reason = ""
         self._abort = threading.Event()
         self._thread = threading.Thread(target=self._run, name="console-rig", daemon=True)
-        self._acq = None                       # fbs.daq.recorder.Acquisition while recording
+        self._acq = None                       # daq.recorder.Acquisition while recording
         self._streaming = False                # the idle meter stream (or the recording) is running
         self._stream_rate = 0.0
         self._stream_pos = 0
@@ -333,8 +343,8 @@ class RigWorker:
 
     # ------------------------------------------------------------------ recording
     def _start_recording(self, path: Path, rate_hz: float, channels: tuple[str, ...] | None) -> str:
-        from fbs.daq.recorder import Acquisition
-        from fbs.daq.runfile import check_new_path
+        from daq.recorder import Acquisition
+        from daq.runfile import check_new_path
 
         if self._acq is not None:
             raise Refused(f"already recording to {self._acq.result.path}; stop it first")
@@ -383,8 +393,8 @@ class RigWorker:
 
     # ------------------------------------------------------------------ procedure
     def _run_procedure(self, proc, prev: str = "ready") -> str:
-        from fbs.procedures.run import find_prior
-        from fbs.procedures.runner import run_procedure
+        from procedures.params import find_prior
+        from procedures.runner import run_procedure
 
         try:
             if self._acq is not None:
@@ -395,7 +405,7 @@ class RigWorker:
             self._abort.clear()
             if self._stop.is_set():
                 raise Refused("the console is closing")
-            from fbs.procedures.runner import next_free
+            from procedures.runner import next_free
             self.out_dir.mkdir(parents=True, exist_ok=True)
             # the file run_procedure will pick (it takes the same next free name), shown while it runs
             self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))

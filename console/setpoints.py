@@ -14,11 +14,10 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Checkbox, Input, Static
 
-from fbs.drivers.calibration import AXES, GYRO_CHANNELS
-from fbs.drivers.errors import SetpointRangeError
-
-from .limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, SetpointLimits
-from .state import Snapshot
+from console.limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, SetpointLimits
+from console.state import Snapshot
+from drivers.calibration import AXES, GYRO_CHANNELS
+from drivers.errors import SetpointRangeError
 
 
 class SetpointPanel(VerticalScroll, can_focus=True):

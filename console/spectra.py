@@ -53,9 +53,9 @@ def log_bins(f: np.ndarray, y: np.ndarray, n: int = BINS) -> tuple[float, float,
 
 
 def compute_view(path: Path, channels: tuple[str, ...]) -> SpectraView:
-    from fbs.daq.filespectra import run_csd_matrix
-    from fbs.daq.reader import RunFile
-    from fbs.procedures.spectra import choose_nperseg
+    from daq.filespectra import run_csd_matrix
+    from daq.reader import RunFile
+    from procedures.analysis.spectra import choose_nperseg
 
     with RunFile(path) as rf:
         nperseg = choose_nperseg(rf.n_samples, rf.rate_hz)

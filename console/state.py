@@ -14,8 +14,8 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from fbs.drivers.calibration import RigCalibration
-from fbs.drivers.relay import RelayStatus
+from drivers.calibration import RigCalibration
+from drivers.relay import RelayStatus
 
 
 @dataclass(frozen=True)
@@ -104,7 +104,7 @@ class RecordingEnded:
 
 @dataclass(frozen=True)
 class ProcedureEnded:
-    summary: Any              # fbs.procedures.runner.RunSummary
+    summary: Any              # procedures.runner.RunSummary
 
 
 @dataclass(frozen=True)

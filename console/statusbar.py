@@ -5,9 +5,8 @@ from __future__ import annotations
 from rich.text import Text
 from textual.widgets import Static
 
-from fbs.drivers.relay import MODES
-
-from .state import Snapshot
+from console.state import Snapshot
+from drivers.relay import MODES
 
 
 class StatusBar(Static):

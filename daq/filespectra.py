@@ -23,15 +23,23 @@ size, unless a single segment is larger). On a file without gaps the result equa
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from .reader import RunFile
-from .spectra import (Scaling, _double_one_sided, _scale, _segment_ffts, _window_and_sizes, coherence,
-                      equivalent_dof, n_segments)
+from daq.reader import RunFile
+from daq.spectra import (
+    Scaling,
+    _double_one_sided,
+    _scale,
+    _segment_ffts,
+    _window_and_sizes,
+    coherence,
+    equivalent_dof,
+    n_segments,
+)
 
 __all__ = ["RunCsd", "run_csd_matrix", "used_segments_dof"]
 

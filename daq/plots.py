@@ -21,8 +21,8 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from .octave import OctaveBands, band_average_dof, octave_bands
-from .spectra import psd_confidence
+from daq.octave import OctaveBands, band_average_dof, octave_bands
+from daq.spectra import psd_confidence
 
 __all__ = ["coherence_significance", "plot_coherence", "plot_psd", "psd_units_label"]
 

@@ -18,15 +18,16 @@ import logging
 import os
 import re
 import socket
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 import h5py
 import numpy as np
 
-from .runfile import FORMAT, STATUS_RECORDING, RunFileError
+from daq.runfile import FORMAT, STATUS_RECORDING, RunFileError
 
 log = logging.getLogger(__name__)
 
@@ -65,7 +66,7 @@ class Block:
 class Channel:
     """One channel as a lazy 1-D array: ``len``, slicing and ``np.asarray`` read from disk."""
 
-    def __init__(self, run: "RunFile", name: str) -> None:
+    def __init__(self, run: RunFile, name: str) -> None:
         self.run, self.name = run, name
         self._ds = run._group[name]
         self.units = _text(self._ds.attrs.get("units", ""))
@@ -277,7 +278,7 @@ class RunFile:
     def close(self) -> None:
         self.f.close()
 
-    def __enter__(self) -> "RunFile":
+    def __enter__(self) -> RunFile:
         return self
 
     def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:

@@ -22,17 +22,17 @@ from __future__ import annotations
 import datetime as _dt
 import logging
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
-from fbs.drivers.errors import DriverError, SampleGap
-from fbs.drivers.rig import Rig
-
-from .runfile import STATUS_COMPLETE, STATUS_RECORDING, RunFileError, RunWriter, abort_status
+from daq.runfile import STATUS_COMPLETE, STATUS_RECORDING, RunFileError, RunWriter, abort_status
+from drivers.errors import DriverError, SampleGap
+from drivers.rig import Rig
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +77,7 @@ class Acquisition:
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ lifetime
-    def __enter__(self) -> "Acquisition":
+    def __enter__(self) -> Acquisition:
         try:
             self.t0 = self.rig.adc.start()
             self.rig.subscribe(self._on_event)
@@ -203,7 +203,7 @@ def _start_stamp(rig: Rig, t0: float) -> dict[str, Any]:
     start = rig.clock.unix_time(t0)
     if start is not None:
         stamp["start_unix_s"] = start
-        stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.timezone.utc).isoformat(timespec="microseconds")
+        stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.UTC).isoformat(timespec="microseconds")
     return stamp
 
 

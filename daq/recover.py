@@ -25,9 +25,9 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from .prealloc import release
-from .reader import RunFile
-from .runfile import EVENT_DTYPE, KIND_BYTES, STATUS_RECORDING, TEXT_BYTES, RunFileError, fit_utf8
+from daq.prealloc import release
+from daq.reader import RunFile
+from daq.runfile import EVENT_DTYPE, KIND_BYTES, STATUS_RECORDING, TEXT_BYTES, RunFileError, fit_utf8
 
 log = logging.getLogger(__name__)
 

@@ -36,24 +36,30 @@ How the writer keeps data safe:
 from __future__ import annotations
 
 import datetime as _dt
+import importlib.metadata
 import json
 import logging
 import os
 import socket
 import time
+from collections.abc import Callable, Mapping
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Callable, Mapping
+from typing import Any
 
 import h5py
 import numpy as np
 from h5py import h5a, h5d, h5p, h5s, h5t
 
-from fbs import __version__
-from .prealloc import Preallocator, release
+from daq.prealloc import Preallocator, release
 
 log = logging.getLogger(__name__)
+
+try:  # the installed distribution's version, for the file's provenance
+    __version__ = importlib.metadata.version("fbs-hil")
+except importlib.metadata.PackageNotFoundError:  # run from a checkout that was never installed
+    __version__ = "unknown"
 
 FORMAT = "fbs-run"
 FORMAT_VERSION = 1
@@ -201,7 +207,7 @@ class RunWriter:
         a = self.f.attrs
         a["format"] = FORMAT
         a["format_version"] = FORMAT_VERSION
-        a["created"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        a["created"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds")
         a["rig"] = rig
         a["mode"] = int(mode)
         a["status"] = STATUS_RECORDING
@@ -448,7 +454,7 @@ class RunWriter:
         if error is not None:
             raise error
 
-    def __enter__(self) -> "RunWriter":
+    def __enter__(self) -> RunWriter:
         return self
 
     def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:

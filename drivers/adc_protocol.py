@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import ProtocolError
+from drivers.errors import ProtocolError
 
 SYNC = b"\xa5\x5a"
 TYPE_SAMPLES = 0x01

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import abc
 
-from . import can_protocol as cp
-from .calibration import GYRO_CHANNELS
-from .can_link import CanLink, NodeClient
-from .errors import ProtocolError, SetpointRangeError
-from .setpoints import check_name
+from drivers import can_protocol as cp
+from drivers.calibration import GYRO_CHANNELS
+from drivers.can_link import CanLink, NodeClient
+from drivers.errors import ProtocolError, SetpointRangeError
+from drivers.setpoints import check_name
 
 
 class CagingSwitches(abc.ABC):

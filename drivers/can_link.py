@@ -15,10 +15,9 @@ import time
 
 import can
 
-from . import can_protocol as cp
-from .errors import (DeviceLost, DeviceTimeout, InterlockError, NodeError, NodeReset,
-                     ProtocolError, SetpointRangeError)
-from .faults import FaultLatch
+from drivers import can_protocol as cp
+from drivers.errors import DeviceLost, DeviceTimeout, InterlockError, NodeError, NodeReset, ProtocolError, SetpointRangeError
+from drivers.faults import FaultLatch
 
 log = logging.getLogger(__name__)
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
-from .errors import ProtocolError
+from drivers.errors import ProtocolError
 
 # Node ids and what each one is.
 NODES = {"relay": 1, "caging": 2, "torquer": 3, "command": 4, "table": 5}

@@ -6,11 +6,11 @@ from __future__ import annotations
 
 import abc
 
-from . import can_protocol as cp
-from .calibration import AXES, RigCalibration
-from .can_link import CanLink, NodeClient
-from .setpoints import check_name, check_value
-from .torquer import check_readback
+from drivers import can_protocol as cp
+from drivers.calibration import AXES, RigCalibration
+from drivers.can_link import CanLink, NodeClient
+from drivers.setpoints import check_name, check_value
+from drivers.torquer import check_readback
 
 #: DAC outputs on the command node, in index order.
 OUTPUTS = tuple(f"vtd_{a}" for a in AXES) + tuple(f"gc_{a}" for a in AXES)

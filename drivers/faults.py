@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import logging
 import threading
-from typing import Callable
+from collections.abc import Callable
 
-from .errors import DriverError
+from drivers.errors import DriverError
 
 log = logging.getLogger(__name__)
 

@@ -11,10 +11,10 @@ import abc
 import logging
 from dataclasses import dataclass
 
-from . import can_protocol as cp
-from .calibration import GYRO_CHANNELS
-from .can_link import CanLink, NodeClient
-from .errors import DriverError, InterlockError, ModeNotAllowed
+from drivers import can_protocol as cp
+from drivers.calibration import GYRO_CHANNELS
+from drivers.can_link import CanLink, NodeClient
+from drivers.errors import DriverError, InterlockError, ModeNotAllowed
 
 log = logging.getLogger(__name__)
 

@@ -17,25 +17,25 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 from urllib.parse import parse_qsl, urlsplit
 
 import can
 
-from . import can_protocol as cp
-from .adc import Adc
-from .caging import CagingSwitches, CanCagingSwitches
-from .calibration import RigCalibration
-from .can_link import CanLink, NodeClient
-from .clock import RigClock, WallClock
-from .command import CanCommandDac, CommandDac
-from .errors import DeviceLost, DeviceTimeout, DriverError
-from .faults import FaultLatch
-from .relay import SAFE_MODE, CanRelayDriver, RelayDriver
-from .serial_adc import SerialAdc
-from .table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
-from .torquer import CanTorquerDac, TorquerDac
+from drivers import can_protocol as cp
+from drivers.adc import Adc
+from drivers.caging import CagingSwitches, CanCagingSwitches
+from drivers.calibration import RigCalibration
+from drivers.can_link import CanLink, NodeClient
+from drivers.clock import RigClock, WallClock
+from drivers.command import CanCommandDac, CommandDac
+from drivers.errors import DeviceLost, DeviceTimeout, DriverError
+from drivers.faults import FaultLatch
+from drivers.relay import SAFE_MODE, CanRelayDriver, RelayDriver
+from drivers.serial_adc import SerialAdc
+from drivers.table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
+from drivers.torquer import CanTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
 
@@ -222,7 +222,7 @@ class Rig:
                 log.exception("closing %s failed", closer)
         return report
 
-    def __enter__(self) -> "Rig":
+    def __enter__(self) -> Rig:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -264,8 +264,8 @@ def _check_keys(url: str, params: dict, allowed: set[str]) -> None:
 
 
 def _open_sim(url: str, params: dict, operator: Operator | None, calibration: RigCalibration | None) -> Rig:
-    from fbs.simhw.params import load_config
-    from fbs.simhw.rig_server import SimRigServer
+    from simhw.params import load_config
+    from simhw.rig_server import SimRigServer
 
     _check_keys(url, params, _SIM_KEYS)
     table = params.get("table", "can")
@@ -279,7 +279,7 @@ def _open_sim(url: str, params: dict, operator: Operator | None, calibration: Ri
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     cfg = load_config(params.get("config"))
     if calibration is None:
-        from fbs.simhw.datasheet import rig_calibration
+        from simhw.datasheet import rig_calibration
         calibration = rig_calibration(cfg)
     server = SimRigServer(cfg, seed=seed, realtime=_flag("realtime", params.get("realtime", "0")), speed=speed,
                           warm=_flag("warm", params.get("warm", "0")), watchdog_s=watchdog)

@@ -21,13 +21,21 @@ from collections import deque
 import numpy as np
 import serial
 
-from .adc import Adc, AdcBlock, AdcConfig, AdcIdentity, AdcStatus
-from .adc_protocol import (CODE_MAX, CODE_MIN, FLAG_OVERRUN, MAX_CHANNELS, MAX_SETS, Frame, Reply,
-                           StreamDecoder, encode_command)
-from .clock import RigClock, WallClock
-from .errors import (DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SampleGap,
-                     SetpointRangeError)
-from .faults import FaultLatch
+from drivers.adc import Adc, AdcBlock, AdcConfig, AdcIdentity, AdcStatus
+from drivers.adc_protocol import (
+    CODE_MAX,
+    CODE_MIN,
+    FLAG_OVERRUN,
+    MAX_CHANNELS,
+    MAX_SETS,
+    Frame,
+    Reply,
+    StreamDecoder,
+    encode_command,
+)
+from drivers.clock import RigClock, WallClock
+from drivers.errors import DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SampleGap, SetpointRangeError
+from drivers.faults import FaultLatch
 
 log = logging.getLogger(__name__)
 

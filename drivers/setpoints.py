@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import math
-from typing import Iterable
+from collections.abc import Iterable
 
-from .errors import SetpointRangeError
+from drivers.errors import SetpointRangeError
 
 
 def check_name(what: str, name: object, allowed: Iterable[str]) -> str:

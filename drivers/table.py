@@ -11,14 +11,14 @@ import abc
 import logging
 import math
 import sys
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
-from . import can_protocol as cp
-from .can_link import CanLink, NodeClient
-from .clock import RigClock
-from .errors import DeviceTimeout, DriverError, OperatorAbort, SetpointRangeError
-from .setpoints import check_value
+from drivers import can_protocol as cp
+from drivers.can_link import CanLink, NodeClient
+from drivers.clock import RigClock
+from drivers.errors import DeviceTimeout, DriverError, OperatorAbort, SetpointRangeError
+from drivers.setpoints import check_value
 
 log = logging.getLogger(__name__)
 

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import abc
 
-from . import can_protocol as cp
-from .calibration import GYRO_CHANNELS, RigCalibration
-from .can_link import CanLink, NodeClient
-from .errors import ProtocolError
-from .setpoints import check_name, check_value
+from drivers import can_protocol as cp
+from drivers.calibration import GYRO_CHANNELS, RigCalibration
+from drivers.can_link import CanLink, NodeClient
+from drivers.errors import ProtocolError
+from drivers.setpoints import check_name, check_value
 
 
 class TorquerDac(abc.ABC):

@@ -1,7 +1,6 @@
-"""fbs-hil: hardware-in-the-loop DAQ and test procedures for the Fixed Base Simulator.
+"""The ``fbs`` command line (DESIGN.md section 7): one module per command, on top of the packages.
 
-The subpackages live in the repository's top-level folders (DESIGN.md section 2):
-``fbs.drivers``, ``fbs.simhw``, ``fbs.daq``, ``fbs.procedures``, ``fbs.console``.
+Data flows one way (DESIGN.md section 2): ``drivers`` -> ``daq`` -> ``procedures`` ->
+``console``; this package sits above them all and only parses arguments, calls them and
+prints. ``fbs.cli.main`` is the console script; ``python -m fbs`` runs the same.
 """
-
-__version__ = "0.1.0"

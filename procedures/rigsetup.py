@@ -7,9 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fbs.drivers.errors import DeviceTimeout
-
-from .runner import Context
+from drivers.errors import DeviceTimeout
+from procedures.runner import Context
 
 
 def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_s: float = 600.0,

@@ -3,7 +3,7 @@
 A procedure (``Procedure``) is a plan: a generator of ``Step`` objects, each a name, a plain
 function of the run's ``Context`` and the rig time it is expected to take. The runner drives
 the plan (as bluesky's RunEngine drives a plan) inside one continuous recording
-(``fbs.daq.recorder.Acquisition``), so every command and every sample of the procedure lands
+(``daq.recorder.Acquisition``), so every command and every sample of the procedure lands
 in one "fbs-run" file with a ``step`` event at each step's start and a ``step-done`` event,
 carrying the step's JSON result, at its end. After the last step the procedure's ``analyze``
 turns the step results and the file into measurements, which are checked against their
@@ -25,16 +25,17 @@ import logging
 import math
 import threading
 import time
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, ClassVar, Iterator, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
-from fbs.daq.reader import RunFile
-from fbs.daq.recorder import Acquisition
-from fbs.daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
-from fbs.drivers.rig import Rig
+from daq.reader import RunFile
+from daq.recorder import Acquisition
+from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
+from drivers.rig import Rig
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +110,7 @@ class Analysis:
 @dataclass
 class Step:
     name: str
-    run: Callable[["Context"], Any]
+    run: Callable[[Context], Any]
     #: expected rig seconds, for progress and time remaining
     expected_s: float = 1.0
     #: a setup step puts the rig in a state and runs again on resume; a data step is taken over
@@ -132,19 +133,9 @@ ProgressListener = Callable[[Progress], None]
 
 
 # ---------------------------------------------------------------------------- procedure
-def prior_value(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channel: str,
-                nominal: float) -> tuple[float, str]:
-    """An earlier ``procedure``'s measured ``key`` for ``channel`` (e.g. earth-rate's K_TO for X),
-    else the data sheet's ``nominal``; with where it came from (``procedure`` or "nominal")."""
-    v = (((prior.get(procedure) or {}).get(key)) or {}).get(channel)
-    if v is not None and math.isfinite(float(v)) and float(v) > 0:
-        return float(v), procedure
-    return float(nominal), "nominal"
-
-
 class Procedure(abc.ABC):
     """A scripted procedure. Subclasses set the class attributes and write ``plan`` and
-    ``analyze``; ``fbs.procedures.catalogue`` finds them by their module's ``PROCEDURE``."""
+    ``analyze``; ``procedures.catalogue`` finds them by their module's ``PROCEDURE``."""
 
     name: ClassVar[str]                  # CLI name, e.g. "earth-rate"
     title: ClassVar[str]
@@ -168,11 +159,11 @@ class Procedure(abc.ABC):
     ranges_V: dict[str, float] | None = None
 
     @abc.abstractmethod
-    def plan(self, ctx: "Context") -> Iterator[Step]:
+    def plan(self, ctx: Context) -> Iterator[Step]:
         """The steps, in order (a generator; it may look at ``ctx.results`` of earlier steps)."""
 
     @abc.abstractmethod
-    def analyze(self, ctx: "Context") -> Analysis:
+    def analyze(self, ctx: Context) -> Analysis:
         """After the steps: measurements from ``ctx.results`` and ``ctx.path``."""
 
     def params_json(self) -> dict[str, Any]:
@@ -440,7 +431,7 @@ def _safe_text(rig: Rig) -> str:
 
 def _finish_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None, out_dir: Path,
                    report: bool) -> None:
-    from .report import write_report
+    from procedures.reports.report import write_report
 
     stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem
     try:

@@ -22,14 +22,22 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from fbs.drivers.adc_protocol import (CODE_MAX, CODE_MIN, FLAG_OVERRUN, MAX_CHANNELS, MAX_SETS, Command,
-                                      ProtocolError, decode_command, encode_frame)
-
-from .plant import CHANNELS
-from .sampling import ADC_RANGES_V
+from drivers.adc_protocol import (
+    CODE_MAX,
+    CODE_MIN,
+    FLAG_OVERRUN,
+    MAX_CHANNELS,
+    MAX_SETS,
+    Command,
+    ProtocolError,
+    decode_command,
+    encode_frame,
+)
+from simhw.plant import CHANNELS
+from simhw.sampling import ADC_RANGES_V
 
 if TYPE_CHECKING:
-    from .rig_server import SimRigServer
+    from simhw.rig_server import SimRigServer
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +46,7 @@ FAULTS = ("drop", "corrupt", "bad_length", "garbage", "bad_reply", "stall", "dis
 
 
 class AdcDevice:
-    def __init__(self, server: "SimRigServer", max_aggregate_rate_hz: float = 2_000_000.0,
+    def __init__(self, server: SimRigServer, max_aggregate_rate_hz: float = 2_000_000.0,
                  fifo_bytes: int = 1 << 20) -> None:
         self.server = server
         self.max_aggregate_rate_hz = max_aggregate_rate_hz

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numba
 
-from .params import Bearing
+from simhw.params import Bearing
 
 
 @dataclass(frozen=True)

@@ -19,13 +19,12 @@ from typing import TYPE_CHECKING
 
 import can
 
-from fbs.drivers import can_protocol as cp
-from fbs.drivers.errors import ProtocolError
-
-from .params import AXES, GYRO_CHANNELS
+from drivers import can_protocol as cp
+from drivers.errors import ProtocolError
+from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
-    from .rig_server import SimRigServer
+    from simhw.rig_server import SimRigServer
 
 log = logging.getLogger(__name__)
 
@@ -38,7 +37,7 @@ NODE_FAULTS = ("stall", "disconnect", "reset", "error", "bad_response")
 class SimNode:
     name = ""
 
-    def __init__(self, server: "SimRigServer") -> None:
+    def __init__(self, server: SimRigServer) -> None:
         self.server = server
         self.node_id = cp.NODES[self.name]
         self.latched = False
@@ -268,7 +267,7 @@ NODE_CLASSES = (RelayNode, CagingNode, TorquerNode, CommandNode, TableNode)
 class CanNodeHost:
     """All simulated nodes on one virtual bus: a receive thread and a heartbeat/watchdog thread."""
 
-    def __init__(self, server: "SimRigServer", channel: str, heartbeat_period_s: float = 0.1,
+    def __init__(self, server: SimRigServer, channel: str, heartbeat_period_s: float = 0.1,
                  watchdog_s: float = 1.0) -> None:
         self.server = server
         self.channel = channel

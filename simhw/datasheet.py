@@ -1,7 +1,7 @@
 """The simulated rig's data sheet: the instrument constants a lab would know beforehand.
 
 ``rig_calibration(cfg)`` publishes, for a sim config, what a real rig's calibration file
-holds (``fbs.drivers.calibration``): site, platform inertia, motor and amplifier constants,
+holds (``drivers.calibration``): site, platform inertia, motor and amplifier constants,
 autocollimator scale factors. It deliberately does *not* publish what the procedures
 measure: torquer and pickoff scale factors, drifts, bearing friction and the table's azimuth
 offset stay at their nominal (thesis) values, whatever the config says, so a procedure run
@@ -10,9 +10,8 @@ against another config must find those by measurement.
 
 from __future__ import annotations
 
-from fbs.drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
-
-from .params import AC_AXES, AXES, SimConfig
+from drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
+from simhw.params import AC_AXES, AXES, SimConfig
 
 
 def rig_calibration(cfg: SimConfig) -> RigCalibration:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .bearing import dahl_step
-from .plant import NL_CLIP, NL_DAHL, NL_SOFTSAT, NL_STOP, DiscretePlant
+from simhw.bearing import dahl_step
+from simhw.plant import NL_CLIP, NL_DAHL, NL_SOFTSAT, NL_STOP, DiscretePlant
 
 
 @dataclass
@@ -25,7 +25,7 @@ class Csr:
     val: np.ndarray
 
     @classmethod
-    def from_dense(cls, M: np.ndarray) -> "Csr":
+    def from_dense(cls, M: np.ndarray) -> Csr:
         ptr = [0]
         idx, val = [], []
         for row in M:
@@ -58,7 +58,7 @@ class CompiledPlant:
     nl_sidx: np.ndarray     # (n_nl, 2): theta, omega state indices for stops
 
     @classmethod
-    def build(cls, disc: DiscretePlant) -> "CompiledPlant":
+    def build(cls, disc: DiscretePlant) -> CompiledPlant:
         plant = disc.plant
         slow = np.array([plant.inputs.index(s) for s in plant.slow_inputs], np.int64)
         fast = np.array([i for i in range(len(plant.inputs)) if i not in set(slow)], np.int64)

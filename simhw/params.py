@@ -257,10 +257,10 @@ class SimConfig:
     sampling: Sampling = field(default_factory=Sampling)
     pickup: list[PickupLine] = field(default_factory=list)
 
-    def copy(self) -> "SimConfig":
+    def copy(self) -> SimConfig:
         return from_dict(to_dict(self))
 
-    def without_random_drift(self) -> "SimConfig":
+    def without_random_drift(self) -> SimConfig:
         """A copy with the gyros' random drift switched off (fixed and g drift stay)."""
         cfg = self.copy()
         for ch in cfg.gyro.values():

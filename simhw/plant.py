@@ -27,8 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from .bearing import linear_part
-from .params import AC_AXES, AXES, GYRO_CHANNELS, MODES, SimConfig
+from simhw.bearing import linear_part
+from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, MODES, SimConfig
 
 URAD = 1e-6
 #: The gyro channel each platform axis is stabilized by in modes 4 and 5.
@@ -53,21 +53,21 @@ NL_CLIP, NL_SOFTSAT, NL_DAHL, NL_STOP = 0, 1, 2, 3
 class Lin(dict):
     """A linear combination of states and inputs: {('x'|'u', index): coefficient}."""
 
-    def __add__(self, other: "Lin") -> "Lin":
+    def __add__(self, other: Lin) -> Lin:
         out = Lin(self)
         for k, v in other.items():
             out[k] = out.get(k, 0.0) + v
         return out
 
-    def __mul__(self, g: float) -> "Lin":
+    def __mul__(self, g: float) -> Lin:
         return Lin({k: v * g for k, v in self.items()})
 
     __rmul__ = __mul__
 
-    def __neg__(self) -> "Lin":
+    def __neg__(self) -> Lin:
         return self * -1.0
 
-    def __sub__(self, other: "Lin") -> "Lin":
+    def __sub__(self, other: Lin) -> Lin:
         return self + (-other)
 
 

@@ -19,18 +19,17 @@ import math
 import threading
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from fbs.drivers.errors import DeviceLost, DeviceTimeout
-
-from .adc_device import AdcDevice
-from .can_nodes import CanNodeHost
-from .clock import PacedClock, VirtualClock
-from .params import GYRO_CHANNELS, SimConfig
-from .simulator import Simulator
+from drivers.errors import DeviceLost, DeviceTimeout
+from simhw.adc_device import AdcDevice
+from simhw.can_nodes import CanNodeHost
+from simhw.clock import PacedClock, VirtualClock
+from simhw.params import GYRO_CHANNELS, SimConfig
+from simhw.simulator import Simulator
 
 log = logging.getLogger(__name__)
 

@@ -16,14 +16,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from . import geometry
-from .clock import VirtualClock
-from .kernel import CompiledPlant
-from .noise import FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
-from .params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
-from .plant import (CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize,
-                    torquer_limit_V)
-from .sampling import SamplingChain, internal_rate
+from simhw import geometry
+from simhw.clock import VirtualClock
+from simhw.kernel import CompiledPlant
+from simhw.noise import FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
+from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
+from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize, torquer_limit_V
+from simhw.sampling import SamplingChain, internal_rate
 
 log = logging.getLogger(__name__)
 

@@ -1,5 +1,5 @@
 """The scripted procedures, one module each; a module is a procedure if it defines
-``PROCEDURE`` (a ``fbs.procedures.runner.Procedure`` subclass). ``catalogue()`` finds them
+``PROCEDURE`` (a ``procedures.runner.Procedure`` subclass). ``catalogue()`` finds them
 by scanning this package, so adding one touches nothing else."""
 
 from __future__ import annotations
@@ -7,7 +7,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 
-from ..runner import Procedure
+from procedures.runner import Procedure
 
 
 def catalogue() -> dict[str, type[Procedure]]:

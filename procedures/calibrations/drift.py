@@ -8,7 +8,7 @@ cancels the rate about its input axis (II C.1.a(8)):
 The earth-rate component is constant on a fixed table, so the wander of ``r`` is the drift's
 (plus what the loop adds, below). Per channel the procedure computes
 
-* the overlapping Allan deviation with confidence intervals (``fbs.procedures.allan``, which
+* the overlapping Allan deviation with confidence intervals (``procedures.analysis.allan``, which
   wraps ``allantools``);
 * the angle random walk N from the tau^-1/2 line through ``arw_tau_lo_s .. arw_tau_hi_s``
   (IEEE 952 Annex C), with the freely fitted slope as the check that it is a white-rate region;
@@ -42,19 +42,19 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
-from fbs.daq.reader import RunFile
-from fbs.drivers.calibration import GYRO_CHANNELS
-
-from .. import allan
-from ..plotting import new_figure, save_figure
-from ..rigsetup import bring_to_mode3, wait_settled
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, prior_value
+from daq.reader import RunFile
+from drivers.calibration import GYRO_CHANNELS
+from procedures.analysis import allan
+from procedures.params import prior_value
+from procedures.reports.plotting import new_figure, save_figure
+from procedures.rigsetup import bring_to_mode3, wait_settled
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 log = logging.getLogger(__name__)
 

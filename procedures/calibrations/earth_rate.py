@@ -28,18 +28,17 @@ and earth rate come from the rig's data sheet (``rig.calibration``), never a pro
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
-from fbs.drivers.calibration import GYRO_CHANNELS
-
-from ..plotting import new_figure, save_figure
-from ..report import fmt
-from ..rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, Step
+from drivers.calibration import GYRO_CHANNELS
+from procedures.reports.plotting import new_figure, save_figure
+from procedures.reports.report import fmt
+from procedures.rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
 
 HORIZONTAL = ("X", "Y", "XRD")
 URAD = 1e-6
@@ -283,7 +282,8 @@ def _markdown(fits: dict[str, ChannelFit], stations: list[dict], names) -> str:
         lines.append(f"| {ch} | {f.kto_urad_per_s_per_V:.5g} ± {f.kto_se:.2g} | {f.drift_urad_per_s:.4g} ± "
                      f"{f.drift_se:.2g} | {psi0} | {f.residual_rms_V * 1e3:.3f} | {f.swept} |")
     lines += ["", "Each fit has a term linear in the stations' visiting order as well, so a slow drift trend over the run "
-              "does not bias the scale factor.", "", "Z is the spindle axis, so its rate does not change with the spindle angle; it was calibrated "
+              "does not bias the scale factor.", "",
+              "Z is the spindle axis, so its rate does not change with the spindle angle; it was calibrated "
               "with the spindle at 90 deg and the table tilted (module docstring).", "",
               "## Stations", "", "| station | tilt | spindle | settled after (s) | " +
               " | ".join(f"torq {c} (V)" for c in GYRO_CHANNELS) + " |", "|---|---|---|---|" + "---|" * 4]

@@ -21,21 +21,21 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import Any
 
 import numpy as np
 from matplotlib.ticker import ScalarFormatter
 
-from fbs.daq.reader import RunFile
-from fbs.daq.runfile import RunFileError
-from fbs.drivers.calibration import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
-
-from .. import dahl
-from ..plotting import new_figure, save_figure
-from ..rigsetup import bring_to_mode3
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, Step
+from daq.reader import RunFile
+from daq.runfile import RunFileError
+from drivers.calibration import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
+from procedures.analysis import dahl
+from procedures.reports.plotting import new_figure, save_figure
+from procedures.rigsetup import bring_to_mode3
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
 
 log = logging.getLogger(__name__)
 

@@ -38,18 +38,18 @@ K_TO is taken from ``Params.kto_urad_per_s_per_V``, else an earlier earth-rate r
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 
-from fbs.daq.reader import RunFile
-from fbs.drivers.calibration import GYRO_CHANNELS
-
-from ..plotting import new_figure, save_figure
-from ..rigsetup import bring_to_mode3, wait_settled
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, prior_value
+from daq.reader import RunFile
+from drivers.calibration import GYRO_CHANNELS
+from procedures.params import prior_value
+from procedures.reports.plotting import new_figure, save_figure
+from procedures.rigsetup import bring_to_mode3, wait_settled
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 
 @dataclass
@@ -198,7 +198,7 @@ class Stopwatch(Procedure):
                 "vg0": round(vg0, 5), "null_slope": slope, "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
                 "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit}
 
-    def _ramp(self, ctx: Context, rec: "_Record", ch: str, bias: float, step: float, target: float, direction: int,
+    def _ramp(self, ctx: Context, rec: _Record, ch: str, bias: float, step: float, target: float, direction: int,
               expected_s: float) -> None:
         """Bias step until the smoothed pickoff passes ``target`` in ``direction``."""
         ctx.rig.set_torquer_bias_V(ch, bias + step)

@@ -2,7 +2,7 @@
 
 A Mode-3 record (autocollimator stabilization, gyros caged through their pickoffs) of the
 primary autocollimator's control and instrumentation channels and the X-Y gyro's pickoffs.
-From one Welch cross-spectral matrix of the record (``fbs.daq.filespectra.run_csd_matrix``)
+From one Welch cross-spectral matrix of the record (``daq.filespectra.run_csd_matrix``)
 the survey gives:
 
 * **the dip** of each autocollimator control-channel spectrum (Ch. V E.1, Figs. 42/45):
@@ -39,7 +39,7 @@ the survey gives:
   X - Y gyro (Fig. 49), as App. A.8 plots.
 
 The measurement uses no thesis result. The thesis's numbers (1.6 / 3.6 urad, the 3.5 Hz
-X dip) appear only in the report, as a reference column (``fbs.procedures.thesis.SURVEY``, or whatever
+X dip) appear only in the report, as a reference column (``procedures.reports.thesis.SURVEY``, or whatever
 the caller passes as ``reference``).
 
 The record is taken in steps of ``piece_s`` so an aborted survey can be resumed: each step
@@ -50,23 +50,24 @@ and averages the Welch segments of all spans (a resumed piece lives in the earli
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 import scipy.ndimage
 import scipy.signal
 
-from fbs.daq.filespectra import RunCsd, run_csd_matrix
-from fbs.daq.plots import plot_coherence, plot_psd
-from fbs.daq.reader import RunFile
-from fbs.daq.spectra import band_rms, coherence
-
-from ..plotting import new_figure, save_figure
-from ..rigsetup import bring_to_mode3
-from .. import thesis
-from ..runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, prior_value
+from daq.filespectra import RunCsd, run_csd_matrix
+from daq.plots import plot_coherence, plot_psd
+from daq.reader import RunFile
+from daq.spectra import band_rms, coherence
+from procedures.params import prior_value
+from procedures.reports import thesis
+from procedures.reports.plotting import new_figure, save_figure
+from procedures.rigsetup import bring_to_mode3
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 AXES = ("X", "Y")
 

@@ -2,7 +2,7 @@
 
 An effect is one module in this package that defines ``EFFECT``, an :class:`Effect`: its
 name, its parameters with defaults and priors, and ``apply``, which returns a modified copy of
-a :class:`~fbs.simhw.params.SimConfig`. ``catalogue()`` finds every module by scanning the
+a :class:`~simhw.params.SimConfig`. ``catalogue()`` finds every module by scanning the
 package, so adding an effect is adding a file; nothing else is edited.
 
 For the model-gap workflow an effect may also say which parameters the spectra identify
@@ -20,10 +20,11 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
-from ..params import AXES, SimConfig
+from simhw.params import AXES, SimConfig
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ To is the one that explains the dip's depth at the measured motion; the hysteres
 (``fbs run hysteresis``) measures To and eta directly.
 """
 
-from . import Effect, Param
+from simhw.effects import Effect, Param
 
 
 def _apply(cfg, axis, stiffness_Nm_per_rad, To_Nm, eta_per_Nm):

@@ -1,7 +1,7 @@
 """``extra_damping``: viscous damping on the gimbal beyond the gyros' (Ch. V F: the viscous
 bearing model the thesis tried first)."""
 
-from . import Effect, Param
+from simhw.effects import Effect, Param
 
 
 def _apply(cfg, axis, damping_Nms):

@@ -4,7 +4,7 @@ Air turbulence in the optical path adds 1/f noise; ``corner_hz`` is where it mee
 sensor's white (shot-noise) level. It enters the loop, like all sensor noise in Mode 3.
 """
 
-from . import Effect, Param, primary_autocollimator
+from simhw.effects import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, corner_hz):

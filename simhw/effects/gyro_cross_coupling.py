@@ -3,7 +3,7 @@
 Scales the float's viscous coupling c/h on the axis's gyro channel by ``factor``.
 """
 
-from . import Effect, Param
+from simhw.effects import Effect, Param
 
 
 def _apply(cfg, axis, factor):

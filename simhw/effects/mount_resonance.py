@@ -5,7 +5,7 @@ sees a resonance the rigid model lacks (the thesis had to filter its control cha
 the mount's bending frequency).
 """
 
-from . import Effect, Param, primary_autocollimator
+from simhw.effects import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, freq_hz, damping):

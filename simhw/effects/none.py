@@ -1,5 +1,5 @@
 """``none``: nothing missing; the measurement is the nominal model."""
 
-from . import Effect
+from simhw.effects import Effect
 
 EFFECT = Effect("none", "no effect", (), lambda cfg, axis: cfg)

@@ -5,7 +5,7 @@ square wave of about 20 arcsec (100 urad) every 40-400 s. Jumps of +-``amplitude
 Poisson times of mean interval ``interval_s``.
 """
 
-from . import Effect, Param, primary_autocollimator
+from simhw.effects import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, amplitude_urad, interval_s):

@@ -4,8 +4,8 @@ The thesis saw 200 Hz (the gyro spin-motor drive) in its autocollimator and comp
 signals. The line is added to the axis's autocollimator control channel as recorded.
 """
 
-from ..params import PickupLine
-from . import Effect, Param
+from simhw.effects import Effect, Param
+from simhw.params import PickupLine
 
 
 def _apply(cfg, axis, freq_hz, amplitude_V):

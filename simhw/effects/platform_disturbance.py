@@ -6,7 +6,7 @@ through a first-order lag at ``corner_hz``, of rms ``torque_rms_Nm``. docs/simhw
 size that brings the simulated platform motion up to the thesis's 1.6 / 3.6 urad.
 """
 
-from . import Effect, Param
+from simhw.effects import Effect, Param
 
 
 def _apply(cfg, axis, torque_rms_Nm, corner_hz):

@@ -4,7 +4,7 @@ Applies to the primary autocollimator's control and instrumentation channels (or
 azimuth unit on Z): a calibration error, which also changes the loop gain.
 """
 
-from . import Effect, Param
+from simhw.effects import Effect, Param
 
 
 def _apply(cfg, axis, fraction):

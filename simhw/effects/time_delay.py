@@ -4,7 +4,7 @@ Slow electronics or digital filtering in the sensor path; it eats phase margin a
 closed-loop peak.
 """
 
-from . import Effect, Param, primary_autocollimator
+from simhw.effects import Effect, Param, primary_autocollimator
 
 
 def _apply(cfg, axis, delay_s):

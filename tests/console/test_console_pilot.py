@@ -8,8 +8,8 @@ import re
 import pytest
 from textual.widgets import Input, Select, Static
 
-from fbs.console.app import ConsoleApp
-from fbs.daq.reader import RunFile
+from console.app import ConsoleApp
+from daq.reader import RunFile
 
 from .conftest import COLD, WARM, nodes_safe, outcome, rig_ready, run_async, wait_for
 

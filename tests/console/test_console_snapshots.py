@@ -12,9 +12,9 @@ import math
 
 import pytest
 
-from fbs.console.app import ConsoleApp
-from fbs.console.meterdata import MeterSnapshot
-from fbs.console.spectra import compute_view
+from console.app import ConsoleApp
+from console.meterdata import MeterSnapshot
+from console.spectra import compute_view
 
 from .conftest import WARM, rig_ready
 
@@ -79,8 +79,8 @@ def test_procedures_screen(snap_compare, out_dir):
 
 
 def test_spectra_screen(snap_compare, out_dir, tmp_path, monkeypatch):
-    from fbs.procedures.simulate import simulate_to_file
-    from fbs.simhw.params import load_config
+    from fbs.simulate import simulate_to_file
+    from simhw.params import load_config
 
     monkeypatch.chdir(tmp_path)   # the view names its file: a relative name keeps the screen fixed
     simulate_to_file(load_config(None), "spectra.h5", mode=3, duration_s=60.0, rate_hz=200.0, seed=5)

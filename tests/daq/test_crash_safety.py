@@ -13,18 +13,18 @@ import h5py
 import numpy as np
 import pytest
 
-from fbs.daq.reader import RunFile
-from fbs.daq.recorder import record
-from fbs.daq.recover import recover
-from fbs.daq.runfile import RunFileError
-from fbs.drivers.rig import open_rig
+from daq.reader import RunFile
+from daq.recorder import record
+from daq.recover import recover
+from daq.runfile import RunFileError
+from drivers.rig import open_rig
 
 pytestmark = pytest.mark.slow
 RATE = 1000.0
 
 
 def _fbs(*args: str, **kw) -> list[str]:
-    return [sys.executable, "-m", "fbs.procedures.cli", *args]
+    return [sys.executable, "-m", "fbs.cli", *args]
 
 
 def test_a_sigkilled_recording_keeps_every_sample_older_than_one_second(tmp_path):

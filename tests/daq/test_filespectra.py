@@ -14,10 +14,10 @@ import tracemalloc
 import numpy as np
 import pytest
 
-from fbs.daq.filespectra import run_csd_matrix, used_segments_dof
-from fbs.daq.reader import RunFile
-from fbs.daq.runfile import RunWriter
-from fbs.daq.spectra import equivalent_dof, n_segments, welch_csd_matrix
+from daq.filespectra import run_csd_matrix, used_segments_dof
+from daq.reader import RunFile
+from daq.runfile import RunWriter
+from daq.spectra import equivalent_dof, n_segments, welch_csd_matrix
 
 FS = 250.0
 RTOL = 1e-12

@@ -15,8 +15,8 @@ import scipy.signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.daq.octave import EDGE_RTOL, band_average_dof, octave_bands
-from fbs.daq.spectra import equivalent_dof
+from daq.octave import EDGE_RTOL, band_average_dof, octave_bands
+from daq.spectra import equivalent_dof
 
 
 def _reference_bands(n_bins: int) -> dict[int, list[int]]:

@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from fbs.daq.prealloc import Preallocator, release
+from daq.prealloc import Preallocator, release
 
 MiB = 1 << 20
 
@@ -48,7 +48,7 @@ def test_a_failing_fallocate_stops_reserving_and_says_why(tmp_path, caplog):
         pre = Preallocator(fd, MiB)
         if not pre.enabled:
             pytest.skip("no fallocate on this platform")
-        with caplog.at_level(logging.WARNING, logger="fbs.daq.prealloc"):
+        with caplog.at_level(logging.WARNING, logger="daq.prealloc"):
             pre.reserve(10)
             pre.reserve(10)
         assert not pre.enabled and pre.reserved == 0

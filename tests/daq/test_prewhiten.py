@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.daq.prewhiten import prewhiten
+from daq.prewhiten import prewhiten
 
 FS = 200.0
 

@@ -10,8 +10,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.daq.reader import RunFile, read_channels
-from fbs.daq.runfile import RunFileError, RunWriter
+from daq.reader import RunFile, read_channels
+from daq.runfile import RunFileError, RunWriter
 
 FS = 50.0
 

@@ -8,9 +8,9 @@ import h5py
 import numpy as np
 import pytest
 
-from fbs.daq.recorder import record
-from fbs.drivers.errors import DeviceLost
-from fbs.drivers.rig import open_rig
+from daq.recorder import record
+from drivers.errors import DeviceLost
+from drivers.rig import open_rig
 
 pytestmark = pytest.mark.slow
 
@@ -49,8 +49,8 @@ def test_a_lost_node_aborts_the_recording_and_the_rig_goes_safe(tmp_path):
 
 
 def test_an_acquisition_hands_back_what_it_writes_and_places_commands_on_the_file_time_base(tmp_path):
-    from fbs.daq.reader import RunFile
-    from fbs.daq.recorder import Acquisition
+    from daq.reader import RunFile
+    from daq.recorder import Acquisition
 
     with open_rig("sim?warm=1") as rig:
         with Acquisition(rig, tmp_path / "a.h5", rate_hz=1000.0, channels=["gyro_x", "torq_x"],

@@ -11,15 +11,15 @@ import h5py
 import numpy as np
 import pytest
 
-from fbs.daq.reader import RunFile
-from fbs.daq.recover import clear_open_flags, lookup3, read_superblock, recover
-from fbs.daq.runfile import RunFileError, RunWriter
+from daq.reader import RunFile
+from daq.recover import clear_open_flags, lookup3, read_superblock, recover
+from daq.runfile import RunFileError, RunWriter
 
 # The writer flushes 300 samples, buffers 50 more, and is killed: the 300 must survive.
 KILLED_WRITER = textwrap.dedent("""
     import os, signal, sys
     import numpy as np
-    from fbs.daq.runfile import RunWriter
+    from daq.runfile import RunWriter
     w = RunWriter(sys.argv[1], rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"})
     x = np.arange(700, dtype=float).reshape(350, 2)
     w.append(x[:300])
@@ -36,7 +36,7 @@ KILLED_WRITER = textwrap.dedent("""
 UNEVEN_WRITER = textwrap.dedent("""
     import os, signal, sys
     import h5py, numpy as np
-    from fbs.daq.runfile import RunWriter
+    from daq.runfile import RunWriter
     w = RunWriter(sys.argv[1], rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V"})
     w.append(np.ones((100, 2)))
     w.flush()

@@ -14,9 +14,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.daq.prealloc import Preallocator
-from fbs.daq.runfile import (EVENT_DTYPE, TEXT_BYTES, RunFileError, RunWriter, check_new_path, chunk_samples,
-                             fit_utf8)
+from daq.prealloc import Preallocator
+from daq.runfile import EVENT_DTYPE, TEXT_BYTES, RunFileError, RunWriter, check_new_path, chunk_samples, fit_utf8
 
 
 class Clock:

@@ -19,9 +19,19 @@ import scipy.stats
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.daq.spectra import (coherence, coherence_pair, equivalent_dof, gain, n_segments,
-                             phase_deg, psd, psd_confidence, quantization_floor, transfer_h1,
-                             welch_csd_matrix)
+from daq.spectra import (
+    coherence,
+    coherence_pair,
+    equivalent_dof,
+    gain,
+    n_segments,
+    phase_deg,
+    psd,
+    psd_confidence,
+    quantization_floor,
+    transfer_h1,
+    welch_csd_matrix,
+)
 
 RTOL = 1e-10
 #: Bins whose reference autospectrum is below this fraction of its peak hold nothing but

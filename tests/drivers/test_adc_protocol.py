@@ -24,8 +24,8 @@ from hypothesis import assume, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from fbs.drivers import adc_protocol
-from fbs.drivers.adc_protocol import (
+from drivers import adc_protocol
+from drivers.adc_protocol import (
     CODE_MAX,
     CODE_MIN,
     COMMANDS,
@@ -47,7 +47,7 @@ from fbs.drivers.adc_protocol import (
     encode_frame,
     frame_size,
 )
-from fbs.drivers.errors import ProtocolError
+from drivers.errors import ProtocolError
 
 #: Fuzz settings: bounded inputs, and a generous deadline so a parser that spins fails.
 FUZZ = settings(max_examples=300, deadline=500)

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from fbs.drivers import can_protocol as cp
-from fbs.drivers.can_protocol import Emergency, Heartbeat, Request, Response, decode
-from fbs.drivers.errors import ProtocolError
+from drivers import can_protocol as cp
+from drivers.can_protocol import Emergency, Heartbeat, Request, Response, decode
+from drivers.errors import ProtocolError
 
 FUZZ = settings(max_examples=400, deadline=500)
 FAST = settings(max_examples=150, deadline=500)

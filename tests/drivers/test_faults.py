@@ -11,9 +11,9 @@ import time
 
 import pytest
 
-from fbs.drivers import can_protocol as cp
-from fbs.drivers.errors import (DeviceLost, DeviceTimeout, NodeError, NodeReset, ProtocolError, SampleGap)
-from fbs.drivers.rig import open_rig
+from drivers import can_protocol as cp
+from drivers.errors import DeviceLost, DeviceTimeout, NodeError, NodeReset, ProtocolError, SampleGap
+from drivers.rig import open_rig
 
 pytestmark = pytest.mark.slow
 

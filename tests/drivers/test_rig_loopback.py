@@ -7,10 +7,10 @@ import can
 import numpy as np
 import pytest
 
-from fbs.drivers import can_protocol as cp
-from fbs.drivers.errors import InterlockError, ModeNotAllowed, OperatorAbort, SetpointRangeError
-from fbs.drivers.rig import open_rig
-from fbs.drivers.table import ManualTable
+from drivers import can_protocol as cp
+from drivers.errors import InterlockError, ModeNotAllowed, OperatorAbort, SetpointRangeError
+from drivers.rig import open_rig
+from drivers.table import ManualTable
 
 pytestmark = pytest.mark.slow
 

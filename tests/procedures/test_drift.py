@@ -13,11 +13,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from fbs.daq.reader import RunFile
-from fbs.drivers.calibration import RigCalibration
-from fbs.procedures.calibrations import catalogue
-from fbs.procedures.calibrations.drift import Drift, Params, analyze_channels
-from fbs.procedures.runner import EVENT_STEP_DONE, load_resume, run_procedure
+from daq.reader import RunFile
+from drivers.calibration import RigCalibration
+from procedures.calibrations import catalogue
+from procedures.calibrations.drift import Drift, Params, analyze_channels
+from procedures.runner import EVENT_STEP_DONE, load_resume, run_procedure
 
 CHANNELS = ("X", "Y", "Z", "XRD")
 
@@ -103,8 +103,8 @@ def expected_loop_white_rate() -> dict[str, float]:
     above the loop bandwidth the torquing rate is the proportional gain (2 zeta omega_n, or
     omega_n for the proportional-only XRD amplifier) times the pickoff's white noise angle,
     N = gain sqrt(S_pickoff / 2); the gyro's own N adds in quadrature."""
-    from fbs.simhw.params import load_config
-    from fbs.simhw.simulator import pickoff_white_psd
+    from simhw.params import load_config
+    from simhw.simulator import pickoff_white_psd
 
     cfg = load_config(None)
     out = {}
@@ -117,7 +117,7 @@ def expected_loop_white_rate() -> dict[str, float]:
 
 
 def _run(tmp_path: Path, url: str, **params) -> object:
-    from fbs.drivers.rig import open_rig
+    from drivers.rig import open_rig
 
     with open_rig(url) as rig:
         return run_procedure(Drift(Drift.Params(**params)), rig, tmp_path)
@@ -208,7 +208,7 @@ def test_bias_instability_follows_the_gyro_flicker(tmp_path):
 def test_abort_and_resume_continue_the_record(tmp_path):
     """An abort in the third of four chunks, then ``resume``: chunks 1-2 are taken over from the
     first file, 3-4 recorded anew, and the analysis covers all four (two stretches, pooled)."""
-    from fbs.drivers.rig import open_rig
+    from drivers.rig import open_rig
 
     # two 300-s stretches are too short for B at 10 loop time constants (71 s, flicker EDF >= 10);
     # the mechanics are the point here, so B is read from 3 (21 s)

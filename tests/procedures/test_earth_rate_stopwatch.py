@@ -10,12 +10,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.drivers.rig import open_rig
-from fbs.procedures.calibrations.earth_rate import EarthRate, fit_horizontal, fit_vertical, omega_z
-from fbs.procedures.calibrations.stopwatch import (Stopwatch, _crossing_interval, _restraint_fit, _smooth,
-                                                   channel_result)
-from fbs.procedures.runner import run_procedure
-from fbs.simhw.geometry import earth_rate_platform, platform_axes_enu
+from drivers.rig import open_rig
+from procedures.calibrations.earth_rate import EarthRate, fit_horizontal, fit_vertical, omega_z
+from procedures.calibrations.stopwatch import Stopwatch, _crossing_interval, _restraint_fit, _smooth, channel_result
+from procedures.runner import run_procedure
+from simhw.geometry import earth_rate_platform, platform_axes_enu
 
 OMEGA = 7.292115e-5
 LAT = 37.43

@@ -20,13 +20,22 @@ import time
 import numpy as np
 import pytest
 
-from fbs.daq.reader import RunFile
-from fbs.daq.runfile import RunWriter
-from fbs.drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
-from fbs.procedures import analyze, dahl
-from fbs.procedures.calibrations import catalogue
-from fbs.procedures.calibrations.hysteresis import (Hysteresis, Params, analyze_file, calibration_from_meta,
-                                                    plot_describing_function, plot_history, plot_loops, plot_scan)
+from daq.reader import RunFile
+from daq.runfile import RunWriter
+from drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
+from fbs import analyze
+from procedures.analysis import dahl
+from procedures.calibrations import catalogue
+from procedures.calibrations.hysteresis import (
+    Hysteresis,
+    Params,
+    analyze_file,
+    calibration_from_meta,
+    plot_describing_function,
+    plot_history,
+    plot_loops,
+    plot_scan,
+)
 
 TO_TOL, ETA_TOL, K_TOL = 0.10, 0.25, 0.10
 
@@ -168,7 +177,7 @@ def test_figures_are_written(tmp_path):
 def cli(argv: list[str]) -> int:
     """``fbs ...`` through the real parser once ``analyze`` is registered there, else through
     this module's ``add_parser`` on a parser of its own (the same dispatch as cli.main)."""
-    from fbs.procedures import cli as fbs_cli
+    from fbs import cli as fbs_cli
 
     parser = fbs_cli.build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
@@ -240,8 +249,8 @@ def test_params_are_checked(kw, match):
 
 # ---------------------------------------------------------------------------- slow: the rig
 def run_on_sim(tmp_path, config_text: str | None = None, axis="X", seed=3):
-    from fbs.drivers.rig import open_rig
-    from fbs.procedures.runner import run_procedure
+    from drivers.rig import open_rig
+    from procedures.runner import run_procedure
 
     url = f"sim?warm=1&seed={seed}"
     if config_text is not None:
@@ -308,8 +317,8 @@ def test_abort_and_resume_runs_the_whole_ladder_again(tmp_path):
     """An interrupted sweep is redone on --resume: the fit needs one continuous ladder."""
     import threading
 
-    from fbs.drivers.rig import open_rig
-    from fbs.procedures.runner import load_resume, run_procedure
+    from drivers.rig import open_rig
+    from procedures.runner import load_resume, run_procedure
 
     params = Params(amplitudes_urad=[400, 40, 8], cycles=2)
     abort = threading.Event()

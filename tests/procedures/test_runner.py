@@ -11,11 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from fbs.daq.reader import RunFile
-from fbs.drivers.rig import open_rig
-from fbs.procedures.calibrations import catalogue
-from fbs.procedures.runner import (Analysis, Measurement, Procedure, ProcedureError, Step, load_resume, next_free,
-                                   run_procedure)
+from daq.reader import RunFile
+from drivers.rig import open_rig
+from procedures.calibrations import catalogue
+from procedures.runner import Analysis, Measurement, Procedure, ProcedureError, Step, load_resume, next_free, run_procedure
 
 pytestmark = pytest.mark.slow
 

@@ -17,12 +17,12 @@ import threading
 import numpy as np
 import pytest
 
-from fbs.daq.spectra import band_rms, psd
-from fbs.procedures.calibrations import catalogue
-from fbs.procedures.calibrations.survey import (Params, Survey, find_dip, merge_spans, pickoff_scales)
-from fbs.procedures.runner import load_resume, run_procedure
-from fbs.simhw.params import SimConfig, load_config
-from fbs.simhw.simulator import Simulator, pickoff_white_psd
+from daq.spectra import band_rms, psd
+from procedures.calibrations import catalogue
+from procedures.calibrations.survey import Params, Survey, find_dip, merge_spans, pickoff_scales
+from procedures.runner import load_resume, run_procedure
+from simhw.params import SimConfig, load_config
+from simhw.simulator import Simulator, pickoff_white_psd
 
 DIP_TOL_HZ = 0.3
 RMS_TOL = 0.20
@@ -131,7 +131,7 @@ def check(summary, expected, label=""):
 # ---------------------------------------------------------------------------- slow: the sim rig
 @pytest.mark.slow
 def test_acceptance_a_default_rig(tmp_path):
-    from fbs.drivers.rig import open_rig
+    from drivers.rig import open_rig
 
     params = Params()
     with open_rig("sim?warm=1&seed=3") as rig:
@@ -188,7 +188,7 @@ def _toml(c: dict) -> str:
 @pytest.mark.slow
 @pytest.mark.parametrize("k", range(3))
 def test_acceptance_b_other_configs(tmp_path, k):
-    from fbs.drivers.rig import open_rig
+    from drivers.rig import open_rig
 
     c = _random_configs()[k]
     cfg_path = tmp_path / "cfg.toml"
@@ -213,7 +213,7 @@ def test_acceptance_b_other_configs(tmp_path, k):
 def test_an_aborted_survey_resumes_with_the_pieces_already_recorded(tmp_path):
     """Abort during the third piece; the resumed run records only the rest and analyses all
     300 s, the first pieces from the aborted file."""
-    from fbs.drivers.rig import open_rig
+    from drivers.rig import open_rig
 
     params = Params()
     stop = threading.Event()
@@ -239,7 +239,7 @@ def test_a_platform_disturbance_torque_keeps_the_rms_right_but_moves_the_dip(tmp
     """Limitation (docs/procedures/survey.md): a torque disturbance drives the platform through a
     path with no zero at the bearing resonance, so it fills the notch and the spectrum's minimum
     moves off sqrt(k/I)/2 pi. The gyro-deduced rms still holds; the dip is only printed."""
-    from fbs.drivers.rig import open_rig
+    from drivers.rig import open_rig
 
     c = {"fX": 3.85, "fY": 6.2, "ToX": 0.016, "ToY": 0.016, "nX": 1.5, "nY": 1.5, "MdX": 1.0e-3, "MdY": 0.8e-3,
          "KgX": None, "KgY": None}

@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from fbs.simhw.bearing import BearingLinearPart, dahl_step, dahl_stiffness, linear_part
-from fbs.simhw.params import Bearing
+from simhw.bearing import BearingLinearPart, dahl_step, dahl_stiffness, linear_part
+from simhw.params import Bearing
 
 FAST = settings(max_examples=100, deadline=None)
 

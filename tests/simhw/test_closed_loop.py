@@ -9,10 +9,10 @@ import math
 import numpy as np
 import pytest
 
-from fbs.daq.spectra import dip_depth_db, dip_frequency, psd
-from fbs.simhw.params import SimConfig
-from fbs.simhw.plant import linearized_poles
-from fbs.simhw.simulator import Simulator
+from daq.spectra import dip_depth_db, dip_frequency, psd
+from simhw.params import SimConfig
+from simhw.plant import linearized_poles
+from simhw.simulator import Simulator
 
 
 def _record(cfg: SimConfig, channels, seconds=300.0, rate=1000.0, seed=11):

@@ -10,9 +10,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.simhw import effects
-from fbs.simhw.effects import Effect, catalogue, get, nominal, parse_spec
-from fbs.simhw.params import AXES, SimConfig, from_dict, to_dict, validate
+from simhw import effects
+from simhw.effects import Effect, catalogue, get, nominal, parse_spec
+from simhw.params import AXES, SimConfig, from_dict, to_dict, validate
 
 REQUIRED = {"none", "bearing_friction", "mount_resonance", "pickup_line", "flicker_noise", "offset_jumps",
             "gyro_cross_coupling", "scale_factor_error", "time_delay", "extra_damping"}

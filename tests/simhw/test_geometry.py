@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.simhw.geometry import (
+from simhw.geometry import (
     earth_rate_platform,
     platform_axes_enu,
     polar_tilt_deg,

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from fbs.simhw.params import SimConfig
-from fbs.simhw.simulator import Simulator
+from simhw.params import SimConfig
+from simhw.simulator import Simulator
 
 
 def _quiet(cfg: SimConfig) -> SimConfig:

@@ -10,7 +10,7 @@ import scipy.signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs.simhw.noise import FlickerNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
+from simhw.noise import FlickerNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
 
 DT = 1e-3
 PICKOFF_LINES = [(70.6, 3.0), (71.4, 3.0), (102.0, 4.0), (187.0, 2.0)]

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from fbs.simhw import params as P
-from fbs.simhw.bearing import dahl_stiffness
-from fbs.simhw.params import (
+from simhw import params as P
+from simhw.bearing import dahl_stiffness
+from simhw.params import (
     AXES,
     GYRO_CHANNELS,
     ConfigError,

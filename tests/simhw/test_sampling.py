@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from fbs.simhw.sampling import ADC_RANGES_V, RangeError, SamplingChain, check_range, quantize
+from simhw.sampling import ADC_RANGES_V, RangeError, SamplingChain, check_range, quantize
 
 FAST = settings(max_examples=150, deadline=None)
 ranges_s = st.sampled_from(ADC_RANGES_V)

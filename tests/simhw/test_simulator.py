@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from fbs.simhw.clock import PacedClock
-from fbs.simhw.params import SimConfig
-from fbs.simhw.plant import CHANNELS, RelayState
-from fbs.simhw.simulator import Simulator
+from simhw.clock import PacedClock
+from simhw.params import SimConfig
+from simhw.plant import CHANNELS, RelayState
+from simhw.simulator import Simulator
 
 
 def _volts(sim, sizes):

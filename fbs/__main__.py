@@ -1,0 +1,7 @@
+"""``python -m fbs``: the same as the ``fbs`` console script."""
+
+import sys
+
+from fbs.cli import main
+
+sys.exit(main())

@@ -1,0 +1,352 @@
+"""Allan deviation of a rate record and the gyro read-offs taken from it.
+
+The deviations come from ``allantools`` (the overlapping Allan deviation, NIST SP 1065
+eq. 11); this module only wraps it for rate data with gaps, adds confidence intervals and
+reads off the IEEE 952 noise terms:
+
+* ``allan_deviation``: overlapping Allan deviation of one or more gap-free segments of
+  rate samples. Segments are pooled as one estimate: each segment's sum of squared second
+  differences is added and divided by the total count (every term is an unbiased estimate
+  of the Allan variance; terms never straddle a gap). Confidence intervals use Greenhall's
+  equivalent degrees of freedom (``allantools.edf_greenhall``, overlapping ADEV, d = 2) for
+  the power-law noise identified at each averaging time by the lag-1 autocorrelation
+  method (``allantools.autocorr_noise_id``, Riley and Greenhall 2004), and the chi-square
+  interval ``allantools.confidence_interval`` (NIST SP 1065 eq. 45). The noise ID needs at
+  least 30 averages; longer averaging times keep the last identified type, so their
+  intervals are approximate.
+* ``read_arw``: angle random walk N, the white-rate term, from the tau^-1/2 line
+  sigma(tau) = N / sqrt(tau) through a stated tau range (IEEE Std 952-1997, Annex C: N is
+  the line's value at tau = 1 s). The line's slope fitted freely is returned too: if it is
+  not near -1/2 the range is not a white-rate region, and N is then only an upper bound,
+  because every other noise term adds to the Allan variance.
+* ``read_bias_instability``: B = (minimum of the Allan deviation) / 0.664 (IEEE 952
+  Annex C: flicker rate noise of one-sided PSD B^2 / (pi f) has the flat Allan floor
+  sqrt(2 ln 2 / pi) B = 0.664 B). The minimum is taken over averaging times with enough
+  degrees of freedom (counted for flicker noise, what the floor is); when it is at the
+  longest of them and significantly below the curve a few octaves earlier, the floor was
+  not reached and B is an upper bound.
+* ``null_stability``: the peak-to-peak wander of block averages (the thesis' "24-hour null
+  stability", Table 1) over the record, and an estimate for a longer span from the Allan
+  deviation (``wander_variance``).
+
+References: IEEE Std 952-1997 (R2008), Annex C "Allan variance method of data reduction";
+W. J. Riley, *Handbook of Frequency Stability Analysis*, NIST SP 1065 (2008): eq. 11
+(overlapping ADEV), eq. 45 (chi-square interval), its test suite (NBS-14, pp. 107-108);
+C. A. Greenhall and W. J. Riley, "Uncertainty of stability variances based on finite
+differences" (PTTI 2003) for the EDF; W. J. Riley and C. A. Greenhall, "Power law noise
+identification using the lag 1 autocorrelation" (EFTF 2004).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import allantools
+import numpy as np
+
+#: IEEE 952 Annex C: the Allan floor of flicker rate noise is sqrt(2 ln 2 / pi) B
+FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)   # 0.6643
+#: one-sigma confidence (68.27 %), as allantools' default
+ONE_SIGMA = float(allantools.ci.ONE_SIGMA_CI)
+#: averages the lag-1 autocorrelation noise ID needs (Riley and Greenhall 2004)
+NOISE_ID_MIN_POINTS = 30
+
+
+@dataclass
+class AllanResult:
+    """Overlapping Allan deviation with its confidence interval at each averaging time."""
+
+    tau_s: np.ndarray
+    dev: np.ndarray
+    lo: np.ndarray               # lower and upper confidence limits (``ci`` level)
+    hi: np.ndarray
+    edf: np.ndarray              # equivalent degrees of freedom
+    n_terms: np.ndarray          # second differences summed (all segments)
+    alpha: np.ndarray            # power-law noise exponent used for the EDF (S_y ~ f^alpha)
+    alpha_identified: np.ndarray  # True where alpha was identified at that tau (not carried over)
+    rate_hz: float
+    n_samples: int               # samples in all segments
+    ci: float = ONE_SIGMA
+    overlapping: bool = True
+    segment_lengths: tuple[int, ...] = ()
+
+    def usable(self, min_edf: float) -> np.ndarray:
+        return np.isfinite(self.dev) & (self.edf >= min_edf)
+
+    def edf_for(self, alpha: int) -> np.ndarray:
+        """Greenhall EDF at every tau had the noise been of type ``alpha`` throughout."""
+        return np.array([_edf(alpha, int(round(t * self.rate_hz)), self.segment_lengths, self.overlapping)
+                         for t in self.tau_s])
+
+    def interval(self, i: int, edf: float, ci: float | None = None) -> tuple[float, float]:
+        """The interval (default: the result's ``ci`` level) of the deviation at index ``i``
+        for ``edf`` degrees of freedom."""
+        lo, hi = allantools.confidence_interval(self.dev[i], edf, self.ci if ci is None else ci)
+        return float(lo), float(hi)
+
+
+def _edf(alpha: int, m: int, lengths: Sequence[int], overlapping: bool) -> float:
+    """Greenhall's EDF (``allantools.edf_greenhall``, d = 2) summed over independent segments."""
+    return float(sum(allantools.edf_greenhall(alpha=int(alpha), d=2, m=int(m), N=int(n) + 1,
+                                              overlapping=overlapping, modified=False)
+                     for n in lengths if n + 1 > 2 * m))
+
+
+def octave_taus(n_samples: int, rate_hz: float, max_fraction: float = 0.25) -> np.ndarray:
+    """Averaging times m / rate for m = 1, 2, 4, ... up to ``max_fraction`` of the record."""
+    m_max = max(1, int(n_samples * max_fraction))
+    return 2.0 ** np.arange(int(math.log2(m_max)) + 1) / rate_hz
+
+
+def split_finite(x: np.ndarray, min_len: int = 3) -> list[np.ndarray]:
+    """The runs of finite samples of ``x`` (NaN marks lost samples), each at least ``min_len``."""
+    x = np.asarray(x, float)
+    ok = np.isfinite(x)
+    if ok.all():
+        return [x] if len(x) >= min_len else []
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(np.int8), [0]])))
+    return [x[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_len]
+
+
+def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
+                    taus: Sequence[float] | np.ndarray | None = None, *, ci: float = ONE_SIGMA,
+                    overlapping: bool = True) -> AllanResult:
+    """Overlapping Allan deviation (``allantools.oadev`` on rate ("freq") data) of one
+    gap-free array or of several segments pooled, with confidence intervals;
+    ``overlapping=False`` gives the classic non-overlapping one (``allantools.adev``).
+
+    ``taus`` default: octaves up to a quarter of the longest segment. A tau no segment is
+    long enough for (2 m + 1 samples) is dropped.
+    """
+    if isinstance(segments, np.ndarray) and segments.ndim == 1:
+        segments = [segments]
+    segs = [np.asarray(s, float) for s in segments if len(s) >= 3]
+    if not segs:
+        raise ValueError("no segment of at least 3 samples")
+    if any(not np.all(np.isfinite(s)) for s in segs):
+        raise ValueError("a segment holds NaN or inf: split the record at its gaps first (split_finite)")
+    longest = max(segs, key=len)
+    if taus is None:
+        taus = octave_taus(len(longest), rate_hz)
+    m_all = np.unique(np.maximum(1, np.round(np.asarray(taus, float) * rate_hz).astype(np.int64)))
+    dev_fn = allantools.oadev if overlapping else allantools.adev
+    sumsq = np.zeros(len(m_all))
+    count = np.zeros(len(m_all), dtype=np.int64)
+    for s in segs:
+        fit = m_all[2 * m_all < len(s)]   # oadev needs N_phase = len + 1 > 2 m
+        if len(fit) == 0:
+            continue
+        t, dev, _err, ns = dev_fn(s, rate=rate_hz, data_type="freq", taus=fit / rate_hz)
+        m_got = np.round(np.asarray(t) * rate_hz).astype(np.int64)
+        idx = np.searchsorted(m_all, m_got)
+        ns = np.asarray(ns, dtype=np.int64)
+        sumsq[idx] += np.asarray(dev) ** 2 * ns
+        count[idx] += ns
+    keep = count > 0
+    m_all, sumsq, count = m_all[keep], sumsq[keep], count[keep]
+    dev = np.sqrt(sumsq / count)
+
+    # noise type per tau (on the longest segment), then Greenhall's EDF summed over segments
+    alpha = np.zeros(len(m_all), dtype=np.int64)
+    identified = np.zeros(len(m_all), dtype=bool)
+    last = 0  # white rate noise until something is identified
+    for i, m in enumerate(m_all):
+        if len(longest) // m >= NOISE_ID_MIN_POINTS:
+            last = int(allantools.autocorr_noise_id(longest, int(m), data_type="freq", dmin=0, dmax=2)[0])
+            last = min(2, max(-2, last))   # the Allan variance converges for alpha > -3
+            identified[i] = True
+        alpha[i] = last
+    lengths = tuple(len(s) for s in segs)
+    edf = np.array([_edf(int(a), int(m), lengths, overlapping) for a, m in zip(alpha, m_all)])
+    lo = np.full(len(m_all), np.nan)
+    hi = np.full(len(m_all), np.nan)
+    for i in np.flatnonzero(edf > 0):
+        lo[i], hi[i] = allantools.confidence_interval(dev[i], edf[i], ci)
+    return AllanResult(m_all / rate_hz, dev, lo, hi, edf, count, alpha, identified, rate_hz,
+                       sum(lengths), ci, overlapping, lengths)
+
+
+# ---------------------------------------------------------------------------- read-offs
+@dataclass
+class ArwReadoff:
+    """White-rate (angle random walk) coefficient from the tau^-1/2 line."""
+
+    N: float                       # units / sqrt(s): sigma(1 s) of the -1/2 line
+    lo: float                      # confidence limits (from the best-determined point in range)
+    hi: float
+    tau_range_s: tuple[float, float]  # averaging times actually used
+    n_points: int
+    slope: float                   # log-log slope fitted freely over the same points
+    white_region: bool             # |slope + 1/2| <= slope_tol: a tau^-1/2 region
+
+    @property
+    def stderr(self) -> float:
+        return (self.hi - self.lo) / 2
+
+
+def read_arw(res: AllanResult, tau_range_s: tuple[float, float], *, min_edf: float = 10.0,
+             slope_tol: float = 0.15) -> ArwReadoff:
+    """N from the line sigma = N tau^-1/2 through the deviations with tau in ``tau_range_s``
+    (IEEE 952 Annex C), fitted in log space with each point weighted by its EDF."""
+    lo_t, hi_t = tau_range_s
+    sel = (res.tau_s >= lo_t * (1 - 1e-9)) & (res.tau_s <= hi_t * (1 + 1e-9)) & res.usable(min_edf)
+    if sel.sum() < 2:
+        raise ValueError(f"fewer than two usable Allan points in tau {lo_t:g}..{hi_t:g} s "
+                         f"(record too short, or the range misses the sample interval)")
+    t, d, w = res.tau_s[sel], res.dev[sel], res.edf[sel]
+    logn = np.log(d) + 0.5 * np.log(t)
+    N = float(np.exp(np.average(logn, weights=w)))
+    slope = float(np.polyfit(np.log(t), np.log(d), 1, w=np.sqrt(w))[0])
+    # points of overlapping estimates are strongly correlated: the fit is no better determined
+    # than its best point, whose relative interval is carried over
+    best = int(np.argmax(w))
+    rel_lo, rel_hi = res.lo[sel][best] / d[best], res.hi[sel][best] / d[best]
+    return ArwReadoff(N, N * rel_lo, N * rel_hi, (float(t.min()), float(t.max())), int(sel.sum()), slope,
+                      abs(slope + 0.5) <= slope_tol)
+
+
+@dataclass
+class BiasInstabilityReadoff:
+    """Bias instability from the flat minimum of the Allan deviation."""
+
+    B: float                       # units (of the rate): sigma_min / 0.664
+    lo: float
+    hi: float
+    tau_min_s: float               # where the minimum is
+    sigma_min: float
+    floor_reached: bool            # False: the minimum is at the longest usable tau, still falling
+    tau_max_s: float               # longest usable tau
+
+    @property
+    def stderr(self) -> float:
+        return (self.hi - self.lo) / 2
+
+
+def read_bias_instability(res: AllanResult, *, min_edf: float = 10.0, min_tau_s: float = 0.0,
+                          back_octaves: int = 3) -> BiasInstabilityReadoff:
+    """B = min sigma / 0.664 over the averaging times >= ``min_tau_s`` where the estimate
+    has at least ``min_edf`` degrees of freedom (IEEE 952 Annex C). ``min_tau_s`` keeps the
+    read-off beyond where the floor can be the quantity's own (e.g. a loop's time constants).
+
+    The degrees of freedom (and the interval) here are Greenhall's for flicker rate noise
+    (alpha = -1) at every tau, the noise the floor is: the identified type is unreliable
+    with the few averages of the longest taus, and a white-noise identification there
+    would claim several times the degrees of freedom, letting a low outlier of the
+    scatter pose as the floor. The minimum of a scattered curve still leans low, the more
+    so the more points it is taken over.
+
+    The floor counts as reached unless the minimum is at the longest usable tau *and* lies
+    significantly below the curve ``back_octaves`` octaves earlier (any usable tau, the 95 %
+    intervals of the two do not overlap): a curve still falling there (white rate noise falls by
+    2^(-3/2) = 0.35 in three octaves) has not shown its floor, and B is then an upper
+    bound. Comparing across several octaves, not one, keeps the scatter of the long-tau
+    points from deciding it."""
+    edf = res.edf_for(-1)
+    usable = np.isfinite(res.dev) & (edf >= min_edf)
+    ok = usable & (res.tau_s >= min_tau_s)
+    if not ok.any():
+        raise ValueError(f"no Allan point with EDF >= {min_edf:g} (flicker) at tau >= {min_tau_s:g} s "
+                         f"(record too short: the longest such tau is "
+                         f"{res.tau_s[usable].max() if usable.any() else 0:g} s)")
+    idx = np.flatnonzero(ok)
+    i = idx[int(np.argmin(res.dev[idx]))]
+    lo, hi = res.interval(i, edf[i])
+    reached = True
+    earlier = np.flatnonzero(usable & (res.tau_s < res.tau_s[i]))
+    if i == idx[-1] and len(earlier):
+        target = res.tau_s[i] / 2 ** back_octaves
+        j = earlier[int(np.argmin(np.abs(np.log(res.tau_s[earlier] / target))))]
+        reached = not res.interval(i, edf[i], 0.95)[1] < res.interval(j, edf[j], 0.95)[0]
+    s = float(res.dev[i])
+    return BiasInstabilityReadoff(s / FLICKER_FLOOR, lo / FLICKER_FLOOR, hi / FLICKER_FLOOR, float(res.tau_s[i]), s,
+                                  reached, float(res.tau_s[idx[-1]]))
+
+
+# ---------------------------------------------------------------------------- null stability
+def block_means(segments: Sequence[np.ndarray], rate_hz: float, avg_s: float) -> np.ndarray:
+    """Means of consecutive whole blocks of ``avg_s`` within each gap-free segment."""
+    m = max(1, int(round(avg_s * rate_hz)))
+    out = [s[: len(s) // m * m].reshape(-1, m).mean(axis=1) for s in segments if len(s) >= m]
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def wander_variance(span_s: float, avg_s: float, sigma_at) -> float:
+    """Expected variance, about their mean, of the ``avg_s`` averages over ``span_s``:
+    half the sum of the Allan variances at avg_s, 2 avg_s, 4 avg_s, ... < span_s.
+
+    This is the Haar decomposition of a sample variance: 2^J averages split exactly into
+    differences of adjacent half-block means at each octave, and each such difference has
+    expected square 2 sigma^2(tau) (non-overlapping Allan variance). ``sigma_at(tau)`` gives
+    the Allan deviation at tau (measured, or extrapolated beyond the record).
+    """
+    n = span_s / avg_s
+    if n < 2:
+        return 0.0
+    levels = int(math.floor(math.log2(n)))
+    var = sum(sigma_at(avg_s * 2 ** j) ** 2 for j in range(levels))
+    frac = math.log2(n) - levels   # a partial octave counts in proportion
+    var += frac * sigma_at(avg_s * 2 ** levels) ** 2
+    return 0.5 * var
+
+
+@dataclass
+class NullStability:
+    """Peak-to-peak wander of ``avg_s`` averages (the thesis' strip-chart null stability)."""
+
+    avg_s: float
+    record_s: float                  # span covered by the averages
+    n_averages: int
+    peak_to_peak: float              # over the record
+    span_s: float                    # the span the estimate is for (e.g. 24 h)
+    estimate: float                  # peak-to-peak expected over span_s
+    measured_over_span: bool         # the record covers span_s: the estimate is a measurement
+    ratio: float                     # sqrt(wander variance over span / over the record)
+    extrapolated_from_tau_s: float   # taus beyond this used the extrapolated Allan deviation
+    extrapolation_slope: float       # log-log slope used beyond it
+    means: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
+
+
+def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanResult, *, avg_s: float = 100.0,
+                   span_s: float = 86400.0, min_edf: float = 10.0) -> NullStability:
+    """Peak-to-peak of the ``avg_s`` means over the record, and an estimate for ``span_s``.
+
+    If the record is shorter than ``span_s`` the peak-to-peak is scaled by the ratio of the
+    expected rms wander of the averages over ``span_s`` to that over the record
+    (``wander_variance``): the range-to-rms ratio of the record is assumed to carry over
+    (it grows slowly with the number of averages, so this leans low). The Allan deviation
+    is taken as measured up to the longest tau with ``min_edf`` degrees of freedom (for
+    flicker noise, as ``read_bias_instability``) and
+    continued beyond it as a power law with the slope of its last octave clamped to
+    0 .. +1/2 (flat for flicker rate noise, +1/2 for rate random walk); a slow trend or
+    temperature cycle the record did not see is not in the estimate.
+    """
+    means = block_means(segments, rate_hz, avg_s)
+    if len(means) < 2:
+        raise ValueError(f"fewer than two {avg_s:g}-s averages in the record")
+    p2p = float(means.max() - means.min())
+    record_s = len(means) * avg_s
+    ok = np.isfinite(res.dev) & (res.edf_for(-1) >= min_edf)   # as read_bias_instability
+    t, d = res.tau_s[ok], res.dev[ok]
+    if len(t) < 2:
+        raise ValueError("too few usable Allan points for the null-stability estimate")
+    slope = math.log(d[-1] / d[-2]) / math.log(t[-1] / t[-2])
+    slope = min(0.5, max(0.0, slope))
+    t_last, d_last = float(t[-1]), float(d[-1])
+    logt, logd = np.log(t), np.log(d)
+
+    def sigma_at(tau: float) -> float:
+        if tau <= t_last:
+            return float(np.exp(np.interp(math.log(tau), logt, logd)))
+        return d_last * (tau / t_last) ** slope
+
+    if record_s >= span_s:
+        k = int(round(span_s / avg_s))
+        win = np.lib.stride_tricks.sliding_window_view(means, k)
+        est = float((win.max(axis=1) - win.min(axis=1)).max())
+        return NullStability(avg_s, record_s, len(means), p2p, span_s, est, True, 1.0, t_last, slope, means)
+    v_rec = wander_variance(record_s, avg_s, sigma_at)
+    v_span = wander_variance(span_s, avg_s, sigma_at)
+    ratio = math.sqrt(v_span / v_rec) if v_rec > 0 else math.nan
+    return NullStability(avg_s, record_s, len(means), p2p, span_s, p2p * ratio, False, ratio, t_last, slope, means)

@@ -1,0 +1,218 @@
+"""Maximum-likelihood fits of catalogue effects to measured band spectra.
+
+Each band estimate ``P_b`` of a channel is ``S_b chi^2_nu / nu`` under a model spectrum
+``S_b``; its negative log-likelihood, up to terms free of the model, is the Whittle form
+([Whittle 1953]; band-averaged, as in [BP] 9.4)
+
+    -l = sum_b nu_b / 2 (ln S_b + P_b / S_b).
+
+Channels are summed as independent; their correlation (the two autocollimator channels see
+the same angle) makes the likelihood sharper than it is, which the ranking's margin absorbs.
+The axis's autocollimator and pickoff noise levels are nuisance parameters, fitted for every
+candidate (including ``none``) by profiling: the effect's own parameters are searched (prior
+grid plus the effect's own guesses, then Nelder-Mead on the prior interval, log where the prior
+is), and at every trial the two noise scales are re-fitted.
+
+Candidates are ranked by the Bayesian information criterion's improvement over ``none``,
+``2 (l_e - l_none) - k ln n`` ([Schwarz 1978]), ``k`` the effect's fitted parameters and ``n``
+the number of band estimates.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from itertools import product
+from typing import Any
+
+import numpy as np
+import scipy.optimize
+
+from procedures.analysis.gap.model import ModelSpectrum, SpectralModel
+from simhw.effects import Effect, Param
+from simhw.params import SimConfig
+
+log = logging.getLogger(__name__)
+
+NUISANCE = ("ac", "pickoff")
+#: Nuisance scales are searched within this factor of the data sheet's noise levels.
+NUISANCE_RANGE = 4.0
+
+
+def whittle_nll(P: np.ndarray, S: np.ndarray, dof: np.ndarray) -> float:
+    """sum nu/2 (ln S + P/S) over channels and bands (Whittle, band form)."""
+    return float(np.sum(0.5 * dof * (np.log(S) + P / S)))
+
+
+@dataclass
+class NuisanceFit:
+    scales: dict[str, float]
+    nll: float
+    S: np.ndarray
+
+
+def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum) -> NuisanceFit:
+    """Noise scales of the nuisance parts that minimize the Whittle likelihood (analytic gradient)."""
+    active = [p for p in NUISANCE if np.any(ms.parts[p] > 0)]
+    fixed = ms.parts["fixed"]
+    comps = [ms.parts[p] for p in active]
+
+    def f(u: np.ndarray) -> tuple[float, np.ndarray]:
+        s = np.exp(u)
+        S = fixed + sum(si * c for si, c in zip(s, comps))
+        S = np.maximum(S, 1e-300)
+        w = 0.5 * dof * (1.0 / S - P / S**2)
+        grad = np.array([np.sum(w * c) * si for si, c in zip(s, comps)])
+        return whittle_nll(P, S, dof), grad
+
+    lim = math.log(NUISANCE_RANGE)
+    if active:
+        res = scipy.optimize.minimize(f, np.zeros(len(active)), jac=True, method="L-BFGS-B",
+                                      bounds=[(-lim, lim)] * len(active))
+        scales = dict(zip(active, np.exp(res.x).tolist()))
+    else:
+        scales = {}
+    S = ms.total(scales)
+    return NuisanceFit(scales, whittle_nll(P, S, dof), S)
+
+
+@dataclass
+class EffectFit:
+    """The best fit of one candidate effect on top of the base model."""
+
+    effect: str
+    params: dict[str, float]           # every parameter of the effect (fitted or held)
+    errors: dict[str, float]           # 1-sigma of the fitted ones, from the likelihood's curvature
+    nll: float
+    scales: dict[str, float]
+    n_fitted: int
+    cfg: SimConfig = field(repr=False)
+    S: np.ndarray = field(repr=False)
+    score: float = 0.0                 # BIC improvement over the base model
+
+    @property
+    def summary(self) -> dict[str, Any]:
+        return {"effect": self.effect, "score": round(self.score, 2)}
+
+
+def _to_unit(p: Param, v: float) -> float:
+    if p.log:
+        return math.log(v / p.lo) / math.log(p.hi / p.lo)
+    return (v - p.lo) / (p.hi - p.lo)
+
+
+def _from_unit(p: Param, t: float) -> float:
+    t = min(max(t, 0.0), 1.0)
+    if p.log:
+        return p.lo * (p.hi / p.lo) ** t
+    return p.lo + t * (p.hi - p.lo)
+
+
+class Fitter:
+    """Profile-likelihood fits of catalogue effects on one measured spectrum."""
+
+    def __init__(self, model: SpectralModel, P: np.ndarray, dof: np.ndarray, axis: str,
+                 grid_points: int = 9) -> None:
+        self.model, self.P, self.dof, self.axis = model, P, np.broadcast_to(dof, P.shape), axis
+        self.grid_points = grid_points
+        self.evaluations = 0
+
+    def base(self, cfg: SimConfig) -> NuisanceFit:
+        return fit_nuisance(self.P, self.dof, self.model(cfg))
+
+    def fit(self, effect: Effect, base_cfg: SimConfig, evidence: Any, *, refine: bool = True,
+            errors: bool = True, start: dict[str, float] | None = None) -> EffectFit | None:
+        """The maximum-likelihood fit of ``effect`` on ``base_cfg``; None if it does not apply.
+        Without ``refine``, the best of the starting points (a screening); without ``errors``,
+        no curvature (NaN uncertainties). ``start``: begin from these values instead of the
+        prior grid and the guesses."""
+        fitted = effect.fit_params
+        held: dict[str, float] = {p.name: p.default for p in effect.params if p not in fitted}
+        guesses = effect.guess(evidence) if effect.guess else []
+        for g in guesses:  # a guessed value of a parameter the spectra cannot see holds it there
+            held.update({k: v for k, v in g.items() if k in held})
+        try:
+            effect.inject(base_cfg, self.axis, **{p.name: p.default for p in fitted}, **held)
+        except ValueError as e:
+            log.debug("%s does not apply: %s", effect.name, e)
+            return None
+
+        cache: dict[tuple, tuple[float, NuisanceFit, SimConfig]] = {}
+
+        def evaluate(t: np.ndarray) -> float:
+            key = tuple(np.round(np.clip(t, 0, 1), 9))
+            if key not in cache:
+                vals = {p.name: _from_unit(p, ti) for p, ti in zip(fitted, key)}
+                cfg = effect.inject(base_cfg, self.axis, **vals, **held)
+                nf = fit_nuisance(self.P, self.dof, self.model(cfg))
+                self.evaluations += 1
+                cache[key] = (nf.nll, nf, cfg)
+            return cache[key][0]
+
+        d = len(fitted)
+        if d == 0:
+            evaluate(np.zeros(0))
+            best_t = np.zeros(0)
+        else:
+            n = self.grid_points if d == 1 else max(3, int(round(self.grid_points ** (1 / d) + 1)))
+            axes = [np.linspace(0.5 / n, 1 - 0.5 / n, n)] * d
+            starts = [np.array(s) for s in product(*axes)] if start is None else []
+            for g in guesses if start is None else [start]:
+                t = np.array([_to_unit(p, g.get(p.name, p.default)) for p in fitted])
+                starts.append(np.clip(t, 0.0, 1.0))
+            scored = sorted(starts, key=evaluate)
+            best_t, best_v = scored[0], evaluate(scored[0])
+            # Refine the best two: small simplex, as the best start already sits in its basin.
+            for t0 in scored[:1] if refine else []:
+                simplex = np.vstack([t0] + [t0 + 0.02 * np.eye(d)[i] for i in range(d)])
+                res = scipy.optimize.minimize(evaluate, t0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * d,
+                                              options={"initial_simplex": np.clip(simplex, 0, 1), "xatol": 2e-4,
+                                                       "fatol": 0.02, "maxfev": 40 * d})
+                if res.fun < best_v:
+                    best_t, best_v = np.clip(res.x, 0, 1), res.fun
+        nll, nf, cfg = cache[tuple(np.round(np.clip(best_t, 0, 1), 9))]
+        params = {p.name: _from_unit(p, t) for p, t in zip(fitted, best_t)} | held
+        if effect.derive is not None:
+            params = effect.derive(params)
+        errs = self._errors(evaluate, best_t, fitted) if errors else {p.name: float("nan") for p in fitted}
+        return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S)
+
+    @staticmethod
+    def _errors(evaluate, t: np.ndarray, fitted: tuple[Param, ...]) -> dict[str, float]:
+        """1-sigma from the inverse curvature of -l in the unit coordinates (central differences)."""
+        d = len(fitted)
+        if d == 0:
+            return {}
+        h = 2e-3
+        f0 = evaluate(t)
+        Hm = np.zeros((d, d))
+        for i in range(d):
+            for j in range(i, d):
+                ei, ej = np.eye(d)[i] * h, np.eye(d)[j] * h
+                if i == j:
+                    v = (evaluate(t + ei) - 2 * f0 + evaluate(t - ei)) / h**2
+                else:
+                    v = (evaluate(t + ei + ej) - evaluate(t + ei - ej) - evaluate(t - ei + ej)
+                         + evaluate(t - ei - ej)) / (4 * h * h)
+                Hm[i, j] = Hm[j, i] = v
+        out = {}
+        try:
+            cov = np.linalg.inv(Hm)
+        except np.linalg.LinAlgError:
+            cov = np.full((d, d), np.nan)
+        for i, p in enumerate(fitted):
+            var = cov[i, i]
+            if not (np.isfinite(var) and var > 0):
+                out[p.name] = float("nan")
+                continue
+            v = _from_unit(p, t[i])
+            # d value / d t: log scale -> v ln(hi/lo), linear -> hi - lo
+            dv = v * math.log(p.hi / p.lo) if p.log else p.hi - p.lo
+            out[p.name] = float(abs(dv) * math.sqrt(var))
+        return out
+
+
+def bic_score(fit: EffectFit, base_nll: float, n_obs: int) -> float:
+    """BIC improvement over the base model: 2 (l_e - l_base) - k ln n."""
+    return 2.0 * (base_nll - fit.nll) - fit.n_fitted * math.log(n_obs)

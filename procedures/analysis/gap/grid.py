@@ -1,0 +1,137 @@
+"""The analysis grid of the model-gap workflow: Welch bins grouped into fractional-octave bands.
+
+Measured and model spectra are compared band by band. A band is the mean of the Welch bins
+(Hann, 50 % overlap, a line removed per segment) whose centres fall in one 1/24-octave
+interval; low bands hold one bin, high bands hundreds. Each band's estimate is taken as
+``S chi^2_nu / nu`` (App. A.4) with ``nu`` its equivalent degrees of freedom: the Welch EDOF
+of one bin (``daq.spectra.equivalent_dof``) times the bins in the band, divided by the
+variance inflation of summing adjacent, correlated bins (for Hann the periodograms of
+neighbouring bins correlate by 4/9, two apart by 1/36).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from daq.spectra import equivalent_dof, n_segments, psd
+
+#: Bins per band below which a band's bins are all evaluated by the model; above, a subset.
+MODEL_POINTS_PER_BAND = 8
+#: Fewest Welch segments for the lowest band's estimate to be worth comparing.
+MIN_SEGMENTS = 8
+
+
+class GapInputError(ValueError):
+    """The file cannot be analysed as it is: the message names the problem and the limit."""
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Welch parameters and the bands of one analysis."""
+
+    rate_hz: float
+    nperseg: int
+    noverlap: int
+    segments: int
+    bins: np.ndarray        # Welch bin indices analysed
+    band_of_bin: np.ndarray  # band index of each analysed bin
+    band_lo_hz: np.ndarray
+    band_hi_hz: np.ndarray
+    dof: np.ndarray          # equivalent degrees of freedom of each band's estimate
+    eval_bins: np.ndarray    # positions (into ``bins``) where the model is evaluated
+    eval_band: np.ndarray    # band of each evaluation point
+
+    @property
+    def df(self) -> float:
+        return self.rate_hz / self.nperseg
+
+    @property
+    def f(self) -> np.ndarray:
+        return self.bins * self.df
+
+    @property
+    def n_bands(self) -> int:
+        return len(self.band_lo_hz)
+
+    @property
+    def band_center_hz(self) -> np.ndarray:
+        return np.sqrt(self.band_lo_hz * self.band_hi_hz)
+
+    def band_mean(self, per_bin: np.ndarray) -> np.ndarray:
+        """Mean over each band's bins of ``per_bin`` (..., n_bins) -> (..., n_bands)."""
+        return _group_mean(per_bin, self.band_of_bin, self.n_bands)
+
+    def eval_mean(self, per_point: np.ndarray) -> np.ndarray:
+        """Mean over each band's evaluation points (..., n_points) -> (..., n_bands)."""
+        return _group_mean(per_point, self.eval_band, self.n_bands)
+
+
+def _group_mean(values: np.ndarray, group: np.ndarray, n: int) -> np.ndarray:
+    counts = np.bincount(group, minlength=n)
+    flat = values.reshape(-1, values.shape[-1])
+    out = np.stack([np.bincount(group, weights=row, minlength=n) for row in flat]) / counts
+    return out.reshape(values.shape[:-1] + (n,))
+
+
+def _bin_correlation(window: np.ndarray, max_lag: int = 4) -> np.ndarray:
+    """Correlation of the periodograms of bins j apart: |sum w^2 e^(-j 2 pi j m / N)|^2 / (sum w^2)^2."""
+    w2 = window**2
+    spec = np.fft.rfft(w2)[: max_lag + 1]
+    return np.abs(spec) ** 2 / float(w2.sum()) ** 2
+
+
+def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz: float = 0.25,
+              f_hi_fraction: float = 0.3, bands_per_octave: int = 24) -> Grid:
+    """Bins from ``f_lo_hz`` (at least the 4th bin, clear of the detrend's leakage) to
+    ``f_hi_fraction`` of the rate, in 1/``bands_per_octave``-octave bands."""
+    if not (rate_hz > 0 and math.isfinite(rate_hz)):
+        raise GapInputError(f"sample rate {rate_hz!r} Hz must be a positive number")
+    nperseg = 1 << max(8, math.ceil(math.log2(rate_hz / df_hz)))
+    noverlap = nperseg // 2
+    need = nperseg + (MIN_SEGMENTS - 1) * (nperseg - noverlap)
+    if n_samples < need:
+        raise GapInputError(
+            f"record too short: {n_samples / rate_hz:.1f} s; the lowest band ({f_lo_hz:g} Hz, "
+            f"{rate_hz / nperseg:.3f} Hz resolution) needs {MIN_SEGMENTS} segments of {nperseg / rate_hz:.1f} s, "
+            f"at least {need / rate_hz:.1f} s")
+    K = n_segments(n_samples, nperseg, noverlap)
+    df = rate_hz / nperseg
+    k0 = max(4, math.ceil(f_lo_hz / df))
+    k1 = int(f_hi_fraction * rate_hz / df)
+    bins = np.arange(k0, k1 + 1)
+    f = bins * df
+    raw = np.floor(bands_per_octave * np.log2(f / (k0 * df)) + 1e-9).astype(int)
+    _, band = np.unique(raw, return_inverse=True)
+    n_bands = band.max() + 1
+    lo = np.array([f[band == b].min() - df / 2 for b in range(n_bands)])
+    hi = np.array([f[band == b].max() + df / 2 for b in range(n_bands)])
+    win = scipy.signal.get_window("hann", nperseg)
+    nu_bin = equivalent_dof(win, nperseg, noverlap, K)
+    rho = _bin_correlation(win)
+    counts = np.bincount(band)
+    inflation = np.array([1 + 2 * sum((1 - j / n) * rho[j] for j in range(1, min(n, len(rho)))) for n in counts])
+    dof = nu_bin * counts / inflation
+    eval_pos: list[int] = []
+    for b in range(n_bands):
+        idx = np.flatnonzero(band == b)
+        if len(idx) > MODEL_POINTS_PER_BAND:
+            idx = idx[np.round(np.linspace(0, len(idx) - 1, MODEL_POINTS_PER_BAND)).astype(int)]
+        eval_pos.extend(idx.tolist())
+    eval_bins = np.array(eval_pos)
+    return Grid(float(rate_hz), nperseg, noverlap, K, bins, band, lo, hi, dof, eval_bins, band[eval_bins])
+
+
+def bin_spectra(x: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+    """The analysed Welch bins: (f, p[n_channels, n_bins]), one-sided density."""
+    f, p = psd(np.atleast_2d(x), grid.rate_hz, nperseg=grid.nperseg, noverlap=grid.noverlap,
+               window="hann", detrend="linear")
+    return f[grid.bins], p[..., grid.bins]
+
+
+def band_spectra(x: np.ndarray, grid: Grid) -> np.ndarray:
+    """Band-averaged one-sided Welch PSD of each row of ``x`` (n_channels, n) -> (n_channels, n_bands)."""
+    return grid.band_mean(bin_spectra(x, grid)[1])

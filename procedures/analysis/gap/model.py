@@ -1,0 +1,339 @@
+"""Expected spectra of the simulated rig, computed exactly from its linear model.
+
+The model-gap workflow needs the spectrum the model *predicts* for many candidate
+configurations, far faster than simulating each. ``simhw`` is one linear state-space model
+driven by noise inputs held over each step (docs/simhw.md section 1), so its output spectrum
+is exact in closed form:
+
+    S_y(f) = sum_i |H_yi(e^(j 2 pi f dt))|^2 S_i(f)              (linear system, [BP] 5.2)
+
+with ``H = C (zI - A_d)^-1 B_d + D`` the discrete plant at the internal step ``dt`` and
+``S_i`` each input's spectrum as the plant sees it (``simhw.noise`` sources report their own).
+The recording chain follows: the 3-pole anti-alias filter ``|AA|^2`` at the internal rate,
+then decimation, which folds the internal spectrum onto 0..fs/2 (aliases f, fs - f, ...), and
+the ADC's white quantization floor ``q^2 / (6 fs)`` one-sided (App. A.7). Deterministic
+sinusoids (pickoff lines, electrical pickup) are not spectra: their expected Welch estimate
+is the Hann window's kernel ``2 (A/2)^2 |W(f - f0)|^2 / (fs sum w^2)`` around each line.
+
+The spectrum is returned in parts so the workflow can scale noise levels it treats as
+nuisance parameters (the axis's autocollimator noise and gyro pickoff noise) without
+recomputing the plant.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.signal
+
+from procedures.analysis.gap.grid import Grid
+from simhw.params import SimConfig
+from simhw.plant import RelayState, build_plant, discretize
+from simhw.sampling import anti_alias_sos, internal_rate
+from simhw.simulator import Sources
+
+#: Parts of the spectrum whose level is a nuisance parameter: the axis's autocollimator noise
+#: (white and 1/f, as its noise-equivalent angle sets them) and gyro pickoff white noise.
+PARTS = ("ac", "pickoff", "fixed")
+
+
+def part_of(input_name: str, kind: str, axis: str) -> str:
+    """Which part of the spectrum a noise source feeds."""
+    if input_name == f"nac_{axis}" and kind in ("WhiteNoise", "FlickerNoise"):
+        return "ac"
+    if input_name == f"np_{axis}" and kind == "WhiteNoise":
+        return "pickoff"
+    return "fixed"
+
+
+def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimConfig:
+    """A copy of ``cfg`` whose noise levels are the fitted nuisance scales of the parts: the
+    autocollimator's NEA scales as sqrt (its white and 1/f PSDs follow it), the pickoff's white
+    PSD is the quoted rms's variance less the lines' (``simhw.simulator.pickoff_white_psd``)."""
+    cfg = cfg.copy()
+    s_ac, s_np = scales.get("ac", 1.0), scales.get("pickoff", 1.0)
+    if axis in cfg.autocollimator:
+        cfg.autocollimator[axis].nea_urad *= math.sqrt(s_ac)
+    elif axis == "Z":
+        cfg.azimuth.nea_urad *= math.sqrt(s_ac)
+    g = cfg.gyro[axis]
+    lines = sum(a * a / 2 for _, a in g.pickoff_lines)
+    g.pickoff_noise_rms_urad = math.sqrt(max(s_np * (g.pickoff_noise_rms_urad**2 - lines), 0.0) + lines)
+    return cfg
+
+
+@dataclass
+class ModelSpectrum:
+    """Band spectra of the analysed channels, (n_channels, n_bands) per part."""
+
+    channels: tuple[str, ...]
+    parts: dict[str, np.ndarray]
+
+    def total(self, scales: dict[str, float] | None = None) -> np.ndarray:
+        scales = scales or {}
+        return sum(self.parts[p] * scales.get(p, 1.0) for p in PARTS)
+
+
+#: Equivalent viscous damping of a Dahl bearing under the rig's random motion, per unit
+#: k / To (N m s rad): c_eq = DAHL_DAMPING * k / To. Dahl's slope eta (T -+ To)^2 differs
+#: going up and down by a fraction of order |T| / To, so even microradian motion dissipates
+#: energy, which fills the dip. Calibrated on simhw's Dahl bearing at the data sheet's noise
+#: levels (k 300-1500 N m/rad, To 0.016-0.05 N m: 2.1e-5 to 2.4e-5; docs/gap.md). Larger motion
+#: than the data sheet's reads as a smaller fitted To.
+DAHL_DAMPING = 2.25e-5
+
+
+def linearized(cfg: SimConfig) -> SimConfig:
+    """The plant the spectra see: each Dahl bearing as its spring eta To^2 plus the equivalent
+    damping of its hysteresis (random-input linearization)."""
+    out = cfg.copy()
+    for axis, b in out.bearing.items():
+        if b.model == "dahl":
+            k = b.eta_per_Nm * b.To_Nm**2
+            b.model, b.stiffness_Nm_per_rad = "spring", k
+            out.platform[axis].extra_damping_Nms += DAHL_DAMPING * k / b.To_Nm
+    return out
+
+
+def relays_for(mode: int) -> RelayState:
+    return RelayState(mode=mode, spin=1.0 if mode >= 2 else 0.0)
+
+
+def _aliases(f: np.ndarray, fs: float, m: int) -> list[np.ndarray]:
+    """Internal-rate frequencies folding onto each output frequency ``f`` (NaN where none)."""
+    nyq_int = fs * m / 2
+    out = []
+    for k in range(m + 1):
+        for sign in (1, -1):
+            if k == 0 and sign < 0:
+                continue
+            fa = k * fs + sign * f
+            ok = (fa > 0) & (fa < nyq_int)
+            if ok.any():
+                out.append(np.where(ok, fa, np.nan))
+    return out
+
+
+def frequency_response(Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """H(z) = C (zI - Ad)^-1 Bd + D at each z: (n_z, n_out, n_in), by a batched direct solve
+    (for plants whose modes are too ill-conditioned for ``zoh_response_modal``)."""
+    n = Ad.shape[0]
+    return C @ np.linalg.solve(z[:, None, None] * np.eye(n) - Ad, Bd) + D
+
+
+def _dirichlet(x: np.ndarray, n: int) -> np.ndarray:
+    """sum_{m<n} e^(-j 2 pi x m / n) for real x (bins): e^(-j pi x (n-1)/n) sin(pi x) / sin(pi x / n)."""
+    x = np.asarray(x, float)
+    s = np.sin(np.pi * x / n)
+    small = np.abs(s) < 1e-12
+    ratio = np.where(small, float(n), np.sin(np.pi * x) / np.where(small, 1.0, s))
+    return np.exp(-1j * np.pi * x * (n - 1) / n) * ratio
+
+
+def zoh_response_modal(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, dt: float,
+                       z: np.ndarray, max_cond: float = 1e11) -> np.ndarray | None:
+    """The exact ZOH discretization's frequency response from the continuous modes, without a
+    matrix exponential: with A = V diag(l) V^-1, A_d = V diag(e^(l dt)) V^-1 and
+    B_d = V diag((e^(l dt) - 1) / l) V^-1 B, so
+
+        H(z) = C V diag(phi(l) / (z - e^(l dt))) V^-1 B + D,   phi(l) = (e^(l dt) - 1) / l.
+
+    None when the eigenvectors are too ill-conditioned to trust (``max_cond``)."""
+    lam, V = np.linalg.eig(A)
+    if not np.all(np.isfinite(lam)) or np.linalg.cond(V) > max_cond:
+        return None
+    ed = np.exp(lam * dt)
+    small = np.abs(lam * dt) < 1e-8
+    phi = np.where(small, dt * (1 + lam * dt / 2), np.expm1(lam * dt) / np.where(small, 1.0, lam))
+    CV = C @ V
+    VB = np.linalg.solve(V, B) * phi[:, None]
+    G = 1.0 / (z[:, None] - ed[None, :])
+    return (G[:, None, :] * CV[None, :, :]) @ VB + D
+
+
+def hann_line_kernel(grid: Grid, f0: float, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
+    """Expected one-sided Welch density of ``amplitude sin(2 pi f0 t)`` at the analysed bins near
+    f0: positions into ``grid.bins`` and values. The periodic Hann window
+    0.5 - 0.25 e^(j 2 pi m/N) - 0.25 e^(-j 2 pi m/N) transforms to
+    W(x) = 0.5 D(x) - 0.25 D(x - 1) - 0.25 D(x + 1), D the Dirichlet kernel, sum w^2 = 3N/8."""
+    k0 = f0 / grid.df
+    near = np.flatnonzero(np.abs(grid.bins - k0) <= 4.5)
+    if len(near) == 0:
+        return near, np.zeros(0)
+    n = grid.nperseg
+    x = grid.bins[near] - k0
+    W = 0.5 * _dirichlet(x, n) - 0.25 * _dirichlet(x - 1, n) - 0.25 * _dirichlet(x + 1, n)
+    return near, 2.0 * (amplitude / 2.0) ** 2 * np.abs(W) ** 2 / (grid.rate_hz * 3.0 * n / 8.0)
+
+
+class SpectralModel:
+    """Expected band spectra of ``channels`` for any configuration of the plant.
+
+    ``quant_psd`` is each channel's quantization floor (V^2/Hz one-sided, from the measured
+    file's LSB). Frequency responses are cached by the plant's matrices, so candidates that
+    change only noise sources (flicker, jumps, lines) cost no matrix work.
+    """
+
+    def __init__(self, grid: Grid, channels: tuple[str, ...], mode: int, axis: str,
+                 quant_psd: np.ndarray | None = None) -> None:
+        self.grid, self.channels, self.mode, self.axis = grid, tuple(channels), mode, axis
+        self.quant = np.zeros(len(channels)) if quant_psd is None else np.asarray(quant_psd, float)
+        self._cache: dict[str, tuple] = {}
+        self._source_cache: dict[tuple, list[dict]] = {}
+        self._aa_cache: dict[tuple, np.ndarray] = {}
+        self.plant_evaluations = 0
+
+    def _plant(self, cfg: SimConfig, dt: float):
+        plant = build_plant(linearized(cfg), relays_for(self.mode))
+        missing = [c for c in self.channels if c not in plant.outputs]
+        if missing:
+            raise ValueError(f"the model has no channel(s) {', '.join(missing)}")
+        key = hashlib.sha1(b"".join(np.ascontiguousarray(m).tobytes() for m in
+                                    (plant.A, plant.B, plant.C, plant.D)) + repr(dt).encode()).hexdigest()
+        return plant, key
+
+    def _responses(self, cfg: SimConfig, m: int, dt: float, inputs: list[str], line_freqs: np.ndarray):
+        plant, key = self._plant(cfg, dt)
+        key += repr((inputs, line_freqs.tobytes()))
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        self.plant_evaluations += 1
+        rows = [plant.outputs.index(c) for c in self.channels]
+        cols = [plant.inputs.index(i) for i in inputs]
+        fs = self.grid.rate_hz
+        f_eval = self.grid.f[self.grid.eval_bins]
+        aliases = _aliases(f_eval, fs, m)
+        freqs = np.concatenate([np.nan_to_num(a, nan=0.0) for a in aliases] + [line_freqs])
+        z = np.exp(2j * np.pi * freqs * dt)
+        C, D = plant.C[rows], plant.D[np.ix_(rows, cols)]
+        H = zoh_response_modal(plant.A, plant.B[:, cols], C, D, dt, z)
+        if H is None:  # eigenvectors too ill-conditioned: discretize and solve
+            disc = discretize(plant, dt)
+            H = frequency_response(disc.Ad, disc.Bd[:, cols], C, D, z)
+        n = len(f_eval)
+        H_alias = [H[i * n:(i + 1) * n] for i in range(len(aliases))]
+        result = (aliases, H_alias, H[len(aliases) * n:])
+        if len(self._cache) > 256:
+            self._cache.clear()
+        self._cache[key] = result
+        return result
+
+    def _sources(self, cfg: SimConfig, m: int, dt: float, probe: list[np.ndarray]):
+        """Each random input's spectrum at the alias frequencies, by part, and the deterministic
+        lines. Each noise source's spectrum is cached on its own parameters."""
+        sources = Sources(cfg, 0, dt)
+        caches = self._source_cache.setdefault((m, dt), [{} for _ in probe])
+        if sum(len(c) for c in caches) > 4096:
+            for c in caches:
+                c.clear()
+        spectra: dict[str, dict[str, list[np.ndarray]]] = {}
+        for name in sources.names:
+            per_alias = [sources.spectrum(name, np.nan_to_num(a, nan=1.0), cache)
+                         for a, cache in zip(probe, caches)]
+            for kind in per_alias[0]:
+                s = [np.where(np.isnan(a), 0.0, sp[kind]) for a, sp in zip(probe, per_alias)]
+                if any(np.any(x > 0) for x in s):
+                    part = part_of(name, kind, self.axis)
+                    acc = spectra.setdefault(name, {}).get(part)
+                    spectra[name][part] = s if acc is None else [x + y for x, y in zip(acc, s)]
+        fs = self.grid.rate_hz
+        lines = [(name, f0, a) for name in sources.names for f0, a in sources.lines(name) if 0 < f0 < fs * m / 2]
+        return spectra, lines
+
+    def _aa2(self, cfg: SimConfig, m: int):
+        """|AA|^2 of the anti-alias filter, as a function of internal-rate frequency."""
+        fs = self.grid.rate_hz
+        s = cfg.sampling
+        key = (fs, m, s.anti_alias_poles, s.anti_alias_fraction)
+        sos = self._aa_cache.get(key)
+        if sos is None:
+            sos = self._aa_cache[key] = anti_alias_sos(s.anti_alias_poles, s.anti_alias_fraction, fs, m)
+
+        def aa2(f: np.ndarray) -> np.ndarray:
+            return np.abs(scipy.signal.sosfreqz(sos, worN=np.nan_to_num(np.atleast_1d(f), nan=0.0), fs=fs * m)[1]) ** 2
+        return aa2
+
+    def __call__(self, cfg: SimConfig) -> ModelSpectrum:
+        grid, fs = self.grid, self.grid.rate_hz
+        m, dt = internal_rate(cfg.sampling, fs)
+        f_eval = grid.f[grid.eval_bins]
+        probe = _aliases(f_eval, fs, m)
+        spectra, line_list = self._sources(cfg, m, dt, probe)
+        inputs = sorted(set(spectra) | {name for name, _, _ in line_list})
+        line_freqs = np.array([f0 for _, f0, _ in line_list], float)
+        aliases, H_alias, H_lines = self._responses(cfg, m, dt, inputs, line_freqs)
+        aa2 = self._aa2(cfg, m)
+        aa_alias = [aa2(a) for a in aliases]
+
+        nch = len(self.channels)
+        parts = {p: np.zeros((nch, grid.n_bands)) for p in PARTS}
+        for j, name in enumerate(inputs):
+            for part, spec in spectra.get(name, {}).items():
+                per_point = np.zeros((nch, len(f_eval)))
+                for H, g, sp in zip(H_alias, aa_alias, spec):
+                    per_point += np.abs(H[:, :, j].T) ** 2 * (g * sp)[None, :]
+                parts[part] += grid.eval_mean(per_point)
+        per_bin = np.zeros((nch, len(grid.bins)))
+        aa_lines = np.sqrt(aa2(line_freqs)) if len(line_freqs) else []
+        for k, (name, f0, a) in enumerate(line_list):
+            self._add_line(per_bin, f0, a * np.abs(H_lines[k, :, inputs.index(name)]) * aa_lines[k])
+        for p in cfg.pickup:
+            if p.channel in self.channels and 0 < p.freq_hz < fs * m / 2:
+                g = math.sqrt(aa2(p.freq_hz)[0])
+                amp = np.zeros(nch)
+                amp[self.channels.index(p.channel)] = p.amplitude_V * g
+                self._add_line(per_bin, p.freq_hz, amp)
+        parts["fixed"] += grid.band_mean(per_bin) + self.quant[:, None]
+        return ModelSpectrum(self.channels, parts)
+
+    def _add_line(self, per_bin: np.ndarray, f0: float, amplitudes: np.ndarray) -> None:
+        fs = self.grid.rate_hz
+        fo = f0 % fs
+        fo = fs - fo if fo > fs / 2 else fo  # the decimator folds it
+        pos, kern = hann_line_kernel(self.grid, fo, 1.0)
+        if len(pos):
+            per_bin[:, pos] += np.asarray(amplitudes)[:, None] ** 2 * kern[None, :]
+
+
+def lsb(x: np.ndarray) -> float:
+    """The recording's quantization step: the smallest step between distinct values, if every
+    sample sits on that grid; 0 for data not on a grid (scaled, or simulated in float)."""
+    v = np.unique(np.asarray(x[:200_000], float))
+    if len(v) < 2:
+        return 0.0
+    q = float(np.min(np.diff(v)))
+    if q <= 0 or not np.allclose(v / q, np.round(v / q), atol=1e-3, rtol=0):
+        return 0.0
+    return q
+
+
+def quantization_psd(q: float, rate_hz: float) -> float:
+    """One-sided white quantization floor q^2 / (6 fs) of an LSB ``q`` (App. A.7, [Widrow])."""
+    return q * q / (6.0 * rate_hz)
+
+
+def step_response(cfg: SimConfig, mode: int, input_name: str, channels: tuple[str, ...], rate_hz: float,
+                  duration_s: float, t_step_s: float) -> np.ndarray:
+    """Response of ``channels`` (n_channels, n) as recorded at ``rate_hz`` (anti-alias filter and
+    decimation included) to a unit step of plant input ``input_name`` at ``t_step_s``, from rest."""
+    m, dt = internal_rate(cfg.sampling, rate_hz)
+    plant = build_plant(cfg, relays_for(mode))
+    disc = discretize(plant, dt)
+    rows = [plant.outputs.index(c) for c in channels]
+    b = disc.Bd[:, plant.inputs.index(input_name)]
+    d = plant.D[rows, plant.inputs.index(input_name)]
+    C = plant.C[rows]
+    n = int(round(duration_s * rate_hz)) * m
+    k_step = int(round(t_step_s * rate_hz)) * m
+    x = np.zeros(len(b))
+    y = np.zeros((n, len(rows)))
+    for k in range(n):
+        u = 1.0 if k >= k_step else 0.0
+        y[k] = C @ x + d * u
+        x = disc.Ad @ x + b * u
+    sos = anti_alias_sos(cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction, rate_hz, m)
+    return scipy.signal.sosfilt(sos, y, axis=0)[::m].T

@@ -1,0 +1,412 @@
+"""The model-gap workflow: find where the measurement and the model disagree, name the missing
+effect, close the gap, and look again (Ch. V E-F made a procedure; docs/gap.md).
+
+1. Read any "fbs-run" file; the model is the nominal plant (Ch. III, no bearing torque) with
+   the file's mode, channels and rate.
+2. Compare band spectra with the model's expected spectra (``model.py``), its noise levels
+   fitted, and look for steps in the time domain; locate the departures (``locate.py``).
+3. Fit every catalogue effect by maximum likelihood and rank by BIC (``fit.py``); name the best.
+4. Add it, compare again; repeat while a significant departure remains and a candidate
+   explains it.
+5. Report the gap (``locate.gap_db``) against the nominal and the refined model; with a
+   report, simulate both with the measured run's channels, rate and duration.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daq.reader import RunFile
+from daq.runfile import RunWriter
+from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score
+from procedures.analysis.gap.grid import GapInputError, Grid, band_spectra, bin_spectra, make_grid
+from procedures.analysis.gap.locate import Band, Evidence, bands, departures, gap_db
+from procedures.analysis.gap.model import SpectralModel, apply_nuisance, lsb, quantization_psd, step_response
+from procedures.analysis.gap.steps import Step, find_steps, robust_scale, step_like, template_gain, window_difference
+from simhw import effects as catalogue
+from simhw.params import Sampling, SimConfig, load_config, to_dict
+from simhw.plant import AXIS_OF_CHANNEL, CHANNELS
+from simhw.sampling import ADC_RANGES_V
+from simhw.simulator import Simulator
+
+log = logging.getLogger(__name__)
+
+AXES = ("X", "Y", "Z")
+#: Command inputs echo the DACs: no plant response to compare.
+SKIPPED_PREFIXES = ("cmd_",)
+URAD = 1e-6
+
+
+def channel_axis(name: str) -> str | None:
+    """The platform axis a recorded channel responds to (ac_x_ctl -> X, gyro_xrd -> X)."""
+    parts = name.split("_")
+    if len(parts) < 2 or name.startswith(SKIPPED_PREFIXES):
+        return None
+    token = parts[1].upper()
+    return AXIS_OF_CHANNEL.get(token, token if token in AXES else None)
+
+
+@dataclass
+class GapOptions:
+    alpha: float = 0.01        # family-wise false-departure probability per file
+    tol_db: float = 0.5        # model tolerance: smaller departures are not gaps
+    min_score: float = 10.0    # BIC improvement for an effect to be named ("very strong", Kass-Raftery)
+    max_effects: int = 3
+    refine_top: int = 3        # candidates refined after the screening (the rest keep their screened score)
+    seed: int = 1              # of the model simulations
+    sim_config: str | Path | None = None
+
+
+@dataclass
+class Record:
+    path: Path
+    axis: str
+    mode: int
+    rate_hz: float
+    channels: tuple[str, ...]
+    data: np.ndarray           # (n_channels, n) volts
+    lsb_V: np.ndarray
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def duration_s(self) -> float:
+        return self.data.shape[1] / self.rate_hz
+
+
+def load_record(path: str | Path, axis: str | None = None) -> Record:
+    """The file's channels of one axis, checked: every problem is a GapInputError naming it."""
+    path = Path(path)
+    if not path.exists():
+        raise GapInputError(f"{path}: no such file")
+    try:
+        run = RunFile(path)
+    except (OSError, ValueError) as e:
+        raise GapInputError(f"{path}: not a readable fbs-run file ({e})") from None
+    with run:
+        attrs = run.attrs
+        ax = (axis or attrs.get("axis") or "")
+        ax = ax.decode() if isinstance(ax, bytes) else str(ax)
+        if not ax:
+            raise GapInputError(f"{path}: the file has no 'axis' attribute; give the axis (--axis X, Y or Z)")
+        ax = ax.strip().upper()
+        if ax not in AXES:
+            raise GapInputError(f"{path}: unknown axis {ax!r}; the platform axes are X, Y and Z")
+        try:
+            mode = int(attrs.get("mode"))
+        except (TypeError, ValueError):
+            raise GapInputError(f"{path}: root attribute 'mode' is {attrs.get('mode')!r}, not a mode 1..6") from None
+        if mode not in range(1, 7):
+            raise GapInputError(f"{path}: mode {mode} cannot be modelled (modes 1..6)")
+        changes = [e for e in run.events if e.kind == "mode" and e.time_s > 0]
+        if changes:
+            raise GapInputError(f"{path}: the mode changes during the record (at {changes[0].time_s:.3f} s: "
+                                f"{changes[0].text}); the gap workflow needs one steady mode — cut the record")
+        present = list(run.lengths)
+        wanted = [c for c in present if c in CHANNELS and channel_axis(c) == ax]
+        if not wanted:
+            need = [c for c in CHANNELS if channel_axis(c) == ax]
+            raise GapInputError(f"{path}: missing channels: none of axis {ax}'s channels ({', '.join(need)}) is in "
+                                f"the file (it has {', '.join(present) or 'none'})")
+        rate = float(run.rate_hz)
+        data = run.read(wanted)
+        status = run.status
+    warnings = []
+    if status and status != "complete":
+        warnings.append(f"file status is {status!r}: analysing the samples it holds")
+    for c, x in zip(wanted, data):
+        bad = ~np.isfinite(x)
+        if bad.any():
+            first = int(np.argmax(bad))
+            raise GapInputError(f"{path}: channel {c} has {int(bad.sum())} NaN/inf samples (first at "
+                                f"{first / rate:.3f} s): lost samples or a gap; analyse a clean span "
+                                f"(cut the record) or re-record")
+    steps = np.array([lsb(x) for x in data])
+    keep = []
+    for c, x, q in zip(wanted, data, steps):
+        full = _range_from_lsb(q, Sampling().adc_bits)
+        clipped = int(np.sum(np.abs(x) >= full - 1.5 * q)) if full else 0
+        if clipped:
+            warnings.append(f"{c} excluded: {clipped} samples at the ADC's full scale (+-{full:g} V): clipped "
+                            f"spectra are not the rig's; record it on a wider range")
+        elif q > 0 and np.std(x) < 3 * q:
+            warnings.append(f"{c} excluded: its signal ({np.std(x):.3g} V rms) is within 3 LSB ({q:.3g} V) of "
+                            f"the ADC; record it on a finer range")
+        elif np.std(x) == 0:
+            warnings.append(f"{c} excluded: constant")
+        else:
+            keep.append(c)
+    if not keep:
+        raise GapInputError(f"{path}: no usable channel of axis {ax}: " + "; ".join(warnings))
+    idx = [wanted.index(c) for c in keep]
+    return Record(path, ax, mode, rate, tuple(keep), data[idx], steps[idx], warnings)
+
+
+@dataclass
+class Finding:
+    """One named effect, in the order found."""
+
+    effect: str
+    parameters: dict[str, float]
+    uncertainties: dict[str, float]
+    score: float
+    runner_up: str
+    margin: float               # score over the runner-up's
+    gap_before_db: float        # on the bands located at this step, model expectation
+    gap_after_db: float
+    located: list[Band]
+    candidates: list[dict[str, Any]]
+
+
+@dataclass
+class GapResult:
+    file: str
+    axis: str
+    mode: int
+    rate_hz: float
+    duration_s: float
+    channels: tuple[str, ...]
+    significant: bool
+    findings: list[Finding]
+    located: list[Band]
+    steps: list[Step]
+    step_channel: str | None
+    gap_before_db: float
+    gap_after_db: float
+    candidates: list[dict[str, Any]]
+    scales_before: dict[str, float]
+    scales_after: dict[str, float]
+    warnings: list[str]
+    unexplained: bool            # a departure remains that no catalogue effect explains
+    grid: Grid = field(repr=False)
+    spectra: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+    cfg_before: SimConfig | None = field(repr=False, default=None)
+    cfg_after: SimConfig | None = field(repr=False, default=None)
+    sim_gaps: tuple[float, float] | None = None  # the gaps against the simulated runs (--report)
+    elapsed_s: float = 0.0
+
+    @property
+    def effect(self) -> str:
+        return self.findings[0].effect if self.findings else "none"
+
+    def to_json(self) -> dict[str, Any]:
+        """DESIGN.md section 7's keys (``effect``, ``parameters``, ``significant``, the gaps,
+        ``candidates``), plus ``uncertainties`` and ``effects`` (every effect, in the order found)."""
+        first = self.findings[0] if self.findings else None
+        return {
+            "effect": self.effect,
+            "parameters": _rounded(first.parameters) if first else {},
+            "uncertainties": _rounded(first.uncertainties) if first else {},
+            "significant": self.significant,
+            "gap_before_db": round(self.gap_before_db, 3),
+            "gap_after_db": round(self.gap_after_db, 3),
+            "candidates": self.candidates,
+            "effects": [{"effect": f.effect, "parameters": _rounded(f.parameters),
+                         "gap_closed_db": round(f.gap_before_db - f.gap_after_db, 3)} for f in self.findings],
+            "file": self.file,
+        }
+
+
+def _rounded(d: dict[str, float]) -> dict[str, float | None]:
+    return {k: (float(f"{v:.5g}") if math.isfinite(v) else None) for k, v in d.items()}
+
+
+def _detect_steps(rec: Record, cfg: SimConfig, window_s: float = 2.0,
+                  template_s: float = 60.0) -> tuple[list[Step], str | None]:
+    """Steps in the channel that shows a unit autocollimator-offset step best (its D over its
+    noise), among channels where that step reads as a step; sizes in radians of the offset."""
+    if rec.duration_s < 8 * window_s:
+        return [], None
+    step_at = int(round(window_s * rec.rate_hz))
+    resp = step_response(cfg, rec.mode, f"nac_{rec.axis}", rec.channels, rec.rate_hz,
+                         min(template_s, rec.duration_s / 2) + window_s, window_s)
+    best: tuple[float, str, np.ndarray, np.ndarray] | None = None
+    for c, x, r in zip(rec.channels, rec.data, resp):
+        if not step_like(r, rec.rate_hz, step_at, window_s=window_s):
+            continue
+        g = template_gain(r, rec.rate_hz, step_at=step_at, window_s=window_s)
+        _, d = window_difference(x - x.mean(), step_at, max(1, step_at // 20))
+        snr = abs(g) / max(robust_scale(d), 1e-300)
+        if best is None or snr > best[0]:
+            best = (snr, c, x, r)
+    if best is None:
+        return [], None
+    _, c, x, r = best
+    steps, _ = find_steps(x, rec.rate_hz, template=r, step_at=step_at, window_s=window_s)
+    return steps, c
+
+
+def _model_makes_steps(cfg: SimConfig, axis: str) -> bool:
+    ac = cfg.autocollimator.get(axis)
+    return bool(ac and ac.offset_jump_urad > 0)
+
+
+def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = None,
+                    note: str = "") -> np.ndarray:
+    """The model with the measured run's channels, rate, duration and ADC ranges; written to
+    ``out`` as an fbs-run file when given. Returns (n_channels, n) volts."""
+    sim = Simulator(cfg, rate_hz=rec.rate_hz, seed=seed, mode=rec.mode)
+    for c, q, x in zip(rec.channels, rec.lsb_V, rec.data):
+        sim.set_range(c, _adc_range(q, float(np.max(np.abs(x))), cfg.sampling.adc_bits))
+    cols = [CHANNELS.index(c) for c in rec.channels]
+    n = rec.data.shape[1]
+    writer = None
+    if out is not None:
+        meta = {"configuration": to_dict(cfg), "seed": seed, "source": f"fbs gap: {note}",
+                "measured_file": str(rec.path), "calibration": {}}
+        writer = RunWriter(out, rig="fbs-gap-model", mode=rec.mode, rate_hz=rec.rate_hz,
+                           channels={c: "V" for c in rec.channels}, axis=rec.axis, meta=meta, overwrite=True)
+    try:
+        chunks = []
+        per = int(round(10 * rec.rate_hz))
+        done = 0
+        while done < n:
+            k = min(per, n - done)
+            block = sim.advance(k)
+            v = block.volts[:, cols]
+            chunks.append(v)
+            if writer is not None:
+                writer.append({c: v[:, j] for j, c in enumerate(rec.channels)})
+            done += k
+    except BaseException as e:
+        if writer is not None:
+            writer.close(f"aborted: {e}")
+        raise
+    if writer is not None:
+        writer.close()
+    return np.concatenate(chunks).T
+
+
+def _range_from_lsb(q: float, bits: int) -> float | None:
+    """The ADC range whose LSB is ``q`` (2 range / 2^bits), if it is one the converter has."""
+    if q > 0:
+        full = q * 2 ** (bits - 1)
+        for r in ADC_RANGES_V:
+            if abs(r - full) <= 0.01 * r:
+                return r
+    return None
+
+
+def _adc_range(q: float, peak: float, bits: int) -> float:
+    """The measured channel's ADC range from its LSB; for data not on a grid, the finest range
+    that holds its peak with margin."""
+    fits = [r for r in ADC_RANGES_V if r >= 1.5 * peak]
+    return _range_from_lsb(q, bits) or (min(fits) if fits else max(ADC_RANGES_V))
+
+
+def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | None = None,
+            report_dir: str | Path | None = None) -> GapResult:
+    """Run the whole workflow on one file; with ``report_dir`` also write the model files and plots."""
+    t_start = time.perf_counter()
+    opt = options or GapOptions()
+    rec = load_record(path, axis)
+    grid = make_grid(rec.rate_hz, rec.data.shape[1])
+    _, p_bins = bin_spectra(rec.data, grid)
+    P = grid.band_mean(p_bins)
+    quant = np.array([quantization_psd(q, rec.rate_hz) for q in rec.lsb_V])
+    cfg0 = catalogue.nominal(load_config(opt.sim_config) if opt.sim_config else None)
+    model = SpectralModel(grid, rec.channels, rec.mode, rec.axis, quant)
+    fitter = Fitter(model, P, grid.dof, rec.axis)
+    base = fitter.base(cfg0)
+    steps, step_channel = _detect_steps(rec, cfg0)
+    n_obs = P.size
+
+    cfg, cur = cfg0, base
+    findings: list[Finding] = []
+    cells = np.zeros(P.shape, bool)
+    first_located: list[Band] = []
+    first_candidates: list[dict[str, Any]] = [{"effect": "none", "score": 0.0}]
+    significant = False
+    unexplained = False
+    named: set[str] = set()
+    for it in range(opt.max_effects + 1):
+        flags = departures(P, cur.S, grid.dof, alpha=opt.alpha, tol_db=opt.tol_db)
+        unexplained_steps = bool(steps) and not _model_makes_steps(cfg, rec.axis)
+        ratio = p_bins / cur.S[:, grid.band_of_bin]
+        located = bands(flags, P, cur.S, grid, rec.channels, ratio)
+        if it == 0:
+            first_located = located
+            significant = bool(flags.any() or unexplained_steps)
+        cells |= flags
+        if not (flags.any() or unexplained_steps):
+            break
+        if it == opt.max_effects:
+            unexplained = True
+            break
+        evidence = Evidence(rec.duration_s, [b.peak_hz for b in located if b.deviation_db > 0],
+                            [s.size / URAD for s in steps])
+        # Screen every effect at its starting points, refine the leaders, then the winner's errors.
+        screened: list[tuple[EffectFit, Any]] = []
+        for eff in catalogue.catalogue().values():
+            if eff.name == "none" or eff.name in named:
+                continue
+            t0, n0 = time.perf_counter(), fitter.evaluations
+            f = fitter.fit(eff, cfg, evidence, refine=False, errors=False)
+            log.debug("screened %s: %d evaluations, %.2f s", eff.name, fitter.evaluations - n0,
+                      time.perf_counter() - t0)
+            if f is not None:
+                screened.append((f, eff))
+        screened.sort(key=lambda fe: fe[0].nll)
+        fits: list[EffectFit] = []
+        for rank, (f, eff) in enumerate(screened):
+            if rank < opt.refine_top:
+                refined = fitter.fit(eff, cfg, evidence, errors=False, start=f.params)
+                f = refined if refined is not None and refined.nll <= f.nll else f
+            f.score = bic_score(f, cur.nll, n_obs)
+            fits.append(f)
+        fits.sort(key=lambda f: -f.score)
+        candidates = [f.summary for f in fits] + [{"effect": "none", "score": 0.0}]
+        candidates.sort(key=lambda c: -c["score"])
+        if it == 0:
+            first_candidates = candidates
+        if not fits or fits[0].score < opt.min_score:
+            unexplained = True
+            break
+        best = fits[0]
+        winner = catalogue.get(best.effect)
+        final = fitter.fit(winner, cfg, evidence, start=best.params)  # refined again, with its uncertainties
+        if final is not None and final.nll <= best.nll + 1e-6:
+            final.score = bic_score(final, cur.nll, n_obs)
+            best = fits[0] = final
+        runner = next((c for c in candidates if c["effect"] != best.effect), {"effect": "none", "score": 0.0})
+        findings.append(Finding(best.effect, best.params, best.errors, best.score, runner["effect"],
+                                best.score - runner["score"], gap_db(P, cur.S, flags), gap_db(P, best.S, flags),
+                                located, candidates))
+        log.info("named %s (score %.1f, %.1f over %s): %s", best.effect, best.score,
+                 best.score - runner["score"], runner["effect"], best.params)
+        named.add(best.effect)
+        cfg, cur = best.cfg, NuisanceFit(best.scales, best.nll, best.S)
+
+    cfg_before = apply_nuisance(cfg0, rec.axis, base.scales)
+    cfg_after = apply_nuisance(cfg, rec.axis, cur.scales)
+    spectra = {"measured": P, "model_before_expected": base.S, "model_after_expected": cur.S}
+    # The gap is measured against each model's expected spectrum: what its simulation converges
+    # to (exactly: test_model.py), without one realization's scatter, which for rare events such
+    # as offset jumps would dominate. The simulated runs are the report's, with their own gaps.
+    gap_before = gap_db(P, base.S, cells)
+    gap_after = gap_db(P, cur.S, cells)
+    sim_gaps: tuple[float, float] | None = None
+    if report_dir is not None:
+        out = Path(report_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        sim_b = simulate_record(cfg_before, rec, opt.seed, out / "model_before.h5", "nominal model, noise levels fitted")
+        sim_a = simulate_record(cfg_after, rec, opt.seed + 1, out / "model_after.h5",
+                                "refined model: " + (", ".join(f.effect for f in findings) or "nothing added"))
+        spectra["model_before"] = band_spectra(sim_b, grid)
+        spectra["model_after"] = band_spectra(sim_a, grid)
+        sim_gaps = (gap_db(P, spectra["model_before"], cells), gap_db(P, spectra["model_after"], cells))
+    result = GapResult(str(rec.path), rec.axis, rec.mode, rec.rate_hz, rec.duration_s, rec.channels, significant,
+                       findings, first_located, steps, step_channel, gap_before, gap_after, first_candidates,
+                       base.scales, cur.scales, rec.warnings, unexplained, grid, spectra, cfg_before, cfg_after,
+                       sim_gaps=sim_gaps)
+    result.elapsed_s = time.perf_counter() - t_start
+    if report_dir is not None:
+        from procedures.analysis.gap.report import write_report
+        write_report(result, Path(report_dir))
+    return result

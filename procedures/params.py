@@ -1,0 +1,81 @@
+"""A procedure's inputs from outside the run: ``--param`` values and earlier procedures' results.
+
+``parse_params`` turns ``--param k=v`` (and ``--axis``) into the procedure's ``Params``;
+``find_prior`` finds the newest completed summary of each procedure (stopwatch needs
+earth-rate's K_TO); ``prior_value`` reads one figure from them, else the data sheet's value.
+The command line and the console use the same three.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from procedures.runner import Procedure
+
+
+def prior_value(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channel: str,
+                nominal: float) -> tuple[float, str]:
+    """An earlier ``procedure``'s measured ``key`` for ``channel`` (e.g. earth-rate's K_TO for X),
+    else the data sheet's ``nominal``; with where it came from (``procedure`` or "nominal")."""
+    v = (((prior.get(procedure) or {}).get(key)) or {}).get(channel)
+    if v is not None and math.isfinite(float(v)) and float(v) > 0:
+        return float(v), procedure
+    return float(nominal), "nominal"
+
+
+def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[str, Any]]:
+    """The newest completed summary (values) of each procedure in ``out_dir``, then ``extra`` files."""
+    found: dict[str, tuple[float, dict]] = {}
+    candidates = sorted(out_dir.glob("*.json")) if out_dir.is_dir() else []
+    for path in candidates:
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue
+        if not isinstance(data, dict) or data.get("verdict") not in ("pass", "fail") or "procedure" not in data:
+            continue
+        mtime = path.stat().st_mtime
+        if data["procedure"] not in found or mtime >= found[data["procedure"]][0]:
+            found[data["procedure"]] = (mtime, data["values"] | {"_from": str(path)})
+    prior = {name: values for name, (_, values) in found.items()}
+    for spec in extra or []:
+        path = Path(spec)
+        try:
+            data = json.loads(path.read_text())
+        except OSError as exc:
+            raise ValueError(f"--prior {path}: cannot read it ({exc.strerror or exc})") from None
+        except ValueError as exc:
+            raise ValueError(f"--prior {path}: not JSON ({exc})") from None
+        if not isinstance(data, dict) or "procedure" not in data or "values" not in data:
+            raise ValueError(f"--prior {path}: not a procedure summary (written by `fbs run` beside its .h5)")
+        prior[data["procedure"]] = data["values"] | {"_from": str(path)}
+    return prior
+
+
+def parse_params(proc_cls: type[Procedure], specs: list[str], axis: str | None) -> Any:
+    """``--param k=v`` (v parsed as JSON when it parses, else a string) and ``--axis``."""
+    data: dict[str, Any] = {}
+    for spec in specs:
+        key, sep, raw = spec.partition("=")
+        if not sep or not key:
+            raise ValueError(f"--param {spec!r}: use name=value, e.g. repetitions=4")
+        try:
+            data[key.strip()] = json.loads(raw)
+        except ValueError:
+            data[key.strip()] = raw
+    if axis is not None:
+        fields = proc_cls.Params.__dataclass_fields__
+        if "axis" in fields:
+            data["axis"] = axis
+        elif "channels" in fields:
+            data["channels"] = [axis]
+        else:
+            raise ValueError(f"fbs run {proc_cls.name}: --axis does not apply (it measures all channels at once)")
+    try:
+        return proc_cls.params_from(data)
+    except TypeError as exc:
+        raise ValueError(f"fbs run {proc_cls.name}: bad parameter: {exc}") from None

@@ -1,0 +1,42 @@
+"""``fbs record`` on the loopback rig (issue 3, acceptance D)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import h5py
+import pytest
+
+from fbs.cli import main
+
+pytestmark = pytest.mark.slow
+
+
+def test_mode_7_is_refused_naming_the_mode(tmp_path):
+    out = tmp_path / "r.h5"
+    proc = subprocess.run([sys.executable, "-m", "fbs.cli", "record", "--rig", "sim", "--mode", "7",
+                           "--duration", "1", "--rate", "1000", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert "fbs record: error: mode 7 is not allowed" in proc.stderr
+    assert not out.exists()  # refused before anything was recorded
+
+
+def test_mode_4_from_a_cold_rig_is_refused_with_the_interlock_reason(tmp_path, capsys):
+    assert main(["record", "--rig", "sim", "--mode", "4", "--duration", "1", "--rate", "1000",
+                 "--out", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "mode 4 refused: gyros not at speed" in err and "not caged" in err
+
+
+def test_record_writes_a_complete_run_file(tmp_path, capsys):
+    out = tmp_path / "r.h5"
+    assert main(["record", "--rig", "sim?warm=1", "--mode", "3", "--duration", "2", "--rate", "500",
+                 "--channels", "ac_x_ctl,gyro_x,torq_x", "--out", str(out)]) == 0
+    assert "1000 samples at 500 Hz, status complete" in capsys.readouterr().out
+    with h5py.File(out, "r") as f:
+        assert f.attrs["format"] == "fbs-run" and f.attrs["status"] == "complete" and f.attrs["mode"] == 3
+        assert sorted(f["channels"]) == ["ac_x_ctl", "gyro_x", "torq_x"]
+        assert f["channels/gyro_x"].shape == (1000,)
+        assert f["channels/gyro_x"].attrs["sample_rate_hz"] == 500.0

@@ -1,0 +1,130 @@
+"""``fbs run`` through the real console script: exit codes and ``--json`` keys exactly as
+DESIGN.md section 7 (acceptance D), a real SIGINT and ``--resume`` (C), the default rig's
+K_TO and K_g (A); and Ctrl-C or a device fault during every procedure (C)."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from daq.reader import RunFile
+from drivers.rig import open_rig
+from procedures.calibrations import catalogue
+from procedures.params import parse_params
+from procedures.runner import run_procedure
+
+FBS = [sys.executable, "-m", "fbs.cli"]
+RIG = "sim?warm=1&seed=5&watchdog=5"
+KTO = {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0}
+KG = {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74}
+
+
+def fbs(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([*FBS, *args], capture_output=True, text=True, timeout=timeout)
+
+
+def test_bad_parameters_exit_2_before_the_rig_moves(tmp_path):
+    r = fbs("run", "earth-rate", "--out", str(tmp_path), "--param", "n_azimuths=2")
+    assert r.returncode == 2 and "n_azimuths = 2 must be 5..72" in r.stderr
+    r = fbs("run", "stopwatch", "--out", str(tmp_path), "--param", "nonsense=1")
+    assert r.returncode == 2 and "unknown parameter(s) nonsense" in r.stderr
+    r = fbs("run", "earth-rate", "--out", str(tmp_path), "--axis", "X")
+    assert r.returncode == 2 and "--axis does not apply" in r.stderr
+    r = fbs("run", "earth-rate", "--rig", "serial:///dev/null?can=virtual:x", "--sim-config", "a.toml")
+    assert r.returncode == 2 and "--sim-config applies to the simulated rig only" in r.stderr
+    assert not list(tmp_path.glob("*.h5"))
+
+
+@pytest.mark.slow
+def test_limits_failed_exits_1_with_the_json_keys(tmp_path):
+    r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--param", "n_azimuths=5",
+            "--param", "z_tilts_deg=[0, 90, 45, 0]", "--param", "z_average_s=20", "--param", "kto_tolerance=1e-6")
+    assert r.returncode == 1, r.stderr
+    out = json.loads(r.stdout)
+    assert list(out) == ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"]
+    assert Path(out["file"]).exists()
+
+
+@pytest.mark.slow
+def test_sigint_resume_and_the_default_rig(tmp_path):
+    """Ctrl-C mid-run -> exit 2, file aborted, rig safe; --resume completes it; K_TO within 0.5 %
+    and (stopwatch, using that K_TO from --out) K_g within 2 % of the default rig's values."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([*FBS, "run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    path = tmp_path / "earth-rate.h5"
+    t_end = time.monotonic() + 300
+    done = 0
+    while done < 4 and time.monotonic() < t_end and p.poll() is None:
+        time.sleep(0.5)
+        if path.exists():
+            try:
+                with RunFile(path) as rf:
+                    done = sum(e.kind == "step-done" for e in rf.events)
+            except OSError:
+                pass  # between the file's creation and its first flush
+    assert done >= 4, "the run did not get going"
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=120)
+    assert p.returncode == 2, stderr
+    assert json.loads(stdout) == {"K_TO_urad_per_s_per_V": None, "drift_urad_per_s": None, "file": str(path)}
+    with RunFile(path) as rf:
+        assert rf.status == "aborted: interrupted"
+        safe = [e for e in rf.events if e.kind == "safe"]
+        n_done = sum(e.kind == "step-done" for e in rf.events)
+    assert safe and safe[-1].text == "safe state reached"
+    summary = json.loads((tmp_path / "earth-rate.json").read_text())
+    assert summary["verdict"] == "aborted" and len(summary["steps_done"]) == n_done
+
+    r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--resume", str(path))
+    assert r.returncode == 0, r.stderr
+    er = json.loads(r.stdout)
+    assert list(er) == ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"] and er["file"].endswith("earth-rate-2.h5")
+    resumed = json.loads((tmp_path / "earth-rate-2.json").read_text())
+    assert len(resumed["steps_resumed"]) == n_done - 1   # every data step done before the abort
+    for ch, kto in KTO.items():
+        assert er["K_TO_urad_per_s_per_V"][ch] == pytest.approx(kto, rel=5e-3)
+
+    r = fbs("run", "stopwatch", "--rig", RIG, "--out", str(tmp_path), "--json")
+    assert r.returncode == 0, r.stderr
+    sw = json.loads(r.stdout)
+    assert list(sw) == ["K_g_mV_per_urad", "file"]
+    for ch, kg in KG.items():
+        assert sw["K_g_mV_per_urad"][ch] == pytest.approx(kg, rel=2e-2)
+    assert "(earth-rate)" in (tmp_path / "stopwatch.md").read_text()   # the measured K_TO was used
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(catalogue()))
+@pytest.mark.parametrize("how", ["ctrl-c", "fault"])
+def test_every_procedure_aborts_to_the_safe_state(tmp_path, name, how):
+    """Ctrl-C (a KeyboardInterrupt on the procedure's thread, as SIGINT raises it) or a device
+    fault during the first data step: rig safe, file "aborted: <why>", summary says what was done."""
+    cls = catalogue()[name]
+    with open_rig(RIG) as rig:
+        proc = cls(parse_params(cls, [], None))
+        calls = []
+
+        def interrupt(p):
+            calls.append(p.index)
+            if p.index >= 1 and len([i for i in calls if i >= 1]) >= 2:
+                if how == "ctrl-c":
+                    raise KeyboardInterrupt
+                rig.emulator.inject("adc", "disconnect")
+
+        s = run_procedure(proc, rig, tmp_path, progress=interrupt)
+        assert s.exit_code == 2 and s.verdict == "aborted"
+        assert rig.is_safe() and rig.emulator.nodes.nodes["relay"].mode == 1
+        assert s.status == ("aborted: interrupted" if how == "ctrl-c" else s.status)
+        assert s.status.startswith("aborted: ") and (how == "ctrl-c" or "DeviceLost" in s.status)
+        with RunFile(s.file) as rf:
+            assert rf.status == s.status
+        assert s.steps_done and len(s.steps_done) < len(s.steps_planned)
+        assert "Steps not done" in s.report.read_text()

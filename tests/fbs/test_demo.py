@@ -1,0 +1,33 @@
+"""``fbs demo``'s campaign report: every figure beside the thesis's and the simulated rig's value.
+(The campaign itself is the procedures run in order; `make demo` runs it end to end.)"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from fbs.demo import CAMPAIGN, sim_values, write_campaign_report
+from procedures.runner import RunSummary
+from simhw.params import SimConfig
+
+
+def _summary(name: str, values: dict, **params) -> RunSummary:
+    return RunSummary(name, Path(f"{name}.h5"), "complete", "pass", values=values, params=params,
+                      report=Path(f"{name}.md"))
+
+
+def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
+    cfg = SimConfig()
+    cfg.gyro["X"].torquer_scale_urad_per_s_per_V = 30.0
+    runs = [_summary("earth-rate", {"K_TO_urad_per_s_per_V": {"X": 30.3}, "drift_urad_per_s": {"X": 0.3}}),
+            _summary("hysteresis", {"To_Nm": 0.0158, "eta_per_Nm": 1.7e6, "stiffness_Nm_per_rad": 424.0}, axis="Y"),
+            _summary("survey", {"platform_rms_urad": {"X": 1.3}, "dip_hz": {"X": 3.84}})]
+    text = write_campaign_report(tmp_path, runs, sim_values(cfg), 100.0, 0).read_text()
+    assert "| K_TO X | urad/s/V | 30.3 | 31.6 | 30 | +1.00 % |" in text
+    assert "| To Y | N m | 0.0158 | 0.016 | 0.016 | -1.25 % |" in text
+    assert "| closed-loop dip X | Hz | 3.84 | 3.5 |" in text
+    assert "| gyro-deduced platform rms X | urad | 1.3 | 1.6 |" in text
+
+
+def test_campaign_covers_every_procedure():
+    from procedures.calibrations import catalogue
+    assert {name for name, _ in CAMPAIGN} == set(catalogue())

@@ -1,0 +1,416 @@
+"""An independent Mode-3 data generator for the model-gap workflow's tests.
+
+The gap workflow uses ``simhw`` as its model. Tests that feed it data made by that same
+simulator would pass even where the simulator's physics is wrong, so this module writes
+"measured" runs from its own transcription of the same physics (DESIGN.md section 3,
+docs/simhw.md sections 2-4). It imports nothing from ``fbs``, and it differs on purpose in:
+
+* realization: one continuous state space per run, written here; the compensation network
+  in parallel (partial-fraction, diagonal) form, the second-order filters with scaled states,
+  angles in microradians;
+* integrator: the bilinear (Tustin) transform (``scipy.signal.cont2discrete``) at an internal
+  rate of at least 8 x the output rate (and 8 kHz), run by a dense numba loop;
+* noise synthesis: whole-record FFT shaping of white Gaussian noise to the target PSD (the
+  1/f part exact down to 1/T), pickoff lines from ``numpy.sin`` of the time vector, offset
+  jumps from exponential (Poisson) switching times.
+
+Only one platform axis is modelled (Mode 3, autocollimator control, gyro caged by its own
+pickoff). Its four recorded channels are written: ``ac_{a}_ctl``, ``ac_{a}_inst``,
+``gyro_{a}``, ``pa_{a}`` (a = x or y), in volts, in the "fbs-run" layout of DESIGN.md
+section 6 (plain h5py). Not modelled: gyro cross-axis coupling, random gyro drift, the
+other axes, nonlinearities (sensor ranges, amplifier clipping, Dahl hysteresis: the bearing
+is a linear spring).
+
+Usage from a test (pytest runs with ``--import-mode=importlib``): the ``independent`` fixture
+of ``tests/procedures/gap/conftest.py`` returns this module::
+
+    def test_something(independent, tmp_path):
+        path = independent.generate(tmp_path / "run.h5", stiffness_Nm_per_rad=410.0, seed=3)
+
+or load it by path with :func:`importlib.util.spec_from_file_location`.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import sys
+from pathlib import Path
+
+import h5py
+import numba
+import numpy as np
+import scipy.fft
+import scipy.integrate
+import scipy.signal
+
+__all__ = [
+    "ADC_LSB_V",
+    "AXES",
+    "MODULE_NAME",
+    "anti_alias_sos",
+    "axis_model",
+    "channel_names",
+    "continuous_model",
+    "generate",
+    "simulate",
+    "white_level_ac",
+    "white_level_pickoff",
+]
+
+# --------------------------------------------------------------------------- parameters
+# Thesis values (Klinger 1974; DESIGN.md section 3). Angles in urad, rates in urad/s.
+EARTH_RATE = 7.292115e-5          # rad/s
+LATITUDE_DEG = 37.43
+MOTOR = dict(Km=0.53, Kb=0.53, Ra=23.0, La=0.023)
+COMP_ZEROS = (10.0, 30.0)                    # rad/s, eq. 3.28 numerator
+COMP_POLES = (0.15, 200.0, 1200.0, 5000.0)   # rad/s, eq. 3.28 denominator
+AC_CTL = dict(w=264.0, zeta=0.71)
+AC_INST = dict(w1=755.0, w2=1250.0, zeta=0.71)
+AC_FLICKER_CORNER_HZ = 3.0
+NEA_BAND_HZ = (0.1, 100.0)
+PICKOFF_BAND_HZ = (0.1, 200.0)
+PICKOFF_LINES_URAD = ((70.6, 3.0), (71.4, 3.0), (102.0, 4.0), (187.0, 2.0))
+SENSE_OHM = 92.1
+KTC_A_PER_V = -6.04e-3
+CAGING_WN, CAGING_ZETA = 0.1, 0.7
+ADC_BITS, ADC_RANGE_V = 16, 10.0
+ADC_LSB_V = 2 * ADC_RANGE_V / 2**ADC_BITS
+ANTI_ALIAS_FRACTION, ANTI_ALIAS_POLES = 0.3, 3
+
+AXES = {
+    # I kg m^2, D N m s (2 Do on X, Do on Y), Kp, autocollimator mV/urad, NEA urad,
+    # gyro channel: h/k s, KTO urad/s/V, Kg mV/urad, pickoff rms urad, constant rate urad/s
+    "X": dict(I=0.70, D=1.02, Kp=302.0, K_ctl=5.70, K_inst=5.63, nea=0.451,
+              tau_r=424.0, KTO=31.6, Kg=6.03, pickoff_rms=6.2,
+              omega_const=(EARTH_RATE * math.cos(math.radians(LATITUDE_DEG))) * 1e6 + 0.35),
+    "Y": dict(I=0.25, D=0.51, Kp=164.0, K_ctl=5.99, K_inst=5.92, nea=0.506,
+              tau_r=708.0, KTO=33.4, Kg=6.70, pickoff_rms=12.4,
+              omega_const=-0.22),
+}
+#: Output order of the state-space model (and of the channels written).
+OUTPUTS = ("ctl", "inst", "gyro", "pa")
+
+
+def channel_names(axis: str) -> tuple[str, ...]:
+    a = axis.lower()
+    return (f"ac_{a}_ctl", f"ac_{a}_inst", f"gyro_{a}", f"pa_{a}")
+
+
+def axis_model(axis: str) -> dict:
+    if axis not in AXES:
+        raise ValueError(f"axis {axis!r}: the generator models X or Y")
+    return dict(AXES[axis])
+
+
+# --------------------------------------------------------------------------- continuous model
+def _compensation_residues() -> np.ndarray:
+    """C(s) = sum_j r_j / (s + p_j): residues of eq. 3.28 at its four distinct real poles."""
+    z1, z2 = COMP_ZEROS
+    p = np.array(COMP_POLES)
+    gain = np.prod(p) / (z1 * z2)  # C(s) = gain (s + z1)(s + z2) / prod(s + p_j)
+    r = np.empty(4)
+    for j in range(4):
+        others = np.prod([p[i] - p[j] for i in range(4) if i != j])
+        r[j] = gain * (z1 - p[j]) * (z2 - p[j]) / others
+    return r
+
+
+def caging_gains(m: dict) -> tuple[float, float]:
+    """C1 (V/V), C2 (1/s) of the PI caging amplifier, from omega_n^2 = K_T K_g C2 and
+    2 zeta omega_n = K_T K_g C1, K_T = 92.1 ohm x KTO x KTC (urad/s per V of V_F).
+    K_T is negative (KTC < 0), so both gains come out negative: that is what makes the loop
+    s^2 + (2 zeta wn + k/h) s + wn^2 stable with V_F = -(C1 e + C2 int e)."""
+    kt = SENSE_OHM * m["KTO"] * KTC_A_PER_V         # urad/s per V
+    kg = m["Kg"] * 1e-3                              # V per urad
+    return 2 * CAGING_ZETA * CAGING_WN / (kt * kg), CAGING_WN**2 / (kt * kg)
+
+
+def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_freq_hz: float = 0.0,
+                     mount_damping: float = 0.05):
+    """(A, B, C, D, x0, names) of one axis in Mode 3.
+
+    Inputs: autocollimator angle noise n_ac (urad), pickoff angle noise n_p (urad), constant
+    gyro input rate Omega (urad/s). Outputs (V): control channel, instrumentation channel,
+    gyro pickoff, power-amplifier input V_c. ``x0`` is the steady state for the constant
+    Omega (caging integrator holding it), with all outputs zero there.
+    """
+    m = axis_model(axis)
+    names: list[str] = []
+
+    def st(name):
+        names.append(name)
+        return len(names) - 1
+
+    th, om, cur = st("theta"), st("omega"), st("i")
+    comp = [st(f"c{j}") for j in range(4)]
+    mount = (st("mount1"), st("mount2")) if mount_freq_hz > 0 else None
+    a1, a2 = st("ctl1"), st("ctl2")
+    b0, b1, b2 = st("inst0"), st("inst1"), st("inst2")
+    sg, q = st("sigma"), st("cage_int")
+    n = len(names)
+    A, B = np.zeros((n, n)), np.zeros((n, 3))
+    C, D = np.zeros((4, n)), np.zeros((4, 3))
+    NAC, NP, OM = 0, 1, 2
+
+    # Sensed angle s = theta_m + n_ac (urad), as a row over (x, u).
+    s_x, s_u = np.zeros(n), np.zeros(3)
+    s_u[NAC] = 1.0
+    if mount is None:
+        s_x[th] = 1.0
+    else:  # theta_m = w^2/(s^2 + 2 zeta w s + w^2) theta, scaled states
+        w = 2 * math.pi * mount_freq_hz
+        m1, m2 = mount
+        A[m1, m2] = w
+        A[m2, th], A[m2, m1], A[m2, m2] = w, -w, -2 * mount_damping * w
+        s_x[m1] = 1.0
+    # Control filter (eq. 3.21): a1 = w^2/(s^2 + 2 zeta w s + w^2) s.
+    w, z = AC_CTL["w"], AC_CTL["zeta"]
+    A[a1, a2] = w
+    A[a2] += w * s_x
+    B[a2] += w * s_u
+    A[a2, a1] += -w
+    A[a2, a2] += -2 * z * w
+    gamma = np.zeros(n)
+    gamma[a1] = m["K_ctl"] * 1e-3          # V
+    # Instrumentation (eq. 3.22): w1/(s + w1) then w2^2/(s^2 + 2 zeta w2 s + w2^2).
+    w1, w2, z2 = AC_INST["w1"], AC_INST["w2"], AC_INST["zeta"]
+    A[b0] += w1 * s_x
+    B[b0] += w1 * s_u
+    A[b0, b0] += -w1
+    A[b1, b2] = w2
+    A[b2, b0], A[b2, b1], A[b2, b2] = w2, -w2, -2 * z2 * w2
+    # Compensation, parallel form, driven by gamma; V_c = -C(s) gamma (inverted).
+    r = _compensation_residues()
+    vc = np.zeros(n)
+    for j, cj in enumerate(comp):
+        A[cj] += gamma
+        A[cj, cj] += -COMP_POLES[j]
+        vc[cj] = -r[j]
+    # Motor: La i' = Kp V_c - Kb theta' - Ra i  (theta' in urad/s -> 1e-6).
+    La = MOTOR["La"]
+    A[cur] += m["Kp"] * vc / La
+    A[cur, om] += -MOTOR["Kb"] * 1e-6 / La
+    A[cur, cur] += -MOTOR["Ra"] / La
+    # Gimbal: I theta'' = Km i - D theta' - k theta  (urad units: torque x 1e6).
+    A[th, om] = 1.0
+    A[om, cur] = MOTOR["Km"] * 1e6 / m["I"]
+    A[om, om] = -m["D"] / m["I"]
+    A[om, th] = -stiffness_Nm_per_rad / m["I"]
+    # Gyro channel: sigma' = theta' + Omega + KTO V_T - sigma/(h/k); e = Kg (sigma + n_p);
+    # V_F = -(C1 e + C2 int e); V_T = 92.1 KTC V_F.
+    c1, c2 = caging_gains(m)
+    kg = m["Kg"] * 1e-3
+    kt = SENSE_OHM * m["KTO"] * KTC_A_PER_V
+    A[q, sg] = kg
+    B[q, NP] = kg
+    A[sg, om] = 1.0
+    B[sg, OM] = 1.0
+    A[sg, sg] = -1.0 / m["tau_r"] - kt * c1 * kg
+    B[sg, NP] = -kt * c1 * kg
+    A[sg, q] = -kt * c2
+    # Outputs.
+    C[0] = gamma
+    C[1, b1] = m["K_inst"] * 1e-3
+    C[2, sg] = kg
+    D[2, NP] = kg
+    C[3] = vc
+    x0 = np.zeros(n)
+    x0[q] = m["omega_const"] / (kt * c2)   # caged: K_T V_F = -Omega, sigma = 0
+    return A, B, C, D, x0, names
+
+
+def white_level_ac(axis: str = "X") -> float:
+    """S_w (urad^2/Hz, one-sided): int_0.1^100 S_w (1 + 3/f) |H_ctl|^2 df = NEA^2."""
+    w, z = AC_CTL["w"], AC_CTL["zeta"]
+
+    def integrand(u):  # over u = ln f
+        f = math.exp(u)
+        x = 2 * math.pi * f / w
+        h2 = 1.0 / ((1 - x * x) ** 2 + (2 * z * x) ** 2)
+        return (f + AC_FLICKER_CORNER_HZ) * h2
+
+    val, _ = scipy.integrate.quad(integrand, math.log(NEA_BAND_HZ[0]), math.log(NEA_BAND_HZ[1]),
+                                  epsabs=0, epsrel=1e-10, limit=200)
+    return axis_model(axis)["nea"] ** 2 / val
+
+
+def white_level_pickoff(axis: str = "X") -> float:
+    """White pickoff PSD (urad^2/Hz) that with the lines gives the rms in 0.1-200 Hz."""
+    lines_var = sum(a * a / 2 for f, a in PICKOFF_LINES_URAD if PICKOFF_BAND_HZ[0] <= f <= PICKOFF_BAND_HZ[1])
+    return (axis_model(axis)["pickoff_rms"] ** 2 - lines_var) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
+
+
+def anti_alias_sos(rate_hz: float, fs_int: float) -> np.ndarray:
+    return scipy.signal.butter(ANTI_ALIAS_POLES, ANTI_ALIAS_FRACTION * rate_hz, fs=fs_int, output="sos")
+
+
+# --------------------------------------------------------------------------- time stepping
+#: The name the tests' conftest registers this module under (``sys.modules``). numba's on-disk
+#: cache re-imports the defining module by name, so it is used only under this name; loaded
+#: any other way the kernel compiles afresh (about 1 s per process).
+MODULE_NAME = "fbs_tests_gap_independent"
+_CACHE = __name__ == MODULE_NAME and __name__ in sys.modules
+
+
+@numba.njit(cache=_CACHE, nogil=True)
+def _tustin_run(Ad, Bd, Cd, Dd, bconst, dconst, x, u, y):
+    """y[k] = Cd x + Dd u[k] + dconst;  x <- Ad x + Bd u[k] + bconst (dense)."""
+    n = x.shape[0]
+    m = u.shape[1]
+    p = Cd.shape[0]
+    xn = np.empty(n)
+    for k in range(u.shape[0]):
+        for i in range(p):
+            acc = dconst[i]
+            for j in range(n):
+                acc += Cd[i, j] * x[j]
+            for j in range(m):
+                acc += Dd[i, j] * u[k, j]
+            y[k, i] = acc
+        for i in range(n):
+            acc = bconst[i]
+            for j in range(n):
+                acc += Ad[i, j] * x[j]
+            for j in range(m):
+                acc += Bd[i, j] * u[k, j]
+            xn[i] = acc
+        for i in range(n):
+            x[i] = xn[i]
+
+
+def _shaped_noise(rng: np.random.Generator, n: int, fs: float, psd) -> np.ndarray:
+    """n samples whose one-sided PSD is psd(f) (f > 0; zero mean), by shaping the FFT of
+    white Gaussian noise over the whole record (periodic; exact down to 1/T)."""
+    spec = scipy.fft.rfft(rng.standard_normal(n))
+    f = np.arange(len(spec)) * (fs / n)
+    gain = np.zeros(len(spec))
+    gain[1:] = np.sqrt(psd(f[1:]) * fs / 2.0)   # a unit-variance sequence has PSD 2/fs
+    return scipy.fft.irfft(spec * gain, n=n)
+
+
+def _telegraph(rng: np.random.Generator, n: int, fs: float, amplitude: float, mean_interval_s: float) -> np.ndarray:
+    """+-amplitude, switching sign at Poisson times of mean interval ``mean_interval_s``."""
+    t_end = n / fs
+    times = []
+    t = 0.0
+    while True:
+        t += rng.exponential(mean_interval_s)
+        if t >= t_end:
+            break
+        times.append(t)
+    start = 1.0 if rng.random() < 0.5 else -1.0
+    flips = np.searchsorted(np.asarray(times) * fs, np.arange(n), side="right")
+    return amplitude * start * np.where(flips % 2 == 0, 1.0, -1.0)
+
+
+def _settle_time(A: np.ndarray, names: list[str]) -> float:
+    """Time for the platform loop's slowest mode to decay by e^-10 (gyro modes excluded)."""
+    keep = [i for i, s in enumerate(names) if s not in ("sigma", "cage_int")]
+    ev = np.linalg.eigvals(A[np.ix_(keep, keep)])
+    slowest = float(np.min(-ev.real))
+    return min(max(10.0 / slowest, 2.0), 120.0)
+
+
+# --------------------------------------------------------------------------- the generator
+def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm_per_rad=0.0,
+             mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
+             offset_jump_urad=0.0, offset_jump_interval_s=60.0) -> dict[str, np.ndarray]:
+    """The recorded channels (volts, ADC-quantized) as a dict, without writing a file."""
+    axis = axis.upper()
+    m = axis_model(axis)
+    if not (rate_hz > 0 and duration_s > 0):
+        raise ValueError("rate_hz and duration_s must be positive")
+    n_out = int(round(duration_s * rate_hz))
+    over = max(8, int(math.ceil(8000.0 / rate_hz)))
+    fs = rate_hz * over
+    dt = 1.0 / fs
+
+    A, B, C, D, x0, names = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping)
+    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
+    settle_out = int(math.ceil(_settle_time(A, names) * rate_hz))
+    n_run = (n_out + settle_out) * over
+    n_fft = scipy.fft.next_fast_len(n_run, real=True)
+
+    ss = np.random.SeedSequence(seed)
+    rng_ac, rng_jump, rng_p, rng_lines = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(4))
+
+    # Autocollimator angle noise (urad): S_w (1 + (3 + extra)/f), plus offset jumps.
+    sw = white_level_ac(axis)
+    corner = AC_FLICKER_CORNER_HZ + max(extra_flicker_corner_hz, 0.0)
+    u = np.empty((n_run, 2))
+    u[:, 0] = _shaped_noise(rng_ac, n_fft, fs, lambda f: sw * (1.0 + corner / f))[:n_run]
+    # The sensor's offset at the start: the slow part of the noise (a 0.2 s mean, which
+    # leaves out the white part) plus the telegraph's level.
+    offset0 = float(np.mean(u[: int(0.2 * fs), 0]))
+    if offset_jump_urad > 0:
+        tele = _telegraph(rng_jump, n_run, fs, offset_jump_urad, offset_jump_interval_s)
+        u[:, 0] += tele
+        offset0 += float(tele[0])
+    # Pickoff noise (urad): white plus lines with random phases.
+    sp = white_level_pickoff(axis)
+    u[:, 1] = math.sqrt(sp * fs / 2.0) * rng_p.standard_normal(n_run)
+    t = np.arange(n_run) * dt
+    for f_line, amp in PICKOFF_LINES_URAD:
+        phase = rng_lines.uniform(0.0, 2 * math.pi)
+        if f_line < fs / 2:
+            u[:, 1] += amp * np.sin(2 * math.pi * f_line * t + phase)
+
+    # Start in the steady state for the sensor offset present at t = 0 (the telegraph level
+    # and the slow 1/f wander), as on a rig that has been running: the platform already
+    # follows it, so no acquisition transient (and no false offset step) opens the record.
+    x = np.ascontiguousarray(x0 + np.linalg.solve(A, -B[:, 0] * offset0), dtype=float)
+    bconst = np.ascontiguousarray(Bd[:, 2] * m["omega_const"])
+    dconst = np.ascontiguousarray(Dd[:, 2] * m["omega_const"])
+    y = np.empty((n_run, 4))
+    _tustin_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, :2]), np.ascontiguousarray(Cd),
+                np.ascontiguousarray(Dd[:, :2]), bconst, dconst, x, u, y)
+    del u
+
+    # Electrical pickup on the control channel, phase zero at the recording's t = 0.
+    t_rec = t - settle_out * over * dt
+    for f_line, amp in (pickup or []):
+        y[:, 0] += amp * np.sin(2 * math.pi * f_line * t_rec)
+    # Recording chain: 3-pole Butterworth at 0.3 fs, decimation, 16-bit ADC over +-10 V.
+    y = scipy.signal.sosfilt(anti_alias_sos(rate_hz, fs), y, axis=0)
+    y = y[settle_out * over::over][:n_out]
+    code = np.clip(np.rint(y / ADC_LSB_V), -(2 ** (ADC_BITS - 1)), 2 ** (ADC_BITS - 1) - 1)
+    volts = code * ADC_LSB_V
+    return {name: np.ascontiguousarray(volts[:, i]) for i, name in enumerate(channel_names(axis))}
+
+
+def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm_per_rad=0.0,
+             mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
+             offset_jump_urad=0.0, offset_jump_interval_s=60.0) -> Path:
+    """Write a Mode-3 "fbs-run" file of one axis's four channels; return its path.
+
+    ``pickup`` is a list of ``(freq_hz, amplitude_V)`` lines added to the control channel
+    before the anti-alias filter. The other keywords are the effects of DESIGN.md section 8
+    that act on one axis in Mode 3 (0 = absent).
+    """
+    params = dict(axis=axis.upper(), duration_s=float(duration_s), rate_hz=float(rate_hz), seed=int(seed),
+                  stiffness_Nm_per_rad=float(stiffness_Nm_per_rad), mount_freq_hz=float(mount_freq_hz),
+                  mount_damping=float(mount_damping),
+                  pickup=[[float(f), float(a)] for f, a in (pickup or [])],
+                  extra_flicker_corner_hz=float(extra_flicker_corner_hz),
+                  offset_jump_urad=float(offset_jump_urad), offset_jump_interval_s=float(offset_jump_interval_s))
+    data = simulate(**{**params, "pickup": [tuple(p) for p in params["pickup"]]})
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with h5py.File(path, "w") as f:
+        f.attrs["format"] = "fbs-run"
+        f.attrs["format_version"] = 1
+        f.attrs["created"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+        f.attrs["rig"] = "independent-generator"
+        f.attrs["mode"] = 3
+        f.attrs["axis"] = params["axis"]
+        f.attrs["status"] = "complete"
+        g = f.create_group("channels")
+        for name, v in data.items():
+            ds = g.create_dataset(name, data=v.astype(np.float64))
+            ds.attrs["units"] = "V"
+            ds.attrs["sample_rate_hz"] = float(rate_hz)
+        meta = f.create_group("meta")
+        meta.attrs["generator"] = json.dumps({"name": "tests/procedures/gap/independent.py", **params})
+    return path
