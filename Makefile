@@ -5,20 +5,28 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test bench clean venv
+.PHONY: demo test check bench clean venv
 
 venv: $(STAMP)
 
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test]'
+	$(PY) -m pip install -q -e '.[test,check]'
 	@touch $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/fbs demo --out out
 
-test: $(STAMP)
+# The static checks first (seconds), then the suite: ruff (pyproject [tool.ruff]), mypy over
+# every package (zero errors, every import resolved), and the import contracts of the one-way
+# data flow (pyproject [tool.importlinter]).
+check: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
+	$(VENV)/bin/lint-imports
+
+test: check
 	$(PY) -m pytest -q
 
 bench: $(STAMP)

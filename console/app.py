@@ -12,15 +12,16 @@ from __future__ import annotations
 import logging
 import signal
 from pathlib import Path
+from typing import TYPE_CHECKING, ClassVar
 
 from textual import work
 from textual.app import App, ComposeResult
-from textual.binding import Binding
+from textual.binding import Binding, BindingType
 from textual.message import Message
 from textual.widgets import Footer, TabbedContent, TabPane
 
 from console.feeds import Feed
-from console.limits import SetpointLimits
+from console.limits import Entry
 from console.logfeed import FeedHandler
 from console.meterdata import MeterSnapshot, MeterSpec, MeterStore, permanent_meters
 from console.meters import MeterPanel
@@ -35,6 +36,10 @@ from console.spectra import SpectraPanel
 from console.state import CommandOutcome, ProcedureEnded, RecordingEnded, RigFailed, RigFault, RigReady, WorkerStopped
 from console.statusbar import StatusBar
 from drivers.calibration import RigCalibration
+from drivers.setpoints import SetpointLimits
+
+if TYPE_CHECKING:
+    from procedures.runner import Procedure
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +65,8 @@ class ConsoleApp(App[int]):
     CSS_PATH = str(Path(__file__).with_name("styles.tcss"))  # absolute: subclasses live elsewhere
     TITLE = "fbs console"
     ENABLE_COMMAND_PALETTE = False
-    BINDINGS = [Binding(key, f"panel('{pid}')", title, group=PANEL_KEYS) for pid, title, key in PANELS] + [
+    BINDINGS: ClassVar[list[BindingType]] = [
+        *(Binding(key, f"panel('{pid}')", title, group=PANEL_KEYS) for pid, title, key in PANELS),
         Binding("q", "quit", "quit"),
         Binding("ctrl+q", "quit", "quit", show=False, priority=True),
     ]
@@ -86,7 +92,7 @@ class ConsoleApp(App[int]):
         self._quitting = False
         self._meter_seq = -1
         self._handler = FeedHandler(self.log_feed)
-        self.catalogue: dict[str, type] = {}
+        self.catalogue: dict[str, type[Procedure]] = {}
         self._saved_levels: dict[str, int] = {}
 
     # ------------------------------------------------------------------ layout
@@ -143,7 +149,7 @@ class ConsoleApp(App[int]):
         cat = _catalogue()
         self.call_from_thread(self._catalogue_loaded, cat)
 
-    def _catalogue_loaded(self, cat: dict[str, type]) -> None:
+    def _catalogue_loaded(self, cat: dict[str, type[Procedure]]) -> None:
         self.catalogue = cat
         self.w_procedures.set_catalogue(cat)
 
@@ -153,7 +159,7 @@ class ConsoleApp(App[int]):
             import asyncio
             loop = asyncio.get_running_loop()
             for sig in (signal.SIGTERM, signal.SIGHUP):
-                loop.add_signal_handler(sig, lambda s=sig: self._signalled(s))
+                loop.add_signal_handler(sig, self._signalled, sig)
         except (RuntimeError, NotImplementedError, ValueError):  # not the main thread (tests): nothing to do
             pass
 
@@ -285,20 +291,23 @@ class ConsoleApp(App[int]):
             return
         if self._refuse_if_busy():
             return
-        {"hold": self.worker_.hold, "release": self.worker_.release,
-         "select": lambda: self.worker_.select(msg.mode)}[msg.what]()
+        if msg.what == "select":
+            assert msg.mode is not None  # the panel's select command always names its mode
+            self.worker_.select(msg.mode)
+            return
+        {"hold": self.worker_.hold, "release": self.worker_.release}[msg.what]()
 
     def on_setpoint_panel_request(self, msg: SetpointPanel.Request) -> None:
         if self._refuse_if_busy():
             return
         w = self.worker_
-        if msg.kind == "torq":
-            w.set_torquer_bias(msg.key, msg.value, msg.slew)
-        elif msg.kind == "vtd":
-            w.set_command_torque(msg.key, msg.value)
-        elif msg.kind == "gc":
-            w.set_ac_bias(msg.key, msg.value)
-        elif msg.kind == "cage":
+        if msg.kind is Entry.TORQUER_BIAS:
+            w.set_torquer_bias(msg.key, float(msg.value), msg.slew)
+        elif msg.kind is Entry.COMMAND_TORQUE:
+            w.set_command_torque(msg.key, float(msg.value))
+        elif msg.kind is Entry.AC_BIAS:
+            w.set_ac_bias(msg.key, float(msg.value))
+        elif msg.kind is Entry.CAGING:
             w.set_caging_inhibit(msg.key, bool(msg.value))
 
     def on_recording_panel_start(self, msg: RecordingPanel.Start) -> None:
@@ -346,7 +355,7 @@ class ConsoleApp(App[int]):
             self.notify("no procedure is running", severity="warning", timeout=4)
 
 
-def _catalogue() -> dict[str, type]:
+def _catalogue() -> dict[str, type[Procedure]]:
     from procedures.calibrations import catalogue
 
     return catalogue()

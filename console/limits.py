@@ -1,20 +1,16 @@
 """Set-point checks on the UI thread, with the drivers' own rules and words.
 
-A bad entry is refused before it leaves the console: the checks are the drivers' own
-(``TorquerDac.check_bias``, ``CommandDac._check``, ``drivers.setpoints.check_value``), run
-on driver objects that hold only the rig's data sheet and can send nothing. The messages
-name the value and the limit exactly as the drivers do, and the rig thread's driver call
-checks again before any byte is sent.
+A bad entry is refused before it leaves the console: the checks are the drivers' own pure
+``drivers.setpoints.SetpointLimits`` on the rig's data sheet, so the messages name the value
+and the limit exactly as the drivers do, and the rig thread's driver call checks again before
+any byte is sent. Here only the typed text is turned into a number first.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from enum import StrEnum
 
-from drivers.calibration import RigCalibration
-from drivers.command import CommandDac
-from drivers.setpoints import check_value
-from drivers.torquer import TorquerDac
+from drivers.setpoints import SetpointKind, SetpointLimits, check_value
 
 #: torquer bias slew rate limits (V/s): slow enough for the caging loops to follow, and a
 #: ramp never takes longer than a few minutes across the whole range
@@ -23,51 +19,35 @@ SLEW_MAX_V_PER_S = 5.0
 SLEW_DEFAULT_V_PER_S = 1.0
 
 
-class _SilentTorquers(TorquerDac):
-    """A torquer DAC with the rig's data sheet and no wire: only its checks are used."""
+class Entry(StrEnum):
+    """What a set-point panel entry commands; the value is its widget id's prefix."""
 
-    def set_bias_V(self, channel: str, volts: float) -> float:
-        raise NotImplementedError("limits only")
+    TORQUER_BIAS = "torq"
+    COMMAND_TORQUE = "vtd"
+    AC_BIAS = "gc"
+    CAGING = "cage"
+    SLEW = "slew"
 
-    def bias_V(self, channel: str) -> float:
-        raise NotImplementedError("limits only")
-
-
-class _SilentCommands(CommandDac):
-    """A command DAC with the rig's data sheet and no wire: only its checks are used."""
-
-    def _set(self, output: str, volts: float) -> float:
-        raise NotImplementedError("limits only")
-
-    def _get(self, output: str) -> float:
-        raise NotImplementedError("limits only")
+    @property
+    def setpoint(self) -> SetpointKind:
+        """The drivers' set-point this entry sets (not for the caging switches or the slew rate)."""
+        return {Entry.TORQUER_BIAS: SetpointKind.TORQUER_BIAS, Entry.COMMAND_TORQUE: SetpointKind.COMMAND_TORQUE,
+                Entry.AC_BIAS: SetpointKind.AC_BIAS}[self]
 
 
-@dataclass(frozen=True)
-class SetpointLimits:
-    calibration: RigCalibration
+def typed_setpoint(limits: SetpointLimits, entry: Entry, key: str, text: str) -> float:
+    """The set-point (V) typed into ``entry`` for channel or axis ``key``; a
+    ``drivers.errors.SetpointRangeError`` names the value and the limit."""
+    kind = entry.setpoint
+    if kind is SetpointKind.TORQUER_BIAS:
+        return limits.torquer_bias(key, _number(text))
+    return limits.command(kind, key, _number(text))
 
-    def torquer_limit_V(self, channel: str) -> float:
-        return _SilentTorquers(self.calibration).limit_V(channel)
 
-    def dac_range_V(self) -> float:
-        return self.calibration.dac_range_V
-
-    def torquer_bias(self, channel: str, text: str) -> float:
-        """The bias (V) typed for ``channel``; ``drivers.errors.SetpointRangeError`` names the value
-        and the limit."""
-        return _SilentTorquers(self.calibration).check_bias(channel, _number(text))
-
-    def command_torque(self, axis: str, text: str) -> float:
-        return _SilentCommands(self.calibration)._check("command torque V_Td", axis, _number(text))
-
-    def ac_bias(self, axis: str, text: str) -> float:
-        return _SilentCommands(self.calibration)._check("autocollimator bias gamma_c", axis, _number(text))
-
-    @staticmethod
-    def slew(text: str) -> float:
-        return check_value("torquer bias slew rate (V/s)", _number(text), SLEW_MAX_V_PER_S,
-                           "the console's bounded slew", lo=SLEW_MIN_V_PER_S)
+def typed_slew(text: str) -> float:
+    """The torquer bias slew rate (V/s) typed, within the console's bounds."""
+    return check_value("torquer bias slew rate (V/s)", _number(text), SLEW_MAX_V_PER_S,
+                       "the console's bounded slew", lo=SLEW_MIN_V_PER_S)
 
 
 def _number(text: str) -> object:
@@ -77,4 +57,3 @@ def _number(text: str) -> object:
         return float(t)
     except ValueError:
         return t
-

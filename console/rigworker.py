@@ -17,11 +17,14 @@ Each tick (``tick_s``, 50 ms) the thread
 A procedure runs on this thread too (``run_procedure``, blocking the loop): the UI refuses
 other commands meanwhile, and aborts through a ``threading.Event`` that needs no queue.
 
-Safe-state guarantees: a device fault is latched by the drivers (the rig goes safe by
-itself); here it ends any recording "aborted: <fault>" and stops the thread's commands.
-``request_shutdown`` (quit, or the app crashing) aborts a running procedure, closes a
-recording "aborted: ConsoleClosed: <why>", and closes the rig, which leaves it safe; so does
-any exception on this thread (the ``finally`` of ``_run``).
+Safe-state guarantees: the thread holds the rig inside ``drivers.safety.SafeOnAbort``, the
+one piece of code that drives the rig safe on an abort. A recording that ends any way but the
+operator's stop (a device fault, a full disk, quit, a crash of the app or of this thread)
+goes through it before its file is closed "aborted: <why>"; so does any exception that ends
+this thread. A device fault is latched by the drivers too (the rig goes safe by itself), and
+stops the thread's commands. ``request_shutdown`` (quit, or the app crashing) aborts a
+running procedure (the runner's own guard makes the rig safe), closes a recording "aborted:
+ConsoleClosed: <why>", and closes the rig, which leaves it safe.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from console.adctap import TappedAdc
 from console.feeds import Feed
@@ -42,6 +46,7 @@ from console.slew import Slew
 from console.state import (
     CommandOutcome,
     LiveState,
+    Phase,
     ProcedureEnded,
     ProcedureInfo,
     RecordingEnded,
@@ -55,6 +60,12 @@ from console.state import (
 from drivers.errors import DriverError, InterlockError, SampleGap, SetpointRangeError
 from drivers.relay import MODES, interlock_reason
 from drivers.rig import Rig, open_rig
+from drivers.safety import SafeOnAbort, go_safe
+from drivers.setpoints import SetpointKind
+
+if TYPE_CHECKING:  # the analysis stack is imported when a recording or a procedure starts
+    from daq.recorder import Acquisition
+    from procedures.runner import Procedure, Progress
 
 log = logging.getLogger(__name__)
 
@@ -93,12 +104,13 @@ class RigWorker:
         self.readback_every_s = readback_every_s
         self.state = LiveState()
         self.rig: Rig | None = None
+        self._safety: SafeOnAbort | None = None  # around everything the thread does with the rig
         self._queue: queue.Queue[Command | None] = queue.Queue()
         self._stop = threading.Event()
         self._stop_reason = ""
         self._abort = threading.Event()
         self._thread = threading.Thread(target=self._run, name="console-rig", daemon=True)
-        self._acq = None                       # daq.recorder.Acquisition while recording
+        self._acq: Acquisition | None = None   # while recording
         self._streaming = False                # the idle meter stream (or the recording) is running
         self._stream_rate = 0.0
         self._stream_pos = 0
@@ -145,11 +157,11 @@ class RigWorker:
     def busy(self) -> str | None:
         """Why commands are refused now (a procedure owns the rig, a fault, closed), or None."""
         snap = self.state.get()
-        if snap.phase == "procedure":
+        if snap.phase is Phase.PROCEDURE:
             return f"procedure {snap.procedure.name if snap.procedure else ''} is running: abort it first (f8)"
-        if snap.phase == "fault":
+        if snap.phase is Phase.FAULT:
             return f"the rig is faulted and safe ({snap.fault}); quit and reopen the console"
-        if snap.phase in ("opening", "closed"):
+        if snap.phase in (Phase.OPENING, Phase.CLOSED):
             return f"the rig is {snap.phase}"
         return None
 
@@ -170,10 +182,10 @@ class RigWorker:
         self.submit(f"torquer bias {channel}", lambda: self._slew_to(channel, volts, slew_V_per_s))
 
     def set_command_torque(self, axis: str, volts: float) -> None:
-        self.submit(f"command torque {axis}", lambda: self._set_output("vtd", axis, volts))
+        self.submit(f"command torque {axis}", lambda: self._set_output(SetpointKind.COMMAND_TORQUE, axis, volts))
 
     def set_ac_bias(self, axis: str, volts: float) -> None:
-        self.submit(f"autocollimator bias {axis}", lambda: self._set_output("gc", axis, volts))
+        self.submit(f"autocollimator bias {axis}", lambda: self._set_output(SetpointKind.AC_BIAS, axis, volts))
 
     def set_caging_inhibit(self, channel: str, inhibit: bool) -> None:
         self.submit(f"caging inhibit {channel}", lambda: self._caging(channel, inhibit))
@@ -184,14 +196,27 @@ class RigWorker:
     def stop_recording(self) -> None:
         self.submit("stop recording", self._stop_recording)
 
-    def run_procedure(self, proc) -> None:
+    def run_procedure(self, proc: Procedure) -> None:
         """Run a ``Procedure`` instance (parameters already parsed) into ``out_dir``."""
         prev = self.state.get().phase
-        if prev == "ready":  # the UI refuses other commands from now on (``busy``)
-            self.state.update(phase="procedure", procedure=ProcedureInfo(proc.name))
+        if prev is Phase.READY:  # the UI refuses other commands from now on (``busy``)
+            self.state.update(phase=Phase.PROCEDURE, procedure=ProcedureInfo(proc.name))
         self.submit(f"procedure {proc.name}", lambda: self._run_procedure(proc, prev))
 
     # ================================================================== the rig thread
+    @property
+    def _rig(self) -> Rig:
+        """The open rig: the thread runs commands only once it is open."""
+        if self.rig is None:
+            raise Refused("the rig is not open")
+        return self.rig
+
+    @property
+    def _guard_safe(self) -> SafeOnAbort:
+        if self._safety is None:
+            raise Refused("the rig is not open")
+        return self._safety
+
     def _post(self, item: object) -> None:
         try:
             self.post_event(item)
@@ -211,22 +236,24 @@ class RigWorker:
                 rig = open_rig(self.url, operator=self.operator)
             except Exception as exc:  # a bad URL or a missing device: say so, nothing to make safe
                 log.error("cannot open the rig %s: %s", self.url, exc)
-                self.state.update(phase="closed", fault=f"cannot open the rig {self.url}: {exc}")
+                self.state.update(phase=Phase.CLOSED, fault=f"cannot open the rig {self.url}: {exc}")
                 self._post(RigFailed(f"cannot open the rig {self.url}: {exc}"))
                 return
             self.rig = rig
+            self._safety = SafeOnAbort(rig, "the console")
             rig.adc = TappedAdc(rig.adc, self.meters)
             rig.subscribe(self._on_rig_event)
-            self.state.update(phase="ready")
+            self.state.update(phase=Phase.READY)
             self._note("console", f"rig {self.url} open ({'virtual' if rig.clock.virtual else 'paced'} time)")
             self._post(RigReady(self.url, rig.calibration, tuple(rig.adc.identity.channels), rig.clock.virtual))
-            self._guard(self._start_meter_stream)
-            self._guard(lambda: self._poll(force=True))
-            while not self._stop.is_set():
-                self._serve(time.monotonic() + self.tick_s)
-                if self._stop.is_set():
-                    break
-                self._tick()
+            with self._safety:   # whatever ends this thread but a quit, the rig goes safe first
+                self._guard(self._start_meter_stream)
+                self._guard(lambda: self._poll(force=True))
+                while not self._stop.is_set():
+                    self._serve(time.monotonic() + self.tick_s)
+                    if self._stop.is_set():
+                        break
+                    self._tick()
         except BaseException as exc:  # noqa: B036 - whatever kills this thread, the rig goes safe below
             log.exception("the console's rig thread failed")
             reason = f"the console's rig thread failed: {type(exc).__name__}: {exc}"
@@ -246,7 +273,7 @@ class RigWorker:
             self._execute(cmd)
 
     def _execute(self, cmd: Command) -> None:
-        if self.state.get().phase in ("fault", "closed"):
+        if self.state.get().phase in (Phase.FAULT, Phase.CLOSED):
             self._post(CommandOutcome(cmd.what, False, self.busy or "the rig is not available"))
             return
         try:
@@ -293,7 +320,7 @@ class RigWorker:
 
     # ------------------------------------------------------------------ streaming
     def _start_meter_stream(self) -> None:
-        rig = self.rig
+        rig = self._rig
         channels = tuple(rig.adc.identity.channels)
         cfg = rig.adc.configure(channels, self.meter_rate_hz)
         rig.adc.start()
@@ -309,7 +336,7 @@ class RigWorker:
         if self._streaming and self._acq is None:
             self._streaming = False
             try:
-                self.rig.adc.stop()
+                self._rig.adc.stop()
             finally:
                 self.meters.clear()
 
@@ -321,7 +348,7 @@ class RigWorker:
         due = int((time.monotonic() - self._stream_wall0 - 0.03) * self._stream_rate) - self._stream_pos
         if due <= 0:
             return
-        if due > 2 * self._stream_rate and self.rig.clock.virtual:
+        if due > 2 * self._stream_rate and self._rig.clock.virtual:
             # a virtual rig slower than the wall clock: skip ahead (nothing is lost, the
             # simulation only computes what is read), so the commands are not starved
             self._stream_wall0 += (due - self._stream_rate) / self._stream_rate
@@ -335,7 +362,7 @@ class RigWorker:
                                                       self._acq.time_s, self._acq.pos, len(r.gaps), r.lost))
             return
         try:
-            block = self.rig.adc.read(due)
+            block = self._rig.adc.read(due)
             self._stream_pos = block.stop_sample
         except SampleGap as gap:  # the meters skip it; only a recording has to account for it
             self._note("gap", f"meter stream: {gap}")
@@ -351,15 +378,15 @@ class RigWorker:
         check_new_path(path)  # a bad name is refused before the meter stream stops
         self._stop_meter_stream()
         try:
-            acq = Acquisition(self.rig, path, rate_hz=rate_hz, channels=channels, block_s=0.05,
+            acq = Acquisition(self._rig, path, rate_hz=rate_hz, channels=channels, block_s=0.05,
                               meta={"console": {"rig": self.url}})
-            acq.__enter__()
+            acq.start()
         except BaseException:
             self._guard(self._start_meter_stream)
             raise
         self._acq = acq
         self._begin_stream(acq.rate_hz)
-        self.state.update(phase="recording", recording=RecordingInfo(Path(path), acq.rate_hz, acq.channels))
+        self.state.update(phase=Phase.RECORDING, recording=RecordingInfo(Path(path), acq.rate_hz, acq.channels))
         return f"recording {len(acq.channels)} channels at {acq.rate_hz:g} Hz to {path}"
 
     def _stop_recording(self) -> str:
@@ -370,21 +397,23 @@ class RigWorker:
         return f"recording closed: {info.path}, {info.samples} samples, status {info.status}"
 
     def _end_recording(self, exc: BaseException | None) -> RecordingInfo:
-        """Close the recording: "complete" without ``exc``; else "aborted: <exc>" and the rig
-        safe (``Acquisition.__exit__`` does both)."""
+        """Close the recording: "complete" without ``exc``; else the rig safe first (the
+        thread's ``SafeOnAbort``, so the file records it), then the file "aborted: <exc>"."""
         acq, self._acq = self._acq, None
+        if acq is None:
+            raise Refused("not recording")
         self._streaming = False
+        if exc is not None:
+            self._guard_safe.abort(exc)
         try:
-            if exc is None:
-                acq.__exit__(None, None, None)
-            else:
-                acq.__exit__(type(exc), exc, exc.__traceback__)
-        except BaseException as late:  # noqa: B036 - closing failed: the file says aborted, go on
+            acq.close(exc)
+        except BaseException as late:  # noqa: B036 - closing failed: the file says aborted; safe, go on
             log.error("closing the recording failed: %s", late)
+            self._guard_safe.abort(late)
         r = acq.result
         info = RecordingInfo(r.path, acq.rate_hz, acq.channels, acq.time_s, acq.pos, len(r.gaps), r.lost, r.status)
-        self.state.update(phase="ready" if self.state.get().phase == "recording" else self.state.get().phase,
-                          recording=info, last_file=r.path)
+        phase = self.state.get().phase
+        self.state.update(phase=Phase.READY if phase is Phase.RECORDING else phase, recording=info, last_file=r.path)
         self._note("recording", f"{r.path}: {r.status}, {acq.pos} samples, {len(r.gaps)} gap(s)")
         self._post(RecordingEnded(r.path, r.status, acq.pos, len(r.gaps)))
         if exc is not None:
@@ -392,7 +421,7 @@ class RigWorker:
         return info
 
     # ------------------------------------------------------------------ procedure
-    def _run_procedure(self, proc, prev: str = "ready") -> str:
+    def _run_procedure(self, proc: Procedure, prev: Phase = Phase.READY) -> str:
         from procedures.params import find_prior
         from procedures.runner import run_procedure
 
@@ -410,13 +439,13 @@ class RigWorker:
             # the file run_procedure will pick (it takes the same next free name), shown while it runs
             self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))
             log.info("procedure %s starting (parameters %s)", proc.name, proc.params_json())
-            summary = run_procedure(proc, self.rig, self.out_dir, progress=self._on_progress, abort=self._abort)
+            summary = run_procedure(proc, self._rig, self.out_dir, progress=self._on_progress, abort=self._abort)
         except BaseException:
-            self.state.update(phase=prev if prev in ("ready", "recording") else "ready", procedure=None)
+            self.state.update(phase=prev if prev in (Phase.READY, Phase.RECORDING) else Phase.READY, procedure=None)
             if not self._stop.is_set() and self._acq is None and not self._streaming:
                 self._guard(self._start_meter_stream)
             raise
-        self.state.update(phase="ready", procedure=None, last_file=summary.file)
+        self.state.update(phase=Phase.READY, procedure=None, last_file=summary.file)
         self._post(ProcedureEnded(summary))
         self._note("procedure", f"{proc.name}: {summary.verdict} ({summary.status}); file {summary.file}")
         if not self._check_fault() and not self._stop.is_set():
@@ -424,7 +453,7 @@ class RigWorker:
             self._guard(lambda: self._poll(force=True))
         return f"{proc.name}: {summary.verdict}, status {summary.status}"
 
-    def _on_progress(self, p) -> None:
+    def _on_progress(self, p: Progress) -> None:
         cur = self.state.get().procedure
         self.state.update(procedure=ProcedureInfo(p.procedure, p.step, p.index, p.n_steps, p.fraction,
                                                   p.remaining_rig_s, p.remaining_wall_s,
@@ -432,19 +461,19 @@ class RigWorker:
 
     # ------------------------------------------------------------------ modes
     def _hold(self) -> str:
-        self.rig.relays.hold()
+        self._rig.relays.hold()
         self._poll(force=True)
         return "mode switches held: select a mode (1-6), then release"
 
     def _select(self, mode: int) -> str:
-        relays = self.rig.relays
+        relays = self._rig.relays
         try:
             relays.select(mode)
         except InterlockError as exc:
             # a disallowed mode (0, 7) lights the alarm; selecting without hold is refused
             if mode not in MODES:
                 self.state.update(alarm=str(exc))
-                self.rig.event("alarm", str(exc))
+                self._rig.event("alarm", str(exc))
             raise
         relays.alarm = None
         self.state.update(alarm=None)
@@ -452,7 +481,7 @@ class RigWorker:
         return f"mode {mode} ({MODES[mode]}) selected: release to switch"
 
     def _release(self) -> str:
-        relays = self.rig.relays
+        relays = self._rig.relays
         status = relays.status()
         why = interlock_reason(status.selected, status) if status.held else None
         try:
@@ -462,18 +491,18 @@ class RigWorker:
             if status.held:  # a refused mode change lights the alarm with its reason
                 relays.alarm = text
                 self.state.update(alarm=text)
-                self.rig.event("alarm", text)
+                self._rig.event("alarm", text)
             self._poll(force=True)
             raise InterlockError(text) from None
         relays.alarm = None
         self.state.update(alarm=None)
-        self.rig.event("mode", f"mode {now}")
+        self._rig.event("mode", f"mode {now}")
         self._poll(force=True)
         return f"mode {now} ({MODES.get(now, '?')}) in force"
 
     def _go_safe(self) -> str:
         self._slews.clear()
-        report = self.rig.safe()
+        report = go_safe(self._rig, "the operator asked for the safe state")
         self.state.update(alarm=None, slewing={})
         self._poll(force=True)
         if not report.ok:
@@ -482,8 +511,8 @@ class RigWorker:
 
     # ------------------------------------------------------------------ set-points
     def _slew_to(self, channel: str, volts: float, rate: float) -> str:
-        rig = self.rig
-        rig.torquers.check_bias(channel, volts)  # refused here, before the ramp starts
+        rig = self._rig
+        rig.torquers.limits.torquer_bias(channel, volts)  # refused here, before the ramp starts
         now = rig.torquers.bias_V(channel)
         self._slews[channel] = Slew(channel, volts, rate, now, rig.now())
         self.state.update(slewing={c: s.target_V for c, s in self._slews.items()})
@@ -492,37 +521,35 @@ class RigWorker:
     def _advance_slews(self) -> None:
         if not self._slews:
             return
-        t = self.rig.now()
+        t = self._rig.now()
         back = dict(self.state.get().readback)
         for ch, s in list(self._slews.items()):
             v = s.step(t)
-            back[f"torq {ch}"] = self.rig.set_torquer_bias_V(ch, v)
+            back[f"torq {ch}"] = self._rig.set_torquer_bias_V(ch, v)
             if s.done:
                 del self._slews[ch]
                 self._note("setpoint", f"torquer bias {ch} at {back[f'torq {ch}']:+.4f} V (read back)")
         self.state.update(readback=back, slewing={c: s.target_V for c, s in self._slews.items()})
 
-    def _set_output(self, kind: str, axis: str, volts: float) -> str:
-        rig = self.rig
-        if kind == "vtd":
-            back = rig.set_command_torque_V(axis, volts)
-            what = "command torque V_Td"
+    def _set_output(self, kind: SetpointKind, axis: str, volts: float) -> str:
+        rig = self._rig
+        if kind is SetpointKind.COMMAND_TORQUE:
+            back, key = rig.set_command_torque_V(axis, volts), f"vtd {axis}"
         else:
-            back = rig.set_ac_bias_V(axis, volts)
-            what = "autocollimator bias gamma_c"
-        self.state.update(readback=dict(self.state.get().readback) | {f"{kind} {axis}": back})
-        return f"{what} {axis} = {back:+.4f} V (read back)"
+            back, key = rig.set_ac_bias_V(axis, volts), f"gc {axis}"
+        self.state.update(readback=dict(self.state.get().readback) | {key: back})
+        return f"{kind} {axis} = {back:+.4f} V (read back)"
 
     def _caging(self, channel: str, inhibit: bool) -> str:
-        back = self.rig.set_caging_inhibit(channel, inhibit)
+        back = self._rig.set_caging_inhibit(channel, inhibit)
         self.state.update(caging=dict(self.state.get().caging) | {channel: back})
         return f"caging {channel} {'inhibited' if back else 'enabled'} (read back)"
 
     # ------------------------------------------------------------------ polling
     def _poll(self, force: bool = False) -> None:
-        rig = self.rig
+        rig = self._rig
         now = time.monotonic()
-        changes: dict = {}
+        changes: dict[str, object] = {}
         if force or now >= self._next_status:
             self._next_status = now + self.status_every_s
             changes["relay"] = rig.relays.status()
@@ -555,7 +582,7 @@ class RigWorker:
         self._slews.clear()
         self.meters.clear()
         safe = _safe_text(rig)
-        self.state.update(phase="fault", fault=str(fault), slewing={})
+        self.state.update(phase=Phase.FAULT, fault=str(fault), slewing={})
         self._note("fault", f"{fault}; safe state: {safe}")
         self._post(RigFault(str(fault), safe))
         return True
@@ -581,7 +608,7 @@ class RigWorker:
             log.exception("closing the rig failed")
             safe = f"unknown ({type(exc).__name__}: {exc})"
         finally:
-            self.state.update(phase="closed")
+            self.state.update(phase=Phase.CLOSED)
             self.stopped.set()
             self._post(WorkerStopped(reason, safe))
 

@@ -14,17 +14,18 @@ from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Checkbox, Input, Static
 
-from console.limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, SetpointLimits
+from console.limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, Entry, typed_setpoint, typed_slew
 from console.state import Snapshot
 from drivers.calibration import AXES, GYRO_CHANNELS
 from drivers.errors import SetpointRangeError
+from drivers.setpoints import SetpointLimits
 
 
 class SetpointPanel(VerticalScroll, can_focus=True):
     class Request(Message):
-        """A checked set-point for the rig thread: ``kind`` torq | vtd | gc | cage."""
+        """A checked set-point for the rig thread (or a caging switch)."""
 
-        def __init__(self, kind: str, key: str, value: float | bool, slew: float = 0.0) -> None:
+        def __init__(self, kind: Entry, key: str, value: float | bool, slew: float = 0.0) -> None:
             super().__init__()
             self.kind, self.key, self.value, self.slew = kind, key, value, slew
 
@@ -75,7 +76,7 @@ class SetpointPanel(VerticalScroll, can_focus=True):
             self.query_one(f"#range-torq-{c}", Static).update(f"+-{limits.torquer_limit_V(c):.4g} V")
         for a in AXES:
             for kind in ("gc", "vtd"):
-                self.query_one(f"#range-{kind}-{a}", Static).update(f"+-{limits.dac_range_V():g} V")
+                self.query_one(f"#range-{kind}-{a}", Static).update(f"+-{limits.calibration.dac_range_V:g} V")
 
     def message(self, text: str, ok: bool) -> None:
         self.query_one("#sp-message", Static).update(Text(text, style="green" if ok else "bold red"))
@@ -85,15 +86,15 @@ class SetpointPanel(VerticalScroll, can_focus=True):
         if self.limits is None or event.input.id is None:
             self.message("the rig is not open yet", False)
             return
-        kind, _, key = event.input.id.partition("-")
+        prefix, _, key = event.input.id.partition("-")
+        kind = Entry(prefix)
         try:
-            if kind == "slew":
-                rate = self.limits.slew(event.value)
+            if kind is Entry.SLEW:
+                rate = typed_slew(event.value)
                 self.message(f"torquer bias slew {rate:g} V/s", True)
                 return
-            rate = self.limits.slew(self.query_one("#slew", Input).value)
-            value = {"torq": self.limits.torquer_bias, "gc": self.limits.ac_bias,
-                     "vtd": self.limits.command_torque}[kind](key, event.value)
+            rate = typed_slew(self.query_one("#slew", Input).value)
+            value = typed_setpoint(self.limits, kind, key, event.value)
         except SetpointRangeError as exc:  # refused here: nothing goes to the rig
             self.message(f"refused: {exc}", False)
             self.notify(str(exc), title="set-point refused", severity="error", timeout=6)
@@ -103,7 +104,7 @@ class SetpointPanel(VerticalScroll, can_focus=True):
     def on_checkbox_changed(self, event: Checkbox.Changed) -> None:
         event.stop()
         if event.checkbox.id and event.checkbox.id.startswith("cage-"):
-            self.post_message(self.Request("cage", event.checkbox.id[5:], bool(event.value)))
+            self.post_message(self.Request(Entry.CAGING, event.checkbox.id[5:], bool(event.value)))
 
     def show(self, snap: Snapshot) -> None:
         key = (snap.readback, snap.slewing, snap.caging)

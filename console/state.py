@@ -11,11 +11,15 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from drivers.calibration import RigCalibration
 from drivers.relay import RelayStatus
+
+if TYPE_CHECKING:
+    from procedures.runner import RunSummary
 
 
 @dataclass(frozen=True)
@@ -43,9 +47,38 @@ class ProcedureInfo:
     aborting: bool = False
 
 
+class Phase(StrEnum):
+    """What the console's rig thread is doing; ``LiveState.update`` allows only the moves in
+    ``_NEXT`` (as bluesky's RunEngine guards its state machine)."""
+
+    OPENING = "opening"          # the rig is being opened
+    READY = "ready"              # meters running, commands accepted
+    RECORDING = "recording"      # an operator's recording is open
+    PROCEDURE = "procedure"      # a procedure owns the rig; only its abort is accepted
+    FAULT = "fault"              # a device fault is latched; the rig went safe
+    CLOSED = "closed"            # the thread has ended (quit, or the rig could not be opened)
+
+    def can_become(self, other: Phase) -> bool:
+        return other is self or other in _NEXT[self]
+
+
+_NEXT: dict[Phase, frozenset[Phase]] = {
+    Phase.OPENING: frozenset({Phase.READY, Phase.FAULT, Phase.CLOSED}),
+    Phase.READY: frozenset({Phase.RECORDING, Phase.PROCEDURE, Phase.FAULT, Phase.CLOSED}),
+    Phase.RECORDING: frozenset({Phase.READY, Phase.FAULT, Phase.CLOSED}),
+    Phase.PROCEDURE: frozenset({Phase.READY, Phase.FAULT, Phase.CLOSED}),
+    Phase.FAULT: frozenset({Phase.CLOSED}),
+    Phase.CLOSED: frozenset(),
+}
+
+
+class PhaseError(RuntimeError):
+    """A move of the console's state machine that ``Phase`` does not allow: a bug."""
+
+
 @dataclass(frozen=True)
 class Snapshot:
-    phase: str = "opening"                     # opening | ready | recording | procedure | fault | closed
+    phase: Phase = Phase.OPENING
     relay: RelayStatus | None = None
     alarm: str | None = None                   # the alarm lamp's reason (disallowed mode, interlock)
     fault: str | None = None                   # a latched device fault (the rig went safe)
@@ -69,6 +102,9 @@ class LiveState:
 
     def update(self, **changes: Any) -> Snapshot:
         with self._lock:
+            new = changes.get("phase", self._snap.phase)
+            if not self._snap.phase.can_become(new):
+                raise PhaseError(f"the console cannot go from {self._snap.phase} to {new}")
             self._snap = replace(self._snap, **changes)
             return self._snap
 
@@ -104,7 +140,7 @@ class RecordingEnded:
 
 @dataclass(frozen=True)
 class ProcedureEnded:
-    summary: Any              # procedures.runner.RunSummary
+    summary: RunSummary
 
 
 @dataclass(frozen=True)

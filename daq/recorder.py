@@ -12,9 +12,11 @@ base. The file streams in SWMR mode with a flush at least every ``flush_s`` (``R
 blocks are read ``block_s`` at a time, so a sample is on disk at most about
 ``2 block_s + flush_s`` (0.7 s by default) after it was taken.
 
-Any exception (a device fault, Ctrl-C, a full disk) puts the rig in the safe state, closes
-the file "aborted: <why>" and is raised again. The file is created before the ADC starts, so
-an unwritable path fails before anything moves.
+Any exception (a device fault, Ctrl-C, a full disk) closes the file "aborted: <why>" and is
+raised again. The recorder only records: driving the rig safe is the business of whoever
+executes the run (``drivers.safety.SafeOnAbort``, which ``record`` and the procedure runner
+wrap around their recordings). The file is created before the ADC starts, so an unwritable
+path fails before anything moves.
 """
 
 from __future__ import annotations
@@ -31,8 +33,10 @@ from typing import Any
 import numpy as np
 
 from daq.runfile import STATUS_COMPLETE, STATUS_RECORDING, RunFileError, RunWriter, abort_status
+from drivers.adc import AdcBlock
 from drivers.errors import DriverError, SampleGap
 from drivers.rig import Rig
+from drivers.safety import SafeOnAbort
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +55,8 @@ class RecordResult:
 
 
 class Acquisition:
-    """The ADC streaming into one run file for as long as the ``with`` block lasts."""
+    """The ADC streaming into one run file for as long as the ``with`` block lasts (or from
+    ``start`` to ``close``, for a caller that holds a recording open across calls)."""
 
     def __init__(self, rig: Rig, path: str | Path, *, rate_hz: float,
                  channels: list[str] | tuple[str, ...] | None = None,
@@ -77,7 +82,8 @@ class Acquisition:
         self._lock = threading.Lock()
 
     # ------------------------------------------------------------------ lifetime
-    def __enter__(self) -> Acquisition:
+    def start(self) -> Acquisition:
+        """Start the ADC and the file's time base; on failure the file is closed "aborted"."""
         try:
             self.t0 = self.rig.adc.start()
             self.rig.subscribe(self._on_event)
@@ -85,25 +91,32 @@ class Acquisition:
             self.writer.event(0.0, "start", f"recording {len(self.channels)} channels at {self.rate_hz:g} Hz, "
                               f"mode {self.mode}")
         except BaseException as exc:
-            self.__exit__(type(exc), exc, exc.__traceback__)
+            self.close(exc)
             raise
         return self
 
-    def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:
+    def close(self, exc: BaseException | None = None) -> None:
+        """Stop the ADC and close the file: "complete" without ``exc``, else "aborted: <why>".
+        A failure while finishing a clean run is raised, and the file is closed "aborted"."""
         status = STATUS_COMPLETE
         try:
-            if ev is None:
+            if exc is None:
                 self.rig.adc.stop()
                 self._flush_events()
                 self.writer.close(status)
-        except BaseException as exc:   # a failure while finishing is an abort like any other
-            ev = exc
+        except BaseException as failure:   # a failure while finishing is an abort like any other
+            exc = failure
             raise
         finally:
-            if ev is not None:
-                status = abort_status(ev)
-                _go_safe(self.rig, ev)
+            if exc is not None:
+                status = abort_status(exc)
             self._finish(status)
+
+    def __enter__(self) -> Acquisition:
+        return self.start()
+
+    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None) -> None:
+        self.close(ev)
 
     def _finish(self, status: str) -> None:
         self.rig.unsubscribe(self._on_event)
@@ -174,7 +187,7 @@ class Acquisition:
             self._flush_events()
         return out
 
-    def _overrange_events(self, block) -> None:
+    def _overrange_events(self, block: AdcBlock) -> None:
         over = block.overrange.any(axis=0)
         for j in np.flatnonzero(over):
             k = int(block.overrange[:, j].argmax())
@@ -187,13 +200,16 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
            ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1, flush_s: float = 0.5,
            procedure: str | None = None, meta: Mapping[str, Any] | None = None,
            overwrite: bool = False) -> RecordResult:
-    """Record ``duration_s`` seconds of the ADC to ``path``; returns what was written."""
+    """Record ``duration_s`` seconds of the ADC to ``path``; returns what was written. An abort
+    leaves the rig safe (``SafeOnAbort``) and the file closed "aborted: <why>"."""
     if not duration_s > 0:
         raise ValueError(f"record duration {duration_s!r} s must be > 0")
-    acq = Acquisition(rig, path, rate_hz=rate_hz, channels=channels, ranges_V=ranges_V, block_s=block_s,
-                      flush_s=flush_s, procedure=procedure, meta=meta, overwrite=overwrite)
-    with acq:
-        acq.acquire(duration_s, keep=False)
+    guard = SafeOnAbort(rig, "recording")
+    with guard:
+        acq = Acquisition(rig, path, rate_hz=rate_hz, channels=channels, ranges_V=ranges_V, block_s=block_s,
+                          flush_s=flush_s, procedure=procedure, meta=meta, overwrite=overwrite)
+        with acq, guard:   # the inner guard first: the safe state lands in the file before it closes
+            acq.acquire(duration_s, keep=False)
     return acq.result
 
 
@@ -205,12 +221,3 @@ def _start_stamp(rig: Rig, t0: float) -> dict[str, Any]:
         stamp["start_unix_s"] = start
         stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.UTC).isoformat(timespec="microseconds")
     return stamp
-
-
-def _go_safe(rig: Rig, exc: BaseException) -> None:
-    """Every abort leaves the rig safe (mode 1, biases zero), whatever stopped the recording."""
-    if isinstance(exc, RunFileError):
-        log.error("%s; putting the rig in the safe state", exc)
-    report = rig.safe()
-    if not report.ok:
-        log.error("the rig did not confirm the safe state: %s", "; ".join(report.failed))

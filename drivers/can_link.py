@@ -16,7 +16,16 @@ import time
 import can
 
 from drivers import can_protocol as cp
-from drivers.errors import DeviceLost, DeviceTimeout, InterlockError, NodeError, NodeReset, ProtocolError, SetpointRangeError
+from drivers.errors import (
+    DeviceLost,
+    DeviceTimeout,
+    DriverError,
+    InterlockError,
+    NodeError,
+    NodeReset,
+    ProtocolError,
+    SetpointRangeError,
+)
 from drivers.faults import FaultLatch
 
 log = logging.getLogger(__name__)
@@ -172,7 +181,7 @@ class CanLink:
                 self.faults.report(exc)
                 raise
             if not slot[0].wait(timeout_s):
-                fault = DeviceTimeout(f"CAN node '{name}' (id {node}) did not answer {cp.OPS[op]} index {index} "
+                fault: DriverError = DeviceTimeout(f"CAN node '{name}' (id {node}) did not answer {cp.OPS[op]} index {index} "
                                       f"within {timeout_s:g} s; the rig went safe")
                 self.faults.report(fault)
                 raise fault
@@ -216,9 +225,7 @@ class NodeClient:
         if resp.status == cp.ST_RANGE:
             raise SetpointRangeError(text, value=value)
         if resp.status in (cp.ST_INTERLOCK, cp.ST_LATCHED, cp.ST_NOT_HELD):
-            err = InterlockError(text)
-            err.detail = resp.value  # type: ignore[attr-defined]
-            raise err
+            raise InterlockError(text, detail=resp.value)
         fault = ProtocolError(text)
         self.link.faults.report(fault)
         raise fault

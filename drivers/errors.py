@@ -33,7 +33,16 @@ class SetpointRangeError(DriverError, ValueError):
 
 
 class InterlockError(DriverError):
-    """The rig refuses the request in its present state (mode interlocks, node latched safe)."""
+    """The rig refuses the request in its present state (mode interlocks, node latched safe).
+
+    ``reasons`` says why in words, one per interlock that holds (e.g. "gyros not at speed");
+    ``detail`` is the node's raw refusal word (its interlock bits), 0 when it gave none.
+    """
+
+    def __init__(self, message: str, *, reasons: tuple[str, ...] = (), detail: int = 0) -> None:
+        super().__init__(message)
+        self.reasons = tuple(reasons)
+        self.detail = detail
 
 
 class ModeNotAllowed(InterlockError, ValueError):

@@ -119,10 +119,10 @@ class CanRelayDriver(RelayDriver):
         try:
             return self.node.call(cp.OP_RELEASE, what="RELEASE")
         except InterlockError as exc:
-            bits = getattr(exc, "detail", 0)
-            why = [w for b, w in ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"), (cp.WHY_NOT_CAGED, "gyros not caged"))
-                   if bits & b]
-            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else "")) from None
+            why = tuple(w for b, w in ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"),
+                                       (cp.WHY_NOT_CAGED, "gyros not caged")) if exc.detail & b)
+            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
+                                 detail=exc.detail) from None
 
     def status(self) -> RelayStatus:
         w = self.node.call(cp.OP_STATUS, what="STATUS")

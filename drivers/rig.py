@@ -7,6 +7,11 @@
     sim?config=F.toml&table=manual       a sim config; a hand-cranked table (the operator is asked)
     serial:///dev/ttyACM0?can=socketcan:can0[&baud=2000000][&table=manual|can]
 
+``serial`` is built in. Other schemes are found by name in the ``fbs.rig_schemes`` entry-point
+group (``pyproject.toml``): ``sim`` is ``simhw.rig_scheme:open_sim_rig``, which serves the same
+drivers from simulated devices. So the drivers never import the simulator, and a new kind of
+rig is a package with an entry point, not an edit here.
+
 Faults that happen off the caller's thread (a node falls silent, the ADC port vanishes) are
 latched (``rig.faults``); the rig goes to the safe state at once, and every later call
 raises the fault. Refusals (``SetpointRangeError``, ``InterlockError``) change nothing, so
@@ -17,8 +22,9 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from importlib.metadata import entry_points
 from urllib.parse import parse_qsl, urlsplit
 
 import can
@@ -64,7 +70,7 @@ class Rig:
         self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
         self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
         #: the rig's data sheet (instrument constants, set-point limits)
-        self.calibration = torquers.calibration
+        self.calibration = torquers.limits.calibration
         #: the simulated rig's server, for fault injection in tests; None on hardware
         self.emulator = emulator
         self.link = link
@@ -230,11 +236,16 @@ class Rig:
 
 
 # ---------------------------------------------------------------------------- open_rig
-_SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog"}
 _SERIAL_KEYS = {"can", "baud", "table"}
+#: the entry-point group where rig URL schemes other than ``serial`` are registered
+SCHEME_GROUP = "fbs.rig_schemes"
+
+#: opens the rig at a URL of its scheme: (url, its query parameters, operator, data sheet) -> Rig
+RigOpener = Callable[[str, dict[str, str], Operator | None, RigCalibration | None], Rig]
 
 
-def _flag(key: str, value: str) -> bool:
+def flag(key: str, value: str) -> bool:
+    """A URL flag's value: 1/true/yes/on or 0/false/no/off."""
     if value.lower() in ("1", "true", "yes", "on"):
         return True
     if value.lower() in ("0", "false", "no", "off"):
@@ -247,60 +258,40 @@ def open_rig(url: str = "sim", *, operator: Operator | None = None,
     """Connect to the rig at ``url`` (see the module docstring); raises DriverError/ValueError."""
     parts = urlsplit(url)
     params = dict(parse_qsl(parts.query, keep_blank_values=True))
-    kind = parts.scheme or parts.path
-    if kind == "sim" and (parts.path in ("sim", "") or parts.scheme == "sim"):
-        return _open_sim(url, params, operator, calibration)
-    if kind == "serial":
+    if parts.scheme == "serial":
         return _open_serial(url, parts.path, params, operator, calibration)
-    raise ValueError(f"rig URL {url!r}: unknown rig; use 'sim[?realtime=1&seed=N&warm=1&config=F.toml&table=manual]' "
-                     f"or 'serial:///dev/ttyACM0?can=socketcan:can0'")
+    kind = parts.scheme or parts.path    # "sim?seed=3" has no scheme: its name is the path
+    opener = scheme_opener(kind) if kind and (not parts.scheme or parts.path in ("", kind)) else None
+    if opener is None:
+        raise ValueError(f"rig URL {url!r}: unknown rig; use 'sim[?realtime=1&seed=N&warm=1&config=F.toml&table=manual]' "
+                         f"or 'serial:///dev/ttyACM0?can=socketcan:can0' (schemes: {', '.join(schemes())})")
+    return opener(url, params, operator, calibration)
 
 
-def _check_keys(url: str, params: dict, allowed: set[str]) -> None:
+def schemes() -> list[str]:
+    """The rig URL schemes this installation knows."""
+    return sorted({"serial", *(ep.name for ep in entry_points(group=SCHEME_GROUP))})
+
+
+def scheme_opener(name: str) -> RigOpener | None:
+    """The opener registered for the scheme ``name`` (entry-point group ``fbs.rig_schemes``)."""
+    for ep in entry_points(group=SCHEME_GROUP, name=name):
+        opener: RigOpener = ep.load()
+        return opener
+    return None
+
+
+def check_keys(url: str, params: Mapping[str, str], allowed: set[str]) -> None:
+    """Refuse a URL parameter the scheme does not know, naming the known ones."""
     unknown = sorted(set(params) - allowed)
     if unknown:
         raise ValueError(f"rig URL {url!r}: unknown parameter(s) {', '.join(unknown)} "
                          f"(known: {', '.join(sorted(allowed))})")
 
 
-def _open_sim(url: str, params: dict, operator: Operator | None, calibration: RigCalibration | None) -> Rig:
-    from simhw.params import load_config
-    from simhw.rig_server import SimRigServer
-
-    _check_keys(url, params, _SIM_KEYS)
-    table = params.get("table", "can")
-    if table not in ("can", "manual"):
-        raise ValueError(f"rig URL {url!r}: table={table!r} must be 'can' or 'manual'")
-    try:
-        seed = int(params.get("seed", "0"))
-        speed = float(params.get("speed", "1"))
-        watchdog = float(params.get("watchdog", "1"))
-    except ValueError as exc:
-        raise ValueError(f"rig URL {url!r}: {exc}") from None
-    cfg = load_config(params.get("config"))
-    if calibration is None:
-        from simhw.datasheet import rig_calibration
-        calibration = rig_calibration(cfg)
-    server = SimRigServer(cfg, seed=seed, realtime=_flag("realtime", params.get("realtime", "0")), speed=speed,
-                          warm=_flag("warm", params.get("warm", "0")), watchdog_s=watchdog)
-    try:
-        bus = can.Bus(interface="virtual", channel=server.can_channel, receive_own_messages=False)
-        if table == "manual":
-            t = server.sim.cfg.table
-            tab = ("manual", operator or terminal_operator, TablePosition(t.tilt_deg, t.spindle_deg % 360.0))
-        else:
-            tab = ("can",)
-        rig = _assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
-                        node_timeout_s=watchdog, closers=[server.stop], emulator=server)
-    except BaseException:
-        server.stop()
-        raise
-    return rig
-
-
 def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
                  calibration: RigCalibration | None) -> Rig:
-    _check_keys(url, params, _SERIAL_KEYS)
+    check_keys(url, params, _SERIAL_KEYS)
     if not path:
         raise ValueError(f"rig URL {url!r}: no serial device path (e.g. serial:///dev/ttyACM0?can=socketcan:can0)")
     iface, _, channel = params.get("can", "").partition(":")
@@ -318,10 +309,10 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
     except (can.CanError, OSError, ValueError, ImportError) as exc:
         raise DeviceLost(f"cannot open CAN interface {iface}:{channel}: {exc}") from exc
     tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
-    return _assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)
+    return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)
 
 
-def _assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
+def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
               closers: list | None = None, emulator=None) -> Rig:
     faults = FaultLatch()

@@ -6,57 +6,52 @@ nominal torquer scale factor) is refused before anything is sent.
 
 from __future__ import annotations
 
-import abc
+from typing import Protocol
 
 from drivers import can_protocol as cp
 from drivers.calibration import GYRO_CHANNELS, RigCalibration
 from drivers.can_link import CanLink, NodeClient
 from drivers.errors import ProtocolError
-from drivers.setpoints import check_name, check_value
+from drivers.setpoints import SetpointLimits, check_name
 
 
-class TorquerDac(abc.ABC):
-    channels = GYRO_CHANNELS
+class TorquerDac(Protocol):
+    """The torquer bias DACs, whatever the wire."""
 
-    def __init__(self, calibration: RigCalibration | None = None) -> None:
-        self.calibration = calibration or RigCalibration()
+    channels: tuple[str, ...]
+    limits: SetpointLimits
 
-    def limit_V(self, channel: str) -> float:
-        return self.calibration.torquer_limit_V(check_name("gyro channel", channel, self.channels))
-
-    def check_bias(self, channel: str, volts: float) -> float:
-        lim = self.limit_V(channel)
-        kto = self.calibration.torquer_scale_urad_per_s_per_V[channel]
-        why = (f"the torquer's {self.calibration.max_torquing_earth_rates:g} x earth-rate limit at "
-               f"K_TO {kto:g} urad/s/V" if lim < self.calibration.dac_range_V else "the DAC's range")
-        return check_value(f"torquer bias (V) on gyro channel {channel}", volts, lim, why)
-
-    @abc.abstractmethod
     def set_bias_V(self, channel: str, volts: float) -> float:
-        """Set one bias; returns the DAC's read-back (V)."""
+        """Set one bias (checked against ``limits`` first); returns the DAC's read-back (V)."""
+        ...
 
-    @abc.abstractmethod
     def bias_V(self, channel: str) -> float: ...
 
-    def zero(self) -> None:
-        for c in self.channels:
-            self.set_bias_V(c, 0.0)
+    def zero(self) -> None: ...
 
 
-class CanTorquerDac(TorquerDac):
+class CanTorquerDac:
+    """The torquer DACs on their CAN node."""
+
+    channels = GYRO_CHANNELS
+
     def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(calibration)
+        self.limits = SetpointLimits(calibration or RigCalibration())
         self.node = NodeClient(link, "torquer")
 
     def set_bias_V(self, channel: str, volts: float) -> float:
-        v = self.check_bias(channel, volts)
+        v = self.limits.torquer_bias(channel, volts)
         i = self.channels.index(channel)
         back = cp.from_micro(self.node.call(cp.OP_SET, i, cp.to_micro(v), what=f"torquer bias {v:+.6f} V on {channel}"))
-        return check_readback(self.node, f"torquer bias on {channel}", v, back, self.calibration.dac_lsb_V)
+        return check_readback(self.node, f"torquer bias on {channel}", v, back, self.limits.calibration.dac_lsb_V)
 
     def bias_V(self, channel: str) -> float:
         i = self.channels.index(check_name("gyro channel", channel, self.channels))
         return cp.from_micro(self.node.call(cp.OP_GET, i, what=f"read torquer bias {channel}"))
+
+    def zero(self) -> None:
+        for c in self.channels:
+            self.set_bias_V(c, 0.0)
 
 
 def check_readback(node: NodeClient, what: str, sent: float, back: float, lsb: float) -> float:

@@ -1,18 +1,26 @@
 """The procedure runner: named steps, progress, measurements with limits, abort to safe.
 
-A procedure (``Procedure``) is a plan: a generator of ``Step`` objects, each a name, a plain
-function of the run's ``Context`` and the rig time it is expected to take. The runner drives
-the plan (as bluesky's RunEngine drives a plan) inside one continuous recording
-(``daq.recorder.Acquisition``), so every command and every sample of the procedure lands
-in one "fbs-run" file with a ``step`` event at each step's start and a ``step-done`` event,
-carrying the step's JSON result, at its end. After the last step the procedure's ``analyze``
-turns the step results and the file into measurements, which are checked against their
-limits (as OpenHTF's measurements with validators) for the pass/fail verdict.
+A procedure (``Procedure``) is a plan: a plain list of ``Step`` objects, each a name, a plain
+function of the run's ``Context`` and the rig time it is expected to take. The list is made
+before step 1 (its length and expected times drive the progress and the time remaining); a
+step that depends on an earlier one reads ``Context.results`` when it runs. The runner
+executes the plan inside one continuous recording (``daq.recorder.Acquisition``), so every
+command and every sample of the procedure lands in one "fbs-run" file with a ``step`` event
+at each step's start and a ``step-done`` event, carrying the step's JSON result and the span
+of samples it recorded, at its end. After the last step the procedure's ``analyze`` turns the
+step results and the data spans into measurements, which are checked against their limits
+(as OpenHTF's measurements with validators) for the pass/fail verdict.
+
+Provenance is the runner's: for every data step it records where its samples are (``Span``:
+the run file and the sample range), hands them to ``analyze`` (``Context.spans``,
+``Context.data_spans``) and carries them over on resume, so no procedure keeps its own
+bookkeeping of files and times.
 
 Abort: Ctrl-C, an exception, a device fault or ``Context.abort`` (the console's button) ends
-the recording: the rig goes to the safe state and the file is closed "aborted: <why>"
-(``Acquisition`` does both); the summary lists the steps done. ``resume`` starts a new run
-from an aborted file: its completed data steps are taken over (their results re-recorded as
+the run. The runner owns the teardown (as OpenHTF's executor does): the rig goes to the safe
+state (``drivers.safety.SafeOnAbort``) while the file is still open, then the recording is
+closed "aborted: <why>"; the summary lists the steps done. ``resume`` starts a new run from an
+aborted file: its completed data steps are taken over (their results and spans re-recorded as
 ``step-done`` events marked ``resumed``), setup steps run again, the rest run normally.
 """
 
@@ -25,17 +33,19 @@ import logging
 import math
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from enum import StrEnum
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Generic, TypeVar
 
 import numpy as np
 
-from daq.reader import RunFile
+from daq.reader import Event, RunFile
 from daq.recorder import Acquisition
 from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
 from drivers.rig import Rig
+from drivers.safety import SafeOnAbort
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +60,20 @@ class ProcedureAborted(Exception):
 
 class ProcedureError(Exception):
     """The procedure cannot go on: what happened and what to do, in words."""
+
+
+class Verdict(StrEnum):
+    """How a run ended. A ``str``, so summaries and JSON read as before ("pass", ...)."""
+
+    PASS = "pass"            # every measurement within its limits
+    FAIL = "fail"            # the run completed, a measurement is outside its limits
+    ABORTED = "aborted"      # stopped before its end (operator, Ctrl-C, device fault)
+    ERROR = "error"          # could not start, or its analysis failed
+
+    @property
+    def exit_code(self) -> int:
+        """DESIGN.md section 7: 0 pass, 1 limits failed, 2 aborted or error."""
+        return {Verdict.PASS: 0, Verdict.FAIL: 1}.get(self, 2)
 
 
 # ---------------------------------------------------------------------------- measurements
@@ -92,7 +116,7 @@ class Figure:
 
     name: str
     caption: str
-    draw: Callable[[Path], None]
+    draw: Callable[[Path], object]
 
 
 @dataclass
@@ -104,6 +128,52 @@ class Analysis:
     measurements: list[Measurement] = field(default_factory=list)
     figures: list[Figure] = field(default_factory=list)
     markdown: str = ""
+
+
+# ---------------------------------------------------------------------------- provenance
+@dataclass(frozen=True)
+class Span:
+    """Where a data step's samples are: samples ``start <= i < stop`` of the run ``file``."""
+
+    file: Path
+    start: int
+    stop: int
+    rate_hz: float
+
+    @property
+    def start_s(self) -> float:
+        return self.start / self.rate_hz
+
+    @property
+    def stop_s(self) -> float:
+        return self.stop / self.rate_hz
+
+    @property
+    def samples(self) -> int:
+        return self.stop - self.start
+
+    def to_json(self) -> dict[str, Any]:
+        return {"file": str(self.file), "start": self.start, "stop": self.stop, "rate_hz": self.rate_hz}
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], recorded_in: Path) -> Span:
+        """A span read from the file ``recorded_in``; a data file that is no longer where it was
+        recorded is looked for beside that file (a run directory copied elsewhere)."""
+        path = Path(data["file"])
+        if not path.exists() and (recorded_in.parent / path.name).exists():
+            path = recorded_in.parent / path.name
+        return cls(path, int(data["start"]), int(data["stop"]), float(data["rate_hz"]))
+
+
+def merge_spans(spans: Iterable[Span]) -> list[Span]:
+    """The spans in order, back-to-back spans of one file joined into one continuous stretch."""
+    out: list[Span] = []
+    for s in spans:
+        if out and out[-1].file == s.file and out[-1].stop == s.start and out[-1].rate_hz == s.rate_hz:
+            out[-1] = Span(s.file, out[-1].start, s.stop, s.rate_hz)
+        else:
+            out.append(s)
+    return out
 
 
 # ---------------------------------------------------------------------------- steps, progress
@@ -133,18 +203,24 @@ ProgressListener = Callable[[Progress], None]
 
 
 # ---------------------------------------------------------------------------- procedure
-class Procedure(abc.ABC):
-    """A scripted procedure. Subclasses set the class attributes and write ``plan`` and
-    ``analyze``; ``procedures.catalogue`` finds them by their module's ``PROCEDURE``."""
+#: a procedure's parameters: a dataclass, one per procedure
+P = TypeVar("P")
+
+
+class Procedure(abc.ABC, Generic[P]):
+    """A scripted procedure, generic over its parameters' dataclass ``P``. Subclasses set the
+    class attributes (``Params`` is ``P`` itself, for building defaults and parsing
+    ``--param``) and write ``plan`` and ``analyze``; ``procedures.calibrations.catalogue``
+    finds them by their module's ``PROCEDURE``."""
 
     name: ClassVar[str]                  # CLI name, e.g. "earth-rate"
     title: ClassVar[str]
     json_keys: ClassVar[tuple[str, ...]]  # DESIGN.md section 7, "file" included
-    Params: ClassVar[type]                # a dataclass of the procedure's parameters
+    Params: ClassVar[type[Any]]           # the dataclass P (a ClassVar cannot name a type variable)
     mode: ClassVar[int] = 3
 
-    def __init__(self, params: Any = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None) -> None:
-        self.params = params if params is not None else self.Params()
+    def __init__(self, params: P | None = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+        self.params: P = params if params is not None else self.Params()
         #: summaries of earlier procedures (by name), e.g. the earth-rate K_TO a stopwatch run uses
         self.prior = dict(prior or {})
 
@@ -159,15 +235,17 @@ class Procedure(abc.ABC):
     ranges_V: dict[str, float] | None = None
 
     @abc.abstractmethod
-    def plan(self, ctx: Context) -> Iterator[Step]:
-        """The steps, in order (a generator; it may look at ``ctx.results`` of earlier steps)."""
+    def plan(self) -> Sequence[Step]:
+        """The steps, in order: a plain list, made before step 1. A step that depends on an
+        earlier one reads ``ctx.results`` when it runs."""
 
     @abc.abstractmethod
     def analyze(self, ctx: Context) -> Analysis:
-        """After the steps: measurements from ``ctx.results`` and ``ctx.path``."""
+        """After the steps: measurements from ``ctx.results`` and the data steps' samples
+        (``ctx.spans``, ``ctx.data_spans``)."""
 
     def params_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.params)
+        return dataclasses.asdict(self.params)  # type: ignore[call-overload]  # P is a dataclass by contract
 
     @classmethod
     def params_from(cls, data: Mapping[str, Any]) -> Any:
@@ -183,11 +261,13 @@ class Context:
     """What a step sees: the rig, the recording, earlier results, and helpers that keep the
     progress current and honour an abort request."""
 
-    def __init__(self, proc: Procedure, rig: Rig, acq: Acquisition, *, progress: ProgressListener | None,
+    def __init__(self, proc: Procedure[Any], rig: Rig, acq: Acquisition, *, progress: ProgressListener | None,
                  abort: threading.Event) -> None:
         self.proc, self.rig, self.acq = proc, rig, acq
         self.params = proc.params
         self.results: dict[str, Any] = {}
+        #: where each data step's samples are (resumed steps: in the earlier file), by step name
+        self.spans: dict[str, Span] = {}
         self.path = acq.result.path
         self._progress = progress
         self._abort = abort
@@ -225,6 +305,12 @@ class Context:
     def column(self, name: str) -> int:
         return self.acq.channels.index(name)
 
+    def data_spans(self, steps: Iterable[str] | None = None) -> list[Span]:
+        """The samples of the data steps done (``steps``, default all), in plan order,
+        back-to-back spans of one file joined; a step not done is left out."""
+        wanted = set(self.spans) if steps is None else set(steps)
+        return merge_spans(self.spans[s.name] for s in self.steps if s.name in wanted and s.name in self.spans)
+
     def note(self, text: str, kind: str = "note") -> None:
         self.acq.note(kind, text)
 
@@ -259,12 +345,14 @@ class RunSummary:
     procedure: str
     file: Path | None
     status: str                      # "complete" | "aborted: <why>"
-    verdict: str                     # "pass" | "fail" | "aborted" | "error"
+    verdict: Verdict
     values: dict[str, Any] = field(default_factory=dict)
     measurements: list[Measurement] = field(default_factory=list)
     steps_done: list[str] = field(default_factory=list)
     steps_resumed: list[str] = field(default_factory=list)
     steps_planned: list[str] = field(default_factory=list)
+    #: where each data step's samples are (the runner's provenance record)
+    spans: dict[str, Span] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
     report: Path | None = None
@@ -273,7 +361,7 @@ class RunSummary:
     @property
     def exit_code(self) -> int:
         """DESIGN.md section 7: 0 pass, 1 limits failed, 2 aborted or error."""
-        return {"pass": 0, "fail": 1}.get(self.verdict, 2)
+        return self.verdict.exit_code
 
     def json_values(self, keys: tuple[str, ...]) -> dict[str, Any]:
         """Exactly the keys of DESIGN.md section 7 (None where not measured)."""
@@ -287,7 +375,7 @@ class RunSummary:
                 "verdict": self.verdict, "values": self.values,
                 "measurements": [m.to_json() for m in self.measurements], "steps_done": self.steps_done,
                 "steps_resumed": self.steps_resumed, "steps_planned": self.steps_planned,
-                "params": self.params, "error": self.error,
+                "spans": {name: s.to_json() for name, s in self.spans.items()}, "params": self.params, "error": self.error,
                 "report": str(self.report) if self.report else None}
 
 
@@ -308,6 +396,8 @@ class Resumed:
     procedure: str
     params: dict[str, Any]
     results: dict[str, Any]
+    #: where the completed data steps' samples are (in that file, or in one it resumed)
+    spans: dict[str, Span] = field(default_factory=dict)
 
 
 def load_resume(path: str | Path, procedure: str) -> Resumed:
@@ -324,20 +414,30 @@ def load_resume(path: str | Path, procedure: str) -> Resumed:
         raise ProcedureError(f"--resume {path}: that file is a {info['name']!r} run, not {procedure!r}")
     if status == STATUS_COMPLETE:
         raise ProcedureError(f"--resume {path}: that run is complete; nothing to resume")
+    results, spans = steps_done(path, events)
+    return Resumed(path, procedure, dict(info.get("params", {})), results, spans)
+
+
+def steps_done(path: Path, events: Iterable[Event]) -> tuple[dict[str, Any], dict[str, Span]]:
+    """The results and data spans of the steps a run file records as done (its ``step-done``
+    events), by step name: what a resume takes over, or a re-analysis of a finished run reads."""
     results: dict[str, Any] = {}
+    spans: dict[str, Span] = {}
     for e in events:
         if e.kind == EVENT_STEP_DONE:
             try:
                 item = json.loads(e.text)
             except json.JSONDecodeError:
-                raise ProcedureError(f"--resume {path}: a step-done event at {e.time_s:.3f} s is not JSON "
+                raise ProcedureError(f"{path}: a step-done event at {e.time_s:.3f} s is not JSON "
                                      f"(cut at {len(e.text)} bytes?)") from None
             results[item["step"]] = item.get("result")
-    return Resumed(path, procedure, dict(info.get("params", {})), results)
+            if item.get("span"):
+                spans[item["step"]] = Span.from_json(item["span"], path)
+    return results, spans
 
 
 # ---------------------------------------------------------------------------- the runner
-def run_procedure(proc: Procedure, rig: Rig, out_dir: str | Path, *, resume: Resumed | None = None,
+def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume: Resumed | None = None,
                   progress: ProgressListener | None = None, abort: threading.Event | None = None,
                   report: bool = True) -> RunSummary:
     """Run ``proc`` on ``rig``, recording to a new file in ``out_dir``; never raises for an
@@ -346,12 +446,11 @@ def run_procedure(proc: Procedure, rig: Rig, out_dir: str | Path, *, resume: Res
     out_dir.mkdir(parents=True, exist_ok=True)
     path = next_free(out_dir, proc.name)
     abort = abort or threading.Event()
-    summary = RunSummary(proc.name, path, "aborted: not started", "error", params=proc.params_json())
+    summary = RunSummary(proc.name, path, "aborted: not started", Verdict.ERROR, params=proc.params_json())
     meta = {"procedure": {"name": proc.name, "title": proc.title, "params": proc.params_json(),
                           "resumed_from": str(resume.path) if resume else None},
             "calibration": dataclasses.asdict(rig.calibration),
             "prior": {k: dict(v) for k, v in proc.prior.items()}}
-    ctx: Context | None = None
     try:
         acq = Acquisition(rig, path, rate_hz=proc.rate_hz, channels=proc.channels(), ranges_V=proc.ranges_V,
                           block_s=proc.block_s,
@@ -362,63 +461,81 @@ def run_procedure(proc: Procedure, rig: Rig, out_dir: str | Path, *, resume: Res
         summary.error = str(exc)
         _finish_report(proc, summary, None, out_dir, report)
         return summary
+    ctx = Context(proc, rig, acq, progress=progress, abort=abort)
+    summary.spans = ctx.spans
+    guard = SafeOnAbort(rig, proc.name)
     try:
-        with acq:
-            ctx = Context(proc, rig, acq, progress=progress, abort=abort)
-            ctx._rig0 = acq.time_s
-            ctx.steps = list(proc.plan(ctx))
-            summary.steps_planned = [s.name for s in ctx.steps]
-            for i, step in enumerate(ctx.steps):
-                ctx.index, ctx.step = i, step
-                ctx._step_t0 = ctx.time_s
-                ctx.check()
-                if resume is not None and not step.setup and step.name in resume.results:
-                    result = resume.results[step.name]
-                    acq.note(EVENT_STEP_DONE, json.dumps({"step": step.name, "result": result,
-                                                          "resumed": str(resume.path)}, default=_jsonable))
-                    summary.steps_resumed.append(step.name)
-                else:
-                    acq.note(EVENT_STEP, f"{i + 1}/{len(ctx.steps)} {step.name}")
-                    log.info("%s: step %d/%d: %s", proc.name, i + 1, len(ctx.steps), step.name)
-                    result = step.run(ctx)
-                    acq.note(EVENT_STEP_DONE, _step_done_text(step.name, result))
-                ctx.results[step.name] = result
-                summary.steps_done.append(step.name)
-                ctx._done_s += step.expected_s
-                ctx.report()
+        # the inner guard drives the rig safe while the file is open (its safe event recorded),
+        # the outer one if only closing the file fails
+        with guard, acq, guard:
+            _execute(ctx, resume, summary)
         summary.status = acq.result.status
     except BaseException as exc:  # noqa: B036 - Ctrl-C included: the summary must say what was done
         summary.status = acq.result.status if acq.result.status.startswith("aborted") else abort_status(exc)
-        summary.verdict = "aborted"
+        summary.verdict = Verdict.ABORTED
         summary.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, KeyboardInterrupt) else "interrupted (Ctrl-C)"
-        log.error("%s aborted in step %r: %s; rig safe: %s", proc.name, ctx.step.name if ctx and ctx.step else "-",
+        log.error("%s aborted in step %r: %s; rig safe: %s", proc.name, ctx.step.name if ctx.step else "-",
                   summary.error, _safe_text(rig))
         _finish_report(proc, summary, None, out_dir, report)
         return summary
     try:
         analysis = proc.analyze(ctx)
     except KeyboardInterrupt:
-        summary.verdict, summary.error = "aborted", "interrupted (Ctrl-C) during the analysis"
+        summary.verdict, summary.error = Verdict.ABORTED, "interrupted (Ctrl-C) during the analysis"
         _finish_report(proc, summary, None, out_dir, report)
         return summary
     except Exception as exc:
         log.exception("%s: analysis failed", proc.name)
-        summary.verdict, summary.error = "error", f"analysis failed: {type(exc).__name__}: {exc}"
+        summary.verdict, summary.error = Verdict.ERROR, f"analysis failed: {type(exc).__name__}: {exc}"
         _finish_report(proc, summary, None, out_dir, report)
         return summary
     summary.analysis = analysis
     summary.values = analysis.values
     summary.measurements = analysis.measurements
-    summary.verdict = "fail" if any(m.passed is False for m in analysis.measurements) else "pass"
+    summary.verdict = Verdict.FAIL if any(m.passed is False for m in analysis.measurements) else Verdict.PASS
     _finish_report(proc, summary, analysis, out_dir, report)
     return summary
 
 
-def _step_done_text(name: str, result: Any) -> str:
-    text = json.dumps({"step": name, "result": result}, default=_jsonable, separators=(",", ":"))
+def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
+    """The steps in order, each with its events; a data step's span recorded (or taken over)."""
+    proc, acq = ctx.proc, ctx.acq
+    ctx._rig0 = acq.time_s
+    ctx.steps = list(proc.plan())
+    summary.steps_planned = [s.name for s in ctx.steps]
+    for i, step in enumerate(ctx.steps):
+        ctx.index, ctx.step = i, step
+        ctx._step_t0 = ctx.time_s
+        ctx.check()
+        if resume is not None and not step.setup and step.name in resume.results:
+            result = resume.results[step.name]
+            done: dict[str, Any] = {"step": step.name, "result": result, "resumed": str(resume.path)}
+            if step.name in resume.spans:
+                ctx.spans[step.name] = resume.spans[step.name]
+                done["span"] = resume.spans[step.name].to_json()
+            acq.note(EVENT_STEP_DONE, _step_done_text(done))
+            summary.steps_resumed.append(step.name)
+        else:
+            acq.note(EVENT_STEP, f"{i + 1}/{len(ctx.steps)} {step.name}")
+            log.info("%s: step %d/%d: %s", proc.name, i + 1, len(ctx.steps), step.name)
+            start = acq.pos
+            result = step.run(ctx)
+            done = {"step": step.name, "result": result}
+            if not step.setup:
+                ctx.spans[step.name] = Span(Path(ctx.path).resolve(), start, acq.pos, acq.rate_hz)
+                done["span"] = ctx.spans[step.name].to_json()
+            acq.note(EVENT_STEP_DONE, _step_done_text(done))
+        ctx.results[step.name] = result
+        summary.steps_done.append(step.name)
+        ctx._done_s += step.expected_s
+        ctx.report()
+
+
+def _step_done_text(done: Mapping[str, Any]) -> str:
+    text = json.dumps(done, default=_jsonable, separators=(",", ":"))
     if len(text.encode()) > TEXT_BYTES:  # a cut result could not be resumed from: a bug in the procedure
-        raise ProcedureError(f"step {name!r}: its result is {len(text.encode())} bytes of JSON, more than an "
-                             f"event holds ({TEXT_BYTES}); keep step results small")
+        raise ProcedureError(f"step {done['step']!r}: its result is {len(text.encode())} bytes of JSON, more than "
+                             f"an event holds ({TEXT_BYTES}); keep step results small")
     return text
 
 
@@ -429,7 +546,7 @@ def _safe_text(rig: Rig) -> str:
         return f"unknown ({exc})"
 
 
-def _finish_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None, out_dir: Path,
+def _finish_report(proc: Procedure[Any], summary: RunSummary, analysis: Analysis | None, out_dir: Path,
                    report: bool) -> None:
     from procedures.reports.report import write_report
 
@@ -449,6 +566,6 @@ def _jsonable(obj: Any) -> Any:
         return obj.tolist()
     if isinstance(obj, Path):
         return str(obj)
-    if dataclasses.is_dataclass(obj):
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         return dataclasses.asdict(obj)
     raise TypeError(f"{type(obj).__name__} is not JSON serializable")

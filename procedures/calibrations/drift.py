@@ -42,8 +42,8 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -54,7 +54,7 @@ from procedures.analysis import allan
 from procedures.params import prior_value
 from procedures.reports.plotting import new_figure, save_figure
 from procedures.rigsetup import bring_to_mode3, wait_settled
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Span, Step
 
 log = logging.getLogger(__name__)
 
@@ -64,7 +64,7 @@ MIN_ARW_SAMPLES = 2.0
 
 
 @dataclass
-class Params:
+class DriftParams:
     #: record length (rig seconds) after the settle
     duration_s: float = 7200.0
     rate_hz: float = 10.0
@@ -129,15 +129,19 @@ def _hours(seconds: float) -> str:
     return f"{seconds / 3600:.3g} h" if seconds >= 3600 else f"{seconds:.4g} s"
 
 
-class Drift(Procedure):
+#: the name the module's functions and tests use
+Params = DriftParams
+
+
+class Drift(Procedure[DriftParams]):
     name = "drift"
     title = "Gyro drift stability: Allan deviation of the caged torquer outputs (Mode 3)"
     json_keys = ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file")
-    Params = Params
+    Params = DriftParams
     mode = 3
     block_s = 1.0
 
-    def __init__(self, params: Params | None = None, **kw) -> None:
+    def __init__(self, params: DriftParams | None = None, **kw) -> None:
         super().__init__(params, **kw)
         self.rate_hz = float(self.params.rate_hz)
 
@@ -149,13 +153,13 @@ class Drift(Procedure):
         n = int(self.params.n_chunks)
         return [f"record {i + 1}/{n}" for i in range(n)]
 
-    def plan(self, ctx: Context) -> Iterator[Step]:
+    def plan(self) -> list[Step]:
         p = self.params
-        yield Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True)
-        yield Step("settle", self.settle, expected_s=max(p.settle_min_s, p.settle_window_s) + 20.0, setup=True)
         chunk_s = p.duration_s / int(p.n_chunks)
-        for name in self.chunk_names():
-            yield Step(name, lambda c, s=chunk_s: self.record(c, s), expected_s=chunk_s)
+        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+                Step("settle", self.settle, expected_s=max(p.settle_min_s, p.settle_window_s) + 20.0, setup=True),
+                *(Step(name, partial(self.record, seconds=chunk_s), expected_s=chunk_s)
+                  for name in self.chunk_names())]
 
     # ------------------------------------------------------------------ steps
     def kto(self, ctx: Context) -> tuple[dict[str, float], str]:
@@ -183,61 +187,32 @@ class Drift(Procedure):
         return {"waited_s": round(s.waited_s, 1)}
 
     def record(self, ctx: Context, seconds: float) -> dict:
-        t0 = ctx.time_s
-        ctx.acquire(seconds, keep=False)
-        return {"file": Path(ctx.path).name, "t": [round(t0, 6), round(ctx.time_s, 6)]}
+        ctx.acquire(seconds, keep=False)   # where the samples are is the runner's record (ctx.spans)
+        return {"seconds": seconds}
 
     # ------------------------------------------------------------------ analysis
-    def spans(self, ctx: Context) -> list[tuple[Path, float, float]]:
-        """(file, t0, t1) of the continuous stretches of record chunks, in order (back-to-back
-        chunks joined); chunks taken over by ``--resume`` live in the earlier file."""
-        with RunFile(ctx.path) as rf:
-            info = rf.meta.get("procedure") or {}
-        resumed_from = info.get("resumed_from") if isinstance(info, dict) else None
-        here = Path(ctx.path)
-        out = []
-        for name in self.chunk_names():
-            r = ctx.results.get(name)
-            if not r:
-                continue
-            fname = r["file"]
-            candidates = [here] if fname == here.name else []
-            if resumed_from:
-                candidates += [Path(resumed_from), Path(resumed_from).parent / fname]
-            candidates += [here.parent / fname]
-            path = next((c for c in candidates if c.name == fname and c.exists()), None)
-            if path is None:
-                raise ProcedureError(f"the data of step {name!r} are in {fname}, which is not beside {here} "
-                                     f"(nor at the resumed run's path {resumed_from})")
-            t0, t1 = float(r["t"][0]), float(r["t"][1])
-            if out and out[-1][0] == path and abs(out[-1][2] - t0) < 1e-6:
-                out[-1] = (path, out[-1][1], t1)   # back-to-back chunks are one continuous record
-            else:
-                out.append((path, t0, t1))
-        return out
-
-    def load(self, spans: list[tuple[Path, float, float]]) -> tuple[dict[str, list[np.ndarray]], int, int, float]:
-        """Raw volts of every recorded channel per chunk (NaN where lost), samples, samples
-        lost, and the sample rate."""
+    def load(self, spans: list[Span]) -> tuple[dict[str, list[np.ndarray]], int, int, float]:
+        """Raw volts of every recorded channel per continuous stretch (NaN where lost),
+        samples, samples lost, and the sample rate."""
         names = list(self.channels())
         chunks: dict[str, list[np.ndarray]] = {n: [] for n in names}
         total = lost = 0
         rate = None
-        for path, t0, t1 in spans:
-            with RunFile(path) as rf:
+        for span in spans:
+            with RunFile(span.file) as rf:
                 if rate is not None and rf.rate_hz != rate:
-                    raise ProcedureError(f"{path} was recorded at {rf.rate_hz:g} Hz, the others at {rate:g} Hz")
+                    raise ProcedureError(f"{span.file} was recorded at {rf.rate_hz:g} Hz, the others at {rate:g} Hz")
                 rate = rf.rate_hz
-                block = rf.slice_s(t0, t1, names)
-            for n in names:
-                chunks[n].append(block[n])
-            total += len(block)
-            lost += int(np.count_nonzero(~np.isfinite(block.data).all(axis=0)))
+                data = rf.read(names, span.start, span.stop)
+            for n, row in zip(names, data):
+                chunks[n].append(row)
+            total += data.shape[1]
+            lost += int(np.count_nonzero(~np.isfinite(data).all(axis=0)))
         return chunks, total, lost, float(rate or self.rate_hz)
 
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
-        spans = self.spans(ctx)
+        spans = ctx.data_spans(self.chunk_names())
         if not spans:
             raise ProcedureError("no record step was done: nothing to analyse")
         kto, kto_source = self.kto(ctx)
@@ -250,7 +225,7 @@ class Drift(Procedure):
         res = analyze_channels(chunks, rate, kto, p, kg)
         ms: list[Measurement] = [
             Measurement("record length", record_s, "s", lo=p.min_record_s,
-                        note=f"{sum(1 for n in self.chunk_names() if ctx.results.get(n))} of "
+                        note=f"{sum(1 for n in self.chunk_names() if n in ctx.spans)} of "
                              f"{len(self.chunk_names())} chunks in {len(spans)} continuous stretch(es)"),
             Measurement("samples lost", lost / max(total, 1), "fraction", hi=p.max_lost_fraction),
         ]
@@ -398,7 +373,7 @@ def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: d
             # the same gap-free stretches of both channels (a lost sample set is lost on all)
             both = [np.vstack([-kto[ch] * t, 1e3 * g / kg_mV_per_urad[ch]])
                     for t, g in zip(torq, chunks[_pickoff(ch)])]
-            runs = [b[:, a:z] for b in both for a, z in _finite_runs(np.isfinite(b).all(axis=0))]
+            runs = [b[:, a:z] for b in both for a, z in _finite_runs(np.asarray(np.isfinite(b).all(axis=0)))]
             loop = measure_loop_gain([b[0] for b in runs], [b[1] for b in runs], rate_hz, band)
             if loop is None:
                 problems.append("loop gain: record too short for a spectrum in the band; bias instability "

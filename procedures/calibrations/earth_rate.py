@@ -28,7 +28,6 @@ and earth rate come from the rig's data sheet (``rig.calibration``), never a pro
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,7 +44,7 @@ URAD = 1e-6
 
 
 @dataclass
-class Params:
+class EarthRateParams:
     n_azimuths: int = 12
     #: table tilts (deg) for the Z channel, spindle at ``z_spindle_deg``
     #: visited up and back down, so a slow drift trend cannot pose as scale factor
@@ -85,15 +84,19 @@ def _channel_column(ch: str) -> str:
     return f"torq_{ch.lower()}"
 
 
-class EarthRate(Procedure):
+#: the name the module's functions and tests use
+Params = EarthRateParams
+
+
+class EarthRate(Procedure[EarthRateParams]):
     name = "earth-rate"
     title = "Torquer scale factor and drift from earth rate (II C.1.a(1))"
     json_keys = ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "file")
-    Params = Params
+    Params = EarthRateParams
     mode = 3
     block_s = 1.0
 
-    def __init__(self, params: Params | None = None, **kw) -> None:
+    def __init__(self, params: EarthRateParams | None = None, **kw) -> None:
         super().__init__(params, **kw)
         self.rate_hz = self.params.rate_hz
 
@@ -109,12 +112,12 @@ class EarthRate(Procedure):
                 for i, t in enumerate(p.z_tilts_deg)]
         return out
 
-    def plan(self, ctx: Context) -> Iterator[Step]:
-        yield Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True)
-        for name, tilt, spindle, avg in self.stations():
-            yield Step(name, lambda c, t=tilt, s=spindle, a=avg: self.station(c, t, s, a),
-                       expected_s=avg + self.params.settle_min_s + 10.0)
-        yield Step("table home", lambda c: self.home(c), expected_s=5.0, setup=True)
+    def plan(self) -> list[Step]:
+        stations = [Step(name, lambda c, t=tilt, s=spindle, a=avg: self.station(c, t, s, a),
+                         expected_s=avg + self.params.settle_min_s + 10.0)
+                    for name, tilt, spindle, avg in self.stations()]
+        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True), *stations,
+                Step("table home", self.home, expected_s=5.0, setup=True)]
 
     def station(self, ctx: Context, tilt: float, spindle: float, average_s: float) -> dict:
         p = self.params

@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -49,7 +49,7 @@ CAL_SOURCES = {"file": "the run's /meta/calibration", "given": "the rig's data s
 
 # ---------------------------------------------------------------------------- parameters
 @dataclass
-class Params:
+class HysteresisParams:
     axis: str = "X"
     frequency_hz: float = 0.4
     #: the ladder, large to small (a large first loop wipes out the bearing's earlier state)
@@ -392,14 +392,18 @@ def markdown(res: HysteresisResult) -> str:
 
 
 # ---------------------------------------------------------------------------- the procedure
-class Hysteresis(Procedure):
+#: the name the module's functions and tests use
+Params = HysteresisParams
+
+
+class Hysteresis(Procedure[HysteresisParams]):
     name = "hysteresis"
     title = "Gimbal bearing torque-angle sweep: Dahl's To and eta (Ch. V F)"
     json_keys = JSON_KEYS
-    Params = Params
+    Params = HysteresisParams
     mode = 3
 
-    def __init__(self, params: Params | None = None, **kw) -> None:
+    def __init__(self, params: HysteresisParams | None = None, **kw) -> None:
         super().__init__(params, **kw)
         p = self.params
         self.axis = p.axis
@@ -414,16 +418,16 @@ class Hysteresis(Procedure):
         a = self.axis.lower()
         return (f"cmd_{a}", f"ac_{a}_inst", f"pa_{a}", f"ac_{a}_ctl")
 
-    def plan(self, ctx: Context) -> Iterator[Step]:
+    def plan(self) -> list[Step]:
         p = self.params
         per = (p.settle_cycles + p.cycles) / p.frequency_hz
-        yield Step("mode 3", lambda c: bring_to_mode3(c), expected_s=300.0, setup=True)
         # The sweep steps run again on --resume (setup=True) rather than being taken over: the
         # fit integrates eq. 5.2 along one continuous recording of the whole ladder, and the
         # bearing's state after an interruption is not the one the earlier steps left.
-        for amp in p.amplitudes_urad:
-            yield Step(f"{amp:g} urad", lambda c, amp=amp: self.sweep(c, amp), expected_s=per, setup=True)
-        yield Step("bias off", lambda c: self.bias_off(c), expected_s=1.0 / p.frequency_hz, setup=True)
+        sweeps = [Step(f"{amp:g} urad", lambda c, amp=amp: self.sweep(c, amp), expected_s=per, setup=True)
+                  for amp in p.amplitudes_urad]
+        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True), *sweeps,
+                Step("bias off", self.bias_off, expected_s=1.0 / p.frequency_hz, setup=True)]
 
     def sweep(self, ctx: Context, amplitude_urad: float) -> dict:
         """``settle_cycles + cycles`` cycles of the sinusoidal bias: theta ~ amplitude sin(w t)."""

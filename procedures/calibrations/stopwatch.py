@@ -38,7 +38,6 @@ K_TO is taken from ``Params.kto_urad_per_s_per_V``, else an earlier earth-rate r
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -53,7 +52,7 @@ from procedures.runner import Analysis, Context, Figure, Measurement, Procedure,
 
 
 @dataclass
-class Params:
+class StopwatchParams:
     channels: list[str] = field(default_factory=lambda: list(GYRO_CHANNELS))
     #: K_TO per channel (urad/s/V); empty: the earth-rate result, else the data sheet's nominal
     kto_urad_per_s_per_V: dict[str, float] = field(default_factory=dict)
@@ -92,15 +91,19 @@ class Params:
                 raise ValueError(f"stopwatch: {name} = {getattr(self, name)} must be > 0")
 
 
-class Stopwatch(Procedure):
+#: the name the module's functions and tests use
+Params = StopwatchParams
+
+
+class Stopwatch(Procedure[StopwatchParams]):
     name = "stopwatch"
     title = "Pickoff scale factor by the stopwatch method (II C.1.a(6))"
     json_keys = ("K_g_mV_per_urad", "file")
-    Params = Params
+    Params = StopwatchParams
     mode = 3
     block_s = 0.5
 
-    def __init__(self, params: Params | None = None, **kw) -> None:
+    def __init__(self, params: StopwatchParams | None = None, **kw) -> None:
         super().__init__(params, **kw)
         self.rate_hz = self.params.rate_hz
         if len(self.params.channels) == 1:
@@ -115,12 +118,11 @@ class Stopwatch(Procedure):
         return prior_value(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", ch,
                            ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch])
 
-    def plan(self, ctx: Context) -> Iterator[Step]:
+    def plan(self) -> list[Step]:
         p = self.params
         per = 200.0 + p.null_s * 2 + (2 * p.repetitions + 1) * (p.hold_s + 45.0) + p.restore_s
-        yield Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True)
-        for ch in p.channels:
-            yield Step(f"channel {ch}", lambda c, ch=ch: self.channel(c, ch), expected_s=per)
+        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+                *(Step(f"channel {ch}", lambda c, ch=ch: self.channel(c, ch), expected_s=per) for ch in p.channels)]
 
     # ------------------------------------------------------------------ one channel
     def channel(self, ctx: Context, ch: str) -> dict:

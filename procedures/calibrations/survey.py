@@ -50,8 +50,9 @@ and averages the Welch segments of all spans (a resumed piece lives in the earli
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -67,7 +68,7 @@ from procedures.params import prior_value
 from procedures.reports import thesis
 from procedures.reports.plotting import new_figure, save_figure
 from procedures.rigsetup import bring_to_mode3
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Span, Step
 
 AXES = ("X", "Y")
 
@@ -86,7 +87,7 @@ def gyro(axis: str) -> str:
 
 
 @dataclass
-class Params:
+class SurveyParams:
     duration_s: float = 300.0
     rate_hz: float = 1000.0
     #: record in steps of this length (the unit an aborted run can be resumed by)
@@ -169,17 +170,6 @@ def find_dip(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, smooth_hz
     return Dip(freq, depth, float(f[i]))
 
 
-def merge_spans(pieces: Sequence[Mapping[str, Any]]) -> list[tuple[str, int, int]]:
-    """(file, start, stop) of the recorded pieces, adjacent pieces of one file merged."""
-    out: list[list] = []
-    for r in pieces:
-        if out and out[-1][0] == r["file"] and out[-1][2] == r["start"]:
-            out[-1][2] = r["stop"]
-        else:
-            out.append([r["file"], int(r["start"]), int(r["stop"])])
-    return [tuple(s) for s in out]
-
-
 @dataclass
 class SpanCsd:
     """The Welch matrix averaged over the segments of several spans."""
@@ -201,13 +191,14 @@ class SpanCsd:
         return self.S[:, i, i].real.copy()
 
 
-def spans_csd(spans: Sequence[tuple[str, int, int]], channels: Sequence[str], seg_s: float) -> SpanCsd:
+def spans_csd(spans: Sequence[Span], channels: Sequence[str], seg_s: float) -> SpanCsd:
     """Welch cross-spectral matrix over the given file spans (segments never straddle two
     spans; a span shorter than a segment, or a file that is gone, is left out with a note)."""
     notes: list[str] = []
     parts: list[RunCsd] = []
     seconds = 0.0
-    for file, start, stop in spans:
+    for span in spans:
+        file, start, stop = span.file, span.start, span.stop
         try:
             with RunFile(file) as rf:
                 nperseg = int(round(seg_s * rf.rate_hz))
@@ -240,33 +231,39 @@ def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str,
 
 
 # ---------------------------------------------------------------------------- the procedure
-class Survey(Procedure):
+#: the name the module's functions and tests use
+Params = SurveyParams
+
+
+class Survey(Procedure[SurveyParams]):
     name = "survey"
     title = "Closed-loop spectral survey in Mode 3 (Ch. V E)"
     json_keys = ("platform_rms_urad", "dip_hz", "file")
-    Params = Params
+    Params = SurveyParams
     mode = 3
     block_s = 1.0
 
-    def __init__(self, params: Params | None = None, *, reference: Mapping[str, Any] | None = None, **kw) -> None:
+    def __init__(self, params: SurveyParams | None = None, *, reference: Mapping[str, Any] | None = None, **kw) -> None:
         super().__init__(params, **kw)
         self.rate_hz = self.params.rate_hz
         #: the report's reference column (never used by the measurement)
         self.reference = dict(thesis.SURVEY if reference is None else reference)
-        self._pieces: list[str] = []
 
     def channels(self) -> tuple[str, ...]:
         return tuple(ac_ctl(a) for a in AXES) + tuple(ac_inst(a) for a in AXES) + tuple(gyro(a) for a in AXES)
 
-    def plan(self, ctx: Context) -> Iterator[Step]:
+    def pieces(self) -> list[tuple[str, float]]:
+        """(step name, seconds) of the record pieces."""
         p = self.params
-        yield Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True)
-        yield Step("settle", self._settle, expected_s=p.settle_s, setup=True)
         n = max(1, math.ceil(p.duration_s / p.piece_s - 1e-9))
         lengths = [p.piece_s] * (n - 1) + [p.duration_s - p.piece_s * (n - 1)]
-        self._pieces = [f"record {i + 1}/{n}" for i in range(n)]
-        for name, seconds in zip(self._pieces, lengths):
-            yield Step(name, lambda c, s=seconds: self._record(c, s), expected_s=seconds)
+        return [(f"record {i + 1}/{n}", seconds) for i, seconds in enumerate(lengths)]
+
+    def plan(self) -> list[Step]:
+        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+                Step("settle", self._settle, expected_s=self.params.settle_s, setup=True),
+                *(Step(name, partial(self._record, seconds=seconds), expected_s=seconds)
+                  for name, seconds in self.pieces())]
 
     def _settle(self, ctx: Context) -> dict:
         already = bool((ctx.results.get("mode 3") or {}).get("already"))
@@ -275,16 +272,14 @@ class Survey(Procedure):
         return {"settle_s": seconds}
 
     def _record(self, ctx: Context, seconds: float) -> dict:
-        start = ctx.acq.pos
-        ctx.acquire(seconds, keep=False)
-        return {"file": str(ctx.path), "start": start, "stop": ctx.acq.pos, "rate_hz": ctx.acq.rate_hz}
+        ctx.acquire(seconds, keep=False)   # where the samples are is the runner's record (ctx.spans)
+        return {"seconds": seconds}
 
     # ------------------------------------------------------------------ analysis
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
         cal = ctx.rig.calibration
-        pieces = [ctx.results[name] for name in self._pieces]
-        csd = spans_csd(merge_spans(pieces), self.channels(), p.seg_s)
+        csd = spans_csd(ctx.data_spans(name for name, _ in self.pieces()), self.channels(), p.seg_s)
         f = csd.f
         kac = {a: cal.autocollimator[a].control_mV_per_urad * 1e-3 for a in AXES}     # V/urad
         kai = {a: cal.autocollimator[a].inst_mV_per_urad * 1e-3 for a in AXES}
@@ -297,14 +292,14 @@ class Survey(Procedure):
         dips = {a: find_dip(f, psd_urad[ac_ctl(a)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
         rms = {a: band_rms(f, psd_urad[gyro(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
         ac_rms = {a: band_rms(f, psd_urad[ac_ctl(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
-        stiffness = {a: (cal.platform[a].inertia_kg_m2 * (2 * math.pi * dips[a].freq_hz) ** 2
-                         if dips[a] is not None else None) for a in AXES}
+        stiffness = {a: (cal.platform[a].inertia_kg_m2 * (2 * math.pi * d.freq_hz) ** 2
+                         if (d := dips[a]) is not None else None) for a in AXES}
         used = csd.segments_used / max(1, csd.segments_total)
 
         values: dict[str, Any] = {
             "platform_rms_urad": {a: rms[a] for a in AXES},
-            "dip_hz": {a: (dips[a].freq_hz if dips[a] is not None else None) for a in AXES},
-            "dip_depth_db": {a: (dips[a].depth_db if dips[a] is not None else None) for a in AXES},
+            "dip_hz": {a: (d.freq_hz if (d := dips[a]) is not None else None) for a in AXES},
+            "dip_depth_db": {a: (d.depth_db if (d := dips[a]) is not None else None) for a in AXES},
             "stiffness_from_dip_Nm_per_rad": stiffness,
             "ac_ctl_rms_urad": ac_rms,
             "pickoff_scale_mV_per_urad": kg_mv,
@@ -331,16 +326,14 @@ class Survey(Procedure):
         dof_bin = csd.dof
         for c in self.channels():
             figures.append(Figure(f"psd-{c}", f"PSD of {c} in urad²/Hz (App. A.8 display)",
-                                  lambda path, c=c: plot_psd(path, f[1:-1], psd_urad[c][1:-1], channel=c, units="urad",
-                                                             dof=dof_bin, nperseg=csd.nperseg, nfft=csd.nfft,
-                                                             title=title)))
+                                  partial(plot_psd, f=f[1:-1], p=psd_urad[c][1:-1], channel=c, units="urad",
+                                          dof=dof_bin, nperseg=csd.nperseg, nfft=csd.nfft, title=title)))
         idx = {c: i for i, c in enumerate(csd.channels)}
         pairs = [(ac_ctl("X"), gyro("X")), (ac_ctl("Y"), gyro("Y")), (ac_ctl("X"), ac_ctl("Y")), (gyro("X"), gyro("Y"))]
         for x, y in pairs:
             figures.append(Figure(f"coherence-{x}-{y}", f"Coherence {x} – {y}",
-                                  lambda path, x=x, y=y: plot_coherence(path, f[1:-1], coh[1:-1, idx[x], idx[y]],
-                                                                        pair=(x, y), n_segments=csd.segments_used,
-                                                                        title=title)))
+                                  partial(plot_coherence, f=f[1:-1], coh=coh[1:-1, idx[x], idx[y]], pair=(x, y),
+                                          n_segments=csd.segments_used, title=title)))
         peak_coh = {}
         for x, y in pairs:
             band = (f >= 1.0) & (f <= 30.0)

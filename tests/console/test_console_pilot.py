@@ -215,6 +215,13 @@ async def test_quit_while_recording_closes_the_file_and_leaves_the_rig_safe(out_
         assert any(e.kind == "safe" for e in rf.events)
 
 
+def test_the_console_goes_safe_through_the_drivers_one_guard(out_dir, go_safe_calls):
+    """Quitting while recording: the rig thread's ``drivers.safety`` guard drives the rig safe
+    (before the file closes, so the file holds it), then the rig is closed."""
+    test_quit_while_recording_closes_the_file_and_leaves_the_rig_safe(out_dir)
+    assert go_safe_calls == ["the console aborted (ConsoleClosed: the operator quit the console)"]
+
+
 @run_async
 async def test_lost_device_aborts_the_recording_and_the_rig_goes_safe(out_dir):
     app = ConsoleApp(WARM, out_dir=out_dir)

@@ -48,6 +48,24 @@ def test_a_lost_node_aborts_the_recording_and_the_rig_goes_safe(tmp_path):
         rig.close()
 
 
+def test_record_goes_safe_through_the_drivers_one_guard_before_the_file_closes(tmp_path, go_safe_calls):
+    """``record`` (``fbs record``) drives the rig safe through ``drivers.safety``; the safe state
+    is in the file, which is closed "aborted"; the recorder itself commands nothing."""
+    with open_rig("sim?warm=1") as rig:
+        rig.set_torquer_bias_V("X", 0.3)
+        stop = threading.Timer(0.3, rig.emulator.inject, ("adc", "disconnect"))
+        stop.start()
+        with pytest.raises(DeviceLost):
+            record(rig, tmp_path / "r.h5", duration_s=600.0, rate_hz=1000.0, channels=["gyro_x"])
+        assert go_safe_calls and go_safe_calls[0].startswith("recording aborted (DeviceLost")
+        assert len(go_safe_calls) == 1
+        assert rig.is_safe() and not any(rig.emulator.nodes.nodes["torquer"].values.values())
+    with h5py.File(tmp_path / "r.h5", "r") as f:
+        assert f.attrs["status"].startswith("aborted: DeviceLost")
+        kinds = [k.decode() for k in f["events"]["kind"]]
+        assert "safe" in kinds
+
+
 def test_an_acquisition_hands_back_what_it_writes_and_places_commands_on_the_file_time_base(tmp_path):
     from daq.reader import RunFile
     from daq.recorder import Acquisition

@@ -3,7 +3,6 @@ K_TO source, gaps and resume; end to end on the simulated rig."""
 
 from __future__ import annotations
 
-import json
 import math
 import threading
 from dataclasses import dataclass, field
@@ -17,7 +16,9 @@ from daq.reader import RunFile
 from drivers.calibration import RigCalibration
 from procedures.calibrations import catalogue
 from procedures.calibrations.drift import Drift, Params, analyze_channels
-from procedures.runner import EVENT_STEP_DONE, load_resume, run_procedure
+from procedures.runner import load_resume, merge_spans, run_procedure, steps_done
+
+from .conftest import assert_spans_are_the_record_steps
 
 CHANNELS = ("X", "Y", "Z", "XRD")
 
@@ -130,13 +131,16 @@ class _Ctx:
     path: Path
     rig: SimpleNamespace
     results: dict = field(default_factory=dict)
+    spans: dict = field(default_factory=dict)
+
+    def data_spans(self, steps):
+        return merge_spans(self.spans[n] for n in steps if n in self.spans)
 
 
 def _reanalysis_ctx(path: Path) -> _Ctx:
     with RunFile(path) as rf:
-        results = {json.loads(e.text)["step"]: json.loads(e.text)["result"]
-                   for e in rf.events if e.kind == EVENT_STEP_DONE}
-    return _Ctx(path, SimpleNamespace(calibration=RigCalibration()), results)
+        results, spans = steps_done(path, rf.events)
+    return _Ctx(path, SimpleNamespace(calibration=RigCalibration()), results, spans)
 
 
 @pytest.mark.slow
@@ -231,4 +235,6 @@ def test_abort_and_resume_continue_the_record(tmp_path):
     length = next(m for m in second.measurements if m.name == "record length")
     assert length.value == pytest.approx(600.0)
     assert "in 2 continuous stretch(es)" in length.note
+    assert_spans_are_the_record_steps(first, second, [f"record {i}/4" for i in (1, 2, 3, 4)], 2, 150.0)
     assert all(v is not None for v in second.values["arw_urad_per_sqrt_s"].values())
+

@@ -44,10 +44,10 @@ class Toy(Procedure):
     def channels(self):
         return ("torq_x", "gyro_x")
 
-    def plan(self, ctx):
-        yield Step("setup", self.setup, expected_s=1.0, setup=True)
-        for i in range(self.params.n_data_steps):
-            yield Step(f"data {i}", lambda c, i=i: self.data(c, i), expected_s=self.params.step_s)
+    def plan(self):
+        return [Step("setup", self.setup, expected_s=1.0, setup=True),
+                *(Step(f"data {i}", lambda c, i=i: self.data(c, i), expected_s=self.params.step_s)
+                  for i in range(self.params.n_data_steps))]
 
     def setup(self, ctx):
         self.setup_runs += 1
@@ -63,6 +63,11 @@ class Toy(Procedure):
         return {"i": i, "mean": float(np.nanmean(x[:, 0]))}
 
     def analyze(self, ctx):
+        # the samples the runner says the data steps recorded, read back from their files
+        self.analysed = {}
+        for name, span in ctx.spans.items():
+            with RunFile(span.file) as rf:
+                self.analysed[name] = (span, rf.read(["torq_x"], span.start, span.stop)[0])
         means = [ctx.results[f"data {i}"]["mean"] for i in range(self.params.n_data_steps)]
         m = float(np.mean(means))
         return Analysis({"mean_V": m}, [Measurement("mean torquer X", m, "V", lo=self.params.limit_lo, hi=10.0)])
@@ -138,6 +143,16 @@ def test_an_exception_in_a_step_aborts_with_its_reason(rig, tmp_path):
     assert s.steps_done == ["setup", "data 0", "data 1"]
 
 
+def test_the_runner_goes_safe_through_the_drivers_one_guard(rig, tmp_path, go_safe_calls):
+    """The runner owns the teardown, through ``drivers.safety`` (once per abort); the recorder
+    only closes the file, after the safe state is in it."""
+    s = run_procedure(Toy(fail_in="data 1"), rig, tmp_path)
+    _assert_aborted_and_safe(rig, s, "toy failure in data 1")
+    assert go_safe_calls == ["toy aborted (ProcedureError: toy failure in data 1)"]
+    ok = run_procedure(Toy(ToyParams(n_data_steps=1)), rig, tmp_path)
+    assert ok.verdict == "pass" and len(go_safe_calls) == 1        # a clean run does not go safe
+
+
 def test_a_device_fault_aborts(rig, tmp_path):
     def fault(p):
         if p.step == "data 1":
@@ -174,6 +189,42 @@ def test_resume_takes_over_done_data_steps_and_reruns_setup(rig, tmp_path):
     # the aborted file is kept as it was
     with RunFile(first.file) as rf:
         assert rf.status.startswith("aborted: ")
+
+
+def test_the_runner_hands_analyze_the_samples_each_data_step_recorded_across_a_resume(rig, tmp_path):
+    """Provenance is the runner's: a resumed run's analysis reads data 0-1 from the aborted
+    file and data 2 from its own, exactly the samples each step took (their means are the
+    step results), never the setup step's; the summary and the step-done events carry them."""
+    first = run_procedure(Toy(fail_in="data 2"), rig, tmp_path)
+    assert set(first.spans) == {"data 0", "data 1"}
+    toy = Toy()
+    s = run_procedure(toy, rig, tmp_path, resume=load_resume(first.file, "toy"))
+    assert s.verdict == "pass"
+    assert set(toy.analysed) == {"data 0", "data 1", "data 2"}
+    n = int(round(toy.params.step_s * toy.rate_hz))
+    for name, (span, x) in toy.analysed.items():
+        here = first if name in ("data 0", "data 1") else s
+        assert span.file == here.file.resolve() and span.samples == n == len(x)
+        assert span == here.spans[name]
+        assert float(np.nanmean(x)) == pytest.approx(ctx_mean(here, name), abs=1e-12)
+    # data 0 starts where the setup step ended (its 1 s is not analysed); data 1 follows on
+    a, b = toy.analysed["data 0"][0], toy.analysed["data 1"][0]
+    assert a.start == int(round(1.0 * toy.rate_hz)) and b.start == a.stop
+    summary = json.loads(s.file.with_suffix(".json").read_text())
+    assert summary["spans"]["data 0"]["file"] == str(first.file.resolve())
+    with RunFile(s.file) as rf:
+        done = {d["step"]: d for d in (json.loads(e.text) for e in rf.events if e.kind == "step-done")}
+    assert done["data 2"]["span"]["start"] == s.spans["data 2"].start and "span" not in done["setup"]
+
+
+def ctx_mean(summary, step: str) -> float:
+    """The mean a data step measured, from the step-done event of the file it ran in."""
+    with RunFile(summary.file) as rf:
+        for e in rf.events:
+            d = json.loads(e.text) if e.kind == "step-done" else None
+            if d and d["step"] == step and "resumed" not in d:
+                return d["result"]["mean"]
+    raise AssertionError(f"no step-done for {step} in {summary.file}")
 
 
 def test_resume_refuses_complete_or_foreign_runs(rig, tmp_path):

@@ -19,10 +19,12 @@ import pytest
 
 from daq.spectra import band_rms, psd
 from procedures.calibrations import catalogue
-from procedures.calibrations.survey import Params, Survey, find_dip, merge_spans, pickoff_scales
+from procedures.calibrations.survey import Params, Survey, find_dip, pickoff_scales
 from procedures.runner import load_resume, run_procedure
 from simhw.params import SimConfig, load_config
 from simhw.simulator import Simulator, pickoff_white_psd
+
+from .conftest import assert_spans_are_the_record_steps
 
 DIP_TOL_HZ = 0.3
 RMS_TOL = 0.20
@@ -54,12 +56,6 @@ def test_find_dip_reports_no_notch_on_a_sloping_spectrum():
     p = (1.0 + (f / 8.0) ** 2) ** -1 * rng.chisquare(68, f.size) / 68
     d = find_dip(f, p, 0.5, 30.0, 0.5)
     assert d is None or d.depth_db < 3.0
-
-
-def test_merge_spans_joins_adjacent_pieces_of_one_file_only():
-    pieces = [{"file": "a.h5", "start": 0, "stop": 10}, {"file": "a.h5", "start": 10, "stop": 20},
-              {"file": "b.h5", "start": 5, "stop": 15}, {"file": "b.h5", "start": 20, "stop": 30}]
-    assert merge_spans(pieces) == [("a.h5", 0, 20), ("b.h5", 5, 15), ("b.h5", 20, 30)]
 
 
 def test_pickoff_scale_comes_from_the_stopwatch_else_nominal():
@@ -232,6 +228,7 @@ def test_an_aborted_survey_resumes_with_the_pieces_already_recorded(tmp_path):
     assert second.steps_resumed == ["record 1/5", "record 2/5"]
     assert second.values["record_s"] == pytest.approx(300.0)
     check(second, expected_values(SimConfig(), params), "resumed")
+    assert_spans_are_the_record_steps(first, second, [f"record {i}/5" for i in range(1, 6)], 2, params.piece_s)
 
 
 @pytest.mark.slow

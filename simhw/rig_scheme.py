@@ -1,0 +1,58 @@
+"""The ``sim`` rig URL scheme: the real drivers served by the simulated devices.
+
+``open_rig("sim?...")`` finds ``open_sim_rig`` through the ``fbs.rig_schemes`` entry point
+(``pyproject.toml``), so ``drivers`` never imports ``simhw``. The rig it returns is the same
+``drivers.rig.Rig`` a serial rig is - ADC on a pseudo-terminal, nodes on a python-can virtual
+bus - with ``emulator`` set to the server, for fault injection in tests::
+
+    sim                          virtual time, cold (mode 1, wheels stopped)
+    sim?warm=1&seed=3            started in mode 3, caged, as after hours of running
+    sim?realtime=1               paced to the wall clock
+    sim?config=F.toml&table=manual&speed=1&watchdog=1
+"""
+
+from __future__ import annotations
+
+import can
+
+from drivers.calibration import RigCalibration
+from drivers.rig import Rig, assemble, check_keys, flag
+from drivers.table import Operator, TablePosition, terminal_operator
+from simhw.datasheet import rig_calibration
+from simhw.params import load_config
+from simhw.rig_server import SimRigServer
+
+SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog"}
+
+
+def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
+                 calibration: RigCalibration | None) -> Rig:
+    """Start the simulated rig's devices and connect the drivers to them."""
+    check_keys(url, params, SIM_KEYS)
+    table = params.get("table", "can")
+    if table not in ("can", "manual"):
+        raise ValueError(f"rig URL {url!r}: table={table!r} must be 'can' or 'manual'")
+    try:
+        seed = int(params.get("seed", "0"))
+        speed = float(params.get("speed", "1"))
+        watchdog = float(params.get("watchdog", "1"))
+    except ValueError as exc:
+        raise ValueError(f"rig URL {url!r}: {exc}") from None
+    cfg = load_config(params.get("config"))
+    if calibration is None:
+        calibration = rig_calibration(cfg)   # the data sheet the simulated rig ships with
+    server = SimRigServer(cfg, seed=seed, realtime=flag("realtime", params.get("realtime", "0")), speed=speed,
+                          warm=flag("warm", params.get("warm", "0")), watchdog_s=watchdog)
+    try:
+        bus = can.Bus(interface="virtual", channel=server.can_channel, receive_own_messages=False)
+        tab: tuple
+        if table == "manual":
+            t = server.sim.cfg.table
+            tab = ("manual", operator or terminal_operator, TablePosition(t.tilt_deg, t.spindle_deg % 360.0))
+        else:
+            tab = ("can",)
+        return assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
+                        node_timeout_s=watchdog, closers=[server.stop], emulator=server)
+    except BaseException:
+        server.stop()
+        raise
