@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-import abc
+from typing import Protocol
 
 from drivers import can_protocol as cp
 from drivers.calibration import GYRO_CHANNELS
@@ -11,24 +11,31 @@ from drivers.errors import ProtocolError, SetpointRangeError
 from drivers.setpoints import check_name
 
 
-class CagingSwitches(abc.ABC):
-    channels = GYRO_CHANNELS
+class CagingSwitches(Protocol):
+    """The caging-inhibit switches, whatever the wire."""
 
-    @abc.abstractmethod
+    channels: tuple[str, ...]
+
     def set_inhibit(self, channel: str, inhibit: bool) -> bool:
         """Set one switch; returns its read-back."""
+        ...
 
-    @abc.abstractmethod
     def inhibited(self, channel: str) -> bool: ...
+
+    def clear(self) -> None: ...
+
+
+class CanCagingSwitches:
+    """The caging switches on their CAN node."""
+
+    channels: tuple[str, ...] = GYRO_CHANNELS
+
+    def __init__(self, link: CanLink) -> None:
+        self.node = NodeClient(link, "caging")
 
     def clear(self) -> None:
         for c in self.channels:
             self.set_inhibit(c, False)
-
-
-class CanCagingSwitches(CagingSwitches):
-    def __init__(self, link: CanLink) -> None:
-        self.node = NodeClient(link, "caging")
 
     def set_inhibit(self, channel: str, inhibit: bool) -> bool:
         i = self.channels.index(check_name("gyro channel", channel, self.channels))

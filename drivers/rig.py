@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 import can
@@ -64,8 +65,8 @@ class SafeReport:
 class Rig:
     def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
                  caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
-                 link: CanLink | None = None, safe_nodes: list[NodeClient] = (),
-                 closers: list[Callable[[], None]] = (), emulator=None) -> None:
+                 link: CanLink | None = None, safe_nodes: Sequence[NodeClient] = (),
+                 closers: Sequence[Callable[[], None]] = (), emulator: Any = None) -> None:
         self.url = url
         self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
         self.caging, self.table, self.clock, self.faults = caging, table, clock, faults

@@ -173,8 +173,8 @@ class SimRigServer:
             log.exception("simulated rig: physics thread failed")
             self.error = exc
             self.adc.disconnect()
-            for n in self.nodes.nodes.values():
-                n.connected = False
+            for node in self.nodes.nodes.values():
+                node.connected = False
             with self._cond:
                 self._cond.notify_all()
 

@@ -4,7 +4,7 @@ The thesis's central finding: for small motion the bearings act as a spring of s
 eta To^2, which puts a dip in the closed-loop autocollimator spectrum at the platform
 resonance sqrt(k / I) / 2 pi (3.5 Hz on X). ``stiffness_Nm_per_rad`` and ``To_Nm`` fix eta.
 Closed-loop spectra see the small-motion spring and the damping of the hysteresis, which
-grows as k / To (procedures/gap/model.py ``linearized``): the gap workflow fits both, so its
+grows as k / To (procedures/analysis/gap/model.py ``linearized``): the gap workflow fits both, so its
 To is the one that explains the dip's depth at the measured motion; the hysteresis sweep
 (``fbs run hysteresis``) measures To and eta directly.
 """

@@ -135,8 +135,7 @@ def test_segment_length_rule():
 def test_registered_in_fbs_main_exits_2_naming_channels(tone_file, tmp_path, capsys):
     from fbs import cli
     sub = next(a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    if "spectra" not in sub.choices:
-        pytest.skip("procedures/cli.py does not register `spectra` yet")
+    assert "spectra" in sub.choices
     assert cli.main(["spectra", str(tone_file), "--channels", "a,nope", "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "fbs spectra: error:" in err and "its channels are a, b" in err

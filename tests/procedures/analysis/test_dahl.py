@@ -1,4 +1,4 @@
-"""Dahl's bearing-friction model and its identification (procedures/dahl.py; thesis Ch. V F)."""
+"""Dahl's bearing-friction model and its identification (procedures/analysis/dahl.py; thesis Ch. V F)."""
 
 from __future__ import annotations
 

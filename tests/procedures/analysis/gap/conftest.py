@@ -1,6 +1,6 @@
 """Fixtures of the model-gap tests.
 
-``independent`` is ``tests/procedures/gap/independent.py``, the generator of "measured" runs
+``independent`` is ``tests/procedures/analysis/gap/independent.py``, the generator of "measured" runs
 that shares no code with ``simhw``. Tests run with ``--import-mode=importlib``, so a
 sibling module cannot be imported by name; it is loaded here by path, once per session, and
 registered in ``sys.modules`` under ``independent.MODULE_NAME`` (numba's on-disk cache

@@ -22,7 +22,7 @@ other axes, nonlinearities (sensor ranges, amplifier clipping, Dahl hysteresis: 
 is a linear spring).
 
 Usage from a test (pytest runs with ``--import-mode=importlib``): the ``independent`` fixture
-of ``tests/procedures/gap/conftest.py`` returns this module::
+of ``tests/procedures/analysis/gap/conftest.py`` returns this module::
 
     def test_something(independent, tmp_path):
         path = independent.generate(tmp_path / "run.h5", stiffness_Nm_per_rad=410.0, seed=3)
@@ -412,5 +412,5 @@ def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffn
             ds.attrs["units"] = "V"
             ds.attrs["sample_rate_hz"] = float(rate_hz)
         meta = f.create_group("meta")
-        meta.attrs["generator"] = json.dumps({"name": "tests/procedures/gap/independent.py", **params})
+        meta.attrs["generator"] = json.dumps({"name": "tests/procedures/analysis/gap/independent.py", **params})
     return path
