@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.metadata
 import logging
 import sys
 
@@ -53,9 +54,17 @@ def _console(args: argparse.Namespace) -> int:
     return run_console(args.rig, args.out)
 
 
+def _version() -> str:
+    try:
+        return importlib.metadata.version("fbs-hil")
+    except importlib.metadata.PackageNotFoundError:  # a checkout that was never installed
+        return "unknown"
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="fbs", description="Fixed Base Simulator HIL: DAQ, procedures, simulation.")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
+    p.add_argument("--version", action="version", version=f"fbs-hil {_version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("simulate", help="the plant offline, in virtual time, no drivers")
