@@ -36,7 +36,7 @@ class CommandDac(Protocol):
 class CanCommandDac:
     """The command DACs on their CAN node."""
 
-    axes = AXES
+    axes: tuple[str, ...] = AXES
 
     def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
         self.limits = SetpointLimits(calibration or RigCalibration())

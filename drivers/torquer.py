@@ -33,7 +33,7 @@ class TorquerDac(Protocol):
 class CanTorquerDac:
     """The torquer DACs on their CAN node."""
 
-    channels = GYRO_CHANNELS
+    channels: tuple[str, ...] = GYRO_CHANNELS
 
     def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
         self.limits = SetpointLimits(calibration or RigCalibration())
