@@ -6,11 +6,10 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from drivers import can_protocol as cp
 from drivers.calibration import AXES, RigCalibration
-from drivers.can_link import CanLink, NodeClient
+from drivers.can_dac import CanDac
+from drivers.can_link import CanLink
 from drivers.setpoints import SetpointKind, SetpointLimits, check_name
-from drivers.torquer import check_readback
 
 #: DAC outputs on the command node, in index order.
 OUTPUTS = tuple(f"vtd_{a}" for a in AXES) + tuple(f"gc_{a}" for a in AXES)
@@ -22,47 +21,50 @@ class CommandDac(Protocol):
     axes: tuple[str, ...]
     limits: SetpointLimits
 
-    def set_command_torque_V(self, axis: str, volts: float) -> float: ...
+    def set_command_torque_V(self, axis: str, volts: float) -> float:
+        """Set V_Td on ``axis`` (checked against ``limits`` first); returns the read-back (V)."""
+        ...
 
-    def set_ac_bias_V(self, axis: str, volts: float) -> float: ...
+    def set_ac_bias_V(self, axis: str, volts: float) -> float:
+        """Set gamma_c on ``axis`` (checked against ``limits`` first); returns the read-back (V)."""
+        ...
 
-    def command_torque_V(self, axis: str) -> float: ...
+    def command_torque_V(self, axis: str) -> float:
+        """V_Td on ``axis`` as the node reads it back (V)."""
+        ...
 
-    def ac_bias_V(self, axis: str) -> float: ...
+    def ac_bias_V(self, axis: str) -> float:
+        """gamma_c on ``axis`` as the node reads it back (V)."""
+        ...
 
-    def zero(self) -> None: ...
+    def zero(self) -> None:
+        """Every output to 0 V (part of the safe state)."""
+        ...
 
 
-class CanCommandDac:
+class CanCommandDac(CanDac):
     """The command DACs on their CAN node."""
 
     axes: tuple[str, ...] = AXES
 
     def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        self.limits = SetpointLimits(calibration or RigCalibration())
-        self.node = NodeClient(link, "command")
+        super().__init__(link, "command", calibration)
 
     def set_command_torque_V(self, axis: str, volts: float) -> float:
-        return self._set(f"vtd_{axis}", self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts))
+        v = self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts)
+        return self.write(OUTPUTS.index(f"vtd_{axis}"), v, f"vtd_{axis}")
 
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
-        return self._set(f"gc_{axis}", self.limits.command(SetpointKind.AC_BIAS, axis, volts))
+        v = self.limits.command(SetpointKind.AC_BIAS, axis, volts)
+        return self.write(OUTPUTS.index(f"gc_{axis}"), v, f"gc_{axis}")
 
     def command_torque_V(self, axis: str) -> float:
-        return self._get(f"vtd_{check_name('axis', axis, self.axes)}")
+        return self.read(OUTPUTS.index(f"vtd_{check_name('axis', axis, self.axes)}"), f"vtd_{axis}")
 
     def ac_bias_V(self, axis: str) -> float:
-        return self._get(f"gc_{check_name('axis', axis, self.axes)}")
+        return self.read(OUTPUTS.index(f"gc_{check_name('axis', axis, self.axes)}"), f"gc_{axis}")
 
     def zero(self) -> None:
         for a in self.axes:
             self.set_command_torque_V(a, 0.0)
             self.set_ac_bias_V(a, 0.0)
-
-    def _set(self, output: str, volts: float) -> float:
-        back = cp.from_micro(self.node.call(cp.OP_SET, OUTPUTS.index(output), cp.to_micro(volts),
-                                            what=f"{output} = {volts:+.6f} V"))
-        return check_readback(self.node, output, volts, back, self.limits.calibration.dac_lsb_V)
-
-    def _get(self, output: str) -> float:
-        return cp.from_micro(self.node.call(cp.OP_GET, OUTPUTS.index(output), what=f"read {output}"))

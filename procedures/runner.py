@@ -141,14 +141,6 @@ class Span:
     rate_hz: float
 
     @property
-    def start_s(self) -> float:
-        return self.start / self.rate_hz
-
-    @property
-    def stop_s(self) -> float:
-        return self.stop / self.rate_hz
-
-    @property
     def samples(self) -> int:
         return self.stop - self.start
 
