@@ -33,20 +33,23 @@ Per channel, all decided from the data and read back from the ADC:
 
 K_TO is taken from ``Params.kto_urad_per_s_per_V``, else an earlier earth-rate result
 (``prior``), else the rig's nominal data-sheet value, and the report says which.
+
+This module holds the parameters, the steps and the analysis that ties them together; the
+numerics (crossing times, the restraint fit, the corrected readings) are
+``procedures.analysis.stopwatch`` and the report's table and plots ``procedures.reports.stopwatch``.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
-from pathlib import Path
+from functools import partial
 
 import numpy as np
 
-from daq.reader import RunFile
 from drivers.calibration import GYRO_CHANNELS
+from procedures.analysis.stopwatch import NoCrossing, channel_result, crossing_interval, restraint_fit, slope
 from procedures.params import prior_value
-from procedures.reports.plotting import new_figure, save_figure
+from procedures.reports.stopwatch import markdown, plot_channel
 from procedures.rigsetup import bring_to_mode3, wait_settled
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
@@ -122,7 +125,7 @@ class Stopwatch(Procedure[StopwatchParams]):
         p = self.params
         per = 200.0 + p.null_s * 2 + (2 * p.repetitions + 1) * (p.hold_s + 45.0) + p.restore_s
         return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                *(Step(f"channel {ch}", lambda c, ch=ch: self.channel(c, ch), expected_s=per) for ch in p.channels)]
+                *(Step(f"channel {ch}", partial(self.channel, ch=ch), expected_s=per) for ch in p.channels)]
 
     # ------------------------------------------------------------------ one channel
     def channel(self, ctx: Context, ch: str) -> dict:
@@ -137,7 +140,9 @@ class Stopwatch(Procedure[StopwatchParams]):
             rig.set_caging_inhibit(ch, False)
         rig.set_torquer_bias_V(ch, 0.0)
         wait_settled(ctx, [tcol], tol_V=3e-4, min_s=60.0, window_s=40.0)
-        vt0 = float(np.nanmean(ctx.acquire(p.null_s)[:, tcol]))
+        ref = ctx.acquire(p.null_s)
+        assert ref is not None  # kept (keep=True, the default)
+        vt0 = float(np.nanmean(ref[:, tcol]))
 
         # 2. open the loop, measure the bias gain, null the precession
         t_open = ctx.time_s
@@ -155,10 +160,10 @@ class Stopwatch(Procedure[StopwatchParams]):
         tol = p.null_tolerance_urad_per_s * kg_nom
         for trim in range(5):
             data = rec.take(ctx, p.null_s)
-            slope = _slope(data[:, 0], 1.0 / p.rate_hz)
-            if abs(slope) < tol or trim == 4:
+            null_slope = slope(data[:, 0], 1.0 / p.rate_hz)
+            if abs(null_slope) < tol or trim == 4:
                 break  # a residual beyond the tolerance fails its measurement; the down-up pairs cancel it
-            bias = rig.set_torquer_bias_V(ch, bias - slope / (kg_nom * kto * gain))
+            bias = rig.set_torquer_bias_V(ch, bias - null_slope / (kg_nom * kto * gain))
         vt_null = float(np.nanmean(data[:, 1]))
         vg0 = float(np.nanmean(data[-int(p.smooth_s * p.rate_hz):, 0]))
         t_null = ctx.time_s
@@ -179,7 +184,10 @@ class Stopwatch(Procedure[StopwatchParams]):
             i0 = rec.n
             self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), target, direction, 2 * expected)
             t, vg, vt = rec.arrays(i0)
-            dt = _crossing_interval(t, vg, lo, hi, direction, p.smooth_s, p.rate_hz)
+            try:
+                dt = crossing_interval(t, vg, lo, hi, direction, p.smooth_s, p.rate_hz)
+            except NoCrossing as exc:
+                raise ProcedureError(str(exc)) from None
             ramps.append([direction, round(dt, 5), round(float(np.nanmean(vt) - vt_null), 7)])
             rec.hold(ctx, ch, bias, p.hold_s)
         # back to the null position
@@ -187,7 +195,7 @@ class Stopwatch(Procedure[StopwatchParams]):
         self._ramp(ctx, rec, ch, bias, step_bias * back * np.sign(gain), vg0, back, 2 * expected)
         rig.set_torquer_bias_V(ch, bias)
         t_end = ctx.time_s
-        fit = _restraint_fit(*rec.arrays(rec.index_at(t_null)), vt_null=vt_null, vg0=vg0, dt_s=0.5)
+        fit = restraint_fit(*rec.arrays(rec.index_at(t_null)), vt_null=vt_null, vg0=vg0, dt_s=0.5)
 
         # 5. restore: the loop takes over from the bias
         rig.set_caging_inhibit(ch, False)
@@ -197,7 +205,7 @@ class Stopwatch(Procedure[StopwatchParams]):
             ctx.acquire(p.restore_s / n_steps, keep=False)
         wait_settled(ctx, [tcol], tol_V=1e-3, min_s=30.0, window_s=30.0)
         return {"ch": ch, "kto": kto, "kto_from": source, "gain": round(gain, 6), "vt_null": round(vt_null, 6),
-                "vg0": round(vg0, 5), "null_slope": slope, "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
+                "vg0": round(vg0, 5), "null_slope": null_slope, "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
                 "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit}
 
     def _ramp(self, ctx: Context, rec: _Record, ch: str, bias: float, step: float, target: float, direction: int,
@@ -231,8 +239,8 @@ class Stopwatch(Procedure[StopwatchParams]):
                                   -p.max_null_rate_urad_per_s, p.max_null_rate_urad_per_s))
         values = {"K_g_mV_per_urad": {ch: r.kg for ch, r in per.items()}}
         figs = [Figure(f"ramps-{ch.lower()}", f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
-                       lambda path, ch=ch: plot_channel(path, ctx.path, ch, results[ch])) for ch in p.channels]
-        return Analysis(values, ms, figs, markdown=_markdown(per))
+                       partial(plot_channel, run=ctx.path, ch=ch, r=results[ch])) for ch in p.channels]
+        return Analysis(values, ms, figs, markdown=markdown(per))
 
 
 # ---------------------------------------------------------------------------- data kept by a channel step
@@ -247,7 +255,9 @@ class _Record:
 
     def take(self, ctx: Context, seconds: float) -> np.ndarray:
         t0 = ctx.time_s
-        data = ctx.acquire(seconds)[:, self.cols]
+        acquired = ctx.acquire(seconds)
+        assert acquired is not None  # kept (keep=True, the default)
+        data = acquired[:, self.cols]
         self.t.append(t0 + np.arange(len(data)) / ctx.acq.rate_hz)
         self.x.append(data)
         self.n += len(data)
@@ -267,154 +277,6 @@ class _Record:
 
     def index_at(self, time_s: float) -> int:
         return int(np.searchsorted(np.concatenate(self.t), time_s))
-
-
-def _slope(y: np.ndarray, dt: float) -> float:
-    """Least-squares slope of equally spaced samples (V/s), NaNs skipped."""
-    t = np.arange(len(y)) * dt
-    ok = np.isfinite(y)
-    t, y = t[ok], y[ok]
-    tc = t - t.mean()
-    return float(tc @ (y - y.mean()) / (tc @ tc))
-
-
-def _smooth(y: np.ndarray, n: int) -> np.ndarray:
-    """Centred moving average over n samples (edges shortened)."""
-    n = max(1, n)
-    c = np.concatenate([[0.0], np.cumsum(y)])
-    i = np.arange(len(y))
-    lo = np.clip(i - n // 2, 0, len(y))
-    hi = np.clip(i - n // 2 + n, 0, len(y))
-    return (c[hi] - c[lo]) / (hi - lo)
-
-
-def _crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
-                       rate_hz: float) -> float:
-    """Time between the smoothed pickoff's crossings of the two levels (linear interpolation)."""
-    s = _smooth(vg, int(round(smooth_s * rate_hz)))
-    first, second = (lo, hi) if direction > 0 else (hi, lo)
-
-    def cross(level: float) -> float:
-        beyond = (s - level) * direction >= 0
-        idx = np.flatnonzero(beyond[1:] & ~beyond[:-1])
-        if len(idx) == 0:
-            raise ProcedureError(f"stopwatch: the pickoff never crossed {level:+.4f} V during a ramp")
-        i = idx[0]
-        return float(t[i] + (level - s[i]) / (s[i + 1] - s[i]) * (t[i + 1] - t[i]))
-
-    return cross(second) - cross(first)
-
-
-def _restraint_fit(t: np.ndarray, vg: np.ndarray, vt: np.ndarray, *, vt_null: float, vg0: float,
-                   dt_s: float) -> dict:
-    """Least squares of V_g(t) - V_g(t0) = a int(V_T - V_T0) + c (t - t0) - k int(V_g - V_g0) (+ offset),
-    on ``dt_s`` means (module docstring, step 4)."""
-    step = t[1] - t[0]
-    n = max(1, int(round(dt_s / step)))
-    m = len(t) // n * n
-    tm = t[:m].reshape(-1, n).mean(axis=1)
-    g = vg[:m].reshape(-1, n)
-    gm, vtm = np.nanmean(g, axis=1), np.nanmean(vt[:m].reshape(-1, n), axis=1)
-    it = np.concatenate([[0.0], np.cumsum((vtm[1:] + vtm[:-1]) / 2 - vt_null) * np.diff(tm)])
-    ig = np.concatenate([[0.0], np.cumsum((gm[1:] + gm[:-1]) / 2 - vg0) * np.diff(tm)])
-    design = np.column_stack([np.ones_like(tm), it, tm - tm[0], -ig])
-    ok = np.isfinite(gm) & np.isfinite(it) & np.isfinite(ig)
-    coef, *_ = np.linalg.lstsq(design[ok], gm[ok], rcond=None)
-    resid = gm[ok] - design[ok] @ coef
-    cov = np.linalg.inv(design[ok].T @ design[ok]) * (resid @ resid) / max(1, ok.sum() - 4)
-    se = np.sqrt(np.diag(cov))
-    return {"a": float(coef[1]), "a_se": float(se[1]), "c": float(coef[2]), "k": float(coef[3]),
-            "k_se": float(se[3]), "rms": float(np.sqrt(np.mean(resid ** 2)))}
-
-
-# ---------------------------------------------------------------------------- results
-@dataclass
-class ChannelResult:
-    channel: str
-    kto: float
-    kto_from: str
-    readings: list[float]          # corrected stopwatch K_g per ramp, mV/urad
-    naive: list[float]             # uncorrected
-    repetitions: list[float]       # mean of each down-up pair
-    asymmetry: float               # (up - down) / mean: a rate offset during the ramps
-    kg: float
-    kg_se: float
-    spread: float
-    kg_ls: float
-    kg_ls_se: float
-    tau_s: float | None
-    tau_se: float | None
-    correction: float              # mean (corrected / naive - 1)
-    null_rate_urad_per_s: float
-
-
-def channel_result(r: dict) -> ChannelResult:
-    """Stopwatch readings (with the restraint correction x coth x) from a channel step's result."""
-    kto = r["kto"]
-    fit = r["fit"]
-    k, k_se = fit["k"], fit["k_se"]
-    resolved = k > 0 and k > 2 * k_se
-    tau = 1.0 / k if resolved else None
-    naive, corrected = [], []
-    for _direction, dt, dvt in r["ramps"]:
-        kg = r["dVg"] / (dt * abs(dvt) * kto) * 1e3                         # II C.1.a(6), V/urad -> mV/urad
-        x = dt / (2 * tau) if tau else 0.0
-        naive.append(kg)
-        corrected.append(kg * (x / math.tanh(x) if x > 0 else 1.0))
-    reps = [float(np.mean(corrected[i:i + 2])) for i in range(0, len(corrected) - 1, 2)]
-    up = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d > 0]
-    down = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d < 0]
-    kg = float(np.mean(reps))
-    spread = float(np.std(reps, ddof=1) / kg) if len(reps) > 1 else 0.0
-    kg_ls = abs(fit["a"]) / kto * 1e3
-    return ChannelResult(r["ch"], kto, r["kto_from"], corrected, naive, reps,
-                         float((np.mean(up) - np.mean(down)) / kg) if up and down else 0.0, kg,
-                         kg * spread / math.sqrt(len(reps)) if len(reps) > 1 else float("nan"), spread,
-                         kg_ls, fit["a_se"] / kto * 1e3, tau, (k_se / k ** 2) if resolved else None,
-                         float(np.mean(np.array(corrected) / np.array(naive)) - 1.0),
-                         r["null_slope"] / (kg * 1e-3))
-
-
-def _markdown(per: dict[str, ChannelResult]) -> str:
-    lines = ["## Results", "",
-             "| channel | K_g stopwatch (mV/urad) | spread | up - down | K_g least squares | h/k fitted (s) | "
-             "restraint correction | residual null rate (urad/s) | K_TO used (urad/s/V) |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for ch, r in per.items():
-        tau = "not resolved" if r.tau_s is None else f"{r.tau_s:.0f} ± {r.tau_se:.0f}"
-        lines.append(f"| {ch} | {r.kg:.4f} ± {r.kg_se:.4f} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
-                     f"{r.kg_ls:.4f} ± "
-                     f"{r.kg_ls_se:.4f} | {tau} | {100 * r.correction:+.3f} % | {r.null_rate_urad_per_s:+.4f} | "
-                     f"{r.kto:.4g} ({r.kto_from}) |")
-    nominal = [ch for ch, r in per.items() if r.kto_from == "nominal"]
-    if nominal:
-        lines += ["", f"**K_TO for {', '.join(nominal)} is the data sheet's nominal value**, not a measurement: "
-                  "run `fbs run earth-rate` first (same --out) for measured K_g."]
-    lines += ["", "Readings per ramp (corrected / uncorrected, mV/urad):", ""]
-    for ch, r in per.items():
-        lines.append(f"- {ch}: " + ", ".join(f"{c:.4f} / {n:.4f}" for c, n in zip(r.readings, r.naive)))
-    lines += ["", "The ramps run between levels symmetric about the null position, so the elastic restraint's "
-              "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record."]
-    return "\n".join(lines)
-
-
-def plot_channel(path: Path, run: Path, ch: str, r: dict) -> None:
-    t0, _, t1 = r["t"]
-    with RunFile(run) as rf:
-        block = rf.slice_s(t0, t1, [f"gyro_{ch.lower()}", f"torq_{ch.lower()}"])
-    fig, axes = new_figure(2, 1, figsize=(10, 6))
-    data = block.data
-    t = (block.start + np.arange(len(block))) / block.rate_hz
-    axes[0, 0].plot(t, data[0], lw=0.5)
-    for level in (r["vg0"] - r["dVg"] / 2, r["vg0"] + r["dVg"] / 2):
-        axes[0, 0].axhline(level, color="k", ls="--", lw=0.8)
-    axes[0, 0].set_ylabel(f"gyro_{ch.lower()} (V)")
-    axes[1, 0].plot(t, data[1], lw=0.8)
-    axes[1, 0].set_ylabel(f"torq_{ch.lower()} (V)")
-    axes[1, 0].set_xlabel("file time (s)")
-    for ax in axes[:, 0]:
-        ax.grid(True, alpha=0.4)
-    save_figure(fig, path)
 
 
 PROCEDURE = Stopwatch

@@ -11,8 +11,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.rig import open_rig
-from procedures.calibrations.earth_rate import EarthRate, fit_horizontal, fit_vertical, omega_z
-from procedures.calibrations.stopwatch import Stopwatch, _crossing_interval, _restraint_fit, _smooth, channel_result
+from procedures.analysis.earth_rate import fit_horizontal, fit_vertical, omega_z
+from procedures.analysis.stopwatch import channel_result
+from procedures.analysis.stopwatch import crossing_interval as _crossing_interval
+from procedures.analysis.stopwatch import restraint_fit as _restraint_fit
+from procedures.analysis.stopwatch import smooth as _smooth
+from procedures.calibrations.earth_rate import EarthRate
+from procedures.calibrations.stopwatch import Stopwatch
 from procedures.runner import run_procedure
 from simhw.geometry import earth_rate_platform, platform_axes_enu
 

@@ -1,0 +1,57 @@
+"""The stopwatch report: the results table, the readings per ramp, and each channel's ramp plot
+read back from the run file. The procedure is ``procedures.calibrations.stopwatch``; the
+readings (``ChannelResult``) are ``procedures.analysis.stopwatch``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from daq.reader import RunFile
+from procedures.analysis.stopwatch import ChannelResult
+from procedures.reports.plotting import new_figure, save_figure
+
+
+def markdown(per: dict[str, ChannelResult]) -> str:
+    lines = ["## Results", "",
+             "| channel | K_g stopwatch (mV/urad) | spread | up - down | K_g least squares | h/k fitted (s) | "
+             "restraint correction | residual null rate (urad/s) | K_TO used (urad/s/V) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for ch, r in per.items():
+        tau = "not resolved" if r.tau_s is None else f"{r.tau_s:.0f} ± {r.tau_se:.0f}"
+        lines.append(f"| {ch} | {r.kg:.4f} ± {r.kg_se:.4f} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
+                     f"{r.kg_ls:.4f} ± "
+                     f"{r.kg_ls_se:.4f} | {tau} | {100 * r.correction:+.3f} % | {r.null_rate_urad_per_s:+.4f} | "
+                     f"{r.kto:.4g} ({r.kto_from}) |")
+    nominal = [ch for ch, r in per.items() if r.kto_from == "nominal"]
+    if nominal:
+        lines += ["", f"**K_TO for {', '.join(nominal)} is the data sheet's nominal value**, not a measurement: "
+                  "run `fbs run earth-rate` first (same --out) for measured K_g."]
+    lines += ["", "Readings per ramp (corrected / uncorrected, mV/urad):", ""]
+    for ch, r in per.items():
+        lines.append(f"- {ch}: " + ", ".join(f"{c:.4f} / {n:.4f}" for c, n in zip(r.readings, r.naive)))
+    lines += ["", "The ramps run between levels symmetric about the null position, so the elastic restraint's "
+              "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record."]
+    return "\n".join(lines)
+
+
+def plot_channel(path: Path, run: Path, ch: str, r: dict) -> None:
+    """The channel's pickoff (with the two stopwatch levels) and torquer output from the loop's
+    opening to the end of the ramps, read from the run file ``run``; ``r`` the step's result."""
+    t0, _, t1 = r["t"]
+    with RunFile(run) as rf:
+        block = rf.slice_s(t0, t1, [f"gyro_{ch.lower()}", f"torq_{ch.lower()}"])
+    fig, axes = new_figure(2, 1, figsize=(10, 6))
+    data = block.data
+    t = (block.start + np.arange(len(block))) / block.rate_hz
+    axes[0, 0].plot(t, data[0], lw=0.5)
+    for level in (r["vg0"] - r["dVg"] / 2, r["vg0"] + r["dVg"] / 2):
+        axes[0, 0].axhline(level, color="k", ls="--", lw=0.8)
+    axes[0, 0].set_ylabel(f"gyro_{ch.lower()} (V)")
+    axes[1, 0].plot(t, data[1], lw=0.8)
+    axes[1, 0].set_ylabel(f"torq_{ch.lower()} (V)")
+    axes[1, 0].set_xlabel("file time (s)")
+    for ax in axes[:, 0]:
+        ax.grid(True, alpha=0.4)
+    save_figure(fig, path)
