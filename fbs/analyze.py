@@ -19,9 +19,9 @@ from pathlib import Path
 
 
 def _hysteresis(args: argparse.Namespace) -> int:
-    from procedures.calibrations.hysteresis import (
+    from procedures.analysis.hysteresis import analyze_file
+    from procedures.reports.hysteresis import (
         CAL_SOURCES,
-        analyze_file,
         markdown,
         plot_describing_function,
         plot_history,

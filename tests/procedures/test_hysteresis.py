@@ -25,17 +25,10 @@ from daq.runfile import RunWriter
 from drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
 from fbs import analyze
 from procedures.analysis import dahl
+from procedures.analysis.hysteresis import analyze_file, calibration_from_meta
 from procedures.calibrations import catalogue
-from procedures.calibrations.hysteresis import (
-    Hysteresis,
-    Params,
-    analyze_file,
-    calibration_from_meta,
-    plot_describing_function,
-    plot_history,
-    plot_loops,
-    plot_scan,
-)
+from procedures.calibrations.hysteresis import Hysteresis, Params
+from procedures.reports.hysteresis import plot_describing_function, plot_history, plot_loops, plot_scan
 
 TO_TOL, ETA_TOL, K_TOL = 0.10, 0.25, 0.10
 

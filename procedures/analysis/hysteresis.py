@@ -1,0 +1,218 @@
+"""The hysteresis analysis: Dahl's To and eta of a gimbal bearing, its loops and describing
+function, from any "fbs-run" file of a torque-angle sweep (thesis Ch. V F, Figs. 50-57). A file
+(and optionally the data sheet) in, ``HysteresisResult`` out; no rig. The procedure that records
+the sweep is ``procedures.calibrations.hysteresis``; the plots and the Markdown are
+``procedures.reports.hysteresis``; ``fbs analyze hysteresis FILE --axis X`` runs this alone.
+
+``analyze_file`` reads only the file: the angle from the instrumentation channel, the bearing
+torque from the power-amplifier input with the platform's inertial and viscous torques removed
+(``dahl.bearing_torque``), the cycles of constant amplitude from the command channel; Dahl's To
+and eta are fitted by integrating eq. 5.2 along the measured angle (``dahl.fit_dahl_path``). It
+gives the loops (Figs. 51, 53, 54), the describing function (eq. 5.12, Fig. 57) and the
+small-motion stiffness eta To^2. Every instrument constant comes from the rig's data sheet
+(``RigCalibration``: the run's own ``/meta/calibration`` for a file); none is a constant here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daq.reader import RunFile
+from daq.runfile import RunFileError
+from drivers.calibration import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
+from procedures.analysis import dahl
+
+log = logging.getLogger(__name__)
+
+URAD = 1e-6
+#: the axes with a primary (two-axis) autocollimator, hence an instrumentation channel (DESIGN.md section 5)
+AC_AXES = ("X", "Y")
+
+
+@dataclass
+class Loop:
+    """One amplitude: its synchronously averaged cycle and first harmonics."""
+
+    amplitude_urad: float              # of the angle's fundamental
+    command_amplitude_V: float
+    n_cycles: int
+    t0_s: float
+    t1_s: float
+    theta_urad: np.ndarray = field(repr=False)     # averaged cycle, phase bins
+    torque_Nm: np.ndarray = field(repr=False)      # measured, less the segment's offset
+    model_Nm: np.ndarray = field(repr=False)       # Dahl along the measured angle, fitted parameters
+    describing_Nm_per_rad: complex = 0j            # measured first-harmonic torque / angle
+    model_describing_Nm_per_rad: complex = 0j      # eq. 5.12 at this amplitude, fitted parameters
+    residual_rms_Nm: float = 0.0
+    offset_Nm: float = 0.0
+
+
+@dataclass
+class HysteresisResult:
+    file: str
+    axis: str
+    frequency_hz: float
+    To_Nm: float
+    eta_per_Nm: float
+    stiffness_Nm_per_rad: float
+    To_se_Nm: float
+    eta_se_per_Nm: float
+    stiffness_se_Nm_per_rad: float
+    correlation: float
+    torque_cutoff_hz: float
+    path_cutoff_hz: float
+    scan: dahl.PathScan
+    loops: list[Loop]
+    residual_rms_Nm: float
+    relative_residual: float           # residual rms / largest loop's torque half-range
+    calibration_source: str            # "file" | "given" | "defaults"
+    rate_hz: float
+    #: a stretch of the largest loop for the time-history plot (Fig. 50): t, angle, torque, model
+    history: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    def values(self) -> dict[str, Any]:
+        """The summary keys of DESIGN.md section 7."""
+        return {"To_Nm": self.To_Nm, "eta_per_Nm": self.eta_per_Nm,
+                "stiffness_Nm_per_rad": self.stiffness_Nm_per_rad, "file": self.file}
+
+    def theta_o_bar(self, loop: Loop) -> float:
+        """Normalized amplitude eta To theta_o (eq. 5.6b)."""
+        return self.eta_per_Nm * self.To_Nm * loop.amplitude_urad * URAD
+
+
+def calibration_from_meta(data: Any) -> RigCalibration | None:
+    """The ``RigCalibration`` a run recorded in ``/meta/calibration`` (``dataclasses.asdict``
+    of it); None if there is none. Unknown keys (a newer writer) are ignored."""
+    if not isinstance(data, Mapping) or not data:
+        return None
+    names = {f.name for f in dataclasses.fields(RigCalibration)}
+    kw = {k: v for k, v in data.items() if k in names}
+    try:
+        if "platform" in kw:
+            kw["platform"] = {a: _make(PlatformConstants, v) for a, v in kw["platform"].items()}
+        if "autocollimator" in kw:
+            kw["autocollimator"] = {a: _make(AutocollimatorConstants, v) for a, v in kw["autocollimator"].items()}
+        return RigCalibration(**kw)
+    except (TypeError, AttributeError) as exc:
+        raise ValueError(f"/meta/calibration is not a rig calibration ({exc})") from None
+
+
+def _make(cls: type, value: Any) -> Any:
+    names = {f.name for f in dataclasses.fields(cls)}
+    return cls(**{k: v for k, v in dict(value).items() if k in names})
+
+
+def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration | None = None, *,
+                 settle_cycles: int = 1, angle_lag_s: float = 0.0, bins: int = 200) -> HysteresisResult:
+    """Dahl's To and eta, the loops and the describing function from any "fbs-run" file with
+    ``cmd_<a>``, ``ac_<a>_inst`` and ``pa_<a>`` channels recorded during a sinusoidal command
+    at one frequency and a ladder of amplitudes (``settle_cycles`` at each new amplitude are
+    left out). ``calibration`` defaults to the file's ``/meta/calibration``, else the data
+    sheet's defaults (with a warning). ``angle_lag_s``: the recorded angle is advanced by this
+    much (the instrumentation channel's lag behind the power-amplifier input, if known).
+    Raises ValueError naming what is wrong."""
+    path = Path(path)
+    a = str(axis).upper()
+    if a not in AXES:
+        raise ValueError(f"unknown axis {axis!r} (the platform axes are {', '.join(AXES)})")
+    if a not in AC_AXES:
+        raise ValueError(f"axis {a} has no instrumentation autocollimator channel (ac_{a.lower()}_inst) to measure "
+                         f"the angle with; the hysteresis analysis works on {' or '.join(AC_AXES)}")
+    names = (f"cmd_{a.lower()}", f"ac_{a.lower()}_inst", f"pa_{a.lower()}")
+    warnings: list[str] = []
+    try:
+        with RunFile(path) as rf:
+            missing = [c for c in names if c not in rf.channels]
+            if missing:
+                raise ValueError(f"{path}: no channel(s) {', '.join(missing)} for axis {a} "
+                                 f"(the file has {', '.join(rf.channels)})")
+            fs = rf.rate_hz
+            data = rf.read(list(names))
+            meta = rf.meta
+    except RunFileError as exc:
+        raise ValueError(str(exc)) from None
+    source = "given"
+    if calibration is None:
+        calibration = calibration_from_meta(meta.get("calibration"))
+        source = "file"
+        if calibration is None:
+            calibration = RigCalibration()
+            source = "defaults"
+            msg = (f"{path.name} records no rig calibration (/meta/calibration): using the data sheet's "
+                   f"default constants")
+            log.warning(msg)
+            warnings.append(msg)
+    if a not in calibration.platform or a not in calibration.autocollimator:
+        raise ValueError(f"axis {a!r}: the rig calibration has no platform and instrumentation-autocollimator "
+                         f"constants for it (axes with both: "
+                         f"{', '.join(sorted(set(calibration.platform) & set(calibration.autocollimator)))})")
+    plat, ac = calibration.platform[a], calibration.autocollimator[a]
+    cmd, inst, pa = data
+    if len(cmd) < 16:
+        raise ValueError(f"{path}: {len(cmd)} samples are too few for an analysis")
+    freq = dahl.command_frequency(np.nan_to_num(cmd), fs)
+    segments = dahl.find_segments(np.nan_to_num(cmd), fs, freq, settle_cycles=settle_cycles)
+    if not segments:
+        raise ValueError(f"{path}: {names[0]} has no run of at least {2 + settle_cycles} cycles at one amplitude "
+                         f"(a sinusoid near {freq:.4g} Hz); too short, or not a hysteresis sweep")
+    a0 = min(s.lead_start for s in segments)
+    b0 = max(s.stop for s in segments)
+    for name, x in zip(names, data):
+        bad = int(np.count_nonzero(~np.isfinite(x[a0:b0])))
+        if bad:
+            raise ValueError(f"{path}: {name} has {bad} lost (NaN) samples in the cycles to analyse "
+                             f"({a0 / fs:.2f}..{b0 / fs:.2f} s)")
+    # the torque band: the fundamental and its harmonics well into the loops' corners
+    fc = min(12.5 * freq, 0.2 * fs)
+    if not (math.isfinite(angle_lag_s) and 0.0 <= angle_lag_s * fs < 20):
+        raise ValueError(f"angle lag {angle_lag_s * 1e3:g} ms must be >= 0 and under 20 samples")
+    theta = dahl.shift(inst / (ac.inst_mV_per_urad * 1e-3) * URAD, fs, angle_lag_s)
+    theta_f = dahl.lowpass(theta, fs, fc)
+    torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
+                                 viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
+    top = min(10.0 * fc, 0.35 * fs)
+    cutoffs = [c for c in 1.25 * fc * 1.25 ** np.arange(20) if c <= top] or [fc]
+    step = max(1, int(fs / (8.0 * fc)))
+    fit, scan = dahl.fit_dahl_path(theta, torque, segments, fs, smooth_hz=fc, cutoffs_hz=cutoffs, step=step,
+                                   independent_every=max(1, int(fs / (2.0 * fc))))
+    path_cutoff_hz = fit.path_cutoff_hz
+    assert path_cutoff_hz is not None  # fit_dahl_path sets it on the fit it returns
+    if fit.path_cutoff_hz in (cutoffs[0], cutoffs[-1]) and len(cutoffs) > 1:
+        msg = (f"the angle-path bandwidth that fits best, {fit.path_cutoff_hz:.3g} Hz, is at the end of the "
+               f"range tried ({cutoffs[0]:.3g}..{cutoffs[-1]:.3g} Hz)")
+        log.warning(msg)
+        warnings.append(msg)
+    model = np.full(len(theta), np.nan)
+    model[fit.start:fit.stop] = fit.model_Nm
+    loops: list[Loop] = []
+    k = fit.stiffness_Nm_per_rad
+    for seg, off, rms in zip(segments, fit.offsets_Nm, fit.residual_rms_Nm):
+        th_c = dahl.synchronous_average(theta_f, fs, freq, seg.start, seg.stop, bins)
+        tq_c = dahl.synchronous_average(torque, fs, freq, seg.start, seg.stop, bins) - off
+        md_c = dahl.synchronous_average(model, fs, freq, seg.start, seg.stop, bins) - off
+        a1 = dahl.first_harmonic(th_c)
+        n_meas = dahl.first_harmonic(tq_c) / a1
+        amp = abs(a1)
+        n_model = complex(dahl.describing_function(fit.eta_per_Nm * fit.To_Nm * amp)) * k
+        loops.append(Loop(amp / URAD, seg.command_amplitude, seg.n_cycles, seg.start / fs, seg.stop / fs,
+                          th_c / URAD, tq_c, md_c, n_meas, n_model, rms, off))
+    big = max(range(len(loops)), key=lambda i: loops[i].amplitude_urad)
+    half_range = 0.5 * float(np.ptp(loops[big].torque_Nm))
+    relative = fit.residual_rms_total_Nm / half_range if half_range > 0 else math.inf
+    s = segments[big]
+    n_hist = min(s.stop - s.start, int(round(1.5 * fs / freq)))
+    sl = slice(s.start, s.start + n_hist)
+    history = {"t_s": np.arange(sl.start, sl.stop) / fs, "theta_urad": theta_f[sl] / URAD,
+               "torque_Nm": torque[sl] - fit.offsets_Nm[big], "model_Nm": model[sl] - fit.offsets_Nm[big]}
+    return HysteresisResult(str(path), a, freq, fit.To_Nm, fit.eta_per_Nm, k, fit.To_se_Nm, fit.eta_se_per_Nm,
+                            fit.stiffness_se_Nm_per_rad, fit.correlation, fc, float(path_cutoff_hz), scan, loops,
+                            fit.residual_rms_total_Nm, relative, source, fs, history, warnings)
