@@ -9,6 +9,8 @@ decorator around the rig's real driver: every call is forwarded unchanged.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
+from typing import overload
 
 from console.meterdata import MeterStore
 from drivers.adc import Adc, AdcBlock, AdcConfig, AdcIdentity, AdcStatus
@@ -20,7 +22,13 @@ class TappedAdc(Adc):
     def __init__(self, inner: Adc, store: MeterStore) -> None:
         self.inner = inner
         self.store = store
-        self.identity: AdcIdentity = inner.identity  # type: ignore[attr-defined]
+        self.identity = inner.identity
+
+    @overload
+    def _tap(self, block: AdcBlock) -> AdcBlock: ...
+
+    @overload
+    def _tap(self, block: AdcBlock | None) -> AdcBlock | None: ...
 
     def _tap(self, block: AdcBlock | None) -> AdcBlock | None:
         if block is not None and len(block):
@@ -34,7 +42,8 @@ class TappedAdc(Adc):
     def identify(self) -> AdcIdentity:
         return self.inner.identify()
 
-    def configure(self, channels, rate_hz, ranges_V=None, frame_sets=None) -> AdcConfig:
+    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
+                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig:
         return self.inner.configure(channels, rate_hz, ranges_V, frame_sets)
 
     @property
@@ -49,7 +58,7 @@ class TappedAdc(Adc):
         return self.inner.start()
 
     def read(self, n: int, timeout_s: float | None = None) -> AdcBlock:
-        return self._tap(self.inner.read(n, timeout_s))  # type: ignore[return-value]
+        return self._tap(self.inner.read(n, timeout_s))
 
     def read_available(self) -> AdcBlock | None:
         return self._tap(self.inner.read_available())

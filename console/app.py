@@ -39,7 +39,7 @@ from drivers.calibration import RigCalibration
 from drivers.setpoints import SetpointLimits
 
 if TYPE_CHECKING:
-    from procedures.runner import Procedure
+    from procedures.runner import Procedure, RunSummary
 
 log = logging.getLogger(__name__)
 
@@ -88,7 +88,7 @@ class ConsoleApp(App[int]):
         self.limits: SetpointLimits | None = None
         self.outcomes: list[CommandOutcome] = []   # every outcome, newest last (tests read it)
         self.stopped: WorkerStopped | None = None
-        self.last_summary = None
+        self.last_summary: RunSummary | None = None
         self._quitting = False
         self._meter_seq = -1
         self._handler = FeedHandler(self.log_feed)

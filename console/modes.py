@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 from rich.text import Text
 from textual.app import ComposeResult
-from textual.binding import Binding
+from textual.binding import Binding, BindingType
 from textual.containers import Vertical
 from textual.message import Message
 from textual.widgets import Static
@@ -18,8 +20,9 @@ SHORT = {1: "gyro off", 2: "spin-up", 3: "AC ctl", 4: "gyro 4ch", 5: "gyro 3ch",
 
 
 class ModePanel(Vertical, can_focus=True):
-    BINDINGS = [Binding("h", "hold", "hold")] + [
-        Binding(str(m), f"select({m})", f"select {m}", group=SELECT) for m in range(8)] + [
+    BINDINGS: ClassVar[list[BindingType]] = [
+        Binding("h", "hold", "hold"),
+        *(Binding(str(m), f"select({m})", f"select {m}", group=SELECT) for m in range(8)),
         Binding("r", "release", "release"),
         Binding("s", "safe", "safe"),
     ]

@@ -23,7 +23,7 @@ class OperatorQuestion:
     answer: str | None = None
     done: threading.Event = field(default_factory=threading.Event)
 
-    def reply(self, answer: str) -> None:
+    def reply(self, answer: str | None) -> None:
         self.answer = answer
         self.done.set()
 
@@ -32,7 +32,7 @@ class ConsoleOperator:
     """Callable as an ``Operator``: prompt -> answer, asked through ``ask`` (the UI)."""
 
     def __init__(self) -> None:
-        self.ask: Callable[[OperatorQuestion], None] | None = None
+        self.ask: Callable[[OperatorQuestion], object] | None = None  # its result is ignored
         self._open: list[OperatorQuestion] = []
         self._closed = False
         self._lock = threading.Lock()

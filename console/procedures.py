@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shlex
+from typing import TYPE_CHECKING
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -16,6 +17,9 @@ from textual.message import Message
 from textual.widgets import Input, ProgressBar, RichLog, Select, Static
 
 from console.state import ProcedureInfo
+
+if TYPE_CHECKING:
+    from procedures.runner import Procedure
 
 
 def _fmt_s(s: float | None) -> str:
@@ -28,7 +32,7 @@ def _fmt_s(s: float | None) -> str:
     return f"{s:.0f} s"
 
 
-def defaults_text(proc_cls) -> str:
+def defaults_text(proc_cls: type[Procedure]) -> str:
     """The parameters and their defaults, as ``k=v`` pairs a user can copy."""
     return " ".join(f"{k}={json.dumps(v, separators=(',', ':'))}"
                     for k, v in dataclasses.asdict(proc_cls.Params()).items())
@@ -58,7 +62,7 @@ class ProcedurePanel(Vertical, can_focus=True):
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
-        self.catalogue: dict[str, type] = {}
+        self.catalogue: dict[str, type[Procedure]] = {}
         self.running = False
 
     def compose(self) -> ComposeResult:
@@ -72,7 +76,7 @@ class ProcedurePanel(Vertical, can_focus=True):
         yield RichLog(id="proc-log", max_lines=1000, wrap=False, markup=False)
         yield Static(id="proc-result")
 
-    def set_catalogue(self, catalogue: dict[str, type]) -> None:
+    def set_catalogue(self, catalogue: dict[str, type[Procedure]]) -> None:
         """The procedures (imported off the UI thread: the analysis stack takes seconds)."""
         self.catalogue = catalogue
         select = self.query_one("#proc-name", Select)

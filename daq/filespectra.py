@@ -235,6 +235,7 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     if k_used == 0 or acc is None:
         raise ValueError(f"every one of the {K} segments of {nperseg} samples ({nperseg / fs:g} s) in "
                          f"{run.path} holds lost samples (NaN): nothing to average; try shorter segments")
+    assert f is not None  # set together with acc
     S = acc
     S *= _scale(win, fs, scaling) / k_used
     _double_one_sided(S, nfft)

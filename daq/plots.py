@@ -18,6 +18,7 @@ import logging
 from pathlib import Path
 
 import numpy as np
+from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
@@ -61,13 +62,13 @@ def _strongest_distinct(f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float
     return out
 
 
-def _new_figure() -> tuple[Figure, object]:
+def _new_figure() -> tuple[Figure, Axes]:
     fig = Figure(figsize=FIGSIZE, layout="constrained")
     FigureCanvasAgg(fig)
     return fig, fig.add_subplot()
 
 
-def _finish(fig: Figure, ax, out: str | Path) -> Path:
+def _finish(fig: Figure, ax: Axes, out: str | Path) -> Path:
     """Grid the axes, write the PNG and free the figure; returns the path."""
     ax.grid(True, which="major", alpha=0.5)
     ax.grid(True, which="minor", alpha=0.15)

@@ -58,13 +58,14 @@ class Preallocator:
 
     def reserve(self, nbytes: int) -> None:
         """Make sure the ``nbytes`` after the current end of file are reserved."""
-        if not self.enabled:
+        call = self._call
+        if not self.enabled or call is None:  # enabled only where there is a fallocate
             return
         end = os.fstat(self.fd).st_size + nbytes
         if end <= self.reserved:
             return
         new = max(end, self.reserved + self.step)
-        if self._call(self.fd, FALLOC_FL_KEEP_SIZE, self.reserved, new - self.reserved) != 0:
+        if call(self.fd, FALLOC_FL_KEEP_SIZE, self.reserved, new - self.reserved) != 0:
             err = ctypes.get_errno()
             self.enabled = False
             log.debug("not reserving disk space ahead any more (fallocate: %s)", os.strerror(err))

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
+from typing import Literal
 
 import numpy as np
 import scipy.optimize
@@ -69,7 +70,7 @@ def _best_frequency(x: np.ndarray, t: np.ndarray, ok: np.ndarray, fs: float, lin
     return float(res.x)
 
 
-def prewhiten(x: np.ndarray, fs: float, *, line: bool = True, sine_hz: float | str | None = None,
+def prewhiten(x: np.ndarray, fs: float, *, line: bool = True, sine_hz: float | Literal["auto"] | None = None,
               max_passes: int = 20) -> Prewhitened:
     """Remove a least-squares line and/or sine and the 4-sigma outliers (App. A.3).
 
@@ -85,13 +86,15 @@ def prewhiten(x: np.ndarray, fs: float, *, line: bool = True, sine_hz: float | s
         raise ValueError(f"prewhiten: {bad} samples are NaN or infinite (gaps?); cut the record at the gaps first")
     if not fs > 0:
         raise ValueError(f"sample rate {fs!r} Hz must be > 0")
+    if isinstance(sine_hz, str) and sine_hz != "auto":
+        raise ValueError(f"sine_hz={sine_hz!r}: give None, a frequency in Hz or 'auto'")
     t = np.arange(len(x)) / fs
     ok = np.ones(len(x), bool)
     outliers: list[tuple[int, float]] = []
     passes = 0
     while True:
         passes += 1
-        freq = _best_frequency(x, t, ok, fs, line) if sine_hz == "auto" else sine_hz
+        freq = _best_frequency(x, t, ok, fs, line) if isinstance(sine_hz, str) else sine_hz
         coef, model = _fit(x, t, ok, line, freq)
         r = x - model
         mean, sigma = float(np.mean(r[ok])), float(np.std(r[ok]))

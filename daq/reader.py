@@ -22,7 +22,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, overload
 
 import h5py
 import numpy as np
@@ -74,6 +74,12 @@ class Channel:
 
     def __len__(self) -> int:
         return self.run.n_samples
+
+    @overload
+    def __getitem__(self, index: slice) -> np.ndarray: ...
+
+    @overload
+    def __getitem__(self, index: int) -> float: ...
 
     def __getitem__(self, index: slice | int) -> np.ndarray | float:
         if isinstance(index, slice):
@@ -260,7 +266,11 @@ class RunFile:
         ``block - overlap`` after the previous; the last may be shorter. One block in memory."""
         if (block_samples is None) == (block_s is None):
             raise ValueError("give exactly one of block_samples and block_s")
-        size = int(block_samples if block_samples is not None else round(block_s * self.rate_hz))
+        if block_samples is not None:
+            size = int(block_samples)
+        else:
+            assert block_s is not None  # exactly one of the two was given
+            size = int(round(block_s * self.rate_hz))
         if size < 1 or not 0 <= overlap < size:
             raise ValueError(f"block of {size} samples with overlap {overlap}: need size >= 1, 0 <= overlap < size")
         channels = tuple(self.channels if channels is None else channels)

@@ -283,7 +283,9 @@ class RunWriter:
 
     def _put(self, cols: np.ndarray | None, n: int | None = None) -> None:
         self._check_ok()
-        n = cols.shape[1] if cols is not None else n
+        if cols is not None:
+            n = cols.shape[1]
+        assert n is not None  # without columns, the caller (append_missing) gives the count
         pos = 0
         while pos < n:
             m = min(n - pos, self._room() - self._k)

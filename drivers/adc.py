@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -50,7 +51,7 @@ class AdcBlock:
     t0_s: float                           # rig time of the stream's sample 0
     channels: tuple[str, ...]
     volts: np.ndarray                     # (n, n_channels) float64, channel-major in memory
-    overrange: np.ndarray = field(repr=False, default=None)  # (n, n_channels) bool
+    overrange: np.ndarray = field(repr=False)  # (n, n_channels) bool
 
     def __len__(self) -> int:
         return len(self.volts)
@@ -71,12 +72,14 @@ class AdcBlock:
 class Adc(abc.ABC):
     """Configure, start, read, stop. ``read`` raises ``SampleGap`` where samples were lost."""
 
+    identity: AdcIdentity                 # what ``identify`` answered when the driver opened the device
+
     @abc.abstractmethod
     def identify(self) -> AdcIdentity: ...
 
     @abc.abstractmethod
     def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
-                  ranges_V: dict[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig: ...
+                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig: ...
 
     @property
     @abc.abstractmethod

@@ -181,8 +181,8 @@ class CanLink:
                 self.faults.report(exc)
                 raise
             if not slot[0].wait(timeout_s):
-                fault: DriverError = DeviceTimeout(f"CAN node '{name}' (id {node}) did not answer {cp.OPS[op]} index {index} "
-                                      f"within {timeout_s:g} s; the rig went safe")
+                fault: DriverError = DeviceTimeout(f"CAN node '{name}' (id {node}) did not answer {cp.OPS[op]} "
+                                                   f"index {index} within {timeout_s:g} s; the rig went safe")
                 self.faults.report(fault)
                 raise fault
         finally:

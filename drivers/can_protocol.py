@@ -135,7 +135,7 @@ def _node_of(arbitration_id: int, base: int) -> int:
     return node
 
 
-def decode(arbitration_id: int, data: bytes, extended: bool = False) -> Request | Response | Heartbeat | Emergency:
+def decode(arbitration_id: int, data: bytes | bytearray, extended: bool = False) -> Request | Response | Heartbeat | Emergency:
     """Any CAN frame -> one of the rig's messages, or ProtocolError naming what is wrong."""
     data = bytes(data)
     if extended or not 0 <= arbitration_id <= 0x7FF:

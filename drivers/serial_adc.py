@@ -17,6 +17,7 @@ import queue
 import threading
 import time
 from collections import deque
+from collections.abc import Mapping
 
 import numpy as np
 import serial
@@ -240,7 +241,7 @@ class SerialAdc(Adc):
             try:
                 self.ser.write(encode_command(verb, *args))
             except (serial.SerialException, OSError) as exc:
-                fault = DeviceLost(f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away")
+                fault: DriverError = DeviceLost(f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away")
                 self._lost(fault)
                 raise fault from exc
             try:
@@ -287,7 +288,8 @@ class SerialAdc(Adc):
     def streaming(self) -> bool:
         return self._rx_streaming
 
-    def configure(self, channels, rate_hz, ranges_V=None, frame_sets=None) -> AdcConfig:
+    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
+                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig:
         ident = self.identity
         channels = tuple(channels)
         # Everything is checked before the first byte goes out.
@@ -316,14 +318,14 @@ class SerialAdc(Adc):
                                      value=rate_hz, limit=limit)
         if ranges_V is None:
             ranges_V = max(ident.ranges_V)
-        ranges = dict.fromkeys(channels, ranges_V) if not isinstance(ranges_V, dict) else dict(ranges_V)
-        for c, r in ranges.items():
+        ranges = dict(ranges_V) if isinstance(ranges_V, Mapping) else dict.fromkeys(channels, ranges_V)
+        for c, rng in ranges.items():
             if c not in channels:
                 raise SetpointRangeError(f"range given for {c!r}, which is not among the chosen channels",
                                          value=c, limit=channels)
-            if r not in ident.ranges_V:
-                raise SetpointRangeError(f"ADC range {r!r} V for {c} is not available (ranges: "
-                                         f"{', '.join(f'{v:g}' for v in ident.ranges_V)} V)", value=r,
+            if rng not in ident.ranges_V:
+                raise SetpointRangeError(f"ADC range {rng!r} V for {c} is not available (ranges: "
+                                         f"{', '.join(f'{v:g}' for v in ident.ranges_V)} V)", value=rng,
                                          limit=ident.ranges_V)
         for c in channels:
             ranges.setdefault(c, max(ident.ranges_V))
@@ -424,7 +426,7 @@ class SerialAdc(Adc):
                 self._raise_queued()
                 avail, blocked = self._contiguous()
                 if avail >= n or (avail and (blocked or not self._rx_streaming)):
-                    return self._take(min(n, avail))
+                    return self._take(min(n, avail), cfg)
                 if not self._rx_streaming:
                     raise InterlockError(f"the ADC stream has ended at sample {self._read_pos}; start it again")
                 now = time.monotonic()
@@ -444,7 +446,12 @@ class SerialAdc(Adc):
         with self._cond:
             self._raise_queued()
             avail, _ = self._contiguous()
-            return self._take(avail) if avail else None
+            if not avail:
+                return None
+            cfg = self._config
+            if cfg is None:  # samples of an earlier stream, held past a reconfiguration that failed
+                raise InterlockError("the ADC is not configured")
+            return self._take(avail, cfg)
 
     def _raise_queued(self) -> None:
         """Raise a latched fault, or the gap or error at the head of the queue (caller holds _cond)."""
@@ -467,8 +474,8 @@ class SerialAdc(Adc):
         finally:
             self._cond.acquire()
 
-    def _take(self, n: int) -> AdcBlock:
-        """Pop n sets (caller holds _cond and has checked they are contiguous)."""
+    def _take(self, n: int, cfg: AdcConfig) -> AdcBlock:
+        """Pop n sets (caller holds _cond and has checked they are contiguous); ``cfg``: the configuration."""
         parts, got = [], 0
         first = self._items[0][0]
         while got < n:
@@ -484,7 +491,6 @@ class SerialAdc(Adc):
         self._read_pos = first + n
         self._cond.notify_all()
         codes = parts[0] if len(parts) == 1 else np.concatenate(parts)
-        cfg = self._config
         # channel-major, as the run file stores it: the recorder's copy into its writer is then
         # a plain copy instead of a transpose, and a channel's column is contiguous; converting
         # this way costs the same (35-40 ms per 256 MB of volts measured either way)

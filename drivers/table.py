@@ -116,7 +116,7 @@ class CanTable(RotaryTable):
         t_end = self.clock.now() + self.move_timeout_s
         while self.node.call(cp.OP_GET, I_MOVING, what="read table moving flag"):
             if self.clock.now() > t_end:
-                fault = DeviceTimeout(f"rotary table not in position after {self.move_timeout_s:g} s of rig time")
+                fault: DriverError = DeviceTimeout(f"rotary table not in position after {self.move_timeout_s:g} s of rig time")
                 self.node.link.faults.report(fault)
                 raise fault
             self.clock.sleep(0.1)

@@ -53,8 +53,11 @@ def wait_settled(ctx: Context, columns: list[int], *, tol_V: float | np.ndarray,
     n_win = max(3, int(round(window_s / chunk_s)))
     means: list[np.ndarray] = []
     t0 = ctx.time_s
+    slope = np.full(len(columns), np.nan)  # no trend until a full window has been fitted
     while True:
-        block = ctx.acquire(chunk_s)[:, columns]
+        data = ctx.acquire(chunk_s)
+        assert data is not None  # kept (keep=True, the default)
+        block = data[:, columns]
         means.append(np.nanmean(block, axis=0))
         waited = ctx.time_s - t0
         if len(means) >= n_win and waited >= min_s:
@@ -68,7 +71,7 @@ def wait_settled(ctx: Context, columns: list[int], *, tol_V: float | np.ndarray,
                 return Settled(waited, slope)
         if waited >= timeout_s:
             raise DeviceTimeout(f"not settled after {timeout_s:g} s of rig time (last trend "
-                                f"{np.array2string(np.abs(slope) * window_s if len(means) >= n_win else np.nan, precision=4)} V "
+                                f"{np.array2string(np.abs(slope) * window_s, precision=4)} V "
                                 f"over {window_s:g} s, tolerance {np.array2string(tol, precision=4)} V)")
 
 

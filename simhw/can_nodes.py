@@ -81,7 +81,9 @@ class SimNode:
             return cp.HB_BOOT  # repeated, so one lost frame cannot hide a reboot
         return cp.HB_SAFE if self.latched else cp.HB_OPERATIONAL
 
-    hb_flags = 0
+    @property
+    def hb_flags(self) -> int:
+        return 0
 
 
 def _dac_quantize(micro_volts: int) -> tuple[bool, int, float]:
@@ -109,7 +111,7 @@ class RelayNode(SimNode):
         self.server.submit(lambda sim: sim.set_mode(1))
 
     @property
-    def hb_flags(self) -> int:  # type: ignore[override]
+    def hb_flags(self) -> int:
         return cp.HB_FLAG_ALARM if self.alarm else 0
 
     def status_word(self) -> int:

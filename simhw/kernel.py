@@ -27,7 +27,8 @@ class Csr:
     @classmethod
     def from_dense(cls, M: np.ndarray) -> Csr:
         ptr = [0]
-        idx, val = [], []
+        idx: list[int] = []
+        val: list[float] = []
         for row in M:
             nz = np.nonzero(row)[0]
             idx.extend(nz)

@@ -224,8 +224,12 @@ class Lines:
                  phase: float | None = None) -> None:
         self.freq_dt = np.array([f * dt for f, _ in lines], float)
         self.amp = np.array([a for _, a in lines], float)
-        self.phase = (np.full(len(lines), phase) if phase is not None
-                      else rng.uniform(0, 2 * math.pi, len(lines)))
+        if phase is not None:
+            self.phase = np.full(len(lines), phase)
+        elif rng is not None:
+            self.phase = rng.uniform(0, 2 * math.pi, len(lines))
+        else:
+            raise ValueError("random line phases need an rng; pass one, or a fixed phase")
         self.k = 0
 
     def take(self, n: int) -> np.ndarray:

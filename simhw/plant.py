@@ -121,10 +121,12 @@ class _Builder:
         self.x(state)
         self.deriv[self.states.index(state)] = expr
 
-    def correction(self, name: str, kind: int, z: Lin, **kw: float) -> Lin:
+    def correction(self, name: str, kind: int, z: Lin, *, p1: float = 0.0, p2: float = 0.0,
+                   gain: float = 1.0) -> Lin:
         """Register a nonlinearity; returns its correction input f(z) - gain z."""
         col = self.u(f"corr_{name}")
-        self.nonlinear.append(Nonlinearity(name, kind, z, self.inputs.index(f"corr_{name}"), **kw))
+        self.nonlinear.append(Nonlinearity(name, kind, z, self.inputs.index(f"corr_{name}"), p1=p1, p2=p2,
+                                           gain=gain))
         return col
 
     def first_order(self, prefix: str, inp: Lin, w: float) -> Lin:

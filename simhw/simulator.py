@@ -264,7 +264,8 @@ class Simulator:
     def set_caging_inhibit(self, channel: str, inhibit: bool) -> None:
         flags = list(self.relays.caging_inhibit)
         flags[GYRO_CHANNELS.index(channel)] = bool(inhibit)
-        self._switch(RelayState(self.relays.mode, tuple(flags), self.relays.spin))
+        x, y, z, xrd = flags
+        self._switch(RelayState(self.relays.mode, (x, y, z, xrd), self.relays.spin))
 
     def set_torquer_bias_V(self, channel: str, volts: float) -> None:
         self._require(channel in GYRO_CHANNELS, f"unknown gyro channel {channel!r}")

@@ -162,8 +162,8 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
     edf = np.array([_edf(int(a), int(m), lengths, overlapping) for a, m in zip(alpha, m_all)])
     lo = np.full(len(m_all), np.nan)
     hi = np.full(len(m_all), np.nan)
-    for i in np.flatnonzero(edf > 0):
-        lo[i], hi[i] = allantools.confidence_interval(dev[i], edf[i], ci)
+    for k in np.flatnonzero(edf > 0):
+        lo[k], hi[k] = allantools.confidence_interval(dev[k], edf[k], ci)
     return AllanResult(m_all / rate_hz, dev, lo, hi, edf, count, alpha, identified, rate_hz,
                        sum(lengths), ci, overlapping, lengths)
 

@@ -74,7 +74,10 @@ class ModelSpectrum:
 
     def total(self, scales: dict[str, float] | None = None) -> np.ndarray:
         scales = scales or {}
-        return sum(self.parts[p] * scales.get(p, 1.0) for p in PARTS)
+        total = self.parts[PARTS[0]] * scales.get(PARTS[0], 1.0)
+        for p in PARTS[1:]:
+            total = total + self.parts[p] * scales.get(p, 1.0)
+        return total
 
 
 #: Equivalent viscous damping of a Dahl bearing under the rig's random motion, per unit

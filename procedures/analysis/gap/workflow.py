@@ -99,8 +99,8 @@ def load_record(path: str | Path, axis: str | None = None) -> Record:
         if ax not in AXES:
             raise GapInputError(f"{path}: unknown axis {ax!r}; the platform axes are X, Y and Z")
         try:
-            mode = int(attrs.get("mode"))
-        except (TypeError, ValueError):
+            mode = int(attrs["mode"])
+        except (KeyError, TypeError, ValueError):
             raise GapInputError(f"{path}: root attribute 'mode' is {attrs.get('mode')!r}, not a mode 1..6") from None
         if mode not in range(1, 7):
             raise GapInputError(f"{path}: mode {mode} cannot be modelled (modes 1..6)")
@@ -374,7 +374,8 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         if final is not None and final.nll <= best.nll + 1e-6:
             final.score = bic_score(final, cur.nll, n_obs)
             best = fits[0] = final
-        runner = next((c for c in candidates if c["effect"] != best.effect), {"effect": "none", "score": 0.0})
+        runner: dict[str, Any] = next((c for c in candidates if c["effect"] != best.effect),
+                                      {"effect": "none", "score": 0.0})
         findings.append(Finding(best.effect, best.params, best.errors, best.score, runner["effect"],
                                 best.score - runner["score"], gap_db(P, cur.S, flags), gap_db(P, best.S, flags),
                                 located, candidates))
