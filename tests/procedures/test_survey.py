@@ -18,8 +18,9 @@ import numpy as np
 import pytest
 
 from daq.spectra import band_rms, psd
+from procedures.analysis.survey import find_dip
 from procedures.calibrations import catalogue
-from procedures.calibrations.survey import Params, Survey, find_dip, pickoff_scales
+from procedures.calibrations.survey import Params, Survey, pickoff_scales
 from procedures.runner import load_resume, run_procedure
 from simhw.params import SimConfig, load_config
 from simhw.simulator import Simulator, pickoff_white_psd

@@ -1,0 +1,258 @@
+"""The survey numerics (thesis Ch. V E, Figs. 42-49): from one Welch cross-spectral matrix of a
+Mode-3 record of the primary autocollimator's control and instrumentation channels and the X-Y
+gyro's pickoffs (``daq.filespectra.run_csd_matrix``, averaged over the record's file spans by
+``spans_csd``), the dip of each control-channel spectrum, the gyro-deduced platform rms and the
+coherences. Files, arrays and the data sheet in, plain dataclasses out; no rig. The procedure
+that records is ``procedures.calibrations.survey``; the report's text and plots are
+``procedures.reports.survey``.
+
+* **the dip** of each autocollimator control-channel spectrum (Ch. V E.1, Figs. 42/45):
+  within the loop bandwidth the closed-loop response to autocollimator noise is about
+  ``1/H(s)``, so a resonance in the feedback path, the platform inertia on the gimbal
+  bearings' spring (Ch. V F), shows as a notch near ``sqrt(k/I)/2 pi``. Found by
+  ``find_dip``: the PSD in dB is smoothed over ``dip_smooth_hz``; of the local minima in
+  ``dip_lo_hz .. dip_hi_hz`` the one of largest prominence (how far it lies below the
+  lower of the highest points between it and a deeper minimum or the band edge on either
+  side, as ``scipy.signal.find_peaks``) is the dip; a least-squares parabola through the
+  smoothed dB within +-``dip_smooth_hz`` of it refines its frequency below the bin spacing.
+  The prominence is reported as the dip's depth; a depth under ``min_dip_depth_db`` fails
+  (no notch: the frequency is then meaningless). The bearing stiffness the dip implies,
+  ``I (2 pi f_dip)^2`` with the data sheet's inertia, is reported beside it.
+
+* **the gyro-deduced platform rms** (Ch. V E.2), exactly the thesis's method:
+
+      platform_rms = sqrt( integral over band_lo_hz .. band_hi_hz of S_g(f) / Kg^2 df )
+
+  with ``S_g`` the one-sided PSD of the gyro pickoff (volts; gyro X for platform X, gyro Y
+  for platform Y) and ``Kg`` its pickoff scale factor. The band is 0.4-15 Hz by default:
+  the thesis had no data below 0.4 Hz, and above 15 Hz the platform does not respond to
+  autocollimator noise (Fig. 26c), so it takes the power below 15 Hz as the platform's
+  variance "at frequencies greater than 0.4 Hz", i.e. as the platform rms over the whole
+  band above 0.4 Hz (0.4-200 Hz). The estimate credits *everything* the pickoff reports in
+  the band to platform motion, pickoff noise included: what it measures is
+  ``sqrt(true platform rms^2 + pickoff noise rms^2)`` in the band (docs/simhw.md section 6,
+  docs/procedures/survey.md). ``Kg`` is an argument: the procedure passes the stopwatch's
+  measured value or the rig's nominal data-sheet value.
+
+* PSDs (urad^2/Hz) of the four autocollimator and two gyro channels, and the coherences
+  autocollimator control - gyro per axis (Figs. 44/47), X - Y control channels (Fig. 48) and
+  X - Y gyro (Fig. 49), as App. A.8 plots (``COHERENCE_PAIRS``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import scipy.ndimage
+import scipy.signal
+
+from daq.filespectra import RunCsd, run_csd_matrix
+from daq.reader import RunFile
+from daq.spectra import band_rms, coherence
+from drivers.calibration import RigCalibration
+
+AXES = ("X", "Y")
+
+
+def ac_ctl(axis: str) -> str:
+    return f"ac_{axis.lower()}_ctl"
+
+
+def ac_inst(axis: str) -> str:
+    return f"ac_{axis.lower()}_inst"
+
+
+def gyro(axis: str) -> str:
+    return f"gyro_{axis.lower()}"
+
+
+#: the channels a survey records
+CHANNELS = tuple(ac_ctl(a) for a in AXES) + tuple(ac_inst(a) for a in AXES) + tuple(gyro(a) for a in AXES)
+#: the coherences plotted and summarized: control - gyro per axis, X - Y control, X - Y gyro
+COHERENCE_PAIRS = [(ac_ctl("X"), gyro("X")), (ac_ctl("Y"), gyro("Y")), (ac_ctl("X"), ac_ctl("Y")), (gyro("X"), gyro("Y"))]
+
+
+class SurveySettings(Protocol):
+    """The parameters the numerics read (the procedure's ``SurveyParams`` has them)."""
+
+    @property
+    def band_lo_hz(self) -> float: ...
+
+    @property
+    def band_hi_hz(self) -> float: ...
+
+    @property
+    def dip_lo_hz(self) -> float: ...
+
+    @property
+    def dip_hi_hz(self) -> float: ...
+
+    @property
+    def dip_smooth_hz(self) -> float: ...
+
+
+class FileSpan(Protocol):
+    """Samples ``start <= i < stop`` of the run ``file`` (``procedures.runner.Span`` is one)."""
+
+    @property
+    def file(self) -> Path: ...
+
+    @property
+    def start(self) -> int: ...
+
+    @property
+    def stop(self) -> int: ...
+
+
+class SpanError(ValueError):
+    """The recorded spans cannot be analysed: none could be read, or their sample rates differ."""
+
+
+# ---------------------------------------------------------------------------- the dip
+@dataclass(frozen=True)
+class Dip:
+    freq_hz: float
+    depth_db: float          # prominence of the minimum in the smoothed dB spectrum
+    bin_hz: float            # the smoothed spectrum's lowest bin (before the parabola)
+
+
+def smoothed_db(f: np.ndarray, p: np.ndarray, smooth_hz: float) -> np.ndarray:
+    """10 log10 of a PSD, averaged in dB over a running window of ``smooth_hz`` (ends held)."""
+    df = float(f[1] - f[0])
+    k = max(1, int(round(smooth_hz / df)))
+    floor = np.finfo(float).tiny
+    db = 10.0 * np.log10(np.maximum(np.asarray(p, float), floor))
+    return scipy.ndimage.uniform_filter1d(db, k, mode="nearest") if k > 1 else db
+
+
+def find_dip(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, smooth_hz: float) -> Dip | None:
+    """The most prominent notch of a PSD between ``lo_hz`` and ``hi_hz`` (module docstring);
+    None when the smoothed spectrum has no local minimum there."""
+    f = np.asarray(f, float)
+    db = smoothed_db(f, p, smooth_hz)
+    sel = np.flatnonzero((f >= lo_hz) & (f <= hi_hz))
+    if sel.size < 3:
+        return None
+    minima, props = scipy.signal.find_peaks(-db[sel], prominence=0.0)
+    if minima.size == 0:
+        return None
+    j = int(np.argmax(props["prominences"]))
+    i = int(sel[minima[j]])
+    depth = float(props["prominences"][j])
+    # least-squares parabola through the smoothed dB within +-smooth_hz (at least the 3 nearest bins)
+    df = float(f[1] - f[0])
+    half = max(1, int(round(max(smooth_hz, df) / df)))
+    a, b = max(sel[0], i - half), min(sel[-1], i + half)
+    x = f[a:b + 1] - f[i]
+    freq = float(f[i])
+    if x.size >= 3:
+        c2, c1, _ = np.polyfit(x, db[a:b + 1], 2)
+        if c2 > 0:
+            vertex = -c1 / (2 * c2)
+            if abs(vertex) <= half * df:
+                freq = float(f[i] + vertex)
+    return Dip(freq, depth, float(f[i]))
+
+
+# ---------------------------------------------------------------------------- the Welch matrix over spans
+@dataclass
+class SpanCsd:
+    """The Welch matrix averaged over the segments of several spans."""
+
+    f: np.ndarray
+    S: np.ndarray
+    channels: tuple[str, ...]
+    fs: float
+    nperseg: int
+    nfft: int
+    segments_used: int
+    segments_total: int
+    dof: float
+    seconds: float
+    notes: list[str]
+
+    def psd(self, channel: str) -> np.ndarray:
+        i = self.channels.index(channel)
+        return self.S[:, i, i].real.copy()
+
+
+def spans_csd(spans: Sequence[FileSpan], channels: Sequence[str], seg_s: float) -> SpanCsd:
+    """Welch cross-spectral matrix over the given file spans (segments never straddle two
+    spans; a span shorter than a segment, or a file that is gone, is left out with a note).
+    Raises ``SpanError`` if no span can be analysed or their sample rates differ."""
+    notes: list[str] = []
+    parts: list[RunCsd] = []
+    seconds = 0.0
+    for span in spans:
+        file, start, stop = span.file, span.start, span.stop
+        try:
+            with RunFile(file) as rf:
+                nperseg = int(round(seg_s * rf.rate_hz))
+                n = max(0, min(stop, rf.n_samples) - start)
+                if n < nperseg:
+                    notes.append(f"{Path(file).name} samples {start}..{stop}: shorter than one {seg_s:g} s segment, "
+                                 f"left out")
+                    continue
+                parts.append(run_csd_matrix(rf, channels, nperseg=nperseg, start=start, stop=stop))
+                seconds += n / rf.rate_hz
+        except (OSError, ValueError) as exc:  # RunFileError is an OSError: a resumed piece's file may be gone
+            notes.append(f"{Path(file).name} samples {start}..{stop}: not read ({exc})")
+    if not parts:
+        raise SpanError("survey: no recorded span could be analysed: " + "; ".join(notes or ["nothing recorded"]))
+    fs = {p.fs for p in parts}
+    if len(fs) != 1:
+        raise SpanError(f"survey: the recorded spans have different sample rates {sorted(fs)} Hz")
+    k = np.array([p.segments_used for p in parts], float)
+    S = sum(p.S * kk for p, kk in zip(parts, k)) / k.sum()
+    first = parts[0]
+    return SpanCsd(first.f, S, tuple(channels), first.fs, first.nperseg, first.nfft, int(k.sum()),
+                   sum(p.segments_total for p in parts), float(sum(p.dof for p in parts)), seconds, notes)
+
+
+# ---------------------------------------------------------------------------- the survey's figures
+@dataclass
+class SurveySpectra:
+    """What the survey measures from one Welch matrix (module docstring)."""
+
+    f: np.ndarray
+    psd_urad: dict[str, np.ndarray]               # per channel, urad^2/Hz
+    coh: np.ndarray                               # magnitude-squared coherence, (f, channel, channel)
+    dips: dict[str, Dip | None]                   # per axis, of the control channel
+    platform_rms_urad: dict[str, float]           # per axis, gyro-deduced, band_lo_hz..band_hi_hz
+    ac_ctl_rms_urad: dict[str, float]             # per axis, same band
+    stiffness_Nm_per_rad: dict[str, float | None]  # per axis, I (2 pi f_dip)^2
+    #: per pair of COHERENCE_PAIRS: (frequency, value) of the largest 1-Hz average in 1-30 Hz
+    peak_coherence: dict[tuple[str, str], tuple[float, float]]
+
+
+def survey_spectra(csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[str, float],
+                   p: SurveySettings) -> SurveySpectra:
+    """The PSDs in urad^2/Hz (the autocollimators' scales from the data sheet ``cal``, the
+    pickoffs' ``kg_mV_per_urad``), the dips, the band rms values and the coherences."""
+    f = csd.f
+    kac = {a: cal.autocollimator[a].control_mV_per_urad * 1e-3 for a in AXES}     # V/urad
+    kai = {a: cal.autocollimator[a].inst_mV_per_urad * 1e-3 for a in AXES}
+    kg = {a: kg_mV_per_urad[a] * 1e-3 for a in AXES}
+    scale = {ac_ctl(a): kac[a] for a in AXES} | {ac_inst(a): kai[a] for a in AXES} | {gyro(a): kg[a] for a in AXES}
+    psd_urad = {c: csd.psd(c) / scale[c] ** 2 for c in csd.channels}              # urad^2/Hz
+    coh = coherence(csd.S)
+
+    dips = {a: find_dip(f, psd_urad[ac_ctl(a)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
+    rms = {a: band_rms(f, psd_urad[gyro(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
+    ac_rms = {a: band_rms(f, psd_urad[ac_ctl(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
+    stiffness = {a: (cal.platform[a].inertia_kg_m2 * (2 * math.pi * d.freq_hz) ** 2
+                     if (d := dips[a]) is not None else None) for a in AXES}
+
+    idx = {c: i for i, c in enumerate(csd.channels)}
+    peak_coh = {}
+    for x, y in COHERENCE_PAIRS:
+        band = (f >= 1.0) & (f <= 30.0)
+        smooth = scipy.ndimage.uniform_filter1d(coh[band, idx[x], idx[y]], max(1, int(round(1.0 / (f[1] - f[0])))))
+        k = int(np.argmax(smooth))
+        peak_coh[(x, y)] = (float(f[band][k]), float(smooth[k]))
+    return SurveySpectra(f, psd_urad, coh, dips, rms, ac_rms, stiffness, peak_coh)
