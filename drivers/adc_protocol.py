@@ -236,9 +236,7 @@ class StreamDecoder:
         if self._bad:
             return None
         self._bad = True
-        err = ProtocolError(f"{msg} (stream offset {at})")
-        err.kind = msg.split(":")[0]  # type: ignore[attr-defined]
-        return err
+        return ProtocolError(f"{msg} (stream offset {at})", kind=msg.split(":")[0])
 
     def _resync(self, start: int) -> None:
         m = _RESYNC.search(self.buf, start)

@@ -17,7 +17,14 @@ class DeviceTimeout(DriverError):
 
 
 class ProtocolError(DriverError):
-    """Bytes that do not follow the protocol: bad CRC, bad length, unknown reply, bad frame."""
+    """Bytes that do not follow the protocol: bad CRC, bad length, unknown reply, bad frame.
+
+    ``kind`` names the class of damage where the decoder knows it (e.g. "bad CRC"), else "".
+    """
+
+    def __init__(self, message: str, *, kind: str = "") -> None:
+        super().__init__(message)
+        self.kind = kind
 
 
 class SetpointRangeError(DriverError, ValueError):

@@ -55,9 +55,7 @@ def wait_settled(ctx: Context, columns: list[int], *, tol_V: float | np.ndarray,
     t0 = ctx.time_s
     slope = np.full(len(columns), np.nan)  # no trend until a full window has been fitted
     while True:
-        data = ctx.acquire(chunk_s)
-        assert data is not None  # kept (keep=True, the default)
-        block = data[:, columns]
+        block = ctx.acquire(chunk_s)[:, columns]
         means.append(np.nanmean(block, axis=0))
         waited = ctx.time_s - t0
         if len(means) >= n_win and waited >= min_s:

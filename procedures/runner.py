@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, ClassVar, Generic, TypeVar
+from typing import Any, ClassVar, Generic, Literal, TypeVar, overload
 
 import numpy as np
 
@@ -276,6 +276,12 @@ class Context:
     def time_s(self) -> float:
         """File time of the next sample (s)."""
         return self.acq.time_s
+
+    @overload
+    def acquire(self, duration_s: float, *, keep: Literal[True] = True, chunk_s: float = 5.0) -> np.ndarray: ...
+
+    @overload
+    def acquire(self, duration_s: float, *, keep: Literal[False], chunk_s: float = 5.0) -> None: ...
 
     def acquire(self, duration_s: float, *, keep: bool = True, chunk_s: float = 5.0) -> np.ndarray | None:
         """Acquire ``duration_s`` (all channels, (n, c) volts, NaN where lost), checking for an
