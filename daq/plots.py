@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -25,12 +26,14 @@ from matplotlib.figure import Figure
 from daq.octave import OctaveBands, band_average_dof, octave_bands
 from daq.spectra import psd_confidence
 
-__all__ = ["coherence_significance", "plot_coherence", "plot_psd", "psd_units_label"]
+__all__ = ["coherence_significance", "new_figure", "plot_coherence", "plot_psd", "psd_units_label", "save_figure"]
 
 log = logging.getLogger(__name__)
 
 FIGSIZE = (9.0, 5.5)
 DPI = 120
+#: the procedures' report figures
+REPORT_DPI = 110
 
 
 def psd_units_label(units: str, scaling: str = "density") -> str:
@@ -62,24 +65,40 @@ def _strongest_distinct(f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float
     return out
 
 
-def _new_figure() -> tuple[Figure, Axes]:
-    fig = Figure(figsize=FIGSIZE, layout="constrained")
+def new_figure(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = (9.0, 5.5),
+               layout: Literal["constrained", "compressed", "tight"] | None = None) -> tuple[Figure, np.ndarray]:
+    """A figure on the Agg canvas with an (nrows, ncols) array of axes; no pyplot, no GUI."""
+    fig = Figure(figsize=figsize, layout=layout)
     FigureCanvasAgg(fig)
-    return fig, fig.add_subplot()
+    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False))
+    return fig, axes
+
+
+def save_figure(fig: Figure, path: str | Path, dpi: float = REPORT_DPI) -> Path:
+    """Write the PNG (laid out tight unless the figure has a layout engine) and free the
+    figure; returns the path."""
+    try:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if fig.get_layout_engine() is None:
+            fig.tight_layout()
+        fig.savefig(path, dpi=dpi, format="png")
+        log.debug("wrote %s", path)
+        return path
+    finally:
+        fig.clear()
+
+
+def _new_figure() -> tuple[Figure, Axes]:
+    fig, axes = new_figure(figsize=FIGSIZE, layout="constrained")
+    return fig, axes[0, 0]
 
 
 def _finish(fig: Figure, ax: Axes, out: str | Path) -> Path:
     """Grid the axes, write the PNG and free the figure; returns the path."""
     ax.grid(True, which="major", alpha=0.5)
     ax.grid(True, which="minor", alpha=0.15)
-    try:
-        out = Path(out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(out, dpi=DPI, format="png")
-        log.debug("wrote %s", out)
-        return out
-    finally:
-        fig.clear()
+    return save_figure(fig, out, dpi=DPI)
 
 
 def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, window="hann",

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.plots import new_figure, save_figure
 from procedures.analysis.gap.workflow import GapResult
-from procedures.reports.plotting import new_figure, save_figure
 
 
 def plot_spectra(res: GapResult, path: Path) -> Path:
