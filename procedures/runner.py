@@ -37,7 +37,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, ClassVar, Generic, Literal, TypeVar, overload
+from typing import TYPE_CHECKING, Any, ClassVar, Generic, Literal, TypeVar, overload
 
 import numpy as np
 
@@ -46,6 +46,9 @@ from daq.recorder import Acquisition
 from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
+
+if TYPE_CHECKING:
+    from _typeshed import DataclassInstance
 
 log = logging.getLogger(__name__)
 
@@ -196,7 +199,7 @@ ProgressListener = Callable[[Progress], None]
 
 # ---------------------------------------------------------------------------- procedure
 #: a procedure's parameters: a dataclass, one per procedure
-P = TypeVar("P")
+P = TypeVar("P", bound="DataclassInstance")
 
 
 class Procedure(abc.ABC, Generic[P]):
@@ -237,7 +240,7 @@ class Procedure(abc.ABC, Generic[P]):
         (``ctx.spans``, ``ctx.data_spans``)."""
 
     def params_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self.params)  # type: ignore[call-overload]  # P is a dataclass by contract
+        return dataclasses.asdict(self.params)
 
     @classmethod
     def params_from(cls, data: Mapping[str, Any]) -> Any:
@@ -498,7 +501,7 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
 def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
     """The steps in order, each with its events; a data step's span recorded (or taken over)."""
     proc, acq = ctx.proc, ctx.acq
-    ctx._rig0 = acq.time_s
+    ctx._rig0, ctx._wall0 = acq.time_s, time.monotonic()
     ctx.steps = list(proc.plan())
     summary.steps_planned = [s.name for s in ctx.steps]
     for i, step in enumerate(ctx.steps):
