@@ -212,7 +212,7 @@ class RigWorker:
         return self.rig
 
     @property
-    def _guard_safe(self) -> SafeOnAbort:
+    def _abort_guard(self) -> SafeOnAbort:
         if self._safety is None:
             raise Refused("the rig is not open")
         return self._safety
@@ -404,12 +404,12 @@ class RigWorker:
             raise Refused("not recording")
         self._streaming = False
         if exc is not None:
-            self._guard_safe.abort(exc)
+            self._abort_guard.abort(exc)
         try:
             acq.close(exc)
         except BaseException as late:  # noqa: B036 - closing failed: the file says aborted; safe, go on
             log.error("closing the recording failed: %s", late)
-            self._guard_safe.abort(late)
+            self._abort_guard.abort(late)
         r = acq.result
         info = RecordingInfo(r.path, acq.rate_hz, acq.channels, acq.time_s, acq.pos, len(r.gaps), r.lost, r.status)
         phase = self.state.get().phase
