@@ -14,8 +14,9 @@ import pytest
 
 from daq.reader import RunFile
 from drivers.calibration import RigCalibration
+from procedures.analysis.drift import analyze_channels
 from procedures.calibrations import catalogue
-from procedures.calibrations.drift import Drift, Params, analyze_channels
+from procedures.calibrations.drift import Drift, Params
 from procedures.runner import load_resume, merge_spans, run_procedure, steps_done
 
 from .conftest import assert_spans_are_the_record_steps
