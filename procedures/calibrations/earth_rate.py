@@ -118,9 +118,8 @@ class EarthRate(Procedure[EarthRateParams]):
         settled = wait_settled(ctx, cols, tol_V=p.settle_tol_V, window_s=p.settle_window_s,
                                min_s=p.settle_min_s, timeout_s=p.settle_timeout_s)
         t0 = ctx.time_s
-        data = ctx.acquire(average_s)
-        assert data is not None  # kept (keep=True, the default)
-        mean, se = mean_and_stderr(data[:, cols])
+        data = ctx.acquire(average_s)[:, cols]
+        mean, se = mean_and_stderr(data)
         return {"tilt": pos.tilt_deg, "spindle": pos.spindle_deg, "t": [round(t0, 3), round(ctx.time_s, 3)],
                 "settle_s": round(settled.waited_s, 1),
                 "V": {c: float(m) for c, m in zip(GYRO_CHANNELS, mean)},

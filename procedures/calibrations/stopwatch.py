@@ -140,9 +140,7 @@ class Stopwatch(Procedure[StopwatchParams]):
             rig.set_caging_inhibit(ch, False)
         rig.set_torquer_bias_V(ch, 0.0)
         wait_settled(ctx, [tcol], tol_V=3e-4, min_s=60.0, window_s=40.0)
-        ref = ctx.acquire(p.null_s)
-        assert ref is not None  # kept (keep=True, the default)
-        vt0 = float(np.nanmean(ref[:, tcol]))
+        vt0 = float(np.nanmean(ctx.acquire(p.null_s)[:, tcol]))
 
         # 2. open the loop, measure the bias gain, null the precession
         t_open = ctx.time_s
@@ -255,9 +253,7 @@ class _Record:
 
     def take(self, ctx: Context, seconds: float) -> np.ndarray:
         t0 = ctx.time_s
-        acquired = ctx.acquire(seconds)
-        assert acquired is not None  # kept (keep=True, the default)
-        data = acquired[:, self.cols]
+        data = ctx.acquire(seconds)[:, self.cols]
         self.t.append(t0 + np.arange(len(data)) / ctx.acq.rate_hz)
         self.x.append(data)
         self.n += len(data)
