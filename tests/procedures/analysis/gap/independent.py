@@ -17,9 +17,81 @@ docs/simhw.md sections 2-4). It imports nothing from ``fbs``, and it differs on 
 Only one platform axis is modelled (Mode 3, autocollimator control, gyro caged by its own
 pickoff). Its four recorded channels are written: ``ac_{a}_ctl``, ``ac_{a}_inst``,
 ``gyro_{a}``, ``pa_{a}`` (a = x or y), in volts, in the "fbs-run" layout of DESIGN.md
-section 6 (plain h5py). Not modelled: gyro cross-axis coupling, random gyro drift, the
-other axes, nonlinearities (sensor ranges, amplifier clipping, Dahl hysteresis: the bearing
-is a linear spring).
+section 6 (plain h5py). Not modelled: gyro cross-axis coupling (so no
+``gyro_cross_coupling``), random gyro drift, the other axes, sensor ranges and Dahl
+hysteresis (the bearing is a linear spring); the one nonlinearity is the opt-in power
+amplifier dead zone / limit below.
+
+Every keyword below defaults to the data sheet (or to "absent"); at the defaults a run is
+sample for sample the run this module wrote before they existed (same random draws in the
+same order), so a test's seed keeps its meaning.
+
+**Effects of the catalogue** (DESIGN.md section 8; 0 = absent; any combination may be given
+at once, they act on different parts of the loop):
+
+* ``stiffness_Nm_per_rad``: ``bearing_friction`` as its small-motion spring eta To^2 (Ch. V F).
+* ``mount_freq_hz``, ``mount_damping``: ``mount_resonance``, the sensed angle through a
+  second-order mount mode (Ch. II B.9, III B).
+* ``pickup``: ``pickup_line``, sinusoids (Hz, V) on the recorded control channel (Ch. V D-E).
+* ``extra_flicker_corner_hz``: ``flicker_noise``, extra 1/f autocollimator noise meeting this
+  unit's white level at that frequency (Ch. V B.3).
+* ``offset_jump_urad``, ``offset_jump_interval_s``: ``offset_jumps``, a +-A telegraph on the
+  sensed angle at Poisson times (Ch. II B.10).
+* ``extra_damping_Nms``: ``extra_damping``, viscous gimbal damping added to D (Ch. V F).
+* ``scale_factor_error``: ``scale_factor_error``, the control and instrumentation channels'
+  scale factors (Table 1) times ``1 + fraction``; the control channel is in the loop, so the
+  loop gain changes with it.
+* ``time_delay_s``: ``time_delay``, a pure delay of the sensed angle ahead of both
+  autocollimator filters, exact (a delay line at the internal step 1/(8 x rate), to which it
+  is rounded; not a Pade approximant).
+
+**Unit-to-unit variation** (nuisance: what differs between two rigs built to the same data
+sheet and is no effect; :func:`draw_nuisance` draws all of it, :data:`NUISANCE_RANGES`):
+
+* ``ac_white_scale`` (0.6-1.4): the autocollimator's white (dark-current shot noise) rms
+  relative to the data sheet's NEA (0.451 / 0.506 urad in 0.1-100 Hz, DESIGN.md section 3,
+  Table 1); its PSD scales by the square.
+* ``ac_flicker_scale`` (0.6-1.4) and ``ac_flicker_corner_hz`` (2-4 Hz): the autocollimator's
+  1/f noise, DESIGN.md section 3 "1/f below ~3 Hz" (Ch. II B: flicker noise of the
+  photodetector). The sensor PSD is ``S_w (a_w^2 + a_f^2 f_c / f)`` with ``S_w`` the data
+  sheet's white level: ``f_c`` is where the 1/f part meets the data sheet's white level and
+  ``a_f`` scales its rms. A pure 1/f has one level, so the two draws together spread it
+  over x0.24 to x2.6 of the data sheet's (``a_f^2 f_c / 3``), and the unit's own corner
+  ``a_f^2 f_c / a_w^2`` has median 3 Hz, 80 % of draws within 1.1-7.6 Hz, 95 % within
+  0.8-11.5 Hz and 0.4-21 Hz at the joint extremes.
+* ``pickoff_white_scale`` (0.6-1.4): the gyro pickoff's white noise rms relative to the data
+  sheet's (6.2 / 12.4 urad rms in 0.1-200 Hz with the lines, DESIGN.md section 3, Table 4).
+* ``pickoff_lines``: the pickoff's discrete lines, ``[(freq_hz, amplitude_urad), ...]``
+  (default :data:`PICKOFF_LINES_URAD`: DESIGN.md's "71 Hz pair 0.8 Hz apart, 102 Hz, 187 Hz",
+  amplitudes ours). :func:`draw_nuisance` moves each by up to +-0.5 Hz (the pair keeps
+  together, 0.7-0.9 Hz apart) and scales each amplitude by 0.6-1.4: another gyro's
+  spin-motor and excitation harmonics sit a fraction of a hertz elsewhere.
+* ``adc_range_V``: the converter range (+-V; 16 bits), one number for all four channels or a
+  mapping by channel name or by kind (``ctl``, ``inst``, ``gyro``, ``pa``); it sets the ADC
+  floor q^2/(6 fs) (App. A.5). Default +-10 V everywhere; :func:`draw_nuisance` picks a lab's
+  choice: ``ctl``, ``inst``, ``gyro`` from 1, 2, 5, 10 V and ``pa`` from 0.05, 0.1, 0.2, 0.5 V.
+
+**Beyond the catalogue** (physics no catalogue entry describes; for the workflow's
+"unexplained" verdict):
+
+* ``amp_dead_zone_V``, ``amp_limit_V`` (a nonlinearity): the platform power amplifier (Ch. III
+  C: gain Kp, a Minuteman I control amplifier's power stage) with a crossover dead zone of
+  +-``amp_dead_zone_V`` at its output (the motor voltage) and/or an output limit of
+  +-``amp_limit_V``: a push-pull stage whose quiescent bias has drifted. In Mode 3 the motor
+  voltage is only tens of millivolts rms (V_c of about 0.2 mV times Kp 302 / 164), so a dead
+  band of that size takes a large share of the loop gain at small signals, and how much
+  depends on the signal's own level - no fixed linear change does that. The bench
+  (``bench/gap_holdout.py``) uses 20-40 mV.
+* ``comp_zeros_rad_s``, ``comp_poles_rad_s`` (a loop change): the compensation network's
+  break frequencies (eq. 3.28: zeros 10, 30; poles 0.15, 200, 1200, 5000 rad/s; C(0) = 1
+  kept). The network is passive (Ch. III E); the thesis found its measured transfer function
+  within a factor of two of the design (Ch. V D, Fig. 40), so a break frequency off by x2 (a
+  wrong or aged capacitor) is a rig one may meet. No catalogue entry moves a break frequency
+  of the compensation: it reshapes the loop's phase lead, not its gain, delay or damping.
+* ``amp_gain_factor``: the power amplifier's gain Kp times this factor. Note: in the spectra
+  this is nearly a ``scale_factor_error`` with the sensor noise level rescaled (both change
+  only the loop gain once the readout scale is taken by the noise level), so it is no test
+  of "unexplained"; it is here for loop-gain experiments.
 
 Usage from a test (pytest runs with ``--import-mode=importlib``): the ``independent`` fixture
 of ``tests/procedures/analysis/gap/conftest.py`` returns this module::
@@ -49,10 +121,12 @@ __all__ = [
     "ADC_LSB_V",
     "AXES",
     "MODULE_NAME",
+    "NUISANCE_RANGES",
     "anti_alias_sos",
     "axis_model",
     "channel_names",
     "continuous_model",
+    "draw_nuisance",
     "generate",
     "simulate",
     "white_level_ac",
@@ -105,10 +179,12 @@ def axis_model(axis: str) -> dict:
 
 
 # --------------------------------------------------------------------------- continuous model
-def _compensation_residues() -> np.ndarray:
+def _compensation_residues(zeros=COMP_ZEROS, poles=COMP_POLES) -> np.ndarray:
     """C(s) = sum_j r_j / (s + p_j): residues of eq. 3.28 at its four distinct real poles."""
-    z1, z2 = COMP_ZEROS
-    p = np.array(COMP_POLES)
+    z1, z2 = zeros
+    p = np.array(poles, dtype=float)
+    if p.shape != (4,) or len(set(p.tolist())) != 4 or np.any(p <= 0) or min(zeros) <= 0:
+        raise ValueError(f"compensation: two positive zeros and four distinct positive poles, not {zeros}, {poles}")
     gain = np.prod(p) / (z1 * z2)  # C(s) = gain (s + z1)(s + z2) / prod(s + p_j)
     r = np.empty(4)
     for j in range(4):
@@ -128,15 +204,26 @@ def caging_gains(m: dict) -> tuple[float, float]:
 
 
 def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_freq_hz: float = 0.0,
-                     mount_damping: float = 0.05):
+                     mount_damping: float = 0.05, *, extra_damping_Nms: float = 0.0, scale_factor_error: float = 0.0,
+                     comp_zeros_rad_s=None, comp_poles_rad_s=None, amp_gain_factor: float = 1.0,
+                     amp_input: bool = False, delayed_sensor: bool = False):
     """(A, B, C, D, x0, names) of one axis in Mode 3.
 
     Inputs: autocollimator angle noise n_ac (urad), pickoff angle noise n_p (urad), constant
     gyro input rate Omega (urad/s). Outputs (V): control channel, instrumentation channel,
     gyro pickoff, power-amplifier input V_c. ``x0`` is the steady state for the constant
     Omega (caging integrator holding it), with all outputs zero there.
+
+    Opened for the elements :func:`simulate` runs outside the linear model (the states stay
+    the same, in the same order): ``amp_input`` cuts the power amplifier out, its output
+    voltage (V, at the motor) becomes an extra input column; ``delayed_sensor`` feeds both
+    autocollimator filters from an extra input column, the delayed sensed angle (urad), and
+    adds the sensed angle (theta_m + n_ac, urad) as an extra output row. Extra columns
+    follow Omega in that order; the extra row follows V_c.
     """
     m = axis_model(axis)
+    zeros = COMP_ZEROS if comp_zeros_rad_s is None else tuple(float(z) for z in comp_zeros_rad_s)
+    poles = COMP_POLES if comp_poles_rad_s is None else tuple(float(p) for p in comp_poles_rad_s)
     names: list[str] = []
 
     def st(name):
@@ -150,12 +237,19 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
     b0, b1, b2 = st("inst0"), st("inst1"), st("inst2")
     sg, q = st("sigma"), st("cage_int")
     n = len(names)
-    A, B = np.zeros((n, n)), np.zeros((n, 3))
-    C, D = np.zeros((4, n)), np.zeros((4, 3))
     NAC, NP, OM = 0, 1, 2
+    n_in = 3
+    VAMP = SD = -1
+    if amp_input:
+        VAMP, n_in = n_in, n_in + 1
+    if delayed_sensor:
+        SD, n_in = n_in, n_in + 1
+    n_out = 5 if delayed_sensor else 4
+    A, B = np.zeros((n, n)), np.zeros((n, n_in))
+    C, D = np.zeros((n_out, n)), np.zeros((n_out, n_in))
 
     # Sensed angle s = theta_m + n_ac (urad), as a row over (x, u).
-    s_x, s_u = np.zeros(n), np.zeros(3)
+    s_x, s_u = np.zeros(n), np.zeros(n_in)
     s_u[NAC] = 1.0
     if mount is None:
         s_x[th] = 1.0
@@ -165,38 +259,46 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
         A[m1, m2] = w
         A[m2, th], A[m2, m1], A[m2, m2] = w, -w, -2 * mount_damping * w
         s_x[m1] = 1.0
+    # What the filters see: the sensed angle, or (delayed_sensor) the input column SD.
+    f_x, f_u = s_x, s_u
+    if delayed_sensor:
+        f_x, f_u = np.zeros(n), np.zeros(n_in)
+        f_u[SD] = 1.0
     # Control filter (eq. 3.21): a1 = w^2/(s^2 + 2 zeta w s + w^2) s.
     w, z = AC_CTL["w"], AC_CTL["zeta"]
     A[a1, a2] = w
-    A[a2] += w * s_x
-    B[a2] += w * s_u
+    A[a2] += w * f_x
+    B[a2] += w * f_u
     A[a2, a1] += -w
     A[a2, a2] += -2 * z * w
     gamma = np.zeros(n)
-    gamma[a1] = m["K_ctl"] * 1e-3          # V
+    gamma[a1] = m["K_ctl"] * (1.0 + scale_factor_error) * 1e-3          # V
     # Instrumentation (eq. 3.22): w1/(s + w1) then w2^2/(s^2 + 2 zeta w2 s + w2^2).
     w1, w2, z2 = AC_INST["w1"], AC_INST["w2"], AC_INST["zeta"]
-    A[b0] += w1 * s_x
-    B[b0] += w1 * s_u
+    A[b0] += w1 * f_x
+    B[b0] += w1 * f_u
     A[b0, b0] += -w1
     A[b1, b2] = w2
     A[b2, b0], A[b2, b1], A[b2, b2] = w2, -w2, -2 * z2 * w2
     # Compensation, parallel form, driven by gamma; V_c = -C(s) gamma (inverted).
-    r = _compensation_residues()
+    r = _compensation_residues(zeros, poles)
     vc = np.zeros(n)
     for j, cj in enumerate(comp):
         A[cj] += gamma
-        A[cj, cj] += -COMP_POLES[j]
+        A[cj, cj] += -poles[j]
         vc[cj] = -r[j]
     # Motor: La i' = Kp V_c - Kb theta' - Ra i  (theta' in urad/s -> 1e-6).
     La = MOTOR["La"]
-    A[cur] += m["Kp"] * vc / La
+    if amp_input:
+        B[cur, VAMP] = 1.0 / La
+    else:
+        A[cur] += m["Kp"] * amp_gain_factor * vc / La
     A[cur, om] += -MOTOR["Kb"] * 1e-6 / La
     A[cur, cur] += -MOTOR["Ra"] / La
     # Gimbal: I theta'' = Km i - D theta' - k theta  (urad units: torque x 1e6).
     A[th, om] = 1.0
     A[om, cur] = MOTOR["Km"] * 1e6 / m["I"]
-    A[om, om] = -m["D"] / m["I"]
+    A[om, om] = -(m["D"] + extra_damping_Nms) / m["I"]
     A[om, th] = -stiffness_Nm_per_rad / m["I"]
     # Gyro channel: sigma' = theta' + Omega + KTO V_T - sigma/(h/k); e = Kg (sigma + n_p);
     # V_F = -(C1 e + C2 int e); V_T = 92.1 KTC V_F.
@@ -212,10 +314,12 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
     A[sg, q] = -kt * c2
     # Outputs.
     C[0] = gamma
-    C[1, b1] = m["K_inst"] * 1e-3
+    C[1, b1] = m["K_inst"] * (1.0 + scale_factor_error) * 1e-3
     C[2, sg] = kg
     D[2, NP] = kg
     C[3] = vc
+    if delayed_sensor:
+        C[4], D[4] = s_x, s_u
     x0 = np.zeros(n)
     x0[q] = m["omega_const"] / (kt * c2)   # caged: K_T V_F = -Omega, sigma = 0
     return A, B, C, D, x0, names
@@ -314,21 +418,162 @@ def _settle_time(A: np.ndarray, names: list[str]) -> float:
 
 
 # --------------------------------------------------------------------------- the generator
+#: Uniform ranges of :func:`draw_nuisance` (the module docstring gives each one's source).
+NUISANCE_RANGES = dict(
+    ac_white_scale=(0.6, 1.4),
+    ac_flicker_scale=(0.6, 1.4),
+    ac_flicker_corner_hz=(2.0, 4.0),
+    pickoff_white_scale=(0.6, 1.4),
+    line_shift_hz=(-0.5, 0.5),        # each line, the 71 Hz pair's centre by up to 0.45 Hz
+    pair_spacing_hz=(0.7, 0.9),       # the 71 Hz pair stays a pair
+    line_amplitude_scale=(0.6, 1.4),
+    adc_range_V={"ctl": (1.0, 2.0, 5.0, 10.0), "inst": (1.0, 2.0, 5.0, 10.0), "gyro": (1.0, 2.0, 5.0, 10.0),
+                 "pa": (0.05, 0.1, 0.2, 0.5)},
+)
+_KINDS = ("ctl", "inst", "gyro", "pa")
+
+
+def draw_nuisance(rng: np.random.Generator) -> dict:
+    """Keywords of :func:`simulate` / :func:`generate` for one unit drawn at random: every
+    nuisance knob uniform within :data:`NUISANCE_RANGES` (the ADC ranges uniform among the
+    listed ones). "Nominal with ordinary unit-to-unit variation": no effect is drawn."""
+    R = NUISANCE_RANGES
+    out = {k: float(rng.uniform(*R[k])) for k in ("ac_white_scale", "ac_flicker_scale", "ac_flicker_corner_hz",
+                                                  "pickoff_white_scale")}
+    (f_a, _), (f_b, _) = PICKOFF_LINES_URAD[:2]
+    centre = 0.5 * (f_a + f_b) + float(rng.uniform(R["line_shift_hz"][0] + 0.05, R["line_shift_hz"][1] - 0.05))
+    spacing = float(rng.uniform(*R["pair_spacing_hz"]))
+    freqs = [centre - spacing / 2, centre + spacing / 2]
+    freqs += [f + float(rng.uniform(*R["line_shift_hz"])) for f, _ in PICKOFF_LINES_URAD[2:]]
+    out["pickoff_lines"] = [(round(f, 4), round(a * float(rng.uniform(*R["line_amplitude_scale"])), 4))
+                            for f, (_, a) in zip(freqs, PICKOFF_LINES_URAD)]
+    out["adc_range_V"] = {k: float(rng.choice(R["adc_range_V"][k])) for k in _KINDS}
+    return out
+
+
+def _adc_ranges(adc_range_V, axis: str) -> np.ndarray:
+    """The four channels' ranges (V) from a number, or a mapping by channel name or kind."""
+    names = channel_names(axis)
+    if isinstance(adc_range_V, (int, float)):
+        ranges = [float(adc_range_V)] * 4
+    else:
+        given = dict(adc_range_V)
+        unknown = set(given) - set(names) - set(_KINDS)
+        if unknown:
+            raise ValueError(f"adc_range_V: unknown channel(s) {sorted(unknown)}; use {names} or {_KINDS}")
+        ranges = [float(given.get(c, given.get(k, ADC_RANGE_V))) for c, k in zip(names, _KINDS)]
+    if min(ranges) <= 0:
+        raise ValueError(f"adc_range_V must be positive, not {ranges}")
+    return np.array(ranges)
+
+
+@numba.njit(cache=_CACHE, nogil=True)
+def _amp_out(v, dead_zone, limit):
+    """The power stage's output for an ideal one of ``v``: dead zone +-dead_zone, then +-limit."""
+    if v > dead_zone:
+        v = v - dead_zone
+    elif v < -dead_zone:
+        v = v + dead_zone
+    else:
+        v = 0.0
+    if v > limit:
+        return limit
+    if v < -limit:
+        return -limit
+    return v
+
+
+@numba.njit(cache=_CACHE, nogil=True)
+def _loop_run(Ad, Bd, Cd, Dd, bconst, dconst, x, u, y, col_amp, row_vc, kp, dead_zone, limit, col_sd, row_s, buf):
+    """The Tustin loop of :func:`_tustin_run` with the elements outside the linear model.
+
+    Inputs ``u[k]`` fill the first columns; column ``col_amp`` (if >= 0) is the power
+    amplifier's output, ``_amp_out(kp V_c)`` with V_c = output row ``row_vc`` (its own
+    feedthrough from that column, order dt^n, solved by fixed-point iteration); column
+    ``col_sd`` (if >= 0) is output row ``row_s`` delayed by ``len(buf)`` steps (``buf``
+    holds the last ones, oldest at ``k % len(buf)``). ``y`` takes the first outputs."""
+    n = x.shape[0]
+    m = Bd.shape[1]
+    p = Cd.shape[0]
+    m_ext = u.shape[1]
+    nd = buf.shape[0]
+    xn = np.empty(n)
+    uk = np.zeros(m)
+    yk = np.empty(p)
+    for k in range(u.shape[0]):
+        for j in range(m_ext):
+            uk[j] = u[k, j]
+        if col_sd >= 0:
+            uk[col_sd] = buf[k % nd]
+        if col_amp >= 0:
+            uk[col_amp] = 0.0
+        for i in range(p):
+            acc = dconst[i]
+            for j in range(n):
+                acc += Cd[i, j] * x[j]
+            for j in range(m):
+                acc += Dd[i, j] * uk[j]
+            yk[i] = acc
+        if col_amp >= 0:
+            a = yk[row_vc]
+            g = Dd[row_vc, col_amp]
+            v = 0.0
+            for _ in range(4):
+                v = _amp_out(kp * (a + g * v), dead_zone, limit)
+            uk[col_amp] = v
+            for i in range(p):
+                yk[i] += Dd[i, col_amp] * v
+        if col_sd >= 0:
+            buf[k % nd] = yk[row_s]
+        for i in range(y.shape[1]):
+            y[k, i] = yk[i]
+        for i in range(n):
+            acc = bconst[i]
+            for j in range(n):
+                acc += Ad[i, j] * x[j]
+            for j in range(m):
+                acc += Bd[i, j] * uk[j]
+            xn[i] = acc
+        for i in range(n):
+            x[i] = xn[i]
+
+
 def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm_per_rad=0.0,
              mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
-             offset_jump_urad=0.0, offset_jump_interval_s=60.0) -> dict[str, np.ndarray]:
-    """The recorded channels (volts, ADC-quantized) as a dict, without writing a file."""
+             offset_jump_urad=0.0, offset_jump_interval_s=60.0,
+             extra_damping_Nms=0.0, scale_factor_error=0.0, time_delay_s=0.0,
+             ac_white_scale=1.0, ac_flicker_scale=1.0, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
+             pickoff_white_scale=1.0, pickoff_lines=None, adc_range_V=ADC_RANGE_V,
+             amp_dead_zone_V=0.0, amp_limit_V=math.inf, amp_gain_factor=1.0,
+             comp_zeros_rad_s=None, comp_poles_rad_s=None) -> dict[str, np.ndarray]:
+    """The recorded channels (volts, ADC-quantized) as a dict, without writing a file.
+    Keywords: see the module docstring."""
     axis = axis.upper()
     m = axis_model(axis)
     if not (rate_hz > 0 and duration_s > 0):
         raise ValueError("rate_hz and duration_s must be positive")
+    for name, v in (("ac_white_scale", ac_white_scale), ("ac_flicker_scale", ac_flicker_scale),
+                    ("ac_flicker_corner_hz", ac_flicker_corner_hz), ("pickoff_white_scale", pickoff_white_scale),
+                    ("amp_gain_factor", amp_gain_factor)):
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError(f"{name} must be finite and >= 0, not {v!r}")
+    if amp_dead_zone_V < 0 or not amp_limit_V > 0 or time_delay_s < 0:
+        raise ValueError("amp_dead_zone_V and time_delay_s must be >= 0, amp_limit_V > 0")
+    ranges = _adc_ranges(adc_range_V, axis)
     n_out = int(round(duration_s * rate_hz))
     over = max(8, int(math.ceil(8000.0 / rate_hz)))
     fs = rate_hz * over
     dt = 1.0 / fs
+    n_delay = int(round(time_delay_s * fs))
+    if time_delay_s > 0 and n_delay < 1:
+        raise ValueError(f"time_delay_s {time_delay_s} is below the internal step {dt:.3g} s")
+    nonlinear_amp = amp_dead_zone_V > 0 or math.isfinite(amp_limit_V)
+    loop = dict(extra_damping_Nms=extra_damping_Nms, scale_factor_error=scale_factor_error,
+                comp_zeros_rad_s=comp_zeros_rad_s, comp_poles_rad_s=comp_poles_rad_s, amp_gain_factor=amp_gain_factor)
 
-    A, B, C, D, x0, names = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping)
-    Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
+    A, B, C, D, x0, names = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping, **loop)
+    if np.max(np.linalg.eigvals(A).real) >= 0:
+        raise ValueError(f"the loop is unstable with these settings ({loop}): no steady run to record")
     settle_out = int(math.ceil(_settle_time(A, names) * rate_hz))
     n_run = (n_out + settle_out) * over
     n_fft = scipy.fft.next_fast_len(n_run, real=True)
@@ -336,11 +581,13 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     ss = np.random.SeedSequence(seed)
     rng_ac, rng_jump, rng_p, rng_lines = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(4))
 
-    # Autocollimator angle noise (urad): S_w (1 + (3 + extra)/f), plus offset jumps.
+    # Autocollimator angle noise (urad): S_w (a_w^2 + (a_f^2 f_c + a_w^2 extra)/f), plus offset
+    # jumps. At the data sheet (a_w = a_f = 1, f_c = 3) this is S_w (1 + (3 + extra)/f).
     sw = white_level_ac(axis)
-    corner = AC_FLICKER_CORNER_HZ + max(extra_flicker_corner_hz, 0.0)
+    white = ac_white_scale ** 2
+    corner = ac_flicker_scale ** 2 * ac_flicker_corner_hz + white * max(extra_flicker_corner_hz, 0.0)
     u = np.empty((n_run, 2))
-    u[:, 0] = _shaped_noise(rng_ac, n_fft, fs, lambda f: sw * (1.0 + corner / f))[:n_run]
+    u[:, 0] = _shaped_noise(rng_ac, n_fft, fs, lambda f: sw * (white + corner / f))[:n_run]
     # The sensor's offset at the start: the slow part of the noise (a 0.2 s mean, which
     # leaves out the white part) plus the telegraph's level.
     offset0 = float(np.mean(u[: int(0.2 * fs), 0]))
@@ -350,9 +597,9 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
         offset0 += float(tele[0])
     # Pickoff noise (urad): white plus lines with random phases.
     sp = white_level_pickoff(axis)
-    u[:, 1] = math.sqrt(sp * fs / 2.0) * rng_p.standard_normal(n_run)
+    u[:, 1] = math.sqrt(sp * fs / 2.0) * pickoff_white_scale * rng_p.standard_normal(n_run)
     t = np.arange(n_run) * dt
-    for f_line, amp in PICKOFF_LINES_URAD:
+    for f_line, amp in (PICKOFF_LINES_URAD if pickoff_lines is None else pickoff_lines):
         phase = rng_lines.uniform(0.0, 2 * math.pi)
         if f_line < fs / 2:
             u[:, 1] += amp * np.sin(2 * math.pi * f_line * t + phase)
@@ -361,41 +608,78 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     # and the slow 1/f wander), as on a rig that has been running: the platform already
     # follows it, so no acquisition transient (and no false offset step) opens the record.
     x = np.ascontiguousarray(x0 + np.linalg.solve(A, -B[:, 0] * offset0), dtype=float)
-    bconst = np.ascontiguousarray(Bd[:, 2] * m["omega_const"])
-    dconst = np.ascontiguousarray(Dd[:, 2] * m["omega_const"])
     y = np.empty((n_run, 4))
-    _tustin_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, :2]), np.ascontiguousarray(Cd),
-                np.ascontiguousarray(Dd[:, :2]), bconst, dconst, x, u, y)
+    if not (nonlinear_amp or n_delay):
+        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
+        bconst = np.ascontiguousarray(Bd[:, 2] * m["omega_const"])
+        dconst = np.ascontiguousarray(Dd[:, 2] * m["omega_const"])
+        _tustin_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, :2]), np.ascontiguousarray(Cd),
+                    np.ascontiguousarray(Dd[:, :2]), bconst, dconst, x, u, y)
+    else:
+        # The same states, the amplifier and/or the sensor path opened (continuous_model); the
+        # kernel closes them with the dead zone / limit and the delay line.
+        Ao, Bo, Co, Do, _, names_o = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping,
+                                                      amp_input=nonlinear_amp, delayed_sensor=bool(n_delay), **loop)
+        assert names_o == names
+        Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((Ao, Bo, Co, Do), dt, method="bilinear")
+        keep = [j for j in range(Bd.shape[1]) if j != 2]          # Omega enters as a constant
+        col_amp = keep.index(3) if nonlinear_amp else -1
+        col_sd = keep.index(Bd.shape[1] - 1) if n_delay else -1
+        # The delay line starts full of the steady sensed angle (the Tustin state's steady
+        # state is the continuous one, so the continuous output row applies).
+        buf = np.zeros(max(n_delay, 1))
+        if n_delay:
+            buf[:] = float(Co[4] @ x) + offset0
+        _loop_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, keep]), np.ascontiguousarray(Cd),
+                  np.ascontiguousarray(Dd[:, keep]), np.ascontiguousarray(Bd[:, 2] * m["omega_const"]),
+                  np.ascontiguousarray(Dd[:, 2] * m["omega_const"]), x, u, y, col_amp, 3,
+                  m["Kp"] * amp_gain_factor, float(amp_dead_zone_V), float(amp_limit_V), col_sd, 4, buf)
     del u
 
     # Electrical pickup on the control channel, phase zero at the recording's t = 0.
     t_rec = t - settle_out * over * dt
     for f_line, amp in (pickup or []):
         y[:, 0] += amp * np.sin(2 * math.pi * f_line * t_rec)
-    # Recording chain: 3-pole Butterworth at 0.3 fs, decimation, 16-bit ADC over +-10 V.
+    # Recording chain: 3-pole Butterworth at 0.3 fs, decimation, 16-bit ADC (+-10 V unless
+    # adc_range_V says otherwise).
     y = scipy.signal.sosfilt(anti_alias_sos(rate_hz, fs), y, axis=0)
     y = y[settle_out * over::over][:n_out]
-    code = np.clip(np.rint(y / ADC_LSB_V), -(2 ** (ADC_BITS - 1)), 2 ** (ADC_BITS - 1) - 1)
-    volts = code * ADC_LSB_V
+    lsb = 2 * ranges / 2**ADC_BITS
+    code = np.clip(np.rint(y / lsb), -(2 ** (ADC_BITS - 1)), 2 ** (ADC_BITS - 1) - 1)
+    volts = code * lsb
     return {name: np.ascontiguousarray(volts[:, i]) for i, name in enumerate(channel_names(axis))}
+
+
+#: generate()'s keywords beyond the original ones, with their defaults (written to the file's
+#: meta only when given otherwise, so an old call's file keeps its meta).
+_NEW_DEFAULTS = dict(extra_damping_Nms=0.0, scale_factor_error=0.0, time_delay_s=0.0, ac_white_scale=1.0,
+                     ac_flicker_scale=1.0, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ, pickoff_white_scale=1.0,
+                     pickoff_lines=None, adc_range_V=ADC_RANGE_V, amp_dead_zone_V=0.0, amp_limit_V=math.inf,
+                     amp_gain_factor=1.0, comp_zeros_rad_s=None, comp_poles_rad_s=None)
 
 
 def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm_per_rad=0.0,
              mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
-             offset_jump_urad=0.0, offset_jump_interval_s=60.0) -> Path:
+             offset_jump_urad=0.0, offset_jump_interval_s=60.0, **more) -> Path:
     """Write a Mode-3 "fbs-run" file of one axis's four channels; return its path.
 
     ``pickup`` is a list of ``(freq_hz, amplitude_V)`` lines added to the control channel
     before the anti-alias filter. The other keywords are the effects of DESIGN.md section 8
-    that act on one axis in Mode 3 (0 = absent).
+    that act on one axis in Mode 3 (0 = absent); ``more`` takes the keywords of
+    :func:`simulate` added later (further effects, unit-to-unit variation, effects beyond
+    the catalogue: the module docstring), e.g. ``**draw_nuisance(rng)``.
     """
+    unknown = set(more) - set(_NEW_DEFAULTS)
+    if unknown:
+        raise TypeError(f"generate() got unexpected keyword(s) {sorted(unknown)}")
     params = dict(axis=axis.upper(), duration_s=float(duration_s), rate_hz=float(rate_hz), seed=int(seed),
                   stiffness_Nm_per_rad=float(stiffness_Nm_per_rad), mount_freq_hz=float(mount_freq_hz),
                   mount_damping=float(mount_damping),
                   pickup=[[float(f), float(a)] for f, a in (pickup or [])],
                   extra_flicker_corner_hz=float(extra_flicker_corner_hz),
                   offset_jump_urad=float(offset_jump_urad), offset_jump_interval_s=float(offset_jump_interval_s))
-    data = simulate(**{**params, "pickup": [tuple(p) for p in params["pickup"]]})
+    extra = {k: v for k, v in more.items() if not _same(v, _NEW_DEFAULTS[k])}
+    data = simulate(**{**params, "pickup": [tuple(p) for p in params["pickup"]]}, **extra)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     with h5py.File(path, "w") as f:
@@ -412,5 +696,24 @@ def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffn
             ds.attrs["units"] = "V"
             ds.attrs["sample_rate_hz"] = float(rate_hz)
         meta = f.create_group("meta")
-        meta.attrs["generator"] = json.dumps({"name": "tests/procedures/analysis/gap/independent.py", **params})
+        meta.attrs["generator"] = json.dumps({"name": "tests/procedures/analysis/gap/independent.py", **params,
+                                              **{k: _jsonable(v) for k, v in extra.items()}})
     return path
+
+
+def _same(a, b) -> bool:
+    if a is None or b is None:
+        return a is b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return float(a) == float(b)
+    return False
+
+
+def _jsonable(v):
+    if isinstance(v, float) and not math.isfinite(v):
+        return str(v)
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    return v
