@@ -54,29 +54,14 @@ def pickoff(ch: str) -> str:
 class DriftSettings(Protocol):
     """The parameters the numerics read (the procedure's ``DriftParams`` has them, with their meanings)."""
 
-    @property
-    def arw_tau_lo_s(self) -> float: ...
-
-    @property
-    def arw_tau_hi_s(self) -> float: ...
-
-    @property
-    def bi_min_loop_tc(self) -> float: ...
-
-    @property
-    def loop_band_lo_hz(self) -> float: ...
-
-    @property
-    def loop_band_hi_frac(self) -> float: ...
-
-    @property
-    def min_edf(self) -> float: ...
-
-    @property
-    def average_s(self) -> float: ...
-
-    @property
-    def null_span_s(self) -> float: ...
+    arw_tau_lo_s: float
+    arw_tau_hi_s: float
+    bi_min_loop_tc: float
+    loop_band_lo_hz: float
+    loop_band_hi_frac: float
+    min_edf: float
+    average_s: float
+    null_span_s: float
 
 
 class DriftDataError(ValueError):

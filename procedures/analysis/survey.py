@@ -80,33 +80,11 @@ COHERENCE_PAIRS = [(ac_ctl("X"), gyro("X")), (ac_ctl("Y"), gyro("Y")), (ac_ctl("
 class SurveySettings(Protocol):
     """The parameters the numerics read (the procedure's ``SurveyParams`` has them)."""
 
-    @property
-    def band_lo_hz(self) -> float: ...
-
-    @property
-    def band_hi_hz(self) -> float: ...
-
-    @property
-    def dip_lo_hz(self) -> float: ...
-
-    @property
-    def dip_hi_hz(self) -> float: ...
-
-    @property
-    def dip_smooth_hz(self) -> float: ...
-
-
-class FileSpan(Protocol):
-    """Samples ``start <= i < stop`` of the run ``file`` (``procedures.runner.Span`` is one)."""
-
-    @property
-    def file(self) -> Path: ...
-
-    @property
-    def start(self) -> int: ...
-
-    @property
-    def stop(self) -> int: ...
+    band_lo_hz: float
+    band_hi_hz: float
+    dip_lo_hz: float
+    dip_hi_hz: float
+    dip_smooth_hz: float
 
 
 class SpanError(ValueError):
@@ -181,15 +159,14 @@ class SpanCsd:
         return self.S[:, i, i].real.copy()
 
 
-def spans_csd(spans: Sequence[FileSpan], channels: Sequence[str], seg_s: float) -> SpanCsd:
+def spans_csd(spans: Sequence[tuple[Path, int, int]], channels: Sequence[str], seg_s: float) -> SpanCsd:
     """Welch cross-spectral matrix over the given file spans (segments never straddle two
     spans; a span shorter than a segment, or a file that is gone, is left out with a note).
     Raises ``SpanError`` if no span can be analysed or their sample rates differ."""
     notes: list[str] = []
     parts: list[RunCsd] = []
     seconds = 0.0
-    for span in spans:
-        file, start, stop = span.file, span.start, span.stop
+    for file, start, stop in spans:
         try:
             with RunFile(file) as rf:
                 nperseg = int(round(seg_s * rf.rate_hz))

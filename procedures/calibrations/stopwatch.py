@@ -43,6 +43,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import partial
+from pathlib import Path
 
 import numpy as np
 
@@ -219,6 +220,13 @@ class Stopwatch(Procedure[StopwatchParams]):
             rec.take(ctx, 0.5)
 
     # ------------------------------------------------------------------ analysis
+    @staticmethod
+    def _file_of(ctx: Context, ch: str) -> Path:
+        """The file channel ``ch``'s step recorded into (an earlier one for a resumed step): its
+        result's times are on that file's time base."""
+        span = ctx.spans.get(f"channel {ch}")
+        return span.file if span is not None else Path(ctx.path)
+
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
         results = {ch: ctx.results[f"channel {ch}"] for ch in p.channels}
@@ -237,7 +245,7 @@ class Stopwatch(Procedure[StopwatchParams]):
                                   -p.max_null_rate_urad_per_s, p.max_null_rate_urad_per_s))
         values = {"K_g_mV_per_urad": {ch: r.kg for ch, r in per.items()}}
         figs = [Figure(f"ramps-{ch.lower()}", f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
-                       partial(plot_channel, run=ctx.path, ch=ch, r=results[ch])) for ch in p.channels]
+                       partial(plot_channel, run=self._file_of(ctx, ch), ch=ch, r=results[ch])) for ch in p.channels]
         return Analysis(values, ms, figs, markdown=markdown(per))
 
 

@@ -136,7 +136,8 @@ class Survey(Procedure[SurveyParams]):
         p = self.params
         cal = ctx.rig.calibration
         try:
-            csd = spans_csd(ctx.data_spans(name for name, _ in self.pieces()), self.channels(), p.seg_s)
+            spans = ctx.data_spans(name for name, _ in self.pieces())
+            csd = spans_csd([(s.file, s.start, s.stop) for s in spans], self.channels(), p.seg_s)
         except SpanError as exc:
             raise ProcedureError(str(exc)) from None
         kg_mv, kg_src = pickoff_scales(self.prior, cal.pickoff_scale_mV_per_urad)

@@ -9,16 +9,15 @@ from typing import Protocol
 
 import numpy as np
 
+from daq.plots import new_figure, save_figure
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis.drift import ChannelDrift, DriftSettings
-from procedures.reports.plotting import new_figure, save_figure
 
 
 class ReportSettings(DriftSettings, Protocol):
     """The parameters the report reads (the procedure's ``DriftParams`` has them)."""
 
-    @property
-    def rate_hz(self) -> float: ...
+    rate_hz: float
 
 
 def hours(seconds: float) -> str:

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.plots import new_figure, save_figure
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis.earth_rate import ChannelFit
-from procedures.reports.plotting import new_figure, save_figure
 from procedures.reports.report import fmt
 
 

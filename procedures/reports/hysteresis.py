@@ -11,9 +11,9 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import ScalarFormatter
 
+from daq.plots import new_figure, save_figure
 from procedures.analysis import dahl
 from procedures.analysis.hysteresis import HysteresisResult
-from procedures.reports.plotting import new_figure, save_figure
 
 #: where the instrument constants came from (``HysteresisResult.calibration_source``), in words
 CAL_SOURCES = {"file": "the run's /meta/calibration", "given": "the rig's data sheet",

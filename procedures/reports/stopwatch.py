@@ -8,9 +8,9 @@ from pathlib import Path
 
 import numpy as np
 
+from daq.plots import new_figure, save_figure
 from daq.reader import RunFile
 from procedures.analysis.stopwatch import ChannelResult
-from procedures.reports.plotting import new_figure, save_figure
 
 
 def markdown(per: dict[str, ChannelResult]) -> str:

@@ -11,15 +11,14 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from daq.plots import new_figure, save_figure
 from procedures.analysis.survey import AXES, Dip, SpanCsd, SurveySettings, ac_ctl, smoothed_db
-from procedures.reports.plotting import new_figure, save_figure
 
 
 class ReportSettings(SurveySettings, Protocol):
     """The parameters the report reads (the procedure's ``SurveyParams`` has them)."""
 
-    @property
-    def min_dip_depth_db(self) -> float: ...
+    min_dip_depth_db: float
 
 
 def markdown(values: Mapping[str, Any], dips: Mapping[str, Dip | None], kg_src: Mapping[str, str], csd: SpanCsd,
