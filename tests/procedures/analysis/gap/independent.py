@@ -81,7 +81,7 @@ sheet and is no effect; :func:`draw_nuisance` draws all of it, :data:`NUISANCE_R
   voltage is only tens of millivolts rms (V_c of about 0.2 mV times Kp 302 / 164), so a dead
   band of that size takes a large share of the loop gain at small signals, and how much
   depends on the signal's own level - no fixed linear change does that. The bench
-  (``bench/gap_holdout.py``) uses 20-40 mV.
+  (``bench/gap_holdout.py``) uses 15-40 mV.
 * ``comp_zeros_rad_s``, ``comp_poles_rad_s`` (a loop change): the compensation network's
   break frequencies (eq. 3.28: zeros 10, 30; poles 0.15, 200, 1200, 5000 rad/s; C(0) = 1
   kept). The network is passive (Ch. III E); the thesis found its measured transfer function
