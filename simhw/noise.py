@@ -165,6 +165,13 @@ class FlickerNoise:
         return out
 
 
+class ExcessFlickerNoise(FlickerNoise):
+    """1/f noise beyond a sensor's own (air turbulence in the optical path: the
+    ``flicker_noise`` effect, Ch. V B.3). The same process as ``FlickerNoise``, kept a kind of
+    its own so an analysis can tell the unit's own 1/f (unit-to-unit variation) from the excess
+    (physics the nominal model lacks)."""
+
+
 class RandomWalk:
     """Integrated white noise: increments of std ``k sqrt(dt)`` (rate random walk)."""
 

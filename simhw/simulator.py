@@ -19,7 +19,7 @@ import scipy.linalg
 from simhw import geometry
 from simhw.clock import VirtualClock
 from simhw.kernel import CompiledPlant
-from simhw.noise import FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
+from simhw.noise import ExcessFlickerNoise, FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
 from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
 from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize, torquer_limit_V
 from simhw.sampling import SamplingChain, internal_rate
@@ -93,7 +93,7 @@ class Sources:
             self.parts[f"nac_{a}"] = [
                 WhiteNoise(sub(f"nac_{a}"), white, dt),
                 FlickerNoise(sub(f"nac_{a}"), white * ac.flicker_corner_hz, 1e-4, 50.0, dt),
-                FlickerNoise(sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt),
+                ExcessFlickerNoise(sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt),
                 TelegraphJumps(sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt),
             ]
         az = cfg.azimuth

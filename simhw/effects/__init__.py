@@ -49,6 +49,9 @@ class Effect:
     fit: tuple[str, ...] | None = None  # parameters the spectra identify (None: all)
     guess: Callable[[Any], list[dict[str, float]]] | None = field(default=None, repr=False)
     derive: Callable[[dict[str, float]], dict[str, float]] | None = field(default=None, repr=False)  # params as applied
+    #: parts of the model-gap analysis's nuisance (``procedures.analysis.gap.model``) that this
+    #: effect describes itself: held while the effect is fitted or in the model
+    owns: tuple[str, ...] = ()
 
     @property
     def fit_params(self) -> tuple[Param, ...]:

@@ -13,4 +13,5 @@ def _apply(cfg, axis, corner_hz):
 
 
 EFFECT = Effect("flicker_noise", __doc__.strip().splitlines()[0],
-                (Param("corner_hz", 10.0, 0.5, 100.0, log=True),), _apply, key_param="corner_hz")
+                (Param("corner_hz", 10.0, 0.5, 100.0, log=True),), _apply, key_param="corner_hz",
+                owns=("ac_flicker",))

@@ -15,8 +15,9 @@ def _apply(cfg, axis, freq_hz, damping):
 
 
 def _guess(evidence) -> list[dict[str, float]]:
-    # a lightly damped mode is a narrow peak: start at each excess the comparison found
-    return [{"freq_hz": f} for f in evidence.peaks_hz[:4] if 10.0 <= f <= 300.0]
+    # a lightly damped mode is narrow: start at each excess the comparison found, and at its
+    # strongest shortfalls (inside the loop a mode reads as a notch in the sensor channels)
+    return [{"freq_hz": f} for f in evidence.peaks_hz[:4] + evidence.dips_hz[:2] if 10.0 <= f <= 300.0]
 
 
 EFFECT = Effect("mount_resonance", __doc__.strip().splitlines()[0],

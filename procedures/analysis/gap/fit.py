@@ -29,15 +29,19 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from procedures.analysis.gap.model import ModelSpectrum, SpectralModel
+from procedures.analysis.gap.model import PARTS, ModelSpectrum, SpectralModel
 from simhw.effects import Effect, Param
 from simhw.params import SimConfig
 
 log = logging.getLogger(__name__)
 
-NUISANCE = ("ac", "pickoff")
-#: Nuisance scales are searched within this factor of the data sheet's noise levels.
+#: Nuisance scales (of a part's power) are searched within this factor of the data sheet's
+#: noise levels: the noise sources', and each pickoff line's (amplitude x 0.25 .. 4).
 NUISANCE_RANGE = 4.0
+LINE_RANGE = 16.0
+#: The autocollimator's own 1/f level may differ from its white level's scaling by this factor
+#: (its corner within 1.5-6 Hz; DESIGN.md section 3: "1/f below ~3 Hz").
+FLICKER_SHAPE_RANGE = 2.0
 
 
 def whittle_nll(P: np.ndarray, S: np.ndarray, dof: np.ndarray) -> float:
@@ -52,27 +56,49 @@ class NuisanceFit:
     S: np.ndarray
 
 
-def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum) -> NuisanceFit:
-    """Noise scales of the nuisance parts that minimize the Whittle likelihood (analytic gradient)."""
-    active = [p for p in NUISANCE if np.any(ms.parts[p] > 0)]
+def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum, hold: frozenset[str] = frozenset()) -> NuisanceFit:
+    """Noise scales of the nuisance parts that minimize the Whittle likelihood (analytic gradient).
+
+    Each part's power scale is free within its range, but the autocollimator's own 1/f
+    ("ac_flicker") moves with its white ("ac") and differs from it only by a shape factor within
+    ``FLICKER_SHAPE_RANGE`` (a corner from 1.5 to 6 Hz around the data sheet's 3 Hz); a part in
+    ``hold`` (one an effect in the model describes itself) has no freedom of its own.
+    """
+    active = [p for p in ms.parts if p != "fixed" and np.any(ms.parts[p] > 0)]
     fixed = ms.parts["fixed"]
     comps = [ms.parts[p] for p in active]
+    # log scale of each active part = M @ u, u the free parameters within ``bounds``
+    columns: list[np.ndarray] = []
+    bounds: list[tuple[float, float]] = []
+
+    def free(rows: list[int], limit: float) -> None:
+        col = np.zeros(len(active))
+        col[rows] = 1.0
+        columns.append(col)
+        bounds.append((-math.log(limit), math.log(limit)))
+
+    for i, p in enumerate(active):
+        if p == "ac_flicker":
+            continue
+        rows = [i] + ([active.index("ac_flicker")] if p == "ac" and "ac_flicker" in active else [])
+        if p not in hold:
+            free(rows, LINE_RANGE if p not in PARTS else NUISANCE_RANGE)
+    if "ac_flicker" in active and "ac_flicker" not in hold:
+        free([active.index("ac_flicker")], FLICKER_SHAPE_RANGE if "ac" in active else NUISANCE_RANGE)
+    M = np.array(columns).T if columns else np.zeros((len(active), 0))
 
     def f(u: np.ndarray) -> tuple[float, np.ndarray]:
-        s = np.exp(u)
+        s = np.exp(M @ u)
         S = fixed + sum(si * c for si, c in zip(s, comps))
         S = np.maximum(S, 1e-300)
         w = 0.5 * dof * (1.0 / S - P / S**2)
         grad = np.array([np.sum(w * c) * si for si, c in zip(s, comps)])
-        return whittle_nll(P, S, dof), grad
+        return whittle_nll(P, S, dof), M.T @ grad
 
-    lim = math.log(NUISANCE_RANGE)
-    if active:
-        res = scipy.optimize.minimize(f, np.zeros(len(active)), jac=True, method="L-BFGS-B",
-                                      bounds=[(-lim, lim)] * len(active))
-        scales = dict(zip(active, np.exp(res.x).tolist()))
-    else:
-        scales = {}
+    u = np.zeros(M.shape[1])
+    if M.shape[1]:
+        u = scipy.optimize.minimize(f, u, jac=True, method="L-BFGS-B", bounds=bounds).x
+    scales = dict(zip(active, np.exp(M @ u).tolist()))
     S = ms.total(scales)
     return NuisanceFit(scales, whittle_nll(P, S, dof), S)
 
@@ -117,9 +143,11 @@ class Fitter:
         self.model, self.P, self.dof, self.axis = model, P, np.broadcast_to(dof, P.shape), axis
         self.grid_points = grid_points
         self.evaluations = 0
+        #: nuisance parts held because an effect already in the model describes them
+        self.hold: frozenset[str] = frozenset()
 
     def base(self, cfg: SimConfig) -> NuisanceFit:
-        return fit_nuisance(self.P, self.dof, self.model(cfg))
+        return fit_nuisance(self.P, self.dof, self.model(cfg), self.hold)
 
     def fit(self, effect: Effect, base_cfg: SimConfig, evidence: Any, *, refine: bool = True,
             errors: bool = True, start: dict[str, float] | None = None) -> EffectFit | None:
@@ -139,13 +167,14 @@ class Fitter:
             return None
 
         cache: dict[tuple, tuple[float, NuisanceFit, SimConfig]] = {}
+        hold = self.hold | frozenset(effect.owns)
 
         def evaluate(t: np.ndarray) -> float:
             key = tuple(np.round(np.clip(t, 0, 1), 9))
             if key not in cache:
                 vals = {p.name: _from_unit(p, ti) for p, ti in zip(fitted, key)}
                 cfg = effect.inject(base_cfg, self.axis, **vals, **held)
-                nf = fit_nuisance(self.P, self.dof, self.model(cfg))
+                nf = fit_nuisance(self.P, self.dof, self.model(cfg), hold)
                 self.evaluations += 1
                 cache[key] = (nf.nll, nf, cfg)
             return cache[key][0]

@@ -14,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.special
 import scipy.stats
 
 from procedures.analysis.gap.grid import Grid
@@ -35,8 +36,9 @@ class Evidence:
     """What the comparison found, as the effects' ``guess`` hooks read it."""
 
     duration_s: float
-    peaks_hz: list[float] = field(default_factory=list)
+    peaks_hz: list[float] = field(default_factory=list)     # where the measurement exceeds the model
     steps_urad: list[float] = field(default_factory=list)
+    dips_hz: list[float] = field(default_factory=list)      # where it falls short (a notch)
 
 
 def departures(P: np.ndarray, S: np.ndarray, dof: np.ndarray, *, alpha: float = 0.01,
@@ -72,10 +74,24 @@ def bands(flags: np.ndarray, P: np.ndarray, S: np.ndarray, grid: Grid, channels:
     return sorted(out, key=lambda b: -abs(b.deviation_db))
 
 
-def gap_db(P: np.ndarray, S: np.ndarray, cells: np.ndarray) -> float:
+def gap_db(P: np.ndarray, S: np.ndarray, cells: np.ndarray, dof: np.ndarray | None = None) -> float:
     """The gap: rms over the located (channel, band) cells of 10 log10(measured / model), dB.
-    Zero when nothing was located."""
+    Zero when nothing was located.
+
+    With ``dof`` (each cell's equivalent degrees of freedom) the estimate's own scatter is taken
+    out: a band estimate is S chi^2_nu / nu, so 10 log10(P/S) has mean c (psi(nu/2) - ln(nu/2))
+    and variance c^2 psi'(nu/2) under a right model (c = 10 / ln 10); with the mean removed from
+    each d, the gap is the rms left over, sqrt(max(mean(d^2) - mean(variance), 0)). A model that is right has gap 0 however few
+    degrees of freedom the located bands have, so "the gap halved" compares the models and not
+    the record's noise floor.
+    """
     if not cells.any():
         return 0.0
     d = 10.0 * np.log10(P[cells] / S[cells])
-    return float(np.sqrt(np.mean(d * d)))
+    if dof is None:
+        return float(np.sqrt(np.mean(d * d)))
+    half = 0.5 * np.broadcast_to(dof, P.shape)[cells]
+    c = 10.0 / np.log(10.0)
+    d = d - c * (scipy.special.digamma(half) - np.log(half))           # the log estimate's bias
+    ms = float(np.mean(d * d) - np.mean(c * c * scipy.special.polygamma(1, half)))  # less its variance
+    return float(np.sqrt(max(ms, 0.0)))

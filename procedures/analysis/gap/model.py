@@ -16,7 +16,8 @@ sinusoids (pickoff lines, electrical pickup) are not spectra: their expected Wel
 is the Hann window's kernel ``2 (A/2)^2 |W(f - f0)|^2 / (fs sum w^2)`` around each line.
 
 The spectrum is returned in parts so the workflow can scale noise levels it treats as
-nuisance parameters (the axis's autocollimator noise and gyro pickoff noise) without
+nuisance parameters (the axis's autocollimator noise and gyro pickoff noise, and each of the
+axis gyro's pickoff lines: ``line0``, ``line1``, ... in the data sheet's order) without
 recomputing the plant.
 """
 
@@ -33,35 +34,55 @@ from procedures.analysis.gap.grid import Grid
 from simhw.params import SimConfig
 from simhw.plant import RelayState, build_plant, discretize
 from simhw.sampling import anti_alias_sos, internal_rate
-from simhw.simulator import Sources
+from simhw.simulator import Sources, ac_white_psd
 
-#: Parts of the spectrum whose level is a nuisance parameter: the axis's autocollimator noise
-#: (white and 1/f, as its noise-equivalent angle sets them) and gyro pickoff white noise.
-PARTS = ("ac", "pickoff", "fixed")
+#: Parts of the spectrum whose level is a nuisance parameter: the axis's autocollimator white
+#: noise ("ac") and its own 1/f noise ("ac_flicker"; an excess 1/f is the ``flicker_noise``
+#: effect's, not nuisance), and the gyro pickoff's white noise; the axis gyro's pickoff lines
+#: are nuisance parts of their own (``line_part``).
+PARTS = ("ac", "ac_flicker", "pickoff", "fixed")
+
+
+def line_part(k: int) -> str:
+    """The part of the axis gyro's ``k``-th pickoff line (its power is a nuisance scale)."""
+    return f"line{k}"
 
 
 def part_of(input_name: str, kind: str, axis: str) -> str:
     """Which part of the spectrum a noise source feeds."""
-    if input_name == f"nac_{axis}" and kind in ("WhiteNoise", "FlickerNoise"):
+    if input_name == f"nac_{axis}" and kind == "WhiteNoise":
         return "ac"
+    if input_name == f"nac_{axis}" and kind == "FlickerNoise":
+        return "ac_flicker"
     if input_name == f"np_{axis}" and kind == "WhiteNoise":
         return "pickoff"
     return "fixed"
 
 
 def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimConfig:
-    """A copy of ``cfg`` whose noise levels are the fitted nuisance scales of the parts: the
-    autocollimator's NEA scales as sqrt (its white and 1/f PSDs follow it), the pickoff's white
-    PSD is the quoted rms's variance less the lines' (``simhw.simulator.pickoff_white_psd``)."""
+    """A copy of ``cfg`` whose noise levels are the fitted nuisance scales of the parts. The
+    autocollimator's white PSD scales by ``ac`` and its own 1/f PSD by ``ac_flicker``: in the
+    simulator's terms (white level from the NEA and the corner, 1/f level = white x corner,
+    ``simhw.simulator.ac_white_psd``) the corner moves by their ratio and the NEA follows, while
+    an excess 1/f (the ``flicker_noise`` effect) keeps its level. The azimuth autocollimator's
+    noise is 1/f only (``ac_flicker``). The pickoff's white PSD is the quoted rms's variance less
+    the lines' (``simhw.simulator.pickoff_white_psd``); each line's power scales by its part's."""
     cfg = cfg.copy()
-    s_ac, s_np = scales.get("ac", 1.0), scales.get("pickoff", 1.0)
+    s_w, s_f, s_np = scales.get("ac", 1.0), scales.get("ac_flicker", 1.0), scales.get("pickoff", 1.0)
     if axis in cfg.autocollimator:
-        cfg.autocollimator[axis].nea_urad *= math.sqrt(s_ac)
+        ac = cfg.autocollimator[axis]
+        white = ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s, ac.control_filter_zeta)
+        corner = ac.flicker_corner_hz * s_f / s_w
+        moved = ac_white_psd(ac.nea_urad, corner, ac.control_filter_rad_per_s, ac.control_filter_zeta)
+        ac.nea_urad *= math.sqrt(s_w * white / moved)
+        ac.flicker_corner_hz = corner
+        ac.extra_flicker_corner_hz /= s_w
     elif axis == "Z":
-        cfg.azimuth.nea_urad *= math.sqrt(s_ac)
+        cfg.azimuth.nea_urad *= math.sqrt(s_f)
     g = cfg.gyro[axis]
-    lines = sum(a * a / 2 for _, a in g.pickoff_lines)
-    g.pickoff_noise_rms_urad = math.sqrt(max(s_np * (g.pickoff_noise_rms_urad**2 - lines), 0.0) + lines)
+    white = max(s_np * (g.pickoff_noise_rms_urad**2 - sum(a * a / 2 for _, a in g.pickoff_lines)), 0.0)
+    g.pickoff_lines = [[f0, a * math.sqrt(scales.get(line_part(k), 1.0))] for k, (f0, a) in enumerate(g.pickoff_lines)]
+    g.pickoff_noise_rms_urad = math.sqrt(white + sum(a * a / 2 for _, a in g.pickoff_lines))
     return cfg
 
 
@@ -74,10 +95,8 @@ class ModelSpectrum:
 
     def total(self, scales: dict[str, float] | None = None) -> np.ndarray:
         scales = scales or {}
-        total = self.parts[PARTS[0]] * scales.get(PARTS[0], 1.0)
-        for p in PARTS[1:]:
-            total = total + self.parts[p] * scales.get(p, 1.0)
-        return total
+        return sum((part * scales.get(name, 1.0) for name, part in self.parts.items()),
+                   np.zeros_like(self.parts["fixed"]))
 
 
 #: Equivalent viscous damping of a Dahl bearing under the rig's random motion, per unit
@@ -282,8 +301,16 @@ class SpectralModel:
                 parts[part] += grid.eval_mean(per_point)
         per_bin = np.zeros((nch, len(grid.bins)))
         aa_lines = np.sqrt(aa2(line_freqs)) if len(line_freqs) else []
+        own = 0  # the axis gyro's pickoff lines, in the data sheet's order: each a part of its own
         for k, (name, f0, a) in enumerate(line_list):
-            self._add_line(per_bin, f0, a * np.abs(H_lines[k, :, inputs.index(name)]) * aa_lines[k])
+            amp = a * np.abs(H_lines[k, :, inputs.index(name)]) * aa_lines[k]
+            if name == f"np_{self.axis}":
+                line_bins = np.zeros_like(per_bin)
+                self._add_line(line_bins, f0, amp)
+                parts[line_part(own)] = grid.band_mean(line_bins)
+                own += 1
+            else:
+                self._add_line(per_bin, f0, amp)
         for p in cfg.pickup:
             if p.channel in self.channels and 0 < p.freq_hz < fs * m / 2:
                 g = math.sqrt(aa2(p.freq_hz)[0])

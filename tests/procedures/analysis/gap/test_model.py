@@ -60,10 +60,15 @@ def test_nuisance_fit_recovers_noise_levels(nominal_run):
     g = make_grid(1000.0, data.shape[1])
     P = band_spectra(data, g)
     ms = SpectralModel(g, CH, 3, "X")(cfg)
-    fake = ms.parts["ac"] * 2.0 + ms.parts["pickoff"] * 0.5 + ms.parts["fixed"]
+    lines = sum(ms.parts[p] for p in ms.parts if p.startswith("line"))
+    fake = (ms.parts["ac"] + ms.parts["ac_flicker"]) * 2.0 + ms.parts["pickoff"] * 0.5 + lines * 3.0 + ms.parts["fixed"]
     nf = fit_nuisance(fake, g.dof, ms)
     assert nf.scales["ac"] == pytest.approx(2.0, rel=1e-3)
+    assert nf.scales["ac_flicker"] == pytest.approx(2.0, rel=1e-3)
     assert nf.scales["pickoff"] == pytest.approx(0.5, rel=1e-3)
+    # the 71 Hz pair shares its bands, so only the lines' total power there is identified
+    fitted = sum(nf.scales[p] * ms.parts[p] for p in ms.parts if p.startswith("line"))
+    assert fitted == pytest.approx(3.0 * lines, rel=2e-2, abs=1e-30)
     assert nf.nll <= whittle_nll(fake, ms.total(), g.dof)
     assert fit_nuisance(P, g.dof, ms).scales["ac"] == pytest.approx(1.0, abs=0.05)
 
@@ -148,3 +153,17 @@ def test_lsb_reads_the_adc_grid():
     x = np.round(np.random.default_rng(0).normal(0, 30 * q, 5000) / q) * q
     assert lsb(x) == pytest.approx(q)
     assert lsb(np.random.default_rng(0).normal(0, 1, 5000)) == 0.0
+
+
+def test_the_gap_takes_out_the_estimates_own_scatter():
+    """Band estimates S chi^2_nu / nu of a right model: the raw rms of 10 log10(P/S) is the
+    noise floor (about 4.34 sqrt(2/nu) dB), the corrected gap is about 0; a 3 dB model error
+    reads as 3 dB either way."""
+    rng = np.random.default_rng(7)
+    nu = np.full((1, 4000), 20.0)
+    S = np.ones((1, 4000))
+    P = S * rng.chisquare(nu) / nu
+    cells = np.ones_like(S, bool)
+    assert gap_db(P, S, cells) == pytest.approx(4.34 * np.sqrt(2 / 20.0), rel=0.1)
+    assert gap_db(P, S, cells, nu) < 0.25
+    assert gap_db(2.0 * P, S, cells, nu) == pytest.approx(3.01, abs=0.15)
