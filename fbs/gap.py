@@ -33,7 +33,14 @@ def _gap(args: argparse.Namespace) -> int:
         print(f"     BIC score {f.score:.1f}, {f.margin:.1f} better than {f.runner_up}; closes "
               f"{f.gap_before_db:.2f} -> {f.gap_after_db:.2f} dB on its bands")
     if res.unexplained:
-        print("  a significant departure remains that no catalogue effect explains")
+        print("  explained: no - a significant departure remains that no catalogue effect closes:")
+        for b in res.remaining[:8]:
+            print(f"    {b.channel} {b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz, {b.deviation_db:+.1f} dB")
+        for s in res.remaining_steps[:8]:
+            print(f"    a step at {s.time_s:.1f} s ({s.size * 1e6:+.3g} urad) the model does not make")
+        for c in res.partial:
+            closes = (f", closes {c['gap_closed_db']:.2f} of {c['of_db']:.2f} dB" if "gap_closed_db" in c else "")
+            print(f"    best partial candidate: {c['effect']} (score {c['score']:.1f}{closes})")
     print(f"  gap {res.gap_before_db:.2f} dB before, {res.gap_after_db:.2f} dB after (models' expected spectra, "
           f"located bands)" + (f"; simulated runs {res.sim_gaps[0]:.2f} -> {res.sim_gaps[1]:.2f} dB" if res.sim_gaps else ""))
     for b in res.located[:8]:
