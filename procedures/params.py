@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +25,13 @@ def prior_value(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str
     if v is not None and math.isfinite(float(v)) and float(v) > 0:
         return float(v), procedure
     return float(nominal), "nominal"
+
+
+def prior_values(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channels: Iterable[str],
+                 nominal: Mapping[str, float]) -> tuple[dict[str, float], dict[str, str]]:
+    """``prior_value`` for each of ``channels``: the values, and where each came from."""
+    got = {ch: prior_value(prior, procedure, key, ch, nominal[ch]) for ch in channels}
+    return {ch: v for ch, (v, _) in got.items()}, {ch: src for ch, (_, src) in got.items()}
 
 
 def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[str, Any]]:

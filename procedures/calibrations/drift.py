@@ -38,7 +38,7 @@ from procedures.analysis.drift import (
     pickoff_stats,
     torq,
 )
-from procedures.params import prior_value
+from procedures.params import prior_values
 from procedures.reports.drift import hours, markdown, plot_allan, plot_null
 from procedures.rigsetup import bring_to_mode3, wait_settled
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
@@ -138,10 +138,8 @@ class Drift(Procedure[DriftParams]):
     def kto(self, ctx: Context) -> tuple[dict[str, float], str]:
         """K_TO per channel (urad/s/V) and where it came from."""
         nominal = ctx.rig.calibration.torquer_scale_urad_per_s_per_V
-        got = {ch: prior_value(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", ch, nominal[ch])
-               for ch in GYRO_CHANNELS}
-        out = {ch: v for ch, (v, _) in got.items()}
-        used_nominal = [ch for ch, (_, src) in got.items() if src == "nominal"]
+        out, sources = prior_values(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", GYRO_CHANNELS, nominal)
+        used_nominal = [ch for ch, src in sources.items() if src == "nominal"]
         if not used_nominal:
             source = "earth-rate result (prior run)"
         elif len(used_nominal) == len(GYRO_CHANNELS):
@@ -177,9 +175,8 @@ class Drift(Procedure[DriftParams]):
             raise ProcedureError(str(exc)) from None
         record_s = total / rate
         cal = ctx.rig.calibration
-        got_kg = {ch: prior_value(self.prior, "stopwatch", "K_g_mV_per_urad", ch, cal.pickoff_scale_mV_per_urad[ch])
-                  for ch in GYRO_CHANNELS}
-        kg = {ch: v for ch, (v, _) in got_kg.items()}
+        kg, kg_sources = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS,
+                                      cal.pickoff_scale_mV_per_urad)
         try:
             res = analyze_channels(chunks, rate, kto, p, kg)
         except DriftDataError as exc:
@@ -197,7 +194,7 @@ class Drift(Procedure[DriftParams]):
             "arw_urad_per_sqrt_s": {ch: r.arw.N if r.arw else None for ch, r in res.items()},
         }
         md = markdown(res, p, kto, kto_source, record_s, lost, total, pickoff_stats(chunks, kg),
-                      any(src != "nominal" for _, src in got_kg.values()))
+                      any(src != "nominal" for src in kg_sources.values()))
         figures = [
             Figure("allan", "Overlapping Allan deviation of the torquing rate -K_TO V_T per channel, with 68 % "
                    "confidence intervals (Greenhall EDF), the tau^-1/2 fit (ARW) and the bias-instability floor",

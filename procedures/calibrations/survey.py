@@ -34,7 +34,7 @@ from typing import Any
 
 from daq.plots import plot_coherence, plot_psd
 from procedures.analysis.survey import AXES, CHANNELS, COHERENCE_PAIRS, SpanError, ac_ctl, spans_csd, survey_spectra
-from procedures.params import prior_value
+from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
 from procedures.rigsetup import bring_to_mode3
@@ -82,8 +82,7 @@ class SurveyParams:
 def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]
                    ) -> tuple[dict[str, float], dict[str, str]]:
     """Kg (mV/urad) per axis and where it came from: the stopwatch summary if given, else nominal."""
-    got = {a: prior_value(prior, "stopwatch", "K_g_mV_per_urad", a, nominal[a]) for a in AXES}
-    return {a: v for a, (v, _) in got.items()}, {a: src for a, (_, src) in got.items()}
+    return prior_values(prior, "stopwatch", "K_g_mV_per_urad", AXES, nominal)
 
 
 # ---------------------------------------------------------------------------- the procedure
