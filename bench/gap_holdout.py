@@ -406,9 +406,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="a handful of cases (8 files)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", default="/tmp/gap_holdout.jsonl", help="per-file results, JSON lines")
+    ap.add_argument("--only", default="", help="comma-separated substrings of '<category> <name>' (e.g. 'B pickup,C')")
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     todo = cases(args.quick)
+    if args.only:
+        todo = [c for c in todo if any(p in f"{c['category']} {c['name']}" for p in args.only.split(","))]
     print(f"gap_holdout: {len(todo)} files, {args.jobs} workers, results to {args.out}", file=sys.stderr, flush=True)
     t0 = time.perf_counter()
     recs: list[dict[str, Any]] = []
@@ -423,6 +426,11 @@ def main(argv: list[str] | None = None) -> int:
             jf.write(json.dumps(rec, default=float) + "\n")
             jf.flush()
             print(f"[{len(recs):2d}/{len(todo)}] {describe(rec)}", file=sys.stderr, flush=True)
+            for f in rec.get("findings", []):
+                if f.get("interval95") is not None:
+                    print(f"        {f['effect']} {f['key']} = {f['parameters'][f['key']]:.6g}, 95 % "
+                          f"[{f['interval95'][0]:.6g}, {f['interval95'][1]:.6g}], truth "
+                          f"{rec['truth'][f['effect']][f['key']]:.6g}", file=sys.stderr, flush=True)
     wall = time.perf_counter() - t0
     order = {(c["category"], c["name"]): i for i, c in enumerate(todo)}
     recs.sort(key=lambda r: order[(r["category"], r["name"])])

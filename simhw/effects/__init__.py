@@ -9,7 +9,8 @@ For the model-gap workflow an effect may also say which parameters the spectra i
 (``fit``; default all) and where to start looking (``guess``: given the workflow's evidence, an
 object with ``peaks_hz`` (narrow excesses, strongest first), ``steps_urad`` (offset steps seen in
 the time domain) and ``duration_s``, a list of parameter dicts; a value of a parameter not in
-``fit`` holds it at that value), and how its parameters read as applied (``derive``: e.g. a
+``fit`` holds it at that value, each such guess a candidate of its own), what the evidence says of
+the held values' uncertainty (``spread``), and how its parameters read as applied (``derive``: e.g. a
 bearing's eta follows from its stiffness and To).
 
 The *nominal* model is the Ch. III plant with the gimbal-bearing torque omitted, as the
@@ -49,6 +50,10 @@ class Effect:
     fit: tuple[str, ...] | None = None  # parameters the spectra identify (None: all)
     guess: Callable[[Any], list[dict[str, float]]] | None = field(default=None, repr=False)
     derive: Callable[[dict[str, float]], dict[str, float]] | None = field(default=None, repr=False)  # params as applied
+    #: 1-sigma of the parameters the spectra cannot see (held at a guess) as the evidence gives
+    #: them: ``spread(evidence, params) -> {name: sigma}`` (a line's frequency from the time
+    #: series, a jump's size from the steps' scatter)
+    spread: Callable[[Any, dict[str, float]], dict[str, float]] | None = field(default=None, repr=False)
     #: parts of the model-gap analysis's nuisance (``procedures.analysis.gap.model``) that this
     #: effect describes itself: held while the effect is fitted or in the model
     owns: tuple[str, ...] = ()

@@ -15,11 +15,18 @@ def _apply(cfg, axis, freq_hz, amplitude_V):
 
 
 def _guess(evidence) -> list[dict[str, float]]:
-    # a line is narrow: start at each narrow excess the comparison found
-    return [{"freq_hz": f} for f in evidence.peaks_hz[:4] if 1.0 <= f <= 450.0]
+    # A line is narrower than a band of the spectra, which cannot place it inside the band: its
+    # frequency is the one measured on the record at each narrow excess (``evidence.lines``),
+    # held, and the spectra fit its amplitude.
+    return [{"freq_hz": f} for f, _ in evidence.lines[:4] if 1.0 <= f <= 450.0]
+
+
+def _spread(evidence, params: dict[str, float]) -> dict[str, float]:
+    near = [(abs(f - params["freq_hz"]), s) for f, s in evidence.lines]
+    return {"freq_hz": min(near)[1]} if near and min(near)[0] < 1e-9 + 1e-6 * params["freq_hz"] else {}
 
 
 EFFECT = Effect("pickup_line", __doc__.strip().splitlines()[0],
                 (Param("freq_hz", 200.0, 1.0, 450.0, log=True),
                  Param("amplitude_V", 0.003, 1e-4, 0.1, log=True)),
-                _apply, key_param="freq_hz", guess=_guess)
+                _apply, key_param="freq_hz", fit=("amplitude_V",), guess=_guess, spread=_spread)

@@ -37,10 +37,11 @@ from simhw.sampling import anti_alias_sos, internal_rate
 from simhw.simulator import Sources, ac_white_psd
 
 #: Parts of the spectrum whose level is a nuisance parameter: the axis's autocollimator white
-#: noise ("ac") and its own 1/f noise ("ac_flicker"; an excess 1/f is the ``flicker_noise``
-#: effect's, not nuisance), and the gyro pickoff's white noise; the axis gyro's pickoff lines
-#: are nuisance parts of their own (``line_part``).
-PARTS = ("ac", "ac_flicker", "pickoff", "fixed")
+#: noise ("ac") and its own 1/f noise ("ac_flicker"), and the gyro pickoff's white noise; the
+#: axis gyro's pickoff lines are nuisance parts of their own (``line_part``). An excess 1/f (the
+#: ``flicker_noise`` effect, "ac_excess") is physics, not nuisance: its corner is where it meets
+#: the unit's white level, so its power moves with "ac" and has no freedom of its own.
+PARTS = ("ac", "ac_flicker", "ac_excess", "pickoff", "fixed")
 
 
 def line_part(k: int) -> str:
@@ -54,6 +55,8 @@ def part_of(input_name: str, kind: str, axis: str) -> str:
         return "ac"
     if input_name == f"nac_{axis}" and kind == "FlickerNoise":
         return "ac_flicker"
+    if input_name == f"nac_{axis}" and kind == "ExcessFlickerNoise":
+        return "ac_excess"
     if input_name == f"np_{axis}" and kind == "WhiteNoise":
         return "pickoff"
     return "fixed"
@@ -63,8 +66,8 @@ def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimCo
     """A copy of ``cfg`` whose noise levels are the fitted nuisance scales of the parts. The
     autocollimator's white PSD scales by ``ac`` and its own 1/f PSD by ``ac_flicker``: in the
     simulator's terms (white level from the NEA and the corner, 1/f level = white x corner,
-    ``simhw.simulator.ac_white_psd``) the corner moves by their ratio and the NEA follows, while
-    an excess 1/f (the ``flicker_noise`` effect) keeps its level. The azimuth autocollimator's
+    ``simhw.simulator.ac_white_psd``) the corner moves by their ratio and the NEA follows; an
+    excess 1/f (the ``flicker_noise`` effect, level = white x its corner) follows the white. The azimuth autocollimator's
     noise is 1/f only (``ac_flicker``). The pickoff's white PSD is the quoted rms's variance less
     the lines' (``simhw.simulator.pickoff_white_psd``); each line's power scales by its part's."""
     cfg = cfg.copy()
@@ -76,7 +79,6 @@ def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimCo
         moved = ac_white_psd(ac.nea_urad, corner, ac.control_filter_rad_per_s, ac.control_filter_zeta)
         ac.nea_urad *= math.sqrt(s_w * white / moved)
         ac.flicker_corner_hz = corner
-        ac.extra_flicker_corner_hz /= s_w
     elif axis == "Z":
         cfg.azimuth.nea_urad *= math.sqrt(s_f)
     g = cfg.gyro[axis]

@@ -27,7 +27,7 @@ from daq.reader import RunFile
 from daq.runfile import RunWriter
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score
 from procedures.analysis.gap.grid import GapInputError, Grid, band_spectra, bin_spectra, make_grid
-from procedures.analysis.gap.lines import found_pickoff_lines
+from procedures.analysis.gap.lines import found_pickoff_lines, refine_line
 from procedures.analysis.gap.locate import Band, Evidence, bands, departures, gap_db
 from procedures.analysis.gap.model import SpectralModel, apply_nuisance, lsb, quantization_psd, step_response
 from procedures.analysis.gap.steps import Step, find_steps, robust_scale, step_like, template_gain, window_difference
@@ -168,6 +168,7 @@ class Finding:
     gap_after_db: float
     located: list[Band]
     candidates: list[dict[str, Any]]
+    intervals: dict[str, tuple[float, float]] = field(default_factory=dict)  # 95 %, ``fit.Fitter._errors``
 
 
 @dataclass
@@ -214,11 +215,13 @@ class GapResult:
             "effect": self.effect,
             "parameters": _rounded(first.parameters) if first else {},
             "uncertainties": _rounded(first.uncertainties) if first else {},
+            "parameters_ci95": _rounded_intervals(first.intervals) if first else {},
             "significant": self.significant,
             "gap_before_db": round(self.gap_before_db, 3),
             "gap_after_db": round(self.gap_after_db, 3),
             "candidates": self.candidates,
             "effects": [{"effect": f.effect, "parameters": _rounded(f.parameters),
+                         "parameters_ci95": _rounded_intervals(f.intervals),
                          "gap_closed_db": round(f.gap_before_db - f.gap_after_db, 3)} for f in self.findings],
             "explained": not self.unexplained,
             "unexplained": ([{"channel": b.channel, "f_lo_hz": round(b.f_lo_hz, 4), "f_hi_hz": round(b.f_hi_hz, 4),
@@ -232,6 +235,27 @@ class GapResult:
 
 def _rounded(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (float(f"{v:.5g}") if math.isfinite(v) else None) for k, v in d.items()}
+
+
+def _rounded_intervals(d: dict[str, tuple[float, float]]) -> dict[str, list[float | None]]:
+    return {k: [float(f"{v:.5g}") if math.isfinite(v) else None for v in iv] for k, iv in d.items()}
+
+
+#: the narrow excesses measured as sinusoids on the record, at most this many, each searched
+#: within this many Welch bins of the bin it peaks in
+MAX_LINES, LINE_SEARCH_BINS = 6, 1.5
+
+
+def _measured_lines(rec: Record, grid: Grid, S: np.ndarray, located: list[Band]) -> list[tuple[float, float]]:
+    """(freq_hz, 1-sigma) of each excess (largest first) measured as a sinusoid on its channel's
+    record (``lines.refine_line``), the model's level in its band as the noise around it."""
+    out: list[tuple[float, float]] = []
+    for b in [b for b in located if b.deviation_db > 0][:MAX_LINES]:
+        i = rec.channels.index(b.channel)
+        band = int(np.clip(np.searchsorted(grid.band_hi_hz, b.peak_hz), 0, grid.n_bands - 1))
+        f, sd, _ = refine_line(rec.data[i], rec.rate_hz, b.peak_hz, LINE_SEARCH_BINS * grid.df, float(S[i, band]))
+        out.append((f, sd))
+    return out
 
 
 def _detect_steps(rec: Record, cfg: SimConfig, window_s: float = 2.0,
@@ -361,8 +385,9 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         if it == opt.max_effects:
             unexplained = True
             break
-        evidence = Evidence(rec.duration_s, [b.peak_hz for b in located if b.deviation_db > 0],
-                            [s.size / URAD for s in steps], [b.peak_hz for b in located if b.deviation_db < 0])
+        lines = _measured_lines(rec, grid, cur.S, located)
+        evidence = Evidence(rec.duration_s, [f for f, _ in lines], [s.size / URAD for s in steps],
+                            [b.peak_hz for b in located if b.deviation_db < 0], lines)
         # Screen every effect at its starting points, refine the leaders, then the winner's errors.
         screened: list[tuple[EffectFit, Any]] = []
         for eff in catalogue.catalogue().values():
@@ -400,7 +425,7 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
             final = fitter.fit(catalogue.get(f.effect), cfg, evidence, start=f.params)
             if final is not None and final.nll <= f.nll + 1e-6:
                 final.score = bic_score(final, cur.nll, n_obs)
-                f = final
+                f = fitter.held_envelope(catalogue.get(f.effect), cfg, evidence, final)
             moved = np.abs(10.0 * np.log10(f.S / cur.S)) > opt.tol_db
             where = flags | moved
             g0, g1 = gap_db(P, cur.S, where, grid.dof), gap_db(P, f.S, where, grid.dof)
@@ -421,7 +446,7 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
                                       {"effect": "none", "score": 0.0})
         cells |= moved
         findings.append(Finding(best.effect, best.params, best.errors, best.score, runner["effect"],
-                                best.score - runner["score"], g0, g1, located, candidates))
+                                best.score - runner["score"], g0, g1, located, candidates, best.intervals))
         log.info("named %s (score %.1f, %.1f over %s): %s", best.effect, best.score,
                  best.score - runner["score"], runner["effect"], best.params)
         named.add(best.effect)
