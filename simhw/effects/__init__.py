@@ -38,6 +38,9 @@ class Param:
     hi: float
     log: bool = False  # draw/fit on a log scale
     doc: str = ""
+    #: a bound of the prior that is a physical limit the data may reach ("lo" or "hi"); a fit
+    #: at any other bound says the effect's form does not reach the data
+    limit: str | None = None
 
 
 @dataclass(frozen=True)

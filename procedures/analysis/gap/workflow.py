@@ -169,6 +169,7 @@ class Finding:
     located: list[Band]
     candidates: list[dict[str, Any]]
     intervals: dict[str, tuple[float, float]] = field(default_factory=dict)  # 95 %, ``fit.Fitter._errors``
+    at_bound: list[str] = field(default_factory=list)  # fitted parameters at a bound of their prior
 
 
 @dataclass
@@ -235,6 +236,81 @@ class GapResult:
 
 def _rounded(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (float(f"{v:.5g}") if math.isfinite(v) else None) for k, v in d.items()}
+
+
+def _with_effects(cfg0: SimConfig, axis: str, fits: list[tuple[catalogue.Effect, EffectFit]]) -> SimConfig:
+    """The nominal configuration with these effects at their fitted values."""
+    cfg = cfg0
+    for eff, f in fits:
+        cfg = eff.inject(cfg, axis, **{p.name: min(max(f.params[p.name], p.lo), p.hi) for p in eff.params})
+    return cfg
+
+
+def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[catalogue.Effect, EffectFit]],
+                   findings: list[Finding], evidence: Evidence, n_obs: int,
+                   opt: GapOptions) -> tuple[SimConfig, NuisanceFit]:
+    """After an addition, each earlier effect re-fitted with all the others in the model (one
+    pass, from its values), then each kept only while it still earns its place: its removal,
+    the others and the noise levels staying fitted, must cost at least ``opt.min_score`` of
+    BIC. ``in_model`` and ``findings`` are updated in place (the same order); returns the
+    refined model's configuration and noise fit."""
+    for i, (eff, f) in enumerate(in_model[:-1]):
+        others = _with_effects(cfg0, axis, [x for j, x in enumerate(in_model) if j != i])
+        again = fitter.fit(eff, others, evidence, start=f.params)
+        if again is not None:
+            again = fitter.held_envelope(eff, others, evidence, again)
+            log.info("re-fitted %s with %s: %s", eff.name, ", ".join(e.name for j, (e, _) in enumerate(in_model)
+                                                                       if j != i), again.params)
+            in_model[i] = (eff, again)
+            fd = findings[i]
+            fd.parameters, fd.uncertainties, fd.intervals = again.params, again.errors, again.intervals
+    cfg = _with_effects(cfg0, axis, in_model)
+    cur = fitter.base(cfg)
+    for i in reversed(range(len(in_model))):
+        eff, f = in_model[i]
+        rest = [x for j, x in enumerate(in_model) if j != i]
+        held, fitter.hold = fitter.hold, frozenset(p for e, _ in rest for p in e.owns)
+        without = fitter.base(_with_effects(cfg0, axis, rest))
+        fitter.hold = held
+        earns = 2.0 * (without.nll - cur.nll) - f.n_fitted * math.log(n_obs)
+        if earns < opt.min_score:
+            log.info("%s no longer earns its place beside %s (BIC %.1f): dropped", eff.name,
+                     ", ".join(e.name for e, _ in rest), earns)
+            del in_model[i], findings[i]
+            fitter.hold = frozenset(p for e, _ in in_model for p in e.owns)
+            cfg, cur = _with_effects(cfg0, axis, in_model), without
+    return cfg, cur
+
+
+#: a fitted parameter within this share of its prior's (log) width of a bound sits at it
+BOUND_SHARE = 0.005
+
+
+def _at_bound(effect: catalogue.Effect, params: dict[str, float]) -> list[str]:
+    """The fitted parameters at a bound of their prior that is not a physical limit."""
+    out = []
+    for p in effect.fit_params:
+        v = params.get(p.name)
+        if v is None or not math.isfinite(v):
+            continue
+        t = math.log(v / p.lo) / math.log(p.hi / p.lo) if p.log else (v - p.lo) / (p.hi - p.lo)
+        if (t <= BOUND_SHARE and p.limit != "lo") or (t >= 1 - BOUND_SHARE and p.limit != "hi"):
+            out.append(f"{p.name} = {v:.4g} at {'lower' if t <= BOUND_SHARE else 'upper'} bound "
+                       f"{p.lo if t <= BOUND_SHARE else p.hi:g}")
+    return out
+
+
+def _where_it_acts(flags: np.ndarray, moved: np.ndarray) -> np.ndarray:
+    """The cells on which a candidate is judged: those it moves by more than the tolerance, and
+    the departing cells within the span of bands it moves (any channel). A line moves one band
+    and is judged there, not diluted by another effect's departures an octave away; a broad
+    effect is judged on every departure it could reach."""
+    cols = np.flatnonzero(moved.any(axis=0))
+    if len(cols) == 0:
+        return flags.copy()
+    span = np.zeros(moved.shape[1], bool)
+    span[cols[0]:cols[-1] + 1] = True
+    return moved | (flags & span[None, :])
 
 
 def _rounded_intervals(d: dict[str, tuple[float, float]]) -> dict[str, list[float | None]]:
@@ -370,6 +446,7 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
     remaining_steps: list[Step] = []
     partial: list[dict[str, Any]] = []
     named: set[str] = set()
+    in_model: list[tuple[catalogue.Effect, EffectFit]] = []
     for it in range(opt.max_effects + 1):
         flags = departures(P, cur.S, grid.dof, alpha=opt.alpha, tol_db=opt.tol_db)
         unexplained_steps = bool(steps) and not _model_makes_steps(cfg, rec.axis)
@@ -418,18 +495,28 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         # strongest bands, and those few partly by their own scatter).
         chosen: tuple[EffectFit, np.ndarray, float, float] | None = None
         partial = []
-        for f in fits:
+        base_ms = fitter.model(cfg)
+        # Steps in the time domain are a shape no spectrum-only effect has: while the model makes
+        # none, the candidates that make them are judged first (a broad noise can mimic their
+        # spectrum, never their steps).
+        order = sorted(fits, key=lambda f: not (unexplained_steps and _model_makes_steps(f.cfg, rec.axis)))
+        for f in order:
             if f.score < opt.min_score:
-                break
+                continue
             # refined again, with its uncertainties, before it is judged
             final = fitter.fit(catalogue.get(f.effect), cfg, evidence, start=f.params)
             if final is not None and final.nll <= f.nll + 1e-6:
                 final.score = bic_score(final, cur.nll, n_obs)
                 f = fitter.held_envelope(catalogue.get(f.effect), cfg, evidence, final)
-            moved = np.abs(10.0 * np.log10(f.S / cur.S)) > opt.tol_db
-            where = flags | moved
+            # the cells the effect itself moves: against the model without it at the same noise
+            # levels (a refitted noise level moves every band a little, and is no effect's doing)
+            moved = np.abs(10.0 * np.log10(f.S / base_ms.total(f.scales))) > opt.tol_db
+            where = _where_it_acts(flags, moved)
             g0, g1 = gap_db(P, cur.S, where, grid.dof), gap_db(P, f.S, where, grid.dof)
-            if g0 - g1 >= max(opt.min_closed_db, opt.min_closed_share * g0):
+            # steps seen in the time domain are a departure of their own: an effect that makes
+            # them in the model explains them, whatever an earlier effect left of their spectrum
+            explains_steps = unexplained_steps and _model_makes_steps(f.cfg, rec.axis)
+            if explains_steps or g0 - g1 >= max(opt.min_closed_db, opt.min_closed_share * g0):
                 chosen = (f, moved, g0, g1)
                 break
             log.info("%s %s wins on the score (%.1f) but closes only %.2f of %.2f dB where it acts (%d cells): "
@@ -452,7 +539,24 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         named.add(best.effect)
         fitter.hold |= frozenset(winner.owns)
         cfg, cur = best.cfg, NuisanceFit(best.scales, best.nll, best.S)
+        in_model.append((winner, best))
+        if len(in_model) > 1:
+            cfg, cur = _refit_jointly(fitter, cfg0, rec.axis, in_model, findings, evidence, n_obs, opt)
 
+    # A parameter fitted at a bound of its prior (not one that is a physical limit) says the
+    # effect's form does not reach the data: it is kept as the best partial candidate, and the
+    # departure stays unexplained.
+    for fd in findings:
+        fd.at_bound = _at_bound(catalogue.get(fd.effect), fd.parameters)
+        if fd.at_bound:
+            log.info("%s is fitted at the bound of its prior (%s): not an explanation", fd.effect,
+                     ", ".join(fd.at_bound))
+            if not unexplained:
+                unexplained = True
+                remaining = first_located
+                remaining_steps = steps if (steps and not _model_makes_steps(cfg, rec.axis)) else []
+            partial.append({"effect": fd.effect, "gap_closed_db": round(fd.gap_before_db - fd.gap_after_db, 3),
+                            "at_bound": fd.at_bound})
     cfg_before = apply_nuisance(cfg0, rec.axis, base.scales)
     cfg_after = apply_nuisance(cfg, rec.axis, cur.scales)
     spectra = {"measured": P, "model_before_expected": base.S, "model_after_expected": cur.S}

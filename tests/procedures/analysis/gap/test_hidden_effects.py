@@ -28,7 +28,7 @@ DRAWS = {
     "bearing_friction": lambda r: {"stiffness_Nm_per_rad": _log_uniform(r, 200, 2000)},
     "mount_resonance": lambda r: {"freq_hz": _log_uniform(r, 20, 80), "damping": _log_uniform(r, 0.01, 0.1)},
     "pickup_line": lambda r: {"freq_hz": float(r.uniform(5, 280)), "amplitude_V": _log_uniform(r, 1e-3, 1e-2)},
-    "flicker_noise": lambda r: {"corner_hz": _log_uniform(r, 5, 50)},
+    "flicker_noise": lambda r: {"corner_hz": _log_uniform(r, 12, 50)},  # above the unit's own 1/f range
     "offset_jumps": lambda r: {"amplitude_urad": _log_uniform(r, 3, 30), "interval_s": float(r.uniform(20, 80))},
 }
 DRAWS_PER_EFFECT = 3
