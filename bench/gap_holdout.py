@@ -76,90 +76,12 @@ def generator():
     return mod
 
 
-# --------------------------------------------------------------------------- hidden effects
-def _log_uniform(rng, lo, hi):
-    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
-
-
-def _delay(rng):
-    # rounded to the generator's internal step at 1 kHz (1/8000 s), so the truth is the delay run
-    return round(float(rng.uniform(0.0025, 0.004)) * 8000) / 8000
-
-
-#: Catalogue effects the generator shows: draw(rng) -> (generator keywords, truth in the catalogue's
-#: parameter names). Ranges: where the loop shows the effect and the generator stays stable on
-#: both axes (a 5 ms delay on Y is at the edge of stability).
-def draw_effect(name: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str, float]]:
-    if name == "bearing_friction":      # DESIGN.md: eta To^2 = 410 (X) / 380 (Y) N m/rad
-        k = round(float(rng.uniform(300.0, 900.0)), 1)
-        return {"stiffness_Nm_per_rad": k}, {"stiffness_Nm_per_rad": k}
-    if name == "mount_resonance":
-        f, z = round(float(rng.uniform(25.0, 80.0)), 2), round(float(rng.uniform(0.02, 0.06)), 4)
-        return {"mount_freq_hz": f, "mount_damping": z}, {"freq_hz": f, "damping": z}
-    if name == "pickup_line":
-        f, a = round(float(rng.uniform(30.0, 250.0)), 2), round(_log_uniform(rng, 0.002, 0.006), 5)
-        return {"pickup": [(f, a)]}, {"freq_hz": f, "amplitude_V": a}
-    if name == "flicker_noise":         # well above the unit-to-unit corner (2-4 Hz, x0.36-1.96 level)
-        c = round(float(rng.uniform(15.0, 30.0)), 2)
-        return {"extra_flicker_corner_hz": c}, {"corner_hz": c}
-    if name == "offset_jumps":          # Ch. II B.10 saw ~100 urad every 40-400 s; smaller here
-        a, t = round(float(rng.uniform(8.0, 20.0)), 2), round(float(rng.uniform(30.0, 60.0)), 1)
-        return {"offset_jump_urad": a, "offset_jump_interval_s": t}, {"amplitude_urad": a, "interval_s": t}
-    if name == "extra_damping":         # the gyros give 1.02 (X) / 0.51 (Y) N m s
-        d = round(float(rng.uniform(2.0, 5.0)), 3)
-        return {"extra_damping_Nms": d}, {"damping_Nms": d}
-    if name == "scale_factor_error":
-        fr = round(float(rng.choice([-1.0, 1.0]) * rng.uniform(0.25, 0.45)), 4)
-        return {"scale_factor_error": fr}, {"fraction": fr}
-    if name == "time_delay":
-        d = _delay(rng)
-        return {"time_delay_s": d}, {"delay_s": d}
-    raise ValueError(name)
-
-
-EFFECTS = ("bearing_friction", "mount_resonance", "pickup_line", "flicker_noise", "offset_jumps",
-           "extra_damping", "scale_factor_error", "time_delay")
-KEY = {"bearing_friction": "stiffness_Nm_per_rad", "mount_resonance": "freq_hz", "pickup_line": "freq_hz",
-       "flicker_noise": "corner_hz", "offset_jumps": "amplitude_urad", "extra_damping": "damping_Nms",
-       "scale_factor_error": "fraction", "time_delay": "delay_s"}
-PAIRS = (("bearing_friction", "pickup_line"), ("mount_resonance", "offset_jumps"),
-         ("bearing_friction", "flicker_noise"), ("time_delay", "pickup_line"),
-         ("extra_damping", "offset_jumps"), ("scale_factor_error", "mount_resonance"))
-
-
-def draw_outside(kind: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str, float]]:
-    """Effects no catalogue entry describes (the generator's docstring): the level and why.
-
-    * ``dead_zone``: power-amplifier crossover dead zone of 15-40 mV at the motor. The motor
-      voltage is ~57 / 38 mV rms (X / Y) in Mode 3, so the loop loses most of its small-signal
-      gain: the control channel rises 20-30 dB below 5 Hz (the platform no longer follows the
-      sensor noise) and falls above the loop's resonance.
-    * ``lead_zero``: eq. 3.28's lead zero w_c3 = 30 rad/s at x0.45-0.55 (a lead resistor off by
-      x2; the thesis measured the network within a factor of two): the 5.7 / 8.2 Hz loop mode
-      moves to ~11 / 15 Hz and its damping rises (X: zeta 0.14 -> 0.4): -14 dB at 3-8 Hz.
-    * ``lead_pole``: eq. 3.28's pole w_c4 = 200 rad/s at x1.8-2.2: more phase lead, the loop
-      mode's damping up by half (X 0.14 -> 0.2, Y 0.20 -> 0.32) at the same frequency: -3 to
-      -4 dB at the peak; the smallest departure of the three.
-    """
-    if kind == "dead_zone":
-        v = round(float(rng.uniform(0.015, 0.040)), 4)
-        return {"amp_dead_zone_V": v}, {"amp_dead_zone_V": v}
-    if kind == "lead_zero":
-        z = round(30.0 * float(rng.uniform(0.45, 0.55)), 3)
-        return {"comp_zeros_rad_s": [10.0, z]}, {"w_c3_rad_s": z}
-    if kind == "lead_pole":
-        p = round(200.0 * float(rng.uniform(1.8, 2.2)), 2)
-        return {"comp_poles_rad_s": [0.15, p, 1200.0, 5000.0]}, {"w_c4_rad_s": p}
-    raise ValueError(kind)
-
-
-OUTSIDE = ("dead_zone", "lead_zero", "lead_pole")
-
-
 def cases(quick: bool) -> list[dict[str, Any]]:
     """Every file of the run: category, name, axis, seed, generator keywords, truth."""
     gen = generator()
     out: list[dict[str, Any]] = []
+    draw_effect, draw_outside = gen.draw_effect, gen.draw_outside
+    EFFECTS, PAIRS = gen.HIDDEN_EFFECTS, gen.HIDDEN_PAIRS
 
     def add(cat, name, axis, seed, kw, truth, hidden):
         nuisance = gen.draw_nuisance(np.random.default_rng([17, seed]))
@@ -252,7 +174,7 @@ def run_case(case: dict[str, Any], folder: str) -> dict[str, Any]:
         item: dict[str, Any] = {"effect": f.effect, "parameters": params, "uncertainties": unc,
                                 "gap_closed_db": float(f.gap_before_db - f.gap_after_db)}
         truth = case["truth"].get(f.effect)
-        key = KEY.get(f.effect)
+        key = generator().KEY_PARAM.get(f.effect)
         if truth and key in truth:
             est, true = params.get(key), truth[key]
             if est is not None:

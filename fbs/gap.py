@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 
 
 def _gap(args: argparse.Namespace) -> int:
@@ -27,9 +26,7 @@ def _gap(args: argparse.Namespace) -> int:
     if not res.significant:
         print("  no significant departure from the nominal model: effect none")
     for i, f in enumerate(res.findings, 1):
-        params = ", ".join(f"{k} = {v:.4g}" + (f" ± {f.uncertainties[k]:.2g}" if math.isfinite(f.uncertainties.get(k, math.nan))
-                                               else "") for k, v in f.parameters.items())
-        print(f"  {i}. {f.effect}: {params}")
+        print(f"  {i}. {f.effect}: {f.parameter_text()} (95 % intervals in brackets)")
         print(f"     BIC score {f.score:.1f}, {f.margin:.1f} better than {f.runner_up}; closes "
               f"{f.gap_before_db:.2f} -> {f.gap_after_db:.2f} dB on its bands")
     if res.unexplained:
@@ -40,6 +37,7 @@ def _gap(args: argparse.Namespace) -> int:
             print(f"    a step at {s.time_s:.1f} s ({s.size * 1e6:+.3g} urad) the model does not make")
         for c in res.partial:
             closes = (f", closes {c['gap_closed_db']:.2f} of {c['of_db']:.2f} dB" if "gap_closed_db" in c else "")
+            closes += f", fitted at its prior's bound: {'; '.join(c['at_bound'])}" if "at_bound" in c else ""
             print(f"    best partial candidate: {c['effect']} (score {c['score']:.1f}{closes})")
     print(f"  gap {res.gap_before_db:.2f} dB before, {res.gap_after_db:.2f} dB after (models' expected spectra, "
           f"located bands)" + (f"; simulated runs {res.sim_gaps[0]:.2f} -> {res.sim_gaps[1]:.2f} dB" if res.sim_gaps else ""))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -76,12 +75,10 @@ def markdown(res: GapResult) -> str:
                   f"{res.sim_gaps[0]:.2f} dB before, {res.sim_gaps[1]:.2f} dB after.", ""]
     if res.findings:
         lines += ["## Effects, in the order found", "",
-                  "| # | effect | parameters | BIC score | margin over runner-up | gap closed on its bands |",
+                  "| # | effect | parameters [95 % interval] | BIC score | margin over runner-up | gap closed on its bands |",
                   "|---|---|---|---|---|---|"]
         for i, f in enumerate(res.findings, 1):
-            params = "; ".join(f"{k} = {v:.4g}" + (f" ± {f.uncertainties[k]:.2g}"
-                                                     if math.isfinite(f.uncertainties.get(k, math.nan)) else "")
-                               for k, v in f.parameters.items())
+            params = f.parameter_text("; ")
             lines.append(f"| {i} | `{f.effect}` | {params} | {f.score:.1f} | {f.margin:.1f} over `{f.runner_up}` | "
                          f"{f.gap_before_db:.2f} -> {f.gap_after_db:.2f} dB |")
         lines.append("")
