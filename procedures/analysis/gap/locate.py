@@ -39,7 +39,7 @@ class Evidence:
     peaks_hz: list[float] = field(default_factory=list)     # where the measurement exceeds the model
     steps_urad: list[float] = field(default_factory=list)
     dips_hz: list[float] = field(default_factory=list)      # where it falls short (a notch)
-    #: each narrow excess measured as a sinusoid on the record: (freq_hz, 1-sigma Hz), as peaks_hz
+    #: the excesses as narrow as a sinusoid, measured on the record: (freq_hz, 1-sigma Hz)
     lines: list[tuple[float, float]] = field(default_factory=list)
 
 

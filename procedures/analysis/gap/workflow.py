@@ -27,7 +27,7 @@ from daq.reader import RunFile
 from daq.runfile import RunWriter
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score
 from procedures.analysis.gap.grid import GapInputError, Grid, band_spectra, bin_spectra, make_grid
-from procedures.analysis.gap.lines import found_pickoff_lines, refine_line
+from procedures.analysis.gap.lines import MeasuredLine, found_pickoff_lines, refine_line
 from procedures.analysis.gap.locate import Band, Evidence, bands, departures, gap_db
 from procedures.analysis.gap.model import SpectralModel, apply_nuisance, lsb, quantization_psd, step_response
 from procedures.analysis.gap.steps import Step, find_steps, robust_scale, step_like, template_gain, window_difference
@@ -348,15 +348,14 @@ def _rounded_intervals(d: dict[str, tuple[float, float]]) -> dict[str, list[floa
 MAX_LINES, LINE_SEARCH_BINS = 6, 1.5
 
 
-def _measured_lines(rec: Record, grid: Grid, S: np.ndarray, located: list[Band]) -> list[tuple[float, float]]:
-    """(freq_hz, 1-sigma) of each excess (largest first) measured as a sinusoid on its channel's
-    record (``lines.refine_line``), the model's level in its band as the noise around it."""
-    out: list[tuple[float, float]] = []
+def _measured_lines(rec: Record, grid: Grid, S: np.ndarray, located: list[Band]) -> list[MeasuredLine]:
+    """Each excess (largest first) measured as a sinusoid on its channel's record
+    (``lines.refine_line``), the model's level in its band as the noise around it."""
+    out = []
     for b in [b for b in located if b.deviation_db > 0][:MAX_LINES]:
         i = rec.channels.index(b.channel)
         band = int(np.clip(np.searchsorted(grid.band_hi_hz, b.peak_hz), 0, grid.n_bands - 1))
-        f, sd, _ = refine_line(rec.data[i], rec.rate_hz, b.peak_hz, LINE_SEARCH_BINS * grid.df, float(S[i, band]))
-        out.append((f, sd))
+        out.append(refine_line(rec.data[i], rec.rate_hz, b.peak_hz, LINE_SEARCH_BINS * grid.df, float(S[i, band])))
     return out
 
 
@@ -488,9 +487,14 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         if it == opt.max_effects:
             unexplained = True
             break
-        lines = _measured_lines(rec, grid, cur.S, located)
-        evidence = Evidence(rec.duration_s, [f for f, _ in lines], [s.size / URAD for s in steps],
-                            [b.peak_hz for b in located if b.deviation_db < 0], lines)
+        # Excesses where the measurement exceeds the model, at bin resolution; those as narrow
+        # as the window makes a sinusoid are lines, their frequency measured on the record.
+        measured = _measured_lines(rec, grid, cur.S, located)
+        peaks = [b.peak_hz for b in located if b.deviation_db > 0]
+        peaks[:len(measured)] = [m.freq_hz if m.is_line else p for m, p in zip(measured, peaks)]
+        evidence = Evidence(rec.duration_s, peaks, [s.size / URAD for s in steps],
+                            [b.peak_hz for b in located if b.deviation_db < 0],
+                            [(m.freq_hz, m.sigma_hz) for m in measured if m.is_line])
         # Screen every effect at its starting points, refine the leaders, then the winner's errors.
         screened: list[tuple[EffectFit, Any]] = []
         for eff in catalogue.catalogue().values():
