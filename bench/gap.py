@@ -1,54 +1,83 @@
-"""Speed of the model-gap workflow (issue 6, acceptance C).
+"""Speed of the model-gap workflow (issue 17, build 8: at most 20 s per 300 s, 1 kHz file on 2 cores).
 
-One 300 s, 1 kHz, 4-channel Mode-3 file (axis X: ac_x_ctl, ac_x_inst, gyro_x, pa_x) with a
-hidden bearing (the thesis's case; the most expensive, as every candidate's search runs and
-two effects' worth of passes follow), analysed end to end by ``procedures.analysis.gap.analyse``:
-reading, spectra, the fits of every catalogue effect, the before/after simulations. The
-baseline measured in the same run is one simulation of the same record (what the workflow
-would cost if it only simulated the nominal model once). Target: at most 60 s on 2 cores.
+Two 300 s, 1 kHz, 4-channel Mode-3 files analysed end to end by
+``procedures.analysis.gap.analyse`` (reading, spectra, line and step measurement, the fits of
+every catalogue effect, joint re-fits, intervals):
 
-Benchmarks report, they never fail: the exit code is 0 and a missed target prints a
-``TARGET MISSED`` line. Usage: ``python bench/gap.py``.
+* ``simhw``: axis X with a hidden bearing (the thesis's case: every candidate's search runs);
+* ``independent``: the test suite's independent generator, axis Y, another unit's noise
+  (``independent.draw_nuisance``) and two effects at once (a bearing and a pickup line), so
+  two passes, a joint re-fit and the pruning run.
+
+The baseline measured in the same run is one simulation of the same record (what the workflow
+would cost if it only simulated the nominal model once). Benchmarks report, they never fail:
+the exit code is 0 and a missed target prints ``TARGET MISSED``. Usage: ``python bench/gap.py``.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import statistics
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-TARGET_S = 60.0
+TARGET_S = 20.0
+GAP_TESTS = Path(__file__).resolve().parent.parent / "tests" / "procedures" / "analysis" / "gap"
+
+
+def _load(name: str, path: Path):
+    """A module of the test suite, by path (the suite runs with --import-mode=importlib)."""
+    mod = sys.modules.get(name)
+    if mod is None:
+        spec = importlib.util.spec_from_file_location(name, path)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    return mod
 
 
 def main() -> int:
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests" / "procedures" / "gap"))
-    from conftest import make_hidden  # the suite's file maker: simhw run, axis channels, lab ranges
+    import numpy as np
 
     from procedures.analysis.gap.workflow import analyse
     from simhw import effects
     from simhw.simulator import Simulator
 
+    conftest = _load("fbs_tests_gap_conftest", GAP_TESTS / "conftest.py")
+    independent = _load("fbs_tests_gap_independent", GAP_TESTS / "independent.py")  # = its MODULE_NAME
+    worst = 0.0
     with tempfile.TemporaryDirectory() as d:
-        path = make_hidden(Path(d) / "bearing.h5", ["bearing_friction:stiffness_Nm_per_rad=410"], seed=3)
-        analyse(path)  # warm: numba caches, imports
-        times = []
-        for _ in range(2):
-            t0 = time.perf_counter()
-            res = analyse(path)
-            times.append(time.perf_counter() - t0)
+        files = {
+            "simhw, hidden bearing": conftest.make_hidden(Path(d) / "bearing.h5",
+                                                          ["bearing_friction:stiffness_Nm_per_rad=410"], seed=3),
+            "independent, another unit, bearing + pickup line": independent.generate(
+                Path(d) / "two.h5", axis="Y", seed=5, duration_s=300.0, rate_hz=1000.0,
+                **independent.draw_nuisance(np.random.default_rng([17, 5])),
+                stiffness_Nm_per_rad=600.0, pickup=[(150.0, 0.004)]),
+        }
+        for label, path in files.items():
+            analyse(path)  # warm: numba caches, imports, the model's caches of this record
+            times = []
+            for _ in range(2):
+                t0 = time.perf_counter()
+                res = analyse(path)
+                times.append(time.perf_counter() - t0)
+            best = min(times)
+            worst = max(worst, max(times))
+            print(f"fbs gap, {label}, 300 s x 4 channels at 1 kHz: {best:.1f} s (runs: "
+                  f"{', '.join(f'{t:.1f}' for t in times)}; median {statistics.median(times):.1f} s); named "
+                  f"{', '.join(f.effect for f in res.findings) or 'none'}, gap {res.gap_before_db:.2f} -> "
+                  f"{res.gap_after_db:.2f} dB")
         t0 = time.perf_counter()
         for _ in Simulator(effects.nominal(), 1000.0, seed=1, mode=3).run(300.0, 10.0):
             pass
         sim_s = time.perf_counter() - t0
-    best = min(times)
-    print(f"fbs gap, 300 s x 4 channels at 1 kHz: {best:.1f} s (runs: {', '.join(f'{t:.1f}' for t in times)}; "
-          f"median {statistics.median(times):.1f} s); named {res.effect}, gap {res.gap_before_db:.2f} -> "
-          f"{res.gap_after_db:.2f} dB")
-    print(f"baseline: one simulation of the record {sim_s:.2f} s; workflow = {best / sim_s:.1f} x baseline")
-    print(f"target <= {TARGET_S:.0f} s: ratio {best / TARGET_S:.2f} of the target"
-          + ("" if best <= TARGET_S else "  TARGET MISSED"))
+    print(f"baseline: one simulation of the record {sim_s:.2f} s; slowest analysis = {worst / sim_s:.1f} x baseline")
+    print(f"target <= {TARGET_S:.0f} s: slowest run {worst:.1f} s, ratio {worst / TARGET_S:.2f} of the target"
+          + ("" if worst <= TARGET_S else "  TARGET MISSED"))
     return 0
 
 

@@ -180,6 +180,11 @@ class Fitter:
         fitted = effect.fit_params
         defaults: dict[str, float] = {p.name: p.default for p in effect.params if p not in fitted}
         guesses = effect.guess(evidence) if effect.guess else []
+        if effect.spread is not None and not guesses and start is None:
+            # its held parameters come from the evidence (a line's frequency, the steps' size):
+            # without evidence it is no candidate, not one at its defaults
+            log.debug("%s: no evidence for its held parameters", effect.name)
+            return None
         held_sets: list[dict[str, float]] = []
         for g in ([start] if start is not None else guesses):
             h = defaults | {k: v for k, v in g.items() if k in defaults}
