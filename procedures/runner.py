@@ -365,8 +365,13 @@ class RunSummary:
         return self.verdict.exit_code
 
     def json_values(self, keys: tuple[str, ...]) -> dict[str, Any]:
-        """Exactly the keys of DESIGN.md section 7 (None where not measured)."""
+        """The keys of DESIGN.md section 7 (None where not measured), with each figure's
+        ``K_ci95`` and the ``resolved`` map where the analysis gives them
+        (``procedures.analysis.intervals.add_figure``)."""
         out = {k: self.values.get(k) for k in keys}
+        out |= {f"{k}_ci95": self.values[f"{k}_ci95"] for k in keys if f"{k}_ci95" in self.values}
+        if "resolved" in self.values:
+            out["resolved"] = self.values["resolved"]
         if "file" in keys:
             out["file"] = str(self.file) if self.file else None
         return out

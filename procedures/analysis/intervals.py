@@ -1,0 +1,76 @@
+"""Reported figures with their 95 % intervals and whether the data resolve them (DESIGN.md section 7).
+
+Every figure key ``K`` of a procedure's JSON may carry ``K_ci95`` (same shape, ``[lo, hi]``) and
+``resolved`` (``{K: {channel: bool}}``). A figure the data cannot resolve is reported as
+``resolved: false`` with its interval, and its value is ``None``: never a bare number. The rule
+(issue 18): a figure is unresolved when its 95 % interval is wider than its magnitude, or when
+its estimate correlates with another of the same fit by more than ``MAX_CORRELATION`` (the
+design cannot tell the two apart, so each is only known together with the other).
+
+The procedures decide *how* an interval is made (generalised least squares, repeated
+determinations, a block bootstrap, a profile); this module only carries it and applies the
+rule, so every procedure reports alike.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import scipy.stats
+
+#: beyond this |correlation| with another estimate of the same fit a figure is not resolved
+MAX_CORRELATION = 0.95
+LEVEL = 0.95
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A figure, its 95 % interval and whether the data resolve it (``why`` says why not)."""
+
+    value: float
+    lo: float
+    hi: float
+    resolved: bool = True
+    why: str = ""
+
+    @property
+    def half_width(self) -> float:
+        return 0.5 * (self.hi - self.lo)
+
+    def covers(self, truth: float) -> bool:
+        return self.lo <= truth <= self.hi
+
+
+def judged(value: float, lo: float, hi: float, *, correlation: float = 0.0, with_: str = "") -> Estimate:
+    """An estimate with its interval, resolved unless the interval is wider than the value's
+    magnitude or ``|correlation|`` (with the estimate named ``with_``) exceeds ``MAX_CORRELATION``."""
+    lo, hi = min(lo, hi), max(lo, hi)
+    if not all(math.isfinite(v) for v in (value, lo, hi)):
+        return Estimate(value, lo, hi, False, "no finite interval")
+    if abs(correlation) > MAX_CORRELATION:
+        return Estimate(value, lo, hi, False, f"correlates {correlation:+.3f} with {with_ or 'another figure'}")
+    if hi - lo > abs(value):
+        return Estimate(value, lo, hi, False, f"its 95 % interval ({hi - lo:.3g} wide) exceeds its magnitude")
+    return Estimate(value, lo, hi, True)
+
+
+def from_stderr(value: float, se: float, *, dof: float | None = None, correlation: float = 0.0,
+                with_: str = "") -> Estimate:
+    """``value +- q se``, q the 97.5 % point of Student's t with ``dof`` degrees of freedom
+    (the normal's without), then ``judged``."""
+    q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof)) if dof else float(scipy.stats.norm.ppf(0.5 + LEVEL / 2))
+    return judged(value, value - q * se, value + q * se, correlation=correlation, with_=with_)
+
+
+def add_figure(values: dict[str, Any], key: str, per_channel: Mapping[str, Estimate], digits: int = 6) -> None:
+    """Put figure ``key`` into a procedure's JSON ``values``: ``key`` ({channel: value, or None
+    where unresolved}), ``key_ci95`` ({channel: [lo, hi]}) and ``resolved[key]``."""
+    def r(v: float) -> float | None:
+        return float(f"{v:.{digits}g}") if math.isfinite(v) else None
+
+    values[key] = {ch: (r(e.value) if e.resolved else None) for ch, e in per_channel.items()}
+    values[f"{key}_ci95"] = {ch: [r(e.lo), r(e.hi)] for ch, e in per_channel.items()}
+    values.setdefault("resolved", {})[key] = {ch: e.resolved for ch, e in per_channel.items()}
