@@ -66,6 +66,10 @@ class RigCalibration:
     #: nominal pickoff scale factors: a fallback when no stopwatch result is at hand
     pickoff_scale_mV_per_urad: dict[str, float] = field(
         default_factory=lambda: {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74})
+    #: the floats' elastic-restraint time constants h/k (s; Table 3): a standing pickoff angle
+    #: sigma is balanced by the rate sigma / (h/k) without torquer current
+    restraint_time_constant_s: dict[str, float] = field(
+        default_factory=lambda: {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0})
     max_torquing_earth_rates: float = 3.5
     dac_range_V: float = 10.0
     dac_bits: int = 16
