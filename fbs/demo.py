@@ -47,6 +47,8 @@ def sim_values(cfg: SimConfig) -> dict[str, Any]:
     return {
         "K_TO_urad_per_s_per_V": {c: g.torquer_scale_urad_per_s_per_V for c, g in cfg.gyro.items()},
         "drift_urad_per_s": {c: g.fixed_drift_urad_per_s for c, g in cfg.gyro.items()},
+        **{f"g_drift_{a}_urad_per_s_per_g": {c: getattr(g, f"g_drift_{a}_urad_per_s_per_g") for c, g in cfg.gyro.items()}
+           for a in "xyz"},
         "K_g_mV_per_urad": {c: g.pickoff_scale_mV_per_urad for c, g in cfg.gyro.items()},
         "To_Nm": {a: cfg.bearing[a].To_Nm for a in ("X", "Y")},
         "eta_per_Nm": {a: cfg.bearing[a].eta_per_Nm for a in ("X", "Y")},
@@ -100,12 +102,20 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
     def per_channel(proc: str, key: str, label: str, units: str, thesis_key: str | None = None) -> None:
         for s in by_name.get(proc, []):
             values = s.values.get(key) or {}
+            ci = s.values.get(f"{key}_ci95") or {}
+            resolved = (s.values.get("resolved") or {}).get(key) or {}
             for ch, v in values.items():
+                iv = ci.get(ch)
+                note = "" if not iv or iv[0] is None else f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]"
+                if resolved.get(ch) is False:
+                    note = "not resolved" + (f": {note}" if note else "")
                 rows.append(Row(f"{label} {ch}", units, v, (THESIS.get(thesis_key or key) or {}).get(ch),
-                                (sim.get(key) or {}).get(ch)))
+                                (sim.get(key) or {}).get(ch), note))
 
     per_channel("earth-rate", "K_TO_urad_per_s_per_V", "K_TO", "urad/s/V")
     per_channel("earth-rate", "drift_urad_per_s", "fixed drift", "urad/s")
+    for a in "xyz":
+        per_channel("earth-rate", f"g_drift_{a}_urad_per_s_per_g", f"g-drift along {a}", "urad/s/g")
     per_channel("stopwatch", "K_g_mV_per_urad", "K_g", "mV/urad")
     for s in by_name.get("hysteresis", []):
         axis = s.params.get("axis", "X")

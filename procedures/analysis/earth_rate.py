@@ -1,135 +1,305 @@
-"""The earth-rate fits: torquer scale factor K_TO, fixed drift d and the table base's azimuth
-misalignment psi0 from the settled torquer outputs at known table orientations (thesis
-II C.1.a(1), II B.10). Plain arrays and station dicts in, ``ChannelFit`` out; no rig. The
-procedure that takes the stations is ``procedures.calibrations.earth_rate`` (its docstring has
-the measurement); the report's table and plot are ``procedures.reports.earth_rate``.
+"""The earth-rate fit as a multi-position torque-to-balance test: torquer scale factor K_TO,
+fixed drift d, g-sensitive drifts along the platform axes and the table base's azimuth offset,
+each with a 95 % interval and a verdict on whether the design resolves it (thesis II C.1.a(1),
+II B.10; IEEE Std 836 static multi-position test; the CIGTF torque-to-balance test).
 
-Per channel, with ``V_T = -(Omega_i + d) / K_TO`` (II C.1.a(8)):
+In Mode 3 the caging loop holds the pickoff near null, and the torquer output balances what
+the float would otherwise integrate (II C.1.a(8), with the elastic restraint's share):
 
-* X, Y and XRD (input axes horizontal at tilt 0): spindle psi through ``n_azimuths`` steps,
-  ``Omega_x = Omega_H cos(psi - psi0)``, ``Omega_y = -Omega_H sin(psi - psi0)``,
-  ``Omega_H = Omega cos(latitude)``. Linear in (a, b, c) of ``a cos psi + b sin psi + c``;
-  K_TO = Omega_H / hypot(a, b).
-* Z is the spindle axis: turning the spindle does not change its rate. It gets a second
-  orientation set: the spindle at 90 deg (platform X on the horizontal tilt shaft, so no
-  X-sensitive g-drift changes) and the table tilted through ``z_tilts_deg``;
-  ``Omega_z = Omega (sin(lat) cos(t) + cos(lat) cos(psi0) sin(t))`` spans
-  Omega sin(lat) .. Omega. Linear in (alpha, beta) of ``alpha Omega_z + beta``.
+    -K_TO V_T = Omega_i + d + g_x f_x + g_y f_y + g_z f_z - sigma / (h/k)
 
-Standard errors come from the fit residuals (delta method for K_TO and psi0). Site latitude
-and earth rate are arguments (the rig's data sheet), never constants here.
+``Omega_i`` the earth rate along the channel's input axis and ``f`` the specific force (g) on
+the platform axes at the station's table tilt and spindle angle (``platform_frame``, Ch. II
+C.4.b), ``sigma`` the standing pickoff angle and ``h/k`` the float's restraint time constant:
+a proportional-only caging loop (XRD) leaves a standing angle whose restraint torque
+balances part of the rate without torquer current, so the apparent scale factor would read
+K_TO (1 + 1/(G_p h/k)) (+0.19 % on XRD) if it were left out.
+
+At a fixed azimuth offset the model is linear in (1/K_TO, d/K_TO, g/K_TO); the horizontal
+channels (X, Y, XRD) profile the offset (the spindle turns their input axes through the earth
+rate's horizontal component), Z takes their mean offset. A term linear in the visiting order
+keeps a slow drift trend out of the rest.
+
+**Intervals.** Station means are not independent: the gyros' flicker drift and the caging
+loops' slow tails carry over from one station to the next. The fit is generalised least
+squares with AR(1) station errors in visiting order (``ar1_gls``), the correlation rho a
+nuisance whose whole likelihood interval the covariance covers, and the intervals use Student's
+t with the fit's residual degrees of freedom. Figures derived from the coefficients (K_TO, d, g)
+take the delta method. A figure whose interval is wider than its magnitude or whose estimate
+correlates with another by more than 0.95 is not resolved (``procedures.analysis.intervals``):
+Z's input axis never reverses on a 0-90 deg table (its rate spans Omega sin(lat) .. Omega), so
+its scale factor and fixed drift correlate beyond that and its drift is reported unresolved.
+Measured on synthetic stations with AR(1) (rho 0.6) and flicker-like errors, coverage of the
+95 % intervals 0.89-0.995 (``tests/procedures/test_earth_rate_stopwatch.py``); on sim rigs with
+random configurations, ``bench/earth_rate_coverage.py``.
+
+Plain arrays and station dicts in, ``ChannelFit`` out; no rig. The procedure that takes the
+stations is ``procedures.calibrations.earth_rate``; the report is ``procedures.reports.earth_rate``.
+Site latitude, earth rate, the restraint time constants and the pickoff scale factors are
+arguments (the rig's data sheet), never constants here.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.stats
 
 from drivers.calibration import GYRO_CHANNELS
+from procedures.analysis.intervals import Estimate, judged
 
-HORIZONTAL = ("X", "Y", "XRD")
 URAD = 1e-6
+#: rho within this drop of the likelihood's maximum is inside its interval (chi^2_1 at 99 %: 6.63 / 2)
+LR_DROP = 3.32
+RHO_GRID = np.linspace(0.0, 0.95, 39)
+#: the platform axis each channel's input axis lies on (DESIGN.md section 3: X-Y gyro -> X, Y;
+#: X-Z gyro -> Z and the redundant X, XRD)
+INPUT_AXIS = {"X": 0, "Y": 1, "Z": 2, "XRD": 0}
+HORIZONTAL = ("X", "Y", "XRD")
+G_AXES = ("x", "y", "z")
+
+
+def platform_frame(tilt_deg: float, spindle_deg: float, offset_deg: float, latitude_deg: float,
+                   earth_rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """(earth rate rad/s, specific force g) on the platform X, Y, Z axes (Ch. II C.4.b).
+
+    Local east-north-up; the table base is turned ``offset`` from north; its east-west shaft
+    tilts the spindle from vertical toward north by ``tilt``; the spindle (platform Z) turns the
+    platform by ``spindle``. At tilt 0 platform X points ``spindle - offset`` from north toward
+    west. The specific force is the support's reaction, +1 g up."""
+    t, s, a = math.radians(tilt_deg), math.radians(spindle_deg), -math.radians(offset_deg)
+    north, west, up = np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    xb = north * math.cos(a) + west * math.sin(a)
+    yb = -north * math.sin(a) + west * math.cos(a)
+    zt = up * math.cos(t) + xb * math.sin(t)
+    xt = xb * math.cos(t) - up * math.sin(t)
+    axes = np.vstack([xt * math.cos(s) + yb * math.sin(s), -xt * math.sin(s) + yb * math.cos(s), zt])
+    lat = math.radians(latitude_deg)
+    return axes @ (earth_rate * np.array([0.0, math.cos(lat), math.sin(lat)])), axes @ up
 
 
 @dataclass
 class ChannelFit:
     channel: str
-    kto_urad_per_s_per_V: float
-    kto_se: float
-    drift_urad_per_s: float
-    drift_se: float
-    psi0_deg: float | None
-    psi0_se: float | None
-    x_deg: np.ndarray            # the swept angle (spindle or tilt)
+    kto: Estimate                    # urad/s per V
+    drift: Estimate                  # fixed drift, urad/s
+    g_drift: dict[str, Estimate]     # g-sensitive drift along platform x, y, z, urad/s per g
+    psi0_deg: float | None           # the table base's azimuth offset this channel sees (horizontal ones)
+    correlation: dict[str, float]    # the largest |correlation| of each figure with another, signed
+    tilt_deg: np.ndarray
+    spindle_deg: np.ndarray
     volts: np.ndarray
     predicted: np.ndarray
     residual_rms_V: float
-    swept: str
+    dof: int
+    restraint_correction: float      # relative change of K_TO made by the standing-pickoff term
+    figures: dict[str, Estimate] = field(default_factory=dict)
+
+    @property
+    def kto_urad_per_s_per_V(self) -> float:
+        return self.kto.value
+
+    @property
+    def drift_urad_per_s(self) -> float:
+        return self.drift.value
 
 
-def _lstsq(design: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Coefficients, their covariance from the residual variance, and the residuals."""
-    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
-    resid = y - design @ coef
-    dof = max(1, len(y) - design.shape[1])
-    cov = np.linalg.inv(design.T @ design) * (resid @ resid) / dof
-    return coef, cov, resid
+def _prais_winsten(X: np.ndarray, v: np.ndarray, rho: float) -> tuple[np.ndarray, np.ndarray]:
+    """The AR(1)-whitened regression: row 0 scaled by sqrt(1 - rho^2), rows k by x_k - rho x_(k-1)."""
+    Xw, vw = X.copy(), v.copy()
+    Xw[1:], vw[1:] = X[1:] - rho * X[:-1], v[1:] - rho * v[:-1]
+    c = math.sqrt(1.0 - rho * rho)
+    Xw[0], vw[0] = X[0] * c, v[0] * c
+    return Xw, vw
 
 
-def _delta_se(gradient: np.ndarray, cov: np.ndarray) -> float:
-    """Standard error of a function of the coefficients by the delta method."""
-    return float(math.sqrt(max(0.0, gradient @ cov @ gradient)))
+def ar1_gls(X: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, tuple[float, float]]:
+    """Generalised least squares for station errors that wander from one station to the next.
+
+    The errors are taken as AR(1) in visiting order, e_k = rho e_(k-1) + w_k (a gyro's flicker
+    drift and the caging loops' slow tails carry over between neighbouring stations). rho is the
+    maximum of the concentrated likelihood -n/2 ln(RSS_rho / n) + 1/2 ln(1 - rho^2) (the
+    Prais-Winsten transform keeps the first station; Beach and MacKinnon 1978). A short record
+    estimates rho poorly and low, so the covariance is the largest, figure by figure, over every
+    rho inside its likelihood-ratio 95 % interval (chi^2_1: 1.92 below the maximum): rho is a
+    nuisance whose uncertainty the intervals carry. Returns (coef at rho_hat, residuals of the
+    untransformed model, covariance, rho_hat, (rho_lo, rho_hi))."""
+    n, p = X.shape
+    rhos = RHO_GRID
+    ll, fits = [], []
+    for r in rhos:
+        Xw, vw = _prais_winsten(X, v, float(r))
+        coef, *_ = np.linalg.lstsq(Xw, vw, rcond=None)
+        e = vw - Xw @ coef
+        rss = float(e @ e)
+        ll.append(-0.5 * n * math.log(max(rss, 1e-300) / n) + 0.5 * math.log(1.0 - r * r))
+        cov = np.linalg.inv(Xw.T @ Xw) * rss / max(1, n - p - 1)
+        fits.append((coef, cov))
+    ll_arr = np.array(ll)
+    k = int(np.argmax(ll_arr))
+    inside = np.flatnonzero(ll_arr >= ll_arr[k] - LR_DROP)
+    coef = fits[k][0]
+    cov = fits[k][1].copy()
+    sd = np.sqrt(np.diag(cov))
+    for i in inside:
+        sd = np.maximum(sd, np.sqrt(np.diag(fits[i][1])))
+    base_sd = np.sqrt(np.diag(cov))
+    scale = sd / np.maximum(base_sd, 1e-300)
+    cov = cov * np.outer(scale, scale)  # the largest variances, the correlation at rho_hat
+    return coef, v - X @ coef, cov, float(rhos[k]), (float(rhos[inside[0]]), float(rhos[inside[-1]]))
 
 
-def _trend(order: np.ndarray | None, n: int) -> np.ndarray:
-    """The drift-trend regressor: the stations' visiting order, centred (none if not given).
-    The order, not the time, so that stations taken over by ``--resume`` from another file
-    (another time base) still line up; the stations of a group take about equal times."""
-    if order is None:
-        return np.zeros((n, 0))
+def _design(ch: str, tilt: np.ndarray, spindle: np.ndarray, latitude_deg: float, earth_rate: float,
+            order: np.ndarray) -> np.ndarray:
+    """Columns: P, Q (the earth rate's horizontal part on the input axis with the base at offset
+    0 and at 90 deg: at offset o it is cos(o) P + sin(o) Q), 1, f_x, f_y, f_z (g), order.
+
+    The earth rate's vertical part on the input axis is Omega sin(lat) f_i: the same column as
+    the g-drift along the input axis (both follow "up"), so it is not a column of its own; the
+    scale factor comes from the horizontal part, and g_i is what is left of f_i's coefficient."""
+    rows = []
+    for t, s in zip(tilt, spindle):
+        w0, f = platform_frame(float(t), float(s), 0.0, latitude_deg, earth_rate)
+        w90, _ = platform_frame(float(t), float(s), 90.0, latitude_deg, earth_rate)
+        vert = earth_rate * math.sin(math.radians(latitude_deg)) * f
+        i = INPUT_AXIS[ch]
+        rows.append([w0[i] - vert[i], w90[i] - vert[i], 1.0, *f])
+    cols = np.array(rows)
+    # rounding leaves 1e-17 where a projection is zero (Q on Z, f at tilt 0): exactly zero
+    scale = np.array([earth_rate, earth_rate, 1.0, 1.0, 1.0, 1.0])
+    cols[np.abs(cols) < 1e-12 * scale] = 0.0
     k = np.asarray(order, float)
-    return (k - k.mean())[:, None]
+    return np.column_stack([cols, k - k.mean()])
 
 
-def fit_horizontal(ch: str, psi_deg: np.ndarray, volts: np.ndarray, omega_h: float,
-                   order: np.ndarray | None = None) -> ChannelFit:
-    """Fit ``V = a cos psi + b sin psi + c [+ e t]`` and map to K_TO, d, psi0 (module docstring).
-    The optional term ``e t`` (t the visiting order) keeps a slow drift trend out of a, b and c."""
-    psi = np.radians(psi_deg)
-    design = np.column_stack([np.cos(psi), np.sin(psi), np.ones_like(psi), _trend(order, len(psi))])
-    coef, cov, resid = _lstsq(design, volts)
-    a, b, c = coef[:3]
-    cov = cov[:3, :3]
-    amp = math.hypot(a, b)                              # = Omega_H / K_TO
-    # Y: V = (Omega_H sin(psi - psi0) - d) / K_TO; X, XRD: V = -(Omega_H cos(psi - psi0) + d) / K_TO
-    psi0 = math.atan2(-a, b) if ch == "Y" else math.atan2(-b, -a)
-    d_psi0 = np.array([-b, a, 0.0]) / amp ** 2          # the same gradient for both forms
-    kto = omega_h / amp
-    d_kto = -omega_h / amp ** 3 * np.array([a, b, 0.0])
-    drift = -c * kto
-    d_drift = -c * d_kto + np.array([0.0, 0.0, -kto])
-    return ChannelFit(ch, kto / URAD, _delta_se(d_kto, cov) / URAD, drift / URAD,
-                      _delta_se(d_drift, cov) / URAD, math.degrees(psi0), math.degrees(_delta_se(d_psi0, cov)),
-                      np.asarray(psi_deg), volts, volts - resid, float(np.sqrt(np.mean(resid ** 2))), "spindle")
+def _identifiable(X: np.ndarray) -> np.ndarray:
+    """Columns the stations vary independently, in order (a column that is constant or a
+    combination of earlier ones, e.g. f_z at tilt 0 only, or Q on Z, is left out and what it
+    carries is reported unresolved)."""
+    unit = X / np.maximum(np.linalg.norm(X, axis=0), 1e-300)
+    keep: list[int] = []
+    for j in range(X.shape[1]):
+        if np.linalg.matrix_rank(unit[:, keep + [j]], tol=1e-6) == len(keep) + 1:
+            keep.append(j)
+    mask = np.zeros(X.shape[1], bool)
+    mask[keep] = True
+    return mask
 
 
-def omega_z(tilt_deg: np.ndarray, latitude_deg: float, earth_rate: float, psi0_deg: float = 0.0) -> np.ndarray:
-    """Earth rate along the spindle (platform Z) at table tilt t (simhw.geometry's convention)."""
-    t, lat = np.radians(tilt_deg), math.radians(latitude_deg)
-    return earth_rate * (math.sin(lat) * np.cos(t) + math.cos(lat) * math.cos(math.radians(psi0_deg)) * np.sin(t))
+COLUMNS = ("P", "Q", "one", "x", "y", "z", "order")
 
 
-def fit_vertical(ch: str, tilt_deg: np.ndarray, volts: np.ndarray, omega: np.ndarray,
-                 order: np.ndarray | None = None) -> ChannelFit:
-    """Fit ``V = alpha Omega_z + beta [+ e t]``: K_TO = -1/alpha, d = -beta K_TO."""
-    design = np.column_stack([omega, np.ones_like(omega), _trend(order, len(omega))])
-    coef, cov, resid = _lstsq(design, volts)
-    alpha, beta = coef[:2]
-    cov = cov[:2, :2]
-    kto = -1.0 / alpha
-    d_kto = np.array([1.0 / alpha ** 2, 0.0])
-    drift = -beta * kto
-    d_drift = np.array([-beta / alpha ** 2, -kto])
-    return ChannelFit(ch, kto / URAD, _delta_se(d_kto, cov) / URAD, drift / URAD,
-                      _delta_se(d_drift, cov) / URAD, None, None, np.asarray(tilt_deg), volts, volts - resid,
-                      float(np.sqrt(np.mean(resid ** 2))), "tilt")
+def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
+                restraint_s: float | None = None, pickoff_mV_per_urad: float | None = None,
+                offset_deg: float | None = None) -> ChannelFit:
+    """One channel's multi-position fit from the stations (``"tilt"``, ``"spindle"`` deg, the
+    settled torquer means ``"V"`` and, for the restraint term, the pickoff means ``"pickoff_V"``,
+    per channel, in visiting order).
+
+    Linear in the coefficients b of ``V = b_P P + b_Q Q + b_1 + b_x f_x + b_y f_y + b_z f_z
+    [+ b_o order] - r / K_TO`` (``_design``; r the restraint rate sigma/(h/k), moved to the
+    left at the current K_TO and re-fitted once): with the base at offset o, b_P = -cos(o)/K_TO,
+    b_Q = -sin(o)/K_TO, b_1 = -d/K_TO, b_k = -(g_k + Omega sin(lat) [k = input axis])/K_TO.
+    A channel whose input axis the spindle does not turn (Z: no Q column) takes ``offset_deg``
+    (the horizontal channels'): K_TO = -cos(o)/b_P."""
+    tilt = np.array([s["tilt"] for s in stations], float)
+    spindle = np.array([s["spindle"] for s in stations], float)
+    v = np.array([s["V"][ch] for s in stations], float)
+    n = len(stations)
+    restraint = np.zeros(n)
+    if restraint_s and pickoff_mV_per_urad and all("pickoff_V" in s for s in stations):
+        sigma_rad = np.array([s["pickoff_V"][ch] for s in stations]) / (pickoff_mV_per_urad * 1e-3) * URAD
+        restraint = sigma_rad / restraint_s
+    X_all = _design(ch, tilt, spindle, latitude_deg, earth_rate_rad_per_s, np.arange(n))
+    keep = _identifiable(X_all)
+    X = X_all[:, keep]
+    col = {name: int(np.sum(keep[:j])) for j, name in enumerate(COLUMNS) if keep[j]}
+    if "P" not in col:
+        raise ValueError(f"earth-rate {ch}: the stations do not turn the input axis through the earth rate's "
+                         f"horizontal part; add tilts or spindle angles")
+    has_q = "Q" in col
+    if not has_q and offset_deg is None:
+        offset_deg = 0.0
+    lat = math.radians(latitude_deg)
+    omega_v = earth_rate_rad_per_s * math.sin(lat)
+
+    def figures_of(b: np.ndarray) -> dict[str, float]:
+        """K_TO (urad/s/V), psi0 (deg), d (urad/s), g_k (urad/s/g) from the coefficients."""
+        if has_q:
+            k = 1.0 / math.hypot(b[col["P"]], b[col["Q"]])
+            o = math.atan2(-b[col["Q"]], -b[col["P"]])
+        else:
+            o = math.radians(offset_deg or 0.0)
+            k = -math.cos(o) / b[col["P"]]
+        out = {"K_TO": k / URAD, "psi0": math.degrees(o), "drift": -b[col["one"]] * k / URAD}
+        for a, name in zip(G_AXES, ("x", "y", "z")):
+            if name in col:
+                out[f"g_{a}"] = (-b[col[name]] * k - (omega_v if INPUT_AXIS[ch] == G_AXES.index(a) else 0.0)) / URAD
+        return out
+
+    coef, resid, cov, rho, _ = ar1_gls(X, v)
+    k0 = figures_of(coef)["K_TO"] * URAD
+    if np.any(restraint):
+        # the restraint rate enters as +r/K_TO: moved to the left at the current K_TO and fitted
+        # again (r/K_TO is a per-mille term: two passes leave under 1e-9 of it)
+        k = k0
+        for _ in range(3):
+            coef, resid, cov, rho, _ = ar1_gls(X, v - restraint / k)
+            k = figures_of(coef)["K_TO"] * URAD
+        correction = k / k0 - 1.0
+    else:
+        correction = 0.0
+    p = X.shape[1]
+    dof = max(1, n - p - 1)
+    q = float(scipy.stats.t.ppf(0.975, dof))
+    vals = figures_of(coef)
+    names = [k for k in vals if k != "psi0"]
+    # delta method, numerically: the figures' Jacobian in the coefficients
+    J = np.zeros((len(vals), p))
+    keys = list(vals)
+    for j in range(p):
+        h = 1e-6 * max(abs(coef[j]), 1e-12)
+        up, dn = coef.copy(), coef.copy()
+        up[j] += h
+        dn[j] -= h
+        fu, fd = figures_of(up), figures_of(dn)
+        J[:, j] = [(fu[k] - fd[k]) / (2 * h) for k in keys]
+    C = J @ cov @ J.T
+    sd = np.sqrt(np.maximum(np.diag(C), 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):  # exact data: zero variances
+        R = np.nan_to_num(C / np.outer(sd, sd))
+    figures: dict[str, Estimate] = {}
+    correlation: dict[str, float] = {}
+    idx = {k: i for i, k in enumerate(keys)}
+    for k in names:
+        i = idx[k]
+        others = [idx[m] for m in names if m != k]
+        j = max(others, key=lambda m: abs(R[i, m])) if others else i
+        correlation[k] = float(R[i, j]) if others else 0.0
+        figures[k] = judged(vals[k], vals[k] - q * sd[i], vals[k] + q * sd[i], correlation=correlation[k],
+                            with_=keys[j])
+    for a in G_AXES:
+        if f"g_{a}" not in figures:
+            figures[f"g_{a}"] = Estimate(math.nan, -math.inf, math.inf, False,
+                                         "the stations do not vary the specific force along this axis")
+    return ChannelFit(ch, figures["K_TO"], figures["drift"], {a: figures[f"g_{a}"] for a in G_AXES},
+                      vals["psi0"] if has_q else None, correlation, tilt, spindle, v, v - resid,
+                      float(np.sqrt(np.mean(resid**2))), dof, correction, figures)
 
 
-def fit_earth_rate(azimuth_stations: list[dict], tilt_stations: list[dict], *, latitude_deg: float,
-                   earth_rate_rad_per_s: float) -> dict[str, ChannelFit]:
-    """Every channel's fit from the stations' results (``"spindle"``, ``"tilt"`` in deg and the
-    settled means ``"V"`` per channel), in visiting order: the azimuth stations for X, Y and
-    XRD, the tilt stations for Z (at the horizontal channels' mean psi0)."""
-    omega_h = earth_rate_rad_per_s * math.cos(math.radians(latitude_deg))
-    psi = np.array([s["spindle"] for s in azimuth_stations])
-    fits = {ch: fit_horizontal(ch, psi, np.array([s["V"][ch] for s in azimuth_stations]), omega_h,
-                               np.arange(len(psi)))
-            for ch in HORIZONTAL}
-    psi0 = float(np.mean([fits[c].psi0_deg for c in HORIZONTAL]))
-    tilt = np.array([s["tilt"] for s in tilt_stations])
-    fits["Z"] = fit_vertical("Z", tilt, np.array([s["V"]["Z"] for s in tilt_stations]),
-                             omega_z(tilt, latitude_deg, earth_rate_rad_per_s, psi0),
-                             np.arange(len(tilt)))
+def fit_earth_rate(stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
+                   restraint_s: dict[str, float] | None = None, pickoff_mV_per_urad: dict[str, float] | None = None,
+                   ) -> dict[str, ChannelFit]:
+    """Every channel's fit from the stations in visiting order: the horizontal channels first
+    (each profiles the base's azimuth offset), then Z at their mean offset."""
+    def one(ch: str, offset: float | None) -> ChannelFit:
+        return fit_channel(ch, stations, latitude_deg=latitude_deg, earth_rate_rad_per_s=earth_rate_rad_per_s,
+                           restraint_s=(restraint_s or {}).get(ch), pickoff_mV_per_urad=(pickoff_mV_per_urad or {}).get(ch),
+                           offset_deg=offset)
+
+    fits = {ch: one(ch, None) for ch in HORIZONTAL}
+    offset = float(np.mean([fits[c].psi0_deg for c in HORIZONTAL]))
+    fits["Z"] = one("Z", offset)
     return {ch: fits[ch] for ch in GYRO_CHANNELS}

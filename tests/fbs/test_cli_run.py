@@ -31,8 +31,8 @@ def fbs(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
 
 
 def test_bad_parameters_exit_2_before_the_rig_moves(tmp_path):
-    r = fbs("run", "earth-rate", "--out", str(tmp_path), "--param", "n_azimuths=2")
-    assert r.returncode == 2 and "n_azimuths = 2 must be 5..72" in r.stderr
+    r = fbs("run", "earth-rate", "--out", str(tmp_path), "--param", "n_spindle=2")
+    assert r.returncode == 2 and "n_spindle = 2 must be 4..36" in r.stderr
     r = fbs("run", "stopwatch", "--out", str(tmp_path), "--param", "nonsense=1")
     assert r.returncode == 2 and "unknown parameter(s) nonsense" in r.stderr
     r = fbs("run", "earth-rate", "--out", str(tmp_path), "--axis", "X")
@@ -44,11 +44,17 @@ def test_bad_parameters_exit_2_before_the_rig_moves(tmp_path):
 
 @pytest.mark.slow
 def test_limits_failed_exits_1_with_the_json_keys(tmp_path):
-    r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--param", "n_azimuths=5",
-            "--param", "z_tilts_deg=[0, 90, 45, 0]", "--param", "z_average_s=20", "--param", "kto_tolerance=1e-6")
+    r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--param", "n_spindle=4",
+            "--param", "tilts_deg=[0, 90, 45]", "--param", "average_s=20", "--param", "kto_tolerance=1e-6")
     assert r.returncode == 1, r.stderr
     out = json.loads(r.stdout)
-    assert list(out) == ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"]
+    figures = ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g", "g_drift_y_urad_per_s_per_g",
+               "g_drift_z_urad_per_s_per_g"]
+    assert list(out) == [*figures, "file", *(f"{k}_ci95" for k in figures), "resolved"]
+    for k in figures:
+        assert set(out[f"{k}_ci95"]) == set(out[k]) == set(out["resolved"][k]) == {"X", "Y", "Z", "XRD"}
+        for ch, v in out[k].items():
+            assert (v is None) == (not out["resolved"][k][ch])  # an unresolved figure is no bare number
     assert Path(out["file"]).exists()
 
 

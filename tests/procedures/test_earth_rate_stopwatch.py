@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.rig import open_rig
-from procedures.analysis.earth_rate import fit_horizontal, fit_vertical, omega_z
+from procedures.analysis.earth_rate import fit_channel, platform_frame
 from procedures.analysis.stopwatch import channel_result
 from procedures.analysis.stopwatch import crossing_interval as _crossing_interval
 from procedures.analysis.stopwatch import restraint_fit as _restraint_fit
@@ -19,53 +19,106 @@ from procedures.analysis.stopwatch import smooth as _smooth
 from procedures.calibrations.earth_rate import EarthRate
 from procedures.calibrations.stopwatch import Stopwatch
 from procedures.runner import run_procedure
-from simhw.geometry import earth_rate_platform, platform_axes_enu
+from simhw.geometry import earth_rate_platform, platform_axes_enu, specific_force_platform
 
 OMEGA = 7.292115e-5
 LAT = 37.43
 
 
 # ---------------------------------------------------------------------------- earth-rate numerics
-def _torquer(ch: str, tilt: float, spindle: float, kto: float, drift: float, psi0: float) -> float:
-    """V_T = -(Omega_i + d)/K_TO with Omega_i from simhw's own table geometry (independent of the fit)."""
+def _station(tilt: float, spindle: float, psi0: float, gyros: dict[str, dict], pickoff: dict[str, float] | None = None,
+             noise: dict[str, float] | None = None) -> dict:
+    """A station's settled torquer means from simhw's own table geometry (independent of the fit):
+    -K_TO V_T = Omega_i + d + g . f - sigma / (h/k)."""
     axes = platform_axes_enu(math.radians(tilt), math.radians(spindle), math.radians(psi0))
     w = earth_rate_platform(math.radians(LAT), OMEGA, axes)
-    w_i = {"X": w[0], "XRD": w[0], "Y": w[1], "Z": w[2]}[ch]
-    return -(w_i + drift * 1e-6) / (kto * 1e-6)
+    f = specific_force_platform(axes)
+    v, pv = {}, {}
+    for ch, g in gyros.items():
+        w_i = w[{"X": 0, "XRD": 0, "Y": 1, "Z": 2}[ch]]
+        sigma = (pickoff or {}).get(ch, 0.0)          # standing pickoff angle, rad
+        rate = w_i + (g["d"] + g["g"] @ f) * 1e-6 - sigma / g.get("hk", 1.0)
+        v[ch] = -rate / (g["kto"] * 1e-6) + (noise or {}).get(ch, 0.0)
+        pv[ch] = sigma / 1e-6 * g.get("kg", 6.0) * 1e-3
+    return {"tilt": tilt, "spindle": spindle, "V": v, "pickoff_V": pv}
 
 
-@settings(max_examples=40, deadline=None)
-@given(kto=st.floats(20, 50), drift=st.floats(-2, 2), psi0=st.floats(-3, 3), ch=st.sampled_from(["X", "Y", "XRD"]))
-def test_horizontal_fit_recovers_the_geometry(kto, drift, psi0, ch):
-    psi = np.arange(12) * 30.0
-    v = np.array([_torquer(ch, 0.0, p, kto, drift, psi0) for p in psi])
-    f = fit_horizontal(ch, psi, v, OMEGA * math.cos(math.radians(LAT)), np.arange(12))
-    assert f.kto_urad_per_s_per_V == pytest.approx(kto, rel=1e-9)
-    assert f.drift_urad_per_s == pytest.approx(drift, abs=1e-7)
-    assert f.psi0_deg == pytest.approx(psi0, abs=1e-7)
+def _positions(tilts=(0.0, 90.0, 45.0), n=8):
+    return [(t, (p if i % 2 == 0 else (n - 1 - p)) * 360.0 / n) for i, t in enumerate(tilts) for p in range(n)]
 
 
-@settings(max_examples=40, deadline=None)
-@given(kto=st.floats(20, 50), drift=st.floats(-2, 2), psi0=st.floats(-3, 3))
-def test_vertical_fit_recovers_z(kto, drift, psi0):
-    tilts = np.array([0, 22.5, 45, 67.5, 90, 67.5, 45, 22.5, 0.0])
-    v = np.array([_torquer("Z", t, 90.0, kto, drift, psi0) for t in tilts])
-    f = fit_vertical("Z", tilts, v, omega_z(tilts, LAT, OMEGA, psi0), np.arange(len(tilts)))
-    assert f.kto_urad_per_s_per_V == pytest.approx(kto, rel=1e-9)
-    assert f.drift_urad_per_s == pytest.approx(drift, abs=1e-7)
+def test_the_frame_is_the_table_geometry():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        t, s, o = rng.uniform(0, 90), rng.uniform(0, 360), rng.uniform(-5, 5)
+        w, f = platform_frame(t, s, o, LAT, OMEGA)
+        axes = platform_axes_enu(math.radians(t), math.radians(s), math.radians(o))
+        assert np.allclose(w, earth_rate_platform(math.radians(LAT), OMEGA, axes), atol=1e-18)
+        assert np.allclose(f, specific_force_platform(axes))
 
 
-def test_fit_standard_errors_are_honest():
-    """Noise of known size: the stated standard error covers the truth at about its rate."""
-    rng = np.random.default_rng(4)
-    psi = np.arange(12) * 30.0
-    clean = np.array([_torquer("X", 0.0, p, 31.6, 0.35, 0.12) for p in psi])
-    z = []
-    for _ in range(400):
-        f = fit_horizontal("X", psi, clean + rng.normal(0, 2e-3, 12), OMEGA * math.cos(math.radians(LAT)))
-        z.append((f.kto_urad_per_s_per_V - 31.6) / f.kto_se)
-    z = np.array(z)
-    assert 0.8 < z.std() < 1.25 and abs(np.mean(np.abs(z) < 1.96) - 0.95) < 0.04
+@settings(max_examples=25, deadline=None)
+@given(kto=st.floats(20, 50), drift=st.floats(-2, 2), psi0=st.floats(-3, 3),
+       g=st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3), ch=st.sampled_from(["X", "Y", "Z", "XRD"]))
+def test_the_multi_position_fit_recovers_scale_factor_and_every_drift(kto, drift, psi0, g, ch):
+    gy = {ch: {"kto": kto, "d": drift, "g": np.array(g)}}
+    stations = [_station(t, s, psi0, gy) for t, s in _positions()]
+    f = fit_channel(ch, stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA,
+                    offset_deg=None if ch != "Z" else psi0)
+    assert f.kto.value == pytest.approx(kto, rel=1e-7)
+    assert f.drift.value == pytest.approx(drift, abs=1e-5)
+    for a, v in zip("xyz", g):
+        assert f.g_drift[a].value == pytest.approx(v, abs=1e-5)
+    if ch != "Z":
+        assert f.psi0_deg == pytest.approx(psi0, abs=1e-5)
+
+
+def test_a_standing_pickoff_is_taken_out_of_the_scale_factor():
+    """A proportional-only loop: the standing angle follows the torquer output, and its restraint
+    share would read as K_TO (1 + 1/(G_p h/k)) without the term."""
+    gp, hk, kto, kg = 0.5, 515.0, 32.0, 5.74        # G_p in 1/s: sigma = rate / G_p
+    stations = []
+    for t, s in _positions():
+        clean = _station(t, s, 0.1, {"XRD": {"kto": kto, "d": 0.4, "g": np.zeros(3)}})
+        rate = -clean["V"]["XRD"] * kto * 1e-6     # what the torquer would balance alone
+        sigma = rate / (gp * hk + 1.0) * hk        # the float's share at equilibrium, rad
+        stations.append(_station(t, s, 0.1, {"XRD": {"kto": kto, "d": 0.4, "g": np.zeros(3), "hk": hk, "kg": kg}},
+                                 pickoff={"XRD": sigma}))
+    with_term = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, restraint_s=hk,
+                            pickoff_mV_per_urad=kg)
+    without = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA)
+    assert with_term.kto.value == pytest.approx(kto, rel=1e-7)
+    assert without.kto.value / kto - 1 == pytest.approx(1 / (gp * hk), rel=0.05)
+    assert with_term.restraint_correction == pytest.approx(-(without.kto.value / kto - 1), rel=0.05)
+
+
+def test_what_the_design_cannot_vary_is_not_resolved():
+    """At tilt 0 only, the specific force along every axis is fixed: no g-drift is reported."""
+    gy = {"X": {"kto": 31.6, "d": 0.3, "g": np.array([0.0, 0.1, 0.05])}}
+    stations = [_station(0.0, s, 0.0, gy) for s in np.arange(12) * 30.0]
+    f = fit_channel("X", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA)
+    assert f.kto.resolved and f.kto.value == pytest.approx(31.6, rel=1e-6)
+    assert not any(e.resolved for e in f.g_drift.values())
+
+
+def test_intervals_cover_under_correlated_station_noise():
+    """Station errors that wander (AR(1), rho 0.6, as a gyro's flicker drift does from one station
+    to the next): the 95 % intervals cover K_TO and the drifts at about their rate."""
+    rng = np.random.default_rng(7)
+    truth = {"kto": 31.6, "d": 0.35, "g": np.array([0.05, 0.08, -0.04])}
+    clean = [_station(t, s, 0.1, {"X": truth}) for t, s in _positions()]
+    hits = {k: 0 for k in ("K_TO", "drift", "g_x", "g_y", "g_z")}
+    n = 200
+    for _ in range(n):
+        e = np.zeros(len(clean))
+        for i in range(len(e)):
+            e[i] = (0.6 * e[i - 1] if i else 0.0) + rng.normal(0, 1e-3)
+        stations = [dict(s, V={"X": s["V"]["X"] + ei}) for s, ei in zip(clean, e)]
+        f = fit_channel("X", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA)
+        for k, t in (("K_TO", 31.6), ("drift", 0.35), ("g_x", 0.05), ("g_y", 0.08), ("g_z", -0.04)):
+            hits[k] += f.figures[k].covers(t)
+    for k, h in hits.items():
+        assert 0.88 <= h / n <= 0.995, (k, h / n)
 
 
 # ---------------------------------------------------------------------------- stopwatch numerics

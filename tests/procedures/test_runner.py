@@ -251,4 +251,5 @@ def test_catalogue_finds_every_procedure_and_keys_are_design_section_7():
     procs = catalogue()
     assert set(procs) == set(design)
     for name, keys in design.items():
-        assert tuple(procs[name].json_keys) == keys
+        # DESIGN.md's keys, in its order; a procedure may report more figures (earth-rate's g-drifts)
+        assert [k for k in procs[name].json_keys if k in keys] == list(keys)

@@ -1,0 +1,132 @@
+"""Coverage of the earth-rate procedure's 95 % intervals (issue 18, acceptance A and C).
+
+Each case is a sim rig with a random configuration the procedure is never told: torquer scale
+factors x0.88-1.12, pickoff scale factors x0.85-1.15, fixed drifts +-0.8 urad/s, g-sensitive
+drifts +-0.15 urad/s/g along each platform axis, the table base's azimuth offset +-1 deg; the
+gyros' random drift (white, flicker, random walk) at the sim's defaults. ``fbs run earth-rate``
+runs on it in virtual time, and every figure's 95 % interval (``K_ci95``) is checked against the
+configuration, resolved or not. Reported per figure: coverage (target 90-98 %), how often it
+was resolved, and for the resolved ones the median |error| over the interval's half width.
+
+Benchmarks report, they never fail. Usage: ``python bench/earth_rate_coverage.py [--seeds 50]
+[--jobs 2] [--out FILE.jsonl]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import multiprocessing  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
+from pathlib import Path  # noqa: E402
+from typing import Any  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+CHANNELS = ("X", "Y", "Z", "XRD")
+NOMINAL = {"X": (31.6, 6.03), "Y": (33.4, 6.70), "Z": (34.1, 7.51), "XRD": (32.0, 5.74)}
+FIGURES = {"K_TO_urad_per_s_per_V": "torquer_scale_urad_per_s_per_V", "drift_urad_per_s": "fixed_drift_urad_per_s",
+           "g_drift_x_urad_per_s_per_g": "g_drift_x_urad_per_s_per_g",
+           "g_drift_y_urad_per_s_per_g": "g_drift_y_urad_per_s_per_g",
+           "g_drift_z_urad_per_s_per_g": "g_drift_z_urad_per_s_per_g"}
+
+
+def draw(seed: int) -> dict[str, dict[str, float]]:
+    rng = np.random.default_rng([18, seed])
+    cfg: dict[str, dict[str, float]] = {"table": {"base_azimuth_offset_deg": float(rng.uniform(-1.0, 1.0))}}
+    for ch, (kto, kg) in NOMINAL.items():
+        cfg[f"gyro.{ch}"] = {"torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
+                             "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
+                             "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
+                             **{f"g_drift_{a}_urad_per_s_per_g": float(rng.uniform(-0.15, 0.15)) for a in "xyz"}}
+    return cfg
+
+
+def _toml(values: dict) -> str:
+    lines = []
+    for section, kv in values.items():
+        lines.append(f"[{section}]")
+        lines += [f"{k} = {v!r}" for k, v in kv.items()]
+    return "\n".join(lines) + "\n"
+
+
+def run_case(seed: int) -> dict[str, Any]:
+    sys.path.insert(0, str(ROOT))
+    from drivers.rig import open_rig
+    from procedures.calibrations.earth_rate import EarthRate
+    from procedures.runner import run_procedure
+
+    cfg = draw(seed)
+    rec: dict[str, Any] = {"seed": seed, "config": cfg}
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "rig.toml"
+        path.write_text(_toml(cfg))
+        t0 = time.perf_counter()
+        try:
+            with open_rig(f"sim?warm=1&seed={seed}&watchdog=5&config={path}") as rig:
+                res = run_procedure(EarthRate(), rig, Path(d))
+        except Exception as e:  # reported, not fatal
+            rec["error"] = f"{type(e).__name__}: {e}"
+            return rec
+        rec["wall_s"] = round(time.perf_counter() - t0, 1)
+        rec["verdict"] = str(res.verdict)
+        rec["values"] = res.values
+    return rec
+
+
+def summarize(recs: list[dict[str, Any]]) -> str:
+    ok = [r for r in recs if "values" in r]
+    lines = [f"earth-rate coverage: {len(ok)} runs ({len(recs) - len(ok)} errors), verdicts "
+             + ", ".join(f"{v} {sum(r['verdict'] == v for r in ok)}" for v in sorted({r['verdict'] for r in ok}))]
+    lines.append(f"{'figure':<30s} {'channel':<4s} {'covered':>9s} {'resolved':>9s} {'|err|/half-width med':>21s}")
+    for key, cfg_key in FIGURES.items():
+        for ch in CHANNELS:
+            cov, res, ratio, n = 0, 0, [], 0
+            for r in ok:
+                iv = r["values"].get(f"{key}_ci95", {}).get(ch)
+                truth = r["config"][f"gyro.{ch}"][cfg_key]
+                if iv is None or iv[0] is None:
+                    continue
+                n += 1
+                cov += iv[0] <= truth <= iv[1]
+                if r["values"]["resolved"][key][ch]:
+                    res += 1
+                    v = r["values"][key][ch]
+                    ratio.append(abs(v - truth) / max(0.5 * (iv[1] - iv[0]), 1e-300))
+            med = f"{statistics.median(ratio):.2f}" if ratio else "-"
+            lines.append(f"{key:<30s} {ch:<4s} {cov:>4d}/{n:<4d} {res:>4d}/{n:<4d} {med:>21s}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", type=int, default=50)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--out", default="/tmp/earth_rate_coverage.jsonl")
+    args = ap.parse_args(argv)
+    recs = []
+    with open(args.out, "w") as jf, ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+        futs = [pool.submit(run_case, s) for s in range(args.seeds)]
+        for fut in as_completed(futs):
+            rec = fut.result()
+            recs.append(rec)
+            jf.write(json.dumps(rec) + "\n")
+            jf.flush()
+            print(f"[{len(recs)}/{args.seeds}] seed {rec['seed']}: {rec.get('verdict', rec.get('error'))} "
+                  f"{rec.get('wall_s', '')} s", file=sys.stderr, flush=True)
+    print(summarize(recs))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
