@@ -26,9 +26,11 @@ squares with AR(1) station errors in visiting order (``ar1_gls``), the correlati
 nuisance whose whole likelihood interval the covariance covers, and the intervals use Student's
 t with the fit's residual degrees of freedom. Figures derived from the coefficients (K_TO, d, g)
 take the delta method. A figure whose interval is wider than its magnitude or whose estimate
-correlates with another by more than 0.95 is not resolved (``procedures.analysis.intervals``):
-Z's input axis never reverses on a 0-90 deg table (its rate spans Omega sin(lat) .. Omega), so
-its scale factor and fixed drift correlate beyond that and its drift is reported unresolved.
+correlates by more than 0.95 with a better-determined one (relative to its value) is not
+resolved (``procedures.analysis.intervals``): Z's input axis never reverses on a 0-90 deg table
+(its rate spans Omega sin(lat) .. Omega, and sin t, cos t and 1 are nearly dependent over
+0-90 deg), so its fixed drift and its g-drift along z are confounded with its scale factor
+(correlation 0.99) and reported unresolved, while the scale factor's marginal interval stays.
 Measured on synthetic stations with AR(1) (rho 0.6) and flicker-like errors, coverage of the
 95 % intervals 0.89-0.995 (``tests/procedures/test_earth_rate_stopwatch.py``); on sim rigs with
 random configurations, ``bench/earth_rate_coverage.py``.
@@ -273,13 +275,19 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     figures: dict[str, Estimate] = {}
     correlation: dict[str, float] = {}
     idx = {k: i for i, k in enumerate(keys)}
+    # Of two figures the design confounds (|correlation| > 0.95) the one it leaves undetermined
+    # is not resolved: each interval is marginal (the full covariance), so the better-determined
+    # partner's stays valid (Z's K_TO within 0.6 % while its fixed drift spans +-0.3 urad/s).
+    rel = {k: q * sd[idx[k]] / max(abs(vals[k]), 1e-300) for k in names}
     for k in names:
         i = idx[k]
         others = [idx[m] for m in names if m != k]
         j = max(others, key=lambda m: abs(R[i, m])) if others else i
         correlation[k] = float(R[i, j]) if others else 0.0
-        figures[k] = judged(vals[k], vals[k] - q * sd[i], vals[k] + q * sd[i], correlation=correlation[k],
-                            with_=keys[j])
+        weaker = [idx[m] for m in names if m != k and rel[m] <= rel[k]]
+        jw = max(weaker, key=lambda m: abs(R[i, m])) if weaker else i
+        figures[k] = judged(vals[k], vals[k] - q * sd[i], vals[k] + q * sd[i],
+                            correlation=float(R[i, jw]) if weaker else 0.0, with_=keys[jw])
     for a in G_AXES:
         if f"g_{a}" not in figures:
             figures[f"g_{a}"] = Estimate(math.nan, -math.inf, math.inf, False,
