@@ -111,12 +111,14 @@ def summarize(recs: list[dict[str, Any]]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=50)
+    ap.add_argument("--first", type=int, default=0, help="first seed (to extend an earlier run)")
+    ap.add_argument("--also", nargs="*", default=[], help="earlier --out files to summarize with this run")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="/tmp/earth_rate_coverage.jsonl")
     args = ap.parse_args(argv)
     recs = []
     with open(args.out, "w") as jf, ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futs = [pool.submit(run_case, s) for s in range(args.seeds)]
+        futs = [pool.submit(run_case, s) for s in range(args.first, args.first + args.seeds)]
         for fut in as_completed(futs):
             rec = fut.result()
             recs.append(rec)
@@ -124,6 +126,8 @@ def main(argv: list[str] | None = None) -> int:
             jf.flush()
             print(f"[{len(recs)}/{args.seeds}] seed {rec['seed']}: {rec.get('verdict', rec.get('error'))} "
                   f"{rec.get('wall_s', '')} s", file=sys.stderr, flush=True)
+    for f in args.also:
+        recs += [json.loads(line) for line in Path(f).read_text().splitlines() if line.strip()]
     print(summarize(recs))
     return 0
 

@@ -203,3 +203,30 @@ def test_earth_rate_and_stopwatch_find_a_random_rig(tmp_path, seed):
     # the table's azimuth offset is found too (X, Y, XRD each see it)
     psi0 = [m.value for m in er.measurements if m.name.startswith("table azimuth misalignment")]
     assert np.allclose(psi0, cfg["table"]["base_azimuth_offset_deg"], atol=0.15)
+
+
+@pytest.mark.slow
+def test_the_multi_position_test_separates_fixed_and_g_sensitive_drift(tmp_path):
+    """Acceptance C (issue 18): fixed drifts of 0.5 urad/s and g-sensitive drifts of 0.1 urad/s/g
+    on a rig the procedure is never told about: each separated, resolved where the design can
+    (the horizontal channels), every interval covering its truth; Z's fixed drift unresolved."""
+    gyro = {"X": {"fixed_drift_urad_per_s": 0.5, "g_drift_x_urad_per_s_per_g": 0.1},
+            "Y": {"fixed_drift_urad_per_s": -0.5, "g_drift_y_urad_per_s_per_g": 0.1},
+            "Z": {"fixed_drift_urad_per_s": 0.5, "g_drift_x_urad_per_s_per_g": 0.1},
+            "XRD": {"fixed_drift_urad_per_s": 0.5, "g_drift_z_urad_per_s_per_g": 0.1}}
+    cfg = {f"gyro.{ch}": {"fixed_drift_urad_per_s": 0.0, **{f"g_drift_{a}_urad_per_s_per_g": 0.0 for a in "xyz"}, **v}
+           for ch, v in gyro.items()}
+    path = tmp_path / "rig.toml"
+    path.write_text(_toml(cfg))
+    with open_rig(f"sim?warm=1&seed=5&watchdog=5&config={path}") as rig:
+        er = run_procedure(EarthRate(), rig, tmp_path)
+    assert er.verdict == "pass", er.error
+    v = er.values
+    for ch in ("X", "Y", "Z", "XRD"):
+        for key, cfg_key in (("drift_urad_per_s", "fixed_drift_urad_per_s"),
+                             *((f"g_drift_{a}_urad_per_s_per_g", f"g_drift_{a}_urad_per_s_per_g") for a in "xyz")):
+            lo, hi = v[f"{key}_ci95"][ch]
+            assert lo <= cfg[f"gyro.{ch}"][cfg_key] <= hi, (ch, key, lo, hi)
+    assert v["resolved"]["drift_urad_per_s"] == {"X": True, "Y": True, "Z": False, "XRD": True}
+    assert v["resolved"]["g_drift_x_urad_per_s_per_g"]["X"] and v["resolved"]["g_drift_y_urad_per_s_per_g"]["Y"]
+    assert v["drift_urad_per_s"]["Z"] is None and v["K_TO_urad_per_s_per_V"]["Z"] is not None
