@@ -34,6 +34,7 @@ SI inside (rad, N m, s); units are in the names at the edges.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numba
@@ -317,6 +318,11 @@ class DahlFit:
     path_cutoff_hz: float | None = None
     n_independent: int = 0             # residual samples counted as independent for the errors
     evaluations: int = 0
+    #: covariance of (ln To, ln eta): cluster-robust over the analysed cycles (``fit_dahl``)
+    cov_ln: np.ndarray = field(repr=False, default_factory=lambda: np.full((2, 2), np.nan))
+    #: degrees of freedom of that covariance (Student t): cycles less the fitted parameters
+    dof: int = 0
+    n_clusters: int = 0
 
 
 def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]) -> tuple[float, float]:
@@ -346,10 +352,11 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     power amplifier's offset, slow disturbances). With ``smooth_hz`` the model torque gets the
     zero-phase low-pass the measured torque had.
 
-    Standard errors are from the Jacobian in (ln To, ln eta) and the residual variance, each
-    residual sample counting for ``step / independent_every`` of an independent one (the
-    low-passed residual is correlated over about fs / (2 smooth_hz) samples); they are
-    statistical only. The stiffness eta To^2 gets the delta method."""
+    Standard errors are cluster-robust over the analysed cycles (the covariance of (ln To,
+    ln eta) from the spread of the cycles' scores, ``cov_ln``, with ``dof`` degrees of freedom
+    for Student's t); they are statistical only. The stiffness eta To^2 gets the delta method.
+    ``independent_every`` only sets ``n_independent`` (a residual sample per that many is
+    counted as independent), kept for the report."""
     if not segments:
         raise ValueError("no cycles of constant amplitude to fit")
     theta = np.asarray(path_rad, dtype=float)
@@ -388,11 +395,20 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     To, eta = math.exp(sol.x[0]), math.exp(sol.x[1])
     r = sol.fun
     n_ind = max(3, int(len(r) * step / max(1, independent_every)))
-    dof = max(1, n_ind - 2 - len(segments))
-    s2 = float(r @ r) / len(r) * n_ind / dof
-    J = sol.jac * math.sqrt(n_ind / len(r))     # as if n_ind independent samples
+    # Cluster-robust ("sandwich") covariance with one cluster per analysed cycle: the residual
+    # is correlated within a cycle (the low-pass, the platform's jitter, the bearing's memory of
+    # it) but its score J_c^T r_c is nearly independent from cycle to cycle, so the spread of the
+    # cycles' scores measures the estimate's error whatever the correlation inside a cycle.
+    labels = np.concatenate([_cycle_labels(s, i + a0, base) for s, i, base in
+                             zip(segments, idx, np.cumsum([0] + [s.n_cycles for s in segments[:-1]]))])
+    n_cl = int(labels.max()) + 1
+    dof = max(1, n_cl - len(segments) - 2)     # each segment's offset and the two parameters
+    J = sol.jac
     try:
-        cov = np.linalg.inv(J.T @ J) * s2
+        bread = np.linalg.inv(J.T @ J)
+        scores = np.zeros((n_cl, 2))
+        np.add.at(scores, labels, J * r[:, None])
+        cov = bread @ (scores.T @ scores) @ bread * (n_cl / dof)
     except np.linalg.LinAlgError:
         cov = np.full((2, 2), np.nan)
     var = np.diag(cov)
@@ -412,7 +428,13 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     for s, off in zip(segments, offsets):
         full[s.lead_start - a0:s.stop - a0] += off
     return DahlFit(To, eta, To * float(se_ln[0]), eta * float(se_ln[1]), k, k * se_lnk, corr, offsets, rms,
-                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals)
+                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals, cov, dof, n_cl)
+
+
+def _cycle_labels(seg: Segment, samples: np.ndarray, base: int) -> np.ndarray:
+    """The cycle (numbered from ``base``) each of a segment's kept samples lies in."""
+    per = (seg.stop - seg.start) / seg.n_cycles
+    return base + np.minimum(((samples - seg.start) / per).astype(int), seg.n_cycles - 1)
 
 
 @dataclass
@@ -470,3 +492,96 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
     scan = PathScan([float(c) for c in cutoffs_hz], [f.residual_rms_total_Nm for f in fits],
                     [f.To_Nm for f in fits], [f.eta_per_Nm for f in fits], best)
     return fits[best], scan
+
+
+# ---------------------------------------------------------------------------- the angle's lag
+@dataclass
+class LagMeasurement:
+    """How far the recorded angle lags the recorded torque input (``measure_lag``)."""
+
+    lag_s: float
+    se_s: float
+    dof: int                           # cycles less one (the jackknife's)
+    frequencies_hz: list[float]        # the command's lines used
+    lags_s: list[float]                # the lag each line gives alone
+    lag_se_s: list[float]
+    n_cycles: int
+
+
+def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: float, freq_hz: float,
+                segments: list[Segment], response: Callable[[np.ndarray], np.ndarray], *, min_hz: float,
+                max_hz: float, max_lines: int = 8, max_se_rad: float = 0.1) -> LagMeasurement:
+    """The lag (s) of the recorded ``angle`` behind the recorded ``drive`` (the power-amplifier
+    input), measured at the command's lines between ``min_hz`` and ``max_hz``.
+
+    The sinusoidal command is a staircase (a DAC updated a whole number of times a cycle), so
+    besides the fundamental it carries lines at the harmonics of the drive frequency around the
+    update rate. Above the servo band the platform there is a rigid body: ``response(w)`` (the
+    data sheet's angle per unit drive, Kp Km / Ra / (-I w^2 + j D w), eq. 3.23-3.27) gives its
+    phase, and what the record shows beyond it is the instruments' lag: the instrumentation
+    channel's filters (eq. 3.22) and the motor's La/Ra, which the data sheet does not give.
+
+    The transfer function drive -> angle at a line is taken with the command as the instrument
+    (sum over cycles of A conj(C) / sum of D conj(C)), so neither the sensor's noise (which the
+    servo feeds into the drive) nor any disturbance uncorrelated with the command biases it.
+    Each kept cycle of every segment is one determination; a delete-one-cycle jackknife gives
+    the errors. The lines (the ``max_lines`` strongest in the command) are combined by weighted
+    least squares in ``-phase = w lag``; ``se_s`` is the jackknife's of that combination,
+    raised by the lines' scatter about it when they disagree beyond their errors."""
+    per = fs_hz / freq_hz
+    n_per = int(round(per))
+    starts = [int(round(s.start + c * per)) for s in segments for c in range(s.n_cycles)]
+    starts = [a for a in starts if a + n_per <= len(cmd)]
+    if len(starts) < 3:
+        raise ValueError(f"{len(starts)} cycles are too few to measure the angle's lag")
+    h_lo, h_hi = int(math.ceil(min_hz / freq_hz)), int(math.floor(max_hz / freq_hz))
+    if h_hi < h_lo:
+        raise ValueError(f"no harmonic of {freq_hz:g} Hz between {min_hz:g} and {max_hz:g} Hz")
+    harm = np.arange(h_lo, h_hi + 1)
+    t = np.arange(n_per) / fs_hz
+    E = np.exp(-2j * math.pi * np.outer(t, harm * freq_hz))           # samples x lines
+    blocks = np.array(starts)[:, None] + np.arange(n_per)[None, :]
+    C = (np.asarray(cmd, float)[blocks] - np.asarray(cmd, float)[blocks].mean(axis=1, keepdims=True)) @ E
+    A = np.asarray(angle, float)[blocks] @ E
+    D = np.asarray(drive, float)[blocks] @ E
+    # the lines the command really carries: the strongest, well above its floor
+    power = np.mean(np.abs(C) ** 2, axis=0)
+    order = np.argsort(power)[::-1]
+    floor = float(np.median(power))
+    strong = [int(i) for i in order[:max_lines] if power[i] > 100.0 * floor]
+    if not strong:
+        raise ValueError(f"the command carries no line between {min_hz:g} and {max_hz:g} Hz to measure the "
+                         f"angle's lag at (a smooth drive: no DAC staircase in band)")
+    w = 2 * math.pi * harm[strong] * freq_hz
+    model = response(w)
+    num = A[:, strong] * np.conj(C[:, strong])                       # cycles x lines
+    den = D[:, strong] * np.conj(C[:, strong])
+
+    def lags(keep: np.ndarray) -> np.ndarray:
+        H = num[keep].sum(axis=0) / den[keep].sum(axis=0)
+        return -np.angle(H / model) / w
+
+    n = len(starts)
+    every = np.ones(n, bool)
+    full = lags(every)
+    jack = np.empty((n, len(strong)))
+    for i in range(n):
+        keep = every.copy()
+        keep[i] = False
+        jack[i] = lags(keep)
+    se_line = np.sqrt((n - 1) / n * np.sum((jack - jack.mean(axis=0)) ** 2, axis=0))
+    good = se_line * w < max_se_rad
+    if not np.any(good):
+        raise ValueError(f"the command's lines between {min_hz:g} and {max_hz:g} Hz are too weak in the angle and "
+                         f"the drive to measure the angle's lag (phase errors over {max_se_rad:g} rad)")
+    wt = np.where(good, 1.0 / np.maximum(se_line, 1e-12) ** 2, 0.0)
+    wt /= wt.sum()
+    lag = float(wt @ full)
+    jack_c = jack @ wt
+    se = float(np.sqrt((n - 1) / n * np.sum((jack_c - jack_c.mean()) ** 2)))
+    m = int(np.count_nonzero(good))
+    if m > 1:
+        chi2 = float(np.sum(((full - lag) / se_line)[good] ** 2))
+        se *= max(1.0, math.sqrt(chi2 / (m - 1)))      # the Birge ratio: lines that disagree
+    return LagMeasurement(lag, se, n - 1, [float(f) for f in harm[strong][good] * freq_hz],
+                          [float(x) for x in full[good]], [float(x) for x in se_line[good]], n)

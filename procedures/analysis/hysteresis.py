@@ -18,23 +18,32 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.stats
 
 from daq.reader import RunFile
 from daq.runfile import RunFileError
 from drivers.calibration import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
 from procedures.analysis import dahl
+from procedures.analysis.intervals import Estimate, judged
 
 log = logging.getLogger(__name__)
 
 URAD = 1e-6
 #: the axes with a primary (two-axis) autocollimator, hence an instrumentation channel (DESIGN.md section 5)
 AC_AXES = ("X", "Y")
+#: the reported figures (DESIGN.md section 7), each a plain number for the swept axis
+FIGURES = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad")
+#: the lag is measured at the command's lines above this many torque bandwidths (where the
+#: platform is a rigid body to the drive) and below this fraction of the sample rate
+LAG_MIN_FC, LAG_MAX_FS = 2.0, 0.45
+#: the lag step of the refit that gives the figures' sensitivity to the lag (s)
+LAG_STEP_S = 0.5e-3
 
 
 @dataclass
@@ -78,11 +87,32 @@ class HysteresisResult:
     #: a stretch of the largest loop for the time-history plot (Fig. 50): t, angle, torque, model
     history: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    #: the angle's lag behind the power-amplifier input that was taken out, its standard error,
+    #: and where it came from: "measured" (``dahl.measure_lag``), "given", or "none" (unmeasured)
+    angle_lag_s: float = 0.0
+    angle_lag_se_s: float = math.nan
+    lag_source: str = "none"
+    lag: dahl.LagMeasurement | None = None
+    #: the figures with their 95 % intervals (cluster-robust over cycles, the lag's error in)
+    estimates: dict[str, Estimate] = field(default_factory=dict)
+    dof: int = 0
 
     def values(self) -> dict[str, Any]:
-        """The summary keys of DESIGN.md section 7."""
-        return {"To_Nm": self.To_Nm, "eta_per_Nm": self.eta_per_Nm,
-                "stiffness_Nm_per_rad": self.stiffness_Nm_per_rad, "file": self.file}
+        """The summary keys of DESIGN.md section 7: each figure plain (None if unresolved), its
+        ``K_ci95`` [lo, hi] and ``resolved`` {K: {axis: bool}}."""
+        out: dict[str, Any] = {}
+        for key in FIGURES:
+            e = self.estimates.get(key)
+            out[key] = (e.value if e.resolved else None) if e is not None else getattr(self, key)
+        for key in FIGURES:
+            e = self.estimates.get(key)
+            if e is not None:
+                out[f"{key}_ci95"] = [e.lo, e.hi]
+        if self.estimates:
+            out["resolved"] = {key: {self.axis: e.resolved} for key, e in self.estimates.items()}
+        out["angle_lag_ms"] = self.angle_lag_s * 1e3
+        out["file"] = self.file
+        return out
 
     def theta_o_bar(self, loop: Loop) -> float:
         """Normalized amplitude eta To theta_o (eq. 5.6b)."""
@@ -112,13 +142,15 @@ def _make(cls: type, value: Any) -> Any:
 
 
 def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration | None = None, *,
-                 settle_cycles: int = 1, angle_lag_s: float = 0.0, bins: int = 200) -> HysteresisResult:
+                 settle_cycles: int = 1, angle_lag_s: float | None = None, bins: int = 200) -> HysteresisResult:
     """Dahl's To and eta, the loops and the describing function from any "fbs-run" file with
     ``cmd_<a>``, ``ac_<a>_inst`` and ``pa_<a>`` channels recorded during a sinusoidal command
     at one frequency and a ladder of amplitudes (``settle_cycles`` at each new amplitude are
     left out). ``calibration`` defaults to the file's ``/meta/calibration``, else the data
-    sheet's defaults (with a warning). ``angle_lag_s``: the recorded angle is advanced by this
-    much (the instrumentation channel's lag behind the power-amplifier input, if known).
+    sheet's defaults (with a warning). The recorded angle is advanced by its lag behind the
+    power-amplifier input (the instrumentation channel's filters, eq. 3.22, and the motor's
+    La/Ra), measured on the record at the command's DAC lines (``dahl.measure_lag``); a number
+    ``angle_lag_s`` overrides the measurement (for studies; its error is then taken as 0).
     Raises ValueError naming what is wrong."""
     path = Path(path)
     a = str(axis).upper()
@@ -173,9 +205,30 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
                              f"({a0 / fs:.2f}..{b0 / fs:.2f} s)")
     # the torque band: the fundamental and its harmonics well into the loops' corners
     fc = min(12.5 * freq, 0.2 * fs)
-    if not (math.isfinite(angle_lag_s) and 0.0 <= angle_lag_s * fs < 20):
-        raise ValueError(f"angle lag {angle_lag_s * 1e3:g} ms must be >= 0 and under 20 samples")
-    theta = dahl.shift(inst / (ac.inst_mV_per_urad * 1e-3) * URAD, fs, angle_lag_s)
+    ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD          # V per rad
+    lag_meas: dahl.LagMeasurement | None = None
+    if angle_lag_s is None:
+        kt, dv, inertia = plat.torque_per_pa_V, plat.viscous_Nms, plat.inertia_kg_m2
+
+        def rigid(w: np.ndarray) -> np.ndarray:
+            # angle per volt of drive of the platform as a rigid body (eq. 3.23-3.27): the
+            # bearing's small-motion stiffness is far below I w^2 at the lines used
+            return kt / (-inertia * w * w + 1j * dv * w)
+
+        try:
+            lag_meas = dahl.measure_lag(cmd, inst / ac_scale, pa, fs, freq, segments, rigid,
+                                        min_hz=LAG_MIN_FC * fc, max_hz=LAG_MAX_FS * fs)
+            lag_s, lag_se, lag_source = lag_meas.lag_s, lag_meas.se_s, "measured"
+        except ValueError as exc:
+            msg = f"the angle's lag behind the power-amplifier input could not be measured ({exc}): none taken out"
+            log.warning(msg)
+            warnings.append(msg)
+            lag_s, lag_se, lag_source = 0.0, math.nan, "none"
+    else:
+        lag_s, lag_se, lag_source = float(angle_lag_s), 0.0, "given"
+    if not (math.isfinite(lag_s) and abs(lag_s) * fs < 20):
+        raise ValueError(f"angle lag {lag_s * 1e3:g} ms must be finite and under 20 samples")
+    theta = dahl.shift(inst / ac_scale, fs, lag_s)
     theta_f = dahl.lowpass(theta, fs, fc)
     torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
                                  viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
@@ -193,6 +246,8 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         warnings.append(msg)
     model = np.full(len(theta), np.nan)
     model[fit.start:fit.stop] = fit.model_Nm
+    estimates = _estimates(fit, lag_se, lag_source, lambda d: _refit(inst / ac_scale, pa, lag_s + d, fit, segments, fs, fc,
+                                                                       plat, step))
     loops: list[Loop] = []
     k = fit.stiffness_Nm_per_rad
     for seg, off, rms in zip(segments, fit.offsets_Nm, fit.residual_rms_Nm):
@@ -215,4 +270,47 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
                "torque_Nm": torque[sl] - fit.offsets_Nm[big], "model_Nm": model[sl] - fit.offsets_Nm[big]}
     return HysteresisResult(str(path), a, freq, fit.To_Nm, fit.eta_per_Nm, k, fit.To_se_Nm, fit.eta_se_per_Nm,
                             fit.stiffness_se_Nm_per_rad, fit.correlation, fc, float(path_cutoff_hz), scan, loops,
-                            fit.residual_rms_total_Nm, relative, source, fs, history, warnings)
+                            fit.residual_rms_total_Nm, relative, source, fs, history, warnings, lag_s, lag_se,
+                            lag_source, lag_meas, estimates, fit.dof)
+
+
+def _refit(angle_rad: np.ndarray, pa: np.ndarray, lag_s: float, fit: dahl.DahlFit, segments: list[dahl.Segment],
+           fs: float, fc: float, plat: PlatformConstants, step: int) -> tuple[float, float]:
+    """(ln To, ln eta) fitted with the angle advanced by ``lag_s``, at ``fit``'s angle-path bandwidth."""
+    theta = dahl.shift(angle_rad, fs, lag_s)
+    theta_f = dahl.lowpass(theta, fs, fc)
+    torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
+                                 viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
+    assert fit.path_cutoff_hz is not None
+    f = dahl.fit_dahl(dahl.lowpass(theta, fs, fit.path_cutoff_hz), torque, segments, fs, smooth_hz=fc, step=step,
+                      start=(fit.To_Nm, fit.eta_per_Nm))
+    return math.log(f.To_Nm), math.log(f.eta_per_Nm)
+
+
+def _estimates(fit: dahl.DahlFit, lag_se_s: float, lag_source: str,
+               refit: Callable[[float], tuple[float, float]]) -> dict[str, Estimate]:
+    """To, eta and eta To^2 with 95 % intervals: the fit's cluster-robust covariance of (ln To,
+    ln eta) plus the measured lag's error carried through the fit's sensitivity to the lag
+    (``refit(d)``: (ln To, ln eta) with the lag moved by d; one call, d = ``LAG_STEP_S``), Student t with the fit's degrees of freedom."""
+    cov = np.array(fit.cov_ln, dtype=float)
+    if lag_source == "measured" and math.isfinite(lag_se_s) and lag_se_s > 0:
+        base = np.array([math.log(fit.To_Nm), math.log(fit.eta_per_Nm)])
+        g = (np.array(refit(LAG_STEP_S)) - base) / LAG_STEP_S
+        cov = cov + np.outer(g, g) * lag_se_s ** 2
+    q = float(scipy.stats.t.ppf(0.975, max(1, fit.dof)))
+    grads = {"To_Nm": np.array([1.0, 0.0]), "eta_per_Nm": np.array([0.0, 1.0]),
+             "stiffness_Nm_per_rad": np.array([2.0, 1.0])}          # ln k = 2 ln To + ln eta
+    values = {"To_Nm": fit.To_Nm, "eta_per_Nm": fit.eta_per_Nm, "stiffness_Nm_per_rad": fit.stiffness_Nm_per_rad}
+    var = np.diag(cov)
+    corr = float(cov[0, 1] / math.sqrt(var[0] * var[1])) if np.all(np.isfinite(cov)) and np.all(var > 0) else 0.0
+    out: dict[str, Estimate] = {}
+    for key, gk in grads.items():
+        se = math.sqrt(max(float(gk @ cov @ gk), 0.0)) if np.all(np.isfinite(cov)) else math.nan
+        v = values[key]
+        lo, hi = v * math.exp(-q * se), v * math.exp(q * se)
+        if lag_source == "none":
+            out[key] = Estimate(v, lo, hi, False, "the angle's lag was not measured: the interval lacks its bias")
+            continue
+        other = {"To_Nm": "eta_per_Nm", "eta_per_Nm": "To_Nm"}.get(key, "")
+        out[key] = judged(v, lo, hi, correlation=corr if other else 0.0, with_=other)
+    return out
