@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 
 import allantools
 import numpy as np
+import scipy.stats
 
 #: IEEE 952 Annex C: the Allan floor of flicker rate noise is sqrt(2 ln 2 / pi) B
 FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)   # 0.6643
@@ -88,10 +89,18 @@ class AllanResult:
 
 
 def _edf(alpha: int, m: int, lengths: Sequence[int], overlapping: bool) -> float:
-    """Greenhall's EDF (``allantools.edf_greenhall``, d = 2) summed over independent segments."""
-    return float(sum(allantools.edf_greenhall(alpha=int(alpha), d=2, m=int(m), N=int(n) + 1,
-                                              overlapping=overlapping, modified=False)
-                     for n in lengths if n + 1 > 2 * m))
+    """Greenhall's EDF (``allantools.edf_greenhall``, d = 2) summed over independent segments.
+    allantools lacks the white-phase (alpha = 2) case of a segment under 4 m + 1 points; there
+    the flicker-phase (alpha = 1) EDF stands in."""
+    def one(n: int) -> float:
+        try:
+            return float(allantools.edf_greenhall(alpha=int(alpha), d=2, m=int(m), N=int(n) + 1,
+                                                  overlapping=overlapping, modified=False))
+        except NotImplementedError:
+            return float(allantools.edf_greenhall(alpha=1, d=2, m=int(m), N=int(n) + 1,
+                                                  overlapping=overlapping, modified=False))
+
+    return float(sum(one(n) for n in lengths if n + 1 > 2 * m))
 
 
 def octave_taus(n_samples: int, rate_hz: float, max_fraction: float = 0.25) -> np.ndarray:
@@ -350,3 +359,237 @@ def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanRes
     v_span = wander_variance(span_s, avg_s, sigma_at)
     ratio = math.sqrt(v_span / v_rec) if v_rec > 0 else math.nan
     return NullStability(avg_s, record_s, len(means), p2p, span_s, p2p * ratio, False, ratio, t_last, slope, means)
+
+
+# ---------------------------------------------------------------------------- noise model
+#: the terms of the Allan variance of a rate record (IEEE 952 Annex C, Table C.1; NIST SP 1065
+#: Table 5 for flicker angle noise), as functions of tau: white angle ("phase") noise 3 Q^2 / tau^2,
+#: flicker angle noise F^2 ln(tau / tau_0) / tau^2 (SP 1065: sigma^2 = h_1 (1.038 + 3 ln(2 pi f_h
+#: tau)) / (4 pi^2 tau^2), the constant part going into the white term; tau_0 half the shortest
+#: tau fitted, so that both coefficients are >= 0 over the fit), angle random walk N^2 / tau, bias
+#: instability (0.664 B)^2, rate random walk K^2 tau / 3
+TERMS = ("angle", "flicker_angle", "arw", "bias", "rrw")
+#: the power-law exponent alpha (S_y ~ f^alpha) of each term, for Greenhall's EDF
+TERM_ALPHA = {"angle": 2, "flicker_angle": 1, "arw": 0, "bias": -1, "rrw": -2}
+#: the weighted least squares' covariance treats the Allan points as independent; the octave
+#: points of one overlapping estimate are not, and on 30 synthetic 2-h records (white angle,
+#: white rate and flicker rate noise) the coefficients scattered 1.0..1.6 times the standard
+#: deviations it gives: the covariance is scaled by the square of the larger
+COV_INFLATION = 1.6 ** 2
+#: a term is read where its share of the modelled variance is at least this fraction of its
+#: largest share (and, among those taus, where it is best determined: ``term_estimate``)
+SHARE_NEAR_MAX = 0.95
+#: the nuisance terms the fit drops when the data do not need them (``fit_noise_model``); the
+#: gyro's own N and B stay, so that a term present but not distinguishable widens the others'
+#: intervals instead of biasing them
+DROPPABLE = ("flicker_angle", "rrw")
+
+
+def _basis(tau: np.ndarray, tau0: float) -> np.ndarray:
+    tau = np.asarray(tau, float)
+    return np.column_stack([3.0 / tau ** 2, np.log(tau / tau0) / tau ** 2, 1.0 / tau,
+                            np.full(len(tau), FLICKER_FLOOR ** 2), tau / 3.0])
+
+
+@dataclass
+class NoiseModel:
+    """The Allan variance as a sum of the terms ``TERMS``, fitted with non-negative
+    coefficients: ``coef`` = (Q^2, F^2, N^2, B^2, K^2), so that
+    sigma^2(tau) = 3 Q^2 / tau^2 + F^2 ln(tau / tau0) / tau^2 + N^2 / tau + 0.664^2 B^2 + K^2 tau / 3."""
+
+    coef: np.ndarray
+    tau0_s: float
+    tau_fit_s: np.ndarray        # the averaging times fitted
+    #: covariance of ``coef`` (the weighted least squares' (A^T W A)^-1 over the terms not held
+    #: at zero, times ``COV_INFLATION``; zero rows and columns for those)
+    cov: np.ndarray = field(default_factory=lambda: np.zeros((len(TERMS), len(TERMS))))
+
+    def basis(self, tau: np.ndarray | float) -> np.ndarray:
+        return _basis(np.atleast_1d(np.asarray(tau, float)), self.tau0_s)
+
+    def variance(self, tau: np.ndarray | float, term: str | None = None) -> np.ndarray:
+        b = self.basis(tau)
+        if term is None:
+            return b @ self.coef
+        j = TERMS.index(term)
+        return b[:, j] * self.coef[j]
+
+    def others_sd(self, term: str, tau: float) -> float:
+        """Standard deviation of the other terms' modelled variance at ``tau`` (from ``cov``)."""
+        g = self.basis(tau)[0]
+        g[TERMS.index(term)] = 0.0
+        return math.sqrt(max(float(g @ self.cov @ g), 0.0))
+
+    def share(self, term: str, tau: np.ndarray | float) -> np.ndarray:
+        """The fraction of the modelled Allan variance at ``tau`` that is ``term``'s."""
+        total = self.variance(tau)
+        return np.where(total > 0, self.variance(tau, term) / np.where(total > 0, total, 1.0), 0.0)
+
+
+def _wnnls(a: np.ndarray, v: np.ndarray, nu: np.ndarray, use: np.ndarray, iterations: int
+           ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Iteratively reweighted non-negative least squares on the columns ``use``: the
+    coefficients, the model values and the weighted sum of squares (chi-square units)."""
+    from scipy.optimize import nnls
+
+    scale = a.max(axis=0)
+    m = v.copy()
+    coef = np.zeros(a.shape[1])
+    for _ in range(iterations):
+        w = np.sqrt(nu / 2.0) / m
+        c, _ = nnls(a[:, use] / scale[use] * w[:, None], v * w)
+        coef = np.zeros(a.shape[1])
+        coef[use] = c / scale[use]
+        m = np.maximum(a @ coef, 1e-3 * v)
+    return coef, m, float(np.sum(nu / 2.0 * ((v - m) / m) ** 2))
+
+
+def fit_noise_model(res: AllanResult, *, min_tau_s: float = 0.0, min_edf: float = 2.0,
+                    iterations: int = 4, keep_chi2: float = 3.84) -> NoiseModel:
+    """Non-negative weighted least squares of the Allan variances at tau >= ``min_tau_s`` on the
+    terms ``TERMS``. An Allan variance estimate with nu degrees of freedom has variance
+    2 sigma^4 / nu (chi-square), so each point is weighted nu / (2 m^2), m the model's value
+    there (iterated from the measured value): a relative fit, where every point counts by
+    its degrees of freedom.
+
+    A nuisance term (``DROPPABLE``) stays only if the data need it: such terms are dropped one at
+    a time, the one whose removal raises the weighted sum of squares least, while that rise (divided by
+    ``COV_INFLATION`` for the points' correlation) is under ``keep_chi2`` (chi-square, one
+    degree of freedom, 95 %). So a term the record cannot tell from the others (a rate random
+    walk in a short record, which a flicker floor's scatter imitates) does not take a share of
+    the variance and widen every other term's interval."""
+    sel = np.isfinite(res.dev) & (res.edf >= min_edf) & (res.tau_s >= min_tau_s * (1 - 1e-9))
+    if sel.sum() < len(TERMS):
+        raise ValueError(f"fewer than {len(TERMS)} usable Allan points at tau >= {min_tau_s:g} s for the noise model")
+    tau, v, nu = res.tau_s[sel], res.dev[sel] ** 2, res.edf[sel]
+    tau0 = 0.5 * float(tau.min())
+    a = _basis(tau, tau0)
+    use = np.ones(len(TERMS), dtype=bool)
+    droppable = np.array([t in DROPPABLE for t in TERMS])
+    coef, m, ssr = _wnnls(a, v, nu, use, iterations)
+    use = coef > 0
+    while use.sum() > 1:
+        trials = []
+        for j in np.flatnonzero(use & droppable):
+            u = use.copy()
+            u[j] = False
+            trials.append((_wnnls(a, v, nu, u, iterations), u))
+        if not trials:
+            break
+        (c2, m2, ssr2), u2 = min(trials, key=lambda t: t[0][2])
+        if (ssr2 - ssr) / COV_INFLATION >= keep_chi2:
+            break
+        coef, m, ssr, use = c2, m2, ssr2, u2 & (c2 > 0)
+    w = nu / (2.0 * m ** 2)
+    active = coef > 0
+    cov = np.zeros((len(TERMS), len(TERMS)))
+    if active.any():
+        scale = a.max(axis=0)
+        aa = a[:, active] / scale[active]
+        inv = np.linalg.pinv(aa.T @ (aa * w[:, None]))
+        cov[np.ix_(active, active)] = COV_INFLATION * inv / np.outer(scale[active], scale[active])
+    return NoiseModel(coef, tau0, tau, cov)
+
+
+@dataclass
+class TermEstimate:
+    """One noise term's coefficient (N for ``arw``, B for ``bias``) with its 95 % interval.
+
+    ``value`` is NaN when the data show none of the term (its share of the model is nil, or
+    the measured variance at ``tau_s`` is all the other terms'); ``lo``..``hi`` are then
+    0 .. the bound the data support."""
+
+    term: str
+    value: float
+    lo: float
+    hi: float
+    tau_s: float                 # the averaging time read (NaN: none)
+    share: float                 # the term's share of the modelled variance there
+    bound: float                 # the model-free upper bound (every other term adds variance)
+    why: str = ""
+
+
+def mixed_edf(res: AllanResult, model: NoiseModel) -> np.ndarray:
+    """Degrees of freedom of the Allan variance at every tau for the fitted mixture of noises:
+    Satterthwaite's nu = (sum v_t)^2 / sum (v_t^2 / nu_t), v_t each term's modelled variance and
+    nu_t Greenhall's EDF for its noise type (a sum of independent scaled chi-squares taken as one;
+    the white-angle term's EDF stands for the flicker-angle term's too, which Greenhall's
+    computation does not cover for d = 2 beyond alpha = 2)."""
+    v = np.column_stack([model.variance(res.tau_s, t) for t in TERMS])
+    nus = np.column_stack([res.edf_for(min(TERM_ALPHA[t], 2) if t != "flicker_angle" else 2) for t in TERMS])
+    num = v.sum(axis=1) ** 2
+    den = np.sum(np.where(v > 0, v ** 2 / np.where(nus > 0, nus, np.inf), 0.0), axis=1)
+    return np.where(den > 0, num / np.where(den > 0, den, 1.0), res.edf)
+
+
+def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: float = 10.0,
+                  min_tau_s: float = 0.0, level: float = 0.95) -> TermEstimate:
+    """The coefficient of ``term`` (``arw``: N, ``bias``: B) with a ``level`` interval for the
+    gyro's parameter, not for the sample.
+
+    The averaging time read is, among those where the term has at least ``SHARE_NEAR_MAX`` of
+    its largest share of the modelled variance, the one where it is best determined: the
+    smallest ratio of the standard deviation of (measured variance - other terms' modelled
+    variance) to the term's modelled variance, the measured variance's from the noise mixture's
+    degrees of freedom there (``mixed_edf``, at least ``min_edf``), the others' from the fit's
+    covariance. It is chosen by the smooth model, not by the scattered data, so a low outlier of
+    the curve cannot select itself (the minimum of the curve, IEEE 952's read-off, leans low and
+    its interval describes that one sample). There the measured Allan variance s^2 has the chi-square interval (NIST
+    SP 1065 eq. 45) of the mixture's degrees of freedom, an interval for the process' Allan
+    variance; the other terms' modelled variance is subtracted from s^2, the uncertainty of
+    that (``NoiseModel.others_sd``) is added in quadrature to each side, and the rest divided by
+    the term's basis function.
+
+    The model-free bound: every independent noise adds Allan variance, so the term's variance
+    is at most the upper limit of the measured variance at every tau; the smallest of these
+    (``bound``, Bonferroni-corrected over the taus) caps the interval. A term with no share in
+    the model, or whose estimate is not positive, has value NaN and the interval 0 .. bound."""
+    j = TERMS.index(term)
+    edf = mixed_edf(res, model)
+    ok = np.isfinite(res.dev) & (edf >= min_edf) & (res.tau_s >= min_tau_s * (1 - 1e-9))
+    if not ok.any():
+        raise ValueError(f"no Allan point with EDF >= {min_edf:g} at tau >= {min_tau_s:g} s")
+    idx = np.flatnonzero(ok)
+    basis = model.basis(res.tau_s[idx])[:, j]
+    # Bonferroni: the bound is the smallest of len(idx) upper limits, so each is taken at the
+    # level that keeps the chance of any one falling below the truth at 1 - level
+    level_each = 1.0 - (1.0 - level) / len(idx)
+    upper = np.array([res.interval(i, edf[i], level_each)[1] ** 2 for i in idx.tolist()]) / basis
+    bound_c = float(upper.min())
+
+    def coefficient(c: float) -> float:   # the figure from the model coefficient
+        return math.sqrt(max(c, 0.0))
+
+    bound = coefficient(bound_c)
+    shares = model.share(term, res.tau_s[idx])
+    if model.coef[j] <= 0 or shares.max() <= 0:
+        return TermEstimate(term, math.nan, 0.0, bound, math.nan, 0.0, bound,
+                            "the fitted noise model has none of it: an upper bound only")
+    # the tau where the term's variance is best determined: the standard deviation of the
+    # measured variance (sqrt(2 / nu) m, m the model's variance) and of the other terms' modelled
+    # variance, in quadrature, relative to the term's variance
+    m_all = model.variance(res.tau_s[idx])
+    own = model.variance(res.tau_s[idx], term)
+    sd = np.sqrt(2.0 / edf[idx] * m_all ** 2 + np.array([model.others_sd(term, t) ** 2 for t in res.tau_s[idx]]))
+    # among the taus where the term has near its largest share (the model's shape is least
+    # relied on there)
+    near = shares >= SHARE_NEAR_MAX * shares.max()
+    k = int(np.argmin(np.where(near & (own > 0), sd / np.where(own > 0, own, 1.0), np.inf)))
+    i = int(idx[k])
+    others = float(model.variance(res.tau_s[i])[0] - model.variance(res.tau_s[i], term)[0])
+    s2 = float(res.dev[i]) ** 2
+    lo, hi = res.interval(i, edf[i], level)
+    # the other terms' modelled variance is uncertain too: its half-width added in quadrature
+    # to each side of the chi-square interval
+    z = float(scipy.stats.norm.ppf(0.5 + level / 2))
+    d_oth = z * model.others_sd(term, res.tau_s[i])
+    c_val = (s2 - others) / basis[k]
+    c_lo = c_val - math.hypot(s2 - lo ** 2, d_oth) / basis[k]
+    c_hi = c_val + math.hypot(hi ** 2 - s2, d_oth) / basis[k]
+    if bound_c > c_val:   # the bound caps the interval, unless this point lies above it
+        c_hi = min(c_hi, bound_c)
+    tau = float(res.tau_s[i])
+    if c_val <= 0:
+        return TermEstimate(term, math.nan, 0.0, coefficient(c_hi), tau, float(shares[k]), bound,
+                            f"at tau {tau:g} s the measured variance is all the other terms': an upper bound only")
+    return TermEstimate(term, coefficient(c_val), coefficient(c_lo), coefficient(c_hi), tau, float(shares[k]), bound)

@@ -41,6 +41,7 @@ import numpy as np
 from daq.reader import RunFile
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis import allan
+from procedures.analysis.intervals import Estimate, judged
 
 
 def torq(ch: str) -> str:
@@ -51,12 +52,15 @@ def pickoff(ch: str) -> str:
     return f"gyro_{ch.lower()}"
 
 
+#: the two-degree-of-freedom gyros' input-axis pairs (a, b) with (a, b, spin) right-handed
+#: (docs/simhw.md section 3): the X-Y gyro and the X-Z gyro
+GYRO_PAIRS = (("X", "Y"), ("Z", "XRD"))
+
+
 class DriftSettings(Protocol):
     """The parameters the numerics read (the procedure's ``DriftParams`` has them, with their meanings)."""
 
-    arw_tau_lo_s: float
-    arw_tau_hi_s: float
-    bi_min_loop_tc: float
+    fit_tau_lo_s: float
     loop_band_lo_hz: float
     loop_band_hi_frac: float
     min_edf: float
@@ -93,13 +97,25 @@ class ChannelDrift:
     channel: str
     kto: float
     mean_rate: float                          # urad/s (earth rate + drift)
-    adev: allan.AllanResult
-    arw: allan.ArwReadoff | None
-    bi: allan.BiasInstabilityReadoff | None
+    adev: allan.AllanResult                   # of the reconstructed input rate
+    model: allan.NoiseModel | None            # IEEE 952 terms fitted to it
+    arw: allan.TermEstimate | None            # N (urad/sqrt(s)) with its 95 % interval
+    bi: allan.TermEstimate | None             # B (urad/s) with its 95 % interval
     null: allan.NullStability | None
     problems: list[str]
     loop: LoopGain | None = None
-    bi_min_tau_s: float = 0.0
+    adev_torquer: allan.AllanResult | None = None   # of -K_TO V_T alone (the loop's output)
+
+    def estimate(self, term: str) -> Estimate:
+        """The figure ``term`` ("arw" or "bias") as a reported estimate: resolved by the
+        intervals rule (``procedures.analysis.intervals.judged``) when the data show it,
+        else unresolved with the interval 0 .. the bound the data support."""
+        t = self.arw if term == "arw" else self.bi
+        if t is None:
+            return Estimate(math.nan, math.nan, math.nan, False, "; ".join(self.problems) or "not measured")
+        if not math.isfinite(t.value):
+            return Estimate(math.nan, t.lo, t.hi, False, t.why)
+        return judged(t.value, t.lo, t.hi)
 
 
 @dataclass
@@ -151,48 +167,100 @@ def measure_loop_gain(torq_segs: list[np.ndarray], pick_segs: list[np.ndarray], 
                     (float(f[sel][0]), float(f[sel][-1])))
 
 
+def reconstruct_rate(r: np.ndarray, a: np.ndarray, rate_hz: float, restraint_s: float,
+                     a_other: np.ndarray | None = None, coupling: float = 0.0) -> np.ndarray:
+    """The gyro's input rate (urad/s) from one gap-free stretch of the torquing rate
+    ``r = -K_TO V_T`` (urad/s) and the pickoff angle ``a = V_g / K_g`` (urad), through the
+    float's equation of motion (thesis II C.1.a(8) and III A, below the nutation; docs/simhw.md
+    section 3):
+
+        sigma' = Omega_in + K_TO V_T - sigma / (h/k)      (before cross-axis coupling)
+        =>  Omega_in = sigma' + sigma / (h/k) + r
+
+    With the viscous cross-axis coupling (II C.4.d) the left side is the channel's own float
+    rate plus ``coupling`` times the other input axis' (for (a, b, spin) right-handed,
+    f_a = sigma_a' - (c_b/h) sigma_b' and f_b = sigma_b' + (c_a/h) sigma_a', the inverse of the
+    coupled float equations): pass the other channel's pickoff angle ``a_other`` and the signed
+    coefficient (-c_b/h for a, +c_a/h for b).
+
+    Computed in angle ("phase") form, x(t) = a(t) + coupling a_other(t) + integral of
+    (r + a / (h/k)) (trapezoid rule), and returned as the rate between samples, diff(x) fs: one
+    sample shorter than the input. Both channels pass the same anti-alias filter, which
+    commutes with this linear reconstruction, so the result is the filtered input rate. What
+    it adds is the pickoff's measurement noise n as n' + n / (h/k): the caging loop does not
+    enter (its transfer cancels), but the differentiated pickoff noise is, referred to the
+    input, exactly what the loop had (below its bandwidth the torquer already is this sum)."""
+    integrand = r + a / restraint_s
+    x = a + (coupling * a_other if a_other is not None else 0.0)
+    return np.diff(x) * rate_hz + 0.5 * (integrand[1:] + integrand[:-1])
+
+
+def coupling_terms(channel: str, h_over_c: dict[str, float] | None) -> tuple[str | None, float]:
+    """The other input axis of ``channel``'s gyro and the signed coupling coefficient of its
+    float rate in ``reconstruct_rate`` (0 without the rig's h/c)."""
+    for a_ch, b_ch in GYRO_PAIRS:
+        if h_over_c is None:
+            break
+        if channel == a_ch:
+            return b_ch, -1.0 / h_over_c[b_ch]
+        if channel == b_ch:
+            return a_ch, 1.0 / h_over_c[a_ch]
+    return None, 0.0
+
+
 def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: dict[str, float],
-                     p: DriftSettings, kg_mV_per_urad: dict[str, float] | None = None) -> dict[str, ChannelDrift]:
-    """Per channel: rate r = -K_TO V (urad/s) split at gaps, its Allan deviation and read-offs.
-    With the pickoff chunks and ``kg_mV_per_urad`` the loop gain is measured as well and the
-    bias instability is read beyond ``p.bi_min_loop_tc`` loop time constants; without, beyond
-    the ARW range."""
+                     p: DriftSettings, kg_mV_per_urad: dict[str, float], restraint_s: dict[str, float],
+                     h_over_c: dict[str, float] | None = None) -> dict[str, ChannelDrift]:
+    """Per channel: the input rate reconstructed from the torquer and pickoff outputs
+    (``reconstruct_rate``) split at gaps, its Allan deviation, the IEEE 952 noise model fitted to
+    it and the terms read with their intervals (``allan.term_estimate``), the null stability,
+    and the caging loop's gain (a diagnostic: the loop's white rate, which the torquer output
+    alone would show)."""
     out = {}
     band = (p.loop_band_lo_hz, p.loop_band_hi_frac * rate_hz)
     for ch in GYRO_CHANNELS:
-        volts = chunks[torq(ch)]
-        segs = [s for c in volts for s in allan.split_finite(-kto[ch] * c)]
-        if not segs:
+        other, coupling = coupling_terms(ch, h_over_c)
+        rows = [-kto[ch] * chunks[torq(ch)][k] for k in range(len(chunks[torq(ch)]))]
+        angle = [1e3 * g / kg_mV_per_urad[ch] for g in chunks[pickoff(ch)]]
+        angle_other = ([1e3 * g / kg_mV_per_urad[other] for g in chunks[pickoff(other)]] if other
+                       else [np.zeros_like(g) for g in angle])
+        # the same gap-free stretches of all channels used (a lost sample set is lost on all)
+        both = [np.vstack([t, g, o]) for t, g, o in zip(rows, angle, angle_other)]
+        runs = [b[:, lo:hi] for b in both for lo, hi in _finite_runs(np.asarray(np.isfinite(b).all(axis=0)))
+                if hi - lo >= 4]
+        if not runs:
             raise DriftDataError(f"channel {ch}: no gap-free data in the record")
+        segs = [reconstruct_rate(b[0], b[1], rate_hz, restraint_s[ch], b[2] if other else None, coupling)
+                for b in runs]
         mean = float(np.average([s.mean() for s in segs], weights=[len(s) for s in segs]))
         res = allan.allan_deviation(segs, rate_hz)
+        torq_res = allan.allan_deviation([b[0] for b in runs], rate_hz)
         problems: list[str] = []
-        loop = None
-        if kg_mV_per_urad is not None and pickoff(ch) in chunks:
-            # the same gap-free stretches of both channels (a lost sample set is lost on all)
-            both = [np.vstack([-kto[ch] * t, 1e3 * g / kg_mV_per_urad[ch]])
-                    for t, g in zip(volts, chunks[pickoff(ch)])]
-            runs = [b[:, a:z] for b in both for a, z in _finite_runs(np.asarray(np.isfinite(b).all(axis=0)))]
-            loop = measure_loop_gain([b[0] for b in runs], [b[1] for b in runs], rate_hz, band)
-            if loop is None:
-                problems.append("loop gain: record too short for a spectrum in the band; bias instability "
-                                "read beyond the ARW range instead")
-        bi_min_tau = p.bi_min_loop_tc * loop.time_constant_s if loop else p.arw_tau_hi_s
-        arw = bi = null = None
+        loop = measure_loop_gain([b[0] for b in runs], [b[1] for b in runs], rate_hz, band)
+        if loop is None:
+            problems.append("loop gain: record too short for a spectrum in the band")
+        model = arw = bi = null = None
         try:
-            arw = allan.read_arw(res, (p.arw_tau_lo_s, p.arw_tau_hi_s), min_edf=p.min_edf)
+            model = allan.fit_noise_model(res, min_tau_s=p.fit_tau_lo_s)
         except ValueError as exc:
-            problems.append(f"ARW: {exc}")
-        try:
-            bi = allan.read_bias_instability(res, min_edf=p.min_edf, min_tau_s=bi_min_tau)
-        except ValueError as exc:
-            problems.append(f"bias instability: {exc}")
+            problems.append(f"noise model: {exc}")
+        if model is not None:
+            for term in ("arw", "bias"):
+                try:
+                    est = allan.term_estimate(res, model, term, min_edf=p.min_edf, min_tau_s=p.fit_tau_lo_s)
+                except ValueError as exc:
+                    problems.append(f"{'ARW' if term == 'arw' else 'bias instability'}: {exc}")
+                    continue
+                if term == "arw":
+                    arw = est
+                else:
+                    bi = est
         try:
             null = allan.null_stability(segs, rate_hz, res, avg_s=p.average_s, span_s=p.null_span_s,
                                         min_edf=p.min_edf)
         except ValueError as exc:
             problems.append(f"null stability: {exc}")
-        out[ch] = ChannelDrift(ch, kto[ch], mean, res, arw, bi, null, problems, loop, bi_min_tau)
+        out[ch] = ChannelDrift(ch, kto[ch], mean, res, model, arw, bi, null, problems, loop, torq_res)
     return out
 
 

@@ -23,6 +23,7 @@ straddle a gap or a resume).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import partial
 
@@ -38,14 +39,15 @@ from procedures.analysis.drift import (
     pickoff_stats,
     torq,
 )
+from procedures.analysis.intervals import add_figure
 from procedures.params import prior_values
 from procedures.reports.drift import hours, markdown, plot_allan, plot_null
 from procedures.rigsetup import bring_to_mode3, wait_settled
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 #: the ADC's anti-alias filter is 3-pole at 0.3 fs (DESIGN.md section 5): the first few
-#: samples' Allan deviation is shaped by it, so the white-rate fit starts at this many samples
-MIN_ARW_SAMPLES = 2.0
+#: samples' Allan deviation is shaped by it, so the noise-model fit starts at this many samples
+MIN_FIT_SAMPLES = 2.0
 
 
 @dataclass
@@ -60,20 +62,14 @@ class DriftParams:
     settle_window_s: float = 40.0
     settle_min_s: float = 120.0
     settle_timeout_s: float = 900.0
-    #: the tau^-1/2 (white-rate) fit range for the angle random walk (s)
-    arw_tau_lo_s: float = 0.4
-    arw_tau_hi_s: float = 1.6
-    #: the bias instability is read at tau >= this many caging-loop time constants 1/G_p, G_p the
-    #: loop's proportional gain (torquing rate per pickoff angle) measured from the record: the
-    #: torquer follows the drift only below the loop's bandwidth, and a PI loop's overshoot lifts
-    #: the flicker's Allan deviation above its floor for a while beyond it (docs/procedures/drift.md)
-    bi_min_loop_tc: float = 10.0
+    #: the shortest averaging time of the noise-model fit (s): the anti-alias filter shapes shorter ones
+    fit_tau_lo_s: float = 0.4
     #: band (Hz) where G_p is measured, well above the loop's bandwidth: from loop_band_lo_hz to
     #: loop_band_hi_frac x the sample rate (both channels pass the same anti-alias filter)
     loop_band_lo_hz: float = 0.2
     loop_band_hi_frac: float = 0.2
-    #: Allan points with fewer equivalent degrees of freedom are not used for the read-offs
-    #: (for the bias instability: Greenhall's EDF for flicker rate noise, allan.read_bias_instability)
+    #: Allan points with fewer equivalent degrees of freedom (Greenhall's, for the term's own noise
+    #: type) are not read for N or B (allan.term_estimate)
     min_edf: float = 10.0
     #: null stability: the means averaged over this long, and the span the estimate is for
     average_s: float = 100.0
@@ -87,17 +83,13 @@ class DriftParams:
             raise ValueError("drift: duration_s and rate_hz must be > 0")
         if not 1 <= int(self.n_chunks) <= 1000:
             raise ValueError(f"drift: n_chunks = {self.n_chunks} must be 1..1000")
-        if not 0 < self.arw_tau_lo_s < self.arw_tau_hi_s:
-            raise ValueError(f"drift: ARW fit range {self.arw_tau_lo_s}..{self.arw_tau_hi_s} s is empty")
-        if self.arw_tau_lo_s * self.rate_hz < MIN_ARW_SAMPLES - 1e-9:
-            raise ValueError(f"drift: the ARW fit starts at {self.arw_tau_lo_s:g} s = "
-                             f"{self.arw_tau_lo_s * self.rate_hz:g} samples at {self.rate_hz:g} Hz; it must start at "
-                             f">= {MIN_ARW_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
+        if self.fit_tau_lo_s * self.rate_hz < MIN_FIT_SAMPLES - 1e-9:
+            raise ValueError(f"drift: the noise-model fit starts at {self.fit_tau_lo_s:g} s = "
+                             f"{self.fit_tau_lo_s * self.rate_hz:g} samples at {self.rate_hz:g} Hz; it must start at "
+                             f">= {MIN_FIT_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
         if not 0 < self.loop_band_lo_hz < self.loop_band_hi_frac * self.rate_hz <= 0.5 * self.rate_hz:
             raise ValueError(f"drift: loop-gain band {self.loop_band_lo_hz:g} .. "
                              f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty or beyond Nyquist")
-        if self.bi_min_loop_tc < 0:
-            raise ValueError("drift: bi_min_loop_tc must be >= 0")
         if not self.average_s > 0 or not self.null_span_s >= self.average_s:
             raise ValueError("drift: need 0 < average_s <= null_span_s")
 
@@ -177,8 +169,11 @@ class Drift(Procedure[DriftParams]):
         cal = ctx.rig.calibration
         kg, kg_sources = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS,
                                       cal.pickoff_scale_mV_per_urad)
+        # the float's restraint and viscous coupling are data-sheet constants (Table 3); the
+        # coupling only where the rig's calibration carries it
+        h_over_c = getattr(cal, "viscous_coupling_h_over_c", None)
         try:
-            res = analyze_channels(chunks, rate, kto, p, kg)
+            res = analyze_channels(chunks, rate, kto, p, kg, dict(cal.restraint_time_constant_s), h_over_c)
         except DriftDataError as exc:
             raise ProcedureError(str(exc)) from None
         ms: list[Measurement] = [
@@ -189,17 +184,17 @@ class Drift(Procedure[DriftParams]):
         ]
         for r in res.values():
             ms += channel_measurements(r)
-        values = {
-            "bias_instability_urad_per_s": {ch: r.bi.B if r.bi else None for ch, r in res.items()},
-            "arw_urad_per_sqrt_s": {ch: r.arw.N if r.arw else None for ch, r in res.items()},
-        }
+        values: dict = {}
+        add_figure(values, "bias_instability_urad_per_s", {ch: r.estimate("bias") for ch, r in res.items()})
+        add_figure(values, "arw_urad_per_sqrt_s", {ch: r.estimate("arw") for ch, r in res.items()})
         md = markdown(res, p, kto, kto_source, record_s, lost, total, pickoff_stats(chunks, kg),
-                      any(src != "nominal" for src in kg_sources.values()))
+                      any(src != "nominal" for src in kg_sources.values()), h_over_c is not None)
         figures = [
-            Figure("allan", "Overlapping Allan deviation of the torquing rate -K_TO V_T per channel, with 68 % "
-                   "confidence intervals (Greenhall EDF), the tau^-1/2 fit (ARW) and the bias-instability floor",
+            Figure("allan", "Overlapping Allan deviation of the gyro's input rate reconstructed from torquer and "
+                   "pickoff, per channel, with 68 % confidence intervals (Greenhall EDF) and the fitted IEEE 952 "
+                   "noise model; thin: the torquing rate -K_TO V_T alone (the caging loop's output)",
                    partial(plot_allan, res=res, p=p)),
-            Figure("null", f"Torquing rate, {p.average_s:g}-s means, over the {hours(record_s)} record (mean "
+            Figure("null", f"Reconstructed input rate, {p.average_s:g}-s means, over the {hours(record_s)} record (mean "
                    "removed): the null-stability wander", partial(plot_null, res=res, p=p)),
         ]
         return Analysis(values, ms, figures, md)
@@ -209,22 +204,21 @@ def channel_measurements(r: ChannelDrift) -> list[Measurement]:
     """A channel's read-offs as measurements, each noting how it was read (or why it was not)."""
     ch = r.channel
     out = []
-    if r.arw is not None:
-        a = r.arw
-        region = "a tau^-1/2 region" if a.white_region else "NOT a tau^-1/2 region: N is an upper bound"
-        out.append(Measurement(f"ARW {ch}", a.N, "urad/sqrt(s)", lo=0.0, stderr=a.stderr,
-                               note=f"tau {a.tau_range_s[0]:g}..{a.tau_range_s[1]:g} s, free slope "
-                                    f"{a.slope:+.2f} ({region}); loop white-rate level, not the gyro's alone"))
-    else:
-        out.append(Measurement(f"ARW {ch}", None, "urad/sqrt(s)", lo=0.0, note="; ".join(r.problems)))
-    if r.bi is not None:
-        b = r.bi
-        floor = "floor reached" if b.floor_reached else "floor NOT reached (still falling): upper bound"
-        out.append(Measurement(f"bias instability {ch}", b.B, "urad/s", lo=0.0, stderr=b.stderr,
-                               note=f"min sigma {b.sigma_min:.4g} urad/s at tau {b.tau_min_s:g} s / 0.664 "
-                                    f"(tau >= {r.bi_min_tau_s:.3g} s); {floor}"))
-    else:
-        out.append(Measurement(f"bias instability {ch}", None, "urad/s", lo=0.0, note="; ".join(r.problems)))
+    for term, name, unit in (("arw", "ARW", "urad/sqrt(s)"), ("bias", "bias instability", "urad/s")):
+        e = r.estimate(term)
+        t = r.arw if term == "arw" else r.bi
+        iv = f"95 % [{e.lo:.3g}, {e.hi:.3g}]"
+        if t is not None and math.isfinite(t.tau_s):
+            how = f"read at tau {t.tau_s:g} s, {100 * t.share:.0f} % of the modelled Allan variance there"
+        else:
+            how = "no share in the fitted noise model"
+        if e.resolved:
+            note = f"{iv}; {how}"
+        else:
+            note = f"not resolved ({e.why}): {iv}" + (f"; {how}" if t is not None else "")
+        # a figure the record cannot give at all (too short) fails; an unresolved one is a result
+        out.append(Measurement(f"{name} {ch}", e.value if e.resolved else None, unit,
+                               lo=0.0 if t is None else None, note=note))
     if r.loop is not None:
         lg = r.loop
         out.append(Measurement(f"caging loop gain G_p {ch}", lg.gain_per_s, "1/s",

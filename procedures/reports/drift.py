@@ -4,6 +4,7 @@ numbers (``ChannelDrift``) are ``procedures.analysis.drift``."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Protocol
 
@@ -25,44 +26,68 @@ def hours(seconds: float) -> str:
     return f"{seconds / 3600:.3g} h" if seconds >= 3600 else f"{seconds:.4g} s"
 
 
+def figure_text(r: ChannelDrift, term: str, digits: int = 3) -> str:
+    """A figure for the table: the value and its 95 % interval, or "not resolved" and the interval."""
+    e = r.estimate(term)
+    if not (math.isfinite(e.lo) and math.isfinite(e.hi)):
+        return "-"
+    iv = f"[{e.lo:.{digits}g}, {e.hi:.{digits}g}]"
+    return f"{e.value:.{digits + 1}g} {iv}" if e.resolved else f"not resolved, {iv}"
+
+
+def read_at(r: ChannelDrift, term: str) -> str:
+    t = r.arw if term == "arw" else r.bi
+    if t is None or not math.isfinite(t.tau_s):
+        return "-"
+    return f"{t.tau_s:g} ({100 * t.share:.0f} %)"
+
+
 def markdown(res: dict[str, ChannelDrift], p: ReportSettings, kto: dict[str, float], kto_source: str, record_s: float,
-             lost: int, total: int, pickoff: dict[str, tuple[float, float]], kg_measured: bool) -> str:
+             lost: int, total: int, pickoff: dict[str, tuple[float, float]], kg_measured: bool,
+             coupled: bool = False) -> str:
     nominal_note = ("" if "NOMINAL" not in kto_source else
                     "\n**K_TO: the rig's nominal data-sheet values were used** (no earth-rate result was given); "
                     "K_TO only scales the rates here, so every rate below scales with it.\n")
     lines = ["## Drift stability", "",
-             f"Record: {hours(record_s)} of the torquer outputs in Mode 3 at {p.rate_hz:g} Hz "
-             f"({lost} of {total} samples lost); rate r = -K_TO V_T, K_TO from the {kto_source}: "
+             f"Record: {hours(record_s)} of the torquer and pickoff outputs in Mode 3 at {p.rate_hz:g} Hz "
+             f"({lost} of {total} samples lost); torquing rate r = -K_TO V_T, K_TO from the {kto_source}: "
              + ", ".join(f"{c} {kto[c]:.4g}" for c in GYRO_CHANNELS) + " urad/s/V.", nominal_note,
-             "| channel | ARW N (urad/sqrt s) | fit tau (s) | free slope | N_loop (urad/sqrt s) | "
-             "bias instability B (urad/s) | read at tau >= (s) | tau at min (s) | floor | mean rate (urad/s) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "**The gyro's input rate** is reconstructed from the float's equation of motion (thesis II C.1.a(8), "
+             "III A): Omega_in = sigma' + sigma / (h/k) + r, sigma the pickoff angle V_g / K_g, h/k the float's "
+             "restraint time constant (data sheet, Table 3)"
+             + (", with the viscous cross-axis coupling of II C.4.d" if coupled else
+                "; the viscous cross-axis coupling (II C.4.d) is left out: the rig's calibration does not carry "
+                "h/c") + ". The caging loop's transfer cancels out of it; what remains of the loop is the "
+                "pickoff's measurement noise n, as n' + n / (h/k), which no record can take apart from the rate.", "",
+             "| channel | ARW N (urad/sqrt s), 95 % | read at tau (s) (share) | bias instability B (urad/s), 95 % | "
+             "read at tau (s) (share) | N_loop (urad/sqrt s) | mean rate (urad/s) |",
+             "|---|---|---|---|---|---|---|"]
     for ch, r in res.items():
-        a, b = r.arw, r.bi
-        arw = (f"{a.N:.4g} ({a.lo:.3g}..{a.hi:.3g})", f"{a.tau_range_s[0]:g}..{a.tau_range_s[1]:g}",
-               f"{a.slope:+.2f}" + ("" if a.white_region else " (not -1/2)")) if a else ("-", "-", "-")
         nloop = f"{r.loop.white_rate:.3g}" if r.loop else "-"
-        bis = (f"{b.B:.4g} ({b.lo:.3g}..{b.hi:.3g})", f"{r.bi_min_tau_s:.3g}", f"{b.tau_min_s:g}",
-               "reached" if b.floor_reached else "not reached: upper bound") if b else ("-", "-", "-", "-")
-        lines.append(f"| {ch} | {' | '.join(arw)} | {nloop} | {' | '.join(bis)} | {r.mean_rate:+.4g} |")
-    lines += ["", "Intervals are 68 % (one sigma) chi-square intervals from Greenhall's equivalent degrees of "
-              "freedom. N is the value at tau = 1 s of the tau^-1/2 line through the stated range "
-              "(IEEE 952 Annex C); B is the minimum Allan deviation at tau >= the \"read at\" column with "
-              f"at least {p.min_edf:g} degrees of freedom for flicker noise, divided by 0.664; \"not reached\" means "
-              "the minimum is at the longest such tau and significantly below the curve three octaves earlier, so "
-              "B is an upper bound.", "",
-              "**What the short-tau slope is.** The torquer output is the caging loop's output: above the "
-              "loop's bandwidth its proportional path passes the pickoff noise (rate = proportional gain G_p x "
-              "pickoff noise angle, a white rate), and below it the loop passes the platform's own motion "
-              "about the input axis. So N here is the white-rate level of the caged channel, an upper bound "
-              "on the gyro's angle random walk, not the gyro's alone. N_loop is that white rate as the "
-              "record shows it: G_p (measured as the torquing rate per pickoff angle above the loop's "
-              "bandwidth) times the pickoff's noise there, over sqrt(2). Where N is close to N_loop, the "
-              "short-tau slope is the loop's, and the gyro's own N is not visible under it. ", "",
-              f"**Where B is read.** The torquer follows the drift only below the loop's bandwidth, and a PI "
-              f"loop's overshoot lifts the flicker's Allan deviation above its floor for several time "
-              f"constants beyond it, so B is read at tau >= {p.bi_min_loop_tc:g} loop time constants 1/G_p "
-              "(measured per channel); the loop's own contributions fall as 1/tau there.", "",
+        lines.append(f"| {ch} | {figure_text(r, 'arw')} | {read_at(r, 'arw')} | {figure_text(r, 'bias')} | "
+                     f"{read_at(r, 'bias')} | {nloop} | {r.mean_rate:+.4g} |")
+    lines += ["", "**How N and B are read.** The overlapping Allan variance of the reconstructed rate is fitted "
+              "with the IEEE 952 terms (Annex C): angle noise 3 Q^2 / tau^2 (the pickoff noise, differentiated, "
+              "and the platform's motion), angle random walk N^2 / tau, bias instability (0.664 B)^2 and rate "
+              f"random walk K^2 tau / 3, at tau >= {p.fit_tau_lo_s:g} s, non-negative, each point weighted by its "
+              "degrees of freedom. Each of N and B is read at the averaging time where the fitted model gives it "
+              "its largest share of the variance (the share column), among those with at least "
+              f"{p.min_edf:g} degrees of freedom for its own noise type: chosen by the smooth model, not by the "
+              "scattered curve. Its 95 % interval is the chi-square interval of the Allan variance there "
+              "(Greenhall's EDF; an interval for the gyro's process, not for this sample) less the other terms' "
+              "modelled variance, capped by the model-free bound: every independent noise adds Allan variance, "
+              "so a term's variance is below the upper 95 % limit of the measured one at every tau, and the "
+              "smallest of these bounds it.", "",
+              "**Not resolved** means the record cannot tell the figure apart from the other terms (no share in "
+              "the fitted model, nothing left after the others are taken off, or an interval wider than the "
+              "value): its value is not reported, only the interval 0 .. the bound the data support. On this "
+              "rig the gyro's own angle random walk is usually unresolved: the differentiated pickoff noise "
+              "(Allan deviation ~ 1/tau) and the bias instability's floor cover the N / sqrt(tau) line at "
+              "every tau.", "",
+              "N_loop is not the gyro's: it is the white rate the caging loop's proportional path makes of the "
+              "pickoff noise (G_p, measured as the torquing rate per pickoff angle above the loop's bandwidth, "
+              "times the pickoff's noise there, over sqrt(2)), which the torquer output alone shows at short tau "
+              "and which the earlier reports called ARW.", "",
               f"## Null stability ({p.average_s:g}-s means; thesis Table 1 style, peak-to-peak)", "",
               f"| channel | p-p over the record (urad/s) | record | {hours(p.null_span_s)} p-p (urad/s) | how |",
               "|---|---|---|---|---|"]
@@ -103,20 +128,23 @@ def plot_allan(path: Path, res: dict[str, ChannelDrift], p: DriftSettings) -> No
         a = r.adev
         ok = np.isfinite(a.lo)
         c = COLORS.get(ch)
-        ax.errorbar(a.tau_s[ok], a.dev[ok], yerr=[a.dev[ok] - a.lo[ok], a.hi[ok] - a.dev[ok]], fmt="o-", ms=3,
-                    color=c, capsize=2, lw=1, label=ch)
-        if r.arw is not None:
-            t = np.array(r.arw.tau_range_s)
-            ax.plot(t, r.arw.N / np.sqrt(t), "--", color=c, lw=2.5, alpha=0.6)
-        if r.bi is not None:   # the floor over the taus it was read from, the minimum ringed
-            ax.plot([r.bi_min_tau_s, r.bi.tau_max_s], [r.bi.sigma_min] * 2, ":", color=c, lw=1.5)
-            ax.plot([r.bi.tau_min_s], [r.bi.sigma_min], "o", mfc="none", mec=c, ms=10)
+        ax.errorbar(a.tau_s[ok], a.dev[ok], yerr=[a.dev[ok] - a.lo[ok], a.hi[ok] - a.dev[ok]], fmt="o", ms=3,
+                    color=c, capsize=2, lw=1, label=f"{ch} input rate")
+        if r.model is not None:
+            t = np.geomspace(a.tau_s[0], a.tau_s[-1], 200)
+            ax.plot(t, np.sqrt(r.model.variance(t)), "-", color=c, lw=1.5, alpha=0.7)
+        if r.adev_torquer is not None:
+            ax.plot(r.adev_torquer.tau_s, r.adev_torquer.dev, "-", color=c, lw=0.7, alpha=0.5)
+        for t_est in (r.arw, r.bi):   # the points read, ringed
+            if t_est is not None and math.isfinite(t_est.tau_s):
+                i = int(np.argmin(np.abs(a.tau_s - t_est.tau_s)))
+                ax.plot([a.tau_s[i]], [a.dev[i]], "o", mfc="none", mec=c, ms=10)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("averaging time tau (s)")
-    ax.set_ylabel("Allan deviation of -K_TO V_T (urad/s)")
-    ax.set_title(f"Drift stability, Mode 3 (dashed: tau^-1/2 fit {p.arw_tau_lo_s:g}..{p.arw_tau_hi_s:g} s; "
-                 "dotted: floor 0.664 B over the taus it is read from)", fontsize=10)
+    ax.set_ylabel("Allan deviation (urad/s)")
+    ax.set_title("Drift stability, Mode 3: input rate (points, model line; ringed: read for N and B) and "
+                 f"torquer output alone (thin); fit from {p.fit_tau_lo_s:g} s", fontsize=9)
     ax.grid(True, which="major", alpha=0.5)
     ax.grid(True, which="minor", alpha=0.15)
     ax.legend()
@@ -135,7 +163,7 @@ def plot_null(path: Path, res: dict[str, ChannelDrift], p: DriftSettings) -> Non
         t = (np.arange(len(m)) + 0.5) * p.average_s / unit
         ax.plot(t, m - m.mean(), ".-", color=COLORS.get(ch), label=f"{ch}: p-p {r.null.peak_to_peak:.3g} urad/s")
     ax.set_xlabel(f"time in the record ({unit_name}; gaps and resumes closed up)")
-    ax.set_ylabel(f"{p.average_s:g}-s mean rate - record mean (urad/s)")
+    ax.set_ylabel(f"{p.average_s:g}-s mean input rate - record mean (urad/s)")
     ax.grid(True, alpha=0.4)
     ax.legend(fontsize=8)
     save_figure(fig, path)

@@ -14,7 +14,7 @@ import pytest
 
 from daq.reader import RunFile
 from drivers.calibration import RigCalibration
-from procedures.analysis.drift import analyze_channels
+from procedures.analysis.drift import analyze_channels, coupling_terms, reconstruct_rate
 from procedures.calibrations import catalogue
 from procedures.calibrations.drift import Drift, Params
 from procedures.runner import load_resume, merge_spans, run_procedure, steps_done
@@ -34,9 +34,9 @@ def test_catalogued_with_the_design_keys():
 
 def test_params_are_checked():
     with pytest.raises(ValueError, match="must start at >= 2 samples"):
-        Params(rate_hz=2.0, arw_tau_lo_s=0.5)
+        Params(rate_hz=2.0, fit_tau_lo_s=0.5)
     with pytest.raises(ValueError, match="is empty"):
-        Params(arw_tau_lo_s=2.0, arw_tau_hi_s=1.0)
+        Params(loop_band_lo_hz=3.0)
     with pytest.raises(ValueError, match="n_chunks"):
         Params(n_chunks=0)
     with pytest.raises(ValueError, match="unknown parameter"):
@@ -59,63 +59,132 @@ def test_kto_from_the_earth_rate_result_else_nominal():
     assert "NOMINAL data-sheet value for Y, Z, XRD" in source
 
 
-def _synthetic_chunks(seed: int, n: int, kto: dict[str, float], N: float = 0.03, B: float = 0.02,
+def _flicker(rng: np.random.Generator, n: int, B: float) -> np.ndarray:
+    """Flicker rate noise of one-sided PSD B^2 / (pi f) (Kasdin-Walter, see test_allan.flicker_rate)."""
+    x = np.zeros(2 * n)
+    x[:n] = rng.standard_normal(n) * B
+    h = np.zeros(2 * n)
+    k = np.arange(1, n)
+    h[0] = 1.0
+    h[1:n] = np.cumprod((k - 0.5) / k)
+    return np.fft.irfft(np.fft.rfft(x) * np.fft.rfft(h))[:n]
+
+
+def _synthetic_chunks(seed: int, n: int, kto: dict[str, float], kg: dict[str, float], hk: dict[str, float],
+                      N: float = 0.03, B: float = 0.02, noise_urad: float = 0.01, gain_per_s: float = 0.14,
                       fs: float = 10.0) -> dict[str, list[np.ndarray]]:
-    """Torquer volts -r/K_TO of white + flicker rate noise (urad/s), one chunk per channel."""
+    """Torquer and pickoff volts of a caged float, one chunk per channel: input rate Omega (white N +
+    flicker B, urad/s) into sigma' = Omega - r - sigma / (h/k) (forward Euler), the torquing rate
+    r = G (sigma + n) of a proportional caging loop on the noisy pickoff angle sigma + n."""
+    from scipy.signal import lfilter
+
     rng = np.random.default_rng(seed)
+    dt = 1.0 / fs
     out = {}
     for ch in CHANNELS:
-        w = rng.standard_normal(n) * N * math.sqrt(fs)
-        # flicker by Kasdin-Walter (see test_allan.flicker_rate)
-        x = np.zeros(2 * n)
-        x[:n] = rng.standard_normal(n) * B
-        h = np.zeros(2 * n)
-        k = np.arange(1, n)
-        h[0] = 1.0
-        h[1:n] = np.cumprod((k - 0.5) / k)
-        f = np.fft.irfft(np.fft.rfft(x) * np.fft.rfft(h))[:n]
-        out[f"torq_{ch.lower()}"] = [-(w + f) / kto[ch]]
+        omega = rng.standard_normal(n) * N * math.sqrt(fs) + _flicker(rng, n, B)
+        noise = rng.standard_normal(n) * noise_urad
+        sigma = lfilter([0.0, dt], [1.0, -(1.0 - dt * gain_per_s - dt / hk[ch])], omega - gain_per_s * noise)
+        r = gain_per_s * (sigma + noise)
+        out[f"torq_{ch.lower()}"] = [-r / kto[ch]]
+        out[f"gyro_{ch.lower()}"] = [(sigma + noise) * kg[ch] * 1e-3]
     return out
+
+
+KTO = {c: 32.0 for c in CHANNELS}
+KG = {c: 6.0 for c in CHANNELS}
+HK = {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0}
+
+
+def test_the_input_rate_is_rebuilt_through_the_float_equation():
+    """A known input rate and float angle, the torquing rate from the float equation with the
+    viscous coupling (sigma_a' = f_a + (c_b/h) sigma_b', sigma_b' = f_b - (c_a/h) sigma_a'):
+    reconstruct_rate returns the input rate between the samples; without the coupling term the
+    coupled channel is off by c/h times the other float's rate."""
+    fs, tau_a, ca, cb = 10.0, 424.0, 1 / 1.96, 1 / 21.0
+    t = np.arange(0, 600.0, 1 / fs)
+    sa, sb = 30 * np.sin(0.05 * t), 20 * np.cos(0.03 * t) + 5.0          # float angles (urad)
+    dsa, dsb = 1.5 * np.cos(0.05 * t), -0.6 * np.sin(0.03 * t)
+    omega = 0.2 + 0.1 * np.sin(0.02 * t)                                  # input rate (urad/s)
+    f_a = dsa - cb * dsb                                                  # the inverse of the coupling
+    r = omega - f_a - sa / tau_a                                          # r = -K_TO V_T
+    mid = 0.5 * (omega[1:] + omega[:-1])
+    got = reconstruct_rate(r, sa, fs, tau_a, sb, -cb)
+    assert np.max(np.abs(got - mid)) < 1e-4
+    plain = reconstruct_rate(r, sa, fs, tau_a)
+    assert np.max(np.abs(plain - mid)) == pytest.approx(cb * 0.6, rel=0.02)
+    assert coupling_terms("X", {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}) == ("Y", pytest.approx(-cb))
+    assert coupling_terms("Y", {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}) == ("X", pytest.approx(ca))
+    assert coupling_terms("Z", None) == (None, 0.0)
+
+
+def test_the_gyro_terms_are_read_through_the_loop():
+    """1 h of a caged float (synthetic, quiet pickoff 0.01 urad): the gyro's N = 0.03 and
+    B = 0.02 from the reconstructed input rate, within 15 % and 35 %, where the torquer output
+    alone shows the loop's low-pass (its short-tau deviation is a fraction of the input's)."""
+    chunks = _synthetic_chunks(4, 36000, KTO, KG, HK)
+    res = analyze_channels(chunks, 10.0, KTO, Params(), KG, HK)
+    covered = 0
+    for ch in CHANNELS:
+        r = res[ch]
+        n, b = r.estimate("arw"), r.estimate("bias")
+        assert n.resolved and n.value == pytest.approx(0.03, rel=0.15) and n.lo < n.value < n.hi, (ch, n)
+        assert b.value == pytest.approx(0.02, rel=0.35) and b.lo < b.value < b.hi, (ch, b)
+        covered += n.covers(0.03) + b.covers(0.02)
+        assert r.adev_torquer is not None and r.adev_torquer.dev[2] < 0.5 * r.adev.dev[2]
+        assert r.loop is not None and r.loop.gain_per_s == pytest.approx(0.14, rel=0.05)
+    assert covered >= 6          # of 8 95 % intervals (here: 7; Z's B 0.0149 [0.0121, 0.0192])
 
 
 def test_a_gap_splits_the_record_and_the_rest_is_pooled():
-    kto = {c: 32.0 for c in CHANNELS}
-    p = Params(arw_tau_lo_s=0.2, arw_tau_hi_s=0.8)
-    chunks = _synthetic_chunks(4, 36000, kto)
-    whole = analyze_channels(chunks, 10.0, kto, p)
+    chunks = _synthetic_chunks(4, 36000, KTO, KG, HK)
+    p = Params()
+    whole = analyze_channels(chunks, 10.0, KTO, p, KG, HK)
     gappy = {k: [v[0].copy()] for k, v in chunks.items()}
-    for v in gappy.values():
-        v[0][20000:20300] = np.nan          # 30 s lost
-    cut = analyze_channels(gappy, 10.0, kto, p)
+    gappy["torq_x"][0][20000:20300] = np.nan          # 30 s lost on one channel: lost for the pair
+    cut = analyze_channels(gappy, 10.0, KTO, p, KG, HK)
+    assert cut["X"].adev.segment_lengths == (19999, 15699)   # one rate sample fewer per stretch
+    assert cut["Y"].adev.segment_lengths == (35999,)         # no coupling given: Y does not read X
+    assert cut["X"].arw.value == pytest.approx(whole["X"].arw.value, rel=0.05)
+    # the sign convention r = -K_TO V: the mean rate is the input's (plus the restraint's share)
     for ch in CHANNELS:
-        assert cut[ch].adev.segment_lengths == (20000, 15700)
-        assert cut[ch].arw.N == pytest.approx(whole[ch].arw.N, rel=0.02)
-        assert cut[ch].bi.B == pytest.approx(whole[ch].bi.B, rel=0.25)
-        assert whole[ch].arw.N == pytest.approx(0.03, rel=0.1)
-        # the sign convention r = -K_TO V: the mean rate of -r/K_TO volts is r's mean
-        assert whole[ch].mean_rate == pytest.approx(float(np.mean(-chunks[f"torq_{ch.lower()}"][0] * 32.0)))
+        v = chunks[f"torq_{ch.lower()}"][0]
+        assert whole[ch].mean_rate == pytest.approx(float(np.mean(-v * 32.0)), abs=0.01)
     dead = {k: [np.full(100, np.nan)] for k in chunks}
     with pytest.raises(Exception, match="no gap-free data"):
-        analyze_channels(dead, 10.0, kto, p)
+        analyze_channels(dead, 10.0, KTO, p, KG, HK)
+
+
+def test_pickoff_noise_hides_the_gyro_arw():
+    """The sim's pickoff noise level (0.6 urad per sample) and the gyro's N = 0.005: N is not
+    resolved, its interval 0 .. bound holds 0.005, and the JSON says so: value None, interval,
+    resolved false (DESIGN.md section 7)."""
+    from procedures.analysis.intervals import add_figure
+
+    chunks = _synthetic_chunks(6, 36000, KTO, KG, HK, N=0.005, noise_urad=0.6)
+    res = analyze_channels(chunks, 10.0, KTO, Params(), KG, HK)
+    values: dict = {}
+    add_figure(values, "arw_urad_per_sqrt_s", {ch: r.estimate("arw") for ch, r in res.items()})
+    for ch in CHANNELS:
+        assert values["arw_urad_per_sqrt_s"][ch] is None
+        lo, hi = values["arw_urad_per_sqrt_s_ci95"][ch]
+        assert lo <= 0.005 < hi < 0.5, (ch, lo, hi)
+        assert values["resolved"]["arw_urad_per_sqrt_s"][ch] is False
 
 
 # ---------------------------------------------------------------------------- sim rig
-def expected_loop_white_rate() -> dict[str, float]:
-    """The white-rate level the caging loop puts on the torquer output of the default sim rig:
-    above the loop bandwidth the torquing rate is the proportional gain (2 zeta omega_n, or
-    omega_n for the proportional-only XRD amplifier) times the pickoff's white noise angle,
-    N = gain sqrt(S_pickoff / 2); the gyro's own N adds in quadrature."""
+def _sim_gyro(key: str) -> dict[str, float]:
+    """The default sim's value of a gyro parameter per channel (the truth the tests compare with)."""
     from simhw.params import load_config
-    from simhw.simulator import pickoff_white_psd
 
     cfg = load_config(None)
-    out = {}
-    for ch in CHANNELS:
-        g = cfg.gyro[ch]
-        gain = g.caging_natural_freq_rad_per_s * (1.0 if g.caging_proportional_only else 2 * g.caging_zeta)
-        s = pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines) * 1e12   # urad^2/Hz
-        out[ch] = math.hypot(gain * math.sqrt(s / 2), g.arw_urad_per_sqrt_s)
-    return out
+    return {ch: float(getattr(cfg.gyro[ch], key)) for ch in CHANNELS}
+
+
+def _figure(s, key: str) -> dict[str, tuple[float | None, float, float, bool]]:
+    """Per channel (value, lo, hi, resolved) of a figure in a run's JSON values."""
+    v, ci, ok = s.values[key], s.values[f"{key}_ci95"], s.values["resolved"][key]
+    return {ch: (v[ch], ci[ch][0], ci[ch][1], ok[ch]) for ch in CHANNELS}
 
 
 def _run(tmp_path: Path, url: str, **params) -> object:
@@ -146,67 +215,89 @@ def _reanalysis_ctx(path: Path) -> _Ctx:
 
 @pytest.mark.slow
 def test_default_rig(tmp_path):
-    """20 min on the default sim rig (seed 3): the short-tau white level is the caging loop's
-    (pickoff noise through the proportional path, 6x the gyro's own N on X), the flat floor
-    gives the sim's B = 0.02 urad/s, and K_TO only scales."""
-    s = _run(tmp_path, "sim?warm=1&seed=3", duration_s=1200.0, n_chunks=4)
+    """40 min on the default sim rig (seed 3), issue 18 acceptance D: no figure named ARW is the
+    loop's noise. The gyro's N = 0.005 urad/sqrt(s) lies under the differentiated pickoff noise
+    and the flicker floor at every tau, so it is reported unresolved, with an interval 0 .. bound
+    that holds it; B (sim 0.02) is read with an interval that holds it (on at least three of four
+    channels: 95 % intervals), and K_TO and K_g only scale."""
+    s = _run(tmp_path, "sim?warm=1&seed=3", duration_s=2400.0, n_chunks=4)
     assert s.exit_code == 0, (s.error, [m for m in s.measurements if m.passed is False])
-    assert set(s.json_values(Drift.json_keys)) == set(Drift.json_keys)
-    arw, bi = s.values["arw_urad_per_sqrt_s"], s.values["bias_instability_urad_per_s"]
-    assert set(arw) == set(bi) == set(CHANNELS)
-    expect = expected_loop_white_rate()
-    # measured over seeds 1-6 (1200 s): X +1..+5 %, Y -1..+1 %, XRD -3..0 % of the prediction
-    for ch in ("X", "Y", "XRD"):
-        assert arw[ch] == pytest.approx(expect[ch], rel=0.15), ch
-    assert arw["X"] > 5 * 0.005             # not the gyro's own N: the loop's
-    # Z: the platform's azimuth motion (azimuth autocollimator 1/f noise) through the loop, no
-    # tau^-1/2 region; flagged as such
-    z = s.analysis.measurements if s.analysis else []
-    assert any(m.name == "ARW Z" and "NOT a tau^-1/2 region" in m.note for m in z)
-    # B (sim: 0.02 urad/s on every channel); measured over seeds 1-6: X 0.018..0.026, Y 0.020..0.030
+    assert set(s.json_values(Drift.json_keys)) >= set(Drift.json_keys) | {"resolved"}
+    n_true, b_true = _sim_gyro("arw_urad_per_sqrt_s"), _sim_gyro("bias_instability_urad_per_s")
+    arw, bi = _figure(s, "arw_urad_per_sqrt_s"), _figure(s, "bias_instability_urad_per_s")
+    for ch in CHANNELS:
+        value, lo, hi, resolved = arw[ch]
+        assert value is None and not resolved, (ch, arw[ch])
+        assert lo <= n_true[ch] < hi < 1.0, (ch, arw[ch])           # a bound that holds it
+        assert s.values["arw_urad_per_sqrt_s"][ch] is None
+    # measured (seed 3, 2400 s): ARW bounds X 0.184, Y 0.326, Z 0.418, XRD 0.194; B X 0.0168
+    # [0.0116, 0.0262], Y 0.0233 [0.0151, 0.0346], XRD 0.0238 [0.0168, 0.0336], Z (the platform's
+    # azimuth motion) unresolved [0, 0.044]
+    held = [bi[ch][1] <= b_true[ch] <= bi[ch][2] for ch in CHANNELS]
+    assert sum(held) >= 3, bi
     for ch in ("X", "Y"):
-        assert 0.5 * 0.02 < bi[ch] < 2.0 * 0.02, (ch, bi[ch])
+        value, lo, hi, resolved = bi[ch]
+        assert resolved and 0.6 * b_true[ch] < value < 1.6 * b_true[ch], (ch, bi[ch])
     report = s.report.read_text()
-    assert "nominal data-sheet values were used" in report
+    assert "nominal data-sheet values were used" in report and "not resolved" in report
     assert (tmp_path / "drift-allan.png").stat().st_size > 10_000
     assert (tmp_path / "drift-null.png").exists()
     assert "24 h p-p" in report and "estimate" in report
-    # K_TO is a scale: an earth-rate K_TO of twice the nominal doubles every rate figure (with a
-    # stopwatch K_g of half the nominal, so that the measured loop gain K_TO K_g |V_T / V_g|, and
-    # with it the taus B is read from, stay the same)
+    # K_TO and K_g are scales: an earth-rate K_TO of twice the nominal and a stopwatch K_g of half
+    # doubles the torquing rate and the pickoff angle, so the reconstructed rate and every figure
     cal = RigCalibration()
     twice = {c: 2 * v for c, v in cal.torquer_scale_urad_per_s_per_V.items()}
     half_kg = {c: v / 2 for c, v in cal.pickoff_scale_mV_per_urad.items()}
-    again = Drift(Drift.Params(duration_s=1200.0, n_chunks=4),
+    again = Drift(Drift.Params(duration_s=2400.0, n_chunks=4),
                   prior={"earth-rate": {"K_TO_urad_per_s_per_V": twice},
                          "stopwatch": {"K_g_mV_per_urad": half_kg}}).analyze(_reanalysis_ctx(s.file))
-    for ch in CHANNELS:
-        assert again.values["arw_urad_per_sqrt_s"][ch] == pytest.approx(2 * arw[ch], rel=1e-9)
-        assert again.values["bias_instability_urad_per_s"][ch] == pytest.approx(2 * bi[ch], rel=1e-9)
+    for key in ("arw_urad_per_sqrt_s", "bias_instability_urad_per_s"):
+        for ch in CHANNELS:
+            got, was = again.values[f"{key}_ci95"][ch], s.values[f"{key}_ci95"][ch]
+            assert got == pytest.approx([2 * x for x in was], rel=1e-4), (key, ch)
+            assert again.values["resolved"][key][ch] == s.values["resolved"][key][ch]
     assert "NOMINAL" not in again.markdown
 
 
 @pytest.mark.slow
+def test_the_gyro_arw_where_it_is_identifiable(tmp_path):
+    """The gyro's white rate raised to 0.3 urad/sqrt(s) (above the pickoff noise referred to the
+    input between ~10 and ~500 s): X and XRD resolve it within 30 %, with intervals that hold it;
+    a channel that does not (Z: the platform's azimuth motion) reports an interval that holds it,
+    one that does (Y: more pickoff noise, wider) is within 30 %."""
+    cfg = tmp_path / "arw.toml"
+    cfg.write_text("".join(f"[gyro.{c}]\narw_urad_per_sqrt_s = 0.3\n" for c in CHANNELS))
+    s = _run(tmp_path, f"sim?warm=1&seed=3&config={cfg}", duration_s=1200.0, n_chunks=2)
+    assert s.exit_code == 0, s.error
+    arw = _figure(s, "arw_urad_per_sqrt_s")
+    # measured (seed 3): X 0.309 [0.224, 0.430], Y 0.362 [0.218, 0.547], XRD 0.305 [0.216, 0.385];
+    # Z unresolved [0, 0.635]
+    for ch in ("X", "XRD"):
+        value, lo, hi, resolved = arw[ch]
+        assert resolved and value == pytest.approx(0.3, rel=0.3) and lo < 0.3 < hi, (ch, arw[ch])
+    for ch in CHANNELS:
+        value, lo, hi, resolved = arw[ch]
+        assert lo <= 0.3 <= hi or (resolved and value == pytest.approx(0.3, rel=0.3)), (ch, arw[ch])
+
+
+@pytest.mark.slow
 def test_bias_instability_follows_the_gyro_flicker(tmp_path):
-    """Three times the sim's flicker bias instability on every gyro channel, same seed: X and Y
-    report about three times the B (the loop's own contributions and the other noise terms are
-    unchanged, so the ratio is a little under 3); ARW is unchanged. The same seed draws the same
-    flicker realization, scaled, so the ratio is much tighter than either value."""
+    """Three times the sim's flicker bias instability on every gyro channel (40 min, seed 5): the
+    resolved B are near 0.06 and the intervals hold 0.06 on at least three of four channels; ARW
+    stays unresolved."""
     cfg = tmp_path / "b3.toml"
     cfg.write_text("".join(f"[gyro.{c}]\nbias_instability_urad_per_s = 0.06\n" for c in CHANNELS))
-    base = _run(tmp_path / "base", "sim?warm=1&seed=5", duration_s=1200.0, n_chunks=2)
-    more = _run(tmp_path / "more", f"sim?warm=1&seed=5&config={cfg}", duration_s=1200.0, n_chunks=2)
-    assert base.exit_code == more.exit_code == 0
-    b0, b3 = base.values["bias_instability_urad_per_s"], more.values["bias_instability_urad_per_s"]
-    for ch in ("X", "Y", "XRD"):
-        # measured over seeds 1-6 (1200 s): ratio X 2.75..3.06, Y 2.75..2.97, XRD 2.46..3.13
-        assert 2.2 < b3[ch] / b0[ch] < 3.5, (ch, b0[ch], b3[ch])
-        assert more.values["arw_urad_per_sqrt_s"][ch] == pytest.approx(base.values["arw_urad_per_sqrt_s"][ch],
-                                                                       rel=0.1)
-    for ch in ("X", "Y"):
-        # one Allan point (tau 102 s, ~12 degrees of freedom) in 1200 s: a chi-square spread;
-        # measured over seeds 1-6: X 0.052..0.076, Y 0.055..0.090 for the sim's 0.06
-        assert 0.5 * 0.06 < b3[ch] < 1.6 * 0.06, (ch, b3[ch])
+    more = _run(tmp_path / "more", f"sim?warm=1&seed=5&config={cfg}", duration_s=2400.0, n_chunks=2)
+    assert more.exit_code == 0
+    bi = _figure(more, "bias_instability_urad_per_s")
+    # measured (seed 5): X 0.068 [0.048, 0.081], Y 0.059 [0.040, 0.094], Z 0.069 [0.048, 0.102],
+    # XRD 0.050 [0.034, 0.080]
+    assert sum(lo <= 0.06 <= hi for _, lo, hi, _ in bi.values()) >= 3, bi
+    resolved = [ch for ch, (_, _, _, ok) in bi.items() if ok]
+    assert len(resolved) >= 2, bi
+    for ch in resolved:
+        assert 0.6 * 0.06 < bi[ch][0] < 1.6 * 0.06, (ch, bi[ch])
+    assert not any(more.values["resolved"]["arw_urad_per_sqrt_s"].values())
 
 
 @pytest.mark.slow
@@ -215,9 +306,7 @@ def test_abort_and_resume_continue_the_record(tmp_path):
     first file, 3-4 recorded anew, and the analysis covers all four (two stretches, pooled)."""
     from drivers.rig import open_rig
 
-    # two 300-s stretches are too short for B at 10 loop time constants (71 s, flicker EDF >= 10);
-    # the mechanics are the point here, so B is read from 3 (21 s)
-    params = dict(duration_s=600.0, n_chunks=4, bi_min_loop_tc=3.0)
+    params = dict(duration_s=600.0, n_chunks=4)
     stop = threading.Event()
 
     def listener(p):
@@ -237,5 +326,7 @@ def test_abort_and_resume_continue_the_record(tmp_path):
     assert length.value == pytest.approx(600.0)
     assert "in 2 continuous stretch(es)" in length.note
     assert_spans_are_the_record_steps(first, second, [f"record {i}/4" for i in (1, 2, 3, 4)], 2, 150.0)
-    assert all(v is not None for v in second.values["arw_urad_per_sqrt_s"].values())
+    # every figure read (resolved or not: an interval with finite limits)
+    for key in ("arw_urad_per_sqrt_s", "bias_instability_urad_per_s"):
+        assert all(hi is not None for _, hi in second.values[f"{key}_ci95"].values()), key
 
