@@ -41,7 +41,7 @@ FIGURES = {"K_TO_urad_per_s_per_V": "torquer_scale_urad_per_s_per_V", "drift_ura
            "g_drift_z_urad_per_s_per_g": "g_drift_z_urad_per_s_per_g"}
 
 
-def draw(seed: int) -> dict[str, dict[str, float]]:
+def draw(seed: int, random_drift: bool = True) -> dict[str, dict[str, float]]:
     rng = np.random.default_rng([18, seed])
     cfg: dict[str, dict[str, float]] = {"table": {"base_azimuth_offset_deg": float(rng.uniform(-1.0, 1.0))}}
     for ch, (kto, kg) in NOMINAL.items():
@@ -49,6 +49,9 @@ def draw(seed: int) -> dict[str, dict[str, float]]:
                              "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
                              "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
                              **{f"g_drift_{a}_urad_per_s_per_g": float(rng.uniform(-0.15, 0.15)) for a in "xyz"}}
+        if not random_drift:
+            cfg[f"gyro.{ch}"].update(arw_urad_per_sqrt_s=0.0, bias_instability_urad_per_s=0.0,
+                                     rrw_urad_per_s_per_sqrt_s=0.0)
     return cfg
 
 
@@ -60,13 +63,13 @@ def _toml(values: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_case(seed: int) -> dict[str, Any]:
+def run_case(seed: int, random_drift: bool = True, spec_bias_instability: float | None = None) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from drivers.rig import open_rig
     from procedures.calibrations.earth_rate import EarthRate
     from procedures.runner import run_procedure
 
-    cfg = draw(seed)
+    cfg = draw(seed, random_drift)
     rec: dict[str, Any] = {"seed": seed, "config": cfg}
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "rig.toml"
@@ -74,7 +77,8 @@ def run_case(seed: int) -> dict[str, Any]:
         t0 = time.perf_counter()
         try:
             with open_rig(f"sim?warm=1&seed={seed}&watchdog=5&config={path}") as rig:
-                res = run_procedure(EarthRate(), rig, Path(d))
+                proc = EarthRate(EarthRate.Params(bias_instability_urad_per_s=spec_bias_instability))
+                res = run_procedure(proc, rig, Path(d))
         except Exception as e:  # reported, not fatal
             rec["error"] = f"{type(e).__name__}: {e}"
             return rec
@@ -113,12 +117,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--first", type=int, default=0, help="first seed (to extend an earlier run)")
     ap.add_argument("--also", nargs="*", default=[], help="earlier --out files to summarize with this run")
+    ap.add_argument("--spec-bias-instability", type=float, default=None,
+                    help="give the procedure the gyros' bias instability as a data sheet would (urad/s; the "
+                         "sim's default is 0.02)")
+    ap.add_argument("--no-random-drift", action="store_true",
+                    help="the gyros' random drift off (what a single run cannot average out)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="/tmp/earth_rate_coverage.jsonl")
     args = ap.parse_args(argv)
     recs = []
     with open(args.out, "w") as jf, ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futs = [pool.submit(run_case, s) for s in range(args.first, args.first + args.seeds)]
+        futs = [pool.submit(run_case, s, not args.no_random_drift, args.spec_bias_instability)
+                for s in range(args.first, args.first + args.seeds)]
         for fut in as_completed(futs):
             rec = fut.result()
             recs.append(rec)

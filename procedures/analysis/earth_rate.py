@@ -191,11 +191,36 @@ def _identifiable(X: np.ndarray) -> np.ndarray:
 
 
 COLUMNS = ("P", "Q", "one", "x", "y", "z", "order")
+#: the restraint term's relative uncertainty: data-sheet h/k and K_g of another unit of the type
+#: (the stopwatch measures K_g to 2 %, the h/k of the thesis's four channels span 424-1072 s)
+RESTRAINT_UNCERTAINTY = 0.2
+
+
+def operating_instability(rate_resid: np.ndarray) -> float:
+    """The run-to-run spread of a run's mean drift, from the run itself (same units as given).
+
+    A run measures the fixed drift plus the gyro's random drift averaged over the run. For a
+    bias-instability (flicker) process that average does not settle with a longer run: its
+    run-to-run spread is about the Allan deviation at the run's length, which for flicker is
+    the flat floor already reached at a fraction of it (IEEE Std 952 Annex C). Here: the
+    overlapping Allan deviation of the stations' residual rates (visiting order) at a third of
+    the stations, which white station noise only raises (conservative). The fit's own terms
+    (constant, trend) absorb part of the wander, so this is a floor, not a bound: on sim rigs
+    with the default random drift (bias instability 0.02 urad/s) the fixed-drift intervals
+    covered 83 % of 150 without a bias-instability figure (``bench/earth_rate_coverage.py``)."""
+    r = np.asarray(rate_resid, float)
+    m = len(r) // 3
+    if m < 1 or len(r) < 2 * m + 1:
+        return 0.0
+    c = np.concatenate([[0.0], np.cumsum(r)])
+    y = (c[m:] - c[:-m]) / m                   # means of m consecutive stations
+    d = y[m:] - y[:-m]
+    return float(np.sqrt(0.5 * np.mean(d * d)))
 
 
 def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
                 restraint_s: float | None = None, pickoff_mV_per_urad: float | None = None,
-                offset_deg: float | None = None) -> ChannelFit:
+                offset_deg: float | None = None, instability_urad_per_s: float = 0.0) -> ChannelFit:
     """One channel's multi-position fit from the stations (``"tilt"``, ``"spindle"`` deg, the
     settled torquer means ``"V"`` and, for the restraint term, the pickoff means ``"pickoff_V"``,
     per channel, in visiting order).
@@ -205,7 +230,12 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     left at the current K_TO and re-fitted once): with the base at offset o, b_P = -cos(o)/K_TO,
     b_Q = -sin(o)/K_TO, b_1 = -d/K_TO, b_k = -(g_k + Omega sin(lat) [k = input axis])/K_TO.
     A channel whose input axis the spindle does not turn (Z: no Q column) takes ``offset_deg``
-    (the horizontal channels'): K_TO = -cos(o)/b_P."""
+    (the horizontal channels'): K_TO = -cos(o)/b_P.
+
+    ``instability_urad_per_s``: the gyro's bias instability where known (an earlier drift run,
+    a data sheet): the fixed drift's interval then carries the run-to-run wander of a run's
+    mean drift (``operating_instability``); the restraint term's own uncertainty (data-sheet
+    h/k and K_g, taken as good to ``RESTRAINT_UNCERTAINTY``) is carried by K_TO's."""
     tilt = np.array([s["tilt"] for s in stations], float)
     spindle = np.array([s["spindle"] for s in stations], float)
     v = np.array([s["V"][ch] for s in stations], float)
@@ -246,11 +276,11 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     if np.any(restraint):
         # the restraint rate enters as +r/K_TO: moved to the left at the current K_TO and fitted
         # again (r/K_TO is a per-mille term: two passes leave under 1e-9 of it)
-        k = k0
+        kto_now = k0
         for _ in range(3):
-            coef, resid, cov, rho, _ = ar1_gls(X, v - restraint / k)
-            k = figures_of(coef)["K_TO"] * URAD
-        correction = k / k0 - 1.0
+            coef, resid, cov, rho, _ = ar1_gls(X, v - restraint / kto_now)
+            kto_now = figures_of(coef)["K_TO"] * URAD
+        correction = kto_now / k0 - 1.0
     else:
         correction = 0.0
     p = X.shape[1]
@@ -269,6 +299,11 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
         fu, fd = figures_of(up), figures_of(dn)
         J[:, j] = [(fu[k] - fd[k]) / (2 * h) for k in keys]
     C = J @ cov @ J.T
+    # the fixed drift is not this run's drift: the gyro's random drift averaged over the run
+    # (operating instability) is added, as an error of its own (``operating_instability``)
+    op = max(operating_instability(resid * vals["K_TO"]), instability_urad_per_s)
+    C[keys.index("drift"), keys.index("drift")] += op**2
+    C[keys.index("K_TO"), keys.index("K_TO")] += (RESTRAINT_UNCERTAINTY * correction * vals["K_TO"]) ** 2
     sd = np.sqrt(np.maximum(np.diag(C), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):  # exact data: zero variances
         R = np.nan_to_num(C / np.outer(sd, sd))
@@ -299,13 +334,13 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
 
 def fit_earth_rate(stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
                    restraint_s: dict[str, float] | None = None, pickoff_mV_per_urad: dict[str, float] | None = None,
-                   ) -> dict[str, ChannelFit]:
+                   instability_urad_per_s: dict[str, float] | None = None) -> dict[str, ChannelFit]:
     """Every channel's fit from the stations in visiting order: the horizontal channels first
     (each profiles the base's azimuth offset), then Z at their mean offset."""
     def one(ch: str, offset: float | None) -> ChannelFit:
         return fit_channel(ch, stations, latitude_deg=latitude_deg, earth_rate_rad_per_s=earth_rate_rad_per_s,
                            restraint_s=(restraint_s or {}).get(ch), pickoff_mV_per_urad=(pickoff_mV_per_urad or {}).get(ch),
-                           offset_deg=offset)
+                           offset_deg=offset, instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0)
 
     fits = {ch: one(ch, None) for ch in HORIZONTAL}
     offset = float(np.mean([fits[c].psi0_deg for c in HORIZONTAL]))

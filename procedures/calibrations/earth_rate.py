@@ -34,6 +34,7 @@ import numpy as np
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis.earth_rate import G_AXES, fit_earth_rate
 from procedures.analysis.intervals import add_figure
+from procedures.params import prior_values
 from procedures.reports.earth_rate import markdown, plot_fits
 from procedures.rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
@@ -56,6 +57,11 @@ class EarthRateParams:
     settle_min_s: float = 120.0
     settle_timeout_s: float = 900.0
     rate_hz: float = 50.0
+    #: the gyros' bias instability (urad/s) from a data sheet, if known: the fixed drift's interval
+    #: then carries a run's wander about the long-term fixed drift. An earlier drift run's figure
+    #: (``--prior``, the same --out) is used before it. Without either, the interval is this
+    #: run's bias and says so.
+    bias_instability_urad_per_s: float | None = None
     #: limits: K_TO within this fraction of the rig's nominal (data sheet) value, fit residual rms
     kto_tolerance: float = 0.2
     max_residual_V: float = 5e-3
@@ -74,6 +80,9 @@ class EarthRateParams:
                              f"stations (the fit has 7 unknowns and needs residuals for its intervals)")
         if min(self.average_s, self.rate_hz) <= 0:
             raise ValueError("earth-rate: average_s and rate_hz must be > 0")
+        if self.bias_instability_urad_per_s is not None and not 0.0 <= self.bias_instability_urad_per_s < 10.0:
+            raise ValueError(f"earth-rate: bias_instability_urad_per_s = {self.bias_instability_urad_per_s} must be "
+                             f"0..10 urad/s")
 
 
 def _channel_column(ch: str) -> str:
@@ -144,9 +153,14 @@ class EarthRate(Procedure[EarthRateParams]):
         cal = ctx.rig.calibration
         stations = [ctx.results[st[0]] for st in self.stations()]
         p = self.params
+        # K_g for the standing pickoff: a stopwatch run's if at hand, else the data sheet's
+        kg, _ = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad)
+        given = p.bias_instability_urad_per_s or 0.0
+        bi, self.instability_sources = prior_values(self.prior, "drift", "bias_instability_urad_per_s", GYRO_CHANNELS,
+                                                    {ch: given for ch in GYRO_CHANNELS})
         fits = fit_earth_rate(stations, latitude_deg=cal.latitude_deg, earth_rate_rad_per_s=cal.earth_rate_rad_per_s,
-                              restraint_s=cal.restraint_time_constant_s,
-                              pickoff_mV_per_urad=cal.pickoff_scale_mV_per_urad)
+                              restraint_s=cal.restraint_time_constant_s, pickoff_mV_per_urad=kg,
+                              instability_urad_per_s=bi)
         ms: list[Measurement] = []
         for ch, f in fits.items():
             nominal = cal.torquer_scale_urad_per_s_per_V[ch]
