@@ -5,7 +5,9 @@ gimbal bearing from a file with ``cmd_<a>``, ``ac_<a>_inst`` and ``pa_<a>`` chan
 during a sinusoidal command at a ladder of amplitudes (the ``hysteresis`` procedure's run, or
 anyone's). The instrument constants are the file's ``/meta/calibration``; a file without one
 is analysed with the data sheet's defaults, with a warning. ``--json`` prints exactly the keys
-``To_Nm``, ``eta_per_Nm``, ``stiffness_Nm_per_rad``, ``file`` as one JSON object on stdout;
+``To_Nm``, ``eta_per_Nm``, ``stiffness_Nm_per_rad`` (each None if the data do not resolve it),
+their ``K_ci95`` and ``resolved`` ({K: {axis: bool}}), ``angle_lag_ms`` (measured on the record
+and taken out) and ``file`` as one JSON object on stdout;
 ``--out DIR`` writes the plots and a Markdown summary there. A file that cannot be analysed
 is a ValueError naming the problem (exit 2).
 """
@@ -31,7 +33,8 @@ def _hysteresis(args: argparse.Namespace) -> int:
 
     if not (args.settle_cycles >= 0):
         raise ValueError(f"--settle-cycles {args.settle_cycles} must be >= 0")
-    res = analyze_file(args.file, args.axis, settle_cycles=args.settle_cycles, angle_lag_s=args.angle_lag_ms * 1e-3)
+    lag = None if args.angle_lag_ms is None else args.angle_lag_ms * 1e-3
+    res = analyze_file(args.file, args.axis, settle_cycles=args.settle_cycles, angle_lag_s=lag)
     written = []
     if args.out:
         out = Path(args.out)
@@ -48,9 +51,13 @@ def _hysteresis(args: argparse.Namespace) -> int:
         return 0
     print(f"fbs analyze hysteresis {res.file}: axis {res.axis}, {len(res.loops)} amplitudes at "
           f"{res.frequency_hz:.4g} Hz; instrument constants: {CAL_SOURCES[res.calibration_source]}")
-    print(f"  To                 = {res.To_Nm:.5g} ± {res.To_se_Nm:.2g} N m")
-    print(f"  eta                = {res.eta_per_Nm:.5g} ± {res.eta_se_per_Nm:.2g} 1/(N m)")
-    print(f"  stiffness eta To^2 = {res.stiffness_Nm_per_rad:.5g} ± {res.stiffness_se_Nm_per_rad:.2g} N m/rad")
+    for key, label, unit in (("To_Nm", "To                ", "N m"), ("eta_per_Nm", "eta               ", "1/(N m)"),
+                             ("stiffness_Nm_per_rad", "stiffness eta To^2", "N m/rad")):
+        e = res.estimates[key]
+        print(f"  {label} = {e.value:.5g} {unit}, 95 % [{e.lo:.5g}, {e.hi:.5g}]"
+              + ("" if e.resolved else f" (not resolved: {e.why})"))
+    print(f"  angle lag behind the power-amplifier input {res.angle_lag_s * 1e3:.3g} ms "
+          f"({'± %.2g ms, measured' % (res.angle_lag_se_s * 1e3) if res.lag_source == 'measured' else res.lag_source})")
     print(f"  fit residual rms {res.residual_rms_Nm * 1e3:.3g} mN m ({100 * res.relative_residual:.3g} % of the "
           f"largest loop's torque half-range); angle path low-passed at {res.path_cutoff_hz:.3g} Hz")
     k = res.stiffness_Nm_per_rad
@@ -72,11 +79,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "sweep: needs cmd_<a>, ac_<a>_inst and pa_<a>")
     h.add_argument("file", metavar="FILE.h5", help="an fbs-run file")
     h.add_argument("--axis", default="X", help="platform axis, X or Y (default X)")
-    h.add_argument("--json", action="store_true", help="print To_Nm, eta_per_Nm, stiffness_Nm_per_rad, file as JSON")
+    h.add_argument("--json", action="store_true", help="print To_Nm, eta_per_Nm, stiffness_Nm_per_rad (with K_ci95 "
+                   "and resolved), angle_lag_ms, file as JSON")
     h.add_argument("--out", metavar="DIR", help="write the plots and a Markdown summary to DIR")
     h.add_argument("--settle-cycles", type=int, default=1,
                    help="cycles at each new amplitude left out (default 1)")
-    h.add_argument("--angle-lag-ms", type=float, default=0.0,
-                   help="advance the recorded angle by this much: the instrumentation channel's lag behind the "
-                   "power-amplifier input, if the data sheet gives it (default 0)")
+    h.add_argument("--angle-lag-ms", type=float, default=None,
+                   help="override the measured lag of the recorded angle behind the power-amplifier input (for "
+                   "studies; default: measured on the record at the command's DAC lines)")
     h.set_defaults(func=_hysteresis)

@@ -495,6 +495,9 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
 
 
 # ---------------------------------------------------------------------------- the angle's lag
+#: a command line used to measure the lag is at least this fraction of the fundamental's amplitude
+LINE_MIN = 1e-5
+
 @dataclass
 class LagMeasurement:
     """How far the recorded angle lags the recorded torque input (``measure_lag``)."""
@@ -534,28 +537,38 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     starts = [a for a in starts if a + n_per <= len(cmd)]
     if len(starts) < 3:
         raise ValueError(f"{len(starts)} cycles are too few to measure the angle's lag")
-    h_lo, h_hi = int(math.ceil(min_hz / freq_hz)), int(math.floor(max_hz / freq_hz))
-    if h_hi < h_lo:
+    if max_hz < min_hz + freq_hz:
         raise ValueError(f"no harmonic of {freq_hz:g} Hz between {min_hz:g} and {max_hz:g} Hz")
+    # The lines as bins of the n_per-sample window. The fundamental, 1e4 times the lines in the
+    # angle, must not leak into them: all three records are high-passed alike first (a filter
+    # common to the three cancels in the ratio below).
+    f_bin = fs_hz / n_per
+    h_lo, h_hi = int(math.ceil(min_hz / f_bin)), int(math.floor(max_hz / f_bin))
     harm = np.arange(h_lo, h_hi + 1)
-    t = np.arange(n_per) / fs_hz
-    E = np.exp(-2j * math.pi * np.outer(t, harm * freq_hz))           # samples x lines
+    sos = scipy.signal.butter(4, 0.5 * min_hz, btype="highpass", fs=fs_hz, output="sos")
+    c_hp, a_hp, d_hp = (scipy.signal.sosfiltfilt(sos, np.asarray(x, dtype=float)) for x in (cmd, angle, drive))
+    E = np.exp(-2j * math.pi * np.outer(np.arange(n_per), harm) / n_per)    # samples x lines
     blocks = np.array(starts)[:, None] + np.arange(n_per)[None, :]
-    C = (np.asarray(cmd, float)[blocks] - np.asarray(cmd, float)[blocks].mean(axis=1, keepdims=True)) @ E
-    A = np.asarray(angle, float)[blocks] @ E
-    D = np.asarray(drive, float)[blocks] @ E
-    # the lines the command really carries: the strongest, well above its floor
+    # the lines are chosen on the plain transform; measured through a Hann window, whose far
+    # sidelobes fall fast (a transient of an amplitude step near a window's end stays out)
+    hann = (0.5 - 0.5 * np.cos(2 * math.pi * np.arange(n_per) / n_per))[:, None]
+    C = c_hp[blocks] @ E
+    Ch, A, D = c_hp[blocks] @ (hann * E), a_hp[blocks] @ (hann * E), d_hp[blocks] @ (hann * E)
+    # the lines the command really carries: the strongest, well above its floor and above
+    # LINE_MIN of its fundamental (a smooth command's numerical dust is no excitation)
     power = np.mean(np.abs(C) ** 2, axis=0)
     order = np.argsort(power)[::-1]
     floor = float(np.median(power))
-    strong = [int(i) for i in order[:max_lines] if power[i] > 100.0 * floor]
+    x = np.asarray(cmd, dtype=float)[blocks]
+    fund = float(np.mean(np.abs(x @ np.exp(-2j * math.pi * np.arange(n_per) / n_per)) ** 2))
+    strong = [int(i) for i in order[:max_lines] if power[i] > max(100.0 * floor, LINE_MIN ** 2 * fund)]
     if not strong:
         raise ValueError(f"the command carries no line between {min_hz:g} and {max_hz:g} Hz to measure the "
                          f"angle's lag at (a smooth drive: no DAC staircase in band)")
-    w = 2 * math.pi * harm[strong] * freq_hz
+    w = 2 * math.pi * harm[strong] * f_bin
     model = response(w)
-    num = A[:, strong] * np.conj(C[:, strong])                       # cycles x lines
-    den = D[:, strong] * np.conj(C[:, strong])
+    num = A[:, strong] * np.conj(Ch[:, strong])                      # cycles x lines
+    den = D[:, strong] * np.conj(Ch[:, strong])
 
     def lags(keep: np.ndarray) -> np.ndarray:
         H = num[keep].sum(axis=0) / den[keep].sum(axis=0)
@@ -583,5 +596,5 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     if m > 1:
         chi2 = float(np.sum(((full - lag) / se_line)[good] ** 2))
         se *= max(1.0, math.sqrt(chi2 / (m - 1)))      # the Birge ratio: lines that disagree
-    return LagMeasurement(lag, se, n - 1, [float(f) for f in harm[strong][good] * freq_hz],
+    return LagMeasurement(lag, se, n - 1, [float(f) for f in harm[strong][good] * f_bin],
                           [float(x) for x in full[good]], [float(x) for x in se_line[good]], n)

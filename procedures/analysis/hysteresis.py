@@ -291,7 +291,8 @@ def _estimates(fit: dahl.DahlFit, lag_se_s: float, lag_source: str,
                refit: Callable[[float], tuple[float, float]]) -> dict[str, Estimate]:
     """To, eta and eta To^2 with 95 % intervals: the fit's cluster-robust covariance of (ln To,
     ln eta) plus the measured lag's error carried through the fit's sensitivity to the lag
-    (``refit(d)``: (ln To, ln eta) with the lag moved by d; one call, d = ``LAG_STEP_S``), Student t with the fit's degrees of freedom."""
+    (``refit(d)``: (ln To, ln eta) with the lag moved by d; one call, d = ``LAG_STEP_S``),
+    Student t with the fit's degrees of freedom."""
     cov = np.array(fit.cov_ln, dtype=float)
     if lag_source == "measured" and math.isfinite(lag_se_s) and lag_se_s > 0:
         base = np.array([math.log(fit.To_Nm), math.log(fit.eta_per_Nm)])

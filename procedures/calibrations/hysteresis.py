@@ -24,7 +24,8 @@ from procedures.reports.hysteresis import markdown, plot_describing_function, pl
 from procedures.rigsetup import bring_to_mode3
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
 
-JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "file")
+#: DESIGN.md section 7, and the angle lag the analysis measured and took out
+JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "file")
 
 
 # ---------------------------------------------------------------------------- parameters
@@ -41,8 +42,9 @@ class HysteresisParams:
     updates_per_cycle: int = 100
     rate_hz: float = 400.0
     #: how far the instrumentation angle lags the power-amplifier input (its filters and the
-    #: motor's L/R), if the data sheet says; 0 leaves the angle as recorded
-    angle_lag_ms: float = 0.0
+    #: motor's L/R): None (the default) measures it on the record (``dahl.measure_lag``); a
+    #: number overrides the measurement, for studies only
+    angle_lag_ms: float | None = None
     #: quality limits: fit residual rms / largest loop's torque half-range; relative standard errors
     max_relative_residual: float = 0.1
     max_relative_se: float = 0.1
@@ -58,8 +60,8 @@ class HysteresisParams:
                              f"positive numbers")
         if not (self.frequency_hz > 0 and self.rate_hz > 0):
             raise ValueError("hysteresis: frequency_hz and rate_hz must be > 0")
-        if not (0.0 <= self.angle_lag_ms < 1e3 / self.rate_hz * 20):
-            raise ValueError(f"hysteresis: angle_lag_ms = {self.angle_lag_ms} must be >= 0 and a few samples at most")
+        if self.angle_lag_ms is not None and not (abs(self.angle_lag_ms) < 1e3 / self.rate_hz * 20):
+            raise ValueError(f"hysteresis: angle_lag_ms = {self.angle_lag_ms} must be a few samples at most")
         if int(self.cycles) < 2 or int(self.settle_cycles) < 0:
             raise ValueError(f"hysteresis: cycles = {self.cycles} must be >= 2 and settle_cycles = "
                              f"{self.settle_cycles} >= 0")
@@ -130,14 +132,26 @@ class Hysteresis(Procedure[HysteresisParams]):
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
         res = analyze_file(ctx.path, p.axis, ctx.rig.calibration, settle_cycles=p.settle_cycles,
-                           angle_lag_s=p.angle_lag_ms * 1e-3)
+                           angle_lag_s=None if p.angle_lag_ms is None else p.angle_lag_ms * 1e-3)
         xs = [res.theta_o_bar(lp) for lp in res.loops]
-        ms = [Measurement("To", res.To_Nm, "N m", lo=0.0, stderr=res.To_se_Nm,
-                          note="running (Coulomb) friction torque, eq. 5.2"),
-              Measurement("eta", res.eta_per_Nm, "1/(N m)", lo=0.0, stderr=res.eta_se_per_Nm),
-              Measurement("stiffness eta To^2", res.stiffness_Nm_per_rad, "N m/rad", lo=0.0,
-                          stderr=res.stiffness_se_Nm_per_rad),
-              Measurement("To relative standard error", res.To_se_Nm / res.To_Nm, "", hi=p.max_relative_se),
+        ms = []
+        for key, label, unit, se, note in (
+                ("To_Nm", "To", "N m", res.To_se_Nm, "running (Coulomb) friction torque, eq. 5.2; "),
+                ("eta_per_Nm", "eta", "1/(N m)", res.eta_se_per_Nm, ""),
+                ("stiffness_Nm_per_rad", "stiffness eta To^2", "N m/rad", res.stiffness_se_Nm_per_rad, "")):
+            e = res.estimates[key]
+            ms.append(Measurement(label, e.value if e.resolved else None, unit, lo=0.0, stderr=se,
+                                  note=note + (f"95 % [{e.lo:.5g}, {e.hi:.5g}]" if e.resolved
+                                               else f"not resolved: {e.why}")))
+        if res.lag is not None:
+            lag_note = (f"measured at the command's lines ({', '.join(f'{f:.4g}' for f in res.lag.frequencies_hz)} Hz, "
+                        f"{res.lag.n_cycles} cycles), taken out")
+        else:
+            lag_note = "given, taken out" if res.lag_source == "given" else "not measured: the angle used as recorded"
+        ms.append(Measurement("angle lag behind the power-amplifier input", res.angle_lag_s * 1e3, "ms",
+                              stderr=res.angle_lag_se_s * 1e3 if math.isfinite(res.angle_lag_se_s) else None,
+                              note=lag_note))
+        ms += [Measurement("To relative standard error", res.To_se_Nm / res.To_Nm, "", hi=p.max_relative_se),
               Measurement("eta relative standard error", res.eta_se_per_Nm / res.eta_per_Nm, "",
                           hi=p.max_relative_se),
               Measurement("fit residual rms / largest loop torque half-range", res.relative_residual, "",

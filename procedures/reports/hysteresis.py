@@ -112,16 +112,31 @@ def plot_scan(path: str | Path, res: HysteresisResult) -> Path:
     return save_figure(fig, path)
 
 
+def _lag_text(res: HysteresisResult) -> str:
+    if res.lag is not None:
+        lines = ", ".join(f"{f:.4g} Hz: {1e3 * x:.3g} ± {1e3 * e:.2g} ms"
+                          for f, x, e in zip(res.lag.frequencies_hz, res.lag.lags_s, res.lag.lag_se_s))
+        return (f"angle lag behind the power-amplifier input {res.angle_lag_s * 1e3:.3g} ± "
+                f"{res.angle_lag_se_s * 1e3:.2g} ms, measured at the command's DAC lines ({lines}) and taken out")
+    if res.lag_source == "given":
+        return f"angle lag {res.angle_lag_s * 1e3:.3g} ms, given (not measured), taken out"
+    return "angle lag not measured: the angle is used as recorded (its lag biases eta and the stiffness high)"
+
+
 def markdown(res: HysteresisResult) -> str:
     lines = ["## Bearing friction (Dahl model, eq. 5.2)", "",
              f"Axis {res.axis}, drive {res.frequency_hz:.4g} Hz; torque band {res.torque_cutoff_hz:.3g} Hz, "
              f"angle path low-passed at {res.path_cutoff_hz:.3g} Hz (least residual of "
              f"{len(res.scan.cutoff_hz)} tried); instrument constants: {CAL_SOURCES[res.calibration_source]}.", "",
-             f"- To = {res.To_Nm:.5g} ± {res.To_se_Nm:.2g} N m",
-             f"- eta = {res.eta_per_Nm:.5g} ± {res.eta_se_per_Nm:.2g} (N m)^-1",
-             f"- stiffness eta To^2 = {res.stiffness_Nm_per_rad:.5g} ± {res.stiffness_se_Nm_per_rad:.2g} N m/rad",
-             f"- correlation of the To and eta estimates {res.correlation:+.3f}; the errors are statistical "
-             f"(residual noise), not the model's or the data sheet's",
+             *[f"- {label} = {e.value:.5g} {unit}, 95 % interval [{e.lo:.5g}, {e.hi:.5g}]"
+               + ("" if e.resolved else f" — **not resolved**: {e.why}")
+               for key, label, unit in (("To_Nm", "To", "N m"), ("eta_per_Nm", "eta", "(N m)^-1"),
+                                        ("stiffness_Nm_per_rad", "stiffness eta To^2", "N m/rad"))
+               for e in (res.estimates[key],) if key in res.estimates],
+             f"- {_lag_text(res)}",
+             f"- correlation of the To and eta estimates {res.correlation:+.3f}; the intervals are cluster-robust "
+             f"over the {sum(lp.n_cycles for lp in res.loops)} analysed cycles (Student t, {res.dof} degrees of "
+             f"freedom) with the lag's error carried in; not the model's or the data sheet's errors",
              f"- fit residual rms {res.residual_rms_Nm * 1e3:.4g} mN m = {100 * res.relative_residual:.3g} % of the "
              f"largest loop's torque half-range", ""]
     lines += ["| amplitude (urad) | eta To theta_o | cycles | torque p-p (mN m) | describing fn. gain / k "
