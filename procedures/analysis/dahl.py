@@ -340,7 +340,7 @@ def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]
 
 def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
              smooth_hz: float | None = None, step: int = 1, independent_every: int = 1,
-             start: tuple[float, float] | None = None) -> DahlFit:
+             start: tuple[float, float] | None = None, drop_cycle: int | None = None) -> DahlFit:
     """Least-squares To and eta of eq. 5.2 integrated along ``path_rad`` (the angle the bearing
     is taken to follow) against ``torque_Nm`` (the measured bearing torque, ``bearing_torque``).
 
@@ -356,7 +356,8 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     ln eta) from the spread of the cycles' scores, ``cov_ln``, with ``dof`` degrees of freedom
     for Student's t); they are statistical only. The stiffness eta To^2 gets the delta method.
     ``independent_every`` only sets ``n_independent`` (a residual sample per that many is
-    counted as independent), kept for the report."""
+    counted as independent), kept for the report. ``drop_cycle``: leave the kept cycle of that
+    index out of every segment's residual (the model still runs along the whole path)."""
     if not segments:
         raise ValueError("no cycles of constant amplitude to fit")
     theta = np.asarray(path_rad, dtype=float)
@@ -368,6 +369,8 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
         raise ValueError("the angle or the torque has non-finite samples (lost data) in the cycles to fit")
     step = max(1, int(step))
     idx = [np.arange(s.start - a0, s.stop - a0, step) for s in segments]
+    if drop_cycle is not None:          # a jackknife replicate: the drop_cycle-th kept cycle of every segment out
+        idx = [i[_cycle_labels(s, i + a0, 0) != drop_cycle] for s, i in zip(segments, idx)]
     meas = [torque[a0 + i] for i in idx]
     To0, eta0 = start if start is not None else _initial_guess(th, meas, idx)
     evals = 0
@@ -450,7 +453,8 @@ class PathScan:
 
 def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
                   smooth_hz: float, cutoffs_hz: list[float], step: int = 1,
-                  independent_every: int = 1) -> tuple[DahlFit, PathScan]:
+                  independent_every: int = 1, drop_cycle: int | None = None,
+                  start: tuple[float, float] | None = None) -> tuple[DahlFit, PathScan]:
     """``fit_dahl`` along the measured angle low-passed at each of ``cutoffs_hz``; the fit that
     explains the torque best (least residual) is returned, with the scan.
 
@@ -464,11 +468,11 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
         raise ValueError("no trial cutoffs for the angle path")
     cutoffs_hz = sorted(float(c) for c in cutoffs_hz)
     fits: list[DahlFit] = []
-    guess = None
+    guess = start
     for fc in cutoffs_hz:
         path = lowpass(theta_rad, fs_hz, fc)
         fit = fit_dahl(path, torque_Nm, segments, fs_hz, smooth_hz=smooth_hz, step=step,
-                       independent_every=independent_every, start=guess)
+                       independent_every=independent_every, start=guess, drop_cycle=drop_cycle)
         fit.path_cutoff_hz = float(fc)
         fits.append(fit)
         guess = (fit.To_Nm, fit.eta_per_Nm)
@@ -482,7 +486,7 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
             fc = float(np.exp(-c1 / (2 * c2)))
             fit = fit_dahl(lowpass(theta_rad, fs_hz, fc), torque_Nm, segments, fs_hz, smooth_hz=smooth_hz,
                            step=step, independent_every=independent_every,
-                           start=(fits[best].To_Nm, fits[best].eta_per_Nm))
+                           start=(fits[best].To_Nm, fits[best].eta_per_Nm), drop_cycle=drop_cycle)
             fit.path_cutoff_hz = fc
             if fit.residual_rms_total_Nm < fits[best].residual_rms_total_Nm:
                 order = int(np.searchsorted(cutoffs_hz, fc))
@@ -513,7 +517,8 @@ class LagMeasurement:
 
 def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: float, freq_hz: float,
                 segments: list[Segment], response: Callable[[np.ndarray], np.ndarray], *, min_hz: float,
-                max_hz: float, max_lines: int = 8, max_se_rad: float = 0.1) -> LagMeasurement:
+                max_hz: float, max_lines: int = 8, max_se_rad: float = 0.1,
+                drop_cycle: int | None = None) -> LagMeasurement:
     """The lag (s) of the recorded ``angle`` behind the recorded ``drive`` (the power-amplifier
     input), measured at the command's lines between ``min_hz`` and ``max_hz``.
 
@@ -530,10 +535,11 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     Each kept cycle of every segment is one determination; a delete-one-cycle jackknife gives
     the errors. The lines (the ``max_lines`` strongest in the command) are combined by weighted
     least squares in ``-phase = w lag``; ``se_s`` is the jackknife's of that combination,
-    raised by the lines' scatter about it when they disagree beyond their errors."""
+    raised by the lines' scatter about it when they disagree beyond their errors. ``drop_cycle``
+    leaves the kept cycle of that index out of every segment (a jackknife replicate)."""
     per = fs_hz / freq_hz
     n_per = int(round(per))
-    starts = [int(round(s.start + c * per)) for s in segments for c in range(s.n_cycles)]
+    starts = [int(round(s.start + c * per)) for s in segments for c in range(s.n_cycles) if c != drop_cycle]
     starts = [a for a in starts if a + n_per <= len(cmd)]
     if len(starts) < 3:
         raise ValueError(f"{len(starts)} cycles are too few to measure the angle's lag")

@@ -246,8 +246,9 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         warnings.append(msg)
     model = np.full(len(theta), np.nan)
     model[fit.start:fit.stop] = fit.model_Nm
-    estimates = _estimates(fit, lag_se, lag_source, lambda d: _refit(inst / ac_scale, pa, lag_s + d, fit, segments, fs, fc,
-                                                                       plat, step))
+    chain = _Chain(inst / ac_scale, pa, cmd, fs, freq, fc, segments, plat, step, cutoffs,
+                   rigid if lag_source == "measured" else None, lag_s)
+    estimates, ses, dof = _jackknife(fit, chain, lag_source)
     loops: list[Loop] = []
     k = fit.stiffness_Nm_per_rad
     for seg, off, rms in zip(segments, fit.offsets_Nm, fit.residual_rms_Nm):
@@ -268,50 +269,73 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     sl = slice(s.start, s.start + n_hist)
     history = {"t_s": np.arange(sl.start, sl.stop) / fs, "theta_urad": theta_f[sl] / URAD,
                "torque_Nm": torque[sl] - fit.offsets_Nm[big], "model_Nm": model[sl] - fit.offsets_Nm[big]}
-    return HysteresisResult(str(path), a, freq, fit.To_Nm, fit.eta_per_Nm, k, fit.To_se_Nm, fit.eta_se_per_Nm,
-                            fit.stiffness_se_Nm_per_rad, fit.correlation, fc, float(path_cutoff_hz), scan, loops,
-                            fit.residual_rms_total_Nm, relative, source, fs, history, warnings, lag_s, lag_se,
-                            lag_source, lag_meas, estimates, fit.dof)
+    return HysteresisResult(str(path), a, freq, fit.To_Nm, fit.eta_per_Nm, k, ses[0] * fit.To_Nm,
+                            ses[1] * fit.eta_per_Nm, ses[2] * k, fit.correlation, fc, float(path_cutoff_hz), scan,
+                            loops, fit.residual_rms_total_Nm, relative, source, fs, history, warnings, lag_s, lag_se,
+                            lag_source, lag_meas, estimates, dof)
 
 
-def _refit(angle_rad: np.ndarray, pa: np.ndarray, lag_s: float, fit: dahl.DahlFit, segments: list[dahl.Segment],
-           fs: float, fc: float, plat: PlatformConstants, step: int) -> tuple[float, float]:
-    """(ln To, ln eta) fitted with the angle advanced by ``lag_s``, at ``fit``'s angle-path bandwidth."""
-    theta = dahl.shift(angle_rad, fs, lag_s)
-    theta_f = dahl.lowpass(theta, fs, fc)
-    torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
-                                 viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
-    assert fit.path_cutoff_hz is not None
-    f = dahl.fit_dahl(dahl.lowpass(theta, fs, fit.path_cutoff_hz), torque, segments, fs, smooth_hz=fc, step=step,
-                      start=(fit.To_Nm, fit.eta_per_Nm))
-    return math.log(f.To_Nm), math.log(f.eta_per_Nm)
+@dataclass
+class _Chain:
+    """The whole determination (lag, torque, path scan, fit) again, for a jackknife replicate."""
+
+    angle_rad: np.ndarray
+    pa: np.ndarray
+    cmd: np.ndarray
+    fs: float
+    freq: float
+    fc: float
+    segments: list[dahl.Segment]
+    plat: PlatformConstants
+    step: int
+    cutoffs: list[float]
+    rigid: Callable[[np.ndarray], np.ndarray] | None     # None: the lag is not measured but held
+    lag_s: float
+
+    def __call__(self, drop: int, fit: dahl.DahlFit) -> tuple[float, float, float]:
+        """(lag, ln To, ln eta) with the ``drop``-th kept cycle of every segment left out."""
+        lag = self.lag_s
+        if self.rigid is not None:
+            lag = dahl.measure_lag(self.cmd, self.angle_rad, self.pa, self.fs, self.freq, self.segments, self.rigid,
+                                   min_hz=LAG_MIN_FC * self.fc, max_hz=LAG_MAX_FS * self.fs, drop_cycle=drop).lag_s
+        theta = dahl.shift(self.angle_rad, self.fs, lag)
+        theta_f = dahl.lowpass(theta, self.fs, self.fc)
+        torque = dahl.bearing_torque(dahl.lowpass(self.pa, self.fs, self.fc), theta_f, self.fs,
+                                     torque_per_pa_Nm_per_V=self.plat.torque_per_pa_V,
+                                     viscous_Nms=self.plat.viscous_Nms, inertia_kg_m2=self.plat.inertia_kg_m2)
+        assert fit.path_cutoff_hz is not None
+        # the path's bandwidth is chosen again, near the full record's choice
+        near = sorted({*(c for c in self.cutoffs if fit.path_cutoff_hz / 1.6 <= c <= fit.path_cutoff_hz * 1.6),
+                       fit.path_cutoff_hz})
+        f, _ = dahl.fit_dahl_path(theta, torque, self.segments, self.fs, smooth_hz=self.fc, cutoffs_hz=near,
+                                  step=self.step, drop_cycle=drop, start=(fit.To_Nm, fit.eta_per_Nm))
+        return lag, math.log(f.To_Nm), math.log(f.eta_per_Nm)
 
 
-def _estimates(fit: dahl.DahlFit, lag_se_s: float, lag_source: str,
-               refit: Callable[[float], tuple[float, float]]) -> dict[str, Estimate]:
-    """To, eta and eta To^2 with 95 % intervals: the fit's cluster-robust covariance of (ln To,
-    ln eta) plus the measured lag's error carried through the fit's sensitivity to the lag
-    (``refit(d)``: (ln To, ln eta) with the lag moved by d; one call, d = ``LAG_STEP_S``),
-    Student t with the fit's degrees of freedom."""
-    cov = np.array(fit.cov_ln, dtype=float)
-    if lag_source == "measured" and math.isfinite(lag_se_s) and lag_se_s > 0:
-        base = np.array([math.log(fit.To_Nm), math.log(fit.eta_per_Nm)])
-        g = (np.array(refit(LAG_STEP_S)) - base) / LAG_STEP_S
-        cov = cov + np.outer(g, g) * lag_se_s ** 2
-    q = float(scipy.stats.t.ppf(0.975, max(1, fit.dof)))
-    grads = {"To_Nm": np.array([1.0, 0.0]), "eta_per_Nm": np.array([0.0, 1.0]),
-             "stiffness_Nm_per_rad": np.array([2.0, 1.0])}          # ln k = 2 ln To + ln eta
+def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str) -> tuple[dict[str, Estimate], list[float], int]:
+    """To, eta and eta To^2 with 95 % intervals from repeated determinations: the whole chain
+    (the lag measured, the torque formed, the path's bandwidth chosen, eq. 5.2 fitted) again with
+    the j-th kept cycle of every segment left out, j = 0 .. G-1 (a delete-a-group jackknife over
+    cycles: the errors of a cycle are correlated within it, hardly from one cycle to the next);
+    Student t with G - 1 degrees of freedom, in ln. Also the relative standard errors
+    (To, eta, stiffness) and the degrees of freedom."""
     values = {"To_Nm": fit.To_Nm, "eta_per_Nm": fit.eta_per_Nm, "stiffness_Nm_per_rad": fit.stiffness_Nm_per_rad}
-    var = np.diag(cov)
-    corr = float(cov[0, 1] / math.sqrt(var[0] * var[1])) if np.all(np.isfinite(cov)) and np.all(var > 0) else 0.0
+    G = min(s.n_cycles for s in chain.segments)
+    if G < 3:
+        return ({k: Estimate(v, math.nan, math.nan, False, f"{G} cycles per amplitude are too few for an interval")
+                 for k, v in values.items()}, [math.nan] * 3, max(0, G - 1))
+    reps = np.array([chain(j, fit) for j in range(G)])            # G x (lag, ln To, ln eta)
+    ln = np.column_stack([reps[:, 1], reps[:, 2], 2 * reps[:, 1] + reps[:, 2]])    # ln k = 2 ln To + ln eta
+    se = np.sqrt((G - 1) / G * np.sum((ln - ln.mean(axis=0)) ** 2, axis=0))
+    q = float(scipy.stats.t.ppf(0.975, G - 1))
     out: dict[str, Estimate] = {}
-    for key, gk in grads.items():
-        se = math.sqrt(max(float(gk @ cov @ gk), 0.0)) if np.all(np.isfinite(cov)) else math.nan
-        v = values[key]
-        lo, hi = v * math.exp(-q * se), v * math.exp(q * se)
+    for (key, v), e in zip(values.items(), se):
+        lo, hi = v * math.exp(-q * e), v * math.exp(q * e)
         if lag_source == "none":
             out[key] = Estimate(v, lo, hi, False, "the angle's lag was not measured: the interval lacks its bias")
-            continue
-        other = {"To_Nm": "eta_per_Nm", "eta_per_Nm": "To_Nm"}.get(key, "")
-        out[key] = judged(v, lo, hi, correlation=corr if other else 0.0, with_=other)
-    return out
+        else:
+            # To and eta are told apart by the ladder reaching both regimes (the procedure's limits
+            # on eta To theta_o), not by their correlation: each is judged by its own interval
+            out[key] = judged(v, lo, hi)
+    log.info("jackknife over %d cycle groups: lags %s ms", G, np.round(reps[:, 0] * 1e3, 3))
+    return out, [float(x) for x in se], G - 1
