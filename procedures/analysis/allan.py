@@ -400,8 +400,9 @@ class NoiseModel:
     coef: np.ndarray
     tau0_s: float
     tau_fit_s: np.ndarray        # the averaging times fitted
-    #: covariance of ``coef`` (the weighted least squares' (A^T W A)^-1 over the terms not held
-    #: at zero, times ``COV_INFLATION``; zero rows and columns for those)
+    #: covariance of ``coef`` (the weighted least squares' (A^T W A)^-1 over the terms fitted
+    #: above zero and the non-droppable ones, times ``COV_INFLATION``; zero rows and columns
+    #: for the dropped)
     cov: np.ndarray = field(default_factory=lambda: np.zeros((len(TERMS), len(TERMS))))
 
     def basis(self, tau: np.ndarray | float) -> np.ndarray:
@@ -481,7 +482,9 @@ def fit_noise_model(res: AllanResult, *, min_tau_s: float = 0.0, min_edf: float 
             break
         coef, m, ssr, use = c2, m2, ssr2, u2 & (c2 > 0)
     w = nu / (2.0 * m ** 2)
-    active = coef > 0
+    # the covariance over the terms fitted above zero and the gyro's own terms even where they
+    # sit at zero: a term the fit put at zero may still hold variance the others would then lose
+    active = (coef > 0) | ~droppable
     cov = np.zeros((len(TERMS), len(TERMS)))
     if active.any():
         scale = a.max(axis=0)
@@ -590,6 +593,8 @@ def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: fl
         c_hi = min(c_hi, bound_c)
     tau = float(res.tau_s[i])
     if c_val <= 0:
-        return TermEstimate(term, math.nan, 0.0, coefficient(c_hi), tau, float(shares[k]), bound,
+        # nothing left once the others' modelled variance is off: only the model-free bound holds
+        # (the others may be over-estimated there)
+        return TermEstimate(term, math.nan, 0.0, bound, tau, float(shares[k]), bound,
                             f"at tau {tau:g} s the measured variance is all the other terms': an upper bound only")
     return TermEstimate(term, coefficient(c_val), coefficient(c_lo), coefficient(c_hi), tau, float(shares[k]), bound)

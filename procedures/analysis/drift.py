@@ -1,31 +1,29 @@
-"""The drift numerics: per gyro channel, the Allan analysis of the torquing rate
-``r = -K_TO V_T`` (urad/s) of a long Mode-3 record, pooled over the record's gap-free runs
-(Allan terms never straddle a gap or a resume). Arrays and run files in, plain dataclasses
-(``ChannelDrift``, ``LoopGain``) out; no rig. The procedure that records is
-``procedures.calibrations.drift``; the report's text and plots are ``procedures.reports.drift``.
+"""The drift numerics: per gyro channel, the gyro's input rate reconstructed from a long Mode-3
+record of the torquer and pickoff outputs, and its Allan analysis, pooled over the record's
+gap-free runs (Allan terms never straddle a gap or a resume). Arrays and run files in, plain
+dataclasses (``ChannelDrift``, ``LoopGain``) out; no rig. The procedure that records is
+``procedures.calibrations.drift``; the report's text and plots are ``procedures.reports.drift``;
+docs/procedures/drift.md has the method and what was measured.
 
 Per channel (``analyze_channels``):
 
-* the overlapping Allan deviation with confidence intervals (``procedures.analysis.allan``, which
+* the input rate Omega_in = sigma' + sigma / (h/k) - K_TO V_T from the float's equation of motion
+  (thesis II C.1.a(8), III A; ``reconstruct_rate``): the caging loop's transfer cancels, the
+  pickoff's measurement noise remains, as n' + n / (h/k);
+* its overlapping Allan deviation with confidence intervals (``procedures.analysis.allan``, which
   wraps ``allantools``);
-* the angle random walk N from the tau^-1/2 line through ``arw_tau_lo_s .. arw_tau_hi_s``
-  (IEEE 952 Annex C), with the freely fitted slope as the check that it is a white-rate region;
-* the caging loop's proportional gain G_p (torquing rate per pickoff angle, from the recorded
-  pickoff and torquer channels above the loop's bandwidth) and the white rate N_loop the
-  pickoff's output makes through it;
-* the bias instability B = (flat minimum of the Allan deviation) / 0.664 (IEEE 952), read at
-  tau >= ``bi_min_loop_tc`` loop time constants 1/G_p, where the torquer follows the drift;
+* the IEEE 952 terms fitted to it (``allan.fit_noise_model``) and, from them, the angle random
+  walk N and the bias instability B, each with a 95 % interval for the gyro's parameter or, where
+  the record cannot tell it from the other terms, only the bound the data support
+  (``allan.term_estimate``; ``ChannelDrift.estimate`` judges them by the rule of
+  ``procedures.analysis.intervals``);
+* the caging loop's proportional gain G_p (torquing rate per pickoff angle above the loop's
+  bandwidth) and the white rate N_loop the pickoff's noise makes through it: what the torquer
+  output alone shows at short tau, a diagnostic, not the gyro's N;
 * the null stability in the style of the thesis' Table 1 (peak-to-peak wander over 24 hours):
-  the peak-to-peak of ``average_s`` means of r over the record, labelled with the record length,
-  and an estimate for 24 hours from the Allan deviation when the record is shorter
-  (``allan.null_stability``).
-
-What the torquer output is not: the caging amplifier's proportional path passes the pickoff
-noise to the torquer (above the loop's bandwidth the torquing rate is the proportional gain
-times the pickoff noise angle), and the loop passes the platform's own motion about the input
-axis (the optical stabilization's noise) below it. So the short-tau Allan deviation is the
-white-rate level of the whole loop, an upper bound on the gyro's own random walk, not the
-gyro's N alone; the bias-instability floor is the gyro's only where these have fallen away.
+  the peak-to-peak of ``average_s`` means of the input rate over the record, labelled with the
+  record length, and an estimate for 24 hours from the Allan deviation when the record is
+  shorter (``allan.null_stability``).
 """
 
 from __future__ import annotations

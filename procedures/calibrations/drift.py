@@ -1,19 +1,22 @@
-"""``drift``: gyro drift stability from a long Mode-3 record of the torquer outputs.
+"""``drift``: gyro drift stability from a long Mode-3 record of the torquer and pickoff outputs.
 
-In Mode 3 the caging loops hold every pickoff at null, so each channel's torquer output
-cancels the rate about its input axis (II C.1.a(8)):
+In Mode 3 the caging loops hold every pickoff near null. The float's equation of motion (thesis
+II C.1.a(8), III A; docs/simhw.md section 3) gives each channel's input rate from what is recorded:
 
-    r(t) = -K_TO V_T(t) = Omega_i + d(t)          (urad/s; earth rate + drift)
+    Omega_in = sigma' + sigma / (h/k) - K_TO V_T        (urad/s; earth rate + drift)
 
-The earth-rate component is constant on a fixed table, so the wander of ``r`` is the drift's
-(plus what the loop adds). Per channel the analysis gives the overlapping Allan deviation, the
-angle random walk N, the caging loop's proportional gain G_p, the bias instability B and the
-null stability; how, and what the torquer output is not, is ``procedures.analysis.drift`` (its
+sigma = V_g / K_g the pickoff angle, h/k the float's restraint time constant. The earth-rate
+component is constant on a fixed table, so the wander of Omega_in is the drift's. Per channel the
+analysis gives the overlapping Allan deviation, the gyro's angle random walk N and bias
+instability B each with its 95 % interval (or, unresolved, the bound the data support), the
+caging loop's gain G_p and the null stability; how is ``procedures.analysis.drift`` (its
 docstring), usable without a rig. The report's text and plots are ``procedures.reports.drift``.
 This module holds the parameters, the steps and the analysis that ties them together.
 
-K_TO is a scale only: an earlier ``earth-rate`` result is used when the procedure is given
-one (``prior``), else the rig's nominal data-sheet value, which the report says.
+K_TO and K_g are scales only: earlier ``earth-rate`` and ``stopwatch`` results are used when the
+procedure is given them (``prior``), else the rig's nominal data-sheet values, which the report
+says; h/k (and the viscous coupling h/c, where the rig's calibration carries it) are data-sheet
+constants.
 
 Steps: Mode 3 and a settle (setup, run again on ``--resume``), then the record in
 ``n_chunks`` data steps, each returning its file and time span, so an aborted overnight record

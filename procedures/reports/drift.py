@@ -131,7 +131,7 @@ def plot_allan(path: Path, res: dict[str, ChannelDrift], p: DriftSettings) -> No
         ax.errorbar(a.tau_s[ok], a.dev[ok], yerr=[a.dev[ok] - a.lo[ok], a.hi[ok] - a.dev[ok]], fmt="o", ms=3,
                     color=c, capsize=2, lw=1, label=f"{ch} input rate")
         if r.model is not None:
-            t = np.geomspace(a.tau_s[0], a.tau_s[-1], 200)
+            t = np.geomspace(r.model.tau_fit_s[0], r.model.tau_fit_s[-1], 200)
             ax.plot(t, np.sqrt(r.model.variance(t)), "-", color=c, lw=1.5, alpha=0.7)
         if r.adev_torquer is not None:
             ax.plot(r.adev_torquer.tau_s, r.adev_torquer.dev, "-", color=c, lw=0.7, alpha=0.5)

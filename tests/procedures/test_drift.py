@@ -220,7 +220,7 @@ def test_default_rig(tmp_path):
     and the flicker floor at every tau, so it is reported unresolved, with an interval 0 .. bound
     that holds it; B (sim 0.02) is read with an interval that holds it (on at least three of four
     channels: 95 % intervals), and K_TO and K_g only scale."""
-    s = _run(tmp_path, "sim?warm=1&seed=3", duration_s=2400.0, n_chunks=4)
+    s = _run(tmp_path, "sim?warm=1&watchdog=5&seed=3", duration_s=2400.0, n_chunks=4)
     assert s.exit_code == 0, (s.error, [m for m in s.measurements if m.passed is False])
     assert set(s.json_values(Drift.json_keys)) >= set(Drift.json_keys) | {"resolved"}
     n_true, b_true = _sim_gyro("arw_urad_per_sqrt_s"), _sim_gyro("bias_instability_urad_per_s")
@@ -267,7 +267,7 @@ def test_the_gyro_arw_where_it_is_identifiable(tmp_path):
     one that does (Y: more pickoff noise, wider) is within 30 %."""
     cfg = tmp_path / "arw.toml"
     cfg.write_text("".join(f"[gyro.{c}]\narw_urad_per_sqrt_s = 0.3\n" for c in CHANNELS))
-    s = _run(tmp_path, f"sim?warm=1&seed=3&config={cfg}", duration_s=1200.0, n_chunks=2)
+    s = _run(tmp_path, f"sim?warm=1&watchdog=5&seed=3&config={cfg}", duration_s=1200.0, n_chunks=2)
     assert s.exit_code == 0, s.error
     arw = _figure(s, "arw_urad_per_sqrt_s")
     # measured (seed 3): X 0.309 [0.224, 0.430], Y 0.362 [0.218, 0.547], XRD 0.305 [0.216, 0.385];
@@ -287,7 +287,7 @@ def test_bias_instability_follows_the_gyro_flicker(tmp_path):
     stays unresolved."""
     cfg = tmp_path / "b3.toml"
     cfg.write_text("".join(f"[gyro.{c}]\nbias_instability_urad_per_s = 0.06\n" for c in CHANNELS))
-    more = _run(tmp_path / "more", f"sim?warm=1&seed=5&config={cfg}", duration_s=2400.0, n_chunks=2)
+    more = _run(tmp_path / "more", f"sim?warm=1&watchdog=5&seed=5&config={cfg}", duration_s=2400.0, n_chunks=2)
     assert more.exit_code == 0
     bi = _figure(more, "bias_instability_urad_per_s")
     # measured (seed 5): X 0.068 [0.048, 0.081], Y 0.059 [0.040, 0.094], Z 0.069 [0.048, 0.102],
@@ -313,7 +313,7 @@ def test_abort_and_resume_continue_the_record(tmp_path):
         if p.step == "record 3/4":
             stop.set()
 
-    with open_rig("sim?warm=1&seed=2") as rig:
+    with open_rig("sim?warm=1&watchdog=5&seed=2") as rig:
         first = run_procedure(Drift(Drift.Params(**params)), rig, tmp_path, progress=listener, abort=stop)
         assert first.exit_code == 2 and first.status.startswith("aborted")
         assert first.steps_done == ["mode 3", "settle", "record 1/4", "record 2/4"]
