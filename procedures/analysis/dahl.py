@@ -478,21 +478,30 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
         guess = (fit.To_Nm, fit.eta_per_Nm)
     best = int(np.argmin([f.residual_rms_total_Nm for f in fits]))
     if 0 < best < len(fits) - 1:
-        # refine: the vertex of the parabola in log(cutoff) through the best and its neighbours
-        x = np.log([cutoffs_hz[best - 1], cutoffs_hz[best], cutoffs_hz[best + 1]])
-        y = np.array([fits[best + d].residual_rms_total_Nm for d in (-1, 0, 1)])
-        c2, c1, _ = np.polyfit(x, y, 2)
-        if c2 > 0:
-            fc = float(np.exp(-c1 / (2 * c2)))
-            fit = fit_dahl(lowpass(theta_rad, fs_hz, fc), torque_Nm, segments, fs_hz, smooth_hz=smooth_hz,
+        # refine: the least residual between the best's neighbours (Brent's bounded search in
+        # log cutoff), so the choice moves continuously with the data rather than by grid steps
+        tried: dict[float, DahlFit] = {}
+
+        def resid(x: float) -> float:
+            fit = fit_dahl(lowpass(theta_rad, fs_hz, math.exp(x)), torque_Nm, segments, fs_hz, smooth_hz=smooth_hz,
                            step=step, independent_every=independent_every,
                            start=(fits[best].To_Nm, fits[best].eta_per_Nm), drop_cycle=drop_cycle)
-            fit.path_cutoff_hz = fc
-            if fit.residual_rms_total_Nm < fits[best].residual_rms_total_Nm:
-                order = int(np.searchsorted(cutoffs_hz, fc))
-                cutoffs_hz = list(cutoffs_hz[:order]) + [fc] + list(cutoffs_hz[order:])
-                fits.insert(order, fit)
-                best = order
+            fit.path_cutoff_hz = math.exp(x)
+            tried[x] = fit
+            return fit.residual_rms_total_Nm
+
+        lo, hi = math.log(cutoffs_hz[best - 1]), math.log(cutoffs_hz[best + 1])
+        opt = scipy.optimize.minimize_scalar(resid, bounds=(lo, hi), method="bounded",
+                                             options={"xatol": 0.01, "maxiter": 12})
+        x = min(tried, key=lambda k: tried[k].residual_rms_total_Nm)
+        fit = tried[x]
+        del opt
+        if fit.residual_rms_total_Nm < fits[best].residual_rms_total_Nm:
+            fc = math.exp(x)
+            order = int(np.searchsorted(cutoffs_hz, fc))
+            cutoffs_hz = list(cutoffs_hz[:order]) + [fc] + list(cutoffs_hz[order:])
+            fits.insert(order, fit)
+            best = order
     scan = PathScan([float(c) for c in cutoffs_hz], [f.residual_rms_total_Nm for f in fits],
                     [f.To_Nm for f in fits], [f.eta_per_Nm for f in fits], best)
     return fits[best], scan
