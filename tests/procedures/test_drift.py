@@ -231,8 +231,9 @@ def test_default_rig(tmp_path):
         assert lo <= n_true[ch] < hi < 1.0, (ch, arw[ch])           # a bound that holds it
         assert s.values["arw_urad_per_sqrt_s"][ch] is None
     # measured (seed 3, 2400 s): ARW bounds X 0.184, Y 0.326, Z 0.418, XRD 0.194; B X 0.0168
-    # [0.0116, 0.0262], Y 0.0233 [0.0151, 0.0346], XRD 0.0238 [0.0168, 0.0336], Z (the platform's
-    # azimuth motion) unresolved [0, 0.044]
+    # [0.0097, 0.0265], Y 0.0233 [0.0150, 0.0347], XRD 0.0238 [0.0154, 0.0336], Z (the platform's
+    # azimuth motion) unresolved [0, 0.044]. Seeds 1-6 (bench/drift_coverage.py): N's bound held
+    # 0.005 24/24; B's interval held 0.02 23/24
     held = [bi[ch][1] <= b_true[ch] <= bi[ch][2] for ch in CHANNELS]
     assert sum(held) >= 3, bi
     for ch in ("X", "Y"):
@@ -262,16 +263,17 @@ def test_default_rig(tmp_path):
 @pytest.mark.slow
 def test_the_gyro_arw_where_it_is_identifiable(tmp_path):
     """The gyro's white rate raised to 0.3 urad/sqrt(s) (above the pickoff noise referred to the
-    input between ~10 and ~500 s): X and XRD resolve it within 30 %, with intervals that hold it;
-    a channel that does not (Z: the platform's azimuth motion) reports an interval that holds it,
-    one that does (Y: more pickoff noise, wider) is within 30 %."""
+    input between ~10 and ~500 s), 40 min: X and XRD resolve it within 30 %, with intervals that
+    hold it; a channel that does not (Y: more pickoff noise; Z: the platform's azimuth motion)
+    reports an interval that holds it."""
     cfg = tmp_path / "arw.toml"
     cfg.write_text("".join(f"[gyro.{c}]\narw_urad_per_sqrt_s = 0.3\n" for c in CHANNELS))
-    s = _run(tmp_path, f"sim?warm=1&watchdog=5&seed=3&config={cfg}", duration_s=1200.0, n_chunks=2)
+    s = _run(tmp_path, f"sim?warm=1&watchdog=5&seed=3&config={cfg}", duration_s=2400.0, n_chunks=2)
     assert s.exit_code == 0, s.error
     arw = _figure(s, "arw_urad_per_sqrt_s")
-    # measured (seed 3): X 0.309 [0.224, 0.430], Y 0.362 [0.218, 0.547], XRD 0.305 [0.216, 0.385];
-    # Z unresolved [0, 0.635]
+    # measured (seed 3): X 0.297 [0.194, 0.403], XRD 0.348 [0.275, 0.425]; Y [0, 0.419] and Z
+    # [0, 0.630] unresolved (bench/drift_coverage.py, seeds 1-6: X and XRD resolved 6/6, median
+    # error 2 % and 11 %; every interval held 0.3)
     for ch in ("X", "XRD"):
         value, lo, hi, resolved = arw[ch]
         assert resolved and value == pytest.approx(0.3, rel=0.3) and lo < 0.3 < hi, (ch, arw[ch])
@@ -290,8 +292,8 @@ def test_bias_instability_follows_the_gyro_flicker(tmp_path):
     more = _run(tmp_path / "more", f"sim?warm=1&watchdog=5&seed=5&config={cfg}", duration_s=2400.0, n_chunks=2)
     assert more.exit_code == 0
     bi = _figure(more, "bias_instability_urad_per_s")
-    # measured (seed 5): X 0.068 [0.048, 0.081], Y 0.059 [0.040, 0.094], Z 0.069 [0.048, 0.102],
-    # XRD 0.050 [0.034, 0.080]
+    # measured (seed 5): X 0.068 [0.048, 0.081], Y 0.059 [0.040, 0.094], Z 0.069 [0.039, 0.104],
+    # XRD 0.050 [0.034, 0.080]; seeds 1-6: held 23/24, resolved 19/24
     assert sum(lo <= 0.06 <= hi for _, lo, hi, _ in bi.values()) >= 3, bi
     resolved = [ch for ch, (_, _, _, ok) in bi.items() if ok]
     assert len(resolved) >= 2, bi
