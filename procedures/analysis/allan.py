@@ -545,7 +545,8 @@ def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: fl
 
     The model-free bound: every independent noise adds Allan variance, so the term's variance
     is at most the upper limit of the measured variance at every tau; the smallest of these
-    (``bound``, Bonferroni-corrected over the taus) caps the interval. A term with no share in
+    (``bound``, Bonferroni-corrected over the taus, each with the fewer of the mixture's and the
+    term's own noise type's degrees of freedom) caps the interval. A term with no share in
     the model, or whose estimate is not positive, has value NaN and the interval 0 .. bound."""
     j = TERMS.index(term)
     edf = mixed_edf(res, model)
@@ -556,8 +557,11 @@ def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: fl
     basis = model.basis(res.tau_s[idx])[:, j]
     # Bonferroni: the bound is the smallest of len(idx) upper limits, so each is taken at the
     # level that keeps the chance of any one falling below the truth at 1 - level
+    # the degrees of freedom of the term's own noise type where fewer than the mixture's: the
+    # bound must hold if the model has the term wrong (or none of it)
+    edf_b = np.minimum(edf, res.edf_for(TERM_ALPHA[term]))
     level_each = 1.0 - (1.0 - level) / len(idx)
-    upper = np.array([res.interval(i, edf[i], level_each)[1] ** 2 for i in idx.tolist()]) / basis
+    upper = np.array([res.interval(i, edf_b[i], level_each)[1] ** 2 for i in idx.tolist()]) / basis
     bound_c = float(upper.min())
 
     def coefficient(c: float) -> float:   # the figure from the model coefficient
