@@ -527,7 +527,7 @@ class LagMeasurement:
 def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: float, freq_hz: float,
                 segments: list[Segment], response: Callable[[np.ndarray], np.ndarray], *, min_hz: float,
                 max_hz: float, max_lines: int = 8, max_se_rad: float = 0.1,
-                drop_cycle: int | None = None) -> LagMeasurement:
+                drop_cycle: int | None = None, lines_hz: list[float] | None = None) -> LagMeasurement:
     """The lag (s) of the recorded ``angle`` behind the recorded ``drive`` (the power-amplifier
     input), measured at the command's lines between ``min_hz`` and ``max_hz``.
 
@@ -545,7 +545,8 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     the errors. The lines (the ``max_lines`` strongest in the command) are combined by weighted
     least squares in ``-phase = w lag``; ``se_s`` is the jackknife's of that combination,
     raised by the lines' scatter about it when they disagree beyond their errors. ``drop_cycle``
-    leaves the kept cycle of that index out of every segment (a jackknife replicate)."""
+    leaves the kept cycle of that index out of every segment (a jackknife replicate);
+    ``lines_hz`` then names the lines to use (the full record's), none chosen or dropped."""
     per = fs_hz / freq_hz
     n_per = int(round(per))
     starts = [int(round(s.start + c * per)) for s in segments for c in range(s.n_cycles) if c != drop_cycle]
@@ -577,6 +578,9 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     x = np.asarray(cmd, dtype=float)[blocks]
     fund = float(np.mean(np.abs(x @ np.exp(-2j * math.pi * np.arange(n_per) / n_per)) ** 2))
     strong = [int(i) for i in order[:max_lines] if power[i] > max(100.0 * floor, LINE_MIN ** 2 * fund)]
+    if lines_hz is not None:
+        strong = [int(np.argmin(np.abs(harm * f_bin - f))) for f in lines_hz]
+        max_se_rad = math.inf
     if not strong:
         raise ValueError(f"the command carries no line between {min_hz:g} and {max_hz:g} Hz to measure the "
                          f"angle's lag at (a smooth drive: no DAC staircase in band)")

@@ -247,7 +247,8 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     model = np.full(len(theta), np.nan)
     model[fit.start:fit.stop] = fit.model_Nm
     chain = _Chain(inst / ac_scale, pa, cmd, fs, freq, fc, segments, plat, step, cutoffs,
-                   rigid if lag_source == "measured" else None, lag_s)
+                   rigid if lag_source == "measured" else None, lag_s,
+                   lag_meas.frequencies_hz if lag_meas is not None else None)
     estimates, ses, dof = _jackknife(fit, chain, lag_source)
     loops: list[Loop] = []
     k = fit.stiffness_Nm_per_rad
@@ -291,13 +292,15 @@ class _Chain:
     cutoffs: list[float]
     rigid: Callable[[np.ndarray], np.ndarray] | None     # None: the lag is not measured but held
     lag_s: float
+    lines_hz: list[float] | None                         # the lines the full record's lag was measured at
 
     def __call__(self, drop: int, fit: dahl.DahlFit) -> tuple[float, float, float]:
         """(lag, ln To, ln eta) with the ``drop``-th kept cycle of every segment left out."""
         lag = self.lag_s
         if self.rigid is not None:
             lag = dahl.measure_lag(self.cmd, self.angle_rad, self.pa, self.fs, self.freq, self.segments, self.rigid,
-                                   min_hz=LAG_MIN_FC * self.fc, max_hz=LAG_MAX_FS * self.fs, drop_cycle=drop).lag_s
+                                   min_hz=LAG_MIN_FC * self.fc, max_hz=LAG_MAX_FS * self.fs, drop_cycle=drop,
+                                   lines_hz=self.lines_hz).lag_s
         theta = dahl.shift(self.angle_rad, self.fs, lag)
         theta_f = dahl.lowpass(theta, self.fs, self.fc)
         torque = dahl.bearing_torque(dahl.lowpass(self.pa, self.fs, self.fc), theta_f, self.fs,
@@ -321,8 +324,8 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str) -> tuple[dict[
     (To, eta, stiffness) and the degrees of freedom."""
     values = {"To_Nm": fit.To_Nm, "eta_per_Nm": fit.eta_per_Nm, "stiffness_Nm_per_rad": fit.stiffness_Nm_per_rad}
     G = min(s.n_cycles for s in chain.segments)
-    if G < 3:
-        return ({k: Estimate(v, math.nan, math.nan, False, f"{G} cycles per amplitude are too few for an interval")
+    if G < 2:
+        return ({k: Estimate(v, math.nan, math.nan, False, f"{G} cycle per amplitude is too few for an interval")
                  for k, v in values.items()}, [math.nan] * 3, max(0, G - 1))
     reps = np.array([chain(j, fit) for j in range(G)])            # G x (lag, ln To, ln eta)
     ln = np.column_stack([reps[:, 1], reps[:, 2], 2 * reps[:, 1] + reps[:, 2]])    # ln k = 2 ln To + ln eta
