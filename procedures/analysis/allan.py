@@ -25,13 +25,22 @@ reads off the IEEE 952 noise terms:
   degrees of freedom (counted for flicker noise, what the floor is); when it is at the
   longest of them and significantly below the curve a few octaves earlier, the floor was
   not reached and B is an upper bound.
+* ``fit_noise_model``: the Allan variance as a non-negative sum of the IEEE 952 terms (white and
+  flicker angle noise, angle random walk, bias instability, rate random walk), weighted by the
+  points' degrees of freedom; ``term_estimate`` reads one term (N or B) with a 95 % interval for
+  the process' parameter at the tau the model picks, or only the model-free bound where the data
+  cannot tell it from the others (the drift procedure's figures; docs/procedures/drift.md).
+  ``read_arw`` and ``read_bias_instability`` are the plain IEEE 952 read-offs, kept for
+  comparison: their intervals describe the sample at the point read.
 * ``null_stability``: the peak-to-peak wander of block averages (the thesis' "24-hour null
   stability", Table 1) over the record, and an estimate for a longer span from the Allan
   deviation (``wander_variance``).
 
 References: IEEE Std 952-1997 (R2008), Annex C "Allan variance method of data reduction";
 W. J. Riley, *Handbook of Frequency Stability Analysis*, NIST SP 1065 (2008): eq. 11
-(overlapping ADEV), eq. 45 (chi-square interval), its test suite (NBS-14, pp. 107-108);
+(overlapping ADEV), eq. 45 (chi-square interval), Table 5 (flicker phase noise), its test suite
+(NBS-14, pp. 107-108); F. E. Satterthwaite, "An approximate distribution of estimates of variance
+components", Biometrics Bulletin 2 (1946) for the mixture's degrees of freedom;
 C. A. Greenhall and W. J. Riley, "Uncertainty of stability variances based on finite
 differences" (PTTI 2003) for the EDF; W. J. Riley and C. A. Greenhall, "Power law noise
 identification using the lag 1 autocorrelation" (EFTF 2004).
