@@ -152,8 +152,9 @@ def write_campaign_report(out: Path, summaries: list[RunSummary], sim: dict[str,
         lines.append(f"| {r.quantity} | {r.units} | {fmt(r.measured)} | {fmt(r.thesis)} | {fmt(r.simulated)} | "
                      f"{err} | {r.note} |")
     lines += ["", "The simulated rig's column is read from its sim config for this comparison only; every "
-              "procedure measured its figures through the drivers. The drift figures come from the torquer "
-              "outputs, which also carry the caging loops' share of pickoff noise (see the drift report).", ""]
+              "procedure measured its figures through the drivers. The drift figures come from the input rate "
+              "rebuilt from torquer and pickoff; the gyro's ARW is not resolved on this rig and is shown as a "
+              "bound (see the drift report).", ""]
     path = out / "report.md"
     path.write_text("\n".join(lines))
     return path
