@@ -300,6 +300,7 @@ def run_on_sim(tmp_path, config_text: str | None = None, axis="X", seed=3):
     with open_rig(url) as rig:
         s = run_procedure(Hysteresis(Params(axis=axis)), rig, tmp_path / "out")
     wall = time.monotonic() - wall
+    assert s.file is not None, s.error
     with RunFile(s.file) as rf:
         rig_s = rf.duration_s
     print(f"hysteresis {axis}: {s.values} in {rig_s:.0f} s of rig time, {wall:.1f} s wall")
