@@ -42,8 +42,6 @@ FIGURES = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad")
 #: the lag is measured at the command's lines above this many torque bandwidths (where the
 #: platform is a rigid body to the drive) and below this fraction of the sample rate
 LAG_MIN_FC, LAG_MAX_FS = 2.0, 0.45
-#: the lag step of the refit that gives the figures' sensitivity to the lag (s)
-LAG_STEP_S = 0.5e-3
 
 
 @dataclass
