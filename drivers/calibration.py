@@ -70,10 +70,6 @@ class RigCalibration:
     #: sigma is balanced by the rate sigma / (h/k) without torquer current
     restraint_time_constant_s: dict[str, float] = field(
         default_factory=lambda: {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0})
-    #: the floats' viscous coupling h/c (Table 3): the float's drag couples its two input axes
-    #: (II C.4.d)
-    viscous_coupling_h_over_c: dict[str, float] = field(
-        default_factory=lambda: {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43})
     max_torquing_earth_rates: float = 3.5
     dac_range_V: float = 10.0
     dac_bits: int = 16
