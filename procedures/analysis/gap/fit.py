@@ -126,7 +126,6 @@ class EffectFit:
     score: float = 0.0                 # BIC improvement over the base model
     #: 95 % intervals of the parameters with an error: (lo, hi), in the parameter's units
     intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
-    unit: dict[str, float] = field(default_factory=dict, repr=False)  # the fitted ones' unit coordinates
 
     @property
     def summary(self) -> dict[str, Any]:
@@ -262,8 +261,7 @@ class Fitter:
                     if math.isfinite(sd) and sd > 0:
                         errs[k] = sd
                         intervals[k] = (params[k] - Z95 * sd, params[k] + Z95 * sd)
-        return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S, intervals=intervals,
-                         unit={p.name: float(t) for p, t in zip(fitted, best_t)})
+        return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S, intervals=intervals)
 
     def held_envelope(self, effect: Effect, base_cfg: SimConfig, evidence: Any, found: EffectFit) -> EffectFit:
         """``found`` with its intervals widened by what the nuisance it holds leaves open.
