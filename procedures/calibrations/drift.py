@@ -103,7 +103,7 @@ Params = DriftParams
 
 class Drift(Procedure[DriftParams]):
     name = "drift"
-    title = "Gyro drift stability: Allan analysis of the input rate from the caged torquer and pickoff outputs (Mode 3)"
+    title = "Gyro drift: Allan analysis of the rate from torquer and pickoff (Mode 3)"
     json_keys = ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file")
     Params = DriftParams
     mode = 3
