@@ -132,7 +132,8 @@ class EffectFit:
         return {"effect": self.effect, "score": round(self.score, 2)}
 
 
-def _to_unit(p: Param, v: float) -> float:
+def to_unit(p: Param, v: float) -> float:
+    """A parameter's value in its search coordinate: 0..1 over its prior (log where the prior is)."""
     if p.log:
         return math.log(v / p.lo) / math.log(p.hi / p.lo)
     return (v - p.lo) / (p.hi - p.lo)
@@ -236,7 +237,7 @@ class Fitter:
             axes = [np.linspace(0.5 / n, 1 - 0.5 / n, n)] * d
             starts = [np.array(s) for s in product(*axes)] if start is None else []
             for g in guesses if start is None else [start]:
-                t = np.array([_to_unit(p, g.get(p.name, p.default)) for p in fitted])
+                t = np.array([to_unit(p, g.get(p.name, p.default)) for p in fitted])
                 starts.append(np.clip(t, 0.0, 1.0))
             scored = sorted(starts, key=evaluate)
             best_t, best_v = scored[0], evaluate(scored[0])

@@ -25,7 +25,7 @@ import numpy as np
 
 from daq.reader import RunFile
 from daq.runfile import RunWriter
-from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score
+from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
 from procedures.analysis.gap.grid import GapInputError, Grid, band_spectra, bin_spectra, make_grid
 from procedures.analysis.gap.lines import MeasuredLine, found_pickoff_lines, refine_line
 from procedures.analysis.gap.locate import Band, Evidence, bands, departures, gap_db
@@ -253,6 +253,18 @@ def _with_effects(cfg0: SimConfig, axis: str, fits: list[tuple[catalogue.Effect,
     return cfg
 
 
+def _without(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[catalogue.Effect, EffectFit]],
+             i: int) -> NuisanceFit:
+    """The model with every effect in it but the ``i``-th, its noise levels fitted (the nuisance
+    parts the others own held)."""
+    rest = [x for j, x in enumerate(in_model) if j != i]
+    held, fitter.hold = fitter.hold, frozenset(p for e, _ in rest for p in e.owns)
+    try:
+        return fitter.base(_with_effects(cfg0, axis, rest))
+    finally:
+        fitter.hold = held
+
+
 def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[catalogue.Effect, EffectFit]],
                    findings: list[Finding], evidence: Evidence, n_obs: int,
                    opt: GapOptions) -> tuple[SimConfig, NuisanceFit]:
@@ -275,14 +287,11 @@ def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tu
     cur = fitter.base(cfg)
     for i in reversed(range(len(in_model))):
         eff, f = in_model[i]
-        rest = [x for j, x in enumerate(in_model) if j != i]
-        held, fitter.hold = fitter.hold, frozenset(p for e, _ in rest for p in e.owns)
-        without = fitter.base(_with_effects(cfg0, axis, rest))
-        fitter.hold = held
+        without = _without(fitter, cfg0, axis, in_model, i)
         earns = 2.0 * (without.nll - cur.nll) - f.n_fitted * math.log(n_obs)
         if earns < opt.min_score:
             log.info("%s no longer earns its place beside %s (BIC %.1f): dropped", eff.name,
-                     ", ".join(e.name for e, _ in rest), earns)
+                     ", ".join(e.name for j, (e, _) in enumerate(in_model) if j != i), earns)
             del in_model[i], findings[i]
             fitter.hold = frozenset(p for e, _ in in_model for p in e.owns)
             cfg, cur = _with_effects(cfg0, axis, in_model), without
@@ -296,13 +305,9 @@ def _order_by_gap_closed(fitter: Fitter, cfg0: SimConfig, axis: str,
     the gap's): the refined model's gap against the gap without that effect, the others and
     the noise levels staying fitted. Each finding's ``gap_before_db`` / ``gap_after_db``
     become those two."""
-    held = fitter.hold
     for i in range(len(in_model)):
-        rest = [x for j, x in enumerate(in_model) if j != i]
-        fitter.hold = frozenset(p for e, _ in rest for p in e.owns)
-        without = fitter.base(_with_effects(cfg0, axis, rest))
+        without = _without(fitter, cfg0, axis, in_model, i)
         findings[i].gap_before_db, findings[i].gap_after_db = gap_db(P, without.S, cells, dof), gap_all
-    fitter.hold = held
     order = sorted(range(len(findings)), key=lambda i: -(findings[i].gap_before_db - findings[i].gap_after_db))
     findings[:] = [findings[i] for i in order]
     in_model[:] = [in_model[i] for i in order]
@@ -319,7 +324,7 @@ def _at_bound(effect: catalogue.Effect, params: dict[str, float]) -> list[str]:
         v = params.get(p.name)
         if v is None or not math.isfinite(v):
             continue
-        t = math.log(v / p.lo) / math.log(p.hi / p.lo) if p.log else (v - p.lo) / (p.hi - p.lo)
+        t = to_unit(p, v)
         if (t <= BOUND_SHARE and p.limit != "lo") or (t >= 1 - BOUND_SHARE and p.limit != "hi"):
             out.append(f"{p.name} = {v:.4g} at {'lower' if t <= BOUND_SHARE else 'upper'} bound "
                        f"{p.lo if t <= BOUND_SHARE else p.hi:g}")
