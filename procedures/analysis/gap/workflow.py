@@ -278,6 +278,10 @@ def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tu
         again = fitter.fit(eff, others, evidence, start=f.params)
         if again is not None:
             again = fitter.held_envelope(eff, others, evidence, again)
+            # a held parameter's spread came from the pass that found it (its line or steps are
+            # no longer a departure now that the effect is in the model): it stays
+            again.errors = f.errors | again.errors
+            again.intervals = f.intervals | again.intervals
             log.info("re-fitted %s with %s: %s", eff.name, ", ".join(e.name for j, (e, _) in enumerate(in_model)
                                                                        if j != i), again.params)
             in_model[i] = (eff, again)
