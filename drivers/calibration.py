@@ -15,6 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 GYRO_CHANNELS = ("X", "Y", "Z", "XRD")
+#: the channel sharing each channel's float: two two-degree-of-freedom gyros, X-Y (spin along
+#: platform Z) and X-Z (spin along Y, channels Z and XRD); viscous float drag couples a pair (II C.4.d)
+FLOAT_PARTNER = {"X": "Y", "Y": "X", "Z": "XRD", "XRD": "Z"}
 AXES = ("X", "Y", "Z")
 EARTH_RATE_RAD_PER_S = 7.292115e-5
 

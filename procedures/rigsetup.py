@@ -14,12 +14,14 @@ from procedures.runner import Context
 def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_s: float = 600.0,
                    poll_s: float = 2.0) -> dict:
     """Mode 3 with the wheels at speed and every channel caged (II D): spin up in mode 2 if
-    needed, then mode 3, then wait for the relay driver's null detectors."""
+    needed, then mode 3, then wait for the relay driver's null detectors. ``t_caged_s`` is the
+    rig time from which every loop is known closed (now, if the rig was found in mode 3): a step
+    that needs the caging loops' transients gone waits from there, resumed or not."""
     rig = ctx.rig
     st = rig.relays.status()
     t0 = ctx.time_s
     if st.mode == 3 and all(st.at_speed.values()) and all(st.caged.values()):
-        return {"already": True, "waited_s": 0.0}
+        return {"already": True, "waited_s": 0.0, "t_caged_s": round(ctx.time_s, 3)}
     if not all(st.at_speed.values()):
         if st.mode != 2:
             rig.set_mode(2)
@@ -27,7 +29,7 @@ def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_
     if rig.relays.status().mode != 3:
         rig.set_mode(3)
     _poll(ctx, lambda s: all(s.caged.values()), cage_timeout_s, poll_s, "every gyro channel caged in mode 3")
-    return {"already": False, "waited_s": round(ctx.time_s - t0, 3)}
+    return {"already": False, "waited_s": round(ctx.time_s - t0, 3), "t_caged_s": round(ctx.time_s, 3)}
 
 
 def _poll(ctx: Context, ok, timeout_s: float, poll_s: float, what: str) -> None:

@@ -4,7 +4,7 @@ dict in, plain values out; no rig. The procedure (the steps, the null, the ramps
 ``procedures.calibrations.stopwatch``, whose docstring has the method; the report's table and
 plot are ``procedures.reports.stopwatch``.
 
-* ``crossing_interval``: one stopwatch reading, the time between the smoothed pickoff's
+* ``crossing_times`` / ``crossing_interval``: one stopwatch reading, the time between the smoothed pickoff's
   crossings of the two levels of a ramp;
 * ``restraint_fit``: tau = h/k from a least-squares fit of the whole open-loop record (step 4
   of the method);
@@ -18,6 +18,13 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.stats
+
+from procedures.analysis.intervals import Estimate, from_stderr, judged
+
+#: why h/k is never a resolved figure (measured by bench/stopwatch_coverage.py over 50 rigs)
+H_OVER_K_UNRESOLVED = ("not reported: the fit also carries the float partner's viscous coupling and the gyro's "
+                       "random drift (fitted h/k +2 to +13 % over 50 simulated rigs); its interval is for information")
 
 
 class NoCrossing(ValueError):
@@ -43,10 +50,10 @@ def smooth(y: np.ndarray, n: int) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
-                      rate_hz: float) -> float:
-    """Time between the smoothed pickoff's crossings of the two levels (linear interpolation).
-    Raises ``NoCrossing`` if it does not cross one of them."""
+def crossing_times(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
+                   rate_hz: float) -> tuple[float, float]:
+    """The times the smoothed pickoff crosses the ramp's first and second level (linear
+    interpolation). Raises ``NoCrossing`` if it does not cross one of them."""
     s = smooth(vg, int(round(smooth_s * rate_hz)))
     first, second = (lo, hi) if direction > 0 else (hi, lo)
 
@@ -58,29 +65,69 @@ def crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direc
         i = idx[0]
         return float(t[i] + (level - s[i]) / (s[i + 1] - s[i]) * (t[i + 1] - t[i]))
 
-    return cross(second) - cross(first)
+    return cross(first), cross(second)
+
+
+def crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
+                      rate_hz: float) -> float:
+    """One stopwatch reading: the time between the two level crossings (``crossing_times``)."""
+    t1, t2 = crossing_times(t, vg, lo, hi, direction, smooth_s, rate_hz)
+    return t2 - t1
+
+
+#: the restraint fit's robust covariance takes the residuals of this many seconds together
+#: (the gyro's random drift is a slowly wandering rate: neighbouring increments share it)
+CLUSTER_S = 30.0
 
 
 def restraint_fit(t: np.ndarray, vg: np.ndarray, vt: np.ndarray, *, vt_null: float, vg0: float,
-                  dt_s: float) -> dict:
-    """Least squares of V_g(t) - V_g(t0) = a int(V_T - V_T0) + c (t - t0) - k int(V_g - V_g0) (+ offset),
-    on ``dt_s`` means (``procedures.calibrations.stopwatch``'s docstring, step 4)."""
+                  dt_s: float, partner: np.ndarray | None = None, increment_s: float = 2.0) -> dict:
+    """Least squares of the pickoff's increments over ``dt_s`` means,
+
+        dV_g = a int(V_T - V_T0) + c dt - k int(V_g - V_g0) + b dV_gp,
+
+    the restraint equation u' = r - u / tau (``procedures.calibrations.stopwatch``'s docstring,
+    step 4) over each interval. ``partner`` is the pickoff of the channel sharing the float: its
+    caging loop answers the viscous cross-coupling (II C.4.d) and, as it does, pushes this float
+    at (c/h) sigma_p'; without that term the loop's slow unwinding after each ramp reads as
+    restraint (h/k 2-4x too long). The increments, not the integrated record, are fitted so the
+    errors are the rate noise of each interval, not its running sum; their covariance is
+    cluster-robust over ``CLUSTER_S`` blocks (White's sandwich with the scores summed per block,
+    small-sample factor G/(G-1)), and ``dof`` = G - 1 goes with it."""
     step = t[1] - t[0]
     n = max(1, int(round(dt_s / step)))
     m = len(t) // n * n
-    tm = t[:m].reshape(-1, n).mean(axis=1)
-    g = vg[:m].reshape(-1, n)
-    gm, vtm = np.nanmean(g, axis=1), np.nanmean(vt[:m].reshape(-1, n), axis=1)
-    it = np.concatenate([[0.0], np.cumsum((vtm[1:] + vtm[:-1]) / 2 - vt_null) * np.diff(tm)])
-    ig = np.concatenate([[0.0], np.cumsum((gm[1:] + gm[:-1]) / 2 - vg0) * np.diff(tm)])
-    design = np.column_stack([np.ones_like(tm), it, tm - tm[0], -ig])
-    ok = np.isfinite(gm) & np.isfinite(it) & np.isfinite(ig)
-    coef, *_ = np.linalg.lstsq(design[ok], gm[ok], rcond=None)
-    resid = gm[ok] - design[ok] @ coef
-    cov = np.linalg.inv(design[ok].T @ design[ok]) * (resid @ resid) / max(1, ok.sum() - 4)
+
+    def means(x: np.ndarray) -> np.ndarray:
+        return np.nanmean(x[:m].reshape(-1, n), axis=1)
+
+    tm, gm, vtm = means(t), means(vg), means(vt)
+    # running integrals on the fine grid, differenced over each ``increment_s`` interval
+    it = np.concatenate([[0.0], np.cumsum(((vtm[1:] + vtm[:-1]) / 2 - vt_null) * np.diff(tm))])
+    ig = np.concatenate([[0.0], np.cumsum(((gm[1:] + gm[:-1]) / 2 - vg0) * np.diff(tm))])
+    j = np.arange(0, len(tm), max(1, int(round(increment_s / dt_s))))
+    cols = [np.diff(it[j]), np.diff(tm[j]), -np.diff(ig[j])]
+    if partner is not None:
+        pm = means(partner)
+        ip = np.concatenate([[0.0], np.cumsum(((pm[1:] + pm[:-1]) / 2 - pm[0]) * np.diff(tm))])
+        cols.append(np.diff(ip[j]))
+    design = np.column_stack(cols)
+    y = np.diff(gm[j])
+    tm = tm[j]
+    ok = np.all(np.isfinite(design), axis=1) & np.isfinite(y)
+    X, y, tk = design[ok], y[ok], tm[1:][ok]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    bread = np.linalg.inv(X.T @ X)
+    block = np.floor((tk - tk[0]) / CLUSTER_S).astype(int)
+    scores = np.zeros((block.max() + 1, X.shape[1]))
+    np.add.at(scores, block, X * resid[:, None])
+    groups = int(np.count_nonzero(np.any(scores != 0, axis=1)))
+    cov = bread @ (scores.T @ scores) @ bread * groups / max(1, groups - 1)
     se = np.sqrt(np.diag(cov))
-    return {"a": float(coef[1]), "a_se": float(se[1]), "c": float(coef[2]), "k": float(coef[3]),
-            "k_se": float(se[3]), "rms": float(np.sqrt(np.mean(resid ** 2)))}
+    return {"a": float(coef[0]), "a_se": float(se[0]), "c": float(coef[1]), "k": float(coef[2]),
+            "k_se": float(se[2]), "b": float(coef[3]) if partner is not None else 0.0,
+            "dof": max(1, groups - 1), "rms": float(np.sqrt(np.mean(resid ** 2)))}
 
 
 @dataclass
@@ -101,6 +148,31 @@ class ChannelResult:
     tau_se: float | None
     correction: float              # mean (corrected / naive - 1)
     null_rate_urad_per_s: float
+    restraint_dof: int = 1
+
+    def kg_estimate(self, kto_rel_half_width: float | None) -> Estimate:
+        """K_g with its 95 % interval: Student's t over the repetitions, combined in quadrature
+        with the relative 95 % half-width of the K_TO used (K_g goes as 1 / K_TO). With no
+        K_TO interval (``None``: the data sheet's nominal value) K_g is not resolved."""
+        n = len(self.repetitions)
+        if n < 2:
+            return Estimate(self.kg, math.nan, math.nan, False, "one repetition gives no spread to judge it by")
+        q = float(scipy.stats.t.ppf(0.975, n - 1))
+        rel = math.hypot(q * self.kg_se / self.kg, kto_rel_half_width or 0.0)
+        e = judged(self.kg, self.kg * (1 - rel), self.kg * (1 + rel))
+        if kto_rel_half_width is None:
+            return Estimate(e.value, e.lo, e.hi, False, "K_TO is the data sheet's nominal value, not a measurement")
+        return e
+
+    def tau_estimate(self) -> Estimate:
+        """h/k with its 95 % interval (1/k over k's t interval), never resolved
+        (``H_OVER_K_UNRESOLVED``): it serves only the x coth x correction, a few 0.01 %."""
+        if self.tau_s is None or self.tau_se is None:
+            return Estimate(math.nan, math.nan, math.inf, False, "the restraint is not resolved by the record")
+        k, k_se = 1.0 / self.tau_s, self.tau_se / self.tau_s ** 2
+        ek = from_stderr(k, k_se, dof=self.restraint_dof)
+        hi = 1.0 / ek.lo if ek.lo > 0 else math.inf
+        return Estimate(self.tau_s, 1.0 / ek.hi, hi, False, H_OVER_K_UNRESOLVED)
 
 
 def channel_result(r: dict) -> ChannelResult:
@@ -121,10 +193,11 @@ def channel_result(r: dict) -> ChannelResult:
     down = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d < 0]
     kg = float(np.mean(reps))
     spread = float(np.std(reps, ddof=1) / kg) if len(reps) > 1 else 0.0
-    kg_ls = abs(fit["a"]) / kto * 1e3
+    ls = r.get("slope_fit", fit)
+    kg_ls = abs(ls["a"]) / kto * 1e3
     return ChannelResult(r["ch"], kto, r["kto_from"], corrected, naive, reps,
                          float((np.mean(up) - np.mean(down)) / kg) if up and down else 0.0, kg,
                          kg * spread / math.sqrt(len(reps)) if len(reps) > 1 else float("nan"), spread,
-                         kg_ls, fit["a_se"] / kto * 1e3, tau, (k_se / k ** 2) if resolved else None,
+                         kg_ls, ls["a_se"] / kto * 1e3, tau, (k_se / k ** 2) if resolved else None,
                          float(np.mean(np.array(corrected) / np.array(naive)) - 1.0),
-                         r["null_slope"] / (kg * 1e-3))
+                         r["null_slope"] / (kg * 1e-3), int(fit.get("dof", 1)))

@@ -41,14 +41,16 @@ numerics (crossing times, the restraint fit, the corrected readings) are
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
 import numpy as np
 
-from drivers.calibration import GYRO_CHANNELS
-from procedures.analysis.stopwatch import NoCrossing, channel_result, crossing_interval, restraint_fit, slope
+from drivers.calibration import FLOAT_PARTNER, GYRO_CHANNELS
+from procedures.analysis.intervals import add_figure
+from procedures.analysis.stopwatch import NoCrossing, channel_result, crossing_times, restraint_fit, slope
 from procedures.params import prior_value
 from procedures.reports.stopwatch import markdown, plot_channel
 from procedures.rigsetup import bring_to_mode3, wait_settled
@@ -74,6 +76,10 @@ class StopwatchParams:
     max_null_rate_urad_per_s: float = 0.5
     smooth_s: float = 1.0
     restore_s: float = 100.0
+    #: a channel's loop is opened only after every caging loop has been closed this long: the
+    #: loops' transients (0.1 rad/s, and the float partner's through the viscous coupling) gone,
+    #: so a step resumed just after mode 3 starts from the state an uninterrupted run gives it
+    min_caged_s: float = 300.0
     rate_hz: float = 200.0
     #: limits: K_g within this fraction of the data sheet's nominal; repetition spread
     kg_tolerance: float = 0.25
@@ -90,7 +96,7 @@ class StopwatchParams:
                              f"(the pickoff's linear range is about +-6 V)")
         if not 0.1 <= self.ramp_rate_urad_per_s <= 100.0:
             raise ValueError(f"stopwatch: ramp_rate_urad_per_s = {self.ramp_rate_urad_per_s} must be 0.1..100")
-        for name in ("hold_s", "null_s", "smooth_s", "restore_s", "rate_hz", "null_tolerance_urad_per_s"):
+        for name in ("hold_s", "null_s", "smooth_s", "restore_s", "rate_hz", "null_tolerance_urad_per_s", "min_caged_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"stopwatch: {name} = {getattr(self, name)} must be > 0")
 
@@ -102,7 +108,7 @@ Params = StopwatchParams
 class Stopwatch(Procedure[StopwatchParams]):
     name = "stopwatch"
     title = "Pickoff scale factor by the stopwatch method (II C.1.a(6))"
-    json_keys = ("K_g_mV_per_urad", "file")
+    json_keys = ("K_g_mV_per_urad", "h_over_k_s", "file")
     Params = StopwatchParams
     mode = 3
     block_s = 0.5
@@ -122,6 +128,21 @@ class Stopwatch(Procedure[StopwatchParams]):
         return prior_value(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", ch,
                            ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch])
 
+    def kto_rel_half_width(self, ch: str, source: str, kto: float) -> float | None:
+        """The relative 95 % half-width of the K_TO in use: 0 for a value given as a parameter
+        (the user vouches for it), the earth-rate result's own interval, ``None`` for the data
+        sheet's nominal value (no measurement: K_g is then not resolved)."""
+        if source == "given":
+            return 0.0
+        if source == "nominal":
+            return None
+        ci = ((self.prior.get(source) or {}).get("K_TO_urad_per_s_per_V_ci95") or {}).get(ch)
+        try:
+            lo, hi = (float(v) for v in ci or ())
+        except (TypeError, ValueError):
+            return None  # an earth-rate summary without intervals (an older run): not a judged K_TO
+        return (hi - lo) / 2 / kto if math.isfinite(hi - lo) else None
+
     def plan(self) -> list[Step]:
         p = self.params
         per = 200.0 + p.null_s * 2 + (2 * p.repetitions + 1) * (p.hold_s + 45.0) + p.restore_s
@@ -134,12 +155,16 @@ class Stopwatch(Procedure[StopwatchParams]):
         kto, source = self.kto(ctx, ch)
         kg_nom = rig.calibration.pickoff_scale_mV_per_urad[ch] * 1e-3      # V/urad, only to trim the null
         gcol, tcol = ctx.column(f"gyro_{ch.lower()}"), ctx.column(f"torq_{ch.lower()}")
-        rec = _Record(gcol, tcol)
+        rec = _Record(gcol, tcol, ctx.column(f"torq_{FLOAT_PARTNER[ch].lower()}"))
 
-        # 1. caged reference
+        # 1. caged reference, once the loops have been closed min_caged_s (resumed or not)
         if rig.caging.inhibited(ch):
             rig.set_caging_inhibit(ch, False)
         rig.set_torquer_bias_V(ch, 0.0)
+        t_caged = float((ctx.results.get("mode 3") or {}).get("t_caged_s", ctx.time_s))
+        if ctx.time_s - t_caged < p.min_caged_s:
+            ctx.acquire(p.min_caged_s - (ctx.time_s - t_caged), keep=False)
+        caged_for = ctx.time_s - t_caged
         wait_settled(ctx, [tcol], tol_V=3e-4, min_s=60.0, window_s=40.0)
         vt0 = float(np.nanmean(ctx.acquire(p.null_s)[:, tcol]))
 
@@ -184,17 +209,23 @@ class Stopwatch(Procedure[StopwatchParams]):
             self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), target, direction, 2 * expected)
             t, vg, vt = rec.arrays(i0)
             try:
-                dt = crossing_interval(t, vg, lo, hi, direction, p.smooth_s, p.rate_hz)
+                t1, t2 = crossing_times(t, vg, lo, hi, direction, p.smooth_s, p.rate_hz)
             except NoCrossing as exc:
                 raise ProcedureError(str(exc)) from None
-            ramps.append([direction, round(dt, 5), round(float(np.nanmean(vt) - vt_null), 7)])
+            # the torquer step between the crossings: not the ADC filter's settling after the bias step
+            dvt = float(np.nanmean(vt[(t >= t1) & (t <= t2)]) - vt_null)
+            ramps.append([direction, round(t2 - t1, 5), round(dvt, 7)])
             rec.hold(ctx, ch, bias, p.hold_s)
         # back to the null position
         back = -1 if rec.last_vg() > vg0 else +1
         self._ramp(ctx, rec, ch, bias, step_bias * back * np.sign(gain), vg0, back, 2 * expected)
         rig.set_torquer_bias_V(ch, bias)
         t_end = ctx.time_s
-        fit = restraint_fit(*rec.arrays(rec.index_at(t_null)), vt_null=vt_null, vg0=vg0, dt_s=0.5)
+        t_fit, vg_fit, vt_fit = rec.arrays(rec.index_at(t_null))
+        fit = restraint_fit(t_fit, vg_fit, vt_fit, vt_null=vt_null, vg0=vg0, dt_s=0.5,
+                            partner=rec.partner(rec.index_at(t_null)))
+        # the ramp slope without the partner term, whose 1 / (1 + (c/h)_a (c/h)_b) it would carry
+        slope_fit = restraint_fit(t_fit, vg_fit, vt_fit, vt_null=vt_null, vg0=vg0, dt_s=0.5)
 
         # 5. restore: the loop takes over from the bias
         rig.set_caging_inhibit(ch, False)
@@ -203,9 +234,10 @@ class Stopwatch(Procedure[StopwatchParams]):
             rig.set_torquer_bias_V(ch, bias * (1 - (i + 1) / n_steps))
             ctx.acquire(p.restore_s / n_steps, keep=False)
         wait_settled(ctx, [tcol], tol_V=1e-3, min_s=30.0, window_s=30.0)
-        return {"ch": ch, "kto": kto, "kto_from": source, "gain": round(gain, 6), "vt_null": round(vt_null, 6),
-                "vg0": round(vg0, 5), "null_slope": null_slope, "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
-                "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit}
+        return {"ch": ch, "kto": kto, "kto_from": source, "kto_rel_ci95": self.kto_rel_half_width(ch, source, kto),
+                "gain": round(gain, 6), "vt_null": round(vt_null, 6), "vg0": round(vg0, 5), "null_slope": null_slope,
+                "caged_for_s": round(caged_for, 1), "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
+                "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit, "slope_fit": slope_fit}
 
     def _ramp(self, ctx: Context, rec: _Record, ch: str, bias: float, step: float, target: float, direction: int,
               expected_s: float) -> None:
@@ -233,28 +265,35 @@ class Stopwatch(Procedure[StopwatchParams]):
         per = {ch: channel_result(r) for ch, r in results.items()}
         cal = ctx.rig.calibration
         ms: list[Measurement] = []
+        kg_est = {ch: r.kg_estimate(results[ch].get("kto_rel_ci95")) for ch, r in per.items()}
+        tau_est = {ch: r.tau_estimate() for ch, r in per.items()}
         for ch, r in per.items():
             nom = cal.pickoff_scale_mV_per_urad[ch]
+            kg, tau = kg_est[ch], tau_est[ch]
             ms.append(Measurement(f"K_g {ch} (stopwatch, mean of {len(r.repetitions)} repetitions)", r.kg, "mV/urad",
-                                  nom * (1 - p.kg_tolerance), nom * (1 + p.kg_tolerance), r.kg_se))
+                                  nom * (1 - p.kg_tolerance), nom * (1 + p.kg_tolerance), r.kg_se,
+                                  note=f"95 % [{kg.lo:.4f}, {kg.hi:.4f}]" + ("" if kg.resolved else f"; not resolved: {kg.why}")))
             ms.append(Measurement(f"K_g {ch} repetition spread (std/mean)", r.spread, "", hi=p.max_spread))
             ms.append(Measurement(f"K_g {ch} least-squares ramp slope", r.kg_ls, "mV/urad", stderr=r.kg_ls_se))
-            ms.append(Measurement(f"h/k {ch} (fitted)", r.tau_s, "s", stderr=r.tau_se))
+            ms.append(Measurement(f"h/k {ch} (fitted)", tau.value if tau.resolved else None, "s",
+                                  note=f"95 % [{tau.lo:.0f}, {tau.hi:.0f}]" + ("" if tau.resolved else f"; {tau.why}")))
             ms.append(Measurement(f"restraint correction {ch}", r.correction * 100, "%"))
             ms.append(Measurement(f"residual null rate {ch}", r.null_rate_urad_per_s, "urad/s",
                                   -p.max_null_rate_urad_per_s, p.max_null_rate_urad_per_s))
-        values = {"K_g_mV_per_urad": {ch: r.kg for ch, r in per.items()}}
+        values: dict = {}
+        add_figure(values, "K_g_mV_per_urad", kg_est)
+        add_figure(values, "h_over_k_s", tau_est, digits=4)
         figs = [Figure(f"ramps-{ch.lower()}", f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
                        partial(plot_channel, run=self._file_of(ctx, ch), ch=ch, r=results[ch])) for ch in p.channels]
-        return Analysis(values, ms, figs, markdown=markdown(per))
+        return Analysis(values, ms, figs, markdown=markdown(per, kg_est, tau_est))
 
 
 # ---------------------------------------------------------------------------- data kept by a channel step
 class _Record:
     """The channel's pickoff and torquer samples with their file times, kept in memory."""
 
-    def __init__(self, gcol: int, tcol: int) -> None:
-        self.cols = [gcol, tcol]
+    def __init__(self, gcol: int, tcol: int, partner_col: int) -> None:
+        self.cols = [gcol, tcol, partner_col]
         self.t: list[np.ndarray] = []
         self.x: list[np.ndarray] = []
         self.n = 0
@@ -278,6 +317,10 @@ class _Record:
     def arrays(self, start: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         t, x = np.concatenate(self.t)[start:], np.concatenate(self.x)[start:]
         return t, x[:, 0], x[:, 1]
+
+    def partner(self, start: int = 0) -> np.ndarray:
+        """The float partner's pickoff over the same samples."""
+        return np.concatenate(self.x)[start:, 2]
 
     def index_at(self, time_s: float) -> int:
         return int(np.searchsorted(np.concatenate(self.t), time_s))

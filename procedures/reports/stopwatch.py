@@ -10,19 +10,25 @@ import numpy as np
 
 from daq.plots import new_figure, save_figure
 from daq.reader import RunFile
+from procedures.analysis.intervals import Estimate
 from procedures.analysis.stopwatch import ChannelResult
 
 
-def markdown(per: dict[str, ChannelResult]) -> str:
+def _interval(e: Estimate, fmt: str) -> str:
+    span = f"[{e.lo:{fmt}}, {e.hi:{fmt}}]"
+    return f"{e.value:{fmt}} {span}" if e.resolved else f"not resolved {span}"
+
+
+def markdown(per: dict[str, ChannelResult], kg: dict[str, Estimate], tau: dict[str, Estimate]) -> str:
     lines = ["## Results", "",
-             "| channel | K_g stopwatch (mV/urad) | spread | up - down | K_g least squares | h/k fitted (s) | "
+             "| channel | K_g stopwatch (mV/urad) [95 %] | spread | up - down | K_g least squares | h/k fitted (s) [95 %] | "
              "restraint correction | residual null rate (urad/s) | K_TO used (urad/s/V) |",
              "|---|---|---|---|---|---|---|---|---|"]
     for ch, r in per.items():
-        tau = "not resolved" if r.tau_s is None else f"{r.tau_s:.0f} ± {r.tau_se:.0f}"
-        lines.append(f"| {ch} | {r.kg:.4f} ± {r.kg_se:.4f} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
+        lines.append(f"| {ch} | {_interval(kg[ch], '.4f')} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
                      f"{r.kg_ls:.4f} ± "
-                     f"{r.kg_ls_se:.4f} | {tau} | {100 * r.correction:+.3f} % | {r.null_rate_urad_per_s:+.4f} | "
+                     f"{r.kg_ls_se:.4f} | {_interval(tau[ch], '.0f')} | {100 * r.correction:+.3f} % | "
+                     f"{r.null_rate_urad_per_s:+.4f} | "
                      f"{r.kto:.4g} ({r.kto_from}) |")
     nominal = [ch for ch, r in per.items() if r.kto_from == "nominal"]
     if nominal:
@@ -32,7 +38,10 @@ def markdown(per: dict[str, ChannelResult]) -> str:
     for ch, r in per.items():
         lines.append(f"- {ch}: " + ", ".join(f"{c:.4f} / {n:.4f}" for c, n in zip(r.readings, r.naive)))
     lines += ["", "The ramps run between levels symmetric about the null position, so the elastic restraint's "
-              "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record."]
+              "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record "
+              "with the float partner's torquer as a regressor; it is shown with its interval but not reported as a "
+              "figure (the fit also carries the partner's viscous coupling). K_g's interval is Student's t over the "
+              "repetitions combined with the interval of the K_TO used."]
     return "\n".join(lines)
 
 

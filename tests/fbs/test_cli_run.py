@@ -103,9 +103,11 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     r = fbs("run", "stopwatch", "--rig", RIG, "--out", str(tmp_path), "--json")
     assert r.returncode == 0, r.stderr
     sw = json.loads(r.stdout)
-    assert list(sw) == ["K_g_mV_per_urad", "file"]
+    assert list(sw)[:3] == ["K_g_mV_per_urad", "h_over_k_s", "file"]
     for ch, kg in KG.items():
         assert sw["K_g_mV_per_urad"][ch] == pytest.approx(kg, rel=2e-2)
+        assert sw["K_g_mV_per_urad_ci95"][ch][0] <= kg <= sw["K_g_mV_per_urad_ci95"][ch][1]
+        assert sw["resolved"]["K_g_mV_per_urad"][ch] and not sw["resolved"]["h_over_k_s"][ch]
     assert "(earth-rate)" in (tmp_path / "stopwatch.md").read_text()   # the measured K_TO was used
 
 

@@ -151,6 +151,53 @@ def test_restraint_fit_recovers_slope_and_h_over_k():
     assert fit["c"] == pytest.approx(c, rel=5e-2)  # 0.5 s means blur the bias steps a little
 
 
+def _coupled_float(ka: float, kb: float, tau: float, rate: float = 20.0):
+    """A two-degree-of-freedom float written from II C.4.d, not from the sim: channel a open loop
+    under bias steps and holds, channel b caged by a PI loop (0.1 rad/s, zeta 0.7) on its pickoff;
+    sigma_a' (1 + ka kb) = f_a + kb f_b, sigma_b' (1 + ka kb) = f_b - ka f_a, f = torquer rate
+    - sigma / tau. Returns t, the pickoff of a (V, 6 mV/urad), its torquer (V, 30 urad/s/V) and b's."""
+    kg, kto, wn, z = 6e-3 / 1e-6, 30e-6, 0.1, 0.7
+    t = np.arange(0, 600, 1 / rate)
+    phase = t % 150
+    vt_a = np.where(phase < 40, 0.6, np.where(phase < 75, 0.0, np.where(phase < 115, -0.6, 0.0)))
+    sa = sb = integ = 0.0
+    ga, gb = np.empty_like(t), np.empty_like(t)
+    for i in range(len(t)):
+        vt_b = -(2 * z * wn * sb + wn * wn * integ) / kto
+        gb[i] = vt_b
+        fa, fb = kto * vt_a[i] - sa / tau, kto * vt_b - sb / tau
+        da, db = (fa + kb * fb) / (1 + ka * kb), (fb - ka * fa) / (1 + ka * kb)
+        ga[i] = sa * kg
+        sa, sb, integ = sa + da / rate, sb + db / rate, integ + sb / rate
+    return t, ga, vt_a, gb
+
+
+def test_the_float_partners_loop_is_not_read_as_restraint():
+    """With the partner's caging loop pushing the float through the viscous coupling, the fit
+    without the partner's torquer misreads h/k; with it, h/k comes out as h/k (1 + ka kb)."""
+    ka, kb, tau = 0.5, 0.05, 450.0
+    t, vg, vt, vt_b = _coupled_float(ka, kb, tau)
+    with_partner = _restraint_fit(t, vg, vt, vt_null=0.0, vg0=0.0, dt_s=0.5, partner=vt_b)
+    without = _restraint_fit(t, vg, vt, vt_null=0.0, vg0=0.0, dt_s=0.5)
+    assert 1 / with_partner["k"] == pytest.approx(tau * (1 + ka * kb), rel=0.02)
+    assert abs(1 / without["k"] / tau - 1) > 0.05
+
+
+def test_k_g_interval_carries_the_k_to_interval():
+    r = {"ch": "X", "kto": 31.6, "kto_from": "earth-rate", "dVg": 2.0, "null_slope": 0.0,
+         "ramps": [[-1, 20.0, -0.3], [1, 20.2, 0.3], [-1, 19.9, -0.3], [1, 20.1, 0.3]],
+         "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / 400.0, "k_se": 8e-5, "dof": 9}}
+    res = channel_result(r)
+    alone, with_kto = res.kg_estimate(0.0), res.kg_estimate(0.01)
+    assert alone.resolved and with_kto.resolved and alone.lo < res.kg < alone.hi
+    assert with_kto.half_width == pytest.approx(math.hypot(alone.half_width, 0.01 * res.kg))
+    nominal = res.kg_estimate(None)
+    assert not nominal.resolved and "nominal" in nominal.why
+    # h/k: an interval around the fitted value, never a resolved figure (acceptance B: not reported)
+    tau = res.tau_estimate()
+    assert not tau.resolved and tau.lo < 400.0 < tau.hi
+
+
 def test_restraint_correction_is_x_coth_x():
     tau = 400.0
     r = {"ch": "X", "kto": 31.6, "kto_from": "given", "dVg": 2.0, "null_slope": 0.0,
@@ -230,3 +277,53 @@ def test_the_multi_position_test_separates_fixed_and_g_sensitive_drift(tmp_path)
     assert v["resolved"]["drift_urad_per_s"] == {"X": True, "Y": True, "Z": False, "XRD": True}
     assert v["resolved"]["g_drift_x_urad_per_s_per_g"]["X"] and v["resolved"]["g_drift_y_urad_per_s_per_g"]["Y"]
     assert v["drift_urad_per_s"]["Z"] is None and v["K_TO_urad_per_s_per_V"]["Z"] is not None
+
+
+# ---------------------------------------------------------------------------- stopwatch resumed
+KTO_SIM = {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0}   # the default sim's: K_g's interval is then the method's
+
+
+@pytest.fixture(scope="module")
+def uninterrupted_stopwatch(tmp_path_factory):
+    with open_rig("sim?warm=1&seed=4&watchdog=5") as rig:
+        return run_procedure(Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=KTO_SIM)), rig,
+                             tmp_path_factory.mktemp("stopwatch"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("ch", ["X", "Y", "Z", "XRD"])
+def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(tmp_path, uninterrupted_stopwatch, ch):
+    """Acceptance E (issue 18): aborted in the middle of channel ``ch``'s step and resumed on a
+    rig started cold (a new process after a power cut), the run passes, the resumed step waited
+    the settle an uninterrupted run gives it, and every K_g is within the uninterrupted run's
+    95 % interval."""
+    import threading
+
+    from procedures.runner import load_resume
+
+    ref = uninterrupted_stopwatch
+    assert ref.verdict == "pass", ref.error
+    stop, reports = threading.Event(), []
+
+    def listener(p):
+        if p.step == f"channel {ch}":
+            reports.append(p)
+            if len(reports) > 3:
+                stop.set()
+
+    params = Stopwatch.Params(kto_urad_per_s_per_V=KTO_SIM)
+    with open_rig("sim?warm=1&seed=4&watchdog=5") as rig:
+        first = run_procedure(Stopwatch(params), rig, tmp_path, progress=listener, abort=stop)
+    order = ["X", "Y", "Z", "XRD"]
+    assert first.status.startswith("aborted") and first.steps_done == ["mode 3"] + [f"channel {c}" for c in
+                                                                                     order[:order.index(ch)]]
+    resumed = load_resume(first.file, "stopwatch")
+    with open_rig("sim?seed=41&watchdog=5") as rig:                       # cold: the wheels spin up again
+        second = run_procedure(Stopwatch(Stopwatch.Params(**resumed.params)), rig, tmp_path, resume=resumed)
+    assert second.verdict == "pass", second.error or [m for m in second.measurements if m.passed is False]
+    assert second.steps_resumed == first.steps_done[1:]
+    result = next(m for m in second.measurements if m.name.startswith(f"residual null rate {ch}"))
+    assert abs(result.value) < params.max_null_rate_urad_per_s
+    for c in order:
+        lo, hi = ref.values["K_g_mV_per_urad_ci95"][c]
+        assert lo <= second.values["K_g_mV_per_urad"][c] <= hi, (c, second.values["K_g_mV_per_urad"][c], lo, hi)
