@@ -450,6 +450,29 @@ class PathScan:
     eta_per_Nm: list[float]
     best: int
 
+    def envelope(self, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+        """How far (ln To, ln eta, ln eta To^2) move from the best fit's over the stretch of the
+        scan whose residual rms is within ``tolerance`` (a fraction) of the least: the path
+        choices the torque cannot tell from the best. Between grid points the residual and the
+        estimates are interpolated linearly in ln cutoff. Returns (down, up), each >= 0."""
+        r = np.asarray(self.residual_rms_Nm, float)
+        ln = np.column_stack([np.log(self.To_Nm), np.log(self.eta_per_Nm),
+                              2 * np.log(self.To_Nm) + np.log(self.eta_per_Nm)])
+        limit = r[self.best] * (1 + tolerance)
+        reached = [ln[self.best]]
+        for direction in (-1, 1):
+            i = self.best
+            while 0 <= i + direction < len(r):
+                j = i + direction
+                if r[j] <= limit:
+                    reached.append(ln[j])
+                    i = j
+                    continue
+                reached.append(ln[i] + (limit - r[i]) / (r[j] - r[i]) * (ln[j] - ln[i]))
+                break
+        v = np.array(reached) - ln[self.best]
+        return np.maximum(-v.min(axis=0), 0.0), np.maximum(v.max(axis=0), 0.0)
+
 
 def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
                   smooth_hz: float, cutoffs_hz: list[float], step: int = 1,

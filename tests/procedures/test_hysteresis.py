@@ -340,7 +340,7 @@ def test_default_rig_acceptance_a(tmp_path, capsys):
     for key in ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad"):
         assert s.values["resolved"][key] == {"X": True}
         lo, hi = s.values[f"{key}_ci95"]
-        assert lo < s.values[key] < hi and hi - lo < 0.05 * s.values[key]
+        assert lo < s.values[key] < hi and hi - lo < 0.1 * s.values[key]
     assert rig_s < 300
     assert [m.passed for m in s.measurements if m.passed is not None] == [True] * 8
     assert any(m.name.startswith("angle lag") and m.value == pytest.approx(s.values["angle_lag_ms"])

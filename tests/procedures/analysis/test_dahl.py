@@ -332,3 +332,18 @@ def test_measure_lag_refuses_a_smooth_command():
     segs = [dahl.Segment(n_per, 6 * n_per, 0, 5, 1.0)]
     with pytest.raises(ValueError, match="no line"):
         dahl.measure_lag(cmd, cmd, cmd, fs, f0, segs, lambda x: 1.0 / (-x * x), min_hz=10.0, max_hz=180.0)
+
+
+def test_path_envelope_spans_the_bandwidths_the_residual_cannot_tell_apart():
+    """The scan's estimates over the stretch whose residual is within the tolerance of the
+    least, interpolated in ln cutoff at the ends; nothing beyond it."""
+    cut = [10.0, 12.5, 15.625, 19.53]
+    scan = dahl.PathScan(cut, [2.0, 1.05, 1.0, 1.5], [1.0, 1.0, 1.0, 1.0], [math.e ** -0.2, math.e ** -0.1, 1.0,
+                                                                           math.e ** 0.1], best=2)
+    down, up = scan.envelope(0.10)
+    # left: 12.5 is within 10 % (ln eta -0.1); on to 10.0 the limit 1.1 is reached a twentieth of the way
+    assert down[1] == pytest.approx(0.1 + (1.1 - 1.05) / (2.0 - 1.05) * 0.1)
+    # right: the limit is reached a fifth of the way to 19.53 (ln eta +0.1)
+    assert up[1] == pytest.approx(0.2 * 0.1)
+    assert down[0] == up[0] == 0.0                      # To the same everywhere
+    assert all(np.allclose(side, 0.0) for side in scan.envelope(0.0))
