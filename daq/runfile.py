@@ -63,6 +63,10 @@ except importlib.metadata.PackageNotFoundError:  # run from a checkout that was 
 
 FORMAT = "fbs-run"
 FORMAT_VERSION = 1
+#: HDF5 format bounds (DESIGN.md section 6): every object encoded as HDF5 1.10 reads it, and
+#: SWMR (which needs 1.10's superblock) still works. "latest" let the installed library (2.x)
+#: choose newer encodings that 1.10 tools (h5dump 1.10.8) could not read.
+LIBVER = ("v110", "v110")
 STATUS_RECORDING = "recording"
 STATUS_COMPLETE = "complete"
 KIND_BYTES = 32
@@ -198,7 +202,7 @@ class RunWriter:
     def _open(self, overwrite: bool) -> None:
         check_new_path(self.path, overwrite)
         try:
-            self.f = h5py.File(self.path, "w" if overwrite else "w-", libver="latest", rdcc_nbytes=0)
+            self.f = h5py.File(self.path, "w" if overwrite else "w-", libver=LIBVER, rdcc_nbytes=0)
         except (OSError, ValueError) as exc:
             raise RunFileError(f"cannot create run file {self.path}: {exc}") from exc
 

@@ -58,6 +58,36 @@ def test_a_closed_file_follows_the_layout_and_opens_with_plain_h5py(tmp_path):
         assert "fbs-hil" in json.loads(f["meta"].attrs["software_version"])
 
 
+def test_the_writer_keeps_to_hdf5_1_10_format_bounds(tmp_path):
+    """DESIGN.md section 6: encodings HDF5 1.10 reads (with "latest" the installed 2.x library
+    chose newer ones for the events table, which h5dump 1.10.8 refused)."""
+    with _writer(tmp_path / "r.h5") as w:
+        assert w.f.id.get_access_plist().get_libver_bounds() == (h5py.h5f.LIBVER_V110, h5py.h5f.LIBVER_V110)
+        w.append(np.zeros((10, 2)))
+        w.event(0.5, "mode", "mode 3")
+
+
+def _h5dump_1_10() -> str | None:
+    import shutil
+
+    exe = shutil.which("h5dump")
+    if exe is None:
+        return None
+    out = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=30).stdout
+    return exe if "1.10." in out else None
+
+
+@pytest.mark.skipif(_h5dump_1_10() is None, reason="no HDF5 1.10 h5dump on PATH to read the file with")
+def test_a_run_file_opens_in_hdf5_1_10_h5dump(tmp_path):
+    """Issue 19 acceptance E: the file, events table included, dumps with HDF5 1.10's tool."""
+    with _writer(tmp_path / "r.h5", axis="X", procedure="unit") as w:
+        w.append(np.zeros((10, 2)))
+        w.event(0.5, "mode", "mode 3")
+    r = subprocess.run([str(_h5dump_1_10()), "-H", str(tmp_path / "r.h5")], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert "events" in r.stdout
+
+
 def test_samples_are_written_when_the_buffer_fills_and_flushed_when_the_interval_passes(tmp_path):
     clock = Clock()
     w = _writer(tmp_path / "r.h5", clock, flush_s=0.5, buffer_bytes=16 * 100)   # 100 samples of 2 channels
