@@ -332,3 +332,21 @@ def test_abort_and_resume_continue_the_record(tmp_path):
     for key in ("arw_urad_per_sqrt_s", "bias_instability_urad_per_s"):
         assert all(hi is not None for _, hi in second.values[f"{key}_ci95"].values()), key
 
+
+
+def test_a_term_the_model_apportions_is_not_resolved():
+    """A term read where it holds under half the modelled Allan variance is the fitted shapes'
+    doing, not a measurement: unresolved, with 0 .. the model-free bound; the same term where it
+    dominates is resolved by its interval."""
+    from procedures.analysis.allan import TermEstimate
+    from procedures.analysis.drift import MIN_SHARE_TO_RESOLVE, ChannelDrift
+
+    def drift_with(share: float) -> ChannelDrift:
+        arw = TermEstimate("arw", 0.11, 0.069, 0.147, 102.4, share, 0.239)
+        return ChannelDrift("X", 31.6, 0.0, None, None, arw, None, None, [])
+
+    low = drift_with(0.41).estimate("arw")
+    assert not low.resolved and (low.lo, low.hi) == (0.0, 0.239) and "41 %" in low.why
+    assert low.covers(0.005)
+    high = drift_with(max(0.9, MIN_SHARE_TO_RESOLVE)).estimate("arw")
+    assert high.resolved and (high.lo, high.hi) == (0.069, 0.147)
