@@ -8,7 +8,9 @@ The time dt for the pickoff to change by a set amount dV_g gives
 
 Per channel, all decided from the data and read back from the ADC:
 
-1. Caged reference: the settled torquer output V_T0 is exactly the null torquer voltage.
+1. Caged reference: once every caging loop has been closed ``min_caged_s`` since mode 3 (a
+   step resumed just after mode 3 waits as an uninterrupted one has), the settled torquer
+   output V_T0 is exactly the null torquer voltage.
 2. Caging inhibited; the bias-to-torquer-output gain g is measured with one small bias step
    (the output follows the bias at once with the loop open), then the bias set so the output
    equals V_T0, and the residual precession checked from the pickoff slope and trimmed until it
@@ -22,17 +24,24 @@ Per channel, all decided from the data and read back from the ADC:
    (sigma - sigma_0)/(h/k). For a ramp from -D to +D about the null, u' = r - u/tau gives
    r = (D/tau) coth(dt / 2 tau), so the corrected value is the naive one times
    x coth x, x = dt / (2 tau): the symmetric ramps keep the correction to second order.
-   tau comes from a least-squares fit of the whole open-loop record:
+   tau comes from a least-squares fit of the pickoff's increments over the open-loop record
+   (``restraint_fit``):
 
-       V_g(t) - V_g(t_0) = a int (V_T - V_T0) dt + c (t - t_0) - k int (V_g - V_g0) dt
+       dV_g = a int (V_T - V_T0) dt + c dt - k int (V_g - V_g0) dt + b int V_T,partner dt
 
-   (a = K_g K_TO, the least-squares ramp slope; c the residual null rate; k = 1/tau), which
-   the holds between ramps, where only the restraint moves the pickoff, make well determined.
+   (a = K_g K_TO, c the residual null rate, k = 1/tau; the partner is the channel sharing the
+   float, whose caging loop pushes it through the viscous coupling, II C.4.d). The holds between
+   ramps, where only the restraint moves the pickoff, determine k. The fit also carries
+   (1 + (c/h)_a (c/h)_b) and the random drift, so h/k is shown with its interval but never
+   reported as a figure (``h_over_k_s`` is ``resolved: false``); the x coth x correction it
+   feeds is a few 0.01 %.
 5. Restore: caging released with the bias still holding the null, the bias slewed to zero
    while the loop takes over, settled.
 
 K_TO is taken from ``Params.kto_urad_per_s_per_V``, else an earlier earth-rate result
-(``prior``), else the rig's nominal data-sheet value, and the report says which.
+(``prior``), else the rig's nominal data-sheet value, and the report says which. K_g's 95 %
+interval is Student's t over the repetitions combined with that K_TO's interval (none for a
+given value; with the nominal value K_g is not resolved).
 
 This module holds the parameters, the steps and the analysis that ties them together; the
 numerics (crossing times, the restraint fit, the corrected readings) are
@@ -290,7 +299,8 @@ class Stopwatch(Procedure[StopwatchParams]):
 
 # ---------------------------------------------------------------------------- data kept by a channel step
 class _Record:
-    """The channel's pickoff and torquer samples with their file times, kept in memory."""
+    """The channel's pickoff and torquer samples and its float partner's torquer, with their
+    file times, kept in memory."""
 
     def __init__(self, gcol: int, tcol: int, partner_col: int) -> None:
         self.cols = [gcol, tcol, partner_col]
