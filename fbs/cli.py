@@ -26,7 +26,7 @@ def _simulate(args: argparse.Namespace) -> int:
         cfg = effect.inject(cfg, axis, **values)
         applied.append(spec)
     path = simulate_to_file(cfg, args.out, mode=args.mode, duration_s=args.duration, rate_hz=args.rate,
-                            seed=args.seed, truth=args.truth, effects=applied)
+                            seed=args.seed, truth=args.truth, effects=applied, overwrite=args.force)
     print(f"wrote {path}: mode {args.mode}, {args.duration:g} s at {args.rate:g} Hz"
           + (f", effects {', '.join(applied)}" if applied else ""))
     return 0
@@ -76,7 +76,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="inject an effect (DESIGN.md section 8), e.g. pickup_line:freq_hz=200,amplitude_V=0.003")
     s.add_argument("--truth", action="store_true", help="also record the true platform angles")
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--out", required=True, help="output .h5 file")
+    s.add_argument("--out", required=True, help="output .h5 file (never replaced unless --force)")
+    s.add_argument("--force", action="store_true",
+                   help="replace an existing --out (never one a writer may still be filling)")
     s.set_defaults(func=_simulate)
 
     r = sub.add_parser("record", help="record the rig's ADC channels to an fbs-run file")

@@ -92,8 +92,13 @@ def test_sim_config_overrides_reach_the_plant(tmp_path):
 
 @pytest.mark.parametrize("args, message", [
     (["--mode", "7", "--duration", "1", "--rate", "100"], "invalid choice"),
-    (["--mode", "3", "--duration", "-1", "--rate", "100"], "duration -1.0 s must be > 0"),
-    (["--mode", "3", "--duration", "1", "--rate", "0"], "sample rate"),
+    (["--mode", "3", "--duration", "-1", "--rate", "100"], "--duration -1.0 must be a finite number > 0"),
+    (["--mode", "3", "--duration", "1", "--rate", "0"], "--rate 0.0 must be a finite number > 0"),
+    (["--mode", "3", "--duration", "nan", "--rate", "100"], "--duration nan must be a finite number > 0"),
+    (["--mode", "3", "--duration", "inf", "--rate", "100"], "--duration inf must be a finite number > 0"),
+    (["--mode", "3", "--duration", "1e-4", "--rate", "200"], "0.02 samples; at least 2 are needed"),
+    (["--mode", "3", "--duration", "1", "--rate", "1e12"], "beyond the offline simulator's 100000 Hz"),
+    (["--mode", "3", "--duration", "1e12", "--rate", "200"], "GB free"),
     (["--mode", "3", "--duration", "1", "--rate", "100", "--effect", "bearing_friction:To_Nm=9"],
      "To_Nm = 9.0 outside its range"),
 ])
@@ -101,3 +106,27 @@ def test_bad_arguments_fail_with_a_clear_message(tmp_path, args, message):
     r = run("simulate", *args, "--out", str(tmp_path / "x.h5"))
     assert r.returncode == 2
     assert message in r.stderr
+
+
+def test_an_existing_file_is_never_replaced_unless_forced_and_never_one_being_written(tmp_path):
+    """Issue 19 item 2: ``--out`` over a finished recording, or one a writer is still filling,
+    and a bad argument over an existing file: the file is left as it was."""
+    out = tmp_path / "x.h5"
+    assert run("simulate", "--mode", "3", "--duration", "2", "--rate", "100", "--out", str(out)).returncode == 0
+    before = out.read_bytes()
+    for extra in ([], ["--duration", "nan"]):
+        args = ["--mode", "3", "--duration", "2", "--rate", "100", *extra]
+        r = run("simulate", *args, "--out", str(out))
+        assert r.returncode == 2 and out.read_bytes() == before, r.stderr
+    assert "exists; a recording is never overwritten" in run("simulate", "--mode", "3", "--duration", "2", "--rate",
+                                                             "100", "--out", str(out)).stderr
+    r = run("simulate", "--mode", "3", "--duration", "3", "--rate", "100", "--seed", "2", "--out", str(out), "--force")
+    assert r.returncode == 0, r.stderr
+    with h5py.File(out, "r") as f:
+        assert f["channels/gyro_x"].shape == (300,)
+    with h5py.File(out, "r+") as f:                       # as a writer that has not finished leaves it
+        f.attrs["status"] = "recording"
+    before = out.read_bytes()
+    r = run("simulate", "--mode", "3", "--duration", "2", "--rate", "100", "--out", str(out), "--force")
+    assert r.returncode == 2 and "not replaced, even with --force" in r.stderr
+    assert out.read_bytes() == before
