@@ -202,8 +202,8 @@ def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
            overwrite: bool = False) -> RecordResult:
     """Record ``duration_s`` seconds of the ADC to ``path``; returns what was written. An abort
     leaves the rig safe (``SafeOnAbort``) and the file closed "aborted: <why>"."""
-    if not duration_s > 0:
-        raise ValueError(f"record duration {duration_s!r} s must be > 0")
+    if not (duration_s > 0 and duration_s < float("inf")):
+        raise ValueError(f"record duration {duration_s!r} s must be a finite number > 0")
     guard = SafeOnAbort(rig, "recording")
     with guard:
         acq = Acquisition(rig, path, rate_hz=rate_hz, channels=channels, ranges_V=ranges_V, block_s=block_s,

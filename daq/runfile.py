@@ -39,7 +39,9 @@ import datetime as _dt
 import importlib.metadata
 import json
 import logging
+import math
 import os
+import shutil
 import socket
 import time
 from collections.abc import Callable, Mapping
@@ -137,6 +139,40 @@ def check_new_path(path: str | Path, overwrite: bool = False) -> None:
         raise RunFileError(f"cannot create run file {path}: {exc}") from exc
     if not os.access(path.parent, os.W_OK):
         raise RunFileError(f"cannot create run file {path}: folder {path.parent} is not writable")
+
+
+def check_request(out: str | Path, *, duration_s: float, rate_hz: float, n_channels: int, max_rate_hz: float,
+                  overwrite: bool = False) -> None:
+    """Refuse, before anything is opened or a rig is told anything, a recording that cannot be
+    what was meant: a duration or rate that is not a finite positive number, a rate beyond
+    ``max_rate_hz``, fewer than two samples, more data than the output's disk has room for, or
+    an output that exists (unless ``overwrite``; even then never one a writer may still be
+    filling). ``ValueError`` or ``RunFileError`` names the value and the limit."""
+    for name, v in (("duration", duration_s), ("rate", rate_hz)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ValueError(f"--{name} {v!r} must be a finite number > 0")
+    if rate_hz > max_rate_hz:
+        raise ValueError(f"--rate {rate_hz:g} Hz is beyond the {max_rate_hz:g} Hz this command can deliver")
+    samples = duration_s * rate_hz
+    if samples < 2:
+        raise ValueError(f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz gives {samples:.3g} samples; "
+                         f"at least 2 are needed")
+    out = Path(out)
+    check_new_path(out, overwrite)
+    if out.exists():
+        try:
+            with h5py.File(out, "r") as f:
+                status = str(f.attrs.get("status", ""))
+        except OSError as exc:
+            raise RunFileError(f"{out} cannot be opened ({exc}): perhaps a writer has it; not replaced") from None
+        if status == STATUS_RECORDING:
+            raise RunFileError(f"{out} has status {STATUS_RECORDING!r} (a writer may still be filling it): "
+                               f"not replaced, even with --force")
+    need = samples * n_channels * 8 * 1.05           # float64 per channel, a little for the layout
+    free = shutil.disk_usage(out.parent).free
+    if need > free:
+        raise ValueError(f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz needs about {need / 1e9:.3g} GB; "
+                         f"{out.parent} has {free / 1e9:.3g} GB free")
 
 
 class RunWriter:

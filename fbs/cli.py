@@ -14,6 +14,12 @@ from simhw import effects as effect_catalogue
 from simhw.params import ConfigError, load_config
 
 log = logging.getLogger("fbs")
+#: DESIGN.md section 5 names 20 channels: a recording's disk check assumes all of them unless
+#: --channels names fewer
+SECTION_5_CHANNELS = 20
+#: no ADC this software drives streams more sample sets per second (the sim's: 2 MS/s shared);
+#: the ADC itself refuses, with its own limit, a rate it cannot keep up for the channels asked
+MAX_RECORD_RATE_HZ = 2_000_000.0
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -34,11 +40,14 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace) -> int:
     from daq.recorder import record
-    from daq.runfile import check_new_path
+    from daq.runfile import check_request
     from drivers.rig import open_rig
 
     channels = [c for c in args.channels.split(",") if c] if args.channels else None
-    check_new_path(args.out)  # a bad --out fails before the rig moves
+    # every argument and --out fail before the rig is told anything (the ADC refuses a rate
+    # beyond its own aggregate limit; this bound is the most any ADC here delivers)
+    check_request(args.out, duration_s=args.duration, rate_hz=args.rate, max_rate_hz=MAX_RECORD_RATE_HZ,
+                  n_channels=len(channels) if channels else SECTION_5_CHANNELS)
     with open_rig(args.rig) as rig:
         rig.set_mode(args.mode)  # disallowed modes and interlocks are refused here, with the reason
         result = record(rig, args.out, duration_s=args.duration, rate_hz=args.rate, channels=channels)

@@ -40,3 +40,20 @@ def test_record_writes_a_complete_run_file(tmp_path, capsys):
         assert sorted(f["channels"]) == ["ac_x_ctl", "gyro_x", "torq_x"]
         assert f["channels/gyro_x"].shape == (1000,)
         assert f["channels/gyro_x"].attrs["sample_rate_hz"] == 500.0
+
+
+@pytest.mark.parametrize("duration, rate, message", [
+    ("nan", "100", "--duration nan must be a finite number > 0"),
+    ("inf", "100", "--duration inf must be a finite number > 0"),
+    ("1e-4", "100", "gives 0.01 samples; at least 2 are needed"),
+    ("1", "1e12", "--rate 1e+12 Hz is beyond"),
+    ("1e12", "1000", "GB free"),
+])
+def test_bad_arguments_are_refused_before_the_rig_is_opened(tmp_path, capsys, duration, rate, message):
+    """Issue 19 items 7, 8: the rig URL names a port that does not exist, so reaching the rig
+    would be a different error; nothing is written."""
+    out = tmp_path / "r.h5"
+    assert main(["record", "--rig", "serial:///dev/no-such-port", "--mode", "3", "--duration", duration,
+                 "--rate", rate, "--out", str(out)]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
