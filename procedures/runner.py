@@ -46,6 +46,7 @@ from daq.recorder import Acquisition
 from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
+from procedures import paramtypes
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -248,6 +249,7 @@ class Procedure(abc.ABC, Generic[P]):
         unknown = sorted(set(data) - set(names))
         if unknown:
             raise ValueError(f"{cls.name}: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(names)})")
+        paramtypes.check(cls.Params, data, cls.name)
         return cls.Params(**data)
 
 

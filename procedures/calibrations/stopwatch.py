@@ -98,6 +98,10 @@ class StopwatchParams:
         bad = [c for c in self.channels if c not in GYRO_CHANNELS]
         if bad or not self.channels:
             raise ValueError(f"stopwatch: channels {self.channels} must be some of {', '.join(GYRO_CHANNELS)}")
+        for ch, v in self.kto_urad_per_s_per_V.items():
+            if ch not in GYRO_CHANNELS or not 0 < v < 1e3:
+                raise ValueError(f"stopwatch: kto_urad_per_s_per_V {ch} = {v!r} must be a channel of "
+                                 f"{', '.join(GYRO_CHANNELS)} with a value in 0..1000 urad/s/V (the data sheet's are 31-34)")
         if not 1 <= int(self.repetitions) <= 50:
             raise ValueError(f"stopwatch: repetitions = {self.repetitions} must be 1..50")
         if not 0.05 <= self.delta_pickoff_V <= 8.0:
