@@ -6,10 +6,12 @@ import argparse
 import importlib.metadata
 import logging
 import sys
+from contextlib import nullcontext
 
 from drivers.errors import DriverError
 from fbs import analyze, demo, inspect, run, spectra
 from fbs import gap as gap_cli
+from fbs.signals import aborting_on_signals
 from simhw import effects as effect_catalogue
 from simhw.params import ConfigError, load_config
 
@@ -121,7 +123,9 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.INFO, stream=sys.stderr,
                         format="%(levelname)s %(name)s: %(message)s")
     try:
-        return args.func(args)
+        # the console owns its terminal and its signals (Textual); every other command aborts alike
+        with nullcontext() if args.command == "console" else aborting_on_signals():
+            return args.func(args)
     except (ConfigError, ValueError, OSError, DriverError) as exc:
         print(f"fbs {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -7,7 +7,8 @@ file, a JSON summary and a Markdown report with PNG plots land in ``--out``.
 Earlier results: a procedure that needs another's result (stopwatch needs K_TO from
 earth-rate; survey and drift use K_g and K_TO) takes the newest completed summary of that
 procedure in ``--out`` (or the files given with ``--prior``); the report says which it used.
-SIGTERM is treated like Ctrl-C: the rig goes safe and the file is closed "aborted: interrupted".
+SIGTERM and SIGHUP are treated like Ctrl-C (``fbs.signals``, for every command): the rig goes
+safe and the file is closed "aborted: interrupted".
 """
 
 from __future__ import annotations
@@ -15,7 +16,6 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import signal
 import sys
 from pathlib import Path
 
@@ -35,10 +35,6 @@ def rig_url(args: argparse.Namespace) -> str:
     return url
 
 
-def _sigterm(signum, frame) -> None:
-    raise KeyboardInterrupt
-
-
 def run_command(args: argparse.Namespace) -> int:
     from drivers.rig import open_rig
 
@@ -53,17 +49,12 @@ def run_command(args: argparse.Namespace) -> int:
     else:
         params = parse_params(proc_cls, args.param or [], args.axis)
     proc = proc_cls(params, prior=find_prior(out, args.prior))
-    # Ctrl-C and SIGTERM abort to the safe state, even when started with SIGINT ignored (a
-    # background job of a non-interactive shell).
-    previous = signal.signal(signal.SIGTERM, _sigterm), signal.signal(signal.SIGINT, signal.default_int_handler)
+    # Ctrl-C, SIGTERM and SIGHUP abort to the safe state (fbs.signals, set by the command line)
     try:
         with open_rig(rig_url(args)) as rig:
             summary = run_procedure(proc, rig, out, resume=resume, progress=_log_progress)
     except ProcedureError as exc:
         raise ValueError(str(exc)) from None
-    finally:
-        signal.signal(signal.SIGTERM, previous[0])
-        signal.signal(signal.SIGINT, previous[1])
     if args.json:
         print(json.dumps(summary.json_values(proc_cls.json_keys)))
     else:

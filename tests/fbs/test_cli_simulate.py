@@ -97,7 +97,7 @@ def test_sim_config_overrides_reach_the_plant(tmp_path):
     (["--mode", "3", "--duration", "nan", "--rate", "100"], "--duration nan must be a finite number > 0"),
     (["--mode", "3", "--duration", "inf", "--rate", "100"], "--duration inf must be a finite number > 0"),
     (["--mode", "3", "--duration", "1e-4", "--rate", "200"], "0.02 samples; at least 2 are needed"),
-    (["--mode", "3", "--duration", "1", "--rate", "1e12"], "beyond the offline simulator's 100000 Hz"),
+    (["--mode", "3", "--duration", "1", "--rate", "1e12"], "beyond the 100000 Hz this command can deliver"),
     (["--mode", "3", "--duration", "1e12", "--rate", "200"], "GB free"),
     (["--mode", "3", "--duration", "1", "--rate", "100", "--effect", "bearing_friction:To_Nm=9"],
      "To_Nm = 9.0 outside its range"),

@@ -1,0 +1,71 @@
+"""Real signals to a real ``fbs`` process (issue 19 item 3): SIGINT, SIGTERM and SIGHUP all take
+the abort path - rig safe and read back, file closed "aborted: interrupted", exit 2 - also when
+the process was started with SIGINT ignored, as a script's background job is."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from daq.reader import RunFile
+
+pytestmark = pytest.mark.slow
+FBS = [sys.executable, "-m", "fbs.cli"]
+
+
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _wait_for_samples(p: subprocess.Popen, path, events: int = 0, timeout_s: float = 300.0) -> None:
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end and p.poll() is None:
+        time.sleep(0.3)
+        try:
+            with RunFile(path) as rf:
+                if rf.n_samples > 0 and sum(e.kind == "step-done" for e in rf.events) >= events:
+                    return
+        except (OSError, ValueError):
+            pass          # not created or not yet flushed
+    raise AssertionError(f"{path} never got going (exit {p.poll()})")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
+def test_a_signal_aborts_a_recording_to_the_safe_state(tmp_path, sig):
+    path = tmp_path / "r.h5"
+    p = subprocess.Popen([*FBS, "record", "--rig", "sim", "--mode", "3", "--duration", "100000", "--rate", "100",
+                          "--out", str(path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=dict(os.environ, PYTHONUNBUFFERED="1"), preexec_fn=_ignore_sigint)
+    try:
+        _wait_for_samples(p, path)
+        p.send_signal(sig)
+        _, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    assert p.returncode == 2, stderr
+    with RunFile(path) as rf:
+        assert rf.status == "aborted: interrupted"
+        safe = [e for e in rf.events if e.kind == "safe"]
+    assert safe and safe[-1].text == "safe state reached", stderr
+
+
+def test_sighup_aborts_a_procedure_to_the_safe_state(tmp_path):
+    p = subprocess.Popen([*FBS, "run", "stopwatch", "--rig", "sim?warm=1", "--out", str(tmp_path)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=dict(os.environ, PYTHONUNBUFFERED="1"), preexec_fn=_ignore_sigint)
+    path = tmp_path / "stopwatch.h5"
+    try:
+        _wait_for_samples(p, path, events=1)
+        p.send_signal(signal.SIGHUP)
+        _, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    assert p.returncode == 2, stderr
+    with RunFile(path) as rf:
+        assert rf.status == "aborted: interrupted"
+        assert any(e.kind == "safe" and e.text == "safe state reached" for e in rf.events)
