@@ -31,6 +31,12 @@ NEA_BAND_HZ = (0.1, 100.0)
 #: Band in which the gyro pickoff noise rms is quoted (Ch. V, 0.1-200 Hz).
 PICKOFF_BAND_HZ = (0.1, 200.0)
 SPIN_READY = 0.99
+#: an analog output beyond this is a diverged plant, not a signal (the amplifiers' supply is 28 V)
+DIVERGED_V = 1e6
+
+
+class SimulationDiverged(ValueError):
+    """The plant's outputs left any physical range: the message says when, where and what."""
 #: Wheel-speed resolution of the plant model during run-up and run-down.
 SPIN_MODEL_STEP = 0.1
 
@@ -372,6 +378,7 @@ class Simulator:
         ny = len(CHANNELS)
         y = np.concatenate(chunks) if chunks else np.zeros((0, ny + len(TRUTH_CHANNELS)))
         analog = y[:, :ny]
+        self._check_finite(analog, t0)
         for col, line in self._pickup:
             analog[:, col] += line.take(n_int)
         keep, volts, over = self.chain.process(analog)
@@ -381,6 +388,17 @@ class Simulator:
                 truth[name] = y[keep, ny + i]
         self.clock.advance_to(self.time_s)
         return Block(t0, self.rate_hz, CHANNELS, volts, over, truth)
+
+    def _check_finite(self, analog: np.ndarray, t0: float) -> None:
+        """Raise ``SimulationDiverged`` where an output is not finite or beyond ``DIVERGED_V``:
+        the quantizer would otherwise write NaN as 0 V and the run would look quiet."""
+        bad = ~np.isfinite(analog) | (np.abs(analog) > DIVERGED_V)
+        if bad.any():
+            i, j = (int(k[0]) for k in np.nonzero(bad))
+            raise SimulationDiverged(
+                f"the simulation diverged at t = {t0 + i * self.dt:.6g} s: {CHANNELS[j]} = {analog[i, j]:.3g} V "
+                f"(beyond {DIVERGED_V:g} V or not a number); the configuration makes the plant unstable or "
+                f"the step too coarse for it - check the values changed from the defaults")
 
     def _spin_transient(self) -> bool:
         return abs(self._spin - self._spin_target()) > 1e-6

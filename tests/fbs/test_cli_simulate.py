@@ -130,3 +130,15 @@ def test_an_existing_file_is_never_replaced_unless_forced_and_never_one_being_wr
     r = run("simulate", "--mode", "3", "--duration", "2", "--rate", "100", "--out", str(out), "--force")
     assert r.returncode == 2 and "not replaced, even with --force" in r.stderr
     assert out.read_bytes() == before
+
+
+def test_a_diverging_plant_stops_with_where_and_when(tmp_path):
+    """Issue 19 item 4: an unstable configuration used to write NaN as 0.0 V and exit 0."""
+    cfg = tmp_path / "unstable.toml"
+    cfg.write_text("[platform.X]\namp_gain = 1e9\n")
+    out = tmp_path / "x.h5"
+    r = run("simulate", "--mode", "3", "--duration", "5", "--rate", "200", "--sim-config", str(cfg), "--out", str(out))
+    assert r.returncode == 2
+    assert "the simulation diverged at t = " in r.stderr and " V (beyond 1e+06 V" in r.stderr
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"].startswith("aborted: SimulationDiverged")
