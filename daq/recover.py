@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -148,17 +149,46 @@ class Recovery:
                 f"kept{pad}; status {self.status!r}; opens with plain h5py now")
 
 
-def _refuse_if_writer_alive(path: Path) -> None:
+def _refuse_if_writer_alive(path: Path, *, force: bool) -> None:
+    """Refuse a file whose writer still runs. ``force`` overrides a writer that is only *said*
+    to run (its pid alive on this host: perhaps another process got the number), never one
+    that holds this very file open (``_holds_open``): that is the writer, and clearing its
+    flags under it destroyed the file."""
     try:
         with RunFile(path) as run:       # opens in SWMR mode, as a live writer's file must be
             alive = run.writer_alive()
-            writer = run.attrs.get("writer", "?")
+            writer = str(run.attrs.get("writer", "?"))
     except RunFileError as exc:          # unreadable even so: no live writer keeps it that way
         log.warning("%s: cannot tell whether its writer runs (%s); repairing", path, exc)
         return
-    if alive:
+    if not alive:
+        return
+    m = _WRITER_PID.search(writer)
+    if m and _holds_open(int(m.group(1)), path):
+        raise RunFileError(f"{path}: its writer ({writer}) is still running and has the file open; stop it "
+                           f"first (not even force repairs a file under its writer)")
+    if not force:
         raise RunFileError(f"{path}: its writer ({writer}) is still running; stop it first "
                            "(or pass force if that process is not the writer)")
+
+
+_WRITER_PID = re.compile(r"pid (\d+) on ")
+
+
+def _holds_open(pid: int, path: Path) -> bool:
+    """Whether process ``pid`` has ``path`` open (Linux /proc; False where that cannot be seen)."""
+    target = path.resolve()
+    try:
+        fds = list(Path(f"/proc/{pid}/fd").iterdir())
+    except OSError:
+        return False
+    for fd in fds:
+        try:
+            if Path(os.readlink(fd)) == target:
+                return True
+        except OSError:
+            continue
+    return False
 
 
 def recover(path: str | Path, *, force: bool = False) -> Recovery:
@@ -167,8 +197,8 @@ def recover(path: str | Path, *, force: bool = False) -> Recovery:
     sb = read_superblock(path)
     was_open = sb.needs_repair(path.stat().st_size)
     if was_open:
-        if sb.flags and not force:
-            _refuse_if_writer_alive(path)
+        if sb.flags:
+            _refuse_if_writer_alive(path, force=force)
         clear_open_flags(path)
         log.info("%s: cleared open-for-write flags 0x%02x", path, sb.flags)
     padded: dict[str, int] = {}

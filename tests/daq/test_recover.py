@@ -123,6 +123,55 @@ def test_recover_refuses_while_the_writer_runs(tmp_path):
     assert recover(p).samples == 300
 
 
+def test_not_even_force_repairs_a_file_its_writer_holds_open(tmp_path):
+    """Issue 19 item 6: ``recover --force`` under a live writer destroyed its file. force is for
+    a pid that only looks alive (another process got the number), not for the writer itself."""
+    p = tmp_path / "live.h5"
+    proc = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(p), "wait"], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "flushed"
+        before = p.read_bytes()
+        with pytest.raises(RunFileError, match="has the file open; stop it first"):
+            recover(p, force=True)
+        assert p.read_bytes() == before              # untouched
+    finally:
+        proc.communicate("go\n", timeout=30)
+    assert recover(p).samples == 300
+
+
+def test_force_repairs_a_file_whose_writer_pid_now_names_another_process(tmp_path):
+    """The writer is dead but its pid is taken (here: this test's own process, which does not
+    have the file open): force repairs it, without force it is refused."""
+    p = tmp_path / "dead.h5"
+    _run(KILLED_WRITER, p)
+    with h5py.File(p, "r", swmr=True) as f:
+        writer = f.attrs["writer"]
+    import re
+
+    writer = writer if isinstance(writer, str) else writer.decode()
+    dead_pid = re.search(r"pid (\d+) on ", writer).group(1)
+    ours = str(os.getpid()).rjust(len(dead_pid), "0")       # same length: the attribute is patched in place
+    if len(ours) > len(dead_pid):
+        pytest.skip(f"this process's pid {ours} is longer than the dead writer's {dead_pid}")
+    _rewrite_writer(p, writer.replace(f"pid {dead_pid} on ", f"pid {ours} on "))
+    with pytest.raises(RunFileError, match="is still running; stop it first"):
+        recover(p)
+    assert recover(p, force=True).samples == 300
+
+
+def _rewrite_writer(path, text: str) -> None:
+    """Replace the writer attribute in place (same length) without opening the file for writing."""
+    with h5py.File(path, "r", swmr=True) as f:
+        old = f.attrs["writer"]
+    old_b = old.encode() if isinstance(old, str) else bytes(old)
+    new_b = text.encode()
+    assert len(new_b) == len(old_b)
+    data = path.read_bytes()
+    assert data.count(old_b) == 1
+    path.write_bytes(data.replace(old_b, new_b))
+
+
 def test_a_damaged_superblock_is_not_touched(tmp_path):
     p = tmp_path / "x.h5"
     with RunWriter(p, rig="t", mode=1, rate_hz=1.0, channels={"a": "V"}) as w:
