@@ -315,14 +315,15 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
 
 def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
-              closers: list | None = None, emulator=None) -> Rig:
+              reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None) -> Rig:
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
-    link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s)
+    link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
+                   reply_timeout_s=reply_timeout_s)
     adc = None
     try:
-        link.wait_for_nodes()
+        link.wait_for_nodes(max(2.0, node_timeout_s))
         clients = [NodeClient(link, n) for n in names]
         for c in clients:
             c.identify()

@@ -7,7 +7,8 @@ the physics through ``server.submit``, at the next block boundary.
 
 ``inject`` makes a node misbehave on request: ``stall`` (no answers, heartbeat goes on),
 ``disconnect`` (silent both ways), ``reset`` (reboot to power-on values), ``error`` (an
-emergency frame; the node latches safe), ``bad_response`` (the next answer is malformed).
+emergency frame; the node latches safe), ``bad_response`` (the next answer is malformed),
+``busy`` (every answer ``delay_s`` late, as from a host too loaded to schedule the node's thread).
 """
 
 from __future__ import annotations
@@ -31,7 +32,7 @@ log = logging.getLogger(__name__)
 FIRMWARE = 0x0100
 DAC_RANGE_V = 10.0
 DAC_LSB_V = 2 * DAC_RANGE_V / 2 ** 16
-NODE_FAULTS = ("stall", "disconnect", "reset", "error", "bad_response")
+NODE_FAULTS = ("stall", "disconnect", "reset", "error", "bad_response", "busy")
 
 
 class SimNode:
@@ -43,6 +44,7 @@ class SimNode:
         self.latched = False
         self.booting = True  # announces BOOT until the host's CLEAR
         self.stalled = False
+        self.reply_delay_s = 0.0
         self.connected = True
         self.silent_since = 0.0
         self.bad_response = 0
@@ -287,7 +289,7 @@ class CanNodeHost:
         for t in self._threads:
             t.start()
 
-    def inject(self, node: str, fault: str, code: int = cp.EMCY_OVERTEMP) -> None:
+    def inject(self, node: str, fault: str, code: int = cp.EMCY_OVERTEMP, delay_s: float = 1.5) -> None:
         if node not in self.nodes:
             raise ValueError(f"unknown node {node!r} (one of {', '.join(self.nodes)})")
         if fault not in NODE_FAULTS:
@@ -296,6 +298,8 @@ class CanNodeHost:
         with self._lock:
             if fault == "stall":
                 n.stalled = True
+            elif fault == "busy":
+                n.reply_delay_s = float(delay_s)
             elif fault == "disconnect":
                 n.connected = False
                 n.silent_since = time.monotonic()
@@ -347,6 +351,9 @@ class CanNodeHost:
         self._send(cp.RESPONSE_BASE + node, bytes(data))
 
     def _answer(self, req: cp.Request) -> None:
+        delay = getattr(self._by_id.get(req.node), "reply_delay_s", 0.0)
+        if delay:
+            time.sleep(delay)           # outside the lock: the heartbeats go on, as on a busy host
         with self._lock:
             n = self._by_id.get(req.node)
             if n is None or not n.connected or n.stalled:
