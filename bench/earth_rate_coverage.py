@@ -26,16 +26,15 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import multiprocessing  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
 import time  # noqa: E402
-from concurrent.futures import ProcessPoolExecutor, as_completed  # noqa: E402
 from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+from coverage_pool import run_cases, toml_of  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CHANNELS = ("X", "Y", "Z", "XRD")
@@ -60,14 +59,6 @@ def draw(seed: int, random_drift: bool = True) -> dict[str, dict[str, float]]:
     return cfg
 
 
-def _toml(values: dict) -> str:
-    lines = []
-    for section, kv in values.items():
-        lines.append(f"[{section}]")
-        lines += [f"{k} = {v!r}" for k, v in kv.items()]
-    return "\n".join(lines) + "\n"
-
-
 def run_case(seed: int, random_drift: bool = True, spec_bias_instability: float | None = None) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from drivers.rig import open_rig
@@ -78,7 +69,7 @@ def run_case(seed: int, random_drift: bool = True, spec_bias_instability: float 
     rec: dict[str, Any] = {"seed": seed, "config": cfg}
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "rig.toml"
-        path.write_text(_toml(cfg))
+        path.write_text(toml_of(cfg))
         t0 = time.perf_counter()
         try:
             with open_rig(f"sim?warm=1&seed={seed}&watchdog=5&config={path}") as rig:
@@ -130,17 +121,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="/tmp/earth_rate_coverage.jsonl")
     args = ap.parse_args(argv)
-    recs = []
-    with open(args.out, "w") as jf, ProcessPoolExecutor(args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
-        futs = [pool.submit(run_case, s, not args.no_random_drift, args.spec_bias_instability)
-                for s in range(args.first, args.first + args.seeds)]
-        for fut in as_completed(futs):
-            rec = fut.result()
-            recs.append(rec)
-            jf.write(json.dumps(rec) + "\n")
-            jf.flush()
-            print(f"[{len(recs)}/{args.seeds}] seed {rec['seed']}: {rec.get('verdict', rec.get('error'))} "
-                  f"{rec.get('wall_s', '')} s", file=sys.stderr, flush=True)
+    recs = run_cases(run_case, [(s, not args.no_random_drift, args.spec_bias_instability)
+                                for s in range(args.first, args.first + args.seeds)], args.jobs, args.out)
     for f in args.also:
         recs += [json.loads(line) for line in Path(f).read_text().splitlines() if line.strip()]
     print(summarize(recs))
