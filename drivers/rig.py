@@ -164,8 +164,8 @@ class Rig:
         # safe-state requests need): go safe on a thread of its own.
         self.event("error", str(fault))
         t = threading.Thread(target=self.safe, name="rig-safe", daemon=True)
+        t.start()                   # before close() can see it: joining an unstarted thread raises
         self._safe_thread = t
-        t.start()
 
     def safe(self) -> SafeReport:
         """Mode 1, every bias and command zero, caging switches released; each step read back."""

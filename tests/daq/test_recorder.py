@@ -31,7 +31,9 @@ def test_a_dropped_frame_is_nan_with_a_gap_event(tmp_path):
 
 
 def test_a_lost_node_aborts_the_recording_and_the_rig_goes_safe(tmp_path):
-    rig = open_rig("sim?warm=1")
+    # the real rig's 1 s node timeout: with the sim's 5 s default the virtual-time recording
+    # can finish before the loss is noticed
+    rig = open_rig("sim?warm=1&watchdog=1")
     try:
         pull = threading.Timer(0.5, rig.emulator.inject, ("relay", "disconnect"))
         pull.start()  # the relay node's cable comes out while the recording runs
