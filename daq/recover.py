@@ -12,22 +12,33 @@ mode; plain ``h5py.File(path)`` refuses it ("file is already open for write (may
    them) are padded with NaN to the longest, with a ``gap`` event, so no sample is
    dropped; the status becomes "aborted: ..." with the number of samples kept.
 
+Before any of that writes a byte, the file is surveyed read-only through a view that shows
+it as step 2 would leave it (``_RepairedView``: the new superblock and the zero fill exist
+only in memory): whether its metadata reads at all, how long its channels are, and so how
+many bytes the repair will add. A repair that cannot succeed - metadata a failed write left
+damaged, or a disk without room for the repair (recovering in place on the disk that filled
+corrupted the file further) - is refused with nothing written: copy the file to a disk with
+room and recover the copy.
+
 It refuses a file whose writer is still running on this host.
 """
 
 from __future__ import annotations
 
+import io
 import logging
+import math
 import os
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
 
 from daq.prealloc import release
-from daq.reader import RunFile
+from daq.reader import writer_alive
 from daq.runfile import EVENT_DTYPE, KIND_BYTES, STATUS_RECORDING, TEXT_BYTES, RunFileError, fit_utf8
 
 log = logging.getLogger(__name__)
@@ -105,6 +116,130 @@ def read_superblock(path: str | Path) -> Superblock:
                       int.from_bytes(raw[28:36], "little"))
 
 
+def _repaired_superblock(sb: Superblock, raw: bytes, size: int) -> bytes:
+    """The 48 superblock bytes ``raw`` as the repair writes them: flags clear, the end-of-file
+    address at least the file's size, the checksum recomputed."""
+    new = bytearray(raw)
+    new[11] = 0
+    new[28:36] = max(sb.eof, size - sb.base).to_bytes(8, "little")
+    new[44:48] = lookup3(bytes(new[:44])).to_bytes(4, "little")
+    return bytes(new)
+
+
+class _RepairedView(io.RawIOBase):
+    """``path`` read-only, as ``clear_open_flags`` would leave it: the superblock repaired
+    and the file zero-filled up to its recorded end - in memory only. HDF5 opens it through
+    h5py's file-object driver."""
+
+    def __init__(self, path: Path, sb: Superblock) -> None:
+        super().__init__()
+        self._fh = open(path, "rb")
+        self._real = os.fstat(self._fh.fileno()).st_size
+        self._fh.seek(sb.offset)
+        self._patch = _repaired_superblock(sb, self._fh.read(48), self._real)
+        self._at = sb.offset
+        self.size = max(self._real, sb.base + sb.eof)
+        self._pos = 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        self._pos = {io.SEEK_SET: 0, io.SEEK_CUR: self._pos, io.SEEK_END: self.size}[whence] + offset
+        return self._pos
+
+    def tell(self) -> int:
+        return self._pos
+
+    def readinto(self, b: bytearray | memoryview) -> int:  # type: ignore[override]
+        view = memoryview(b).cast("B")
+        n = max(0, min(len(view), self.size - self._pos))
+        real = max(0, min(n, self._real - self._pos))
+        if real:
+            self._fh.seek(self._pos)
+            got = self._fh.readinto(view[:real]) or 0
+            view[got:real] = bytes(real - got)
+        view[real:n] = bytes(n - real)                     # the zero fill past the real end
+        lo, hi = max(self._pos, self._at), min(self._pos + n, self._at + len(self._patch))
+        if lo < hi:
+            view[lo - self._pos:hi - self._pos] = self._patch[lo - self._at:hi - self._at]
+        self._pos += n
+        return n
+
+    def close(self) -> None:
+        self._fh.close()
+        super().close()
+
+
+@dataclass(frozen=True)
+class _Survey:
+    """What the repair will find and add, read before it writes."""
+
+    status: str
+    writer: str                  # the writer attribute ("fbs-hil V, pid P on HOST")
+    rate_hz: float
+    lengths: dict[str, int]
+    events_ok: bool              # an events table the gap event can be added to
+
+    @property
+    def padding(self) -> dict[str, int]:
+        n = max(self.lengths.values())
+        return {c: n - m for c, m in self.lengths.items() if m < n}
+
+
+#: Room a repair needs besides the zero fill and the padding: the object headers, the chunk
+#: index and the status attribute HDF5 rewrites (a repaired 16-channel file grew < 20 KiB).
+REPAIR_MARGIN_BYTES = 256 << 10
+
+
+def _survey(path: Path, sb: Superblock | None) -> _Survey:
+    """Read what the repair needs without writing: through ``_RepairedView`` when the
+    superblock needs repair (``sb``), else the file itself, read-only."""
+    src: Any = _RepairedView(path, sb) if sb is not None else path
+    try:
+        with h5py.File(src, "r") as f:
+            status = f.attrs.get("status", "")
+            status = status.decode() if isinstance(status, bytes) else str(status)
+            writer = f.attrs.get("writer", "")
+            writer = writer.decode() if isinstance(writer, bytes) else str(writer)
+            g = f.get("channels")
+            if not isinstance(g, h5py.Group) or not len(g):
+                raise RunFileError(f"{path}: no /channels group with datasets; not a run file this can repair")
+            lengths: dict[str, int] = {}
+            rate = math.nan
+            for c in g:
+                ds = g.get(c)
+                if not isinstance(ds, h5py.Dataset) or ds.ndim != 1:
+                    raise RunFileError(f"{path}: /channels/{c} is not a 1-D dataset; not a run file this can repair")
+                lengths[c] = ds.shape[0]
+                if not math.isfinite(rate):
+                    rate = float(np.asarray(ds.attrs.get("sample_rate_hz", math.nan)).ravel()[0])
+            if not (math.isfinite(rate) and rate > 0):
+                raise RunFileError(f"{path}: channel sample_rate_hz {rate!r} is not a positive number")
+            ev = f.get("events")
+            events_ok = isinstance(ev, h5py.Dataset) and ev.dtype == EVENT_DTYPE and ev.maxshape == (None,)
+            return _Survey(status, writer, rate, lengths, events_ok)
+    except RunFileError:
+        raise
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError, IndexError) as exc:
+        raise RunFileError(f"{path}: its metadata cannot be read ({exc}); a write that failed (a full disk, a "
+                           f"crash) left it damaged beyond this repair. Nothing was written") from exc
+    finally:
+        if isinstance(src, _RepairedView):
+            src.close()
+
+
+def _refuse_without_room(path: Path, need: int) -> None:
+    st = os.statvfs(path.parent)
+    free = st.f_bavail * st.f_frsize
+    if free < need:
+        raise RunFileError(f"{path}: the repair needs about {need} bytes on its disk and {free} are free. Nothing "
+                           f"was written; copy the file to a disk with room and recover the copy")
+
+
 def clear_open_flags(path: str | Path) -> Superblock:
     """Clear the superblock's open-for-write flags and make its end-of-file address agree
     with the file (``h5clear -s --increment=0``). Returns the superblock as it was.
@@ -118,13 +253,10 @@ def clear_open_flags(path: str | Path) -> Superblock:
     size = path.stat().st_size
     with open(path, "r+b") as fh:
         fh.seek(sb.offset)
-        raw = bytearray(fh.read(48))
-        raw[11] = 0
+        raw = _repaired_superblock(sb, fh.read(48), size)
         if sb.eof > size - sb.base:
             fh.truncate(sb.base + sb.eof)
             log.warning("%s: zero-filled %d bytes up to the recorded end of file", path, sb.base + sb.eof - size)
-        raw[28:36] = max(sb.eof, size - sb.base).to_bytes(8, "little")
-        raw[44:48] = lookup3(bytes(raw[:44])).to_bytes(4, "little")
         fh.seek(sb.offset)
         fh.write(raw)
         fh.flush()
@@ -149,19 +281,12 @@ class Recovery:
                 f"kept{pad}; status {self.status!r}; opens with plain h5py now")
 
 
-def _refuse_if_writer_alive(path: Path, *, force: bool) -> None:
-    """Refuse a file whose writer still runs. ``force`` overrides a writer that is only *said*
-    to run (its pid alive on this host: perhaps another process got the number), never one
-    that holds this very file open (``_holds_open``): that is the writer, and clearing its
-    flags under it destroyed the file."""
-    try:
-        with RunFile(path) as run:       # opens in SWMR mode, as a live writer's file must be
-            alive = run.writer_alive()
-            writer = str(run.attrs.get("writer", "?"))
-    except RunFileError as exc:          # unreadable even so: no live writer keeps it that way
-        log.warning("%s: cannot tell whether its writer runs (%s); repairing", path, exc)
-        return
-    if not alive:
+def _refuse_if_writer_alive(path: Path, writer: str, *, force: bool) -> None:
+    """Refuse a file whose writer (its ``writer`` attribute) still runs. ``force`` overrides a
+    writer that is only *said* to run (its pid alive on this host: perhaps another process got
+    the number), never one that holds this very file open (``_holds_open``): that is the
+    writer, and clearing its flags under it destroyed the file."""
+    if not writer_alive(writer):
         return
     m = _WRITER_PID.search(writer)
     if m and _holds_open(int(m.group(1)), path):
@@ -191,44 +316,73 @@ def _holds_open(pid: int, path: Path) -> bool:
     return False
 
 
+def _held_by_anyone(path: Path) -> int | None:
+    """The pid of a process on this host that has ``path`` open, if any (Linux /proc)."""
+    for proc in Path("/proc").glob("[0-9]*"):
+        if int(proc.name) != os.getpid() and _holds_open(int(proc.name), path):
+            return int(proc.name)
+    return None
+
+
 def recover(path: str | Path, *, force: bool = False) -> Recovery:
-    """Make a file left by a dead writer open with plain h5py, keeping every flushed sample."""
+    """Make a file left by a dead writer open with plain h5py, keeping every flushed sample.
+    Raises ``RunFileError``, having written nothing, where the repair cannot succeed."""
     path = Path(path)
+    if not path.is_file():
+        raise RunFileError(f"{path}: {'no such file' if not path.exists() else 'not a regular file'}")
     sb = read_superblock(path)
-    was_open = sb.needs_repair(path.stat().st_size)
+    size = path.stat().st_size
+    was_open = sb.needs_repair(size)
+    try:
+        survey = _survey(path, sb if was_open else None)
+    except RunFileError:
+        pid = _held_by_anyone(path) if was_open else None
+        if pid is not None:     # a live writer's metadata may be caught half-written: not damage
+            raise RunFileError(f"{path}: process {pid} has the file open (its writer?); stop it first") from None
+        raise
+    if was_open and sb.flags:
+        _refuse_if_writer_alive(path, survey.writer, force=force)
+    padding = survey.padding
+    if was_open or padding or survey.status == STATUS_RECORDING:
+        fill = max(0, sb.base + sb.eof - size) if was_open else 0
+        _refuse_without_room(path, fill + 8 * sum(padding.values()) + REPAIR_MARGIN_BYTES)
+    else:
+        return Recovery(path, False, max(survey.lengths.values()), survey.rate_hz, {}, survey.status)
     if was_open:
-        if sb.flags:
-            _refuse_if_writer_alive(path, force=force)
         clear_open_flags(path)
         log.info("%s: cleared open-for-write flags 0x%02x", path, sb.flags)
-    padded: dict[str, int] = {}
-    with h5py.File(path, "r+") as f:
-        status = f.attrs.get("status", "")
-        status = status.decode() if isinstance(status, bytes) else str(status)
-        g = f["channels"]
-        rate = float(g[next(iter(g))].attrs["sample_rate_hz"])
-        lengths = {c: g[c].shape[0] for c in g}
-        n = max(lengths.values())
-        for c, m in lengths.items():
-            if m < n:
-                g[c].resize((n,))
-                g[c][m:] = np.nan
-                padded[c] = n - m
-        if padded and "events" in f and f["events"].dtype == EVENT_DTYPE:
-            ev = f["events"]
-            k = len(ev)
-            ev.resize((k + 1,))
-            lo = min(lengths.values())
-            ev[k] = (lo / rate, fit_utf8("gap", KIND_BYTES),
-                     fit_utf8(f"samples {lo}..{n} of {', '.join(padded)} lost when the writer stopped", TEXT_BYTES))
-        if was_open or status == STATUS_RECORDING:
-            why = status[len("aborted: "):] + "; " if status.startswith("aborted: ") else ""
-            status = (f"aborted: {why}not closed by its writer (killed, or its disk filled); {n} samples "
-                      f"({n / rate:.3f} s) were flushed and kept")
-            f.attrs["status"] = status
+    try:
+        status = _repair(path, survey, was_open)
+    except (OSError, KeyError, ValueError, RuntimeError) as exc:
+        raise RunFileError(f"{path}: the repair failed after the superblock was repaired: {exc}") from exc
     if was_open:
         try:
             release(path)               # the dead writer's space reserved past the end
         except OSError as exc:
             log.warning("%s: could not return the disk space reserved past its end: %s", path, exc)
-    return Recovery(path, was_open, n, rate, padded, status)
+    return Recovery(path, was_open, max(survey.lengths.values()), survey.rate_hz, padding, status)
+
+
+def _repair(path: Path, survey: _Survey, was_open: bool) -> str:
+    """Pad the short channels with NaN (a ``gap`` event says so) and set the status."""
+    lengths, rate = survey.lengths, survey.rate_hz
+    n, lo = max(lengths.values()), min(lengths.values())
+    padding = survey.padding
+    status = survey.status
+    with h5py.File(path, "r+") as f:
+        g = f["channels"]
+        for c, k in padding.items():
+            g[c].resize((n,))
+            g[c][n - k:] = np.nan
+        if padding and survey.events_ok:
+            ev = f["events"]
+            k = len(ev)
+            ev.resize((k + 1,))
+            ev[k] = (lo / rate, fit_utf8("gap", KIND_BYTES),
+                     fit_utf8(f"samples {lo}..{n} of {', '.join(padding)} lost when the writer stopped", TEXT_BYTES))
+        if was_open or status == STATUS_RECORDING:
+            why = status[len("aborted: "):] + "; " if status.startswith("aborted: ") else ""
+            status = (f"aborted: {why}not closed by its writer (killed, or its disk filled); {n} samples "
+                      f"({n / rate:.3f} s) were flushed and kept")
+            f.attrs["status"] = status
+    return status

@@ -557,10 +557,11 @@ def _safe_text(rig: Rig) -> str:
 def _finish_report(proc: Procedure[Any], summary: RunSummary, analysis: Analysis | None, out_dir: Path,
                    report: bool) -> None:
     from procedures.reports.report import write_report
+    from procedures.reports.textfile import write_text_atomic
 
     stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem
     try:
-        (out_dir / f"{stem}.json").write_text(json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n")
+        write_text_atomic(out_dir / f"{stem}.json", json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n")
         if report:
             summary.report = write_report(proc, summary, analysis, out_dir / f"{stem}.md")
     except Exception as exc:  # a report that cannot be written must not hide the run's outcome

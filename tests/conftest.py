@@ -2,6 +2,12 @@
 
 from __future__ import annotations
 
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
 import pytest
 
 import drivers.safety
@@ -20,3 +26,50 @@ def go_safe_calls(monkeypatch):
 
     monkeypatch.setattr(drivers.safety, "go_safe", spy)
     return calls
+
+
+class SmallDisk:
+    """A real small filesystem (tmpfs) of its own for a test: the full disk the world makes,
+    not a file-size limit."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def free(self) -> int:
+        return shutil.disk_usage(self.path).free
+
+    def fill(self, leave_bytes: int = 0) -> None:
+        """Take all but ``leave_bytes`` of the free space (as another program would)."""
+        with open(self.path / f"ballast{len(list(self.path.glob('ballast*')))}", "wb") as fh:
+            want = max(0, self.free() - leave_bytes)
+            block = bytes(1 << 16)
+            while want > 0:
+                try:
+                    want -= fh.write(block[:min(want, len(block))])
+                    fh.flush()
+                except OSError:       # what is left is smaller than a block: full is full
+                    break
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """``small_disk(size_bytes)`` mounts a tmpfs of that size and returns a ``SmallDisk``;
+    unmounted after the test. Skipped, with the reason, where this machine does not let the
+    tests mount one (not root, or no CAP_SYS_ADMIN in a container)."""
+    mounted: list[Path] = []
+
+    def make(size_bytes: int) -> SmallDisk:
+        if not sys.platform.startswith("linux") or os.geteuid() != 0 or shutil.which("mount") is None:
+            pytest.skip("mounting a small tmpfs needs Linux, root and mount(8); this machine has not all three")
+        d = tmp_path / f"disk{len(mounted)}"
+        d.mkdir()
+        p = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={int(size_bytes)},mode=1777", "tmpfs", str(d)],
+                           capture_output=True, text=True)
+        if p.returncode:
+            pytest.skip(f"cannot mount a small tmpfs here: {p.stderr.strip() or p.returncode}")
+        mounted.append(d)
+        return SmallDisk(d)
+
+    yield make
+    for d in mounted:
+        subprocess.run(["umount", "-l", str(d)], capture_output=True)

@@ -6,6 +6,8 @@ import logging
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from procedures.reports.textfile import write_text_atomic
+
 if TYPE_CHECKING:
     from procedures.runner import Analysis, Procedure, RunSummary
 
@@ -60,5 +62,4 @@ def write_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None
                 lines += [f"(plot {fig.name} failed: {exc})", ""]
                 continue
             lines += [f"![{fig.caption}]({png.name})", "", f"*{fig.caption}*", ""]
-    path.write_text("\n".join(lines) + "\n")
-    return path
+    return write_text_atomic(path, "\n".join(lines) + "\n")

@@ -53,7 +53,7 @@ def test_a_failing_fallocate_stops_reserving_and_says_why(tmp_path, caplog):
             pre.reserve(10)
         assert not pre.enabled and pre.reserved == 0
         assert [r.getMessage() for r in caplog.records] == [
-            "fallocate failed: Bad file descriptor; writing on without reserving space"]
+            "fallocate failed: Bad file descriptor; checking the free space instead of reserving it"]
     finally:
         os.close(fd)
 

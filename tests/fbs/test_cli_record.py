@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+import shutil
 import subprocess
 import sys
+import time
 
 import h5py
+import numpy as np
 import pytest
+
+from daq.reader import RunFile
 
 from fbs.cli import main
 
@@ -57,3 +62,48 @@ def test_bad_arguments_are_refused_before_the_rig_is_opened(tmp_path, capsys, du
                  "--rate", rate, "--out", str(out)]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_disk_that_fills_mid_recording_ends_it_safely_with_every_flushed_sample_kept(small_disk, tmp_path):
+    """Issue 19 acceptance C: `fbs record` on a real small filesystem that another program
+    fills while the recording runs."""
+    disk = small_disk(8 << 20)
+    out = disk.path / "r.h5"
+    rate = 1000.0
+    proc = subprocess.Popen([sys.executable, "-m", "fbs.cli", "record", "--rig", "sim?realtime=1&warm=1",
+                             "--mode", "3", "--duration", "120", "--rate", str(rate),
+                             "--channels", "gyro_x,gyro_y,ac_x_ctl", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        seen = 0
+        for _ in range(600):                     # a bound on a hang, not a deadline: ~2 min
+            if proc.poll() is not None:
+                break
+            time.sleep(0.2)
+            try:
+                with RunFile(out) as live:
+                    seen = live.n_samples if live.swmr else 0
+            except (OSError, KeyError):
+                continue
+            if seen >= rate:
+                break
+        assert seen >= rate and proc.poll() is None, proc.communicate()
+        disk.fill()
+        _, err = proc.communicate(timeout=120)
+    finally:
+        proc.kill()
+    assert proc.returncode == 2 and "Traceback" not in err, err
+    assert "the disk is full" in err and "Free some space or record to another disk" in err
+    flushed = int(err.split("Samples 0..")[1].split(" ")[0])
+    assert flushed >= seen
+    assert "safe state" in err, err
+    copy = tmp_path / "copy.h5"                  # acceptance C: recovered on a copy with room
+    shutil.copyfile(out, copy)
+    done = subprocess.run([sys.executable, "-m", "fbs.cli", "recover", str(copy)], capture_output=True, text=True,
+                          timeout=120)
+    assert done.returncode == 0, done.stderr
+    with h5py.File(copy, "r") as f:
+        assert f.attrs["status"].startswith("aborted") and "the disk is full" in f.attrs["status"]
+        for c in ("gyro_x", "gyro_y", "ac_x_ctl"):
+            x = f["channels"][c][:flushed]
+            assert len(x) == flushed and np.isfinite(x).all() and x.std() > 0, c
