@@ -323,6 +323,10 @@ class DahlFit:
     #: degrees of freedom of that covariance (Student t): cycles less the fitted parameters
     dof: int = 0
     n_clusters: int = 0
+    #: each segment's leverage on ln To, ln eta and ln(eta To^2): its share of what the fit
+    #: knows of each, c^T J_s^T J_s c / c^T J^T J c with c = (J^T J)^-1 g (g the figure's
+    #: gradient; the offsets projected out). Each figure's shares add up to 1.
+    leverage: list[tuple[float, float, float]] = field(default_factory=list)
 
 
 def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]) -> tuple[float, float]:
@@ -413,7 +417,11 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
         np.add.at(scores, labels, J * r[:, None])
         cov = bread @ (scores.T @ scores) @ bread * (n_cl / dof)
     except np.linalg.LinAlgError:
-        cov = np.full((2, 2), np.nan)
+        bread = cov = np.full((2, 2), np.nan)
+    proj = J @ bread @ np.array([[1.0, 0.0, 2.0], [0.0, 1.0, 1.0]])   # J c for ln To, ln eta, ln k
+    bounds = np.cumsum([0] + [len(i) for i in idx])
+    info = np.array([np.sum(proj[a:b] ** 2, axis=0) for a, b in zip(bounds[:-1], bounds[1:])])
+    leverage = [(float(x), float(y), float(z)) for x, y, z in info / info.sum(axis=0)]
     var = np.diag(cov)
     se_ln = np.sqrt(np.where(var >= 0, var, np.nan))
     g = np.array([2.0, 1.0])                    # ln k = 2 ln To + ln eta
@@ -431,7 +439,7 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     for s, off in zip(segments, offsets):
         full[s.lead_start - a0:s.stop - a0] += off
     return DahlFit(To, eta, To * float(se_ln[0]), eta * float(se_ln[1]), k, k * se_lnk, corr, offsets, rms,
-                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals, cov, dof, n_cl)
+                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals, cov, dof, n_cl, leverage)
 
 
 def _cycle_labels(seg: Segment, samples: np.ndarray, base: int) -> np.ndarray:

@@ -403,3 +403,17 @@ def test_abort_and_resume_runs_the_whole_ladder_again(tmp_path):
     assert s2.status == "complete" and s2.steps_resumed == []
     assert s2.steps_done == ["mode 3", "400 urad", "40 urad", "8 urad", "bias off"]
     assert s2.values["To_Nm"] == pytest.approx(0.016, rel=TO_TOL)
+
+
+def test_the_half_width_is_t_at_the_welch_satterthwaite_dof():
+    """GUM G.4: one part gives its own t; equal parts pool their degrees of freedom; a bound
+    (infinite dof) gives the normal quantile."""
+    from scipy import stats
+
+    from procedures.analysis.hysteresis import _half_width
+
+    assert _half_width([(1.0, 5)]) == pytest.approx(stats.t.ppf(0.975, 5))
+    assert _half_width([(1.0, 5), (1.0, 5)]) == pytest.approx(stats.t.ppf(0.975, 10) * math.sqrt(2))
+    assert _half_width([(0.3, math.inf)]) == pytest.approx(0.3 * stats.norm.ppf(0.975))
+    assert _half_width([(1.0, 5), (2.0, math.inf)]) == pytest.approx(
+        stats.t.ppf(0.975, 25 * 5) * math.sqrt(5))

@@ -242,6 +242,10 @@ def test_fit_recovers_To_and_eta_from_an_independent_integration(To, eta, seed):
     assert abs(fit.To_Nm - To) < 5 * fit.To_se_Nm + 1e-6 * To
     assert abs(fit.eta_per_Nm - eta) < 5 * fit.eta_se_per_Nm + 1e-6 * eta
     assert fit.residual_rms_total_Nm == pytest.approx(0.01 * To, rel=0.2)
+    # each amplitude's leverage on each figure: its share of what the fit knows of it
+    lev = np.array(fit.leverage)
+    assert lev.shape == (5, 3) and np.all(lev >= 0) and np.allclose(lev.sum(axis=0), 1.0)
+    assert np.argmax(lev[:, 0]) == np.argmax([s.command_amplitude for s in segs])   # the largest loop fixes To
 
 
 def test_fit_with_smoothing_and_the_path_scan():
