@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 
 from daq.reader import RunFile
-
 from fbs.cli import main
 
 pytestmark = pytest.mark.slow
