@@ -324,6 +324,14 @@ def encode_command(verb: str, *args: object) -> bytes:
     return text.encode("ascii") + b"\n"
 
 
+def encode_resync() -> bytes:
+    """What the host sends first on every connection (docs/protocol.md 1.8): an empty line, which
+    ends any partial command an earlier host left in the device's line buffer (the device answers
+    it ``ERR SYNTAX``), then ``STOP``, whose ``OK STOP`` reply marks the end of whatever the device
+    still had to send (frames of a stream nobody stopped, replies nobody read)."""
+    return b"\n" + encode_command("STOP")
+
+
 def decode_command(line: bytes) -> Command:
     """Device side: one command line -> Command, or ProtocolError (answered ``ERR SYNTAX``)."""
     raw = bytes(line).rstrip(b"\r\n")

@@ -7,6 +7,11 @@ order and never splices across them. Replies go to the command in flight.
 
 On a virtual (simulated) clock a full buffer holds the reader back, and with it the
 simulation; on hardware it is a host overrun, reported as a gap like any other loss.
+
+Connecting resynchronises first (docs/protocol.md 1.8): an ADC that an earlier host left
+streaming (the process was killed) sends the rest of a frame cut anywhere, the frames made
+since, and the replies nobody read. The host sends an empty line and ``STOP`` and discards
+everything up to ``OK STOP``, then ``STAT?`` and everything up to ``OK STAT``, before ``IDN?``.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from drivers.adc_protocol import (
     Reply,
     StreamDecoder,
     encode_command,
+    encode_resync,
 )
 from drivers.clock import RigClock, WallClock
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SampleGap, SetpointRangeError
@@ -45,6 +51,62 @@ FRAME_SECONDS = 0.01
 MAX_FRAME_SECONDS = 1.0
 #: No byte for this long while a frame is incomplete: the frame will not be completed.
 QUIET_S = 0.25
+#: Resynchronisation at connect (docs/protocol.md 1.8): the most the host discards while it
+#: waits for ``OK STOP`` (16 x the reference FIFO, a few seconds of the fastest stream), and
+#: the most time it gives the device in all (5 x the default reply timeout; a clean connect
+#: takes milliseconds). Besides, as for any reply, the device may not go silent for the reply
+#: timeout, counted from the later of the send and the last byte received, so a slow host or
+#: a long drain does not count against the device.
+RESYNC_BYTES = 16 << 20
+RESYNC_TIMEOUT_S = 10.0
+
+
+def _count(n: int, what: str) -> str:
+    return f"{n} {what}" + ("" if n == 1 else "s")
+
+
+class _Resync:
+    """What the reader discards while the host resynchronises at connect (docs/protocol.md 1.8).
+
+    ``steps`` are the ``OK`` keywords that end each step, in order; the reader hands each of
+    those replies to the host and discards every other unit until the last one has come."""
+
+    HEAD = 48  # bytes of the start of the line kept for the error message
+
+    def __init__(self, steps: tuple[str, ...]) -> None:
+        self.steps = list(steps)
+        self.nbytes = 0
+        self.head = bytearray()
+        self.frames = 0
+        self.replies = 0
+        self.last_reply = ""
+        self.stale = 0          # replies other than ERR SYNTAX (the host's own empty line gets that)
+        self.bad = 0
+        self.first_bad = ""
+
+    def received(self, data: bytes) -> None:
+        self.nbytes += len(data)
+        if len(self.head) < self.HEAD:
+            self.head += data[:self.HEAD - len(self.head)]
+
+    def discard(self, item: Frame | Reply | ProtocolError) -> None:
+        if isinstance(item, Frame):
+            self.frames += 1
+        elif isinstance(item, Reply):
+            self.replies += 1
+            self.last_reply = f"{'OK' if item.ok else 'ERR'} {item.verb} {item.text}".strip()[:80]
+            if item.ok or item.verb != "SYNTAX":
+                self.stale += 1
+        else:
+            self.bad += 1
+            self.first_bad = self.first_bad or str(item)
+
+    def summary(self) -> str:
+        parts = [_count(self.frames, "frame"), _count(self.replies, "other reply line")
+                 + (f" (the last {self.last_reply!r})" if self.replies else ""),
+                 _count(self.bad, "undecodable unit") + (f" (the first: {self.first_bad})" if self.bad else "")]
+        return (f"{_count(self.nbytes, 'byte')}: {', '.join(parts)}; they began "
+                f"{bytes(self.head)!r}" + (" ..." if self.nbytes > len(self.head) else ""))
 
 
 def _err_from_reply(reply: Reply, what: str) -> DriverError:
@@ -63,11 +125,14 @@ class SerialAdc(Adc):
 
     def __init__(self, port: str, *, clock: RigClock | None = None, faults: FaultLatch | None = None,
                  baudrate: int = 2_000_000, reply_timeout_s: float = 2.0, stall_timeout_s: float = 3.0,
-                 buffer_s: float = 120.0) -> None:
+                 buffer_s: float = 120.0, resync_bytes: int = RESYNC_BYTES,
+                 resync_timeout_s: float = RESYNC_TIMEOUT_S) -> None:
         self.port = port
         self.clock = clock or WallClock()
         self.faults = faults or FaultLatch()
         self.reply_timeout_s = reply_timeout_s
+        self.resync_bytes = resync_bytes
+        self.resync_timeout_s = resync_timeout_s
         self.stall_timeout_s = stall_timeout_s
         self.buffer_s = buffer_s
         try:
@@ -92,13 +157,13 @@ class SerialAdc(Adc):
         self._last_rx = time.monotonic()
         self._closed = False
         self._stopping = False              # STOP sent: a full buffer may no longer hold the reader
+        # From the first byte read until the device's OK STAT, everything is discarded (1.8).
+        self._sync: _Resync | None = _Resync(("STOP", "STAT"))
         self._thread = threading.Thread(target=self._reader, name="adc-reader", daemon=True)
         self._thread.start()
         try:
+            self._resync()
             self.identity = self.identify()
-            if self._command("STAT?").fields.get("state") == "streaming":
-                log.warning("ADC on %s was still streaming (an earlier session ended abruptly); stopping it", port)
-                self._command("STOP")
         except DriverError:
             self.close()
             raise
@@ -122,17 +187,33 @@ class SerialAdc(Adc):
                     self._dispatch()
                 continue
             self._last_rx = time.monotonic()
+            sync = self._sync
+            if sync is not None:
+                sync.received(data)
             self._decoder.feed(data)
             self._dispatch()
 
     def _dispatch(self) -> None:
         for item in self._decoder.items():
-            if isinstance(item, Frame):
+            sync = self._sync
+            if sync is not None:
+                self._on_resync_item(sync, item)
+            elif isinstance(item, Frame):
                 self._on_frame(item)
             elif isinstance(item, Reply):
                 self._on_reply(item)
             else:
                 self._on_bad_bytes(item)
+
+    def _on_resync_item(self, sync: _Resync, item: Frame | Reply | ProtocolError) -> None:
+        """While resynchronising: hand over the reply that ends a step, discard the rest."""
+        if isinstance(item, Reply) and item.ok and item.verb == sync.steps[0]:
+            sync.steps.pop(0)
+            if not sync.steps:
+                self._sync = None     # in sync: what follows is the replies to the host's commands
+            self._replies.put(item)
+        else:
+            sync.discard(item)
 
     def _on_reply(self, reply: Reply) -> None:
         if reply.ok and reply.verb == "START":
@@ -228,7 +309,77 @@ class SerialAdc(Adc):
             self._cond.notify_all()
         self.faults.report(fault)
 
+    # ------------------------------------------------------------------ connecting
+    def _resync(self) -> None:
+        """Bring the byte stream to a known point before the first command (docs/protocol.md 1.8).
+
+        An ADC that an earlier host left streaming sends the rest of a frame cut anywhere, the
+        frames made since and the replies nobody read; a dead host may also have left half a
+        command line in the device. So: an empty line (ends that line; answered ERR SYNTAX) and
+        STOP, and everything up to OK STOP is discarded; then STAT?, and everything up to OK
+        STAT is discarded (the first OK STOP may have been a dead host's own). Bounded by
+        ``resync_bytes`` and ``resync_timeout_s``, and the device may not go silent for the
+        reply timeout, measured, as for any reply, from the later of the send and the last byte.
+        """
+        sync = self._sync
+        assert sync is not None
+        t_start = time.monotonic()
+        with self._cmd_lock:
+            self._send(encode_resync(), "STOP")
+            self._await_resync(sync, "STOP", t_start)
+            self._send(encode_command("STAT?"), "STAT?")
+            stat = self._await_resync(sync, "STAT", t_start)
+        if stat.fields.get("state") == "streaming":
+            fault = ProtocolError(f"ADC on {self.port}: still streaming after STOP at connect ('OK STAT {stat.text}'); "
+                                  f"power-cycle the ADC, then reopen the rig")
+            self.faults.report(fault)
+            raise fault
+        if sync.frames or sync.bad or sync.stale:
+            log.warning("ADC on %s had output left when opened (an earlier session ended without STOP?): stopped "
+                        "it and discarded %s", self.port, sync.summary())
+        else:
+            log.debug("ADC on %s: in sync after %s", self.port, sync.summary())
+
+    def _await_resync(self, sync: _Resync, keyword: str, t_start: float) -> Reply:
+        sent = time.monotonic()
+        while True:
+            self.faults.check()        # the port went away under the reader
+            try:
+                reply: Reply = self._replies.get(timeout=0.05)
+                return reply
+            except queue.Empty:
+                pass
+            now = time.monotonic()
+            if now - max(self._last_rx, sent) > self.reply_timeout_s:
+                why = f"then nothing for {self.reply_timeout_s:g} s"
+            elif sync.nbytes > self.resync_bytes:
+                why = f"not within {_count(self.resync_bytes, 'byte')}"
+            elif now - t_start > self.resync_timeout_s:
+                why = f"not within {self.resync_timeout_s:g} s"
+            else:
+                continue
+            asked = "STOP" if keyword == "STOP" else "STAT? (after STOP)"
+            advice = (f"check that {self.port} is the FBS ADC (not another device), that it is powered and its "
+                      f"baud rate is {self.ser.baudrate}; power-cycle the ADC, then reopen the rig")
+            fault: DriverError
+            if not sync.nbytes:
+                fault = DeviceTimeout(f"ADC on {self.port}: no reply to {asked} at connect within "
+                                      f"{self.reply_timeout_s:g} s: the device sent nothing at all; {advice}")
+            else:
+                fault = ProtocolError(f"ADC on {self.port}: cannot resynchronise at connect: sent {asked} and read "
+                                      f"{sync.summary()}, but no 'OK {keyword}' reply ({why}); {advice}")
+            self.faults.report(fault)
+            raise fault
+
     # ------------------------------------------------------------------ commands
+    def _send(self, data: bytes, what: str) -> None:
+        try:
+            self.ser.write(data)
+        except (serial.SerialException, OSError) as exc:
+            fault = DeviceLost(f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away")
+            self._lost(fault)
+            raise fault from exc
+
     def _command(self, verb: str, *args: object, what: str | None = None) -> Reply:
         self.faults.check()
         if self._closed:
@@ -238,17 +389,13 @@ class SerialAdc(Adc):
             while not self._replies.empty():
                 stale = self._replies.get_nowait()
                 log.warning("ADC on %s: stale reply dropped: %s", self.port, stale)
-            try:
-                self.ser.write(encode_command(verb, *args))
-            except (serial.SerialException, OSError) as exc:
-                fault: DriverError = DeviceLost(f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away")
-                self._lost(fault)
-                raise fault from exc
+            self._send(encode_command(verb, *args), what)
             try:
                 reply = self._replies.get(timeout=self.reply_timeout_s)
             except queue.Empty:
-                fault = DeviceTimeout(f"ADC on {self.port}: no reply to {what!r} within {self.reply_timeout_s:g} s"
-                                      + (f" (last bad data: {self._bad_data})" if self._bad_data else ""))
+                fault: DriverError = DeviceTimeout(
+                    f"ADC on {self.port}: no reply to {what!r} within {self.reply_timeout_s:g} s"
+                    + (f" (last bad data: {self._bad_data})" if self._bad_data else ""))
                 self.faults.report(fault)
                 raise fault from None
         if isinstance(reply, ProtocolError):

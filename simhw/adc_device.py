@@ -7,6 +7,9 @@ queue is the device's FIFO: on a virtual clock a full FIFO holds the simulation 
 paced clock it overflows like hardware (frames dropped, sequence counter still counting).
 
 ``inject`` makes the device misbehave on request, for the tests of every fault path.
+``hold`` is the one that is not a fault of the device: it stops the output as a USB device's
+stops when its host no longer reads (the host process died without ``STOP``), so a test can
+leave the line mid-frame, or with a reply pending, for the next host to connect to.
 """
 
 from __future__ import annotations
@@ -42,7 +45,7 @@ if TYPE_CHECKING:
 log = logging.getLogger(__name__)
 
 FIRMWARE = "1.0"
-FAULTS = ("drop", "corrupt", "bad_length", "garbage", "bad_reply", "stall", "disconnect")
+FAULTS = ("drop", "corrupt", "bad_length", "garbage", "bad_reply", "stall", "disconnect", "hold")
 
 
 class AdcDevice:
@@ -67,6 +70,9 @@ class AdcDevice:
         self._fifo_cond = threading.Condition()
         self._faults: dict[str, int] = {}
         self._stall_until: float | None = None
+        self._hold_lock = threading.Lock()
+        self._hold_bytes: int | None = None  # bytes still to send before the output holds
+        self._hold_lines = 0                 # command lines to receive before it goes on
         self._connected = True
         self._stop = threading.Event()
         self._threads = [threading.Thread(target=self._command_loop, name="sim-adc-commands", daemon=True),
@@ -78,10 +84,22 @@ class AdcDevice:
     def inject(self, fault: str, count: int = 1, seconds: float | None = None, nbytes: int = 64) -> None:
         """Misbehave on purpose: ``drop``/``corrupt``/``bad_length`` the next ``count`` frames,
         write ``garbage`` bytes, answer the next command with a ``bad_reply``, ``stall`` (stop
-        sending and answering, for ``seconds`` or for good), or ``disconnect`` (close the port)."""
+        sending and answering, for ``seconds`` or for good), or ``disconnect`` (close the port).
+
+        ``hold``: send ``nbytes`` more bytes of output (frames and replies alike, so a frame may
+        be cut anywhere), then send nothing until ``count`` more command lines have arrived. It
+        is what a USB device does when the host process holding the port dies mid-stream: its
+        output waits, cut wherever it was, and the next host to talk to it gets the rest of the
+        frame first, then everything queued meanwhile (frames, and replies to the commands that
+        were in flight). Commands are still answered (into the FIFO) while the output holds."""
         if fault not in FAULTS:
             raise ValueError(f"unknown ADC fault {fault!r} (one of {', '.join(FAULTS)})")
-        if fault == "disconnect":
+        if fault == "hold":
+            if count < 1 or nbytes < 0:
+                raise ValueError(f"hold needs count >= 1 command lines and nbytes >= 0 (got {count}, {nbytes})")
+            with self._hold_lock:
+                self._hold_bytes, self._hold_lines = nbytes, count
+        elif fault == "disconnect":
             self.disconnect()
         elif fault == "stall":
             now = self.server.wall()
@@ -107,6 +125,25 @@ class AdcDevice:
             self._stall_until = None
             return False
         return True
+
+    def _writable(self, want: int) -> int:
+        """How many of ``want`` bytes the writer may send now (0 while the output holds)."""
+        with self._hold_lock:
+            if self._hold_bytes is None:
+                return want
+            return min(want, self._hold_bytes)
+
+    def _sent(self, n: int) -> None:
+        with self._hold_lock:
+            if self._hold_bytes is not None:
+                self._hold_bytes = max(0, self._hold_bytes - n)
+
+    def _line_received(self) -> None:
+        with self._hold_lock:
+            if self._hold_bytes is not None:
+                self._hold_lines -= 1
+                if self._hold_lines <= 0:
+                    self._hold_bytes = None
 
     def disconnect(self) -> None:
         """The cable is pulled: the port goes away under the host."""
@@ -156,8 +193,13 @@ class AdcDevice:
                 if self._stalled():
                     self._stop.wait(0.01)
                     continue
+                allowed = self._writable(len(view))
+                if not allowed:
+                    self._stop.wait(0.01)
+                    continue
                 try:
-                    n = os.write(self.master, view)
+                    n = os.write(self.master, view[:allowed])
+                    self._sent(n)
                     view = view[n:]
                 except BlockingIOError:
                     try:
@@ -234,6 +276,7 @@ class AdcDevice:
             while b"\n" in buf:
                 line, _, rest = bytes(buf).partition(b"\n")
                 buf = bytearray(rest)
+                self._line_received()
                 while self._stalled():
                     self._stop.wait(0.01)
                 try:
