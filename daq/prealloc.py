@@ -96,8 +96,7 @@ class Preallocator:
                 if new > end and call(self.fd, FALLOC_FL_KEEP_SIZE, self.reserved, end - self.reserved) == 0:
                     self.reserved = end          # the step was too much, what is needed fits
                     return
-                raise DiskFull(err, f"no room for {nbytes + self.headroom} more bytes ({nbytes} to write, "
-                                    f"{self.headroom} kept to close the file): {os.strerror(err)}")
+                raise self._no_room(err, nbytes, os.strerror(err))
             self.enabled = False
             if err not in _UNSUPPORTED and err != errno.EINTR:
                 log.warning("fallocate failed: %s; checking the free space instead of reserving it",
@@ -108,8 +107,11 @@ class Preallocator:
         st = os.fstatvfs(self.fd)
         free = st.f_bavail * st.f_frsize
         if free < end - max(size, self.reserved):
-            raise DiskFull(errno.ENOSPC, f"no room for {nbytes + self.headroom} more bytes ({nbytes} to write, "
-                                         f"{self.headroom} kept to close the file): {free} bytes free")
+            raise self._no_room(errno.ENOSPC, nbytes, f"{free} bytes free")
+
+    def _no_room(self, err: int, nbytes: int, why: str) -> DiskFull:
+        return DiskFull(err, f"no room for {nbytes + self.headroom} more bytes ({nbytes} to write, "
+                             f"{self.headroom} kept to close the file): {why}")
 
 
 def release(path: str | Path) -> None:

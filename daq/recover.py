@@ -30,6 +30,7 @@ import logging
 import math
 import os
 import re
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -233,8 +234,7 @@ def _survey(path: Path, sb: Superblock | None) -> _Survey:
 
 
 def _refuse_without_room(path: Path, need: int) -> None:
-    st = os.statvfs(path.parent)
-    free = st.f_bavail * st.f_frsize
+    free = shutil.disk_usage(path.parent).free          # as ``runfile.check_request`` measures it
     if free < need:
         raise RunFileError(f"{path}: the repair needs about {need} bytes on its disk and {free} are free. Nothing "
                            f"was written; copy the file to a disk with room and recover the copy")
