@@ -9,15 +9,44 @@
 
 A file a live writer holds in SWMR mode, or one a killed writer left behind, is opened
 read-only in SWMR mode; ``refresh()`` then picks up what the writer has flushed since.
+
+Opening checks the layout contract (DESIGN.md section 6) from metadata alone - attributes,
+types, shapes; no sample is read - and refuses a file that breaks it with a ``ContractError``
+(a ``RunFileError``) naming each rule broken and the bad value, so that no analysis runs on
+what is not volts on one time base. The rules, in the order checked:
+
+1. the path is a regular file (a FIFO, a directory or a device is refused before it is
+   opened: opening a FIFO would wait for a writer forever);
+2. it is HDF5 and not truncated, and its metadata reads (``UnreadableRunFile``);
+3. root ``format = "fbs-run"`` and ``format_version = 1`` (``READABLE_VERSIONS``; a file of
+   another version is refused before its layout is looked at);
+4. ``/channels`` is a group of at least one member, each a 1-D dataset in the file (not a
+   group, a link to another file, a virtual or external-storage dataset, nor one stored with
+   an HDF5 filter this library lacks);
+5. every channel is floating point (integer ADC counts are not volts);
+6. every channel has a string ``units`` and a number ``sample_rate_hz``, finite and within
+   ``MIN_RATE_HZ`` .. ``MAX_RATE_HZ``; all channels have the same rate (to ``RATE_RTOL``);
+7. all channels have the same length (one time base), and at least one sample; a file being
+   written or left by a writer that died (opened in SWMR mode, or its status still
+   "recording": ``fbs recover`` closes it) is exempt from both, as a live writer extends its
+   channels one after another and starts with none (its ``n_samples`` is the shortest's);
+8. ``/events``, if present, is a 1-D table with ``time`` (a number), ``kind`` and ``text``;
+   ``/meta``, if present, a group.
+
+Lost samples are NaN in a valid file (the recorder writes them so, with a ``gap`` event):
+checking for them would read every sample, so opening does not; ``lost_samples`` describes
+them where an analysis that cannot use them refuses.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import os
 import re
 import socket
+import stat
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,9 +56,38 @@ from typing import Any, overload
 import h5py
 import numpy as np
 
-from daq.runfile import FORMAT, STATUS_RECORDING, RunFileError
+from daq.runfile import FORMAT, FORMAT_VERSION, STATUS_RECORDING, RunFileError
+from daq.swmr import open_swmr_read
 
 log = logging.getLogger(__name__)
+
+#: the "fbs-run" format versions this reader reads
+READABLE_VERSIONS = (FORMAT_VERSION,)
+#: ``sample_rate_hz`` this reader accepts, Hz: below one sample in 1000 s no analysis here has a
+#: band to look at; above 10 MHz is past any ADC this software drives (the fastest, the sim's, gives
+#: 2 MS/s in all). Outside is an encoding mistake (a period for a rate, kHz for Hz, 1e-300).
+MIN_RATE_HZ = 1e-3
+MAX_RATE_HZ = 1e7
+#: channels' rates equal to this relative tolerance are one rate (float32 and float64 of one number)
+RATE_RTOL = 1e-6
+#: problems a ContractError message lists (the rest are counted)
+_MAX_LISTED = 8
+#: what a lost-samples message tells the reader about NaN in a run file
+LOST_SAMPLES_NOTE = ("the recorder writes samples it lost as NaN and logs a `gap` event for them, "
+                     "which `fbs inspect FILE` lists")
+
+
+class ContractError(RunFileError):
+    """An HDF5 file that breaks the "fbs-run" version 1 layout contract (DESIGN.md section 6).
+    The message names each rule broken and the bad value; ``problems`` lists them."""
+
+    def __init__(self, message: str, problems: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.problems = tuple(problems) or (message,)
+
+
+class UnreadableRunFile(RunFileError):
+    """Not a regular file, not HDF5, truncated, or metadata HDF5 cannot read."""
 
 
 @dataclass(frozen=True)
@@ -101,27 +159,377 @@ class Channel:
         return f"<Channel {self.name} [{self.units}] {len(self)} samples at {self.rate_hz:g} Hz>"
 
 
-def _text(v: Any) -> str:
-    return v.decode("utf-8", errors="replace") if isinstance(v, bytes) else str(v)
+def as_text(v: Any) -> str:
+    """Text for display: bytes decoded, and what is not UTF-8 (h5py gives undecodable bytes as lone
+    surrogates) replaced, so that printing it cannot fail."""
+    if isinstance(v, bytes):
+        return v.decode("utf-8", errors="replace")
+    return str(v).encode("utf-8", errors="surrogateescape").decode("utf-8", errors="replace")
 
 
-def _open(path: Path) -> tuple[h5py.File, bool]:
+_text = as_text
+
+
+# ---------------------------------------------------------------------------- the layout contract
+@dataclass(frozen=True)
+class _Found:
+    """What a file that keeps the contract holds, as the checks found it."""
+
+    channels: tuple[str, ...]
+    rate_hz: float
+    units: dict[str, str]
+
+
+class _Bad(Exception):
+    """An attribute value that is not what the rule asks for (the message says what it is)."""
+
+
+def _show(v: Any) -> str:
+    """A value for a message: short, with its type where the repr hides it."""
+    if isinstance(v, np.ndarray):
+        text = np.array2string(v, threshold=6, edgeitems=2)
+        return f"{text} ({v.dtype} array of shape {v.shape})"
+    if isinstance(v, np.generic):
+        return f"{v.item()!r} ({v.dtype})"
+    text = repr(v)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def _scalar(v: Any) -> Any:
+    """A scalar attribute value: a one-element array counts as its element."""
+    if isinstance(v, np.ndarray):
+        if v.size != 1:
+            raise _Bad(f"{_show(v)} is not one value")
+        return v.reshape(()).item() if v.dtype.kind in "biufc" else v.reshape(-1)[0]
+    return v
+
+
+def _number(v: Any) -> float:
+    """A real number attribute (int or float, not bool, text or complex) as a float."""
+    x = _scalar(v)
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        raise _Bad(f"{_show(v)} is not a number")
+    return float(x)
+
+
+def _string(v: Any) -> str:
+    """A text attribute (str, or UTF-8 bytes) as str."""
+    x = _scalar(v)
+    if isinstance(x, bytes):
+        try:
+            return x.decode("utf-8")
+        except UnicodeDecodeError:
+            raise _Bad(f"{_show(v)} is not UTF-8 text") from None
+    if not isinstance(x, str):
+        raise _Bad(f"{_show(v)} is not a string")
+    try:
+        x.encode("utf-8")
+    except UnicodeEncodeError:      # h5py's undecodable bytes, as lone surrogates
+        raise _Bad(f"{ascii(x)} is not UTF-8 text") from None
+    return str(x)
+
+
+def _rate_problem(rate: float) -> str | None:
+    if not math.isfinite(rate):
+        return f"{rate!r} is not finite"
+    if rate <= 0:
+        return f"{rate!r} Hz is not positive"
+    if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+        return f"{rate!r} Hz is outside the {MIN_RATE_HZ:g} .. {MAX_RATE_HZ:g} Hz this reader accepts"
+    return None
+
+
+def member_dataset(g: h5py.Group, name: str) -> tuple[h5py.Dataset | None, str | None]:
+    """``/channels/name`` as a dataset in this file, or why it is not one. The link is looked at
+    before it is followed: an external link is never opened (its target may be a FIFO, on which
+    HDF5 would wait for ever)."""
+    link = g.get(name, getlink=True)
+    if isinstance(link, h5py.ExternalLink):
+        return None, (f"a link to {link.filename}:{link.path} (another file): a channel is a dataset "
+                      f"in the run file itself")
+    obj = g.get(name)
+    if obj is None:
+        return None, f"a link to {getattr(link, 'path', '?')}, which does not exist"
+    if isinstance(obj, h5py.Group):
+        return None, "a group, not a 1-D dataset"
+    if not isinstance(obj, h5py.Dataset):
+        return None, f"a {type(obj).__name__}, not a 1-D dataset"
+    return obj, None
+
+
+def _storage_problem(ds: h5py.Dataset) -> str | None:
+    """Samples stored outside the file, or behind a filter this HDF5 cannot decode."""
+    if ds.is_virtual:
+        return "a virtual dataset (its samples live in other files): a channel's samples are in the run file"
+    if ds.external:
+        files = ", ".join(str(e[0]) for e in ds.external)
+        return f"samples stored in external file(s) {files}: a channel's samples are in the run file"
+    plist = ds.id.get_create_plist()
+    for i in range(plist.get_nfilters()):
+        code, _flags, _values, name = plist.get_filter(i)
+        if not h5py.h5z.filter_avail(code):
+            label = name.decode(errors="replace") if isinstance(name, bytes) else str(name)
+            return f"compressed with HDF5 filter {code} ({label}), which this HDF5 library cannot decode"
+    return None
+
+
+def _events_problem(ds: Any) -> str | None:
+    """Why ``/events`` is not the contract's table (time, kind, text), or None."""
+    if not isinstance(ds, h5py.Dataset):
+        return f"/events is a {type(ds).__name__}: it must be a table (dataset) of time, kind, text"
+    names = ds.dtype.names or ()
+    if not {"time", "kind", "text"} <= set(names):
+        return f"/events lacks time, kind or text (has {', '.join(names) or f'no fields: {ds.dtype}'})"
+    if ds.ndim != 1:
+        return f"/events is {ds.ndim}-D (shape {ds.shape}): it must be a 1-D table"
+    t = ds.dtype["time"]
+    if t.kind not in "iuf":
+        return f"/events time is {t}: it must be a number (seconds)"
+    return None
+
+
+def _names(cs: Sequence[str], most: int = 6) -> str:
+    return ", ".join(cs[:most]) + (f" and {len(cs) - most} more" if len(cs) > most else "")
+
+
+def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _Found]:
+    """Every rule of the layout contract ``f`` breaks (module docstring), each naming the bad
+    value, and what it holds. Reads attributes, types and shapes only. A wrong ``format`` or
+    ``format_version`` is the only problem given: the rest of such a file is not this layout's.
+    ``live``: the file is being written, or its writer died (opened in SWMR mode, or its status
+    still "recording"): its channels may differ in length, or hold nothing yet."""
+    problems: list[str] = []
+    empty = _Found((), math.nan, {})
+    fmt = f.attrs.get("format")
+    if fmt is None:
+        return [f"is not an {FORMAT} file (no root attribute format; an {FORMAT} file has format = {FORMAT!r})"], empty
+    try:
+        fmt_text = _string(fmt)
+    except _Bad as exc:
+        fmt_text = str(exc)
+    if fmt_text != FORMAT:
+        return [f"is not an {FORMAT} file (format = {fmt_text!r})"], empty
+    readable = " or ".join(str(v) for v in READABLE_VERSIONS)
+    if "format_version" not in f.attrs:
+        problems.append(f"no root attribute format_version (this reader reads {FORMAT} version {readable})")
+    else:
+        v = f.attrs["format_version"]
+        try:
+            version = _number(v)
+        except _Bad as exc:
+            return [f"format_version = {exc}; this reader reads {FORMAT} version {readable}"], empty
+        if version not in READABLE_VERSIONS:
+            return [f"format_version = {_show(_scalar(v))}: this reader reads {FORMAT} version {readable} only "
+                    f"(a newer layout needs a newer fbs-hil)"], empty
+    linked = []
+    for name in ("channels", "events", "meta"):
+        link = f.get(name, getlink=True)      # the link only: an external one is not followed
+        if isinstance(link, h5py.ExternalLink):
+            linked.append(f"/{name} is a link to {link.filename}:{link.path} (another file): the layout's "
+                          f"objects are in the run file itself")
+    if linked:
+        return problems + linked, empty
+    if "channels" not in f:
+        problems.append("has no /channels group")
+        return problems, empty
+    g = f["channels"]
+    if not isinstance(g, h5py.Group):
+        problems.append(f"/channels is a {type(g).__name__}, not a group of one dataset per channel")
+        return problems, empty
+    names = tuple(g)
+    if not names:
+        problems.append("has no channels (/channels is empty)")
+        return problems, empty
+    rates: dict[str, float] = {}
+    units: dict[str, str] = {}
+    lengths: dict[str, int] = {}
+    per_channel: dict[str, list[str]] = {}       # a rule broken -> the channels breaking it
+
+    def bad(c: str, text: str) -> None:
+        per_channel.setdefault(text, []).append(c)
+
+    for c in names:
+        try:
+            c.encode("utf-8")
+        except UnicodeEncodeError:
+            problems.append(f"/channels/{ascii(c)}: a channel name that is not UTF-8 text")
+            continue
+        ds, why = member_dataset(g, c)
+        if ds is None:
+            bad(c, str(why))
+            continue
+        shape = ds.shape
+        if shape is None or len(shape) != 1:
+            bad(c, f"{'a null dataspace' if shape is None else f'{len(shape)}-D (shape {shape})'}: a channel is a "
+                   f"1-D dataset")
+            continue
+        lengths[c] = shape[0]
+        try:
+            dt = ds.dtype
+        except (TypeError, ValueError) as exc:
+            bad(c, f"an HDF5 type this reader cannot map ({exc}): channels are floating point")
+            continue
+        if dt.kind != "f":
+            hint = " (integer ADC counts are not volts: scale them to volts first)" if dt.kind in "iub" else ""
+            bad(c, f"{dt} samples, not floating point{hint}")
+        storage = _storage_problem(ds)
+        if storage:
+            bad(c, storage)
+        if "units" not in ds.attrs:
+            bad(c, "no units attribute (a string, e.g. 'V')")
+        else:
+            try:
+                units[c] = _string(ds.attrs["units"])
+            except _Bad as exc:
+                bad(c, f"units = {exc}")
+        if "sample_rate_hz" not in ds.attrs:
+            bad(c, "no sample_rate_hz attribute (a number, Hz)")
+        else:
+            try:
+                rate = _number(ds.attrs["sample_rate_hz"])
+            except _Bad as exc:
+                bad(c, f"sample_rate_hz = {exc}")
+            else:
+                why_rate = _rate_problem(rate)
+                if why_rate:
+                    bad(c, f"sample_rate_hz = {why_rate}")
+                else:
+                    rates[c] = rate
+    for text, cs in per_channel.items():
+        subject = f"/channels/{cs[0]}" if len(cs) == 1 else f"channels {_names(cs)}"
+        problems.append(f"{subject}: {text}")
+    if rates:
+        lo, hi = min(rates.values()), max(rates.values())
+        if not math.isclose(lo, hi, rel_tol=RATE_RTOL):
+            by_rate: dict[float, list[str]] = {}
+            for c, r in rates.items():
+                by_rate.setdefault(r, []).append(c)
+            problems.append("channels have different sample rates (" + "; ".join(
+                f"{r!r} Hz: {_names(cs)}" for r, cs in by_rate.items()) + "): all channels share one time base")
+    if lengths and not live:
+        if len(set(lengths.values())) > 1:
+            by_length: dict[int, list[str]] = {}
+            for c, n in lengths.items():
+                by_length.setdefault(n, []).append(c)
+            problems.append("channels have different lengths (" + "; ".join(
+                f"{n} samples: {_names(cs)}" for n, cs in sorted(by_length.items()))
+                + "): all channels share one time base; a writer that died between channels leaves this, "
+                "and `fbs recover FILE` pads the short ones with NaN")
+        elif max(lengths.values()) == 0:
+            problems.append("holds no samples (every channel has length 0)")
+    if "events" in f:
+        bad_events = _events_problem(f["events"])
+        if bad_events:
+            problems.append(bad_events)
+    if "meta" in f and not isinstance(f["meta"], h5py.Group):
+        problems.append("/meta is not a group (JSON strings as its attributes)")
+    if problems:
+        return problems, empty
+    first = names[0]
+    return [], _Found(names, rates[first], units)
+
+
+def contract_error(path: Path, problems: Sequence[str]) -> ContractError:
+    """The error a file breaking the rules ``problems`` raises: every rule, in one message."""
+    if len(problems) == 1 and problems[0].startswith(("is not an", "has no", "holds no")):
+        return ContractError(f"{path} {problems[0]}", problems)
+    if len(problems) == 1 and problems[0].startswith("format_version ="):
+        return ContractError(f"{path}: {problems[0]}", problems)
+    listed = list(problems[:_MAX_LISTED])
+    if len(problems) > _MAX_LISTED:
+        listed.append(f"... and {len(problems) - _MAX_LISTED} more")
+    return ContractError(f"{path} breaks the {FORMAT} version {FORMAT_VERSION} layout (DESIGN.md section 6): "
+                         + "; ".join(listed), problems)
+
+
+def nonfinite_spans(x: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of every run of non-finite samples (NaN, inf) in ``x``."""
+    bad = ~np.isfinite(np.asarray(x))
+    if not bad.any():
+        return []
+    d = np.diff(np.concatenate(([0], bad.astype(np.int8), [0])))
+    return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
+
+
+def spans_text(spans: Sequence[tuple[int, int]], rate_hz: float, offset: int = 0, max_spans: int = 3) -> str:
+    """The spans ``(start, stop)`` (``offset`` added) as "samples 500..509 (2.500..2.545 s), ..."."""
+    shown = ", ".join(f"samples {offset + a}..{offset + b - 1} ({(offset + a) / rate_hz:.3f}..{(offset + b - 1) / rate_hz:.3f} s)"
+                      for a, b in spans[:max_spans])
+    return shown + (f" and {len(spans) - max_spans} more span(s)" if len(spans) > max_spans else "")
+
+
+def lost_samples(channel: str, x: np.ndarray, rate_hz: float, offset: int = 0, max_spans: int = 3) -> str | None:
+    """None if every sample of ``x`` is finite; else what is not, for an error message: the
+    channel, the count, and the sample spans (``offset`` + index, with their times), e.g.
+    "gyro_x has 10 lost (NaN) samples: samples 500..509 (2.500..2.545 s)"."""
+    spans = nonfinite_spans(x)
+    if not spans:
+        return None
+    x = np.asarray(x)
+    n_nan = int(np.count_nonzero(np.isnan(x)))
+    n_inf = int(np.count_nonzero(np.isinf(x)))
+    kinds = " and ".join(k for k in (f"{n_nan} lost (NaN)" if n_nan else "", f"{n_inf} infinite" if n_inf else "") if k)
+    return f"{channel} has {kinds} samples: {spans_text(spans, rate_hz, offset, max_spans)}"
+
+
+_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+
+
+def check_regular_file(path: Path) -> None:
+    """Refuse, without opening it, a path that is not a regular file: HDF5 would wait forever
+    on a FIFO or a terminal for bytes no one writes."""
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise UnreadableRunFile(f"{path}: no such file") from None
+    except OSError as exc:
+        raise UnreadableRunFile(f"{path}: cannot look at it: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        kind = next((k for test, k in _KINDS if test(mode)), f"not a regular file (mode {mode:o})")
+        raise UnreadableRunFile(f"{path} is {kind}, not a run file: a run file is a regular HDF5 file "
+                                f"(DESIGN.md section 6); it was not opened")
+
+
+_TRUNCATED = re.compile(r"truncated file: eof = (\d+).*stored_eof = (\d+)")
+
+
+def open_hdf5(path: str | Path) -> tuple[h5py.File, bool]:
     """Open plain read-only; a file still marked open for writing (a live SWMR writer, or
-    one that was killed) is opened in SWMR-read mode instead. Returns (file, swmr)."""
-    if not path.exists():
-        raise RunFileError(f"{path}: no such file")
+    one that was killed) is opened in SWMR-read mode instead. Returns (file, swmr).
+    Raises ``UnreadableRunFile`` naming why the path cannot be opened as HDF5."""
+    path = Path(path)
+    check_regular_file(path)
     try:
         return h5py.File(path, "r"), False
     except OSError as exc:
-        if "truncated file" in str(exc):
-            raise RunFileError(f"cannot open {path}: its writer failed while extending it (disk full?): {exc}; "
-                               f"`fbs recover {path}` repairs it") from exc
-        if "already open for write" not in str(exc) and "unable to lock" not in str(exc).lower():
-            raise RunFileError(f"cannot open {path}: {exc}") from exc
+        text = str(exc)
+        m = _TRUNCATED.search(text)
+        if m:
+            raise UnreadableRunFile(
+                f"{path} is truncated: {m.group(1)} bytes on disk, its HDF5 superblock records {m.group(2)} (cut "
+                f"short by a copy or a download, or its writer failed while extending it, e.g. on a full disk; "
+                f"`fbs recover {path}` repairs the latter)") from exc
+        if "signature not found" in text:
+            raise UnreadableRunFile(f"{path} is not an HDF5 file (no HDF5 signature in its "
+                                    f"{_size(path)} bytes): a run file is HDF5 (DESIGN.md section 6)") from exc
+        if "already open for write" not in text and "unable to lock" not in text.lower():
+            raise UnreadableRunFile(f"cannot open {path} as HDF5: {exc}") from exc
+    except (RuntimeError, ValueError, KeyError) as exc:
+        raise UnreadableRunFile(f"cannot open {path} as HDF5: {exc}") from exc
     try:
-        return h5py.File(path, "r", swmr=True), True
-    except OSError as exc:
-        raise RunFileError(f"cannot open {path} (held by a writer, or left by one that died): {exc}") from exc
+        return open_swmr_read(path), True
+    except (OSError, RuntimeError, ValueError, KeyError) as exc:
+        raise UnreadableRunFile(f"cannot open {path} (held by a writer, or left by one that died): {exc}") from exc
+
+
+def _size(path: Path) -> int | str:
+    try:
+        return path.stat().st_size
+    except OSError:
+        return "?"
 
 
 class RunFile:
@@ -129,7 +537,7 @@ class RunFile:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.f, self.swmr = _open(self.path)
+        self.f, self.swmr = open_hdf5(self.path)
         try:
             self._check()
         except BaseException:
@@ -137,34 +545,36 @@ class RunFile:
             raise
 
     def _check(self) -> None:
-        fmt = _text(self.f.attrs.get("format", ""))
-        if fmt != FORMAT:
-            raise RunFileError(f"{self.path} is not an {FORMAT} file (format = {fmt!r})")
-        if "channels" not in self.f:
-            raise RunFileError(f"{self.path} has no /channels group")
+        """The layout contract (module docstring), from metadata only. Sets ``_group``,
+        ``channels``, ``rate_hz`` and ``units``; raises ``ContractError`` naming every rule
+        broken, ``UnreadableRunFile`` if HDF5 cannot read the metadata."""
+        try:
+            live = self.swmr or _text(self.f.attrs.get("status", "")) == STATUS_RECORDING
+            problems, found = contract_problems(self.f, live=live)
+        except RunFileError:
+            raise
+        except (OSError, RuntimeError, KeyError, ValueError, TypeError, AttributeError) as exc:
+            raise UnreadableRunFile(f"{self.path}: its HDF5 metadata cannot be read ({type(exc).__name__}: "
+                                    f"{exc})") from exc
+        if problems:
+            raise contract_error(self.path, problems)
         self._group = self.f["channels"]
-        self.channels: tuple[str, ...] = tuple(self._group)
-        if not self.channels:
-            raise RunFileError(f"{self.path} has no channels")
-        rates = {}
-        for c in self.channels:
-            ds = self._group[c]
-            if ds.ndim != 1:
-                raise RunFileError(f"{self.path}: channel {c} is {ds.ndim}-D, the layout needs 1-D")
-            if "sample_rate_hz" not in ds.attrs:
-                raise RunFileError(f"{self.path}: channel {c} has no sample_rate_hz attribute")
-            rates[c] = float(ds.attrs["sample_rate_hz"])
-        if len(set(rates.values())) != 1:
-            raise RunFileError(f"{self.path}: channels have different sample rates {rates}")
-        self.rate_hz = rates[self.channels[0]]
-        if not self.rate_hz > 0:
-            raise RunFileError(f"{self.path}: sample_rate_hz = {self.rate_hz} is not positive")
-        self.units = {c: _text(self._group[c].attrs.get("units", "")) for c in self.channels}
+        self.channels: tuple[str, ...] = found.channels
+        self.rate_hz = found.rate_hz
+        self.units = found.units
 
     # ------------------------------------------------------------------ description
     @property
     def attrs(self) -> dict[str, Any]:
-        return {k: (_text(v) if isinstance(v, (bytes, str)) else v) for k, v in self.f.attrs.items()}
+        """The root attributes (strings decoded; one HDF5 cannot read shows why)."""
+        out: dict[str, Any] = {}
+        for k in self.f.attrs:
+            try:
+                v = self.f.attrs[k]
+            except (OSError, RuntimeError, TypeError, ValueError) as exc:
+                v = f"<unreadable: {exc}>"
+            out[k] = _text(v) if isinstance(v, (bytes, str)) else v
+        return out
 
     @property
     def n_samples(self) -> int:
@@ -196,10 +606,14 @@ class RunFile:
         if "events" not in self.f:
             return []
         ds = self.f["events"]
-        names = ds.dtype.names or ()
-        if not {"time", "kind", "text"} <= set(names):
-            raise RunFileError(f"{self.path}: /events lacks time, kind or text (has {names})")
-        return [Event(float(r["time"]), _text(r["kind"]), _text(r["text"])) for r in ds[()]]
+        problem = _events_problem(ds)
+        if problem:
+            raise ContractError(f"{self.path}: {problem}", [problem])
+        try:
+            rows = ds[()]
+            return [Event(float(r["time"]), _text(r["kind"]), _text(r["text"])) for r in rows]
+        except (OSError, RuntimeError, TypeError, ValueError) as exc:
+            raise UnreadableRunFile(f"{self.path}: /events cannot be read ({exc})") from exc
 
     @property
     def meta(self) -> dict[str, Any]:
@@ -243,11 +657,33 @@ class RunFile:
             raise ValueError(f"samples {start}..{stop} are outside {self.path} (0..{n})")
         # NaN, not np.empty: HDF5 leaves the buffer alone where a chunk was never written
         # (fill_time "never", or a writer that died between extending and writing)
-        out = np.full((len(channels), stop - start), np.nan)
+        try:
+            out = np.full((len(channels), stop - start), np.nan)
+        except MemoryError:
+            raise RunFileError(f"{self.path}: samples {start}..{stop} of {len(channels)} channel(s) "
+                               f"({8 * len(channels) * (stop - start) / 1e9:.3g} GB) do not fit in memory; "
+                               f"analyse a shorter span") from None
         for i, c in enumerate(channels):
             if stop > start:
-                self._group[c].read_direct(out, np.s_[start:stop], np.s_[i, :])
+                try:
+                    self._group[c].read_direct(out, np.s_[start:stop], np.s_[i, :])
+                except (OSError, RuntimeError, TypeError, ValueError) as exc:
+                    raise UnreadableRunFile(f"{self.path}: samples {start}..{stop} of channel {c} cannot be "
+                                            f"read ({exc})") from exc
         return out
+
+    def lost_spans(self, channel: str, start: int = 0, stop: int | None = None,
+                   block_samples: int = 1 << 20) -> list[tuple[int, int]]:
+        """``(start, stop)`` of every run of lost (non-finite) samples of ``channel`` in samples
+        ``start .. stop``, read a block at a time (bounded memory on a file of any size)."""
+        spans: list[tuple[int, int]] = []
+        for b in self.blocks(block_samples, channels=[channel], start=start, stop=stop):
+            for a, e in nonfinite_spans(b.data[0]):
+                if spans and spans[-1][1] == b.start + a:          # a run across the block boundary
+                    spans[-1] = (spans[-1][0], b.start + e)
+                else:
+                    spans.append((b.start + a, b.start + e))
+        return spans
 
     def slice_s(self, t0_s: float, t1_s: float, channels: Sequence[str] | None = None) -> Block:
         """The samples with t0_s <= t < t1_s (t = index / rate, from the start of the run)."""

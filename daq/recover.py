@@ -39,7 +39,7 @@ import h5py
 import numpy as np
 
 from daq.prealloc import release
-from daq.reader import writer_alive
+from daq.reader import as_text, member_dataset, writer_alive
 from daq.runfile import EVENT_DTYPE, KIND_BYTES, STATUS_RECORDING, TEXT_BYTES, RunFileError, fit_utf8
 
 log = logging.getLogger(__name__)
@@ -100,6 +100,9 @@ def read_superblock(path: str | Path) -> Superblock:
             fh.seek(offset)
             raw = fh.read(48)
             if raw[:8] == SIGNATURE:
+                if len(raw) < 48:
+                    raise RunFileError(f"{path}: cut short inside its HDF5 superblock ({len(raw)} of 48 bytes at "
+                                       f"offset {offset}); nothing is left to recover")
                 break
             offset = 512 if offset == 0 else offset * 2
         else:
@@ -202,19 +205,20 @@ def _survey(path: Path, sb: Superblock | None) -> _Survey:
     src: Any = _RepairedView(path, sb) if sb is not None else path
     try:
         with h5py.File(src, "r") as f:
-            status = f.attrs.get("status", "")
-            status = status.decode() if isinstance(status, bytes) else str(status)
-            writer = f.attrs.get("writer", "")
-            writer = writer.decode() if isinstance(writer, bytes) else str(writer)
+            status = as_text(f.attrs.get("status", ""))
+            writer = as_text(f.attrs.get("writer", ""))
+            for name in ("channels", "events"):     # never followed to another file (it may be a FIFO)
+                if isinstance(f.get(name, getlink=True), h5py.ExternalLink):
+                    raise RunFileError(f"{path}: /{name} is a link to another file; not a run file this can repair")
             g = f.get("channels")
             if not isinstance(g, h5py.Group) or not len(g):
                 raise RunFileError(f"{path}: no /channels group with datasets; not a run file this can repair")
             lengths: dict[str, int] = {}
             rate = math.nan
             for c in g:
-                ds = g.get(c)
-                if not isinstance(ds, h5py.Dataset) or ds.ndim != 1:
-                    raise RunFileError(f"{path}: /channels/{c} is not a 1-D dataset; not a run file this can repair")
+                ds, why = member_dataset(g, c)
+                if ds is None or ds.ndim != 1:
+                    raise RunFileError(f"{path}: /channels/{c} is {why or 'not 1-D'}; not a run file this can repair")
                 lengths[c] = ds.shape[0]
                 if not math.isfinite(rate):
                     rate = float(np.asarray(ds.attrs.get("sample_rate_hz", math.nan)).ravel()[0])

@@ -3,6 +3,12 @@ whose writer died.
 
 ``inspect`` reads only attributes, dataset shapes and the events, so it is instant on a
 file of any size, and it works on a file being recorded (SWMR) or left by a killed writer.
+
+A file that breaks the layout contract (``daq.reader``: DESIGN.md section 6) is still shown as
+far as HDF5 reads it - root attributes, and each member of ``/channels`` with its type, shape,
+units and rate - followed by every rule it breaks; the command then ends as an error (exit 2,
+``fbs inspect: error: <the rules>`` on stderr), as the analysis commands do on that file. A
+path that is not a readable HDF5 file (a FIFO, a directory, truncated) is only the error.
 """
 
 from __future__ import annotations
@@ -10,12 +16,17 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
+from typing import Any
 
-from daq.reader import RunFile
+import h5py
+
+from daq.reader import ContractError, RunFile, as_text, open_hdf5
 from daq.recover import recover
 from daq.runfile import STATUS_RECORDING
 
 MAX_EVENTS = 200
+#: members of /channels (and root attributes) a broken file's description lists
+MAX_LISTED = 64
 
 
 def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
@@ -53,8 +64,88 @@ def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
     return lines
 
 
+def _value(v: Any) -> str:
+    if isinstance(v, (bytes, str)):
+        v = as_text(v)
+    text = repr(v) if isinstance(v, str) else str(v).replace("\n", " ")
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _attrs(obj: Any, names: tuple[str, ...] | None = None) -> str:
+    out = []
+    for k in list(obj.attrs)[:MAX_LISTED] if names is None else [n for n in names if n in obj.attrs]:
+        try:
+            out.append(f"{k} {_value(obj.attrs[k])}")
+        except (OSError, RuntimeError, TypeError, ValueError) as exc:
+            out.append(f"{k} <unreadable: {exc}>")
+    return ", ".join(out) or "none"
+
+
+def _member_line(g: h5py.Group, name: str) -> str:
+    link = g.get(name, getlink=True)
+    if isinstance(link, (h5py.ExternalLink, h5py.SoftLink)):
+        target = f"{link.filename}:{link.path}" if isinstance(link, h5py.ExternalLink) else link.path
+        kind = f"{type(link).__name__} to {target}"
+        if isinstance(link, h5py.ExternalLink):     # not followed: the other file is not this one's
+            return kind
+        obj = g.get(name)
+        if obj is None:
+            return f"{kind} (dangling)"
+        kind += ", "
+    else:
+        kind, obj = "", g[name]
+    if isinstance(obj, h5py.Dataset):
+        try:
+            dtype = str(obj.dtype)
+        except (TypeError, ValueError) as exc:
+            dtype = f"<type unreadable: {exc}>"
+        return f"{kind}dataset {dtype} shape {obj.shape}; {_attrs(obj, ('units', 'sample_rate_hz'))}"
+    return f"{kind}{'group' if isinstance(obj, h5py.Group) else type(obj).__name__}"
+
+
+def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
+    """The lines ``fbs inspect`` prints for a file that breaks the layout contract: what HDF5
+    reads of it, then each rule broken."""
+    lines = [f"{path}: HDF5, but not a valid fbs-run version 1 file (DESIGN.md section 6)"]
+    try:
+        f, _swmr = open_hdf5(path)
+    except OSError as exc:
+        lines.append(f"  (cannot be opened again to describe it: {exc})")
+    else:
+        try:
+            with f:
+                lines.append(f"  root attributes: {_attrs(f)}")
+                link = f.get("channels", getlink=True)
+                g = None if isinstance(link, h5py.ExternalLink) else f.get("channels")
+                if isinstance(g, h5py.Group):
+                    names = list(g)
+                    lines.append(f"  /channels ({len(names)} members):")
+                    width = max([len(as_text(c)) for c in names[:MAX_LISTED]] + [1])
+                    for c in names[:MAX_LISTED]:
+                        try:
+                            lines.append(f"    {as_text(c):<{width}}  {_member_line(g, c)}")
+                        except (OSError, RuntimeError, KeyError, TypeError, ValueError) as exc:
+                            lines.append(f"    {as_text(c):<{width}}  <unreadable: {exc}>")
+                    if len(names) > MAX_LISTED:
+                        lines.append(f"    ... {len(names) - MAX_LISTED} more")
+                others = [k for k in f if k != "channels"]
+                if others:
+                    lines.append("  other members: " + ", ".join(
+                        f"/{k} ({_member_line(f, k).split(';')[0]})" for k in others[:MAX_LISTED]))
+        except (OSError, RuntimeError, KeyError, TypeError, ValueError) as exc:
+            lines.append(f"  (the rest cannot be read: {exc})")
+    lines.append("  breaks the layout contract:")
+    lines += [f"    - {p}" for p in problems]
+    return lines
+
+
 def _inspect(args: argparse.Namespace) -> int:
-    print("\n".join(describe(args.file, args.max_events)))
+    try:
+        lines = describe(args.file, args.max_events)
+    except ContractError as exc:      # shown as far as it reads, then an error (exit 2) naming the rules
+        print("\n".join(describe_broken(args.file, exc.problems)))
+        raise
+    print("\n".join(lines))
     return 0
 
 

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 import scipy.stats
 
-from daq.reader import RunFile
+from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunFileError
 from drivers.calibration import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
 from procedures.analysis import dahl
@@ -196,18 +196,45 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     cmd, inst, pa = data
     if len(cmd) < 16:
         raise ValueError(f"{path}: {len(cmd)} samples are too few for an analysis")
-    freq = dahl.command_frequency(np.nan_to_num(cmd), fs)
+    # lost samples of the command read as 0 here: where they break the sweep, the error says so
+    cmd_lost = lost_samples(names[0], cmd, fs)
+    lost_why = f"; {cmd_lost} ({LOST_SAMPLES_NOTE})" if cmd_lost else ""
+    try:
+        freq = dahl.command_frequency(np.nan_to_num(cmd), fs)
+    except ValueError as exc:
+        raise ValueError(f"{exc}{lost_why}") from None
     segments = dahl.find_segments(np.nan_to_num(cmd), fs, freq, settle_cycles=settle_cycles)
     if not segments:
         raise ValueError(f"{path}: {names[0]} has no run of at least {2 + settle_cycles} cycles at one amplitude "
-                         f"(a sinusoid near {freq:.4g} Hz); too short, or not a hysteresis sweep")
+                         f"(a sinusoid near {freq:.4g} Hz); too short, or not a hysteresis sweep{lost_why}")
     a0 = min(s.lead_start for s in segments)
     b0 = max(s.stop for s in segments)
     for name, x in zip(names, data):
-        bad = int(np.count_nonzero(~np.isfinite(x[a0:b0])))
-        if bad:
-            raise ValueError(f"{path}: {name} has {bad} lost (NaN) samples in the cycles to analyse "
-                             f"({a0 / fs:.2f}..{b0 / fs:.2f} s)")
+        lost = lost_samples(name, x[a0:b0], fs, offset=a0)
+        if lost:
+            raise ValueError(f"{path}: {lost}, in the cycles to analyse (samples {a0}..{b0 - 1}, {a0 / fs:.2f}.."
+                             f"{b0 / fs:.2f} s), which the analysis needs whole; {LOST_SAMPLES_NOTE}")
+    finite = np.isfinite(data).all(axis=0)
+    if not finite.all():
+        # lost samples outside the cycles: the filters below run over the whole record and would
+        # carry them into the cycles, so the record is cut to the stretch around the cycles that
+        # holds none (as a file that ended there), and that is said
+        lost_where = "; ".join(t for t in (lost_samples(n, x, fs) for n, x in zip(names, data)) if t)
+        bad = np.flatnonzero(~finite)
+        s0 = int(bad[bad < a0].max()) + 1 if (bad < a0).any() else 0
+        s1 = int(bad[bad >= b0].min()) if (bad >= b0).any() else data.shape[1]
+        msg = (f"{lost_where}: outside the cycles, but the filters would spread them; analysed samples "
+               f"{s0}..{s1 - 1} ({s0 / fs:.2f}..{s1 / fs:.2f} s) only")
+        log.warning(msg)
+        warnings.append(msg)
+        data = data[:, s0:s1]
+        cmd, inst, pa = data
+        freq = dahl.command_frequency(cmd, fs)
+        segments = dahl.find_segments(cmd, fs, freq, settle_cycles=settle_cycles)
+        if not segments:
+            raise ValueError(f"{path}: samples {s0}..{s1 - 1}, the stretch of the sweep without lost samples, have no "
+                             f"run of at least {2 + settle_cycles} cycles at one amplitude; {lost_where} "
+                             f"({LOST_SAMPLES_NOTE})")
     # the torque band: the fundamental and its harmonics well into the loops' corners
     fc = min(12.5 * freq, 0.2 * fs)
     ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD          # V per rad
