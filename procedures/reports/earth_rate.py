@@ -53,7 +53,7 @@ def markdown(fits: dict[str, ChannelFit], stations: list[dict], names: Iterable[
                      f"{f.restraint_correction * 100:+.3f} % |")
     unresolved = [(ch, k, e.why) for ch, f in fits.items() for k, e in f.figures.items() if not e.resolved]
     lines += ["", "Intervals: generalised least squares with station errors correlated from one station to the next "
-              "(AR(1) in visiting order, its correlation a nuisance over its whole likelihood interval), Student's t "
+              "(AR(1) in visiting order, its correlation a nuisance integrated out over its restricted likelihood), Student's t "
               "with the fit's residual degrees of freedom. A figure is *not resolved* when its interval is wider than "
               "its magnitude or its estimate correlates with another by more than 0.95."]
     if unresolved:
