@@ -477,9 +477,15 @@ def test_a_fifo_a_directory_and_links_to_a_fifo_are_refused_without_hanging(tmp_
                                                                       "/channels is a link to"),
              (["analyze", "hysteresis"], counts, "int16 samples")]
     procs = [(_spawn(_argv(cmd, path)), cmd, words) for cmd, path, words in jobs]
-    for p, cmd, words in procs:
-        code, _out, err = _finish(p)
-        assert code == 2 and f"fbs {cmd[0]}: error:" in err and words in err, (cmd, err)
+    try:
+        for p, cmd, words in procs:
+            code, _out, err = _finish(p)
+            assert code == 2 and f"fbs {cmd[0]}: error:" in err and words in err, (cmd, err)
+    finally:       # a failure above must not leave the others waiting on the FIFO for ever
+        for p, _cmd, _words in procs:
+            if p.poll() is None:
+                p.kill()
+                p.communicate()
     assert fifo.exists() and folder.is_dir()
 
 
