@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 
 import can
 
@@ -34,7 +35,7 @@ log = logging.getLogger(__name__)
 class CanLink:
     def __init__(self, bus: can.BusABC, nodes: list[str], *, faults: FaultLatch | None = None,
                  heartbeat_period_s: float = 0.1, node_timeout_s: float = 1.0, reply_timeout_s: float = 0.5,
-                 channel: str = "") -> None:
+                 channel: str = "", monotonic: Callable[[], float] = time.monotonic) -> None:
         unknown = [n for n in nodes if n not in cp.NODES]
         if unknown:
             raise ValueError(f"unknown CAN node(s) {unknown}; known: {', '.join(cp.NODES)}")
@@ -45,6 +46,9 @@ class CanLink:
         self.heartbeat_period_s = heartbeat_period_s
         self.node_timeout_s = node_timeout_s
         self.reply_timeout_s = reply_timeout_s
+        #: the clock of every deadline here: the wall's, or one that leaves out the host's pauses
+        #: (``drivers.runclock``) for nodes that run in this process
+        self._mono = monotonic
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
         self._pending: dict[tuple[int, int], list] = {}
@@ -104,7 +108,7 @@ class CanLink:
 
     def _on_heartbeat(self, m: cp.Heartbeat) -> None:
         name = cp.NODE_NAMES[m.node]
-        self._last_hb[m.node] = time.monotonic()
+        self._last_hb[m.node] = self._mono()
         was_up = m.node in self._operational
         if m.state == cp.HB_OPERATIONAL:
             self._operational.add(m.node)
@@ -119,7 +123,7 @@ class CanLink:
 
     # ------------------------------------------------------------------ heartbeat and watch
     def _heartbeat_loop(self) -> None:
-        t_start = time.monotonic()
+        t_start = self._mono()
         while True:  # the first heartbeat goes out at once: it arms the nodes' watchdogs
             self._counter += 1
             try:
@@ -128,7 +132,7 @@ class CanLink:
             except DeviceLost as exc:
                 self.faults.report(exc)
                 return
-            now = time.monotonic()
+            now = self._mono()
             for name in self.nodes:
                 node = cp.NODES[name]
                 last = self._last_hb.get(node, t_start)
@@ -143,12 +147,12 @@ class CanLink:
 
     def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
-        deadline = time.monotonic() + timeout_s
+        deadline = self._mono() + timeout_s
         while True:
             missing = [n for n in self.nodes if cp.NODES[n] not in self._last_hb]
             if not missing:
                 return
-            if time.monotonic() > deadline:
+            if self._mono() > deadline:
                 raise DeviceLost(f"CAN {self.channel}: no heartbeat from node(s) "
                                  f"{', '.join(f'{n} (id {cp.NODES[n]})' for n in missing)} within {timeout_s:g} s; "
                                  f"check the bus wiring, termination and node power")
@@ -180,7 +184,10 @@ class CanLink:
             except DeviceLost as exc:
                 self.faults.report(exc)
                 raise
-            if not slot[0].wait(timeout_s):
+            deadline = self._mono() + timeout_s
+            while not slot[0].wait(0.05):
+                if self._mono() <= deadline:
+                    continue
                 fault: DriverError = DeviceTimeout(f"CAN node '{name}' (id {node}) did not answer {cp.OPS[op]} "
                                                    f"index {index} within {timeout_s:g} s; the rig went safe")
                 self.faults.report(fault)

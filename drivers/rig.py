@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
@@ -40,7 +41,7 @@ from drivers.command import CanCommandDac, CommandDac
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanRelayDriver, RelayDriver
-from drivers.serial_adc import SerialAdc
+from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
 from drivers.table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
 from drivers.torquer import CanTorquerDac, TorquerDac
 
@@ -315,12 +316,15 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
 
 def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
-              reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None) -> Rig:
+              reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None,
+              monotonic: Callable[[], float] = time.monotonic) -> Rig:
+    """The rig from its ADC port and CAN bus. ``monotonic``: the drivers' deadline clock (the
+    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s)."""
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
     link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
-                   reply_timeout_s=reply_timeout_s)
+                   reply_timeout_s=reply_timeout_s, monotonic=monotonic)
     adc = None
     try:
         link.wait_for_nodes(max(2.0, node_timeout_s))
@@ -328,7 +332,11 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         for c in clients:
             c.identify()
             c.clear()  # a node latched safe by an earlier session's end starts fresh
-        adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate)
+        # the ADC's own deadlines (2 s for a reply, 3 s of silence while streaming) stretch with a
+        # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them
+        adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate, monotonic=monotonic,
+                        reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
+                        stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
         tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
         rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=CanTorquerDac(link, calibration),
                   commands=CanCommandDac(link, calibration), caging=CanCagingSwitches(link), table=tab,

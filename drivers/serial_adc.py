@@ -22,7 +22,7 @@ import queue
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 
 import numpy as np
 import serial
@@ -120,14 +120,25 @@ def _err_from_reply(reply: Reply, what: str) -> DriverError:
     return DriverError(text)
 
 
+#: a command's reply deadline, s (from the later of the send and the last byte received)
+ADC_REPLY_TIMEOUT_S = 2.0
+#: silence while streaming that is a stall, s
+ADC_STALL_TIMEOUT_S = 3.0
+
+
 class SerialAdc(Adc):
     """Driver of the FBS ADC on a serial port (a USB CDC device, or the simulator's pty)."""
 
     def __init__(self, port: str, *, clock: RigClock | None = None, faults: FaultLatch | None = None,
-                 baudrate: int = 2_000_000, reply_timeout_s: float = 2.0, stall_timeout_s: float = 3.0,
+                 baudrate: int = 2_000_000, reply_timeout_s: float = ADC_REPLY_TIMEOUT_S,
+                 stall_timeout_s: float = ADC_STALL_TIMEOUT_S,
                  buffer_s: float = 120.0, resync_bytes: int = RESYNC_BYTES,
-                 resync_timeout_s: float = RESYNC_TIMEOUT_S) -> None:
+                 resync_timeout_s: float = RESYNC_TIMEOUT_S,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
         self.port = port
+        #: the clock of every deadline here: the wall's, or one that leaves out the host's pauses
+        #: (``drivers.runclock``) for a device that runs in this process
+        self._mono = monotonic
         self.clock = clock or WallClock()
         self.faults = faults or FaultLatch()
         self.reply_timeout_s = reply_timeout_s
@@ -154,7 +165,7 @@ class SerialAdc(Adc):
         self._read_pos = 0
         self._t0 = 0.0
         self._config: AdcConfig | None = None
-        self._last_rx = time.monotonic()
+        self._last_rx = self._mono()
         self._closed = False
         self._stopping = False              # STOP sent: a full buffer may no longer hold the reader
         # From the first byte read until the device's OK STAT, everything is discarded (1.8).
@@ -182,11 +193,11 @@ class SerialAdc(Adc):
             if not data:
                 # A frame cut short (corrupted length field) would hold back what follows,
                 # such as the STOP reply, for ever: after a quiet spell, give it up.
-                if self._decoder.pending() and time.monotonic() - self._last_rx > QUIET_S:
+                if self._decoder.pending() and self._mono() - self._last_rx > QUIET_S:
                     self._decoder.quiet()
                     self._dispatch()
                 continue
-            self._last_rx = time.monotonic()
+            self._last_rx = self._mono()
             sync = self._sync
             if sync is not None:
                 sync.received(data)
@@ -323,7 +334,7 @@ class SerialAdc(Adc):
         """
         sync = self._sync
         assert sync is not None
-        t_start = time.monotonic()
+        t_start = self._mono()
         with self._cmd_lock:
             self._send(encode_resync(), "STOP")
             self._await_resync(sync, "STOP", t_start)
@@ -341,7 +352,7 @@ class SerialAdc(Adc):
             log.debug("ADC on %s: in sync after %s", self.port, sync.summary())
 
     def _await_resync(self, sync: _Resync, keyword: str, t_start: float) -> Reply:
-        sent = time.monotonic()
+        sent = self._mono()
         while True:
             self.faults.check()        # the port went away under the reader
             try:
@@ -349,7 +360,7 @@ class SerialAdc(Adc):
                 return reply
             except queue.Empty:
                 pass
-            now = time.monotonic()
+            now = self._mono()
             if now - max(self._last_rx, sent) > self.reply_timeout_s:
                 why = f"then nothing for {self.reply_timeout_s:g} s"
             elif sync.nbytes > self.resync_bytes:
@@ -380,6 +391,17 @@ class SerialAdc(Adc):
             self._lost(fault)
             raise fault from exc
 
+    def _await_reply(self) -> Reply | ProtocolError | None:
+        """The next reply, or None after ``reply_timeout_s`` on this driver's deadline clock."""
+        deadline = self._mono() + self.reply_timeout_s
+        while True:
+            try:
+                reply: Reply | ProtocolError = self._replies.get(timeout=0.05)
+                return reply
+            except queue.Empty:
+                if self._mono() > deadline:
+                    return None
+
     def _command(self, verb: str, *args: object, what: str | None = None) -> Reply:
         self.faults.check()
         if self._closed:
@@ -390,9 +412,8 @@ class SerialAdc(Adc):
                 stale = self._replies.get_nowait()
                 log.warning("ADC on %s: stale reply dropped: %s", self.port, stale)
             self._send(encode_command(verb, *args), what)
-            try:
-                reply = self._replies.get(timeout=self.reply_timeout_s)
-            except queue.Empty:
+            reply = self._await_reply()
+            if reply is None:
                 fault: DriverError = DeviceTimeout(
                     f"ADC on {self.port}: no reply to {what!r} within {self.reply_timeout_s:g} s"
                     + (f" (last bad data: {self._bad_data})" if self._bad_data else ""))
@@ -523,7 +544,7 @@ class SerialAdc(Adc):
             self._capacity = max(int(self.buffer_s * cfg.rate_hz), 4 * cfg.frame_sets)
         self._command("START")
         self._t0 = self.clock.now()
-        self._last_rx = time.monotonic()
+        self._last_rx = self._mono()
         return self._t0
 
     def stop(self) -> AdcStatus:
@@ -567,7 +588,7 @@ class SerialAdc(Adc):
         # frame more than needed, and for more still while nothing comes.
         ahead = cfg.frame_sets
         self.clock.demand(self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz)
-        t_start = time.monotonic()
+        t_start = self._mono()
         with self._cond:
             while True:
                 self._raise_queued()
@@ -576,7 +597,7 @@ class SerialAdc(Adc):
                     return self._take(min(n, avail), cfg)
                 if not self._rx_streaming:
                     raise InterlockError(f"the ADC stream has ended at sample {self._read_pos}; start it again")
-                now = time.monotonic()
+                now = self._mono()
                 if timeout_s is not None and now - t_start > timeout_s:
                     raise DeviceTimeout(f"ADC on {self.port}: {n} sample sets not received within {timeout_s:g} s")
                 if now - max(self._last_rx, t_start) > self.stall_timeout_s:

@@ -16,6 +16,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import can
@@ -272,8 +273,9 @@ class CanNodeHost:
     """All simulated nodes on one virtual bus: a receive thread and a heartbeat/watchdog thread."""
 
     def __init__(self, server: SimRigServer, channel: str, heartbeat_period_s: float = 0.1,
-                 watchdog_s: float = 1.0) -> None:
+                 watchdog_s: float = 1.0, monotonic: Callable[[], float] = time.monotonic) -> None:
         self.server = server
+        self._mono = monotonic          # the watchdogs' clock (``SimRigServer.monotonic``)
         self.channel = channel
         self.heartbeat_period_s = heartbeat_period_s
         self.watchdog_s = watchdog_s
@@ -302,7 +304,7 @@ class CanNodeHost:
                 n.reply_delay_s = float(delay_s)
             elif fault == "disconnect":
                 n.connected = False
-                n.silent_since = time.monotonic()
+                n.silent_since = self._mono()
             elif fault == "bad_response":
                 n.bad_response += 1
             elif fault == "reset":
@@ -335,7 +337,7 @@ class CanNodeHost:
                 self._refuse(msg, exc)
                 continue
             if isinstance(m, cp.Heartbeat) and m.node == 0:
-                self._last_host_hb = time.monotonic()
+                self._last_host_hb = self._mono()
             elif isinstance(m, cp.Request):
                 self._answer(m)
 
@@ -372,7 +374,7 @@ class CanNodeHost:
     def _hb_loop(self) -> None:
         while not self._stop.wait(self.heartbeat_period_s):
             self._counter += 1
-            now = time.monotonic()
+            now = self._mono()
             with self._lock:
                 for n in self.nodes.values():
                     if not n.connected:

@@ -17,12 +17,14 @@ import can
 
 from drivers.calibration import RigCalibration
 from drivers.rig import Rig, assemble, check_keys, flag
+from drivers.runclock import RunningClock
 from drivers.table import Operator, TablePosition, terminal_operator
 from simhw.datasheet import rig_calibration
 from simhw.params import load_config
 from simhw.rig_server import SimRigServer
 
-#: the simulated rig's default heartbeat and reply deadline (s, wall clock)
+#: the simulated rig's default heartbeat and reply deadline (s, on a clock that leaves out the
+#: host's pauses: ``drivers.runclock``)
 SIM_WATCHDOG_S = 5.0
 SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog"}
 
@@ -39,15 +41,23 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         speed = float(params.get("speed", "1"))
         # a wall-clock deadline on a rig whose time is virtual measures the host's load, not the
         # rig: the sim's heartbeat watchdogs and CAN reply deadline default to 5 s (a real rig's
-        # nodes use 1 s); tests of the watchdog itself give watchdog= explicitly
+        # nodes use 1 s), on a clock without the host's pauses; tests of the watchdog itself
+        # give watchdog= explicitly
         watchdog = float(params.get("watchdog", str(SIM_WATCHDOG_S)))
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     cfg = load_config(params.get("config"))
     if calibration is None:
         calibration = rig_calibration(cfg)   # the data sheet the simulated rig ships with
-    server = SimRigServer(cfg, seed=seed, realtime=flag("realtime", params.get("realtime", "0")), speed=speed,
-                          warm=flag("warm", params.get("warm", "0")), watchdog_s=watchdog)
+    # the devices run in this process: their deadlines, and the drivers', leave out the time the
+    # process could not run (a busy host), so they measure the rig (``drivers.runclock``)
+    running = RunningClock()
+    try:
+        server = SimRigServer(cfg, seed=seed, realtime=flag("realtime", params.get("realtime", "0")), speed=speed,
+                              warm=flag("warm", params.get("warm", "0")), watchdog_s=watchdog, monotonic=running)
+    except BaseException:
+        running.close()
+        raise
     try:
         bus = can.Bus(interface="virtual", channel=server.can_channel, receive_own_messages=False)
         tab: tuple
@@ -57,8 +67,9 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         else:
             tab = ("can",)
         return assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
-                        node_timeout_s=watchdog, reply_timeout_s=max(0.5, watchdog), closers=[server.stop],
-                        emulator=server)
+                        node_timeout_s=watchdog, reply_timeout_s=max(0.5, watchdog),
+                        closers=[server.stop, running.close], emulator=server, monotonic=running)
     except BaseException:
         server.stop()
+        running.close()
         raise

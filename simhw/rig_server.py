@@ -70,8 +70,11 @@ def _compile_kernels(cfg: SimConfig | None, rate_hz: float) -> None:
 class SimRigServer:
     def __init__(self, cfg: SimConfig | None = None, *, seed: int = 0, realtime: bool = False, speed: float = 1.0,
                  warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 1.0,
-                 paced_block_s: float = 0.01, watchdog_s: float = 1.0) -> None:
+                 paced_block_s: float = 0.01, watchdog_s: float = 1.0,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
         self.seed = seed
+        #: the devices' deadline clock (``drivers.runclock.RunningClock`` from the sim rig scheme)
+        self.monotonic = monotonic
         self.paced = realtime
         self.max_block_s = max_block_s
         self.paced_block_s = paced_block_s
@@ -91,7 +94,7 @@ class SimRigServer:
         self._stop = threading.Event()
         self.adc = AdcDevice(self)
         self.can_channel = f"fbs-sim-{uuid.uuid4().hex[:12]}"
-        self.nodes = CanNodeHost(self, self.can_channel, watchdog_s=watchdog_s)
+        self.nodes = CanNodeHost(self, self.can_channel, watchdog_s=watchdog_s, monotonic=monotonic)
         self.clock = SimClock(self)
         self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
         self._thread.start()
@@ -130,7 +133,7 @@ class SimRigServer:
     def wait_time(self, t: float, stall_s: float = 10.0) -> None:
         """Block until rig time reaches ``t``; a clear error if it stops advancing."""
         with self._cond:
-            last, since = self._time, time.monotonic()
+            last, since = self._time, self.monotonic()
             while self._time < t - 1e-9:
                 if self.error is not None:
                     raise DeviceLost(f"the simulated rig stopped: {self.error!r}")
@@ -138,8 +141,8 @@ class SimRigServer:
                     raise DeviceLost("the simulated rig was closed")
                 self._cond.wait(0.05)
                 if self._time != last:
-                    last, since = self._time, time.monotonic()
-                elif time.monotonic() - since > stall_s:
+                    last, since = self._time, self.monotonic()
+                elif self.monotonic() - since > stall_s:
                     raise DeviceTimeout(f"rig time stalled at {self._time:.3f} s while waiting for {t:.3f} s"
                                         + (f": {self.stall_reason}" if self.stall_reason else ""))
 
