@@ -12,7 +12,7 @@ venv: $(STAMP)
 $(STAMP): pyproject.toml
 	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test,check]'
+	$(PY) -m pip install -q -e '.[test,check,cluster]'
 	@touch $(STAMP)
 
 demo: $(STAMP)

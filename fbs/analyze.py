@@ -18,12 +18,16 @@ import argparse
 import json
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from procedures.analysis.hysteresis import HysteresisResult
 
 
-def _hysteresis(args: argparse.Namespace) -> int:
+def _analyse(args: argparse.Namespace) -> tuple[HysteresisResult, list[Path]]:
+    """The analysis, and the files ``--out`` wrote."""
     from procedures.analysis.hysteresis import analyze_file
     from procedures.reports.hysteresis import (
-        CAL_SOURCES,
         markdown,
         plot_describing_function,
         plot_history,
@@ -35,7 +39,7 @@ def _hysteresis(args: argparse.Namespace) -> int:
         raise ValueError(f"--settle-cycles {args.settle_cycles} must be >= 0")
     lag = None if args.angle_lag_ms is None else args.angle_lag_ms * 1e-3
     res = analyze_file(args.file, args.axis, settle_cycles=args.settle_cycles, angle_lag_s=lag)
-    written = []
+    written: list[Path] = []
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
@@ -46,9 +50,21 @@ def _hysteresis(args: argparse.Namespace) -> int:
         md = out / f"{stem}.md"
         md.write_text(f"# fbs analyze hysteresis {Path(args.file).name} --axis {res.axis}\n\n" + markdown(res))
         written.append(md)
+    return res, written
+
+
+def json_result(args: argparse.Namespace) -> dict[str, Any]:
+    """The object ``--json`` prints (``fbs batch analyze-hysteresis`` collects the same)."""
+    return _analyse(args)[0].values()
+
+
+def _hysteresis(args: argparse.Namespace) -> int:
+    from procedures.reports.hysteresis import CAL_SOURCES
+
     if args.json:
-        print(json.dumps(res.values()))
+        print(json.dumps(json_result(args)))
         return 0
+    res, written = _analyse(args)
     print(f"fbs analyze hysteresis {res.file}: axis {res.axis}, {len(res.loops)} amplitudes at "
           f"{res.frequency_hz:.4g} Hz; instrument constants: {CAL_SOURCES[res.calibration_source]}")
     for key, label, unit in (("To_Nm", "To                ", "N m"), ("eta_per_Nm", "eta               ", "1/(N m)"),
@@ -87,4 +103,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     h.add_argument("--angle-lag-ms", type=float, default=None,
                    help="override the measured lag of the recorded angle behind the power-amplifier input (for "
                    "studies; default: measured on the record at the command's DAC lines)")
-    h.set_defaults(func=_hysteresis)
+    h.set_defaults(func=_hysteresis, json_result=json_result)

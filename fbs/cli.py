@@ -9,7 +9,7 @@ import sys
 from contextlib import nullcontext
 
 from drivers.errors import DriverError
-from fbs import analyze, demo, inspect, run, spectra
+from fbs import analyze, batch, demo, inspect, run, spectra
 from fbs import gap as gap_cli
 from fbs.signals import aborting_on_signals
 from simhw import effects as effect_catalogue
@@ -22,6 +22,8 @@ SECTION_5_CHANNELS = 20
 #: no ADC this software drives streams more sample sets per second (the sim's: 2 MS/s shared);
 #: the ADC itself refuses, with its own limit, a rate it cannot keep up for the channels asked
 MAX_RECORD_RATE_HZ = 2_000_000.0
+#: what a command reports as ``fbs CMD: error: ...`` and exit 2 (``fbs batch`` records the same per file)
+COMMAND_ERRORS = (ConfigError, ValueError, OSError, DriverError)
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -115,6 +117,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_parser(sub)
     analyze.add_parser(sub)
     gap_cli.add_parser(sub)
+    batch.add_parser(sub)
     return p
 
 
@@ -126,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         # the console owns its terminal and its signals (Textual); every other command aborts alike
         with nullcontext() if args.command == "console" else aborting_on_signals():
             return args.func(args)
-    except (ConfigError, ValueError, OSError, DriverError) as exc:
+    except COMMAND_ERRORS as exc:
         print(f"fbs {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

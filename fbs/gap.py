@@ -11,16 +11,29 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from procedures.analysis.gap.workflow import GapResult
 
 
-def _gap(args: argparse.Namespace) -> int:
+def _analyse(args: argparse.Namespace) -> GapResult:
     from procedures.analysis.gap.workflow import GapOptions, analyse
 
     opt = GapOptions(sim_config=args.sim_config, seed=args.seed)
-    res = analyse(args.file, axis=args.axis, options=opt, report_dir=args.report)
+    return analyse(args.file, axis=args.axis, options=opt, report_dir=args.report)
+
+
+def json_result(args: argparse.Namespace) -> dict[str, Any]:
+    """The object ``--json`` prints (``fbs batch gap`` collects the same)."""
+    return _analyse(args).to_json()
+
+
+def _gap(args: argparse.Namespace) -> int:
     if args.json:
-        print(json.dumps(res.to_json()))
+        print(json.dumps(json_result(args)))
         return 0
+    res = _analyse(args)
     print(f"fbs gap {res.file}: axis {res.axis}, mode {res.mode}, {res.duration_s:.0f} s at {res.rate_hz:g} Hz, "
           f"channels {', '.join(res.channels)} ({res.elapsed_s:.1f} s)")
     if not res.significant:
@@ -62,4 +75,4 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("--axis", help="platform axis X, Y or Z (default: the file's 'axis' attribute)")
     g.add_argument("--sim-config", help="TOML sim config the nominal model starts from (default: the data sheet)")
     g.add_argument("--seed", type=int, default=1, help="seed of the model simulations (default 1)")
-    g.set_defaults(func=_gap)
+    g.set_defaults(func=_gap, json_result=json_result)

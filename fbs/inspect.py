@@ -9,6 +9,7 @@ far as HDF5 reads it - root attributes, and each member of ``/channels`` with it
 units and rate - followed by every rule it breaks; the command then ends as an error (exit 2,
 ``fbs inspect: error: <the rules>`` on stderr), as the analysis commands do on that file. A
 path that is not a readable HDF5 file (a FIFO, a directory, truncated) is only the error.
+``--json`` prints ``summary``'s object instead (a broken file: only the error).
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import h5py
+import numpy as np
 
 from daq.reader import ContractError, RunFile, as_text, open_hdf5
 from daq.recover import recover
@@ -139,7 +141,54 @@ def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
     return lines
 
 
+def _plain(v: Any) -> Any:
+    """An attribute value as JSON: text decoded, numpy scalars and arrays as Python's."""
+    if isinstance(v, (bytes, str)):
+        return as_text(v)
+    if isinstance(v, np.generic):
+        return _plain(v.item())
+    if isinstance(v, np.ndarray):
+        return _plain(v.tolist())
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if v is None or isinstance(v, (bool, int, float)):
+        return v
+    return as_text(str(v))
+
+
+def summary(path: str | Path, max_events: int = MAX_EVENTS) -> dict[str, Any]:
+    """What ``fbs inspect --json`` prints: the file's root ``attrs``, its ``status`` as read (a
+    "recording" file whose writer is gone reads as aborted), ``swmr``, ``rate_hz``,
+    ``n_samples``, ``duration_s``, ``channels`` {name: {``units``, ``samples``}}, the first
+    ``max_events`` ``events`` [{``time_s``, ``kind``, ``text``}] of ``events_total``, and the
+    names of its ``meta`` entries. A file that breaks the layout contract raises ``ContractError``."""
+    with RunFile(path) as run:
+        lengths = run.lengths
+        events = run.events
+        return {
+            "file": str(run.path),
+            "attrs": {k: _plain(v) for k, v in run.attrs.items()},
+            "status": run.status,
+            "swmr": run.swmr,
+            "rate_hz": run.rate_hz,
+            "n_samples": run.n_samples,
+            "duration_s": run.duration_s,
+            "channels": {c: {"units": run.units[c], "samples": lengths[c]} for c in run.channels},
+            "events": [{"time_s": e.time_s, "kind": e.kind, "text": e.text} for e in events[:max_events]],
+            "events_total": len(events),
+            "meta": sorted(run.meta),
+        }
+
+
+def json_result(args: argparse.Namespace) -> dict[str, Any]:
+    """The object ``--json`` prints (``fbs batch inspect`` collects the same)."""
+    return summary(args.file, args.max_events)
+
+
 def _inspect(args: argparse.Namespace) -> int:
+    if args.json:          # a broken file is only the error (exit 2), stdout stays empty
+        print(json.dumps(json_result(args)))
+        return 0
     try:
         lines = describe(args.file, args.max_events)
     except ContractError as exc:      # shown as far as it reads, then an error (exit 2) naming the rules
@@ -158,7 +207,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     i = sub.add_parser("inspect", help="channels, units, rate, duration, status and events of a run file")
     i.add_argument("file")
     i.add_argument("--max-events", type=int, default=MAX_EVENTS, help="events to list (default %(default)s)")
-    i.set_defaults(func=_inspect)
+    i.add_argument("--json", action="store_true", help="one JSON object on stdout: attributes, status, rate, "
+                   "samples, duration, channels with units, events, meta names")
+    i.set_defaults(func=_inspect, json_result=json_result)
     r = sub.add_parser("recover", help="make a run file left by a killed writer open with plain h5py again")
     r.add_argument("file")
     r.add_argument("--force", action="store_true", help="even if a process with the writer's pid runs")

@@ -1,4 +1,4 @@
-"""``fbs spectra FILE.h5 --channels a,b [--out DIR] [--seg-s S]`` (DESIGN.md section 7).
+"""``fbs spectra FILE.h5 --channels a,b [--out DIR] [--seg-s S] [--json]`` (DESIGN.md section 7).
 
 The numerics and the files written are ``procedures.analysis.spectra``'s; this is the command line.
 """
@@ -6,15 +6,57 @@ The numerics and the files written are ``procedures.analysis.spectra``'s; this i
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
+from typing import Any
 
-from procedures.analysis.spectra import default_out_dir, spectra_command
+from procedures.analysis.spectra import SpectraResult, default_out_dir, spectra_command
+
+
+def _compute(args: argparse.Namespace) -> SpectraResult:
+    channels = [c for c in args.channels.split(",") if c.strip()]
+    out = Path(args.out) if args.out else default_out_dir(args.file)
+    return spectra_command(args.file, channels, out, seg_s=args.seg_s)
+
+
+def summary(result: SpectraResult) -> dict[str, Any]:
+    """What ``--json`` prints: the files written, the Welch estimate's segments, resolution and
+    EDOF, and per channel its octave-band count, PSD units and the points kept above
+    ``KEEP_FACTOR`` times their band's average (``kept_f_hz``, ``kept_psd``), the plots' content."""
+    from daq.plots import psd_units_label
+
+    c = result.csd
+    return {
+        "file": str(result.path),
+        "out_dir": str(result.out_dir),
+        "files": [str(p) for p in result.files],
+        "rate_hz": float(c.fs),
+        "n_samples": int(c.n_samples),
+        "segment_samples": int(c.nperseg),
+        "segment_s": float(c.segment_s),
+        "overlap_samples": int(c.noverlap),
+        "resolution_hz": float(c.resolution_hz),
+        "segments_used": int(c.segments_used),
+        "segments_total": int(c.segments_total),
+        "segments_skipped": int(c.segments_skipped),
+        "dof": float(c.dof),
+        "channels": {ch: {"psd_units": psd_units_label(c.units[c.index(ch)], c.scaling),
+                          "octave_bands": int(b.n_bands), "keep_factor": float(b.factor),
+                          "kept_f_hz": [float(f) for f in b.kept_f], "kept_psd": [float(p) for p in b.kept_p]}
+                     for ch, b in result.bands.items()},
+    }
+
+
+def json_result(args: argparse.Namespace) -> dict[str, Any]:
+    """The object ``--json`` prints (``fbs batch spectra`` collects the same)."""
+    return summary(_compute(args))
 
 
 def _run(args: argparse.Namespace) -> int:
-    channels = [c for c in args.channels.split(",") if c.strip()]
-    out = Path(args.out) if args.out else default_out_dir(args.file)
-    result = spectra_command(args.file, channels, out, seg_s=args.seg_s)
+    if args.json:
+        print(json.dumps(json_result(args)))
+        return 0
+    result = _compute(args)
     for p in result.files:
         print(f"wrote {p}")
     for line in result.lines():
@@ -35,5 +77,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     s.add_argument("--seg-s", type=float, metavar="S",
                    help="Welch segment length in seconds (default: a power of two of samples near 10 s, "
                         "shorter if the run holds fewer than 8 such segments)")
-    s.set_defaults(func=_run)
+    s.add_argument("--json", action="store_true", help="one JSON object on stdout (files written, segments, "
+                   "resolution, EDOF, the points kept above their band's average) instead of the summary lines")
+    s.set_defaults(func=_run, json_result=json_result)
     return s
