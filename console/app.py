@@ -18,9 +18,11 @@ from textual import work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
 from textual.message import Message
-from textual.widgets import Footer, TabbedContent, TabPane
+from textual.notifications import SeverityLevel
+from textual.widgets import Footer, TabbedContent, TabPane, Tabs
 
 from console.feeds import Feed
+from console.keyhelp import HelpScreen
 from console.limits import Entry
 from console.logfeed import FeedHandler
 from console.meterdata import MeterSnapshot, MeterSpec, MeterStore, permanent_meters
@@ -29,11 +31,21 @@ from console.modes import ModePanel
 from console.operator import ConsoleOperator, OperatorQuestion
 from console.operatorscreen import OperatorScreen
 from console.procedures import ProcedurePanel, parse_param_text
+from console.quitscreen import QuitScreen, what_quit_closes
 from console.recording import RecordingPanel, default_path
 from console.rigworker import RigWorker
 from console.setpoints import SetpointPanel
 from console.spectra import SpectraPanel
-from console.state import CommandOutcome, ProcedureEnded, RecordingEnded, RigFailed, RigFault, RigReady, WorkerStopped
+from console.state import (
+    CommandOutcome,
+    ProcedureEnded,
+    RecordingEnded,
+    RigEventItem,
+    RigFailed,
+    RigFault,
+    RigReady,
+    WorkerStopped,
+)
 from console.statusbar import StatusBar
 from drivers.calibration import RigCalibration
 from drivers.setpoints import SetpointLimits
@@ -67,6 +79,7 @@ class ConsoleApp(App[int]):
     ENABLE_COMMAND_PALETTE = False
     BINDINGS: ClassVar[list[BindingType]] = [
         *(Binding(key, f"panel('{pid}')", title, group=PANEL_KEYS) for pid, title, key in PANELS),
+        Binding("question_mark", "help", "help", key_display="?"),
         Binding("q", "quit", "quit"),
         Binding("ctrl+q", "quit", "quit", show=False, priority=True),
     ]
@@ -120,6 +133,10 @@ class ConsoleApp(App[int]):
         self.w_recording = self.query_one("#recording-panel", RecordingPanel)
         self.w_procedures = self.query_one("#procedures-panel", ProcedurePanel)
         self.w_spectra = self.query_one("#spectra-panel", SpectraPanel)
+        # Tab moves between a panel's boxes, never onto the tab row: a panel's keys (F7, F8)
+        # would not reach it from there
+        for tabs in self.query(Tabs):
+            tabs.can_focus = False
         logging.getLogger().addHandler(self._handler)
         # the live log shows the procedures' INFO records, whatever the host program configured
         self._saved_levels = {}
@@ -184,6 +201,14 @@ class ConsoleApp(App[int]):
         self.query_one(TabbedContent).active = pid
         self.query_one(f"#{pid}-panel").focus()
 
+    def action_help(self) -> None:
+        if isinstance(self.screen, HelpScreen) or len(self.screen_stack) > 1:
+            return  # another question is open
+        pid = self.query_one(TabbedContent).active
+        key, title = next((k, t) for p, t, k in PANELS if p == pid)
+        panel = self.query_one(f"#{pid}-panel")
+        self.push_screen(HelpScreen(f"{key.upper()} {title}", getattr(panel, "KEY_HELP", ())))
+
     def on_tabbed_content_tab_activated(self, event: TabbedContent.TabActivated) -> None:
         # a panel shown (by key or by mouse) takes the focus, so its keys work at once
         pane = event.pane
@@ -194,6 +219,21 @@ class ConsoleApp(App[int]):
         if self._quitting or self.worker_.stopped.is_set():
             self.exit(0)
             return
+        if isinstance(self.screen, QuitScreen):   # already asking
+            return
+        closes = what_quit_closes(self.worker_.state.get())
+        if closes:  # a live recording or procedure: ask, naming what quitting would close
+            self.push_screen(QuitScreen(closes), self._quit_answered)
+            return
+        self._quit_now()
+
+    def _quit_answered(self, quit_: bool | None) -> None:
+        if quit_:
+            self._quit_now()
+        else:
+            self.worker_.events.put(RigEventItem(None, "console", "quit declined: still running"))
+
+    def _quit_now(self) -> None:
         self._quitting = True
         self.w_status.note = "quitting: rig going safe…"
         self.worker_.request_shutdown("the operator quit the console")
@@ -239,11 +279,35 @@ class ConsoleApp(App[int]):
 
     def _outcome(self, o: CommandOutcome) -> None:
         if o.what in ("hold", "release", "safe state") or o.what.startswith("select"):
-            self.w_modes.last(o.text, o.ok)
+            same = not o.ok and o.text == self.worker_.state.get().alarm   # said once, by the lamp
+            self.w_modes.last(f"{o.what} refused: the alarm above says why" if same else o.text, o.ok)
         elif o.what.startswith(("torquer", "command", "autocollimator", "caging")):
             self.w_setpoints.message(o.text if o.ok else f"refused: {o.text}", o.ok)
         if not o.ok:
-            self.notify(o.text, title=f"{o.what} refused", severity="error", timeout=8)
+            self.refuse(o.what, o.text)
+
+    # ------------------------------------------------------------------ notifications
+    def notify(self, message: str, *, title: str = "", severity: SeverityLevel = "information",
+               timeout: float | None = None, markup: bool = True) -> None:
+        """A toast, and a repaint of the whole screen once it has gone: an expired toast is
+        removed from the DOM, but a terminal kept showing its text over the panel below."""
+        super().notify(message, title=title, severity=severity, timeout=timeout, markup=markup)
+        wait = self.NOTIFICATION_TIMEOUT if timeout is None else timeout
+        self.set_timer(wait + 0.25, self._repaint_after_toast)
+
+    def _repaint_after_toast(self) -> None:
+        if self.is_running:
+            self.screen.refresh(repaint=True, layout=True)
+
+    # ------------------------------------------------------------------ refusals and notes
+    def note(self, kind: str, text: str) -> None:
+        """A line in the event log from this thread, at the rig time last read (it never asks the rig)."""
+        self.worker_.events.put(RigEventItem(self.worker_.state.get().rig_time_s, kind, text))
+
+    def refuse(self, what: str, text: str, severity: SeverityLevel = "error", timeout: float = 8) -> None:
+        """A refused entry or command: a notification, and a line in the event log."""
+        self.note("refused", f"{what}: {text}")
+        self.notify(text, title=f"{what} refused", severity=severity, timeout=timeout)
 
     # ------------------------------------------------------------------ the refresh timer
     def refresh_live(self) -> None:
@@ -278,7 +342,7 @@ class ConsoleApp(App[int]):
     def _refuse_if_busy(self) -> bool:
         why = self.worker_.busy
         if why:
-            self.notify(why, title="refused", severity="warning", timeout=6)
+            self.refuse("command", why, severity="warning", timeout=6)
             return True
         return False
 
@@ -310,6 +374,9 @@ class ConsoleApp(App[int]):
         elif msg.kind is Entry.CAGING:
             w.set_caging_inhibit(msg.key, bool(msg.value))
 
+    def on_setpoint_panel_refused(self, msg: SetpointPanel.Refused) -> None:
+        self.refuse(msg.what, msg.text, timeout=6)
+
     def on_recording_panel_start(self, msg: RecordingPanel.Start) -> None:
         if self._refuse_if_busy():
             return
@@ -318,7 +385,7 @@ class ConsoleApp(App[int]):
             if not rate > 0:
                 raise ValueError
         except ValueError:
-            self.notify(f"sample rate {msg.rate!r} is not a positive number of Hz", severity="error")
+            self.refuse("recording", f"sample rate {msg.rate!r} is not a positive number of Hz")
             return
         path = Path(msg.path.strip()) if msg.path.strip() else default_path(self.out_dir)
         channels = tuple(c.strip() for c in msg.channels.split(",") if c.strip()) or None
@@ -333,18 +400,18 @@ class ConsoleApp(App[int]):
         if self._refuse_if_busy():
             return
         if self.worker_.state.get().phase == "recording":
-            self.notify("a recording is running: stop it (f4, f8) before a procedure, which records its own file",
-                        title="refused", severity="warning", timeout=6)
+            self.refuse("procedure", "a recording is running: stop it (f4, f8) before a procedure, which records "
+                        "its own file", severity="warning", timeout=6)
             return
         cls = self.catalogue.get(msg.name)
         if cls is None:
-            self.notify(f"no procedure {msg.name!r}" if self.catalogue else "the procedures are still loading",
-                        severity="error")
+            self.refuse("procedure", f"no procedure {msg.name!r}" if self.catalogue
+                        else "the procedures are still loading")
             return
         try:
             proc = parse_param_text(cls, msg.params)
         except (ValueError, TypeError) as exc:  # refused before the rig is touched
-            self.notify(str(exc), title="parameters refused", severity="error", timeout=10)
+            self.refuse(f"procedure {msg.name} parameters", str(exc), timeout=10)
             return
         self.log_feed.drain()
         self.w_procedures.started(proc.name)
@@ -381,7 +448,15 @@ def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
         root.handlers[:] = saved[0]
         root.setLevel(saved[1])
         file_handler.close()
-    stopped = app.stopped
-    if stopped is not None:
-        print(f"fbs console: rig closed ({stopped.reason}); safe state: {stopped.safe}")
+    if app.stopped is not None:
+        print(exit_line(app.stopped))
     return app.return_code or 0
+
+
+def exit_line(stopped: WorkerStopped) -> str:
+    """The line ``fbs console`` leaves on the terminal: why the rig closed, whether it is safe,
+    and every file the shutdown closed, by name, with its status."""
+    line = f"fbs console: rig closed ({stopped.reason}); safe state: {stopped.safe}"
+    if stopped.closed:
+        line += "; closed " + "; ".join(stopped.closed)
+    return line

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -10,11 +11,14 @@ from textual.binding import Binding
 from textual.containers import Vertical
 from textual.widgets import Sparkline, Static
 
+from console.keyhelp import PanelHelp
 from console.meterdata import MeterSnapshot, MeterSpec
 
 #: the bar of a meter spans the ADC's +-10 V, like the needle of a zero-centre panel meter
 BAR_HALF = 14
 FULL_SCALE_V = 10.0
+#: a reading this close to the ADC's rails is flagged: the loop is saturated, the value is not a measurement
+RAIL_V = 9.9
 
 
 def _bar(volts: float) -> str:
@@ -38,6 +42,8 @@ class MeterTable(Static):
         self.specs: tuple[MeterSpec, ...] = ()
         self.snap = MeterSnapshot(0)
         self.paints = 0              # how many times the table was drawn (the benchmark counts it)
+        self.paused = False
+        self.channels: tuple[str, ...] | None = None   # the ADC's channels, once the rig is open
 
     def show(self, specs: tuple[MeterSpec, ...], snap: MeterSnapshot) -> None:
         self.specs, self.snap = specs, snap
@@ -46,8 +52,11 @@ class MeterTable(Static):
     def render(self) -> Text:
         self.paints += 1
         t = Text(no_wrap=True, overflow="crop")
-        t.append(f"{'meter':<12}{'value':>11} {'units':<7}{'volts':>10}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}\n",
+        t.append(f"{'meter':<12}{'value':>11} {'units':<7}{'volts':>10}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}",
                  style="bold")
+        if self.paused:
+            t.append("  PAUSED", style="bold black on yellow")
+        t.append("\n")
         if not self.specs:
             t.append("waiting for the rig…")
             return t
@@ -55,10 +64,16 @@ class MeterTable(Static):
             v = self.snap.volts.get(s.channel)
             eng = None if v is None else s.eng(v)
             t.append(f"{s.label:<12}")
-            t.append(_num(eng, 11, 2), style="bold")
-            t.append(f" {s.units:<7}{_num(v, 10, 4)}  ")
-            t.append(_bar(v) if v is not None and math.isfinite(v) else " " * BAR_HALF + "│" + " " * BAR_HALF,
-                     style="cyan")
+            if v is None or not math.isfinite(v):  # say why there is no number
+                why = ("not on this ADC" if self.channels is not None and s.channel not in self.channels
+                       else "no reading (stream stopped)" if self.snap.seq else "waiting for the rig")
+                t.append(f"{'—':>11} {s.units:<7}  {why}", style="dim")
+            else:
+                t.append(_num(eng, 11, 2), style="bold")
+                t.append(f" {s.units:<7}{_num(v, 10, 4)}  ")
+                t.append(_bar(v), style="cyan")
+                if abs(v) >= RAIL_V:
+                    t.append(" RAIL", style="bold white on red")
             if i < len(self.specs) - 1:
                 t.append("\n")
         return t
@@ -87,16 +102,24 @@ class StripChart(Vertical):
         self._title = self.query_one(".chart-title", Static)
         self._spark = self.query_one(Sparkline)
 
-    def show(self, points: tuple[float, ...]) -> None:
+    def show(self, points: tuple[float, ...], paused: bool = False) -> None:
         pts = [p for p in points if math.isfinite(p)]
         title = f"chart {self.chart_name}: {self.channel}"
         if pts:
-            title += f"   {min(pts):+.4f} .. {max(pts):+.4f} V over the last {len(pts) * self.point_s:.0f} s"
+            span = f"{len(pts) * self.point_s:.0f} s"
+            title += f"   {min(pts):+.4f} .. {max(pts):+.4f} V over " + (f"{span} before the pause" if paused
+                                                                          else f"the last {span}")
+        else:
+            title += "   no data yet"
         self._title.update(title, layout=False)
         self._spark.data = pts
 
 
 class MeterPanel(Vertical, can_focus=True):
+    KEY_HELP: ClassVar[PanelHelp] = (
+        ("c", "strip chart A: the next channel"), ("v", "strip chart B: the next channel"),
+        ("p", "pause / resume the meters (the panel says PAUSED while they are frozen)"),
+    )
     BINDINGS = [
         Binding("c", "cycle('A')", "chart A"),
         Binding("v", "cycle('B')", "chart B"),
@@ -116,6 +139,7 @@ class MeterPanel(Vertical, can_focus=True):
 
     def set_channels(self, channels: tuple[str, ...]) -> None:
         self.channels = channels
+        self._table.channels = channels
 
     @property
     def chart_channels(self) -> tuple[str, str]:
@@ -140,4 +164,8 @@ class MeterPanel(Vertical, can_focus=True):
 
     def action_pause(self) -> None:
         self.paused = not self.paused
-        self.notify("meters paused" if self.paused else "meters live", timeout=2)
+        self._table.paused = self.paused     # the panel says so while it is frozen, not only a toast
+        self._table.refresh()
+        for chart in self._charts:
+            chart.show(self._table.snap.history.get(chart.channel, ()), paused=self.paused)
+        self.notify("meters paused (p resumes)" if self.paused else "meters live", timeout=2)

@@ -11,8 +11,9 @@ from textual.containers import Vertical
 from textual.message import Message
 from textual.widgets import Static
 
+from console.keyhelp import PanelHelp
 from console.state import Snapshot
-from drivers.relay import CAGED_FOR_MODE, MODES, interlock_reason
+from drivers.relay import CAGED_FOR_MODE, MODES, RelayStatus, interlock_reason
 
 SELECT = Binding.Group("select", compact=True)
 #: the mode switches' labels, short enough for one row at 80 columns
@@ -20,6 +21,13 @@ SHORT = {1: "gyro off", 2: "spin-up", 3: "AC ctl", 4: "gyro 4ch", 5: "gyro 3ch",
 
 
 class ModePanel(Vertical, can_focus=True):
+    KEY_HELP: ClassVar[PanelHelp] = (
+        ("h", "hold the mode switches: nothing changes until the release"),
+        ("0-7", "select a mode while held: 1 gyro off, 2 spin-up, 3 autocollimator control, 4 gyro "
+        "control (4-channel caging), 5 gyro control (3-channel), 6 external; 0 and 7 light the alarm"),
+        ("r", "release: the selected mode takes effect (4 and 5 need the gyros at speed and caged)"),
+        ("s", "the safe state now: mode 1, outputs zero, caging released; aborts a running procedure"),
+    )
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("h", "hold", "hold"),
         *(Binding(str(m), f"select({m})", f"select {m}", group=SELECT) for m in range(8)),
@@ -92,14 +100,7 @@ class ModePanel(Vertical, can_focus=True):
             alarm.append(" alarm ", style="dim reverse")
             alarm.append(" off", style="dim")
         self.query_one("#mode-alarm", Static).update(alarm)
-        gy = Text("gyros at speed / caged: ")
-        for c in st.at_speed:
-            gy.append(f"{c} ")
-            for ok in (st.at_speed[c], st.caged[c]):
-                gy.append("✓" if ok else "✗", style="green" if ok else "bold yellow")
-            gy.append("  ")
-        gy.append(f"wheels {100 * st.spin_fraction:.0f} %")
-        self.query_one("#mode-gyros", Static).update(gy)
+        self.query_one("#mode-gyros", Static).update(gyro_words(st, snap.caging))
         il = Text()
         for m in CAGED_FOR_MODE:
             why = interlock_reason(m, st)
@@ -107,3 +108,29 @@ class ModePanel(Vertical, can_focus=True):
             il.append("allowed" if why is None else why.split(": ", 1)[1], style="green" if why is None else "yellow")
             il.append("\n")
         self.query_one("#mode-interlocks", Static).update(il)
+
+
+def _names(flags: dict[str, bool], want: bool) -> list[str]:
+    return [c for c, v in flags.items() if v is want]
+
+
+def gyro_words(st: RelayStatus, inhibited: dict[str, bool]) -> Text:
+    """The wheels and the caging in words, and what engages the caging (II D): it is not a
+    switch, the relay driver cages each gyro by itself in mode 3 once its pickoff nulls."""
+    t = Text(f"wheels {100 * st.spin_fraction:.0f} %   at speed: ")
+    slow = _names(st.at_speed, False)
+    t.append("all" if not slow else ("none" if len(slow) == len(st.at_speed) else "all but " + " ".join(slow)),
+             style="green" if not slow else "bold yellow")
+    t.append("   caged: ")
+    loose = _names(st.caged, False)
+    t.append("all" if not loose else ("none" if len(loose) == len(st.caged) else "all but " + " ".join(loose)),
+             style="green" if not loose else "bold yellow")
+    held = _names(inhibited, True)
+    if loose:
+        why = ("caging engages by itself in mode 3 (each loop once its pickoff nulls)" if st.mode < 3
+               else "engaging by itself as each pickoff nulls" if st.mode == 3 else "")
+        if held:
+            why += ("; " if why else "") + f"inhibited on Set-points: {' '.join(held)}"
+        if why:
+            t.append(f"\n({why})", style="dim")
+    return t

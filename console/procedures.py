@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import shlex
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, ClassVar
 
 from rich.text import Text
 from textual.app import ComposeResult
@@ -16,6 +16,7 @@ from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Input, ProgressBar, RichLog, Select, Static
 
+from console.keyhelp import PanelHelp
 from console.state import ProcedureInfo
 
 if TYPE_CHECKING:
@@ -50,6 +51,12 @@ def parse_param_text(proc_cls, text: str):
 
 
 class ProcedurePanel(Vertical, can_focus=True):
+    KEY_HELP: ClassVar[PanelHelp] = (
+        ("F7", "run the chosen procedure with the typed parameters (name=value ..., as fbs run --param)"),
+        ("F8", "abort it: the rig goes safe, its file is closed \"aborted\" (fbs run --resume continues it)"),
+        ("Tab / shift+Tab", "between the procedure list and the parameters box"),
+        ("Enter", "on the list: open it; in the parameters box: run"),
+    )
     BINDINGS = [Binding("f7", "run", "run"), Binding("f8", "abort", "abort")]
 
     class Run(Message):

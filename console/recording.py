@@ -2,19 +2,30 @@
 
 from __future__ import annotations
 
+import time
+from collections import deque
 from pathlib import Path
+from typing import ClassVar
 
 from rich.text import Text
+from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
 from textual.widgets import Input, RichLog, Static
 
+from console.keyhelp import PanelHelp
 from console.state import RecordingInfo, RigEventItem, Snapshot
 
 
 class RecordingPanel(Vertical, can_focus=True):
+    KEY_HELP: ClassVar[PanelHelp] = (
+        ("F7", "start a recording: the file (blank: the next free recording.h5), rate, channels"),
+        ("F8", "stop it: the file is closed \"complete\""),
+        ("Tab / shift+Tab", "the next / previous box"),
+        ("Enter", "in a box: start the recording"),
+    )
     BINDINGS = [Binding("f7", "start", "record"), Binding("f8", "stop", "stop")]
 
     class Start(Message):
@@ -36,7 +47,8 @@ class RecordingPanel(Vertical, can_focus=True):
             yield Input(placeholder="all (or a,b,c)", id="rec-channels", compact=True)
         yield Static("not recording   (f7 record, f8 stop)", id="rec-status")
         yield Static("event log", classes="section")
-        yield RichLog(id="event-log", max_lines=500, wrap=False, markup=False)
+        # wrapped, so no horizontal scroll bar hides the newest line; it follows the newest entry
+        yield EventLog(id="event-log", max_lines=500, wrap=True, min_width=20, markup=False, auto_scroll=True)
 
     def action_start(self) -> None:
         self.post_message(self.Start(self.query_one("#rec-path", Input).value,
@@ -70,12 +82,57 @@ class RecordingPanel(Vertical, can_focus=True):
         else:
             status.update(_ended(r), layout=False)
 
+    _last_text = ""
+
     def log_events(self, items: list[RigEventItem]) -> None:
-        log = self.query_one("#event-log", RichLog)
+        """One line an event: wall clock, rig time, kind, text; a text the line before already
+        said (a refused mode after its alarm) is not repeated."""
+        log = self.query_one("#event-log", EventLog)
         for e in items:
-            stamp = f"{e.rig_time_s:10.3f} s" if e.rig_time_s is not None else " " * 12
-            style = "bold red" if e.kind in ("alarm", "error", "fault") else ("yellow" if e.kind == "gap" else "")
-            log.write(Text(f"{stamp} {e.kind:<9} {e.text}", style=style))
+            if e.text == self._last_text or e.text.endswith(": " + self._last_text):
+                continue  # e.g. "select mode 7: <the alarm's text>" right after that alarm
+            self._last_text = e.text
+            log.add(event_line(e))
+
+
+class EventLog(RichLog):
+    """A wrapped log that wraps its entries again whenever its width changes. Left to itself a
+    RichLog wraps a line once, at a width measured against the app's console, not itself, and
+    keeps it so (a line logged while its panel was hidden stays wrapped at 80 columns)."""
+
+    def __init__(self, *, max_lines: int = 500, **kw) -> None:
+        super().__init__(max_lines=max_lines, **kw)
+        self.entries: deque[Text] = deque(maxlen=max_lines)
+        self._wrapped_at = 0
+
+    def add(self, line: Text) -> None:
+        self.entries.append(line)
+        if self._wrapped_at:   # else kept until the log is shown (on_resize)
+            self.write(line, width=self._wrapped_at)
+
+    def clear(self) -> EventLog:
+        self.entries.clear()
+        return super().clear()
+
+    def on_resize(self, event: events.Resize) -> None:
+        width = self.scrollable_content_region.width
+        if width and width != self._wrapped_at:
+            self._wrapped_at = width
+            super().clear()
+            for line in self.entries:
+                self.write(line, width=width)
+
+
+def event_line(e: RigEventItem) -> Text:
+    """``12:03:07 r  1234.56 s alarm    mode 7 is not allowed ...`` (wall clock, then rig time)."""
+    wall = time.strftime("%H:%M:%S", time.localtime(e.wall_s))
+    rig = f"r {e.rig_time_s:9.2f} s" if e.rig_time_s is not None else "r         - s"
+    style = ("bold red" if e.kind in ("alarm", "error", "fault") else
+             "red" if e.kind == "refused" else "yellow" if e.kind == "gap" else "")
+    t = Text(f"{wall} ", style="dim")
+    t.append(f"{rig} ", style="dim")
+    t.append(f"{e.kind:<8} {e.text}", style=style)
+    return t
 
 
 def _hms(s: float) -> str:

@@ -15,7 +15,13 @@ Each tick (``tick_s``, 50 ms) the thread
   set-point read-backs.
 
 A procedure runs on this thread too (``run_procedure``, blocking the loop): the UI refuses
-other commands meanwhile, and aborts through a ``threading.Event`` that needs no queue.
+other commands meanwhile, and aborts through a ``threading.Event`` that needs no queue. The
+procedure shares the rig through this owner rather than stopping it: its rig time passes
+through its recording, and after every block the ADC tap hands the thread back to the owner
+(``TappedAdc.after_block``), which polls the relay status and the read-backs on rig time
+(``status_every_s``, ``readback_every_s``); a command the procedure gives (its rig event: a mode,
+a set-point, the safe state) is read back at once. So the header, the Modes and the Set-points
+panels follow the rig within a second of rig time, in virtual time too.
 
 Safe-state guarantees: the thread holds the rig inside ``drivers.safety.SafeOnAbort``, the
 one piece of code that drives the rig safe on an abort. A recording that ends any way but the
@@ -71,6 +77,8 @@ log = logging.getLogger(__name__)
 
 #: Refusals change nothing on the rig (drivers/errors.py); anything else is a fault.
 REFUSALS = (SetpointRangeError, InterlockError, ValueError, OSError)
+#: rig events after which a running procedure's state is read back at once
+_STATE_EVENTS = frozenset({"mode", "setpoint", "safe", "alarm"})
 
 
 class ConsoleClosed(Exception):
@@ -118,7 +126,13 @@ class RigWorker:
         self._slews: dict[str, Slew] = {}
         self._next_status = 0.0
         self._next_readback = 0.0
+        self._sharing = False                  # a procedure runs on this thread: poll on rig time
+        self._next_status_rig = 0.0
+        self._next_readback_rig = 0.0
+        self._quiet_setpoints = False          # a slew's steps: one line in the event log, not one a step
         self._fault_handled = False
+        #: the files the shutdown closed, "path (status)", for the console's exit line
+        self.closed_on_stop: list[str] = []
         self.stopped = threading.Event()
 
     # ================================================================== UI side (any thread)
@@ -224,10 +238,23 @@ class RigWorker:
             log.debug("could not post %r", item, exc_info=True)
 
     def _note(self, kind: str, text: str) -> None:
-        self.events.put(RigEventItem(None, kind, text))
+        """A console note for the event log, stamped with the rig's time (this is its thread)."""
+        try:
+            t: float | None = self.rig.now() if self.rig is not None else None
+        except Exception:  # a clock that cannot answer: the wall time alone
+            t = None
+        self.events.put(RigEventItem(t, kind, text))
 
     def _on_rig_event(self, t: float, kind: str, text: str) -> None:
-        self.events.put(RigEventItem(t, kind, text))
+        if not (self._quiet_setpoints and kind == "setpoint"):
+            self.events.put(RigEventItem(t, kind, text))
+        # a command a running procedure gave: read it back now (only on this thread, which
+        # owns the devices; a fault's event comes from the driver's receive thread)
+        if self._sharing and kind in _STATE_EVENTS and threading.current_thread() is self._thread:
+            try:
+                self._poll_shared(status=kind != "setpoint", readback=True)
+            except DriverError as exc:  # the procedure meets a fault on its own next call
+                log.debug("reading the rig back after %s: %s", kind, exc)
 
     def _run(self) -> None:
         reason = ""
@@ -241,7 +268,7 @@ class RigWorker:
                 return
             self.rig = rig
             self._safety = SafeOnAbort(rig, "the console")
-            rig.adc = TappedAdc(rig.adc, self.meters)
+            rig.adc = TappedAdc(rig.adc, self.meters, after_block=self._poll_shared)
             rig.subscribe(self._on_rig_event)
             self.state.update(phase=Phase.READY)
             self._note("console", f"rig {self.url} open ({'virtual' if rig.clock.virtual else 'paced'} time)")
@@ -415,6 +442,8 @@ class RigWorker:
         phase = self.state.get().phase
         self.state.update(phase=Phase.READY if phase is Phase.RECORDING else phase, recording=info, last_file=r.path)
         self._note("recording", f"{r.path}: {r.status}, {acq.pos} samples, {len(r.gaps)} gap(s)")
+        if self._stop.is_set():
+            self.closed_on_stop.append(f"recording {r.path} ({r.status})")
         self._post(RecordingEnded(r.path, r.status, acq.pos, len(r.gaps)))
         if exc is not None:
             self._slews.clear()
@@ -439,13 +468,22 @@ class RigWorker:
             # the file run_procedure will pick (it takes the same next free name), shown while it runs
             self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))
             log.info("procedure %s starting (parameters %s)", proc.name, proc.params_json())
-            summary = run_procedure(proc, self._rig, self.out_dir, progress=self._on_progress, abort=self._abort)
+            now = self._rig.now()
+            self._next_status_rig = self._next_readback_rig = now
+            self._sharing = True
+            try:
+                summary = run_procedure(proc, self._rig, self.out_dir, progress=self._on_progress,
+                                        abort=self._abort)
+            finally:
+                self._sharing = False
         except BaseException:
             self.state.update(phase=prev if prev in (Phase.READY, Phase.RECORDING) else Phase.READY, procedure=None)
             if not self._stop.is_set() and self._acq is None and not self._streaming:
                 self._guard(self._start_meter_stream)
             raise
         self.state.update(phase=Phase.READY, procedure=None, last_file=summary.file)
+        if self._stop.is_set() and summary.file is not None:
+            self.closed_on_stop.append(f"procedure {proc.name}'s file {summary.file} ({summary.status})")
         self._post(ProcedureEnded(summary))
         self._note("procedure", f"{proc.name}: {summary.verdict} ({summary.status}); file {summary.file}")
         if not self._check_fault() and not self._stop.is_set():
@@ -525,10 +563,16 @@ class RigWorker:
         back = dict(self.state.get().readback)
         for ch, s in list(self._slews.items()):
             v = s.step(t)
-            back[f"torq {ch}"] = self._rig.set_torquer_bias_V(ch, v)
+            self._quiet_setpoints = True   # the steps are in the rig's events (a recording keeps them)
+            try:
+                back[f"torq {ch}"] = self._rig.set_torquer_bias_V(ch, v)
+            finally:
+                self._quiet_setpoints = False
             if s.done:
                 del self._slews[ch]
-                self._note("setpoint", f"torquer bias {ch} at {back[f'torq {ch}']:+.4f} V (read back)")
+                self._note("setpoint", f"torquer bias {ch} {s.start_V:+.4f} -> {s.target_V:+.4f} V at "
+                           f"{s.rate_V_per_s:g} V/s in {s.steps} step(s), {t - s.t0:.2f} s; "
+                           f"read back {back[f'torq {ch}']:+.4f} V")
         self.state.update(readback=back, slewing={c: s.target_V for c, s in self._slews.items()})
 
     def _set_output(self, kind: SetpointKind, axis: str, volts: float) -> str:
@@ -547,15 +591,37 @@ class RigWorker:
 
     # ------------------------------------------------------------------ polling
     def _poll(self, force: bool = False) -> None:
-        rig = self._rig
+        """On the thread's tick (idle, recording): on the wall clock."""
         now = time.monotonic()
-        changes: dict[str, object] = {}
-        if force or now >= self._next_status:
+        status, readback = force or now >= self._next_status, force or now >= self._next_readback
+        if status:
             self._next_status = now + self.status_every_s
-            changes["relay"] = rig.relays.status()
-            changes["rig_time_s"] = rig.now()
-        if force or now >= self._next_readback:
+        if readback:
             self._next_readback = now + self.readback_every_s
+        self._read_state(status, readback)
+
+    def _poll_shared(self, *, status: bool = False, readback: bool = False) -> None:
+        """While a procedure runs on this thread: on rig time, after each block of its
+        recording and at once after its commands (``status``, ``readback`` force them)."""
+        if not self._sharing or self.rig is None or self.rig.faults.fault is not None:
+            return
+        t = self.rig.now()
+        # due a quarter interval early: block ends jitter by a frame around the schedule, and a
+        # poll just missed would wait a whole block more
+        status = status or t >= self._next_status_rig - 0.25 * self.status_every_s
+        readback = readback or t >= self._next_readback_rig - 0.25 * self.readback_every_s
+        if status:
+            self._next_status_rig = t + self.status_every_s
+        if readback:
+            self._next_readback_rig = t + self.readback_every_s
+        self._read_state(status, readback)
+
+    def _read_state(self, status: bool, readback: bool) -> None:
+        rig = self._rig
+        changes: dict[str, object] = {}
+        if status:
+            changes["relay"] = rig.relays.status()
+        if readback:
             back = {f"torq {c}": rig.torquers.bias_V(c) for c in rig.torquers.channels}
             for a in rig.commands.axes:
                 back[f"vtd {a}"] = rig.commands.command_torque_V(a)
@@ -563,6 +629,7 @@ class RigWorker:
             changes["readback"] = back
             changes["caging"] = {c: rig.caging.inhibited(c) for c in rig.caging.channels}
         if changes:
+            changes["rig_time_s"] = rig.now()
             self.state.update(**changes)
 
     # ------------------------------------------------------------------ faults and the end
@@ -610,7 +677,7 @@ class RigWorker:
         finally:
             self.state.update(phase=Phase.CLOSED)
             self.stopped.set()
-            self._post(WorkerStopped(reason, safe))
+            self._post(WorkerStopped(reason, safe, tuple(self.closed_on_stop)))
 
 
 def _safe_text(rig: Rig) -> str:

@@ -8,12 +8,15 @@ to the rig thread.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 from rich.text import Text
 from textual.app import ComposeResult
 from textual.containers import Horizontal, VerticalScroll
 from textual.message import Message
 from textual.widgets import Checkbox, Input, Static
 
+from console.keyhelp import PanelHelp
 from console.limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, Entry, typed_setpoint, typed_slew
 from console.state import Snapshot
 from drivers.calibration import AXES, GYRO_CHANNELS
@@ -22,12 +25,26 @@ from drivers.setpoints import SetpointLimits
 
 
 class SetpointPanel(VerticalScroll, can_focus=True):
+    KEY_HELP: ClassVar[PanelHelp] = (
+        ("Tab / shift+Tab", "the next / previous box"),
+        ("Enter", "in a box: send the typed value (checked against its range first; a ramp for a torquer bias)"),
+        ("Space", "on a caging switch: inhibit caging on that channel / release it (read back from the node)"),
+        ("up / down", "scroll the panel"),
+    )
+
     class Request(Message):
         """A checked set-point for the rig thread (or a caging switch)."""
 
         def __init__(self, kind: Entry, key: str, value: float | bool, slew: float = 0.0) -> None:
             super().__init__()
             self.kind, self.key, self.value, self.slew = kind, key, value, slew
+
+    class Refused(Message):
+        """An entry refused here (out of range, not a number): nothing went to the rig."""
+
+        def __init__(self, what: str, text: str) -> None:
+            super().__init__()
+            self.what, self.text = what, text
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
@@ -45,9 +62,11 @@ class SetpointPanel(VerticalScroll, can_focus=True):
 
     def compose(self) -> ComposeResult:
         with Horizontal(classes="sp-row"):
-            yield Static("caging inhibit", classes="sp-label")
+            yield Static("caging (Space)", classes="sp-label")
             for c in GYRO_CHANNELS:
-                yield Checkbox(c, id=f"cage-{c}", compact=True)
+                yield Checkbox(caging_label(c, False), id=f"cage-{c}", compact=True)
+        yield Static("  auto: the gyro cages by itself in mode 3; inhibited: its loop is held open",
+                     id="sp-caging-note")
         yield Static("torquer bias (V)   set             range           read-back", classes="sp-head")
         for c in GYRO_CHANNELS:
             yield from self._row("torq", c, f"  gyro {c}")
@@ -97,7 +116,7 @@ class SetpointPanel(VerticalScroll, can_focus=True):
             value = typed_setpoint(self.limits, kind, key, event.value)
         except SetpointRangeError as exc:  # refused here: nothing goes to the rig
             self.message(f"refused: {exc}", False)
-            self.notify(str(exc), title="set-point refused", severity="error", timeout=6)
+            self.post_message(self.Refused("set-point", str(exc)))   # the app notifies and logs it
             return
         self.post_message(self.Request(kind, key, value, rate))
 
@@ -124,3 +143,10 @@ class SetpointPanel(VerticalScroll, can_focus=True):
             if box.value != inhibited:
                 with box.prevent(Checkbox.Changed):  # a read-back is not an operator's request
                     box.value = inhibited
+            if str(box.label) != (words := caging_label(c, inhibited)):
+                box.label = words
+
+
+def caging_label(channel: str, inhibited: bool) -> str:
+    """A caging switch in words: "auto" (the relay driver cages by mode) or "inhibited"."""
+    return f"{channel} {'inhibited' if inhibited else 'auto'}"

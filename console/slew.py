@@ -7,7 +7,7 @@ of the rig thread moves each bias at most ``rate x dt`` toward its target, in ri
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 @dataclass
@@ -17,6 +17,12 @@ class Slew:
     rate_V_per_s: float
     now_V: float
     last_t: float
+    steps: int = 0                 # set-points sent so far
+    start_V: float = field(init=False)
+    t0: float = field(init=False)  # rig time the ramp began
+
+    def __post_init__(self) -> None:
+        self.start_V, self.t0 = self.now_V, self.last_t
 
     @property
     def done(self) -> bool:
@@ -29,4 +35,5 @@ class Slew:
         room = self.target_V - self.now_V
         move = self.rate_V_per_s * dt
         self.now_V = self.target_V if abs(room) <= move else self.now_V + (move if room > 0 else -move)
+        self.steps += 1
         return self.now_V

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 from rich.text import Text
@@ -19,6 +20,8 @@ from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.widgets import Input, Sparkline, Static
+
+from console.keyhelp import PanelHelp
 
 BINS = 64
 
@@ -76,6 +79,11 @@ def compute_view(path: Path, channels: tuple[str, ...]) -> SpectraView:
 
 
 class SpectraPanel(Vertical, can_focus=True):
+    KEY_HELP: ClassVar[PanelHelp] = (
+        ("F7", "PSD and coherence of the named channels of the file (blank: the last recording)"),
+        ("Tab / shift+Tab", "between the file and channels boxes"),
+        ("Enter", "in a box: compute"),
+    )
     BINDINGS = [Binding("f7", "compute", "compute")]
 
     DEFAULT_CSS = """

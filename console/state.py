@@ -10,6 +10,7 @@ Textual messages.
 from __future__ import annotations
 
 import threading
+import time
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
@@ -153,12 +154,15 @@ class RigFault:
 class WorkerStopped:
     reason: str
     safe: str
+    closed: tuple[str, ...] = ()   # what the shutdown closed: "recording out/x.h5 (aborted: ...)"
 
 
 @dataclass(frozen=True)
 class RigEventItem:
-    """A rig event (``Rig.subscribe``) or a console note, for the event log."""
+    """A rig event (``Rig.subscribe``) or a console note, for the event log, with the rig's
+    time (None where unknown) and the wall clock's (Unix s) when it was made."""
 
     rig_time_s: float | None
     kind: str
     text: str
+    wall_s: float = field(default_factory=time.time)

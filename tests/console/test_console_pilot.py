@@ -211,6 +211,8 @@ async def test_quit_while_recording_closes_the_file_and_leaves_the_rig_safe(out_
         path = app.worker_.state.get().recording.path
         assert path == out_dir / "recording.h5"              # the default name
         await pilot.press("q")
+        await wait_for(pilot, lambda: app.screen.__class__.__name__ == "QuitScreen", what="the question")
+        await pilot.press("y")                              # issue 20: a live recording asks first
         await wait_for(pilot, lambda: app.worker_.stopped.is_set(), what="the rig closed")
     assert nodes_safe(emulator)
     with RunFile(path) as rf:
