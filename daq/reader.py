@@ -127,7 +127,7 @@ class Channel:
     def __init__(self, run: RunFile, name: str) -> None:
         self.run, self.name = run, name
         self._ds = run._group[name]
-        self.units = _text(self._ds.attrs.get("units", ""))
+        self.units = as_text(self._ds.attrs.get("units", ""))
         self.rate_hz = run.rate_hz
 
     def __len__(self) -> int:
@@ -165,9 +165,6 @@ def as_text(v: Any) -> str:
     if isinstance(v, bytes):
         return v.decode("utf-8", errors="replace")
     return str(v).encode("utf-8", errors="surrogateescape").decode("utf-8", errors="replace")
-
-
-_text = as_text
 
 
 # ---------------------------------------------------------------------------- the layout contract
@@ -549,7 +546,7 @@ class RunFile:
         ``channels``, ``rate_hz`` and ``units``; raises ``ContractError`` naming every rule
         broken, ``UnreadableRunFile`` if HDF5 cannot read the metadata."""
         try:
-            live = self.swmr or _text(self.f.attrs.get("status", "")) == STATUS_RECORDING
+            live = self.swmr or as_text(self.f.attrs.get("status", "")) == STATUS_RECORDING
             problems, found = contract_problems(self.f, live=live)
         except RunFileError:
             raise
@@ -573,7 +570,7 @@ class RunFile:
                 v = self.f.attrs[k]
             except (OSError, RuntimeError, TypeError, ValueError) as exc:
                 v = f"<unreadable: {exc}>"
-            out[k] = _text(v) if isinstance(v, (bytes, str)) else v
+            out[k] = as_text(v) if isinstance(v, (bytes, str)) else v
         return out
 
     @property
@@ -592,14 +589,14 @@ class RunFile:
     @property
     def status(self) -> str:
         """The root ``status``; a "recording" file whose writer is gone reads as aborted."""
-        s = _text(self.f.attrs.get("status", ""))
+        s = as_text(self.f.attrs.get("status", ""))
         if s == STATUS_RECORDING and self.writer_alive() is False:
             return "aborted: the writer died without closing the file (run `fbs recover` on it)"
         return s
 
     def writer_alive(self) -> bool | None:
         """Whether the process that wrote the file still runs (None: cannot tell)."""
-        return writer_alive(_text(self.f.attrs.get("writer", "")))
+        return writer_alive(as_text(self.f.attrs.get("writer", "")))
 
     @property
     def events(self) -> list[Event]:
@@ -611,7 +608,7 @@ class RunFile:
             raise ContractError(f"{self.path}: {problem}", [problem])
         try:
             rows = ds[()]
-            return [Event(float(r["time"]), _text(r["kind"]), _text(r["text"])) for r in rows]
+            return [Event(float(r["time"]), as_text(r["kind"]), as_text(r["text"])) for r in rows]
         except (OSError, RuntimeError, TypeError, ValueError) as exc:
             raise UnreadableRunFile(f"{self.path}: /events cannot be read ({exc})") from exc
 
@@ -622,9 +619,9 @@ class RunFile:
         out = {}
         for k, v in self.f["meta"].attrs.items():
             try:
-                out[k] = json.loads(_text(v))
+                out[k] = json.loads(as_text(v))
             except (TypeError, ValueError):
-                out[k] = _text(v)
+                out[k] = as_text(v)
         return out
 
     def refresh(self) -> None:
