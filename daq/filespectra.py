@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from daq.reader import LOST_SAMPLES_NOTE, RunFile, spans_text
+from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_text
 from daq.spectra import (
     Scaling,
     _double_one_sided,
@@ -237,8 +237,7 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
         for c in channels:      # where they are (the error path only: a second pass over the file)
             spans = run.lost_spans(c, start, stop)
             if spans:
-                n_lost = sum(e - a for a, e in spans)
-                lost.append(f"{c} has {n_lost} lost (NaN/inf) samples: {spans_text(spans, fs)}")
+                lost.append(lost_text(c, spans, fs))
         raise ValueError(f"every one of the {K} segments of {nperseg} samples ({nperseg / fs:g} s) in "
                          f"{run.path} holds lost samples (NaN): nothing to average; try shorter segments. "
                          f"{'; '.join(lost)} ({LOST_SAMPLES_NOTE})")

@@ -437,7 +437,7 @@ def contract_error(path: Path, problems: Sequence[str]) -> ContractError:
     listed = list(problems[:_MAX_LISTED])
     if len(problems) > _MAX_LISTED:
         listed.append(f"... and {len(problems) - _MAX_LISTED} more")
-    return ContractError(f"{path} breaks the {FORMAT} version {FORMAT_VERSION} layout (DESIGN.md section 6): "
+    return ContractError(f"{path} breaks the {FORMAT} version {FORMAT_VERSION} layout: "
                          + "; ".join(listed), problems)
 
 
@@ -457,10 +457,18 @@ def spans_text(spans: Sequence[tuple[int, int]], rate_hz: float, offset: int = 0
     return shown + (f" and {len(spans) - max_spans} more span(s)" if len(spans) > max_spans else "")
 
 
+def lost_text(channel: str, spans: Sequence[tuple[int, int]], rate_hz: float, *, kinds: str | None = None,
+              offset: int = 0, max_spans: int = 3) -> str:
+    """The one wording every error uses for a channel's lost samples: the channel, the count
+    (``kinds``, when the caller told NaN from inf; else "N lost (NaN/inf)") and the spans, e.g.
+    "gyro_x has 10 lost (NaN/inf) samples: samples 500..509 (2.500..2.545 s)"."""
+    kinds = kinds or f"{sum(b - a for a, b in spans)} lost (NaN/inf)"
+    return f"{channel} has {kinds} samples: {spans_text(spans, rate_hz, offset, max_spans)}"
+
+
 def lost_samples(channel: str, x: np.ndarray, rate_hz: float, offset: int = 0, max_spans: int = 3) -> str | None:
-    """None if every sample of ``x`` is finite; else what is not, for an error message: the
-    channel, the count, and the sample spans (``offset`` + index, with their times), e.g.
-    "gyro_x has 10 lost (NaN) samples: samples 500..509 (2.500..2.545 s)"."""
+    """None if every sample of ``x`` is finite; else ``lost_text`` with NaN and inf counted
+    apart, e.g. "gyro_x has 10 lost (NaN) samples: samples 500..509 (2.500..2.545 s)"."""
     spans = nonfinite_spans(x)
     if not spans:
         return None
@@ -468,7 +476,7 @@ def lost_samples(channel: str, x: np.ndarray, rate_hz: float, offset: int = 0, m
     n_nan = int(np.count_nonzero(np.isnan(x)))
     n_inf = int(np.count_nonzero(np.isinf(x)))
     kinds = " and ".join(k for k in (f"{n_nan} lost (NaN)" if n_nan else "", f"{n_inf} infinite" if n_inf else "") if k)
-    return f"{channel} has {kinds} samples: {spans_text(spans, rate_hz, offset, max_spans)}"
+    return lost_text(channel, spans, rate_hz, kinds=kinds, offset=offset, max_spans=max_spans)
 
 
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
@@ -487,7 +495,7 @@ def check_regular_file(path: Path) -> None:
     if not stat.S_ISREG(mode):
         kind = next((k for test, k in _KINDS if test(mode)), f"not a regular file (mode {mode:o})")
         raise UnreadableRunFile(f"{path} is {kind}, not a run file: a run file is a regular HDF5 file "
-                                f"(DESIGN.md section 6); it was not opened")
+                                f"(it was not opened)")
 
 
 _TRUNCATED = re.compile(r"truncated file: eof = (\d+).*stored_eof = (\d+)")
@@ -511,7 +519,7 @@ def open_hdf5(path: str | Path) -> tuple[h5py.File, bool]:
                 f"`fbs recover {path}` repairs the latter)") from exc
         if "signature not found" in text:
             raise UnreadableRunFile(f"{path} is not an HDF5 file (no HDF5 signature in its "
-                                    f"{_size(path)} bytes): a run file is HDF5 (DESIGN.md section 6)") from exc
+                                    f"{_size(path)} bytes): a run file is an HDF5 file") from exc
         if "already open for write" not in text and "unable to lock" not in text.lower():
             raise UnreadableRunFile(f"cannot open {path} as HDF5: {exc}") from exc
     except (RuntimeError, ValueError, KeyError) as exc:

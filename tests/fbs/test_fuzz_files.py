@@ -306,7 +306,7 @@ def check_case(tmp: Path, case: Case) -> None:
     # gap: these 13 s are too short for it, but lost samples are named before that
     code, out, err = run(["gap", str(path), "--axis", "X"])
     if valid and case.nan and case.nan[0] in GAP_CHANNELS:
-        refused("gap", code, err, [f"channel {case.nan[0]} has", "NaN/inf samples", "samples", "`gap` event"])
+        refused("gap", code, err, [f"channel {case.nan[0]} has", "lost (NaN) samples: samples", "`gap` event"])
     elif valid:
         refused("gap", code, err, ["record too short"])
     elif cut:
@@ -420,7 +420,7 @@ def test_gap_on_lost_samples_names_them_instead_of_a_result(tmp_path: Path) -> N
     base = Case("v110", 0, 0, 0, 0, "all", 0, "all", 0, "all", 0, 1, ("ac_x_inst", "cycles"), True, True, False, None)
     path = build(tmp_path / "run.h5", base)
     code, out, err = run(["gap", str(path), "--json"])
-    refused("gap", code, err, ["channel ac_x_inst has 10 NaN/inf samples", "samples 1200..1209 (6.000..6.045 s)",
+    refused("gap", code, err, ["channel ac_x_inst has 10 lost (NaN) samples", "samples 1200..1209 (6.000..6.045 s)",
                                "`gap` event"])
     assert out == ""
 

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from daq.reader import LOST_SAMPLES_NOTE, RunFile, nonfinite_spans, spans_text
+from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunWriter
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
 from procedures.analysis.gap.grid import GapInputError, Grid, band_spectra, bin_spectra, make_grid
@@ -127,12 +127,10 @@ def load_record(path: str | Path, axis: str | None = None) -> Record:
     if status and status != "complete":
         warnings.append(f"file status is {status!r}: analysing the samples it holds")
     for c, x in zip(wanted, data):
-        spans = nonfinite_spans(x)
-        if spans:
-            n_bad = sum(b - a for a, b in spans)
-            raise GapInputError(f"{path}: channel {c} has {n_bad} NaN/inf samples (first at {spans[0][0] / rate:.3f} s; "
-                                f"{spans_text(spans, rate)}): lost samples or a gap ({LOST_SAMPLES_NOTE}); the gap "
-                                f"workflow needs every sample: analyse a clean span (cut the record) or re-record")
+        lost = lost_samples(c, x, rate)
+        if lost:
+            raise GapInputError(f"{path}: channel {lost} ({LOST_SAMPLES_NOTE}); the gap workflow needs every sample: "
+                                f"analyse a clean span (cut the record) or re-record")
     steps = np.array([lsb(x) for x in data])
     keep = []
     for c, x, q in zip(wanted, data, steps):

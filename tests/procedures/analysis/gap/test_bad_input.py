@@ -64,7 +64,7 @@ def test_nans_are_named_with_their_channel_count_and_time(tmp_path, capsys):
     x = _noise(100_000)
     x[12_345:12_355] = np.nan
     p = _write(tmp_path / "f.h5", {"ac_x_ctl": _noise(100_000, 1), "gyro_x": x})
-    _expect(p, "gyro_x has 10 NaN", "12.345 s", capsys=capsys)
+    _expect(p, "gyro_x has 10 lost (NaN) samples: samples 12345..12354", "(12.345..12.354 s)", capsys=capsys)
 
 
 def test_a_mode_change_inside_the_record_is_refused(tmp_path):
