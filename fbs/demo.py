@@ -3,10 +3,10 @@
 The rig starts cold (mode 1, wheels stopped), as a lab's would. The procedures run in the
 order the lab runs them, each using the results before it: earth-rate (K_TO) -> stopwatch
 (K_g, with the measured K_TO) -> hysteresis X and Y -> survey (with the measured K_g) ->
-drift (with the measured K_TO). Each leaves its HDF5 file, JSON summary and report in
-``--out``; ``out/report.md`` sets every figure measured beside the thesis's value and the
-simulated rig's own value. The demo, unlike the procedures, may read the sim config: only to
-fill that last column.
+drift (with the measured K_TO). Each leaves its HDF5 file, JSON summary, report and log in
+``--out`` and shows its progress as ``fbs run`` does; ``out/report.md`` sets every figure
+measured beside the thesis's value and the simulated rig's own value. The demo, unlike the
+procedures, may read the sim config: only to fill that last column.
 """
 
 from __future__ import annotations
@@ -23,7 +23,7 @@ from typing import Any
 from procedures.calibrations import get
 from procedures.reports import thesis
 from procedures.reports.report import fmt
-from procedures.runner import RunSummary, run_procedure
+from procedures.runner import RunSummary
 from simhw.params import SimConfig, load_config
 
 log = logging.getLogger(__name__)
@@ -67,6 +67,8 @@ CAMPAIGN: list[tuple[str, str | None]] = [("earth-rate", None), ("stopwatch", No
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
                  progress: Callable[[str], None] | None = None) -> tuple[list[RunSummary], Path]:
     from drivers.rig import open_rig
+    from fbs.progress import run_with_progress
+    from fbs.runlog import RunLog
     from procedures.params import parse_params
 
     out.mkdir(parents=True, exist_ok=True)
@@ -80,7 +82,8 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
             proc = cls(parse_params(cls, [], axis), prior=prior)
             if progress:
                 progress(f"{name}{' ' + axis if axis else ''} ...")
-            s = run_procedure(proc, rig, out)
+            with RunLog() as runlog:
+                s = run_with_progress(proc, rig, out, runlog)
             summaries.append(s)
             if progress:
                 progress(f"{name}{' ' + axis if axis else ''}: {s.verdict} ({s.status}), "

@@ -70,7 +70,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g = sub.add_parser("gap", help="model-gap workflow: where the measurement departs from the nominal model, "
                        "and which catalogue effect closes the gap")
     g.add_argument("file", metavar="FILE.h5", help="an fbs-run file (any writer)")
-    g.add_argument("--json", action="store_true", help="one JSON object on stdout (DESIGN.md section 7)")
+    g.add_argument("--json", action="store_true", help="one JSON object on stdout: effect, parameters (with uncertainties "
+                   "and 95 %% intervals), significant, gap_before_db, gap_after_db, candidates, effects, explained, "
+                   "unexplained, file")
     g.add_argument("--report", metavar="DIR", help="write model_before.h5, model_after.h5, plots and gap.md to DIR")
     g.add_argument("--axis", help="platform axis X, Y or Z (default: the file's 'axis' attribute)")
     g.add_argument("--sim-config", help="TOML sim config the nominal model starts from (default: the data sheet)")

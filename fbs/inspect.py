@@ -10,6 +10,8 @@ units and rate - followed by every rule it breaks; the command then ends as an e
 ``fbs inspect: error: <the rules>`` on stderr), as the analysis commands do on that file. A
 path that is not a readable HDF5 file (a FIFO, a directory, truncated) is only the error.
 ``--json`` prints ``summary``'s object instead (a broken file: only the error).
+
+``recover --json`` prints ``recovery_json``'s object instead of the summary line.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import h5py
 import numpy as np
 
 from daq.reader import ContractError, RunFile, as_text, open_hdf5
-from daq.recover import recover
+from daq.recover import Recovery, recover
 from daq.runfile import STATUS_RECORDING
 
 MAX_EVENTS = 200
@@ -108,7 +110,7 @@ def _member_line(g: h5py.Group, name: str) -> str:
 def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
     """The lines ``fbs inspect`` prints for a file that breaks the layout contract: what HDF5
     reads of it, then each rule broken."""
-    lines = [f"{path}: HDF5, but not a valid fbs-run version 1 file (DESIGN.md section 6)"]
+    lines = [f"{path}: HDF5, but not a valid fbs-run version 1 file (the rules it breaks are listed below)"]
     try:
         f, _swmr = open_hdf5(path)
     except OSError as exc:
@@ -198,8 +200,22 @@ def _inspect(args: argparse.Namespace) -> int:
     return 0
 
 
+def recovery_json(r: Recovery) -> dict[str, Any]:
+    """What ``fbs recover --json`` prints: ``file``, ``was_open`` (false: closed properly,
+    nothing done), ``n_samples`` per channel kept, ``rate_hz``, ``duration_s``, ``padded``
+    {channel: NaN samples added} and ``status``."""
+    return {"file": str(r.path), "was_open": r.was_open, "n_samples": r.samples, "rate_hz": r.rate_hz,
+            "duration_s": r.samples / r.rate_hz if r.rate_hz else None, "padded": dict(r.padded), "status": r.status}
+
+
+def recover_json_result(args: argparse.Namespace) -> dict[str, Any]:
+    """Recover the file; the object ``--json`` prints."""
+    return recovery_json(recover(args.file, force=args.force))
+
+
 def _recover(args: argparse.Namespace) -> int:
-    print(recover(args.file, force=args.force).summary())
+    r = recover(args.file, force=args.force)
+    print(json.dumps(recovery_json(r)) if args.json else r.summary())
     return 0
 
 
@@ -213,4 +229,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r = sub.add_parser("recover", help="make a run file left by a killed writer open with plain h5py again")
     r.add_argument("file")
     r.add_argument("--force", action="store_true", help="even if a process with the writer's pid runs")
-    r.set_defaults(func=_recover)
+    r.add_argument("--json", action="store_true", help="one JSON object on stdout: file, was_open, n_samples, "
+                   "rate_hz, duration_s, padded, status")
+    r.set_defaults(func=_recover, json_result=recover_json_result)

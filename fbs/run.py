@@ -1,8 +1,12 @@
 """``fbs run <procedure>``: a procedure for unattended use (DESIGN.md section 7).
 
-Exit codes: 0 pass, 1 limits failed, 2 aborted or error. ``--json`` prints exactly the
-summary keys of DESIGN.md section 7 as one JSON object on stdout (logs go to stderr). The HDF5
-file, a JSON summary and a Markdown report with PNG plots land in ``--out``.
+Exit codes: 0 pass, 1 limits failed, 2 aborted or error (``fbs.usage``). ``--json`` prints
+exactly the summary keys of DESIGN.md section 7 as one JSON object on stdout (logs go to
+stderr). The HDF5 file, a JSON summary, a Markdown report with PNG plots and the run's log
+(``<run>.log``, ``fbs.runlog``) land in ``--out``. On a terminal one status line shows the
+step, the fraction done and the rig and wall time left; elsewhere plain timestamped progress
+lines are logged at a modest rate (``fbs.progress``). ``fbs run NAME --help`` lists the
+procedure's parameters (``fbs.procedure_help``), importing that procedure only then.
 
 Earlier results: a procedure that needs another's result (stopwatch needs K_TO from
 earth-rate; survey and drift use K_g and K_TO) takes the newest completed summary of that
@@ -16,12 +20,18 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
+import shlex
+import shutil
+import socket
 import sys
 from pathlib import Path
 
+from fbs.runlog import RunLog
+from fbs.usage import EXIT_CODES_HELP, version
 from procedures.calibrations import get, module_names
 from procedures.params import find_prior, parse_params
-from procedures.runner import ProcedureError, load_resume, run_procedure
+from procedures.runner import ProcedureError, load_resume
 
 log = logging.getLogger(__name__)
 
@@ -37,29 +47,37 @@ def rig_url(args: argparse.Namespace) -> str:
 
 def run_command(args: argparse.Namespace) -> int:
     from drivers.rig import open_rig
+    from fbs.progress import run_with_progress
 
-    proc_cls = get(args.procedure)
-    out = Path(args.out)
-    resume = None
-    if args.resume:
-        resume = load_resume(args.resume, proc_cls.name)
-        if args.param or args.axis:
-            raise ValueError("--resume continues with the interrupted run's parameters; do not give --param/--axis")
-        params = proc_cls.params_from(resume.params)
-    else:
-        params = parse_params(proc_cls, args.param or [], args.axis)
-    proc = proc_cls(params, prior=find_prior(out, args.prior))
-    # Ctrl-C, SIGTERM and SIGHUP abort to the safe state (fbs.signals, set by the command line)
-    try:
-        with open_rig(rig_url(args)) as rig:
-            summary = run_procedure(proc, rig, out, resume=resume, progress=_log_progress)
-    except ProcedureError as exc:
-        raise ValueError(str(exc)) from None
+    with RunLog() as runlog:
+        # the log's first line (held until the log is named; never on stderr)
+        log.info("%s (fbs-hil %s, pid %d on %s)", shlex.join(["fbs", *getattr(args, "argv", [])]), version(),
+                 os.getpid(), socket.gethostname(), extra={"stderr": False})
+        proc_cls = get(args.procedure)
+        out = Path(args.out)
+        resume = None
+        if args.resume:
+            resume = load_resume(args.resume, proc_cls.name)
+            if args.param or args.axis:
+                raise ValueError("--resume continues with the interrupted run's parameters; do not give --param/--axis")
+            params = proc_cls.params_from(resume.params)
+        else:
+            params = parse_params(proc_cls, args.param or [], args.axis)
+        proc = proc_cls(params, prior=find_prior(out, args.prior))
+        # Ctrl-C, SIGTERM and SIGHUP abort to the safe state (fbs.signals, set by the command line)
+        try:
+            with open_rig(rig_url(args)) as rig:
+                summary = run_with_progress(proc, rig, out, runlog, resume=resume)
+        except ProcedureError as exc:
+            raise ValueError(str(exc)) from None
+        # the verdict ends the log; on a terminal stdout says it (the status line's place)
+        log.info("fbs run %s: %s (%s); file %s; report %s", proc.name, summary.verdict, summary.status,
+                 summary.file, summary.report, extra={"progress": True})
     if args.json:
         print(json.dumps(summary.json_values(proc_cls.json_keys)))
     else:
         print(f"fbs run {proc.name}: {summary.verdict} ({summary.status}); file {summary.file}; "
-              f"report {summary.report}")
+              f"report {summary.report}; log {runlog.path}")
         for m in summary.measurements:
             mark = {True: "pass", False: "FAIL", None: ""}[m.passed]
             err = f" ± {m.stderr:.3g}" if m.stderr is not None else ""
@@ -71,24 +89,56 @@ def run_command(args: argparse.Namespace) -> int:
     return summary.exit_code
 
 
-def _log_progress(p) -> None:
-    left = f", about {p.remaining_wall_s:.0f} s left" if p.remaining_wall_s is not None else ""
-    log.debug("%s: %3.0f %% step %d/%d %s%s", p.procedure, 100 * p.fraction, p.index + 1, p.n_steps, p.step, left)
+def procedure_name(text: str) -> str:
+    """A known procedure's name (checked against the module names, without importing them);
+    else a usage error listing the known ones."""
+    known = [m.replace("_", "-") for m in module_names()]
+    if text not in known:
+        raise argparse.ArgumentTypeError(f"unknown procedure {text!r} (known: {', '.join(known)})")
+    return text
+
+
+class _Help(argparse.Action):
+    """``-h/--help``; after a procedure's name, its parameters too (only then is it imported)."""
+
+    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, default: str = argparse.SUPPRESS,
+                 help: str | None = None) -> None:
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
+                 option_string: str | None = None) -> None:
+        from fbs.procedure_help import parameter_help
+
+        parser.print_help()
+        name = getattr(namespace, "procedure", None)
+        if name:
+            width = max(60, min(100, shutil.get_terminal_size().columns - 2))
+            print("\n" + parameter_help(name, width))
+        parser.exit()
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    r = sub.add_parser("run", help="run a procedure unattended (exit 0 pass, 1 limits failed, 2 aborted/error)")
+    known = ", ".join(m.replace("_", "-") for m in module_names())
+    r = sub.add_parser("run", help="run a procedure unattended (exit 0 pass, 1 limits failed, 2 aborted/error)",
+                       add_help=False, formatter_class=argparse.RawDescriptionHelpFormatter,
+                       description="Run a procedure on the rig, recording everything into one run file in --out\n"
+                                   "(NAME.h5, then NAME-2.h5, ...), with its JSON summary, a Markdown report with\n"
+                                   "plots and its log (NAME.log) beside it. On a terminal a status line shows the\n"
+                                   "step and the time left. `fbs run PROCEDURE --help` lists its parameters.",
+                       epilog=EXIT_CODES_HELP)
+    r.add_argument("-h", "--help", action=_Help, help="show this help; after PROCEDURE, its parameters too")
     # Named, not imported: importing every procedure (allantools, matplotlib) would cost every
-    # `fbs` command ~2 s; an unknown name is refused by get() with the known ones listed.
-    r.add_argument("procedure", metavar="PROCEDURE",
-                   help="the procedure (" + ", ".join(m.replace("_", "-") for m in module_names()) + ")")
+    # `fbs` command ~2 s; the name is checked against the modules' names.
+    r.add_argument("procedure", metavar="PROCEDURE", type=procedure_name, help=f"the procedure ({known})")
     r.add_argument("--rig", default="sim", help="rig URL (default: the simulated rig, 'sim')")
     r.add_argument("--sim-config", help="TOML sim config for the simulated rig")
     r.add_argument("--axis", help="the axis or gyro channel to measure (procedure-dependent)")
-    r.add_argument("--out", default="out", help="directory for the run file, summary and report (default: out)")
-    r.add_argument("--json", action="store_true", help="print the JSON summary of DESIGN.md section 7 on stdout")
+    r.add_argument("--out", default="out", help="directory for the run file, summary, report and log (default: out)")
+    r.add_argument("--json", action="store_true", help="print the procedure's figures as one JSON object on stdout "
+                   "(keys: its figures, each figure's K_ci95 and resolved, file)")
     r.add_argument("--resume", metavar="FILE", help="continue an aborted run from its last completed step")
-    r.add_argument("--param", action="append", metavar="NAME=VALUE", help="a procedure parameter (repeatable)")
+    r.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="a procedure parameter (repeatable; `fbs run PROCEDURE --help` lists them)")
     r.add_argument("--prior", action="append", metavar="SUMMARY.json",
                    help="an earlier procedure's summary to use (default: the newest in --out)")
     r.set_defaults(func=run_command)

@@ -91,7 +91,6 @@ def test_sim_config_overrides_reach_the_plant(tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--mode", "7", "--duration", "1", "--rate", "100"], "invalid choice"),
     (["--mode", "3", "--duration", "-1", "--rate", "100"], "--duration -1.0 must be a finite number > 0"),
     (["--mode", "3", "--duration", "1", "--rate", "0"], "--rate 0.0 must be a finite number > 0"),
     (["--mode", "3", "--duration", "nan", "--rate", "100"], "--duration nan must be a finite number > 0"),
@@ -106,6 +105,12 @@ def test_bad_arguments_fail_with_a_clear_message(tmp_path, args, message):
     r = run("simulate", *args, "--out", str(tmp_path / "x.h5"))
     assert r.returncode == 2
     assert message in r.stderr
+
+
+def test_a_mode_not_among_the_choices_is_a_usage_error(tmp_path):
+    """argparse refuses it: the usage code (64), not the 2 of a bad value."""
+    r = run("simulate", "--mode", "7", "--duration", "1", "--rate", "100", "--out", str(tmp_path / "x.h5"))
+    assert r.returncode == 64 and "invalid choice" in r.stderr
 
 
 def test_an_existing_file_is_never_replaced_unless_forced_and_never_one_being_written(tmp_path):
