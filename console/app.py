@@ -14,13 +14,15 @@ import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
-from textual import work
+from textual import events, work
 from textual.app import App, ComposeResult
 from textual.binding import Binding, BindingType
+from textual.geometry import Size
 from textual.message import Message
 from textual.notifications import SeverityLevel
-from textual.widgets import Footer, TabbedContent, TabPane, Tabs
+from textual.widgets import Footer, Static, TabbedContent, TabPane, Tabs
 
+from console.channels import unknown_channels
 from console.feeds import Feed
 from console.keyhelp import HelpScreen
 from console.limits import Entry
@@ -30,7 +32,7 @@ from console.meters import MeterPanel
 from console.modes import ModePanel
 from console.operator import ConsoleOperator, OperatorQuestion
 from console.operatorscreen import OperatorScreen
-from console.procedures import ProcedurePanel, parse_param_text
+from console.procedures import ProcedurePanel, parse_run_text
 from console.quitscreen import QuitScreen, what_quit_closes
 from console.recording import RecordingPanel, default_path
 from console.rigworker import RigWorker
@@ -63,6 +65,8 @@ DEFAULT_RIG = "sim?realtime=1"
 PANELS = (("meters", "Meters", "f1"), ("modes", "Modes", "f2"), ("setpoints", "Set-pts", "f3"),
           ("recording", "Record", "f4"), ("procedures", "Procs", "f5"), ("spectra", "Spectra", "f6"))
 PANEL_KEYS = Binding.Group("panel")
+#: the smallest terminal the layout fits (columns, rows); below it a notice says what is cut off
+MIN_SIZE = (80, 24)
 
 
 class RigNews(Message):
@@ -106,10 +110,12 @@ class ConsoleApp(App[int]):
         self._meter_seq = -1
         self._handler = FeedHandler(self.log_feed)
         self.catalogue: dict[str, type[Procedure]] = {}
+        self.adc_channels: tuple[str, ...] = ()
         self._saved_levels: dict[str, int] = {}
 
     # ------------------------------------------------------------------ layout
     def compose(self) -> ComposeResult:
+        yield Static(id="too-small")
         yield StatusBar(self.rig_url, id="status")
         with TabbedContent(initial="meters"):
             for pid, title, key in PANELS:
@@ -152,6 +158,7 @@ class ConsoleApp(App[int]):
         self.set_interval(self.refresh_s, self.refresh_live)
         self.w_meters.show(self.specs, MeterSnapshot(0))
         self.w_meters.focus()
+        self._check_size()
         self._install_signals()
 
     def _start_background(self) -> None:
@@ -169,6 +176,27 @@ class ConsoleApp(App[int]):
     def _catalogue_loaded(self, cat: dict[str, type[Procedure]]) -> None:
         self.catalogue = cat
         self.w_procedures.set_catalogue(cat)
+        self._next_recording()
+
+    def _next_recording(self) -> None:
+        """The file a recording with a blank name would get, shown in its box (the name shown
+        is the name written). The naming rule is the runner's: asked once it is imported."""
+        if self.catalogue:
+            self.w_recording.set_next_path(default_path(self.out_dir))
+
+    # ------------------------------------------------------------------ terminal size
+    def on_resize(self, event: events.Resize) -> None:
+        self._check_size(event.size)   # the new size: ``self.size`` follows after this handler
+
+    def _check_size(self, size: Size | None = None) -> None:
+        """A terminal smaller than the layout needs cuts lamps and meters off: say so on top."""
+        w, h = size or self.size
+        notice = self.query_one("#too-small", Static)
+        small = w < MIN_SIZE[0] or h < MIN_SIZE[1]
+        if small:
+            notice.update(f"terminal {w}x{h} is too small: the console needs {MIN_SIZE[0]}x{MIN_SIZE[1]}; "
+                          "lamps, meters and keys are cut off. Enlarge it.")
+        notice.display = small
 
     def _install_signals(self) -> None:
         # SIGTERM, or SIGHUP when an SSH session drops: quit the same way as the quit key
@@ -214,6 +242,8 @@ class ConsoleApp(App[int]):
         pane = event.pane
         if pane.id and (self.focused is None or pane not in self.focused.ancestors_with_self):
             self.query_one(f"#{pane.id}-panel").focus()
+        if pane.id == "recording":
+            self._next_recording()   # another program may have taken the name meanwhile
 
     async def action_quit(self) -> None:
         if self._quitting or self.worker_.stopped.is_set():
@@ -251,6 +281,7 @@ class ConsoleApp(App[int]):
             self.limits = SetpointLimits(item.calibration)
             self.w_setpoints.set_limits(self.limits)
             self.w_meters.set_channels(item.channels)
+            self.adc_channels = item.channels
         elif isinstance(item, RigFailed):
             self.w_status.note = item.text
             self.notify(item.text, title="rig not open", severity="error", timeout=30)
@@ -258,15 +289,17 @@ class ConsoleApp(App[int]):
             self.outcomes.append(item)
             self._outcome(item)
         elif isinstance(item, RecordingEnded):
-            self.w_spectra.last_file = item.path
+            self.w_spectra.offer(item.path, "the last recording")
+            self._next_recording()
             self.notify(f"{item.path}: {item.status}", title="recording closed",
                         severity="information" if item.status == "complete" else "error", timeout=8)
         elif isinstance(item, ProcedureEnded):
-            self.last_summary = item.summary
+            summary = item.summary
+            self.last_summary = summary
             self.w_procedures.log_lines(self.log_feed.drain())
-            self.w_procedures.finished(item.summary)
-            if item.summary.file is not None:
-                self.w_spectra.last_file = item.summary.file
+            self.w_procedures.finished(summary, item.plots)
+            if summary.file is not None and summary.file.exists():
+                self.w_spectra.offer(summary.file, f"the {summary.procedure} run's file")
         elif isinstance(item, RigFault):
             self.notify(f"{item.text}\nsafe state: {item.safe}", title="DEVICE FAULT", severity="error",
                         timeout=60)
@@ -283,6 +316,10 @@ class ConsoleApp(App[int]):
             self.w_modes.last(f"{o.what} refused: the alarm above says why" if same else o.text, o.ok)
         elif o.what.startswith(("torquer", "command", "autocollimator", "caging")):
             self.w_setpoints.message(o.text if o.ok else f"refused: {o.text}", o.ok)
+        elif o.what.startswith("procedure ") and not o.ok:
+            self.w_procedures.refused(o.text)
+        elif o.what == "start recording" and o.ok:
+            self._next_recording()   # the name just taken is not the next one any more
         if not o.ok:
             self.refuse(o.what, o.text)
 
@@ -387,10 +424,14 @@ class ConsoleApp(App[int]):
         except ValueError:
             self.refuse("recording", f"sample rate {msg.rate!r} is not a positive number of Hz")
             return
-        path = Path(msg.path.strip()) if msg.path.strip() else default_path(self.out_dir)
         channels = tuple(c.strip() for c in msg.channels.split(",") if c.strip()) or None
         if channels == ("all",):
             channels = None
+        why = unknown_channels(channels or (), self.adc_channels, "the ADC") if self.adc_channels else None
+        if why:
+            self.refuse("recording", why, timeout=10)
+            return
+        path = Path(msg.path.strip()) if msg.path.strip() else default_path(self.out_dir)
         self.worker_.start_recording(path, rate, channels)
 
     def on_recording_panel_stop(self, msg: RecordingPanel.Stop) -> None:
@@ -409,13 +450,13 @@ class ConsoleApp(App[int]):
                         else "the procedures are still loading")
             return
         try:
-            proc = parse_param_text(cls, msg.params)
+            proc, resume_from = parse_run_text(cls, msg.params)
         except (ValueError, TypeError) as exc:  # refused before the rig is touched
             self.refuse(f"procedure {msg.name} parameters", str(exc), timeout=10)
             return
         self.log_feed.drain()
-        self.w_procedures.started(proc.name)
-        self.worker_.run_procedure(proc)
+        self.w_procedures.started(proc.name, resume_from)
+        self.worker_.run_procedure(proc, resume_from)
 
     def on_procedure_panel_abort(self, msg: ProcedurePanel.Abort) -> None:
         if not self.worker_.abort_procedure():

@@ -15,17 +15,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from console.channels import short
 from drivers.calibration import GYRO_CHANNELS, RigCalibration
 
 
 @dataclass(frozen=True)
 class MeterSpec:
-    """One permanent meter: an ADC channel and its conversion to engineering units."""
+    """One permanent meter: an ADC channel (named as in DESIGN.md section 5, as every panel
+    names it) and its conversion to engineering units."""
 
     channel: str
-    label: str
     units: str
     per_volt: float          # engineering units per volt at the ADC
+
+    @property
+    def what(self) -> str:
+        """The kind of signal in a word (``pickoff``), shown beside the channel's name."""
+        return short(self.channel)
 
     def eng(self, volts: float) -> float:
         return volts * self.per_volt
@@ -33,12 +39,12 @@ class MeterSpec:
 
 def permanent_meters(cal: RigCalibration) -> tuple[MeterSpec, ...]:
     """The ten meters of the thesis's meter panel, in its order."""
-    gyros = tuple(MeterSpec(f"gyro_{c.lower()}", f"pickoff {c}", "urad", 1e3 / cal.pickoff_scale_mV_per_urad[c])
+    gyros = tuple(MeterSpec(f"gyro_{c.lower()}", "urad", 1e3 / cal.pickoff_scale_mV_per_urad[c])
                   for c in GYRO_CHANNELS)
-    torquers = tuple(MeterSpec(f"torq_{c.lower()}", f"torquer {c}", "urad/s",
-                               cal.torquer_scale_urad_per_s_per_V[c]) for c in GYRO_CHANNELS)
-    acs = tuple(MeterSpec(f"ac_{a.lower()}_ctl", f"autocoll {a}", "urad",
-                          1e3 / cal.autocollimator[a].control_mV_per_urad) for a in ("X", "Y"))
+    torquers = tuple(MeterSpec(f"torq_{c.lower()}", "urad/s", cal.torquer_scale_urad_per_s_per_V[c])
+                     for c in GYRO_CHANNELS)
+    acs = tuple(MeterSpec(f"ac_{a.lower()}_ctl", "urad", 1e3 / cal.autocollimator[a].control_mV_per_urad)
+                for a in ("X", "Y"))
     return gyros + torquers + acs
 
 

@@ -1,4 +1,7 @@
-"""The meter panel (thesis II C.2): the ten permanent meters, and two live strip charts."""
+"""The meter panel (thesis II C.2): the ten permanent meters, and two live strip charts.
+
+Each meter is named by its ADC channel (``gyro_x``, DESIGN.md section 5), as the recording,
+the spectra and the run files name it, with the kind of signal beside it (``pickoff``)."""
 
 from __future__ import annotations
 
@@ -11,11 +14,12 @@ from textual.binding import Binding
 from textual.containers import Vertical
 from textual.widgets import Sparkline, Static
 
+from console.channels import describe
 from console.keyhelp import PanelHelp
 from console.meterdata import MeterSnapshot, MeterSpec
 
 #: the bar of a meter spans the ADC's +-10 V, like the needle of a zero-centre panel meter
-BAR_HALF = 14
+BAR_HALF = 13
 FULL_SCALE_V = 10.0
 #: a reading this close to the ADC's rails is flagged: the loop is saturated, the value is not a measurement
 RAIL_V = 9.9
@@ -52,7 +56,7 @@ class MeterTable(Static):
     def render(self) -> Text:
         self.paints += 1
         t = Text(no_wrap=True, overflow="crop")
-        t.append(f"{'meter':<12}{'value':>11} {'units':<7}{'volts':>10}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}",
+        t.append(f"{'channel':<18}{'value':>10} {'units':<7}{'volts':>9}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}",
                  style="bold")
         if self.paused:
             t.append("  PAUSED", style="bold black on yellow")
@@ -63,14 +67,15 @@ class MeterTable(Static):
         for i, s in enumerate(self.specs):
             v = self.snap.volts.get(s.channel)
             eng = None if v is None else s.eng(v)
-            t.append(f"{s.label:<12}")
+            t.append(f"{s.channel:<9}")
+            t.append(f"{s.what:<9}", style="dim")
             if v is None or not math.isfinite(v):  # say why there is no number
                 why = ("not on this ADC" if self.channels is not None and s.channel not in self.channels
                        else "no reading (stream stopped)" if self.snap.seq else "waiting for the rig")
-                t.append(f"{'—':>11} {s.units:<7}  {why}", style="dim")
+                t.append(f"{'—':>10} {s.units:<7}  {why}", style="dim")
             else:
-                t.append(_num(eng, 11, 2), style="bold")
-                t.append(f" {s.units:<7}{_num(v, 10, 4)}  ")
+                t.append(_num(eng, 10, 2), style="bold")
+                t.append(f" {s.units:<7}{_num(v, 9, 4)}  ")
                 t.append(_bar(v), style="cyan")
                 if abs(v) >= RAIL_V:
                     t.append(" RAIL", style="bold white on red")
@@ -95,7 +100,7 @@ class StripChart(Vertical):
         self.channel = channel
 
     def compose(self) -> ComposeResult:
-        yield Static(f"chart {self.chart_name}: {self.channel}", classes="chart-title")
+        yield Static(f"chart {self.chart_name}: {describe(self.channel)}", classes="chart-title")
         yield Sparkline([], summary_function=max)
 
     def on_mount(self) -> None:
@@ -104,7 +109,7 @@ class StripChart(Vertical):
 
     def show(self, points: tuple[float, ...], paused: bool = False) -> None:
         pts = [p for p in points if math.isfinite(p)]
-        title = f"chart {self.chart_name}: {self.channel}"
+        title = f"chart {self.chart_name}: {describe(self.channel)}"
         if pts:
             span = f"{len(pts) * self.point_s:.0f} s"
             title += f"   {min(pts):+.4f} .. {max(pts):+.4f} V over " + (f"{span} before the pause" if paused

@@ -13,6 +13,7 @@ from textual.widgets import Static
 
 from console.keyhelp import PanelHelp
 from console.state import Snapshot
+from console.timefmt import duration
 from drivers.relay import CAGED_FOR_MODE, MODES, RelayStatus, interlock_reason
 
 SELECT = Binding.Group("select", compact=True)
@@ -25,7 +26,8 @@ class ModePanel(Vertical, can_focus=True):
         ("h", "hold the mode switches: nothing changes until the release"),
         ("0-7", "select a mode while held: 1 gyro off, 2 spin-up, 3 autocollimator control, 4 gyro "
         "control (4-channel caging), 5 gyro control (3-channel), 6 external; 0 and 7 light the alarm"),
-        ("r", "release: the selected mode takes effect (4 and 5 need the gyros at speed and caged)"),
+        ("r", "release: the selected mode takes effect (4 and 5 need the gyros at speed and caged; the "
+              "spin-up in mode 2 shows its time to speed)"),
         ("s", "the safe state now: mode 1, outputs zero, caging released; aborts a running procedure"),
     )
     BINDINGS: ClassVar[list[BindingType]] = [
@@ -70,7 +72,8 @@ class ModePanel(Vertical, can_focus=True):
     _shown: tuple = ()
 
     def show(self, snap: Snapshot) -> None:
-        key = (snap.relay, snap.alarm, snap.fault)
+        key = (snap.relay, snap.alarm, snap.fault, snap.caging,
+               None if snap.spin_left_s is None else duration(snap.spin_left_s))
         if key == self._shown:
             return
         self._shown = key
@@ -100,24 +103,29 @@ class ModePanel(Vertical, can_focus=True):
             alarm.append(" alarm ", style="dim reverse")
             alarm.append(" off", style="dim")
         self.query_one("#mode-alarm", Static).update(alarm)
-        self.query_one("#mode-gyros", Static).update(gyro_words(st, snap.caging))
-        il = Text()
-        for m in CAGED_FOR_MODE:
-            why = interlock_reason(m, st)
-            il.append(f"mode {m}: ")
-            il.append("allowed" if why is None else why.split(": ", 1)[1], style="green" if why is None else "yellow")
-            il.append("\n")
-        self.query_one("#mode-interlocks", Static).update(il)
+        self.query_one("#mode-gyros", Static).update(gyro_words(st, snap.caging, snap.spin_left_s))
+        self.query_one("#mode-interlocks", Static).update(interlock_words(st, snap.alarm))
 
 
 def _names(flags: dict[str, bool], want: bool) -> list[str]:
     return [c for c, v in flags.items() if v is want]
 
 
-def gyro_words(st: RelayStatus, inhibited: dict[str, bool]) -> Text:
+def spin_words(st: RelayStatus, left_s: float | None) -> str:
+    """The wheels' speed and, spinning up, the time left to speed (estimated on rig time)."""
+    text = f"wheels {100 * st.spin_fraction:.0f} %"
+    if all(st.at_speed.values()):
+        return text
+    if st.mode < 2:
+        return text + " (mode 2 spins them up)"
+    return text + (f", at speed in about {duration(left_s)}" if left_s is not None
+                   else ", spinning up (time to speed: measuring)")
+
+
+def gyro_words(st: RelayStatus, inhibited: dict[str, bool], spin_left_s: float | None = None) -> Text:
     """The wheels and the caging in words, and what engages the caging (II D): it is not a
     switch, the relay driver cages each gyro by itself in mode 3 once its pickoff nulls."""
-    t = Text(f"wheels {100 * st.spin_fraction:.0f} %   at speed: ")
+    t = Text(spin_words(st, spin_left_s) + "   at speed: ")
     slow = _names(st.at_speed, False)
     t.append("all" if not slow else ("none" if len(slow) == len(st.at_speed) else "all but " + " ".join(slow)),
              style="green" if not slow else "bold yellow")
@@ -127,10 +135,28 @@ def gyro_words(st: RelayStatus, inhibited: dict[str, bool]) -> Text:
              style="green" if not loose else "bold yellow")
     held = _names(inhibited, True)
     if loose:
-        why = ("caging engages by itself in mode 3 (each loop once its pickoff nulls)" if st.mode < 3
+        why = ("caging engages by itself in mode 3, each loop once its pickoff nulls" if st.mode < 3
                else "engaging by itself as each pickoff nulls" if st.mode == 3 else "")
         if held:
             why += ("; " if why else "") + f"inhibited on Set-points: {' '.join(held)}"
         if why:
             t.append(f"\n({why})", style="dim")
+    return t
+
+
+def interlock_words(st: RelayStatus, alarm: str | None) -> Text:
+    """Whether modes 4 and 5 would be allowed now, each with what it needs. What is missing is
+    said once, by the line above (at speed, caged); a refused release once more by the alarm,
+    in the drivers' words (``relay.interlock_reason``), to which these lines then point."""
+    t = Text()
+    for m, need in CAGED_FOR_MODE.items():
+        t.append(f"mode {m} needs {' '.join(need)} at speed and caged: ")
+        if interlock_reason(m, st) is None:
+            t.append("allowed", style="green")
+        elif alarm is not None and alarm.startswith(f"mode {m} refused"):
+            t.append("refused (the alarm says why)", style="yellow")
+        else:
+            t.append("not now (see above)", style="yellow")
+        t.append("\n")
+    t.rstrip()
     return t

@@ -3,25 +3,25 @@
 from __future__ import annotations
 
 import time
-from collections import deque
 from pathlib import Path
 from typing import ClassVar
 
 from rich.text import Text
-from textual import events
 from textual.app import ComposeResult
 from textual.binding import Binding
 from textual.containers import Horizontal, Vertical
 from textual.message import Message
-from textual.widgets import Input, RichLog, Static
+from textual.widgets import Input, Static
 
+from console.eventlog import EventLog
 from console.keyhelp import PanelHelp
 from console.state import RecordingInfo, RigEventItem, Snapshot
 
 
 class RecordingPanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
-        ("F7", "start a recording: the file (blank: the next free recording.h5), rate, channels"),
+        ("F7", "start a recording: the file (blank: the next free recording.h5, named in the box), rate, "
+               "channels (all, or names as gyro_x,torq_x)"),
         ("F8", "stop it: the file is closed \"complete\""),
         ("Tab / shift+Tab", "the next / previous box"),
         ("Enter", "in a box: start the recording"),
@@ -39,16 +39,20 @@ class RecordingPanel(Vertical, can_focus=True):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="rec-row"):
             yield Static("file", classes="rec-label")
-            yield Input(placeholder="out/recording.h5 (next free name)", id="rec-path", compact=True)
+            yield Input(placeholder="blank: the next free recording.h5", id="rec-path", compact=True)
         with Horizontal(classes="rec-row"):
             yield Static("rate Hz", classes="rec-label")
             yield Input("1000", id="rec-rate", compact=True, classes="rec-short")
             yield Static(" channels", classes="rec-label")
-            yield Input(placeholder="all (or a,b,c)", id="rec-channels", compact=True)
+            yield Input(placeholder="all, or names: gyro_x,torq_x,...", id="rec-channels", compact=True)
         yield Static("not recording   (f7 record, f8 stop)", id="rec-status")
         yield Static("event log", classes="section")
         # wrapped, so no horizontal scroll bar hides the newest line; it follows the newest entry
         yield EventLog(id="event-log", max_lines=500, wrap=True, min_width=20, markup=False, auto_scroll=True)
+
+    def set_next_path(self, path: Path) -> None:
+        """The file a recording started with a blank name goes to (the name shown is the name written)."""
+        self.query_one("#rec-path", Input).placeholder = f"blank: {path} (the next free name)"
 
     def action_start(self) -> None:
         self.post_message(self.Start(self.query_one("#rec-path", Input).value,
@@ -93,34 +97,6 @@ class RecordingPanel(Vertical, can_focus=True):
                 continue  # e.g. "select mode 7: <the alarm's text>" right after that alarm
             self._last_text = e.text
             log.add(event_line(e))
-
-
-class EventLog(RichLog):
-    """A wrapped log that wraps its entries again whenever its width changes. Left to itself a
-    RichLog wraps a line once, at a width measured against the app's console, not itself, and
-    keeps it so (a line logged while its panel was hidden stays wrapped at 80 columns)."""
-
-    def __init__(self, *, max_lines: int = 500, **kw) -> None:
-        super().__init__(max_lines=max_lines, **kw)
-        self.entries: deque[Text] = deque(maxlen=max_lines)
-        self._wrapped_at = 0
-
-    def add(self, line: Text) -> None:
-        self.entries.append(line)
-        if self._wrapped_at:   # else kept until the log is shown (on_resize)
-            self.write(line, width=self._wrapped_at)
-
-    def clear(self) -> EventLog:
-        self.entries.clear()
-        return super().clear()
-
-    def on_resize(self, event: events.Resize) -> None:
-        width = self.scrollable_content_region.width
-        if width and width != self._wrapped_at:
-            self._wrapped_at = width
-            super().clear()
-            for line in self.entries:
-                self.write(line, width=width)
 
 
 def event_line(e: RigEventItem) -> Text:

@@ -48,7 +48,9 @@ from console.adctap import TappedAdc
 from console.feeds import Feed
 from console.meterdata import MeterStore
 from console.operator import ConsoleOperator
+from console.reportfiles import report_plots
 from console.slew import Slew
+from console.spinup import SpinUpEstimate
 from console.state import (
     CommandOutcome,
     LiveState,
@@ -131,6 +133,7 @@ class RigWorker:
         self._next_readback_rig = 0.0
         self._quiet_setpoints = False          # a slew's steps: one line in the event log, not one a step
         self._fault_handled = False
+        self._spin = SpinUpEstimate()
         #: the files the shutdown closed, "path (status)", for the console's exit line
         self.closed_on_stop: list[str] = []
         self.stopped = threading.Event()
@@ -210,12 +213,14 @@ class RigWorker:
     def stop_recording(self) -> None:
         self.submit("stop recording", self._stop_recording)
 
-    def run_procedure(self, proc: Procedure) -> None:
-        """Run a ``Procedure`` instance (parameters already parsed) into ``out_dir``."""
+    def run_procedure(self, proc: Procedure, resume_from: Path | None = None) -> None:
+        """Run a ``Procedure`` instance (parameters already parsed) into ``out_dir``; with
+        ``resume_from``, continue that aborted run of it (its parameters, its steps done), as
+        ``fbs run NAME --resume FILE`` does."""
         prev = self.state.get().phase
         if prev is Phase.READY:  # the UI refuses other commands from now on (``busy``)
             self.state.update(phase=Phase.PROCEDURE, procedure=ProcedureInfo(proc.name))
-        self.submit(f"procedure {proc.name}", lambda: self._run_procedure(proc, prev))
+        self.submit(f"procedure {proc.name}", lambda: self._run_procedure(proc, prev, resume_from))
 
     # ================================================================== the rig thread
     @property
@@ -450,13 +455,20 @@ class RigWorker:
         return info
 
     # ------------------------------------------------------------------ procedure
-    def _run_procedure(self, proc: Procedure, prev: Phase = Phase.READY) -> str:
+    def _run_procedure(self, proc: Procedure, prev: Phase = Phase.READY, resume_from: Path | None = None) -> str:
         from procedures.params import find_prior
-        from procedures.runner import run_procedure
+        from procedures.runner import ProcedureError, load_resume, run_procedure
 
         try:
             if self._acq is not None:
                 raise Refused(f"recording to {self._acq.result.path}: stop it before running a procedure")
+            resume = None
+            if resume_from is not None:
+                try:   # the file is read here, not on the UI thread
+                    resume = load_resume(resume_from, proc.name)
+                    proc = type(proc)(type(proc).params_from(resume.params), prior=proc.prior)
+                except (ProcedureError, ValueError, OSError) as exc:
+                    raise Refused(str(exc)) from None
             proc.prior = find_prior(self.out_dir) | dict(proc.prior)
             self._stop_meter_stream()
             self._slews.clear()
@@ -467,12 +479,13 @@ class RigWorker:
             self.out_dir.mkdir(parents=True, exist_ok=True)
             # the file run_procedure will pick (it takes the same next free name), shown while it runs
             self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))
-            log.info("procedure %s starting (parameters %s)", proc.name, proc.params_json())
+            log.info("procedure %s %s (parameters %s)", proc.name,
+                     f"resuming {resume.path}" if resume else "starting", proc.params_json())
             now = self._rig.now()
             self._next_status_rig = self._next_readback_rig = now
             self._sharing = True
             try:
-                summary = run_procedure(proc, self._rig, self.out_dir, progress=self._on_progress,
+                summary = run_procedure(proc, self._rig, self.out_dir, resume=resume, progress=self._on_progress,
                                         abort=self._abort)
             finally:
                 self._sharing = False
@@ -484,7 +497,7 @@ class RigWorker:
         self.state.update(phase=Phase.READY, procedure=None, last_file=summary.file)
         if self._stop.is_set() and summary.file is not None:
             self.closed_on_stop.append(f"procedure {proc.name}'s file {summary.file} ({summary.status})")
-        self._post(ProcedureEnded(summary))
+        self._post(ProcedureEnded(summary, report_plots(summary.report)))
         self._note("procedure", f"{proc.name}: {summary.verdict} ({summary.status}); file {summary.file}")
         if not self._check_fault() and not self._stop.is_set():
             self._guard(self._start_meter_stream)
@@ -620,7 +633,10 @@ class RigWorker:
         rig = self._rig
         changes: dict[str, object] = {}
         if status:
-            changes["relay"] = rig.relays.status()
+            st = rig.relays.status()
+            changes["relay"] = st
+            # the wheels run in every mode but 1: how long until they are at speed
+            changes["spin_left_s"] = self._spin.observe(rig.now(), st.spin_fraction, st.mode >= 2)
         if readback:
             back = {f"torq {c}": rig.torquers.bias_V(c) for c in rig.torquers.channels}
             for a in rig.commands.axes:

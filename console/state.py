@@ -90,6 +90,7 @@ class Snapshot:
     procedure: ProcedureInfo | None = None
     last_file: Path | None = None
     rig_time_s: float = 0.0
+    spin_left_s: float | None = None           # rig time until the wheels are at speed (estimated)
 
 
 class LiveState:
@@ -142,6 +143,7 @@ class RecordingEnded:
 @dataclass(frozen=True)
 class ProcedureEnded:
     summary: RunSummary
+    plots: tuple[Path, ...] = ()   # the report's plots, as written (read on the rig thread)
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ import functools
 import time
 
 import pytest
+from textual.widgets import Input, Select
 
 WARM = "sim?warm=1&seed=3&watchdog=5"       # mode 3, caged, virtual time
 COLD = "sim?seed=3&watchdog=5"              # mode 1, wheels stopped, virtual time
@@ -26,6 +27,16 @@ async def rig_ready(pilot) -> None:
     await wait_for(pilot, lambda: app.worker_.state.get().relay is not None and app.limits is not None
                    and bool(app.catalogue), what="the rig to open and the procedures to load")
     await pilot.pause(0.1)
+
+
+async def start_procedure(pilot, name: str, params: str = "") -> None:
+    """On Procedures (F5), choose ``name``, type ``params`` (``name=value ...`` or ``--resume
+    FILE``) and run it (F7)."""
+    app = pilot.app
+    await pilot.press("f5")
+    app.query_one("#proc-name", Select).value = name
+    app.query_one("#proc-params", Input).value = params
+    await pilot.press("f7")
 
 
 def nodes_safe(emulator, timeout_s: float = 5.0) -> bool:

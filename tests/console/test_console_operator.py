@@ -10,7 +10,7 @@ import threading
 
 import pytest
 from rich.console import Console
-from textual.widgets import Checkbox, Input, RichLog, Select, Static
+from textual.widgets import Checkbox, Input, RichLog, Static
 
 from console.app import PANELS, ConsoleApp, exit_line
 from console.keyhelp import GLOBAL_HELP, HelpScreen, help_keys
@@ -18,7 +18,7 @@ from console.meterdata import MeterSnapshot
 from console.quitscreen import QuitScreen
 from daq.reader import RunFile
 
-from .conftest import COLD, WARM, outcome, rig_ready, run_async, wait_for
+from .conftest import COLD, WARM, outcome, rig_ready, run_async, start_procedure, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -100,10 +100,7 @@ async def test_the_rig_is_polled_and_shown_while_a_procedure_runs(out_dir):
 
         rig.adc.after_block = after_block
         published = record_updates(worker)
-        await pilot.press("f5")
-        app.query_one("#proc-name", Select).value = "stopwatch"
-        app.query_one("#proc-params", Input).value = 'channels=["X"] repetitions=1'
-        await pilot.press("f7")
+        await start_procedure(pilot, "stopwatch", 'channels=["X"] repetitions=1')
 
         def progress() -> bool:
             cp.serve()
@@ -194,9 +191,7 @@ async def test_quit_during_a_procedure_names_it_and_its_file(out_dir):
     app = ConsoleApp(WARM, out_dir=out_dir)
     async with app.run_test(size=(80, 24)) as pilot:
         await rig_ready(pilot)
-        await pilot.press("f5")
-        app.query_one("#proc-name", Select).value = "stopwatch"
-        await pilot.press("f7")
+        await start_procedure(pilot, "stopwatch")
         state = app.worker_.state
         await wait_for(pilot, lambda: (p := state.get().procedure) is not None and p.index >= 1,
                        what="the procedure's second step")
@@ -301,9 +296,9 @@ async def test_frozen_and_missing_values_say_why_and_caging_is_in_words(out_dir)
         table = app.w_meters.query_one("#meter-table")
         app.show_meter_frame(MeterSnapshot(1, {"gyro_x": -10.0, "gyro_y": 0.01}, {"gyro_x": (-10.0,) * 10}))
         await pilot.pause(0.1)
-        rows = {line.split("  ")[0]: line for line in str(table.render()).splitlines()}
-        assert rows["pickoff X"].endswith("RAIL") and "RAIL" not in rows["pickoff Y"]   # at the rail: flagged
-        assert "no reading" in rows["pickoff Z"]                           # no number: and why
+        rows = {line.split()[0]: line for line in str(table.render()).splitlines()}
+        assert rows["gyro_x"].endswith("RAIL") and "RAIL" not in rows["gyro_y"]   # at the rail: flagged
+        assert "no reading" in rows["gyro_z"]                              # no number: and why
         assert "PAUSED" not in str(table.render())
         await pilot.press("p")
         assert "PAUSED" in str(table.render()).splitlines()[0]              # the panel says it is frozen

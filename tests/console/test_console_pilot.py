@@ -6,12 +6,12 @@ from __future__ import annotations
 import re
 
 import pytest
-from textual.widgets import Input, Select, Static
+from textual.widgets import Input, Static
 
 from console.app import ConsoleApp
 from daq.reader import RunFile
 
-from .conftest import COLD, WARM, nodes_safe, outcome, rig_ready, run_async, wait_for
+from .conftest import COLD, WARM, nodes_safe, outcome, rig_ready, run_async, start_procedure, wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -138,9 +138,9 @@ async def test_record_start_stop_then_spectra(out_dir):
         await pilot.press("f6", "f7")
         await wait_for(pilot, lambda: app.w_spectra.view is not None, what="the spectra")
         view = app.w_spectra.view
-        assert view.path == out_dir / "bench.h5" and set(view.psd_db) == {"gyro_x", "gyro_y"}
-        assert len(view.coherence) == 64 and all(0 <= c <= 1 + 1e-9 for c in view.coherence)
-        assert "PSD gyro_x" in text_of(app, "#spec-t0")
+        assert view.path == out_dir / "bench.h5" and set(view.psd) == {"gyro_x", "gyro_y"}
+        assert len(view.coherence) == len(view.f_hz) > 50 and all(0 <= c <= 1 for c in view.coherence)
+        assert "gyro_x gyro_y" in text_of(app, "#spec-t0") and "the last recording" in text_of(app, "#spec-info")
 
 
 @run_async
@@ -148,10 +148,7 @@ async def test_stopwatch_runs_to_its_results(out_dir):
     app = ConsoleApp(WARM, out_dir=out_dir)
     async with app.run_test(size=(80, 24)) as pilot:
         await rig_ready(pilot)
-        await pilot.press("f5")
-        app.query_one("#proc-name", Select).value = "stopwatch"
-        app.query_one("#proc-params", Input).value = 'channels=["X"] repetitions=1'
-        await pilot.press("f7")
+        await start_procedure(pilot, "stopwatch", 'channels=["X"] repetitions=1')
         await wait_for(pilot, lambda: app.last_summary is not None, timeout_s=60, what="the procedure to end")
         s = app.last_summary
         assert s.status == "complete" and s.verdict in ("pass", "fail") and s.file == out_dir / "stopwatch.h5"
@@ -162,7 +159,8 @@ async def test_stopwatch_runs_to_its_results(out_dir):
         await pilot.pause(0.2)
         result = text_of(app, "#proc-result")
         assert s.verdict.upper() in result and str(s.file) in result and "K_g" in result
-        assert app.w_spectra.last_file == s.file               # the spectra view offers it next
+        assert app.w_spectra.last_file == s.file               # the spectra view offers it next, saying whose
+        assert app.query_one("#spec-path", Input).placeholder == f"blank: {s.file} (the stopwatch run's file)"
         log_text = "\n".join(str(line.text) for line in app.query_one("#proc-log").lines)
         assert "stopwatch: step 2/2: channel X" in log_text    # the live log showed the run
 
@@ -172,9 +170,7 @@ async def test_stopwatch_aborted_leaves_the_rig_safe_and_the_file_aborted(out_di
     app = ConsoleApp(WARM, out_dir=out_dir)
     async with app.run_test(size=(80, 24)) as pilot:
         await rig_ready(pilot)
-        await pilot.press("f5")
-        app.query_one("#proc-name", Select).value = "stopwatch"
-        await pilot.press("f7")                             # all four channels: minutes of rig time
+        await start_procedure(pilot, "stopwatch")           # all four channels: minutes of rig time
         await wait_for(pilot, lambda: (p := app.worker_.state.get().procedure) is not None and p.index >= 1,
                        what="the procedure's second step")
         # other commands are refused while the procedure owns the rig

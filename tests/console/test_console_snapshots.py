@@ -1,9 +1,10 @@
 """Issue 7, acceptance A, and issue 20, acceptance B: the main screens pinned at 80x24 and
-120x40 (pytest-textual-snapshot).
+120x40, and the notice of a terminal too small at 60x18 (pytest-textual-snapshot).
 
 Deterministic by construction: a warm seeded rig in virtual time (mode 3, caged, outputs
 zero), the meter refresh off (``live_meters=False``) with a fixed meter frame drawn instead,
-a fixed event log (its wall-clock stamps in UTC), and no other rig time on the pinned screens.
+a fixed event log (its wall-clock stamps in UTC), a fixed procedure summary, the files named
+relative to the test's own directory (``out/``), and no other rig time on the pinned screens.
 Regenerate with ``--snapshot-update`` after an intended change, and look at the SVGs before
 committing them.
 """
@@ -23,6 +24,7 @@ from console.meterdata import MeterSnapshot
 from console.quitscreen import QuitScreen, what_quit_closes
 from console.spectra import compute_view
 from console.state import Phase, RecordingInfo, RigEventItem
+from procedures.runner import Measurement, RunSummary, Verdict
 
 from .conftest import WARM, rig_ready
 
@@ -30,6 +32,7 @@ pytestmark = pytest.mark.slow
 
 SIZE = (80, 24)
 LARGE = (120, 40)
+SMALL = (60, 18)
 
 #: a plausible frame of the warm rig, fixed: pickoffs near null, torquers holding earth rate
 FRAME_V = {"gyro_x": 0.0021, "gyro_y": -0.0094, "gyro_z": 0.0152, "gyro_xrd": 0.3311, "torq_x": -1.8431,
@@ -43,7 +46,8 @@ def fixed_frame() -> MeterSnapshot:
 
 
 def console(out_dir) -> ConsoleApp:
-    return ConsoleApp(WARM, out_dir=out_dir, live_meters=False)
+    # ``out_dir`` is the fixture's, but the screens name files relative to the test's directory
+    return ConsoleApp(WARM, out_dir=Path("out"), live_meters=False)
 
 
 #: the event log pinned: the kinds of line an operator meets (2024-05-17 09:30 UTC on)
@@ -56,9 +60,32 @@ EVENTS = (RigEventItem(0.0, "console", "rig sim?warm=1&seed=3&watchdog=5 open (v
                        "the alarm); the rig stays in its present mode", 1715938231.0))
 
 
+#: a stopwatch run of one channel, as the console shows it at the end (a residual out of limits)
+MEASUREMENTS = (Measurement("K_g X (stopwatch, mean of 1 repetitions)", 6.02806, "mV/urad", lo=4.5225, hi=7.5375),
+                Measurement("K_g X repetition spread (std/mean)", 0.0, "", hi=0.02),
+                Measurement("K_g X least-squares ramp slope", 6.01805, "mV/urad", stderr=0.014),
+                Measurement("h/k X (fitted)", None, "s"),
+                Measurement("restraint correction X", 0.0124492, "%"),
+                Measurement("residual null rate X", 0.6208821, "urad/s", lo=-0.5, hi=0.5))
+
+
+def summary(aborted: bool = False) -> tuple[RunSummary, tuple[Path, ...]]:
+    run = Path("out/stopwatch.h5")
+    run.parent.mkdir(exist_ok=True)
+    run.touch()                                  # the file a resume continues is there
+    if aborted:
+        return RunSummary("stopwatch", run, "aborted: ProcedureAborted: aborted by the operator", Verdict.ABORTED,
+                          steps_done=["mode 3", "channel X"], steps_planned=["mode 3", "channel X", "channel Y"],
+                          error="ProcedureAborted: aborted by the operator", report=Path("out/stopwatch.md")), ()
+    return (RunSummary("stopwatch", run, "complete", Verdict.FAIL, measurements=list(MEASUREMENTS),
+                       steps_done=["mode 3", "channel X"], steps_planned=["mode 3", "channel X"],
+                       report=Path("out/stopwatch.md")), (Path("out/stopwatch-X.png"), Path("out/stopwatch-ramps.png")))
+
+
 @pytest.fixture(autouse=True)
-def utc(monkeypatch):
+def utc(monkeypatch, tmp_path):
     monkeypatch.setenv("TZ", "UTC")
+    monkeypatch.chdir(tmp_path)   # the screens name files under out/, whatever the test's directory
     time.tzset()
     yield
     monkeypatch.undo()
@@ -111,26 +138,65 @@ def test_procedures_screen(snap_compare, out_dir):
     assert snap_compare(console(out_dir), press=["f5"], terminal_size=SIZE, run_before=settle)
 
 
-def test_spectra_screen(snap_compare, out_dir, tmp_path, monkeypatch):
+def procedure_result(aborted: bool = False):
+    async def ended(pilot) -> None:
+        await settle(pilot)
+        await pilot.press("f5")
+        while not pilot.app.catalogue:
+            await pilot.pause(0.05)
+        pilot.app.w_procedures.query_one("#proc-name").value = "stopwatch"
+        pilot.app.w_procedures.finished(*summary(aborted))
+        await pilot.pause(0.3)
+
+    return ended
+
+
+def test_procedure_result_screen(snap_compare, out_dir):
+    assert snap_compare(console(out_dir), terminal_size=SIZE, run_before=procedure_result())
+
+
+def test_procedure_aborted_screen(snap_compare, out_dir):
+    assert snap_compare(console(out_dir), terminal_size=SIZE, run_before=procedure_result(aborted=True))
+
+
+@pytest.fixture
+def spectra_view():
     from fbs.simulate import simulate_to_file
     from simhw.params import load_config
 
-    monkeypatch.chdir(tmp_path)   # the view names its file: a relative name keeps the screen fixed
+    # the view names its file: a relative name keeps the screen fixed
     simulate_to_file(load_config(None), "spectra.h5", mode=3, duration_s=60.0, rate_hz=200.0, seed=5)
     view = compute_view(Path("spectra.h5"), ("gyro_x", "gyro_y"))
 
     async def spectra(pilot) -> None:
         await settle(pilot)
         await pilot.press("f6")
-        pilot.app.w_spectra.draw(view)
+        pilot.app.w_spectra.offer(view.path, "the last recording")
+        pilot.app.w_spectra.draw(view, "the last recording")
         await pilot.pause(0.3)
 
-    assert snap_compare(console(out_dir), terminal_size=SIZE, run_before=spectra)
+    return spectra
+
+
+def test_spectra_screen(snap_compare, out_dir, spectra_view):
+    assert snap_compare(console(out_dir), terminal_size=SIZE, run_before=spectra_view)
 
 
 @pytest.mark.parametrize("key", ["f1", "f2", "f3", "f4", "f5"])
 def test_main_screens_at_120x40(snap_compare, out_dir, key):
     assert snap_compare(console(out_dir), press=[key], terminal_size=LARGE, run_before=settle)
+
+
+def test_spectra_at_120x40(snap_compare, out_dir, spectra_view):
+    assert snap_compare(console(out_dir), terminal_size=LARGE, run_before=spectra_view)
+
+
+def test_procedure_result_at_120x40(snap_compare, out_dir):
+    assert snap_compare(console(out_dir), terminal_size=LARGE, run_before=procedure_result())
+
+
+def test_terminal_too_small_at_60x18(snap_compare, out_dir):
+    assert snap_compare(console(out_dir), press=["f2"], terminal_size=SMALL, run_before=settle)
 
 
 def test_help_screen(snap_compare, out_dir):

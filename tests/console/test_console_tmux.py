@@ -70,14 +70,14 @@ def test_fbs_console_in_tmux_shows_meters_and_quits_cleanly(tmp_path):
         screen, shown_s = "", None
         while time.monotonic() - t0 < 30:
             screen = capture(session)
-            if "torquer XRD" in screen and "urad/s" in screen and "autocoll Y" in screen:
+            if "torq_xrd" in screen and "urad/s" in screen and "ac_y_ctl" in screen:
                 shown_s = time.monotonic() - t0
                 break
             time.sleep(0.05)
         assert shown_s is not None, f"no meter panel after 30 s:\n{screen}"
         # the readings arrive from the rig thread: digits replace the dashes
         t_end = time.monotonic() + 20
-        while "—" in capture(session).split("torquer X", 1)[1].split("\n", 1)[0] and time.monotonic() < t_end:
+        while "—" in capture(session).split("torq_x ", 1)[1].split("\n", 1)[0] and time.monotonic() < t_end:
             time.sleep(0.1)
         assert "MODE 1" in capture(session)
         print(f"\nfbs console: meter panel shown {shown_s:.2f} s after start (acceptance: within 3 s)")
