@@ -33,23 +33,15 @@ error (its newest line), or the batch was interrupted or refused.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shlex
-import signal
 import sys
 import time
-from collections import deque
-from collections.abc import Iterator
-from concurrent.futures import FIRST_COMPLETED, CancelledError, Future, wait
-from concurrent.futures.process import BrokenProcessPool
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fbs import batch_exec, batch_task
-from fbs.signals import ABORT_SIGNALS
 
 
 class BatchError(ValueError):
@@ -76,15 +68,10 @@ class Plan:
 
 # ---------------------------------------------------------------------------- checking the arguments
 def _jobs(text: str | None) -> int | None:
-    if text is None:
-        return None
     try:
-        jobs = int(text)
-    except ValueError:
-        raise BatchError(f"--jobs {text!r} is not a whole number") from None
-    if jobs < 1:
-        raise BatchError(f"--jobs {text!r} must be at least 1")
-    return jobs
+        return batch_exec.parse_jobs(text)
+    except ValueError as exc:
+        raise BatchError(str(exc)) from None
 
 
 def _files(names: list[str]) -> list[str]:
@@ -116,19 +103,11 @@ def _extra(command: str, text: str, first_file: str) -> list[str]:
 def _read_results(out: Path, plan: Plan) -> None:
     """Check an existing ``--out`` is a batch results file of this COMMAND and ``--args``, and
     note its newest line per file (a last line cut short by a killed writer is left out)."""
-    raw = out.read_bytes()
-    body = raw
-    if raw and not raw.endswith(b"\n"):        # unfinished last line: only a killed writer leaves one
-        cut = raw.rfind(b"\n") + 1
-        body, plan.torn_tail = raw[:cut], len(raw) - cut
-    for n, line in enumerate(body.splitlines(), 1):
-        if not line.strip():
-            continue
-        try:
-            rec = json.loads(line.decode("utf-8"))
-        except (UnicodeDecodeError, ValueError):
-            raise BatchError(f"--out {out} is not a batch results file (line {n} is not JSON); "
-                             f"give another --out") from None
+    try:
+        lines, plan.torn_tail = batch_exec.read_results(out)
+    except ValueError as exc:
+        raise BatchError(f"--out {out} is not a batch results file ({exc}); give another --out") from None
+    for n, rec in lines:
         missing = [k for k in batch_task.RECORD_KEYS if k != "args" and not (isinstance(rec, dict) and k in rec)]
         if missing:
             raise BatchError(f"--out {out} is not a batch results file (line {n} has no {', '.join(missing)}); "
@@ -175,41 +154,6 @@ def plan_of(args: argparse.Namespace) -> Plan:
     return plan
 
 
-# ---------------------------------------------------------------------------- the results file
-@contextmanager
-def _signals_held() -> Iterator[None]:
-    """Abort signals wait until the block is done (a result line is written whole)."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, ABORT_SIGNALS)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
-class ResultsFile:
-    """``--out``, appended one whole line per result and synced to disk."""
-
-    def __init__(self, path: Path, torn_tail: int) -> None:
-        self.path = path
-        self._fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
-        if torn_tail:
-            os.ftruncate(self._fd, os.fstat(self._fd).st_size - torn_tail)
-
-    def append(self, rec: dict[str, Any]) -> None:
-        data = (json.dumps(rec) + "\n").encode("utf-8")
-        with _signals_held():
-            view = memoryview(data)
-            while view:
-                view = view[os.write(self._fd, view):]
-            os.fsync(self._fd)
-
-    def close(self) -> None:
-        os.close(self._fd)
-
-
 # ---------------------------------------------------------------------------- the run
 def _say(text: str) -> None:
     print(f"fbs batch: {text}", file=sys.stderr, flush=True)
@@ -217,9 +161,8 @@ def _say(text: str) -> None:
 
 def _lost(plan: Plan, path: str, exc: BaseException) -> dict[str, Any]:
     """The line of a file whose worker failed it (not the command: the process or the cluster)."""
-    why = "its worker process died" if isinstance(exc, BrokenProcessPool) else "its executor failed it"
-    return batch_task.record(path, plan.command, plan.extra, 2, None, f"{why} ({type(exc).__name__}: {exc}); "
-                             f"run the batch again to retry it", 0.0)
+    return batch_task.record(path, plan.command, plan.extra, 2, None,
+                             f"{batch_exec.lost_reason(exc)}; run the batch again to retry it", 0.0)
 
 
 def _exit_code(plan: Plan) -> int:
@@ -229,37 +172,29 @@ def _exit_code(plan: Plan) -> int:
     return 1 if any(r["exit"] == 1 for r in recs) else 0
 
 
-def _run(plan: Plan, backend: batch_exec.Backend, results: ResultsFile) -> None:
-    todo = deque(plan.todo)
+def _run(plan: Plan, backend: batch_exec.Backend, results: batch_exec.ResultsFile) -> None:
+    todo = plan.todo
     n_todo, n_done, n_err = len(todo), 0, 0
-    in_flight: dict[Future[dict[str, Any]], str] = {}
     t0 = time.monotonic()
-    try:
-        while todo or in_flight:
-            while todo and len(in_flight) < backend.max_in_flight:
-                path = todo.popleft()
-                in_flight[backend.submit(plan.command, plan.extra, path)] = path
-            finished, _ = wait(in_flight, timeout=5.0, return_when=FIRST_COMPLETED)
-            for fut in finished:
-                path = in_flight.pop(fut)
-                try:
-                    exc = fut.exception()
-                except CancelledError as cancelled:     # by the cluster (a scheduler restarted), not by us
-                    exc = cancelled
-                rec = _lost(plan, path, exc) if exc is not None else fut.result()
-                results.append(rec)
-                plan.latest[path] = rec
-                n_done += 1
-                n_err += rec["error"] is not None
-                how = "ok" if rec["error"] is None else f"exit {rec['exit']}: {rec['error'].splitlines()[-1]}"
-                _say(f"[{n_done}/{n_todo}] {path}: {how} ({rec['elapsed_s']:.1f} s); {n_err} error(s), "
-                     f"{time.monotonic() - t0:.0f} s elapsed")
-    except KeyboardInterrupt:
-        with _signals_held():           # a second signal does not cut the stopping short
-            backend.abort()
-            _say(f"interrupted: {n_done} result(s) of this run kept in {plan.out}, {len(in_flight)} unfinished "
-                 f"cancelled, {len(todo)} not submitted; run the same command again to go on")
-        raise
+
+    def done(path: str, rec: Any, exc: BaseException | None) -> None:
+        nonlocal n_done, n_err
+        if exc is not None:
+            rec = _lost(plan, path, exc)
+        results.append(rec)
+        plan.latest[path] = rec
+        n_err += rec["error"] is not None
+        how = "ok" if rec["error"] is None else f"exit {rec['exit']}: {rec['error'].splitlines()[-1]}"
+        n_done += 1
+        _say(f"[{n_done}/{n_todo}] {path}: {how} ({rec['elapsed_s']:.1f} s); {n_err} error(s), "
+             f"{time.monotonic() - t0:.0f} s elapsed")
+
+    def interrupted(n_done: int, n_in_flight: int, n_not_submitted: int) -> None:
+        _say(f"interrupted: {n_done} result(s) of this run kept in {plan.out}, {n_in_flight} unfinished "
+             f"cancelled, {n_not_submitted} not submitted; run the same command again to go on")
+
+    batch_exec.run_tasks(backend, batch_task.run_file, [(p, (plan.command, plan.extra, p)) for p in todo],
+                         done, interrupted)
 
 
 def _batch(args: argparse.Namespace) -> int:
@@ -268,10 +203,10 @@ def _batch(args: argparse.Namespace) -> int:
     done = len(plan.files) - len(todo)
     retried = sum(1 for f in todo if f in plan.latest)
     # no more local processes than files to run
-    jobs = plan.jobs if plan.scheduler else min(plan.jobs or batch_exec.default_jobs(), max(1, len(todo)))
+    jobs = batch_exec.local_jobs(plan.jobs, plan.scheduler, len(todo))
     backend = batch_exec.open_backend(jobs, plan.scheduler) if todo else None
     try:
-        results = ResultsFile(plan.out, plan.torn_tail)
+        results = batch_exec.ResultsFile(plan.out, plan.torn_tail)
     except BaseException:
         if backend:
             backend.close()
@@ -301,7 +236,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Runs COMMAND on every FILE as `fbs COMMAND FILE --json OPTIONS` would, in "
                        "parallel, and appends one JSON line per file to --out as each finishes; an interrupted batch "
                        "goes on where it stopped when run again. Exit 0 all ok, 1 some file's limits failed, 2 some "
-                       "file failed (or interrupted, or refused). See docs/batch.md.")
+                       "file failed (or interrupted, or refused).")
     b.add_argument("batch_command", metavar="COMMAND", help=f"one of {', '.join(batch_task.COMMANDS)}")
     b.add_argument("files", nargs="*", metavar="FILE", help="fbs-run files (finished ones, on storage every worker "
                    "reads)")

@@ -1,40 +1,52 @@
-"""Where ``fbs batch`` runs its files: a local process pool, or a Dask distributed cluster.
+"""Where ``fbs batch`` and ``fbs campaign`` run their work: a local process pool, or a Dask
+distributed cluster; and what both do around it (the loop that submits and collects, the
+results file appended one whole line at a time, reading it back to resume).
 
-Both are a ``concurrent.futures.Executor`` to the batch loop (``fbs.batch``), which submits
-``fbs.batch_task.run_file`` and writes each result as it arrives; only starting, describing
-and stopping differ.
+Both executors are a ``concurrent.futures.Executor`` to ``run_tasks``, which submits a
+module-level function (``fbs.batch_task.run_file``, ``fbs.campaign_task.run``) and hands each
+result to its caller as it arrives; only starting, describing and stopping differ.
 
 - ``LocalPool``: ``ProcessPoolExecutor`` of spawned processes. Their environment is set in this
   process before they start (spawned children inherit it, so it holds before numpy loads in
   them): one BLAS thread each and the user's numba cache (``batch_task.worker_environment``).
-  Workers ignore SIGINT and SIGHUP: the batch process handles those, and ends its workers.
-  A worker that dies (a crash, the OOM killer) breaks a ``ProcessPoolExecutor``: the files in
-  flight are recorded as errors (retried by the next run) and a fresh pool takes the rest.
+  Workers ignore SIGINT and SIGHUP: the calling process handles those, and ends its workers.
+  A worker that dies (a crash, the OOM killer) breaks a ``ProcessPoolExecutor``: the tasks in
+  flight fail with ``BrokenProcessPool`` (recorded as errors, or submitted again where the
+  caller allows it) and a fresh pool takes the rest.
 - ``DaskCluster``: ``distributed.Client(ADDR).get_executor()``. The cluster's workers must have
-  fbs-hil installed; a worker lost mid-file has its file rescheduled by the scheduler on another.
+  fbs-hil installed; a worker lost mid-task has its task rescheduled by the scheduler on another.
   ``distributed`` is the optional extra ``fbs-hil[cluster]``.
 """
 
 from __future__ import annotations
 
+import json
 import multiprocessing
 import os
 import signal
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from collections import deque
+from collections.abc import Callable, Hashable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, CancelledError, Executor, Future, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
-from typing import Any
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, TypeVar
 
 from fbs import batch_task
+from fbs.signals import ABORT_SIGNALS
 
 CLUSTER_EXTRA = "pip install 'fbs-hil[cluster]'"
 #: seconds to wait for the scheduler to answer (connecting, not the work)
 CONNECT_TIMEOUT_S = 30
+
+K = TypeVar("K", bound=Hashable)
 
 
 class BackendError(ValueError):
     """The executor cannot be started (no ``distributed``, no scheduler at the address)."""
 
 
+# ---------------------------------------------------------------------------- the executors
 def _init_local_worker() -> None:
     for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGHUP")):
         if s is not None:
@@ -47,7 +59,7 @@ class LocalPool:
 
     def __init__(self, jobs: int) -> None:
         self.jobs = jobs
-        self.max_in_flight = jobs           # no queue behind the workers: a broken pool loses no queued file
+        self.max_in_flight = jobs           # no queue behind the workers: a broken pool loses no queued task
         env = batch_task.worker_environment()
         self._saved = {k: os.environ.get(k) for k in env}
         os.environ.update(env)              # inherited by the workers the pool spawns
@@ -60,13 +72,13 @@ class LocalPool:
     def describe(self) -> str:
         return f"{self.jobs} local process{'es' if self.jobs != 1 else ''} (one BLAS thread each)"
 
-    def submit(self, *args: Any) -> Future[dict[str, Any]]:
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
         try:
-            return self._pool.submit(batch_task.run_file, *args)
-        except BrokenProcessPool:          # a worker died: its files are recorded as errors; go on afresh
+            return self._pool.submit(fn, *args)
+        except BrokenProcessPool:          # a worker died: its tasks failed with it; go on afresh
             self._pool.shutdown(wait=True)
             self._pool = self._new_pool()
-            return self._pool.submit(batch_task.run_file, *args)
+            return self._pool.submit(fn, *args)
 
     def abort(self) -> None:
         """Cancel what has not started and end the workers (what they were doing is lost)."""
@@ -106,8 +118,8 @@ class DaskCluster:
         return (f"Dask scheduler {self.address} ({len(threads)} worker{'s' if len(threads) != 1 else ''}, "
                 f"{sum(threads.values())} threads)")
 
-    def submit(self, *args: Any) -> Future[dict[str, Any]]:
-        return self._executor.submit(batch_task.run_file, *args)
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
+        return self._executor.submit(fn, *args)
 
     def abort(self) -> None:
         self._executor.shutdown(wait=False)      # cancels every future not finished
@@ -121,7 +133,7 @@ Backend = LocalPool | DaskCluster
 
 
 def open_backend(jobs: int | None, scheduler: str | None) -> Backend:
-    """The executor ``fbs batch`` asked for (``jobs`` None: one process per core available)."""
+    """The executor asked for (``jobs`` None: one process per core available)."""
     if scheduler:
         return DaskCluster(scheduler, jobs)
     return LocalPool(jobs if jobs is not None else default_jobs())
@@ -133,3 +145,131 @@ def default_jobs() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:          # not Linux
         return max(1, os.cpu_count() or 1)
+
+
+def parse_jobs(text: str | None) -> int | None:
+    """``--jobs``: None (not given) or a whole number >= 1; ``ValueError`` naming the value."""
+    if text is None:
+        return None
+    try:
+        jobs = int(text)
+    except ValueError:
+        raise ValueError(f"--jobs {text!r} is not a whole number") from None
+    if jobs < 1:
+        raise ValueError(f"--jobs {text!r} must be at least 1")
+    return jobs
+
+
+def local_jobs(jobs: int | None, scheduler: str | None, n_tasks: int) -> int | None:
+    """The ``jobs`` to open a backend with: on a cluster as given; locally no more processes than
+    tasks (default one per core)."""
+    return jobs if scheduler else min(jobs or default_jobs(), max(1, n_tasks))
+
+
+# ---------------------------------------------------------------------------- submitting and collecting
+def lost_reason(exc: BaseException) -> str:
+    """Why a task has no result when the executor, not the task, failed it."""
+    why = "its worker process died" if isinstance(exc, BrokenProcessPool) else "its executor failed it"
+    return f"{why} ({type(exc).__name__}: {exc})"
+
+
+def run_tasks(backend: Backend, fn: Callable[..., Any], tasks: Iterable[tuple[K, tuple[Any, ...]]],
+              done: Callable[[K, Any, BaseException | None], None],
+              interrupted: Callable[[int, int, int], None], *, retry_lost: int = 0,
+              retrying: Callable[[K, BaseException], None] | None = None) -> None:
+    """``fn(*args)`` for every ``(key, args)`` of ``tasks`` on ``backend``, at most
+    ``backend.max_in_flight`` at once; ``done(key, result, None)`` as each finishes, in this
+    thread, or ``done(key, None, exc)`` for a task the executor failed (its worker process died,
+    the cluster gave up on it). A task whose local worker died is first submitted again, up to
+    ``retry_lost`` times (a worker killed under other tasks takes theirs down with it), and
+    ``retrying(key, exc)`` told.
+
+    On ``KeyboardInterrupt`` (the abort signals, ``fbs.signals``): nothing more is submitted,
+    the backend is aborted (unstarted tasks cancelled, local workers ended), then
+    ``interrupted(n_done, n_in_flight, n_not_submitted)`` is called, with the abort signals
+    held, and the interrupt goes on up."""
+    todo: deque[tuple[K, tuple[Any, ...]]] = deque(tasks)
+    in_flight: dict[Future[Any], tuple[K, tuple[Any, ...]]] = {}
+    retries: dict[K, int] = {}
+    n_done = 0
+    try:
+        while todo or in_flight:
+            while todo and len(in_flight) < backend.max_in_flight:
+                key, args = todo.popleft()
+                in_flight[backend.submit(fn, *args)] = (key, args)
+            finished, _ = wait(in_flight, timeout=5.0, return_when=FIRST_COMPLETED)
+            for fut in finished:
+                key, args = in_flight.pop(fut)
+                try:
+                    exc = fut.exception()
+                except CancelledError as cancelled:     # by the cluster (a scheduler restarted), not by us
+                    exc = cancelled
+                if isinstance(exc, BrokenProcessPool) and retries.get(key, 0) < retry_lost:
+                    retries[key] = retries.get(key, 0) + 1
+                    todo.appendleft((key, args))
+                    if retrying is not None:
+                        retrying(key, exc)
+                    continue
+                done(key, None if exc is not None else fut.result(), exc)
+                n_done += 1
+    except KeyboardInterrupt:
+        with signals_held():           # a second signal does not cut the stopping short
+            backend.abort()
+            interrupted(n_done, len(in_flight), len(todo))
+        raise
+
+
+# ---------------------------------------------------------------------------- the results file
+@contextmanager
+def signals_held() -> Iterator[None]:
+    """Abort signals wait until the block is done (a result line is written whole)."""
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, ABORT_SIGNALS)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+class ResultsFile:
+    """A JSON-lines results file, appended one whole line per result and synced to disk; an
+    unfinished last line (``torn_tail`` bytes, from ``read_results``) is cut off first."""
+
+    def __init__(self, path: Path, torn_tail: int = 0) -> None:
+        self.path = path
+        self._fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        if torn_tail:
+            os.ftruncate(self._fd, os.fstat(self._fd).st_size - torn_tail)
+
+    def append(self, rec: dict[str, Any]) -> None:
+        data = (json.dumps(rec) + "\n").encode("utf-8")
+        with signals_held():
+            view = memoryview(data)
+            while view:
+                view = view[os.write(self._fd, view):]
+            os.fsync(self._fd)
+
+    def close(self) -> None:
+        os.close(self._fd)
+
+
+def read_results(path: Path) -> tuple[list[tuple[int, Any]], int]:
+    """The whole lines of a JSON-lines results file as ``(line number, object)``, blank lines
+    left out, and the length in bytes of an unfinished last line (only a killed writer leaves
+    one; it is not returned). ``ValueError("line N is not JSON")`` for the first line that is not."""
+    raw = path.read_bytes()
+    body, torn = raw, 0
+    if raw and not raw.endswith(b"\n"):
+        cut = raw.rfind(b"\n") + 1
+        body, torn = raw[:cut], len(raw) - cut
+    lines = []
+    for n, line in enumerate(body.splitlines(), 1):
+        if not line.strip():
+            continue
+        try:
+            lines.append((n, json.loads(line.decode("utf-8"))))
+        except (UnicodeDecodeError, ValueError):
+            raise ValueError(f"line {n} is not JSON") from None
+    return lines, torn

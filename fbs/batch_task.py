@@ -5,7 +5,8 @@
 (``json_result``, set on its subparser), so a batch result is exactly what the single command
 prints. It never raises for the file's sake: the command's errors become the record's
 ``exit`` 2 and ``error``, as ``fbs.cli.main`` reports them; anything else (a bug) is exit 1
-with its traceback, as Python ends the single command.
+with its traceback, as Python ends the single command (``guarded``, which ``fbs.campaign_task``
+ends its runs with too).
 
 A worker runs with one BLAS thread (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
 ``MKL_NUM_THREADS`` = 1, and threadpoolctl where installed) and numba's cache in a directory of
@@ -26,6 +27,7 @@ import json
 import os
 import time
 import traceback
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -59,11 +61,11 @@ def worker_environment() -> dict[str, str]:
 
 def prepare_process() -> None:
     """Set ``worker_environment()`` in this process. Takes effect for the BLAS and numba loaded
-    after it; ``_limit_loaded_blas`` holds the ones already loaded."""
+    after it; ``limit_loaded_blas`` holds the ones already loaded."""
     os.environ.update(worker_environment())
 
 
-def _limit_loaded_blas() -> None:
+def limit_loaded_blas() -> None:
     """One thread for every BLAS/OpenMP library loaded in this process (threadpoolctl, where installed)."""
     try:
         from threadpoolctl import threadpool_limits
@@ -100,21 +102,35 @@ def record(path: str, command: str, extra: list[str], exit_code: int, result: An
     return dict(zip(RECORD_KEYS, (path, command, list(extra), exit_code, result, error, round(elapsed_s, 3))))
 
 
+def guarded(fn: Callable[..., Any], *args: Any) -> tuple[int, Any, str | None, float]:
+    """``fn(*args)`` ended as a single command ends: ``(exit, result, error, seconds)``, with exit
+    0 and the result; 2 and the message for ``fbs.cli.COMMAND_ERRORS`` (what ``fbs CMD`` reports
+    as ``error: ...``); 1 and the traceback for anything else (a bug). It never raises for the
+    task's sake (``KeyboardInterrupt`` and ``SystemExit`` go on up)."""
+    from fbs.cli import COMMAND_ERRORS
+
+    t0 = time.perf_counter()
+    try:
+        result = fn(*args)
+    except COMMAND_ERRORS as exc:
+        return 2, None, str(exc), time.perf_counter() - t0
+    except Exception as exc:      # a bug: the single command ends with this traceback, exit 1
+        return 1, None, "".join(traceback.format_exception(exc)).rstrip(), time.perf_counter() - t0
+    return 0, result, None, time.perf_counter() - t0
+
+
+def _json_of(command: str, path: str, extra: list[str]) -> Any:
+    args = parse_command(command, path, extra)
+    # what the single command prints, read back: the batch holds exactly that object
+    return json.loads(json.dumps(args.json_result(args)))
+
+
 def run_file(command: str, extra: list[str], path: str) -> dict[str, Any]:
     """``fbs <command> path --json <extra>`` in this process, as a result line."""
     prepare_process()
     # the first file of a process loads the numerics here, not counted in its elapsed_s
-    from fbs.cli import COMMAND_ERRORS
+    import fbs.cli  # noqa: F401
 
-    _limit_loaded_blas()
-    t0 = time.perf_counter()
-    try:
-        args = parse_command(command, path, extra)
-        # what the single command prints, read back: the batch holds exactly that object
-        result = json.loads(json.dumps(args.json_result(args)))
-    except COMMAND_ERRORS as exc:
-        return record(path, command, extra, 2, None, str(exc), time.perf_counter() - t0)
-    except Exception as exc:      # a bug in the command: the single command ends with this traceback, exit 1
-        text = "".join(traceback.format_exception(exc)).rstrip()
-        return record(path, command, extra, 1, None, text, time.perf_counter() - t0)
-    return record(path, command, extra, 0, result, None, time.perf_counter() - t0)
+    limit_loaded_blas()
+    code, result, error, elapsed = guarded(_json_of, command, path, extra)
+    return record(path, command, extra, code, result, error, elapsed)

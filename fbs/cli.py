@@ -14,7 +14,7 @@ import sys
 from contextlib import nullcontext
 
 from drivers.errors import DriverError
-from fbs import analyze, batch, demo, inspect, record, run, simulate, spectra
+from fbs import analyze, batch, campaign, demo, inspect, record, run, simulate, spectra
 from fbs import gap as gap_cli
 from fbs.logsetup import command_logging
 from fbs.signals import aborting_on_signals
@@ -60,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     analyze.add_parser(sub)
     gap_cli.add_parser(sub)
     batch.add_parser(sub)
+    campaign.add_parser(sub)
     return p
 
 
