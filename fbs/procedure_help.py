@@ -6,10 +6,11 @@ Everything is read from the procedure itself, so the help cannot drift from the 
 * type and default: the ``Params`` dataclass's fields;
 * units: the field name's suffix, the project's naming rule (``hold_s`` seconds,
   ``ramp_rate_urad_per_s`` urad/s, ``delta_pickoff_V`` volts);
-* limits: the type rule ``--param`` values are checked against (``procedures.paramtypes``),
-  and the range the procedure's own ``__post_init__`` states when given a value far out of
-  it (``repetitions = 1000000 must be 1..50`` -> ``1..50``); a check that names no plain
-  range is left to the run, which states it when a value breaks it;
+* limits: the limits the ``Params`` fields declare (``procedures.paramlimits``: ``1..50``,
+  ``> 0``, ``one of X, Y``), the same objects that check the values; the type rules of
+  ``procedures.paramtypes`` are stated once, below the list. A limit that ties parameters
+  together (a band below the Nyquist frequency) is no one field's: the run states it when a
+  value breaks it;
 * what it is for: the ``#:`` comment above the field.
 
 Only ``fbs run NAME --help`` imports the procedure; ``fbs --help`` stays fast.
@@ -27,15 +28,11 @@ import typing
 from typing import Any
 
 from procedures import paramtypes
+from procedures.paramlimits import describe_limits
 
 #: unit words of a field name's suffix, and how they are written
 UNITS = {"s": "s", "ms": "ms", "hz": "Hz", "v": "V", "mv": "mV", "deg": "deg", "urad": "urad", "rad": "rad",
          "db": "dB", "nm": "N m"}
-#: values far outside any parameter's range, to make ``__post_init__`` state it
-_PROBES_INT = (-1_000_000, 0, 1_000_000)
-_PROBES_FLOAT = (-1e9, 0.0, 1e9)
-_NUMBER = r"[-+]?\d[\d.e+-]*"
-_RANGE = re.compile(rf"(?:must (?:be|lie in) )?(?P<lim>[<>]=? ?{_NUMBER}|{_NUMBER}\.\.{_NUMBER}(?: [A-Za-z/]+)?)")
 
 
 def units(name: str) -> str:
@@ -63,30 +60,6 @@ def _type_name(hint: Any) -> str:
     if origin is dict:
         return f"mapping {_type_name(args[0])} -> {_type_name(args[1])}"
     return {int: "integer", float: "number", str: "text", bool: "true/false", type(None): "null"}.get(hint, str(hint))
-
-
-def _bare(hint: Any) -> list[Any]:
-    """``X | None`` -> [X]; any other hint -> [hint]."""
-    if typing.get_origin(hint) in (typing.Union, types.UnionType):
-        return [a for a in typing.get_args(hint) if a is not type(None)]
-    return [hint]
-
-
-def _stated_range(cls: type, name: str, hint: Any) -> str:
-    """The range ``cls.__post_init__`` states for ``name`` when given values far outside it."""
-    bare = _bare(hint)
-    probes = _PROBES_INT if int in bare else _PROBES_FLOAT if float in bare else ()
-    found: list[str] = []
-    for value in probes:
-        try:
-            cls(**{name: value})
-        except Exception as exc:   # whatever it raises: only a stated range is used
-            text = str(exc)
-            at = re.search(rf"\b{re.escape(name)}\b(?: = \S+)?(?: [A-Za-z]+)?(?:,? (?:and )?\w+)* ", text)
-            m = _RANGE.match(text, at.end()) if at else None
-            if m and m.group("lim") not in found:
-                found.append(m.group("lim"))
-    return " and ".join(found)
 
 
 def _comments(cls: type) -> dict[str, str]:
@@ -125,6 +98,7 @@ def parameter_help(name: str, width: int = 100) -> str:
     cls = proc.Params
     hints = typing.get_type_hints(cls)
     comments = _comments(cls)
+    limits = describe_limits(cls)
     lines = textwrap.wrap(f"parameters of {proc.name} ({proc.title}), as --param NAME=VALUE (VALUE in JSON):", width)
     for f in dataclasses.fields(cls):
         hint = hints.get(f.name, Any)
@@ -132,13 +106,13 @@ def parameter_help(name: str, width: int = 100) -> str:
         u = units(f.name)
         if u:
             facts.append(u)
-        limits = _stated_range(cls, f.name, hint)
-        if limits:
-            facts.append(f"limits: {limits}")
+        if f.name in limits:
+            facts.append(f"limits: {limits[f.name]}")
         lines.append(f"  {f.name} = {json.dumps(_default(f))}  ({', '.join(facts)})")
         if f.name in comments:
             lines += textwrap.wrap(comments[f.name], width, initial_indent=" " * 6, subsequent_indent=" " * 6)
     lines += textwrap.wrap(f"Numbers must be finite, durations (names ending in _s) at most {paramtypes.MAX_SECONDS:g} s. "
-                           "Every value is checked before the rig moves: one of the wrong type or out of its range "
-                           "is an error (exit 2) naming it and its limit.", width)
+                           "Every value is checked before the rig moves: one of the wrong type, out of its limits or at "
+                           "odds with another (a band past the Nyquist frequency) is an error (exit 2) naming it and "
+                           "the limit.", width)
     return "\n".join(lines)

@@ -14,7 +14,9 @@ the value and the rule, for every procedure alike, from the annotations alone:
 * ``list[T]``, ``dict[str, T]``: each element by the rule for ``T``;
 * ``X | None``: ``None`` or the rule for ``X``.
 
-Ranges that belong to one procedure (``repetitions`` 1..50) stay in its ``Params.__post_init__``.
+Limits that belong to one procedure (``repetitions`` 1..50, ``axis`` X or Y) are declared on its
+``Params`` fields and checked on construction (``procedures.paramlimits``); this module reads
+the bare types (``typing.get_type_hints`` drops the ``Annotated`` limits).
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import partial
+from typing import Annotated
 
 import numpy as np
 
@@ -43,6 +44,7 @@ from procedures.analysis.drift import (
     torq,
 )
 from procedures.analysis.intervals import add_figure
+from procedures.paramlimits import Range, above, check_limits
 from procedures.params import prior_values
 from procedures.reports.drift import hours, markdown, plot_allan, plot_null
 from procedures.rigsetup import bring_to_mode3, wait_settled
@@ -56,10 +58,10 @@ MIN_FIT_SAMPLES = 2.0
 @dataclass
 class DriftParams:
     #: record length (rig seconds) after the settle
-    duration_s: float = 7200.0
-    rate_hz: float = 10.0
+    duration_s: Annotated[float, above(0)] = 7200.0
+    rate_hz: Annotated[float, above(0)] = 10.0
     #: the record is split into this many data steps (each resumable)
-    n_chunks: int = 10
+    n_chunks: Annotated[int, Range(1, 1000)] = 10
     #: settle: the torquing rate changes by less than this over ``settle_window_s`` (urad/s)
     settle_tol_urad_per_s: float = 0.02
     settle_window_s: float = 40.0
@@ -69,32 +71,31 @@ class DriftParams:
     fit_tau_lo_s: float = 0.4
     #: band (Hz) where G_p is measured, well above the loop's bandwidth: from loop_band_lo_hz to
     #: loop_band_hi_frac x the sample rate (both channels pass the same anti-alias filter)
-    loop_band_lo_hz: float = 0.2
-    loop_band_hi_frac: float = 0.2
+    loop_band_lo_hz: Annotated[float, above(0)] = 0.2
+    loop_band_hi_frac: Annotated[float, Range(0.0, 0.5, lo_open=True, note="of the sample rate: 0.5 is Nyquist")] = 0.2
     #: Allan points with fewer equivalent degrees of freedom (Greenhall's, for the term's own noise
     #: type) are not read for N or B (allan.term_estimate)
     min_edf: float = 10.0
     #: null stability: the means averaged over this long, and the span the estimate is for
-    average_s: float = 100.0
+    average_s: Annotated[float, above(0)] = 100.0
     null_span_s: float = 86400.0
     #: quality limits: the record must cover this much, and lose at most this fraction of samples
     min_record_s: float = 300.0
     max_lost_fraction: float = 0.01
 
     def __post_init__(self) -> None:
-        if not self.duration_s > 0 or not self.rate_hz > 0:
-            raise ValueError("drift: duration_s and rate_hz must be > 0")
-        if not 1 <= int(self.n_chunks) <= 1000:
-            raise ValueError(f"drift: n_chunks = {self.n_chunks} must be 1..1000")
+        check_limits(self, "drift")
+        # what no one field can declare: limits that tie fields together
         if self.fit_tau_lo_s * self.rate_hz < MIN_FIT_SAMPLES - 1e-9:
             raise ValueError(f"drift: the noise-model fit starts at {self.fit_tau_lo_s:g} s = "
                              f"{self.fit_tau_lo_s * self.rate_hz:g} samples at {self.rate_hz:g} Hz; it must start at "
                              f">= {MIN_FIT_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
-        if not 0 < self.loop_band_lo_hz < self.loop_band_hi_frac * self.rate_hz <= 0.5 * self.rate_hz:
+        if not self.loop_band_lo_hz < self.loop_band_hi_frac * self.rate_hz:
             raise ValueError(f"drift: loop-gain band {self.loop_band_lo_hz:g} .. "
-                             f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty or beyond Nyquist")
-        if not self.average_s > 0 or not self.null_span_s >= self.average_s:
-            raise ValueError("drift: need 0 < average_s <= null_span_s")
+                             f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty: loop_band_lo_hz must be below "
+                             f"loop_band_hi_frac x rate_hz")
+        if not self.null_span_s >= self.average_s:
+            raise ValueError(f"drift: null_span_s = {self.null_span_s} must be >= average_s = {self.average_s}")
 
 
 #: the name the module's functions and tests use

@@ -28,12 +28,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Annotated
 
 import numpy as np
 
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis.earth_rate import G_AXES, fit_earth_rate
 from procedures.analysis.intervals import add_figure
+from procedures.paramlimits import Each, Range, above, check_limits
 from procedures.params import prior_values
 from procedures.reports.earth_rate import markdown, plot_fits
 from procedures.rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
@@ -45,10 +47,11 @@ class EarthRateParams:
     #: table tilts (deg) in the order visited; at least three different ones, some above 0,
     #: separate the drifts. Not monotonic, so a slow trend over the run is not a tilt term
     #: (visited 0, 45, 90 the fixed drift and the g-drift along z correlate by -0.97).
-    tilts_deg: list[float] = field(default_factory=lambda: [0.0, 90.0, 45.0])
+    tilts_deg: Annotated[list[float], Each(Range(0.0, 90.0, units="deg", note="the table's tilt range"))] = field(
+        default_factory=lambda: [0.0, 90.0, 45.0])
     #: spindle angles per tilt, equally spaced
-    n_spindle: int = 8
-    average_s: float = 60.0
+    n_spindle: Annotated[int, Range(4, 36, note="the spindle angles per tilt")] = 8
+    average_s: Annotated[float, above(0)] = 60.0
     settle_tol_V: float = 3e-4
     settle_window_s: float = 40.0
     #: the caging loops (omega_n 0.1 rad/s) and their coupling through the float's viscous
@@ -56,33 +59,25 @@ class EarthRateParams:
     #: below what the noisy trend test can see: never average sooner than this
     settle_min_s: float = 120.0
     settle_timeout_s: float = 900.0
-    rate_hz: float = 50.0
+    rate_hz: Annotated[float, above(0)] = 50.0
     #: the gyros' bias instability (urad/s) from a data sheet, if known: the fixed drift's interval
     #: then carries a run's wander about the long-term fixed drift. An earlier drift run's figure
     #: (``--prior``, the same --out) is used before it. Without either, the interval is this
     #: run's bias and says so.
-    bias_instability_urad_per_s: float | None = None
+    bias_instability_urad_per_s: Annotated[float | None, Range(0.0, 10.0, hi_open=True, units="urad/s")] = None
     #: limits: K_TO within this fraction of the rig's nominal (data sheet) value, fit residual rms
     kto_tolerance: float = 0.2
     max_residual_V: float = 5e-3
 
     def __post_init__(self) -> None:
-        if not 4 <= int(self.n_spindle) <= 36:
-            raise ValueError(f"earth-rate: n_spindle = {self.n_spindle} must be 4..36 (the spindle angles per tilt)")
-        for t in self.tilts_deg:
-            if not 0.0 <= t <= 90.0:
-                raise ValueError(f"earth-rate: tilt {t} deg is outside the table's 0..90 deg")
+        check_limits(self, "earth-rate")
+        # what no one field can declare: the stations must separate the fit's unknowns
         if len(set(self.tilts_deg)) < 3 or max(self.tilts_deg) <= 0.0:
             raise ValueError(f"earth-rate: tilts_deg {self.tilts_deg} needs at least 3 different tilts, some above 0 "
                              f"(the fixed and g-sensitive drifts and Z's scale factor are separated by tilting)")
         if len(self.tilts_deg) * int(self.n_spindle) < 12:
             raise ValueError(f"earth-rate: {len(self.tilts_deg)} tilts x {self.n_spindle} spindle angles is under 12 "
                              f"stations (the fit has 7 unknowns and needs residuals for its intervals)")
-        if min(self.average_s, self.rate_hz) <= 0:
-            raise ValueError("earth-rate: average_s and rate_hz must be > 0")
-        if self.bias_instability_urad_per_s is not None and not 0.0 <= self.bias_instability_urad_per_s < 10.0:
-            raise ValueError(f"earth-rate: bias_instability_urad_per_s = {self.bias_instability_urad_per_s} must be "
-                             f"0..10 urad/s")
 
 
 def _channel_column(ch: str) -> str:

@@ -18,8 +18,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Annotated
 
 from procedures.analysis.hysteresis import AC_AXES, analyze_file
+from procedures.paramlimits import Each, OneOf, above, at_least, check_limits
 from procedures.reports.hysteresis import markdown, plot_describing_function, plot_history, plot_loops, plot_scan
 from procedures.rigsetup import bring_to_mode3
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
@@ -31,16 +33,17 @@ JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "fil
 # ---------------------------------------------------------------------------- parameters
 @dataclass
 class HysteresisParams:
-    axis: str = "X"
-    frequency_hz: float = 0.4
+    axis: Annotated[str, OneOf(*AC_AXES, note="the others have no instrumentation autocollimator channel")] = "X"
+    frequency_hz: Annotated[float, above(0)] = 0.4
     #: the ladder, large to small (a large first loop wipes out the bearing's earlier state)
-    amplitudes_urad: list[float] = field(default_factory=lambda: [500.0, 250.0, 100.0, 50.0, 25.0, 10.0, 5.0])
+    amplitudes_urad: Annotated[list[float], Each(above(0, note="amplitudes are positive"), nonempty=True)] = field(
+        default_factory=lambda: [500.0, 250.0, 100.0, 50.0, 25.0, 10.0, 5.0])
     #: analysed cycles per amplitude, after ``settle_cycles`` left out
-    cycles: int = 6
-    settle_cycles: int = 1
+    cycles: Annotated[int, at_least(2)] = 6
+    settle_cycles: Annotated[int, at_least(0)] = 1
     #: bias DAC updates per cycle; rate_hz / (frequency_hz * updates_per_cycle) must be whole samples
-    updates_per_cycle: int = 100
-    rate_hz: float = 400.0
+    updates_per_cycle: Annotated[int, at_least(8, note="fewer is too coarse a sine")] = 100
+    rate_hz: Annotated[float, above(0)] = 400.0
     #: how far the instrumentation angle lags the power-amplifier input (its filters and the
     #: motor's L/R): None (the default) measures it on the record (``dahl.measure_lag``); a
     #: number overrides the measurement, for studies only
@@ -50,23 +53,13 @@ class HysteresisParams:
     max_relative_se: float = 0.1
 
     def __post_init__(self) -> None:
+        # normalized before the limits are checked: "y" is the Y axis, JSON 500 the number 500.0
         self.axis = str(self.axis).upper()
-        if self.axis not in AC_AXES:
-            raise ValueError(f"hysteresis: axis {self.axis!r} has no instrumentation autocollimator channel "
-                             f"(X or Y)")
         self.amplitudes_urad = [float(a) for a in self.amplitudes_urad]
-        if not self.amplitudes_urad or any(not (a > 0 and math.isfinite(a)) for a in self.amplitudes_urad):
-            raise ValueError(f"hysteresis: amplitudes_urad {self.amplitudes_urad} must be a non-empty list of "
-                             f"positive numbers")
-        if not (self.frequency_hz > 0 and self.rate_hz > 0):
-            raise ValueError("hysteresis: frequency_hz and rate_hz must be > 0")
+        check_limits(self, "hysteresis")
+        # what no one field can declare: limits that tie fields together
         if self.angle_lag_ms is not None and not (abs(self.angle_lag_ms) < 1e3 / self.rate_hz * 20):
             raise ValueError(f"hysteresis: angle_lag_ms = {self.angle_lag_ms} must be a few samples at most")
-        if int(self.cycles) < 2 or int(self.settle_cycles) < 0:
-            raise ValueError(f"hysteresis: cycles = {self.cycles} must be >= 2 and settle_cycles = "
-                             f"{self.settle_cycles} >= 0")
-        if int(self.updates_per_cycle) < 8:
-            raise ValueError(f"hysteresis: updates_per_cycle = {self.updates_per_cycle} is too coarse a sine (>= 8)")
         per_update = self.rate_hz / (self.frequency_hz * self.updates_per_cycle)
         if abs(per_update - round(per_update)) > 1e-9 or round(per_update) < 1:
             raise ValueError(f"hysteresis: rate_hz / (frequency_hz * updates_per_cycle) = {per_update:g} samples "

@@ -54,64 +54,55 @@ import math
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
+from typing import Annotated
 
 import numpy as np
 
 from drivers.calibration import FLOAT_PARTNER, GYRO_CHANNELS
 from procedures.analysis.intervals import add_figure
 from procedures.analysis.stopwatch import NoCrossing, channel_result, crossing_times, restraint_fit, slope
+from procedures.paramlimits import Each, OneOf, Range, above, check_limits
 from procedures.params import prior_value
 from procedures.reports.stopwatch import markdown, plot_channel
 from procedures.rigsetup import bring_to_mode3, wait_settled
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
+#: the parameters' limits too long to read inline
+_CHANNEL = OneOf(*GYRO_CHANNELS)
+_KTO = Range(0, 1e3, lo_open=True, hi_open=True, units="urad/s/V", note="the data sheet's are 31-34")
+
 
 @dataclass
 class StopwatchParams:
-    channels: list[str] = field(default_factory=lambda: list(GYRO_CHANNELS))
+    channels: Annotated[list[str], Each(_CHANNEL, nonempty=True)] = field(default_factory=lambda: list(GYRO_CHANNELS))
     #: K_TO per channel (urad/s/V); empty: the earth-rate result, else the data sheet's nominal
-    kto_urad_per_s_per_V: dict[str, float] = field(default_factory=dict)
-    delta_pickoff_V: float = 2.0
+    kto_urad_per_s_per_V: Annotated[dict[str, float], Each(_KTO, keys=_CHANNEL)] = field(default_factory=dict)
+    delta_pickoff_V: Annotated[float, Range(0.05, 8.0, units="V", note="the pickoff's linear range is about +-6 V")] = 2.0
     #: fast enough that the gyro's random drift (a few tenths of urad/s over minutes on Z) is a
     #: small part of the ramp rate; a down-up pair cancels what is left
-    ramp_rate_urad_per_s: float = 20.0
+    ramp_rate_urad_per_s: Annotated[float, Range(0.1, 100.0)] = 20.0
     #: a repetition is a ramp down and a ramp up: their mean cancels any residual rate
-    repetitions: int = 3
-    hold_s: float = 20.0
-    null_s: float = 20.0
-    null_tolerance_urad_per_s: float = 0.1
+    repetitions: Annotated[int, Range(1, 50)] = 3
+    hold_s: Annotated[float, above(0)] = 20.0
+    null_s: Annotated[float, above(0)] = 20.0
+    null_tolerance_urad_per_s: Annotated[float, above(0)] = 0.1
     #: limit on the residual: a few % of the ramp rate (the down-up pairs cancel it; Z's random
     #: drift wanders by a few tenths of urad/s over minutes, so a tighter null does not hold)
     max_null_rate_urad_per_s: float = 0.5
-    smooth_s: float = 1.0
-    restore_s: float = 100.0
+    smooth_s: Annotated[float, above(0)] = 1.0
+    restore_s: Annotated[float, above(0)] = 100.0
     #: a channel's loop is opened only after every caging loop has been closed this long: the
     #: loops' transients (0.1 rad/s, and the float partner's through the viscous coupling) gone,
     #: so a step resumed just after mode 3 starts from the state an uninterrupted run gives it
-    min_caged_s: float = 300.0
-    rate_hz: float = 200.0
+    min_caged_s: Annotated[float, above(0)] = 300.0
+    rate_hz: Annotated[float, above(0)] = 200.0
     #: limits: K_g within this fraction of the data sheet's nominal; repetition spread
     kg_tolerance: float = 0.25
     max_spread: float = 0.02
 
     def __post_init__(self) -> None:
-        bad = [c for c in self.channels if c not in GYRO_CHANNELS]
-        if bad or not self.channels:
-            raise ValueError(f"stopwatch: channels {self.channels} must be some of {', '.join(GYRO_CHANNELS)}")
-        for ch, v in self.kto_urad_per_s_per_V.items():
-            if ch not in GYRO_CHANNELS or not 0 < v < 1e3:
-                raise ValueError(f"stopwatch: kto_urad_per_s_per_V {ch} = {v!r} must be a channel of "
-                                 f"{', '.join(GYRO_CHANNELS)} with a value in 0..1000 urad/s/V (the data sheet's are 31-34)")
-        if not 1 <= int(self.repetitions) <= 50:
-            raise ValueError(f"stopwatch: repetitions = {self.repetitions} must be 1..50")
-        if not 0.05 <= self.delta_pickoff_V <= 8.0:
-            raise ValueError(f"stopwatch: delta_pickoff_V = {self.delta_pickoff_V} V must be 0.05..8 V "
-                             f"(the pickoff's linear range is about +-6 V)")
-        if not 0.1 <= self.ramp_rate_urad_per_s <= 100.0:
-            raise ValueError(f"stopwatch: ramp_rate_urad_per_s = {self.ramp_rate_urad_per_s} must be 0.1..100")
-        for name in ("hold_s", "null_s", "smooth_s", "restore_s", "rate_hz", "null_tolerance_urad_per_s", "min_caged_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"stopwatch: {name} = {getattr(self, name)} must be > 0")
+        # every check is a declared limit (procedures.paramlimits): none ties fields together
+        check_limits(self, "stopwatch")
 
 
 #: the name the module's functions and tests use

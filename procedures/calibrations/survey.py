@@ -30,10 +30,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
 from daq.plots import plot_coherence, plot_psd
 from procedures.analysis.survey import AXES, CHANNELS, COHERENCE_PAIRS, SpanError, ac_ctl, spans_csd, survey_spectra
+from procedures.paramlimits import above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
@@ -43,30 +44,28 @@ from procedures.runner import Analysis, Context, Figure, Measurement, Procedure,
 
 @dataclass
 class SurveyParams:
-    duration_s: float = 300.0
-    rate_hz: float = 1000.0
+    duration_s: Annotated[float, above(0)] = 300.0
+    rate_hz: Annotated[float, above(0)] = 1000.0
     #: record in steps of this length (the unit an aborted run can be resumed by)
-    piece_s: float = 60.0
+    piece_s: Annotated[float, above(0)] = 60.0
     #: wait after reaching mode 3 (a rig already caged in mode 3 waits at most 5 s)
-    settle_s: float = 30.0
+    settle_s: Annotated[float, at_least(0)] = 30.0
     #: Welch segment length (Hann, 50 % overlap): bin spacing 1/seg_s
-    seg_s: float = 16.0
+    seg_s: Annotated[float, above(0)] = 16.0
     #: band of the gyro-deduced platform rms (the thesis's method: 0.4-15 Hz)
-    band_lo_hz: float = 0.4
+    band_lo_hz: Annotated[float, above(0)] = 0.4
     band_hi_hz: float = 15.0
     #: where to look for the control-channel dip, and the smoothing of the dB spectrum
-    dip_lo_hz: float = 0.5
+    dip_lo_hz: Annotated[float, above(0)] = 0.5
     dip_hi_hz: float = 30.0
-    dip_smooth_hz: float = 0.5
+    dip_smooth_hz: Annotated[float, at_least(0)] = 0.5
     #: quality limits: the dip's prominence, the fraction of Welch segments usable (no lost samples)
     min_dip_depth_db: float = 6.0
     min_segments_used: float = 0.9
 
     def __post_init__(self) -> None:
-        if not (self.duration_s > 0 and self.rate_hz > 0 and self.piece_s > 0 and self.seg_s > 0):
-            raise ValueError("survey: duration_s, rate_hz, piece_s and seg_s must be > 0")
-        if self.settle_s < 0:
-            raise ValueError(f"survey: settle_s = {self.settle_s} must be >= 0")
+        check_limits(self, "survey")
+        # what no one field can declare: limits that tie fields together
         if self.seg_s > self.duration_s:
             raise ValueError(f"survey: a Welch segment of {self.seg_s} s is longer than the record "
                              f"({self.duration_s} s)")
@@ -75,8 +74,6 @@ class SurveyParams:
             raise ValueError(f"survey: band {self.band_lo_hz}..{self.band_hi_hz} Hz must lie in 0..{nyq:g} Hz")
         if not 0 < self.dip_lo_hz < self.dip_hi_hz <= nyq:
             raise ValueError(f"survey: dip search {self.dip_lo_hz}..{self.dip_hi_hz} Hz must lie in 0..{nyq:g} Hz")
-        if self.dip_smooth_hz < 0:
-            raise ValueError("survey: dip_smooth_hz must be >= 0")
 
 
 def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]

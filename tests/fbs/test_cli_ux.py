@@ -74,6 +74,9 @@ def test_run_name_help_lists_the_procedures_parameters_with_defaults_units_and_l
     assert re.search(r"^  repetitions = 3  \(integer, limits: 1\.\.50\)$", out, re.M), out
     assert re.search(r"^  hold_s = 20\.0  \(number, s, limits: > 0\)$", out, re.M), out
     assert re.search(r"^  ramp_rate_urad_per_s = 20\.0  \(number, urad/s, limits: 0\.1\.\.100\)$", out, re.M), out
+    assert re.search(r"^  delta_pickoff_V = 2\.0  \(number, V, limits: 0\.05\.\.8 V\)$", out, re.M), out
+    # a limit that is no range is stated too: the channels to choose from
+    assert re.search(r"^  channels = \[.*\]  \(list of text, limits: non-empty, each one of X, Y, Z, XRD\)$", out, re.M), out
     assert "a repetition is a ramp down and a ramp up" in out          # what it is for
     assert "DESIGN" not in out
     # without a name: the command's own help, no procedure's parameters
