@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test check bench clean venv
+.PHONY: demo test check bench clean venv test-lowest
 
 venv: $(STAMP)
 
@@ -28,6 +28,11 @@ check: $(STAMP)
 
 test: check
 	$(PY) -m pytest -q
+
+# The suite with every runtime dependency at its lower bound in pyproject.toml (a fresh venv in a
+# temporary copy of the work tree, .ci/lowest); 20-40 min, so not part of `make test` or CI.
+test-lowest:
+	bash .ci/lowest
 
 bench: $(STAMP)
 	$(PY) bench/run_all.py
