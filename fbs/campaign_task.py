@@ -56,7 +56,7 @@ def simulate_record(path: str | Path, effect: str, params: dict[str, float], see
     if effect != "none":
         cfg = effects.get(effect).inject(cfg, AXIS, **params)
         spec = [effect + ":" + ",".join(f"{k}={v!r}" for k, v in params.items())]
-    sim = Simulator(cfg, RATE_HZ, seed=seed, mode=MODE)
+    sim = Simulator(cfg, RATE_HZ, seed=seed, mode=MODE, channels=tuple(RANGES_V))  # the recorded channels only
     for c, r in RANGES_V.items():
         sim.set_range(c, r)
     with RunWriter(path, rig="sim-offline", mode=MODE, rate_hz=RATE_HZ, channels=dict.fromkeys(RANGES_V, "V"),

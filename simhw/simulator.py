@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import logging
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,7 +22,8 @@ from simhw.clock import VirtualClock
 from simhw.kernel import CompiledPlant
 from simhw.noise import ExcessFlickerNoise, FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
 from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
-from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, RelayState, build_plant, discretize, torquer_limit_V
+from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, Plant, RelayState, build_plant, discretize, torquer_limit_V
+from simhw.reduction import Kept, kept, reduce
 from simhw.sampling import SamplingChain, internal_rate
 
 log = logging.getLogger(__name__)
@@ -176,12 +178,24 @@ class Simulator:
         for modes 2-6 and "stopped" for mode 1. A run started in modes 3-5 with the wheels at
         speed starts in the caged steady state, as a rig that has been running for hours.
     truth : also return the true platform angles ``theta_x, theta_y, theta_z`` (rad).
+    channels : the recorded channels to simulate (default: all of them, in ``CHANNELS`` order).
+        A subset simulates only the part of the rig they depend on (``simhw.reduction``): the
+        same numbers as the full rig gives on those channels, at a fraction of the cost (a
+        single-axis record drops the other axes, their gyros and their noise).
     """
 
     def __init__(self, cfg: SimConfig | None = None, rate_hz: float = 1000.0, seed: int = 0,
                  mode: int = 3, spin: float | None = None, truth: bool = False,
-                 clock: VirtualClock | None = None) -> None:
+                 clock: VirtualClock | None = None, channels: Sequence[str] | None = None) -> None:
         self.cfg = cfg = (cfg or SimConfig()).copy()
+        self.channels: tuple[str, ...] = CHANNELS if channels is None else tuple(channels)
+        bad = [c for c in self.channels if c not in CHANNELS]
+        if bad or not self.channels or len(set(self.channels)) != len(self.channels):
+            raise ValueError(f"channels {list(self.channels)} must be distinct recorded channels, at least one "
+                             f"(the channels are {', '.join(CHANNELS)})")
+        #: the outputs the kernel computes, in the order of the columns it returns
+        self._outputs = self.channels + (TRUTH_CHANNELS if truth else ())
+        self._keep: Kept | None = None if channels is None else kept(cfg, self._outputs)
         self.seed = seed
         self.clock = clock or VirtualClock()
         self.truth = truth
@@ -220,13 +234,13 @@ class Simulator:
         # Each time base gets its own streams, derived from the one seed.
         seed = self.seed if self._rate_changes == 0 else (self.seed, self._rate_changes)
         self.sources = Sources(self.cfg, seed, self.dt)
-        self.chain = SamplingChain(CHANNELS, self.rate_hz, self.oversample, s.anti_alias_fraction,
+        self.chain = SamplingChain(self.channels, self.rate_hz, self.oversample, s.anti_alias_fraction,
                                    s.anti_alias_poles, s.adc_bits, s.default_range_V)
         for c, r in (ranges or {}).items():
             self.chain.set_range(c, r)
         # Electrical pickup: phase zero at the start of the time base, on the plant's step count.
-        self._pickup = [(CHANNELS.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
-                        for p in self.cfg.pickup]
+        self._pickup = [(self.channels.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
+                        for p in self.cfg.pickup if p.channel in self.channels]
 
     def set_rate(self, rate_hz: float) -> None:
         """Change the output sample rate now (the ADC was reconfigured).
@@ -304,7 +318,8 @@ class Simulator:
     def _compile(self, relays: RelayState) -> CompiledPlant:
         cp = self._cache.get(relays)
         if cp is None:
-            cp = CompiledPlant.build(discretize(build_plant(self.cfg, relays), self.dt))
+            disc = discretize(build_plant(self.cfg, relays), self.dt)
+            cp = CompiledPlant.build(disc if self._keep is None else reduce(disc, self._keep))
             if len(self._cache) > 64:
                 self._cache.clear()
             self._cache[relays] = cp
@@ -315,7 +330,8 @@ class Simulator:
             self.relays = relays
             self._compiled = self._compile(relays)  # same state layout in every relay state
 
-    def _slow_inputs(self) -> np.ndarray:
+    def _slow_inputs(self, plant: Plant | None = None) -> np.ndarray:
+        """The values of ``plant``'s slow inputs (default: the compiled plant's), in its order."""
         cfg = self.cfg
         axes = geometry.platform_axes_enu(math.radians(cfg.table.tilt_deg), math.radians(cfg.table.spindle_deg),
                                           math.radians(cfg.table.base_azimuth_offset_deg))
@@ -332,17 +348,19 @@ class Simulator:
                      + g.g_drift_y_urad_per_s_per_g * f[1] + g.g_drift_z_urad_per_s_per_g * f[2]) * URAD
             values[f"vb_{c}"] = self.bias[c]
             values[f"wconst_{c}"] = w[axis_i[c]] + drift
-        return np.array([values[s] for s in self._compiled.disc.plant.slow_inputs])
+        return np.array([values[s] for s in (plant or self._compiled.disc.plant).slow_inputs])
 
     def _settle(self) -> None:
         """Start in the steady state of the linear model for the present slow inputs.
 
         A spans 1e-6 (gyro) to 1e7 (filters): a least-squares solve with a relative cutoff
-        would drop the gyro rows, so solve by LU, which pivots through the scaling.
+        would drop the gyro rows, so solve by LU, which pivots through the scaling. A reduced run
+        solves the whole rig and keeps its part: a smaller LU would round differently, and the
+        reduced run would no longer be the full run's to the bit.
         """
-        plant = self._compiled.disc.plant
-        slow = self._slow_inputs()
-        rhs = -plant.B[:, self._compiled.slow_cols] @ slow
+        plant = self._compiled.disc.plant if self._keep is None else build_plant(self.cfg, self.relays)
+        slow = self._slow_inputs(plant)
+        rhs = -plant.B[:, [plant.inputs.index(s) for s in plant.slow_inputs]] @ slow
         # The slow noise (offset jumps, 1/f, disturbance) already has a value at t = 0: the
         # platform has been following it, so it is part of the steady state too.
         for name in self.sources.names:
@@ -354,7 +372,8 @@ class Simulator:
             log.warning("mode %d has no unique steady state; starting from rest", self.mode)
             return
         if np.all(np.isfinite(x)):
-            self.x = x
+            kept_states = self._compiled.disc.plant.states
+            self.x = x if self._keep is None else x[[plant.states.index(s) for s in kept_states]]
 
     def _spin_target(self) -> float:
         return 0.0 if self.relays.mode == 1 else 1.0
@@ -375,8 +394,8 @@ class Simulator:
             chunks.append(self._run_internal(m))
             done += m
             self._evolve_spin(m * self.dt)
-        ny = len(CHANNELS)
-        y = np.concatenate(chunks) if chunks else np.zeros((0, ny + len(TRUTH_CHANNELS)))
+        ny = len(self.channels)
+        y = np.concatenate(chunks) if chunks else np.zeros((0, len(self._outputs)))
         analog = y[:, :ny]
         self._check_finite(analog, t0)
         for col, line in self._pickup:
@@ -387,7 +406,7 @@ class Simulator:
             for i, name in enumerate(TRUTH_CHANNELS):
                 truth[name] = y[keep, ny + i]
         self.clock.advance_to(self.time_s)
-        return Block(t0, self.rate_hz, CHANNELS, volts, over, truth)
+        return Block(t0, self.rate_hz, self.channels, volts, over, truth)
 
     def _check_finite(self, analog: np.ndarray, t0: float) -> None:
         """Raise ``SimulationDiverged`` where an output is not finite or beyond ``DIVERGED_V``:
@@ -396,7 +415,7 @@ class Simulator:
         if bad.any():
             i, j = (int(k[0]) for k in np.nonzero(bad))
             raise SimulationDiverged(
-                f"the simulation diverged at t = {t0 + i * self.dt:.6g} s: {CHANNELS[j]} = {analog[i, j]:.3g} V "
+                f"the simulation diverged at t = {t0 + i * self.dt:.6g} s: {self.channels[j]} = {analog[i, j]:.3g} V "
                 f"(beyond {DIVERGED_V:g} V or not a number); the configuration makes the plant unstable or "
                 f"the step too coarse for it - check the values changed from the defaults")
 
@@ -430,7 +449,7 @@ class Simulator:
         y = np.empty((m, len(plant.outputs)))
         cp.run(self.x, u, self._slow_inputs(), self.nl_state, y)
         self.step += m
-        order = [plant.outputs.index(c) for c in CHANNELS + TRUTH_CHANNELS]
+        order = [plant.outputs.index(c) for c in self._outputs]
         return y[:, order]
 
     def run(self, duration_s: float, block_s: float = 10.0):

@@ -400,10 +400,10 @@ def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = N
                     note: str = "") -> np.ndarray:
     """The model with the measured run's channels, rate, duration and ADC ranges; written to
     ``out`` as an fbs-run file when given. Returns (n_channels, n) volts."""
-    sim = Simulator(cfg, rate_hz=rec.rate_hz, seed=seed, mode=rec.mode)
+    # only the recorded channels: the part of the rig they depend on, the same numbers (simhw.reduction)
+    sim = Simulator(cfg, rate_hz=rec.rate_hz, seed=seed, mode=rec.mode, channels=rec.channels)
     for c, q, x in zip(rec.channels, rec.lsb_V, rec.data):
         sim.set_range(c, _adc_range(q, float(np.max(np.abs(x))), cfg.sampling.adc_bits))
-    cols = [CHANNELS.index(c) for c in rec.channels]
     n = rec.data.shape[1]
     writer = None
     if out is not None:
@@ -418,7 +418,7 @@ def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = N
         while done < n:
             k = min(per, n - done)
             block = sim.advance(k)
-            v = block.volts[:, cols]
+            v = block.volts
             chunks.append(v)
             if writer is not None:
                 writer.append({c: v[:, j] for j, c in enumerate(rec.channels)})
