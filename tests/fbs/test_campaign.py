@@ -219,27 +219,29 @@ def test_c_a_dask_worker_killed_mid_campaign_loses_nothing(reference, cluster, t
 def test_c_an_interrupted_campaign_keeps_its_runs_and_a_rerun_completes_it(reference, tmp_path):
     out = tmp_path / "campaign"
     runs = out / "runs.jsonl"
-    argv = [*FBS, "campaign", *EFFECT, "--grid", "amplitude_V=0.002:0.002:1", "--seeds", "1", "--jobs", "1",
-            "--out", str(out)]
+    # four runs one after another: when the first line is there, three are still to come, so the
+    # SIGTERM lands mid-campaign however fast a run is (how many finished before it, it may vary)
+    argv = [*FBS, "campaign", *SUBSET, "--jobs", "1", "--out", str(out)]
     p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        wait_for_lines(runs, p)                       # the null run; the effect's is under way
+        wait_for_lines(runs, p)
         p.send_signal(signal.SIGTERM)
         _, err = p.communicate(timeout=HANG_S)
     finally:
         p.kill()
     assert p.returncode == 2 and "interrupted" in err, err
     kept = runs.read_bytes()
-    assert kept.count(b"\n") == 1 and kept.endswith(b"\n")
+    done = kept.count(b"\n")
+    assert 1 <= done < 4 and kept.endswith(b"\n")
+    nulls = sum(r["effect"] == "none" for r in lines_of(runs))
     cv = json.loads((out / "curves.json").read_text())            # the curves of what was done
-    assert cv["complete"] is False and cv["done"] == 1 and cv["nulls"]["done"] == 1
+    assert cv["complete"] is False and cv["done"] == done and cv["nulls"]["done"] == nulls
 
     r = fbs(*argv[3:])
     assert r.returncode == 0, r.stderr
-    assert "1 already done" in r.stderr and "1 to run" in r.stderr
+    assert f"{done} already done" in r.stderr and f"{4 - done} to run" in r.stderr
     assert runs.read_bytes().startswith(kept)
-    want = {k: v for k, v in _subset(reference).items() if k[2] == 1}
-    assert by_run(lines_of(runs)) == want
+    assert by_run(lines_of(runs)) == _subset(reference)
     assert json.loads((out / "curves.json").read_text())["complete"] is True
 
 
