@@ -7,7 +7,12 @@ process pool of 1 and of 2 workers. Target: 2 workers reach at least 1.7x the th
 
 The run files are the detection-limit records of docs/gap.md section 6
 (``fbs.campaign_task.simulate_record``): the nominal model and a few catalogue effects on axis
-X, several seeds, made once in a temporary directory before any timing. One untimed warm-up
+X, several seeds, made once in a temporary directory before any timing. There are 24 of them
+because a file's analysis takes 0.5-3.5 s depending on what it finds: with 8 files the last
+one or two ran alone on one worker while the other idled, and the ratio measured that tail
+(1.53x idle, with 1.85x of the work in the tasks themselves), not the throughput of a batch of
+thousands. Each configuration also reports the seconds its tasks took (the sum of the result
+lines' ``elapsed_s``), so start-up and tail are visible as wall clock minus task time per worker. One untimed warm-up
 batch loads numba's cache and the page cache; then the 1- and 2-worker batches run
 interleaved (1, 2, 1, 2, ...), each a fresh ``--out``, and each configuration's median time
 is its figure, so a change in the machine's load hits both. The result lines of the two
@@ -41,7 +46,8 @@ EFFECTS = ("none", "pickup_line", "extra_damping", "flicker_noise")
 #: the record length: the gap workflow needs at least 73.728 s
 DURATION_S = 120.0
 QUICK_DURATION_S = 80.0
-N_SEEDS = 2
+N_SEEDS = 6
+QUICK_SEEDS = 2
 REPEAT = 3
 QUICK_REPEAT = 2
 #: keys that hold timings, left out when comparing the result lines
@@ -69,7 +75,7 @@ def load() -> str:
     return f"load average {one:.2f} {five:.2f} {fifteen:.2f} (1, 5, 15 min)"
 
 
-def make_files(directory: Path, duration_s: float) -> list[str]:
+def make_files(directory: Path, duration_s: float, n_seeds: int) -> list[str]:
     """The run files, simulated in this process (untimed)."""
     from fbs import campaign_task
     from simhw import effects
@@ -77,7 +83,7 @@ def make_files(directory: Path, duration_s: float) -> list[str]:
     files = []
     for effect in EFFECTS:
         params = {} if effect == "none" else {p.name: p.default for p in effects.get(effect).params}
-        for seed in range(1, N_SEEDS + 1):
+        for seed in range(1, n_seeds + 1):
             path = directory / f"{effect}-{seed}.h5"
             campaign_task.simulate_record(path, effect, params, seed, duration_s)
             files.append(str(path))
@@ -85,7 +91,7 @@ def make_files(directory: Path, duration_s: float) -> list[str]:
 
 
 def run_batch(files: list[str], out: Path, jobs: int, scheduler: str | None = None) -> float:
-    """Seconds of one ``fbs batch gap`` over ``files`` (a fresh ``out``); raises if it fails."""
+    """Wall-clock seconds of one ``fbs batch gap`` over ``files`` (a fresh ``out``); raises if it fails."""
     if out.exists():
         out.unlink()
     cmd = [sys.executable, "-m", "fbs", "batch", "gap", *files, "--jobs", str(jobs), "--out", str(out)]
@@ -97,6 +103,11 @@ def run_batch(files: list[str], out: Path, jobs: int, scheduler: str | None = No
     if proc.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd[:6])} ... --jobs {jobs} exited {proc.returncode}:\n{proc.stderr[-3000:]}")
     return seconds
+
+
+def task_seconds(out: Path) -> float:
+    """The seconds the tasks of ``out`` took, summed (each result line's ``elapsed_s``)."""
+    return sum(float(json.loads(s).get("elapsed_s") or 0.0) for s in out.read_text().splitlines() if s.strip())
 
 
 def _strip(obj: Any) -> Any:
@@ -130,6 +141,7 @@ def main() -> int:
     args = ap.parse_args()
     duration = QUICK_DURATION_S if args.quick else DURATION_S
     repeat = QUICK_REPEAT if args.quick else REPEAT
+    n_seeds = QUICK_SEEDS if args.quick else N_SEEDS
 
     log(f"machine: {machine()}")
     log(f"start: {load()}")
@@ -137,8 +149,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="fbs-batch-scaling-") as d:
         tmp = Path(d)
         t0 = time.perf_counter()
-        files = make_files(tmp, duration)
-        log(f"input: {len(files)} run files ({', '.join(EFFECTS)} x {N_SEEDS} seeds, {duration:.0f} s each), "
+        files = make_files(tmp, duration, n_seeds)
+        log(f"input: {len(files)} run files ({', '.join(EFFECTS)} x {n_seeds} seeds, {duration:.0f} s each), "
             f"made in {time.perf_counter() - t0:.0f} s (untimed)")
 
         t0 = time.perf_counter()
@@ -148,9 +160,12 @@ def main() -> int:
         times: dict[int, list[float]] = {1: [], 2: []}
         for i in range(repeat):
             for jobs in (1, 2):
-                s = run_batch(files, tmp / f"jobs{jobs}.jsonl", jobs)
+                out = tmp / f"jobs{jobs}.jsonl"
+                s = run_batch(files, out, jobs)
                 times[jobs].append(s)
-                log(f"  round {i + 1}: {jobs} worker(s) {s:6.1f} s  {len(files) / s:.3f} files/s")
+                busy = task_seconds(out)
+                log(f"  round {i + 1}: {jobs} worker(s) {s:6.1f} s  {len(files) / s:.3f} files/s; "
+                    f"tasks {busy:.1f} s, idle or starting {jobs * s - busy:.1f} worker-s")
         ref = results_of(tmp / "jobs1.jsonl")
         ok &= compare("2 workers", ref, results_of(tmp / "jobs2.jsonl"))
 
