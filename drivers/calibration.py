@@ -32,6 +32,8 @@ class PlatformConstants:
     motor_Nm_per_A: float         # Km
     back_emf_V_s: float           # Kb
     armature_ohm: float           # Ra
+    armature_H: float = 0.023     # La (eq. 3.25)
+    command_divider: float = 0.0075  # Kd: V_Td into the amplifier input (eq. 3.27)
 
     @property
     def torque_per_pa_V(self) -> float:
@@ -50,6 +52,13 @@ class AutocollimatorConstants:
 
     control_mV_per_urad: float
     inst_mV_per_urad: float
+    #: the channels' filters (Table 1, eqs. 3.21-3.22): control 2nd order; instrumentation
+    #: 1st order then 2nd order
+    control_filter_rad_per_s: float = 264.0
+    control_filter_zeta: float = 0.71
+    inst_filter1_rad_per_s: float = 755.0
+    inst_filter2_rad_per_s: float = 1250.0
+    inst_filter2_zeta: float = 0.71
 
 
 def _platform_defaults() -> dict[str, PlatformConstants]:

@@ -1,0 +1,490 @@
+"""Frequency responses measured on run files, and the rational models fitted to them
+(thesis Ch. V C-D, Figs. 35-41 and 52; the models of Ch. III).
+
+Estimates
+---------
+``response(blocks, source, target)`` is H1 = S_xy / S_xx (eqs. 4.36-4.38): right when the
+noise is on the output only, as for the compensation network, whose input (the control
+channel) and output (the amplifier input) are both recorded (Ch. V D, Fig. 40).
+
+``response(blocks, source, target, via=r)`` is S_ry / S_rx: the response from x to y when
+both are inside a closed loop and ``r`` is a signal injected into it (the command torque
+V_Td, Ch. V C). Sensor noise drives x and y through the loop, so H1 would be biased toward
+the inverse of the controller; noise is uncorrelated with r, so the ratio of the two
+cross-spectra with r is not (the indirect, or instrumental-variable, estimate).
+
+Intervals
+---------
+The record is cut into ``n_blocks`` blocks (8 by default) of whole Welch segments; the
+cross-spectral matrix of each block is computed once. A delete-one jackknife over the blocks
+(Efron and Stein 1981) gives the standard error of log|H|, of the phase, and of every
+parameter fitted to H, and the 95 % intervals use Student's t with ``n_blocks - 1`` degrees of
+freedom. It needs no formula for the random error of a ratio of spectra (Bendat and Piersol's
+assumes H1 with output noise only), it carries the bias and correlation of the fit along, and
+it keeps what the blocks share: a slow drift or a line that is in every block widens nothing,
+so it is not hidden in the interval either.
+
+Models
+------
+``fit_network``: eq. 3.28 with a free gain and free corners,
+H(s) = -g (s/w2+1)(s/w3+1) / ((s/w1+1)(s/w4+1)(s/w5+1)(s/w6+1)) (the network's output is
+inverted: negative feedback). Fitted to log H (dB and phase together) by weighted least squares.
+Below the band the low pole w1 acts as an integrator with the gain: only g w1 is seen there, and
+the report says that g and w1 are not resolved separately (their correlation).
+
+``fit_platform``: the gimbal axis from amplifier input to autocollimator angle (eqs. 3.23-3.27),
+G(s) = Kp Km Kac F(s) / ((La s + Ra)(J s^2 + D s + k) + Km Kb s), F the autocollimator
+channel's filter (eqs. 3.21-3.22). With the amplifier, motor and sensor constants of the data
+sheet, Z(s) = [Kp Km Kac F(s) / G(s) - Km Kb s] / (La s + Ra) = J s^2 + D s + k is linear in
+the inertia J, the viscous damping D and the bearing stiffness k (Fig. 52's spring-mass
+system): Re Z = k - J w^2, Im Z = D w, solved by weighted linear least squares. The data
+sheet's inertia is not used. With Dahl friction (eq. 5.2) k and D are the describing function
+at the excitation's amplitude: eta To^2 only for motions well inside To / (eta To^2).
+
+References
+----------
+.. [Klinger] R. Klinger, 1974, Ch. III (eqs. 3.21-3.28), Ch. V C-D.
+.. [BP] J. S. Bendat and A. G. Piersol, *Random Data*, the chapters on frequency-response
+   estimates and on closed-loop systems.
+.. [ES] B. Efron and C. Stein, "The jackknife estimate of variance", Ann. Statist. 9 (3),
+   586-596, 1981.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.optimize
+import scipy.stats
+
+from daq.filespectra import run_csd_matrix
+from daq.reader import RunFile
+from daq.spectra import coherence
+from drivers.calibration import AutocollimatorConstants, PlatformConstants
+from procedures.analysis.intervals import Estimate, from_stderr
+
+URAD = 1e-6
+N_BLOCKS = 8
+LEVEL = 0.95
+
+
+class TransferError(ValueError):
+    """The record cannot give this response: what is missing, in words."""
+
+
+# ---------------------------------------------------------------------------- block spectra
+@dataclass
+class BlockCsd:
+    """The Welch cross-spectral matrix of each of ``n_blocks`` consecutive blocks of a record."""
+
+    f: np.ndarray
+    S: np.ndarray            # (blocks, f, channel, channel)
+    weights: np.ndarray      # segments used per block
+    channels: tuple[str, ...]
+    fs: float
+    seg_s: float
+    seconds: float
+
+    @property
+    def n_blocks(self) -> int:
+        return int(self.S.shape[0])
+
+    def mean(self, leave_out: int | None = None) -> np.ndarray:
+        w = self.weights.copy()
+        if leave_out is not None:
+            w[leave_out] = 0.0
+        return np.einsum("b,bfij->fij", w, self.S) / w.sum()
+
+    def index(self, name: str) -> int:
+        if name not in self.channels:
+            raise TransferError(f"channel {name!r} was not analysed (have: {', '.join(self.channels)})")
+        return self.channels.index(name)
+
+
+def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[str], seg_s: float,
+              n_blocks: int = N_BLOCKS) -> BlockCsd:
+    """The Welch matrices (Hann, 50 % overlap, linear detrend) of ``n_blocks`` blocks of the
+    given file spans, each block whole segments of one span. Raises ``TransferError`` when the
+    spans hold fewer than ``n_blocks`` segments."""
+    if n_blocks < 3:
+        raise TransferError(f"n_blocks = {n_blocks}: a jackknife needs at least 3 blocks")
+    pieces: list[tuple[Path, int, int, float]] = []
+    for file, start, stop in spans:
+        with RunFile(file) as rf:
+            stop = min(int(stop), rf.n_samples)
+            pieces.append((Path(file), int(start), stop, float(rf.rate_hz)))
+    rates = {p[3] for p in pieces}
+    if len(rates) != 1:
+        raise TransferError(f"the spans have different sample rates {sorted(rates)} Hz")
+    fs = rates.pop()
+    nperseg = int(round(seg_s * fs))
+    total = sum(max(0, stop - start) for _, start, stop, _ in pieces)
+    if total < nperseg * n_blocks:
+        raise TransferError(f"{total / fs:.1f} s of record holds fewer than {n_blocks} blocks of one {seg_s:g} s "
+                            f"segment: record longer or shorten the segment")
+    # blocks of about equal length, each inside one span
+    block_len = total // n_blocks
+    bounds: list[tuple[Path, int, int]] = []
+    for file, start, stop, _ in pieces:
+        n = (stop - start) // block_len if block_len else 0
+        for k in range(n):
+            bounds.append((file, start + k * block_len, start + (k + 1) * block_len))
+    if len(bounds) < n_blocks:                     # short spans: fewer, whole spans
+        bounds = [(file, start, stop) for file, start, stop, _ in pieces if stop - start >= nperseg]
+    S, w = [], []
+    f = np.empty(0)
+    for file, start, stop in bounds[:max(n_blocks, len(bounds))]:
+        c = run_csd_matrix(file, channels, nperseg=nperseg, start=start, stop=stop)
+        f = c.f
+        S.append(c.S)
+        w.append(float(c.segments_used))
+    if len(S) < 3:
+        raise TransferError(f"only {len(S)} block(s) of whole {seg_s:g} s segments: a jackknife needs 3")
+    return BlockCsd(f, np.array(S), np.array(w), tuple(channels), fs, seg_s, total / fs)
+
+
+def periodic_blocks(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[str], period_s: float,
+                    n_blocks: int = N_BLOCKS, skip_periods: int = 1) -> BlockCsd:
+    """The cross-spectral matrices of whole periods of a periodic excitation, grouped in
+    ``n_blocks`` blocks: each period's DFT without a window (mean removed), so at the excited
+    frequencies k / period there is no leakage at all (the periodic-excitation method of
+    system identification; Pintelon and Schoukens, *System Identification: A Frequency Domain
+    Approach*, ch. 2). Leakage is what a Hann window does to a lightly damped resonance: the
+    closed loop's amplifier input has a deep notch there, the window fills it in, and the
+    damping read 25 % high. The first ``skip_periods`` of each span are the loop's transient."""
+    if n_blocks < 3:
+        raise TransferError(f"n_blocks = {n_blocks}: a jackknife needs at least 3 blocks")
+    per: list[np.ndarray] = []
+    fs = None
+    for file, start, stop in spans:
+        with RunFile(file) as rf:
+            rate = float(rf.rate_hz)
+            if fs is not None and rate != fs:
+                raise TransferError(f"the spans have different sample rates {fs:g} and {rate:g} Hz")
+            fs = rate
+            n = int(round(period_s * rate))
+            if abs(n - period_s * rate) > 1e-6:
+                raise TransferError(f"a {period_s:g} s period is not a whole number of samples at {rate:g} Hz")
+            stop = min(int(stop), rf.n_samples)
+            k = (stop - start) // n - skip_periods
+            if k <= 0:
+                continue
+            x = rf.read(list(channels), start + skip_periods * n, start + (skip_periods + k) * n).T
+        x = x.reshape(k, n, len(channels))
+        keep = np.all(np.isfinite(x), axis=(1, 2))            # a period with a lost sample is left out
+        x = x[keep] - x[keep].mean(axis=1, keepdims=True)
+        X = np.fft.rfft(x, axis=1) * math.sqrt(2.0 / (n * rate))   # one-sided density scaling
+        per.append(np.einsum("pfi,pfj->pfij", X.conj(), X))
+    if fs is None or not per or sum(len(p) for p in per) < n_blocks:
+        got = sum(len(p) for p in per)
+        raise TransferError(f"{got} whole {period_s:g} s period(s) of excitation recorded (after {skip_periods} "
+                            f"left out as transient): a jackknife over {n_blocks} blocks needs {n_blocks}")
+    allp = np.concatenate(per)
+    groups = np.array_split(np.arange(len(allp)), n_blocks)
+    S = np.array([allp[g].mean(axis=0) for g in groups])
+    f = np.fft.rfftfreq(int(round(period_s * fs)), 1.0 / fs)
+    return BlockCsd(f, S, np.array([float(len(g)) for g in groups]), tuple(channels), fs, period_s,
+                    len(allp) * period_s)
+
+
+def file_blocks(path: str | Path, channels: Sequence[str], seg_s: float, n_blocks: int = N_BLOCKS,
+                start_s: float = 0.0, stop_s: float | None = None) -> BlockCsd:
+    """``block_csd`` of one file (seconds ``start_s .. stop_s``, default all)."""
+    with RunFile(path) as rf:
+        fs = rf.rate_hz
+        stop = rf.n_samples if stop_s is None else min(rf.n_samples, int(round(stop_s * fs)))
+        missing = [c for c in channels if c not in rf.channels]
+        if missing:
+            raise TransferError(f"{path} has no channel {', '.join(missing)} (its channels: {', '.join(rf.channels)})")
+    return block_csd([(path, int(round(start_s * fs)), stop)], channels, seg_s, n_blocks)
+
+
+# ---------------------------------------------------------------------------- responses
+@dataclass
+class Response:
+    """A measured frequency response with jackknife intervals."""
+
+    source: str
+    target: str
+    via: str | None
+    f: np.ndarray
+    H: np.ndarray                     # complex, target per source
+    coherence: np.ndarray             # source-target (H1) or via-target
+    log_se: np.ndarray                # jackknife standard error of ln|H|
+    phase_se_rad: np.ndarray          # jackknife standard error of the phase
+    H_blocks: np.ndarray              # leave-one-out estimates (blocks, f)
+    dof: int                          # n_blocks - 1
+
+    @property
+    def gain_db(self) -> np.ndarray:
+        return 20 * np.log10(np.abs(self.H))
+
+    @property
+    def phase_deg(self) -> np.ndarray:
+        return np.degrees(np.angle(self.H))
+
+    def t(self) -> float:
+        return float(scipy.stats.t.ppf(0.5 + LEVEL / 2, self.dof))
+
+    def gain_db_ci(self) -> tuple[np.ndarray, np.ndarray]:
+        h = self.t() * self.log_se * 20 / math.log(10)
+        return self.gain_db - h, self.gain_db + h
+
+    def phase_deg_ci(self) -> tuple[np.ndarray, np.ndarray]:
+        h = np.degrees(self.t() * self.phase_se_rad)
+        return self.phase_deg - h, self.phase_deg + h
+
+
+def _h(S: np.ndarray, i: int, j: int, r: int | None) -> np.ndarray:
+    if r is None:
+        return S[:, i, j] / S[:, i, i].real          # eq. 4.36: S_xy / S_xx
+    return S[:, r, j] / S[:, r, i]                   # S_ry / S_rx (closed loop, injected r)
+
+
+def jackknife_se(values: np.ndarray) -> np.ndarray:
+    """Delete-one jackknife standard error over axis 0: sqrt((B-1)/B sum (v_b - mean)^2)."""
+    B = values.shape[0]
+    return np.sqrt((B - 1) / B * np.sum((values - values.mean(axis=0)) ** 2, axis=0))
+
+
+def response(blocks: BlockCsd, source: str, target: str, via: str | None = None) -> Response:
+    i, j = blocks.index(source), blocks.index(target)
+    r = None if via is None else blocks.index(via)
+    if len({i, j} | ({r} if r is not None else set())) < (2 if r is None else 3):
+        raise TransferError(f"source {source!r}, target {target!r} and via {via!r} must be different channels")
+    S = blocks.mean()
+    with np.errstate(divide="ignore", invalid="ignore"):
+        H = _h(S, i, j, r)
+        Hb = np.array([_h(blocks.mean(leave_out=b), i, j, r) for b in range(blocks.n_blocks)])
+        ratio = Hb / H
+        log_se = jackknife_se(np.log(np.abs(ratio)))
+        phase_se = jackknife_se(np.angle(ratio))
+        coh = coherence(S)[:, r if r is not None else i, j]
+    return Response(source, target, via, blocks.f, H, coh, log_se, phase_se, Hb, blocks.n_blocks - 1)
+
+
+def usable(resp: Response, lo_hz: float, hi_hz: float, min_coherence: float = 0.5) -> np.ndarray:
+    """Bins in [lo, hi] with coherence above ``min_coherence`` and finite estimates."""
+    f = resp.f
+    ok = (f >= lo_hz) & (f <= hi_hz) & (resp.coherence >= min_coherence)
+    ok &= np.isfinite(resp.H) & np.isfinite(resp.log_se) & (resp.log_se > 0) & (resp.phase_se_rad > 0)
+    return ok
+
+
+# ---------------------------------------------------------------------------- the compensation network
+#: eq. 3.28's corners (rad/s), the design values of Ch. III G (Fig. 22)
+NETWORK_CORNERS = ("w1_rad_per_s", "w2_rad_per_s", "w3_rad_per_s", "w4_rad_per_s", "w5_rad_per_s", "w6_rad_per_s")
+DESIGN_NETWORK: dict[str, float] = {"gain": 1.0, "w1_rad_per_s": 0.15, "w2_rad_per_s": 10.0, "w3_rad_per_s": 30.0,
+                                    "w4_rad_per_s": 200.0, "w5_rad_per_s": 1200.0, "w6_rad_per_s": 5000.0}
+
+
+def network_response(f_hz: np.ndarray, p: Mapping[str, float]) -> np.ndarray:
+    """-g (s/w2+1)(s/w3+1) / ((s/w1+1)(s/w4+1)(s/w5+1)(s/w6+1)), eq. 3.28, inverted (pa per ac_ctl)."""
+    s = 2j * np.pi * np.asarray(f_hz, float)
+    num = (s / p["w2_rad_per_s"] + 1) * (s / p["w3_rad_per_s"] + 1)
+    den = ((s / p["w1_rad_per_s"] + 1) * (s / p["w4_rad_per_s"] + 1) * (s / p["w5_rad_per_s"] + 1)
+           * (s / p["w6_rad_per_s"] + 1))
+    return -p["gain"] * num / den
+
+
+@dataclass
+class ModelFit:
+    """Parameters fitted to a response, with jackknife intervals, and the fit's own checks."""
+
+    model: str
+    estimates: dict[str, Estimate]
+    band_hz: tuple[float, float]
+    n_bins: int
+    residual_db_rms: float
+    residual_deg_rms: float
+    #: rms of the log residuals in units of each bin's jackknife standard error (~1 if the model fits)
+    residual_normalized: float
+    correlations: dict[str, float] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+    #: the fitted model's response at ``f`` (for the report)
+    curve: Callable[[np.ndarray], np.ndarray] | None = None
+
+    def values(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k, e in self.estimates.items():
+            out[k] = e.value if e.resolved else None
+            out[f"{k}_ci95"] = [e.lo, e.hi]
+        out["resolved"] = {k: e.resolved for k, e in self.estimates.items()}
+        out["why_unresolved"] = {k: e.why for k, e in self.estimates.items() if not e.resolved}
+        out |= {"band_hz": list(self.band_hz), "bins": self.n_bins, "residual_db_rms": self.residual_db_rms,
+                "residual_deg_rms": self.residual_deg_rms, "residual_normalized": self.residual_normalized}
+        if self.notes:
+            out["notes"] = list(self.notes)
+        return out
+
+
+def _log_residual(model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray) -> np.ndarray:
+    q = np.log(model / H)
+    return np.concatenate([q.real / log_se, q.imag / phase_se])
+
+
+def _fit_network_once(f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray,
+                      start: np.ndarray) -> np.ndarray:
+    def resid(x: np.ndarray) -> np.ndarray:
+        return _log_residual(network_response(f, _network_params(x)), H, log_se, phase_se)
+
+    lo = start - math.log(20.0)
+    hi = start + math.log(20.0)
+    sol = scipy.optimize.least_squares(resid, start, bounds=(lo, hi), x_scale=1.0, method="trf")
+    return np.asarray(sol.x)
+
+
+def _network_params(x: np.ndarray) -> dict[str, float]:
+    # x = ln(g w1), ln w1 .. ln w6: g w1 is what the band sees when w1 is below it
+    w = np.exp(x[1:])
+    return {"gain": float(math.exp(x[0]) / w[0]), **{k: float(v) for k, v in zip(NETWORK_CORNERS, w)}}
+
+
+def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
+                start: Mapping[str, float] | None = None, min_coherence: float = 0.5) -> ModelFit:
+    """Eq. 3.28 fitted to ``resp`` (control channel -> amplifier input) over ``lo..hi`` Hz."""
+    ok = usable(resp, lo_hz, hi_hz, min_coherence)
+    if ok.sum() < 12:
+        raise TransferError(f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
+                            f"with coherence >= {min_coherence:g}; a network fit needs 12")
+    p0 = dict(DESIGN_NETWORK if start is None else start)
+    x0 = np.log([p0["gain"] * p0["w1_rad_per_s"], *(p0[k] for k in NETWORK_CORNERS)])
+    f, H, ls, ps = resp.f[ok], resp.H[ok], resp.log_se[ok], resp.phase_se_rad[ok]
+    x = _fit_network_once(f, H, ls, ps, x0)
+    # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
+    xb = np.array([_fit_network_once(f, resp.H_blocks[b][ok], ls, ps, x) for b in range(resp.H_blocks.shape[0])])
+    se = jackknife_se(xb)
+    corr = np.corrcoef(xb.T) if xb.shape[0] > 2 else np.eye(len(x))
+    names = ["gain_times_w1_rad_per_s", *NETWORK_CORNERS]
+    est: dict[str, Estimate] = {}
+    correlations: dict[str, float] = {}
+    for k, name in enumerate(names):
+        # interval on the log, reported on the value (a corner is positive)
+        e = from_stderr(x[k], se[k], dof=resp.dof)
+        c = np.delete(np.abs(np.nan_to_num(corr[k])), k)
+        worst = int(np.argmax(c)) if c.size else 0
+        other = [n for i, n in enumerate(names) if i != k][worst]
+        cmax = float(c[worst]) if c.size else 0.0
+        correlations[name] = cmax
+        est[name] = _exp_estimate(x[k], e, cmax, other)
+    # the gain alone: ln g = x0 - x1
+    xg = xb[:, 0] - xb[:, 1]
+    eg = from_stderr(x[0] - x[1], float(jackknife_se(xg)), dof=resp.dof)
+    cg = abs(float(np.corrcoef(xg, xb[:, 1])[0, 1])) if np.std(xg) > 0 and np.std(xb[:, 1]) > 0 else 0.0
+    est["gain"] = _exp_estimate(x[0] - x[1], eg, cg, "w1_rad_per_s")
+    params = _network_params(x)
+    q = np.log(network_response(f, params) / H)
+    return ModelFit("network", est, (lo_hz, hi_hz), int(ok.sum()),
+                    float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))),
+                    float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))),
+                    float(np.sqrt(np.mean(_log_residual(network_response(f, params), H, ls, ps) ** 2))), correlations,
+                    curve=lambda ff: network_response(ff, params))
+
+
+def _exp_estimate(x: float, e: Estimate, correlation: float, other: str) -> Estimate:
+    """A positive figure fitted as its logarithm: the interval exp(lo)..exp(hi); unresolved when
+    the log interval is wider than ln 10 (a decade) or it correlates with ``other`` beyond 0.95."""
+    from procedures.analysis.intervals import MAX_CORRELATION
+    value, lo, hi = math.exp(x), math.exp(e.lo), math.exp(e.hi)
+    if not all(math.isfinite(v) for v in (value, lo, hi)):
+        return Estimate(value, lo, hi, False, "no finite interval")
+    if correlation > MAX_CORRELATION:
+        return Estimate(value, lo, hi, False, f"correlates {correlation:.3f} with {other}: only known together")
+    if e.hi - e.lo > math.log(10.0):
+        return Estimate(value, lo, hi, False, f"its 95 % interval spans {hi / lo:.3g}x (more than a decade)")
+    return Estimate(value, lo, hi, True)
+
+
+# ---------------------------------------------------------------------------- the platform axis
+def sensor_filter(f_hz: np.ndarray, ac: AutocollimatorConstants, channel: str) -> np.ndarray:
+    """The autocollimator channel's filter, eqs. 3.21 (control) and 3.22 (instrumentation)."""
+    s = 2j * np.pi * np.asarray(f_hz, float)
+
+    def second(w: float, z: float) -> np.ndarray:
+        return w * w / (s * s + 2 * z * w * s + w * w)
+
+    if channel.endswith("_ctl"):
+        return second(ac.control_filter_rad_per_s, ac.control_filter_zeta)
+    if channel.endswith("_inst"):
+        w1 = ac.inst_filter1_rad_per_s
+        return w1 / (s + w1) * second(ac.inst_filter2_rad_per_s, ac.inst_filter2_zeta)
+    raise TransferError(f"{channel!r} is not an autocollimator channel (ac_<axis>_ctl or ac_<axis>_inst)")
+
+
+def sensor_scale_V_per_rad(ac: AutocollimatorConstants, channel: str) -> float:
+    mv = ac.control_mV_per_urad if channel.endswith("_ctl") else ac.inst_mV_per_urad
+    return mv * 1e-3 / URAD
+
+
+def platform_impedance(f_hz: np.ndarray, G: np.ndarray, pc: PlatformConstants, ac: AutocollimatorConstants,
+                       channel: str) -> np.ndarray:
+    """Z = [Kp Km Kac F / G - Km Kb s] / (La s + Ra) = J s^2 + D s + k (eqs. 3.23-3.27)."""
+    s = 2j * np.pi * np.asarray(f_hz, float)
+    kac = sensor_scale_V_per_rad(ac, channel)
+    drive = pc.amp_gain * pc.motor_Nm_per_A * kac * sensor_filter(f_hz, ac, channel)
+    return (drive / G - pc.motor_Nm_per_A * pc.back_emf_V_s * s) / (pc.armature_H * s + pc.armature_ohm)
+
+
+def platform_response(f_hz: np.ndarray, J: float, D: float, k: float, pc: PlatformConstants,
+                      ac: AutocollimatorConstants, channel: str) -> np.ndarray:
+    """G(s): autocollimator channel volts per amplifier-input volt (eqs. 3.21-3.27)."""
+    s = 2j * np.pi * np.asarray(f_hz, float)
+    kac = sensor_scale_V_per_rad(ac, channel)
+    drive = pc.amp_gain * pc.motor_Nm_per_A * kac * sensor_filter(f_hz, ac, channel)
+    return drive / ((pc.armature_H * s + pc.armature_ohm) * (J * s * s + D * s + k)
+                    + pc.motor_Nm_per_A * pc.back_emf_V_s * s)
+
+
+def _solve_jdk(f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray) -> np.ndarray:
+    """Weighted least squares of Re Z = k - J w^2, Im Z = D w; weights 1 / (|Z| rel_se)."""
+    w = 2 * np.pi * f
+    sig = np.abs(Z) * rel_se
+    A = np.zeros((2 * f.size, 3))
+    A[:f.size, 0] = -w * w / sig        # J
+    A[:f.size, 2] = 1.0 / sig           # k
+    A[f.size:, 1] = w / sig             # D
+    b = np.concatenate([Z.real / sig, Z.imag / sig])
+    return np.linalg.lstsq(A, b, rcond=None)[0]
+
+
+def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConstants, lo_hz: float = 0.3,
+                 hi_hz: float = 50.0, min_coherence: float = 0.5) -> ModelFit:
+    """Inertia J, viscous damping D and bearing stiffness k from ``resp`` (amplifier input ->
+    autocollimator channel, best measured via the injected command torque)."""
+    ok = usable(resp, lo_hz, hi_hz, min_coherence)
+    if ok.sum() < 6:
+        raise TransferError(f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
+                            f"with coherence >= {min_coherence:g}; a platform fit needs 6")
+    f = resp.f[ok]
+    rel = np.hypot(resp.log_se[ok], resp.phase_se_rad[ok])
+    Z = platform_impedance(f, resp.H[ok], pc, ac, resp.target)
+    x = _solve_jdk(f, Z, rel)
+    xb = np.array([_solve_jdk(f, platform_impedance(f, resp.H_blocks[b][ok], pc, ac, resp.target), rel)
+                   for b in range(resp.H_blocks.shape[0])])
+    se = jackknife_se(xb)
+    corr = np.corrcoef(xb.T)
+    names = ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad")
+    est: dict[str, Estimate] = {}
+    correlations: dict[str, float] = {}
+    for k, name in enumerate(names):
+        c = np.delete(np.abs(np.nan_to_num(corr[k])), k)
+        worst = int(np.argmax(c))
+        other = [n for i, n in enumerate(names) if i != k][worst]
+        correlations[name] = float(c[worst])
+        est[name] = from_stderr(float(x[k]), float(se[k]), dof=resp.dof, correlation=float(c[worst]), with_=other)
+    J, D, kk = (float(v) for v in x)
+    model = platform_response(f, J, D, kk, pc, ac, resp.target)
+    q = np.log(model / resp.H[ok])
+    notes = [f"viscous damping D includes the bearing's and the gyro gimbals'; the motor's back-EMF "
+             f"({pc.motor_Nm_per_A * pc.back_emf_V_s / pc.armature_ohm:.3g} N m s) is taken out"]
+    return ModelFit("platform", est, (lo_hz, hi_hz), int(ok.sum()),
+                    float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))),
+                    float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))),
+                    float(np.sqrt(np.mean(_log_residual(model, resp.H[ok], resp.log_se[ok], resp.phase_se_rad[ok]) ** 2))),
+                    correlations, notes,
+                    curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target))

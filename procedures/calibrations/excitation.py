@@ -1,0 +1,328 @@
+"""``excitation``: coherent measurement with an injected command torque (thesis Ch. V C-D,
+Figs. 35-41 and 52).
+
+In Mode 3 (autocollimator stabilization) the procedure records
+
+1. a quiet piece, nothing injected: the compensation network from its recorded input (the
+   control channel ``ac_<a>_ctl``) and output (the amplifier input ``pa_<a>``), exactly as the
+   thesis did for Fig. 40: no excitation, the network driven by the loop's own noise (H1);
+2. a short probe with band-limited noise as V_Td at a small level, from which the level that
+   moves the platform by ``target_urad`` rms is found (the loop's response is linear in V_Td;
+   the level is then cut so that no channel exceeds ``max_range_fraction`` of its ADC range and
+   V_Td's peak stays inside the DAC);
+3. the excited piece: a multisine (every frequency k / ``period_s`` in ``band_lo_hz``-
+   ``band_hi_hz``, equal amplitudes, random phases; one period repeated), updated ``update_hz``
+   times a second between ADC blocks, so every value applied is on the file's time base as
+   ``cmd_<a>``, at that level. Whole periods are analysed without a window, so the excited
+   lines have no leakage (``transfer.periodic_blocks``).
+
+The analysis (``procedures.analysis.transfer``, whose docstring says how) gives the network's
+corners (eq. 3.28) and the platform's inertia, damping and bearing stiffness (eqs. 3.23-3.27)
+from the response of the autocollimator to the amplifier input measured through V_Td; each
+with a jackknife 95 % interval. Neither uses the data sheet's inertia or the design corners:
+those appear in the report only, beside the measured values. The amplifier, motor and sensor
+constants are the data sheet's (``rig.calibration``).
+
+Coherent and incoherent parts of each sensor's spectrum (Ch. V C): with gamma^2 the coherence
+of the sensor with V_Td, gamma^2 S is what the platform's excited motion put there, and
+(1 - gamma^2) S the rest: the sensor's own noise and the platform's unexcited motion.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+
+from procedures.analysis.intervals import add_figure
+from procedures.analysis.transfer import (
+    DESIGN_NETWORK,
+    NETWORK_CORNERS,
+    ModelFit,
+    TransferError,
+    block_csd,
+    fit_network,
+    fit_platform,
+    network_response,
+    periodic_blocks,
+    response,
+)
+from procedures.paramlimits import OneOf, above, at_least, check_limits
+from procedures.reports.excitation import markdown, plot_response
+from procedures.rigsetup import bring_to_mode3
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+
+URAD = 1e-6
+#: the recorded channels' ADC ranges (V): the amplifier input is millivolts
+RANGES_V = {"cmd": 10.0, "ac_ctl": 1.0, "ac_inst": 1.0, "gyro": 1.0, "pa": 0.05}
+
+
+@dataclass
+class ExcitationParams:
+    axis: Annotated[str, OneOf("X", "Y", note="Z has no primary autocollimator channel")] = "X"
+    rate_hz: Annotated[float, above(0)] = 1000.0
+    #: V_Td updates per second (a DAC set-point between ADC blocks); rate_hz / update_hz whole
+    update_hz: Annotated[float, above(0)] = 250.0
+    settle_s: Annotated[float, at_least(0)] = 20.0
+    quiet_s: Annotated[float, above(0)] = 120.0
+    probe_s: Annotated[float, above(0)] = 16.0
+    excite_s: Annotated[float, above(0)] = 256.0
+    #: the excitation's flat band (the thesis's was white to 30 Hz)
+    band_lo_hz: Annotated[float, above(0)] = 0.1
+    band_hi_hz: Annotated[float, above(0)] = 60.0
+    #: the platform motion to aim for, rms (the thesis's run: about 13 urad)
+    target_urad: Annotated[float, above(0)] = 10.0
+    #: V_Td rms of the probe
+    probe_V: Annotated[float, above(0)] = 0.05
+    max_range_fraction: Annotated[float, above(0)] = 0.6
+    #: Welch segment of the quiet record (bin spacing 1/seg_s), the excitation's period (its
+    #: line spacing 1/period_s: the platform's resonance is about 0.2 Hz wide), jackknife blocks
+    seg_s: Annotated[float, above(0)] = 8.0
+    period_s: Annotated[float, above(0)] = 16.0
+    n_blocks: Annotated[int, at_least(3)] = 8
+    #: the band the network and the platform are fitted over
+    fit_lo_hz: Annotated[float, above(0)] = 0.5
+    network_hi_hz: Annotated[float, above(0)] = 100.0
+    platform_hi_hz: Annotated[float, above(0)] = 50.0
+    seed: Annotated[int, at_least(0)] = 1
+
+    def __post_init__(self) -> None:
+        self.axis = str(self.axis).upper()
+        check_limits(self, "excitation")
+        per = self.rate_hz / self.update_hz
+        if abs(per - round(per)) > 1e-9 or round(per) < 1:
+            raise ValueError(f"excitation: rate_hz / update_hz = {per:g} samples per V_Td update must be a whole "
+                             f"number >= 1")
+        if not self.band_lo_hz < self.band_hi_hz <= self.update_hz / 2:
+            raise ValueError(f"excitation: band {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must lie below half the "
+                             f"update rate ({self.update_hz / 2:g} Hz)")
+        if self.quiet_s < self.seg_s * self.n_blocks:
+            raise ValueError(f"excitation: quiet_s = {self.quiet_s:g} s holds fewer than n_blocks = {self.n_blocks} "
+                             f"segments of {self.seg_s:g} s")
+        if self.excite_s < self.period_s * (self.n_blocks + 1):
+            raise ValueError(f"excitation: excite_s = {self.excite_s:g} s holds fewer than n_blocks + 1 = "
+                             f"{self.n_blocks + 1} periods of {self.period_s:g} s (the first is the transient)")
+        for name, per in (("period_s", self.period_s * self.update_hz), ("period_s", self.period_s * self.rate_hz)):
+            if abs(per - round(per)) > 1e-6:
+                raise ValueError(f"excitation: {name} = {self.period_s:g} s must be whole V_Td updates and samples")
+        if not self.fit_lo_hz < min(self.network_hi_hz, self.platform_hi_hz) <= self.rate_hz * 0.3:
+            raise ValueError(f"excitation: fit bands from {self.fit_lo_hz:g} Hz to {self.network_hi_hz:g} / "
+                             f"{self.platform_hi_hz:g} Hz must lie below the anti-alias filter (0.3 fs = "
+                             f"{self.rate_hz * 0.3:g} Hz)")
+
+
+Params = ExcitationParams
+
+
+def excitation_signal(n: int, update_hz: float, lo_hz: float, hi_hz: float, seed: int) -> np.ndarray:
+    """``n`` values of unit-rms noise, flat from ``lo_hz`` to ``hi_hz`` (random phases, equal
+    amplitudes: a periodic multisine of period n / update_hz), one per V_Td update."""
+    rng = np.random.default_rng(seed)
+    f = np.fft.rfftfreq(n, 1.0 / update_hz)
+    spec = np.zeros(f.size, complex)
+    band = (f >= lo_hz) & (f <= hi_hz)
+    if not band.any():
+        raise ValueError(f"no frequency of a {n / update_hz:g} s excitation lies in {lo_hz:g}-{hi_hz:g} Hz")
+    spec[band] = np.exp(2j * np.pi * rng.random(int(band.sum())))
+    x = np.fft.irfft(spec, n)
+    return x / np.sqrt(np.mean(x * x))
+
+
+class Excitation(Procedure[ExcitationParams]):
+    name = "excitation"
+    title = "Coherent excitation through V_Td in Mode 3: network, inertia, stiffness (Ch. V C-D)"
+    json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "file")
+    Params = ExcitationParams
+    mode = 3
+
+    def __init__(self, params: ExcitationParams | None = None, **kw: Any) -> None:
+        super().__init__(params, **kw)
+        p = self.params
+        self.axis = p.axis
+        self.rate_hz = p.rate_hz
+        self.block_s = 1.0 / p.update_hz
+        a = p.axis.lower()
+        self.names = {"cmd": f"cmd_{a}", "ac_ctl": f"ac_{a}_ctl", "ac_inst": f"ac_{a}_inst", "gyro": f"gyro_{a}",
+                      "pa": f"pa_{a}"}
+        self.channel_ranges_V: dict[str, float] = {self.names[k]: v for k, v in RANGES_V.items()}
+        self.ranges_V = self.channel_ranges_V
+
+    def channels(self) -> tuple[str, ...]:
+        return tuple(self.names.values())
+
+    def plan(self) -> list[Step]:
+        p = self.params
+        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+                Step("settle", self._settle, expected_s=p.settle_s, setup=True),
+                Step("quiet", self._quiet, expected_s=p.quiet_s),
+                Step("probe", self._probe, expected_s=p.probe_s, setup=True),
+                Step("excite", self._excite, expected_s=p.excite_s),
+                Step("V_Td off", self._off, expected_s=2.0, setup=True)]
+
+    def _settle(self, ctx: Context) -> dict:
+        ctx.rig.set_command_torque_V(self.params.axis, 0.0)
+        ctx.acquire(self.params.settle_s, keep=False)
+        return {"settle_s": self.params.settle_s}
+
+    def _quiet(self, ctx: Context) -> dict:
+        ctx.acquire(self.params.quiet_s, keep=False)
+        return {"seconds": self.params.quiet_s}
+
+    def _inject(self, ctx: Context, volts_rms: float, seconds: float, keep: bool) -> np.ndarray | None:
+        """``seconds`` of the excitation at ``volts_rms``: one V_Td set-point per ADC block."""
+        p = self.params
+        period = excitation_signal(int(round(p.period_s * p.update_hz)), p.update_hz, p.band_lo_hz, p.band_hi_hz,
+                                   p.seed)
+        n = int(round(seconds * p.update_hz))
+        x = np.resize(period, n) * volts_rms             # whole periods, repeated
+        blocks = []
+        try:
+            for v in x:
+                ctx.rig.set_command_torque_V(p.axis, float(v))
+                got = ctx.acquire(self.block_s, keep=keep, chunk_s=self.block_s)  # type: ignore[call-overload]
+                if keep:
+                    blocks.append(got)
+        finally:
+            ctx.rig.set_command_torque_V(p.axis, 0.0)
+        return np.concatenate(blocks) if keep else None
+
+    def _probe(self, ctx: Context) -> dict:
+        """The level (V_Td rms) that moves the platform ``target_urad`` rms, cut to the ranges."""
+        p = self.params
+        cal = ctx.rig.calibration
+        quiet = ctx.acquire(min(p.probe_s, 8.0))
+        data = self._inject(ctx, p.probe_V, p.probe_s, keep=True)
+        assert data is not None
+        cols = {k: self.channels().index(n) for k, n in self.names.items()}
+        skip = int(round(min(2.0, p.probe_s / 4) * p.rate_hz))         # the loop's transient
+        scale = cal.autocollimator[p.axis].control_mV_per_urad * 1e-3 / URAD
+        rms_q = float(np.nanstd(quiet[:, cols["ac_ctl"]])) / scale / URAD
+        rms_p = float(np.nanstd(data[skip:, cols["ac_ctl"]])) / scale / URAD
+        moved = math.sqrt(max(rms_p ** 2 - rms_q ** 2, 0.0))
+        if not moved > 0:
+            raise ProcedureError(f"excitation: a {p.probe_V:g} V rms probe did not move the platform measurably "
+                                 f"(ac_{p.axis.lower()}_ctl {rms_p:.3g} urad rms, quiet {rms_q:.3g}): is the "
+                                 f"command-torque DAC connected? Raise probe_V.")
+        level = p.probe_V * p.target_urad / moved
+        limits = {"target": level}
+        # what each channel's excited part would peak at, scaled from the probe
+        for k, name in self.names.items():
+            if k == "cmd":
+                continue
+            col = data[skip:, cols[k]]
+            peak = float(np.nanmax(np.abs(col - np.nanmean(col))))
+            if peak > 0:
+                limits[name] = p.probe_V * p.max_range_fraction * self.channel_ranges_V[name] / peak
+        crest = float(np.max(np.abs(excitation_signal(int(round(p.period_s * p.update_hz)), p.update_hz,
+                                                      p.band_lo_hz, p.band_hi_hz, p.seed))))
+        limits["V_Td DAC"] = 0.9 * min(cal.dac_range_V, self.channel_ranges_V[self.names["cmd"]]) / crest
+        by = min(limits, key=lambda k: limits[k])
+        chosen = limits[by]
+        return {"probe_V_rms": p.probe_V, "probe_motion_urad_rms": round(moved, 4), "quiet_urad_rms": round(rms_q, 4),
+                "level_V_rms": chosen, "limited_by": by,
+                "expected_motion_urad_rms": round(moved * chosen / p.probe_V, 4)}
+
+    def _excite(self, ctx: Context) -> dict:
+        level = float(ctx.results["probe"]["level_V_rms"])
+        self._inject(ctx, level, self.params.excite_s, keep=False)
+        return {"seconds": self.params.excite_s, "level_V_rms": level}
+
+    def _off(self, ctx: Context) -> dict:
+        ctx.rig.set_command_torque_V(self.params.axis, 0.0)
+        ctx.acquire(1.0, keep=False)
+        return {"V_Td": 0.0}
+
+    # ------------------------------------------------------------------ analysis
+    def analyze(self, ctx: Context) -> Analysis:
+        p = self.params
+        cal = ctx.rig.calibration
+        n = self.names
+        try:
+            quiet = block_csd([(s.file, s.start, s.stop) for s in ctx.data_spans(["quiet"])],
+                              [n["ac_ctl"], n["pa"]], p.seg_s, p.n_blocks)
+            excited = periodic_blocks([(s.file, s.start, s.stop) for s in ctx.data_spans(["excite"])],
+                                      [n["cmd"], n["pa"], n["ac_ctl"], n["ac_inst"], n["gyro"]], p.period_s,
+                                      p.n_blocks)
+            net_resp = response(quiet, n["ac_ctl"], n["pa"])
+            net = fit_network(net_resp, max(p.fit_lo_hz, 4.0 / p.seg_s), p.network_hi_hz)
+            plat_resp = response(excited, n["pa"], n["ac_inst"], via=n["cmd"])
+            plat = fit_platform(plat_resp, cal.platform[p.axis], cal.autocollimator[p.axis],
+                                max(p.fit_lo_hz, 1.5 / p.period_s), p.platform_hi_hz)
+        except TransferError as exc:
+            raise ProcedureError(f"excitation: {exc}") from None
+        values = analysis_values(net, plat, p.axis, cal.platform[p.axis].inertia_kg_m2)
+        values["level_V_rms"] = ctx.results["probe"]["level_V_rms"]
+        values["level_limited_by"] = ctx.results["probe"]["limited_by"]
+        values["incoherent"] = incoherent_parts(excited, n, p)
+        ms = measurements(net, plat, values, p)
+        figures = [Figure("network", "Compensation network, control channel to amplifier input: measured H1 with "
+                          "95 % intervals, the fit and the design (cf. Fig. 40)",
+                          partial(plot_response, resp=net_resp, fit=net,
+                                  design=lambda f: network_response(f, DESIGN_NETWORK))),
+                   Figure("platform", "Platform, amplifier input to instrumentation angle through V_Td: measured "
+                          "with 95 % intervals and the fit (cf. Fig. 52)",
+                          partial(plot_response, resp=plat_resp, fit=plat, design=None))]
+        title = f"{Path(ctx.path).name}, axis {p.axis}"
+        return Analysis(values, ms, figures, markdown(values, title))
+
+
+def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia: float) -> dict[str, Any]:
+    values: dict[str, Any] = {"axis": axis, "network": net.values(),
+                              "network_design": {k: DESIGN_NETWORK[k] for k in ("gain", *NETWORK_CORNERS)}}
+    f = np.geomspace(0.3, 50.0, 200)
+    assert net.curve is not None
+    d = net.curve(f) / network_response(f, DESIGN_NETWORK)
+    values["network_vs_design_max_db"] = float(np.max(np.abs(20 * np.log10(np.abs(d)))))
+    values["network_vs_design_max_deg"] = float(np.max(np.abs(np.degrees(np.angle(d)))))
+    for key in ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad"):
+        add_figure(values, key, {axis: plat.estimates[key]})
+    values["platform_fit"] = {k: v for k, v in plat.values().items()
+                              if k in ("band_hz", "bins", "residual_db_rms", "residual_deg_rms", "residual_normalized",
+                                       "notes")}
+    values["datasheet_inertia_kg_m2"] = datasheet_inertia
+    return values
+
+
+def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) -> dict[str, Any]:
+    """Each sensor's spectrum split by its coherence with V_Td: rms (V) of the coherent and the
+    incoherent parts over 1-50 Hz."""
+    from daq.spectra import coherence
+
+    S = excited.mean()
+    coh = coherence(S)
+    f = excited.f
+    band = (f >= 1.0) & (f <= 50.0)
+    df = f[1] - f[0]
+    r = excited.index(n["cmd"])
+    out: dict[str, Any] = {}
+    for k in ("ac_ctl", "ac_inst", "gyro"):
+        i = excited.index(n[k])
+        s = S[:, i, i].real
+        g = np.clip(coh[:, r, i], 0.0, 1.0)
+        out[n[k]] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
+                     "incoherent_rms_V": float(np.sqrt(np.sum(((1 - g) * s)[band]) * df)), "band_hz": [1.0, 50.0]}
+    return out
+
+
+def measurements(net: ModelFit, plat: ModelFit, values: Mapping[str, Any], p: ExcitationParams) -> list[Measurement]:
+    ms = []
+    for key, unit in (("inertia_kg_m2", "kg m^2"), ("damping_Nms", "N m s"), ("stiffness_Nm_per_rad", "N m/rad")):
+        e = plat.estimates[key]
+        ms.append(Measurement(f"{key} ({p.axis})", e.value if e.resolved else None, unit,
+                              note=(f"95 % [{e.lo:.4g}, {e.hi:.4g}]" if e.resolved else f"not resolved: {e.why}")))
+    # residuals in units of each bin's own standard error: about 1 when the model fits
+    ms.append(Measurement("platform fit residual / standard error", plat.residual_normalized, "rms", hi=3.0,
+                          note=f"{plat.residual_db_rms:.3g} dB, {plat.residual_deg_rms:.3g} deg rms unweighted"))
+    ms.append(Measurement("network fit residual / standard error", net.residual_normalized, "rms", hi=3.0,
+                          note=f"{net.residual_db_rms:.3g} dB, {net.residual_deg_rms:.3g} deg rms unweighted"))
+    ms.append(Measurement("network against the design, worst over 0.3-50 Hz", values["network_vs_design_max_db"], "dB",
+                          note=f"{values['network_vs_design_max_deg']:.3g} deg (a comparison, not a limit)"))
+    return ms
+
+
+PROCEDURE = Excitation

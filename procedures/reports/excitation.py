@@ -1,0 +1,83 @@
+"""The excitation procedure's report: the measured responses beside their fits and the
+design, and a Markdown summary setting each identified figure beside the data sheet's."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from daq.plots import new_figure, save_figure
+from procedures.analysis.transfer import NETWORK_CORNERS, ModelFit, Response
+
+
+def plot_response(path: Path, resp: Response, fit: ModelFit | None,
+                  design: Callable[[np.ndarray], np.ndarray] | None) -> None:
+    """Gain and phase of ``resp`` with its 95 % intervals, the fitted model and the design."""
+    fig, axes = new_figure(3, 1, figsize=(9.0, 8.0))
+    sel = resp.f > 0
+    f = resp.f[sel]
+    lo, hi = resp.gain_db_ci()
+    plo, phi = resp.phase_deg_ci()
+    ax_g, ax_p, ax_c = axes.flat
+    ax_g.fill_between(f, lo[sel], hi[sel], color="C0", alpha=0.25, linewidth=0, label="95 % (jackknife)")
+    ax_g.semilogx(f, resp.gain_db[sel], color="C0", linewidth=0.7, label="measured")
+    ax_p.fill_between(f, plo[sel], phi[sel], color="C0", alpha=0.25, linewidth=0)
+    ax_p.semilogx(f, resp.phase_deg[sel], color="C0", linewidth=0.7)
+    for curve, label, color in ((fit.curve if fit else None, "fit", "C1"), (design, "design", "C2")):
+        if curve is None:
+            continue
+        h = curve(f)
+        ax_g.semilogx(f, 20 * np.log10(np.abs(h)), color=color, label=label)
+        ax_p.semilogx(f, np.degrees(np.angle(h)), color=color)
+    if fit is not None:
+        for ax in (ax_g, ax_p, ax_c):
+            for edge in fit.band_hz:
+                ax.axvline(edge, color="0.5", linestyle=":", linewidth=0.8)
+    ax_c.semilogx(f, resp.coherence[sel], color="C3")
+    ax_c.set_ylim(0, 1.05)
+    via = f" via {resp.via}" if resp.via else ""
+    ax_g.set_title(f"{resp.source} -> {resp.target}{via}")
+    ax_g.set_ylabel("gain (dB)")
+    ax_p.set_ylabel("phase (deg)")
+    ax_c.set_ylabel("coherence")
+    ax_c.set_xlabel("frequency (Hz)")
+    for ax in axes.flat:
+        ax.grid(True, which="both", alpha=0.3)
+    ax_g.legend(fontsize=8)
+    save_figure(fig, path)
+
+
+def _fmt(v: Any) -> str:
+    return "-" if v is None else f"{v:.4g}"
+
+
+def markdown(values: Mapping[str, Any], title: str) -> str:
+    a = values["axis"]
+    net = values["network"]
+    design = values["network_design"]
+    lines = [f"Excitation through V_Td, {title}. Level {values['level_V_rms']:.4g} V rms (limited by "
+             f"{values['level_limited_by']}).", "",
+             "## Compensation network (eq. 3.28), from the quiet record (cf. Fig. 40)", "",
+             "| figure | measured | 95 % interval | design (Ch. III G) | resolved |", "|---|---|---|---|---|"]
+    for k in ("gain", *NETWORK_CORNERS):
+        ci = net.get(f"{k}_ci95") or [None, None]
+        lines.append(f"| {k} | {_fmt(net.get(k))} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {design[k]:g} | "
+                     f"{net['resolved'].get(k)} |")
+    for k, why in (net.get("why_unresolved") or {}).items():
+        lines.append(f"\n* {k}: {why}")
+    lines += ["", f"The fitted network differs from the design by at most {values['network_vs_design_max_db']:.3g} dB "
+              f"and {values['network_vs_design_max_deg']:.3g} deg over 0.3-50 Hz.", "",
+              "## Platform axis (eqs. 3.23-3.27), from the excited record (cf. Fig. 52)", "",
+              "| figure | measured | 95 % interval | data sheet |", "|---|---|---|---|"]
+    for k, sheet in (("inertia_kg_m2", values.get("datasheet_inertia_kg_m2")), ("damping_Nms", None),
+                     ("stiffness_Nm_per_rad", None)):
+        ci = values[f"{k}_ci95"][a]
+        lines.append(f"| {k} | {_fmt(values[k][a])} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {_fmt(sheet)} |")
+    lines += ["", "## Coherent and incoherent parts, 1-50 Hz (Ch. V C)", "",
+              "| channel | coherent with V_Td (V rms) | incoherent (V rms) |", "|---|---|---|"]
+    for c, v in values["incoherent"].items():
+        lines.append(f"| {c} | {v['coherent_rms_V']:.4g} | {v['incoherent_rms_V']:.4g} |")
+    return "\n".join(lines) + "\n"
