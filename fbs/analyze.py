@@ -10,6 +10,17 @@ their ``K_ci95`` and ``resolved`` ({K: {axis: bool}}), ``angle_lag_ms`` (measure
 and taken out) and ``file`` as one JSON object on stdout;
 ``--out DIR`` writes the plots and a Markdown summary there. A file that cannot be analysed
 is a ValueError naming the problem (exit 2).
+
+``fbs analyze transfer FILE.h5 --from A --to B [--via R] [--fit network|platform]
+[--period S] [--start S] [--stop S] [--json] [--out DIR]``: the frequency response from channel A
+to channel B (H1 = S_AB / S_AA, or S_RB / S_RA through an injected signal R inside a closed loop)
+with its coherence and jackknife 95 % intervals, tabulated 0.3-100 Hz, and a fitted model: the
+compensation network of eq. 3.28 (``ac_<a>_ctl`` -> ``pa_<a>``) or the platform axis's inertia,
+damping and bearing stiffness (``pa_<a>`` -> ``ac_<a>_inst`` or ``_ctl``, eqs. 3.23-3.27; the
+file's ``/meta/calibration`` supplies the amplifier, motor and sensor constants). ``--fit``
+defaults to the model the channel pair names. ``--period`` analyses whole periods of a periodic
+excitation without a window (the ``excitation`` procedure's multisine: 16 s); ``--start`` and
+``--stop`` (s) pick the part of the record. ``procedures.analysis.transfer`` says how.
 """
 
 from __future__ import annotations
@@ -88,6 +99,118 @@ def _hysteresis(args: argparse.Namespace) -> int:
     return 0
 
 
+def _transfer_model(args: argparse.Namespace) -> str | None:
+    if args.fit != "auto":
+        return None if args.fit == "none" else str(args.fit)
+    src, dst = args.source, args.target
+    if src.startswith("ac_") and src.endswith("_ctl") and dst.startswith("pa_"):
+        return "network"
+    if src.startswith("pa_") and dst.startswith("ac_") and dst.endswith(("_ctl", "_inst")):
+        return "platform"
+    return None
+
+
+def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]:
+    """The ``--json`` object of ``fbs analyze transfer``, the response and the fit."""
+    from daq.reader import RunFile
+    from drivers.calibration import RigCalibration
+    from procedures.analysis import transfer as tf
+    from procedures.analysis.hysteresis import calibration_from_meta
+
+    names = [c for c in (args.via, args.source, args.target) if c]
+    if not (args.seg_s > 0):
+        raise ValueError(f"--seg-s {args.seg_s} must be > 0")
+    with RunFile(args.file) as rf:
+        fs, n_total, meta = rf.rate_hz, rf.n_samples, rf.meta
+        missing = [c for c in names if c not in rf.channels]
+        if missing:
+            raise ValueError(f"{args.file} has no channel {', '.join(missing)} (its channels: {', '.join(rf.channels)})")
+    start = int(round((args.start or 0.0) * fs))
+    stop = n_total if args.stop is None else min(n_total, int(round(args.stop * fs)))
+    if not 0 <= start < stop:
+        raise ValueError(f"--start {args.start} / --stop {args.stop} leave no samples of the {n_total / fs:g} s record")
+    if args.period is not None:
+        blocks = tf.periodic_blocks([(args.file, start, stop)], names, args.period, args.blocks)
+    else:
+        blocks = tf.block_csd([(args.file, start, stop)], names, args.seg_s, args.blocks)
+    resp = tf.response(blocks, args.source, args.target, via=args.via)
+    out: dict[str, Any] = {"file": str(args.file), "from": args.source, "to": args.target, "via": args.via,
+                           "blocks": blocks.n_blocks, "seconds": round(blocks.seconds, 3),
+                           "measured": _measured_table(resp)}
+    model = _transfer_model(args)
+    fit = None
+    lo = max(args.lo_hz, 4.0 / blocks.seg_s if args.period is None else 1.5 / blocks.seg_s)
+    if model == "network":
+        fit = tf.fit_network(resp, lo, args.hi_hz or 100.0)
+    elif model == "platform":
+        cal = calibration_from_meta(meta.get("calibration")) or RigCalibration()
+        axis = args.target.split("_")[1].upper()
+        if axis not in cal.platform or axis not in cal.autocollimator:
+            raise ValueError(f"axis {axis}: the rig calibration has no platform and autocollimator constants for it")
+        fit = tf.fit_platform(resp, cal.platform[axis], cal.autocollimator[axis], lo, args.hi_hz or 50.0)
+    out["model"] = model
+    out["fit"] = fit.values() if fit is not None else None
+    return out, resp, fit
+
+
+def _r4(v: Any) -> float | None:
+    return round(float(v), 4) if math.isfinite(float(v)) else None
+
+
+def _measured_table(resp: Any) -> dict[str, list[Any]]:
+    """The measured response at the bins nearest ``transfer.TABLE_HZ``."""
+    from procedures.analysis.transfer import TABLE_HZ
+
+    glo, ghi = resp.gain_db_ci()
+    plo, phi = resp.phase_deg_ci()
+    rows: dict[str, list[Any]] = {"f_hz": [], "gain_db": [], "gain_db_ci95": [], "phase_deg": [],
+                                  "phase_deg_ci95": [], "coherence": []}
+    for f in TABLE_HZ:
+        i = int(abs(resp.f - f).argmin())
+        if abs(resp.f[i] - f) > 0.5 * f:
+            continue
+        rows["f_hz"].append(_r4(resp.f[i]))
+        rows["gain_db"].append(_r4(resp.gain_db[i]))
+        rows["gain_db_ci95"].append([_r4(glo[i]), _r4(ghi[i])])
+        rows["phase_deg"].append(_r4(resp.phase_deg[i]))
+        rows["phase_deg_ci95"].append([_r4(plo[i]), _r4(phi[i])])
+        rows["coherence"].append(_r4(resp.coherence[i]))
+    return rows
+
+
+def _transfer(args: argparse.Namespace) -> int:
+    from procedures.reports.excitation import plot_response
+
+    out, resp, fit = transfer_result(args)
+    if args.out:
+        d = Path(args.out)
+        d.mkdir(parents=True, exist_ok=True)
+        png = d / f"{Path(args.file).stem}-{args.source}-{args.target}.png"
+        plot_response(png, resp=resp, fit=fit, design=None)
+        out["plot"] = str(png)
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    via = f" via {args.via}" if args.via else ""
+    print(f"fbs analyze transfer {args.file}: {args.source} -> {args.target}{via}, {out['blocks']} blocks, "
+          f"{out['seconds']:g} s")
+    m = out["measured"]
+    print("    f (Hz)   gain (dB) [95 %]          phase (deg) [95 %]        coherence")
+    for k, f in enumerate(m["f_hz"]):
+        g, (gl, gh), ph, (pl, p2) = m["gain_db"][k], m["gain_db_ci95"][k], m["phase_deg"][k], m["phase_deg_ci95"][k]
+        print(f"  {f:8.3g}   {g!s:>8} [{gl}, {gh}]   {ph!s:>8} [{pl}, {p2}]   {m['coherence'][k]}")
+    if fit is not None:
+        print(f"  {out['model']} fit over {fit.band_hz[0]:g}-{fit.band_hz[1]:g} Hz ({fit.n_bins} bins), residual "
+              f"{fit.residual_db_rms:.3g} dB / {fit.residual_deg_rms:.3g} deg rms, {fit.residual_normalized:.3g} "
+              f"standard errors:")
+        for name, e in fit.estimates.items():
+            print(f"    {name} = {e.value:.5g}, 95 % [{e.lo:.5g}, {e.hi:.5g}]"
+                  + ("" if e.resolved else f" (not resolved: {e.why})"))
+    if args.out:
+        print(f"  wrote {out['plot']}")
+    return 0
+
+
 def add_parser(sub: argparse._SubParsersAction) -> None:
     a = sub.add_parser("analyze", help="a procedure's analysis alone, on a recorded fbs-run file")
     asub = a.add_subparsers(dest="analysis", required=True, metavar="ANALYSIS")
@@ -104,3 +227,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="override the measured lag of the recorded angle behind the power-amplifier input (for "
                    "studies; default: measured on the record at the command's DAC lines)")
     h.set_defaults(func=_hysteresis, json_result=json_result)
+
+    t = asub.add_parser("transfer", help="frequency response A -> B (H1, or through an injected R), coherence, "
+                        "intervals, and a fitted network (eq. 3.28) or platform (inertia, damping, stiffness)")
+    t.add_argument("file", metavar="FILE.h5", help="an fbs-run file")
+    t.add_argument("--from", dest="source", required=True, metavar="A", help="input channel")
+    t.add_argument("--to", dest="target", required=True, metavar="B", help="output channel")
+    t.add_argument("--via", metavar="R", help="an injected signal inside the loop (e.g. cmd_x): S_RB / S_RA")
+    t.add_argument("--fit", choices=("auto", "network", "platform", "none"), default="auto",
+                   help="the model to fit (default: the one the channel pair names)")
+    t.add_argument("--period", type=float, metavar="S", help="whole periods of a periodic excitation of S seconds, "
+                   "no window (the excitation procedure's: 16)")
+    t.add_argument("--seg-s", type=float, default=8.0, help="Welch segment (s) without --period (default 8)")
+    t.add_argument("--blocks", type=int, default=8, help="jackknife blocks (default 8)")
+    t.add_argument("--start", type=float, metavar="S", help="analyse from S seconds")
+    t.add_argument("--stop", type=float, metavar="S", help="analyse up to S seconds")
+    t.add_argument("--lo-hz", type=float, default=0.5, help="fit band low edge (default 0.5 Hz)")
+    t.add_argument("--hi-hz", type=float, help="fit band high edge (default 100 Hz network, 50 Hz platform)")
+    t.add_argument("--json", action="store_true", help="print the result as one JSON object")
+    t.add_argument("--out", metavar="DIR", help="write the response plot to DIR")
+    t.set_defaults(func=_transfer, json_result=lambda a: transfer_result(a)[0])

@@ -196,9 +196,15 @@ class Excitation(Procedure[ExcitationParams]):
         p = self.params
         cal = ctx.rig.calibration
         quiet = ctx.acquire(min(p.probe_s, 8.0))
+        cols = {k: self.channels().index(n) for k, n in self.names.items()}
+        for k, name in self.names.items():
+            col = quiet[:, cols[k]]
+            if k != "cmd" and np.nanmax(np.abs(col)) >= 0.99 * self.channel_ranges_V[name]:
+                raise ProcedureError(f"excitation: {name} is at its full scale ({self.channel_ranges_V[name]:g} V) "
+                                     f"with nothing injected: the platform is not at rest in Mode 3 (an unstable "
+                                     f"loop, or a gimbal on its stop); nothing was injected")
         data = self._inject(ctx, p.probe_V, p.probe_s, keep=True)
         assert data is not None
-        cols = {k: self.channels().index(n) for k, n in self.names.items()}
         skip = int(round(min(2.0, p.probe_s / 4) * p.rate_hz))         # the loop's transient
         scale = cal.autocollimator[p.axis].control_mV_per_urad * 1e-3 / URAD
         rms_q = float(np.nanstd(quiet[:, cols["ac_ctl"]])) / scale / URAD
