@@ -116,3 +116,26 @@ def test_excitation_on_dahl_bearings_reads_near_the_small_motion_stiffness(tmp_p
     assert abs(J / 0.70 - 1) < 0.05 and J_ci[0] <= 0.70 <= J_ci[1]
     assert abs(v["stiffness_Nm_per_rad"]["X"] / 410.0 - 1) < 0.10
     assert v["damping_Nms"]["X"] > 1.5          # Dahl's hysteresis dissipates: more than the 1.02 viscous
+
+
+@pytest.mark.slow
+def test_excitation_pickoff_noise_is_the_simulated_within_20_percent(tmp_path):
+    """Issue 22 B: the gyro's part incoherent with V_Td, in 1-50 Hz, against the simulated
+    pickoff noise there (its white level and the lines in the band), on a rig with another
+    pickoff noise level than the thesis's."""
+    from simhw.params import SimConfig
+    from simhw.simulator import pickoff_white_psd
+
+    cfg_path = tmp_path / "noisy.toml"
+    cfg_path.write_text("[gyro.X]\npickoff_noise_rms_urad = 9.5\n")
+    with open_rig(f"sim?warm=1&seed=43&config={cfg_path}") as rig:
+        s = run_procedure(Excitation(Params(**FAST)), rig, tmp_path / "out")
+    assert s.exit_code == 0, s.error
+    g = load_config(cfg_path).gyro["X"]
+    assert g.pickoff_noise_rms_urad != SimConfig().gyro["X"].pickoff_noise_rms_urad
+    white = pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines) * 1e12
+    lines = sum(a ** 2 / 2 for fl, a in g.pickoff_lines if 1.0 <= fl <= 50.0)
+    expected = (white * 49.0 + lines) ** 0.5
+    got = s.values["pickoff_noise_urad_rms"]["X"]
+    print(f"pickoff noise 1-50 Hz: measured {got:.4g} urad rms, simulated {expected:.4g}")
+    assert abs(got / expected - 1) < 0.20, (got, expected)
