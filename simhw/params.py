@@ -117,6 +117,9 @@ class Autocollimator:
     #: level is derived from it together with the 1/f corner (docs/simhw.md).
     nea_urad: float = _f(0.451, lo=0.0)
     flicker_corner_hz: float = _f(3.0, lo=0.0)
+    #: the fraction of the white noise's PSD common to the X and Y channels (one source seen by
+    #: both, Fig. 48: their coherence in the white band is the product of the two fractions)
+    common_noise_fraction: float = _f(0.0, lo=0.0, hi=1.0)
     # Effects (DESIGN.md section 8); zero means absent.
     mount_freq_hz: float = _f(0.0, lo=0.0)
     mount_damping: float = _f(0.02, lo=0.0, lo_open=True)

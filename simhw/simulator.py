@@ -20,7 +20,15 @@ import scipy.linalg
 from simhw import geometry
 from simhw.clock import VirtualClock
 from simhw.kernel import CompiledPlant
-from simhw.noise import ExcessFlickerNoise, FlickerNoise, LagNoise, Lines, RandomWalk, TelegraphJumps, WhiteNoise
+from simhw.noise import (
+    ExcessFlickerNoise,
+    FlickerNoise,
+    LagNoise,
+    Lines,
+    RandomWalk,
+    TelegraphJumps,
+    WhiteNoise,
+)
 from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
 from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, Plant, RelayState, build_plant, discretize, torquer_limit_V
 from simhw.reduction import Kept, kept, reduce
@@ -94,16 +102,25 @@ class Sources:
             return np.random.Generator(np.random.PCG64(rngs[name].integers(2**63)))
 
         self.parts: dict[str, list] = {}
+        # The X/Y common noise (Fig. 48): each axis draws it from its own generator seeded alike,
+        # so both see the same sequence, each at its own pace (an input the reduced simulator
+        # never reads costs nothing). Spawned after every other stream: a rig without it is
+        # bit-identical to one from before it existed.
+        common_seed = ss.spawn(1)[0]
         for a in AC_AXES:
             ac = cfg.autocollimator[a]
             white = ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s,
                                  ac.control_filter_zeta)
+            frac = ac.common_noise_fraction
             self.parts[f"nac_{a}"] = [
-                WhiteNoise(sub(f"nac_{a}"), white, dt),
+                WhiteNoise(sub(f"nac_{a}"), white * (1.0 - frac), dt),
                 FlickerNoise(sub(f"nac_{a}"), white * ac.flicker_corner_hz, 1e-4, 50.0, dt),
                 ExcessFlickerNoise(sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt),
                 TelegraphJumps(sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt),
             ]
+            if frac > 0:
+                common = np.random.Generator(np.random.PCG64(common_seed))
+                self.parts[f"nac_{a}"].append(WhiteNoise(common, white * frac, dt))
         az = cfg.azimuth
         level = (az.nea_urad * URAD) ** 2 / math.log(NEA_BAND_HZ[1] / NEA_BAND_HZ[0])
         self.parts["nac_Z"] = [FlickerNoise(sub("nac_Z"), level, 1e-4, 200.0, dt)]

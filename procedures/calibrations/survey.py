@@ -33,7 +33,16 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from daq.plots import plot_coherence, plot_psd
-from procedures.analysis.survey import AXES, CHANNELS, COHERENCE_PAIRS, SpanError, ac_ctl, spans_csd, survey_spectra
+from procedures.analysis.survey import (
+    AXES,
+    CHANNELS,
+    COHERENCE_PAIRS,
+    SpanError,
+    ac_ctl,
+    cross_axis_coherence,
+    spans_csd,
+    survey_spectra,
+)
 from procedures.paramlimits import above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports import thesis
@@ -152,6 +161,10 @@ class Survey(Procedure[SurveyParams]):
             "band_hz": [p.band_lo_hz, p.band_hi_hz],
             "record_s": csd.seconds,
         }
+        # Fig. 48: a noise common to the two autocollimator axes shows as coherence where the
+        # sensors' own noise dominates; independent channels give about 1/n
+        cross = cross_axis_coherence(csd, ac_ctl("X"), ac_ctl("Y"))
+        values["cross_axis_coherence"] = cross.values()
         ms: list[Measurement] = []
         for a in AXES:
             d = dips[a]
@@ -162,6 +175,10 @@ class Survey(Procedure[SurveyParams]):
                                   if d is None or d.depth_db < p.min_dip_depth_db else ""))
             ms.append(Measurement(f"platform rms {a}, gyro-deduced {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz",
                                   sp.platform_rms_urad[a], "urad", note=f"Kg {kg_mv[a]:.4g} mV/urad ({kg_src[a]})"))
+        ms.append(Measurement(f"coherence {cross.pair[0]} - {cross.pair[1]}, mean {cross.band_hz[0]:g}-"
+                              f"{cross.band_hz[1]:g} Hz", cross.mean, "",
+                              note=f"{'significant' if cross.significant else 'not significant'}: {cross.z:.1f} "
+                                   f"standard deviations above independent channels' {cross.null_mean:.3g}"))
         ms.append(Measurement("Welch segments usable (no lost samples)", used, "", lo=p.min_segments_used,
                               note=f"{csd.segments_used} of {csd.segments_total}"))
 

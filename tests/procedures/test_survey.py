@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from daq.spectra import band_rms, psd
-from procedures.analysis.survey import find_dip
+from procedures.analysis.survey import cross_axis_coherence, find_dip, spans_csd
 from procedures.calibrations import catalogue
 from procedures.calibrations.survey import Params, Survey, pickoff_scales
 from procedures.runner import load_resume, run_procedure
@@ -255,3 +255,45 @@ def test_a_platform_disturbance_torque_keeps_the_rms_right_but_moves_the_dip(tmp
               f"(true {exp['true_rms_urad'][a]:.3f})")
         assert exp["true_rms_urad"][a] > 2 * exp["noise_rms_urad"][a]      # truth-dominated
         assert abs(v["platform_rms_urad"][a] / exp["expected_rms_urad"][a] - 1) < RMS_TOL
+
+
+# ---------------------------------------------------------------------------- cross-axis coherence (Fig. 48)
+def _two_axis_file(tmp_path, fraction, seed):
+    from daq.runfile import RunWriter
+
+    cfg = SimConfig()
+    for a in "XY":
+        cfg.autocollimator[a].common_noise_fraction = fraction
+    chans = ("ac_x_ctl", "ac_y_ctl")
+    sim = Simulator(cfg, 1000.0, seed=seed, mode=3, channels=chans)
+    for c in chans:
+        sim.set_range(c, 1.0)
+    path = tmp_path / f"common-{fraction}-{seed}.h5"
+    with RunWriter(path, rig="sim-offline", mode=3, rate_hz=1000.0, channels=dict.fromkeys(chans, "V")) as w:
+        for block in sim.run(128.0, 16.0):
+            w.append({c: block[c] for c in chans})
+    return path
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_cross_axis_coherence_is_significant_only_with_a_common_noise(tmp_path, seed):
+
+    found = {}
+    for fraction in (0.0, 0.5):
+        path = _two_axis_file(tmp_path, fraction, seed)
+        csd = spans_csd([(path, 0, 128000)], ("ac_x_ctl", "ac_y_ctl"), 8.0)
+        found[fraction] = cross_axis_coherence(csd, "ac_x_ctl", "ac_y_ctl")
+    assert not found[0.0].significant, found[0.0]
+    assert abs(found[0.0].mean / found[0.0].null_mean - 1) < 0.3, found[0.0]
+    assert found[0.5].significant and found[0.5].mean > 0.1, found[0.5]
+
+
+def test_common_noise_fraction_zero_leaves_the_noise_bit_identical():
+    """The common stream is spawned after every other: a rig without it draws what it drew before."""
+    a = Simulator(SimConfig(), 1000.0, seed=5, mode=3, channels=("ac_x_ctl", "ac_y_ctl"))
+    cfg = SimConfig()
+    cfg.autocollimator["Y"].common_noise_fraction = 0.3      # X's own streams must not move either
+    b = Simulator(cfg, 1000.0, seed=5, mode=3, channels=("ac_x_ctl", "ac_y_ctl"))
+    xa, xb = next(a.run(2.0, 2.0)), next(b.run(2.0, 2.0))
+    assert np.array_equal(xa["ac_x_ctl"], xb["ac_x_ctl"])
+    assert not np.array_equal(xa["ac_y_ctl"], xb["ac_y_ctl"])
