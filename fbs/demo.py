@@ -54,14 +54,25 @@ def sim_values(cfg: SimConfig) -> dict[str, Any]:
         "eta_per_Nm": {a: cfg.bearing[a].eta_per_Nm for a in ("X", "Y")},
         "stiffness_Nm_per_rad": stiff,
         "dip_hz": {a: math.sqrt(stiff[a] / cfg.platform[a].inertia_kg_m2) / (2 * math.pi) for a in ("X", "Y")},
+        "inertia_kg_m2": {a: cfg.platform[a].inertia_kg_m2 for a in ("X", "Y")},
+        "pickoff_noise_urad_rms": {c: _pickoff_noise_1_50(g) for c, g in cfg.gyro.items()},
         "bias_instability_urad_per_s": {c: g.bias_instability_urad_per_s for c, g in cfg.gyro.items()},
         "arw_urad_per_sqrt_s": {c: g.arw_urad_per_sqrt_s for c, g in cfg.gyro.items()},
     }
 
 
+def _pickoff_noise_1_50(g: Any) -> float:
+    """The simulated pickoff noise (urad rms) in 1-50 Hz: its white level and the lines there."""
+    from simhw.simulator import pickoff_white_psd
+
+    white = pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines) * 1e12
+    return math.sqrt(white * 49.0 + sum(a * a / 2 for f, a in g.pickoff_lines if 1.0 <= f <= 50.0))
+
+
 #: (procedure, axis or None) in campaign order
 CAMPAIGN: list[tuple[str, str | None]] = [("earth-rate", None), ("stopwatch", None), ("hysteresis", "X"),
-                                          ("hysteresis", "Y"), ("survey", None), ("drift", None)]
+                                          ("hysteresis", "Y"), ("survey", None), ("excitation", "X"),
+                                          ("drift", None)]
 
 
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
@@ -137,6 +148,25 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
         for ch, v in (s.values.get("platform_rms_urad") or {}).items():
             rows.append(Row(f"gyro-deduced platform rms {ch}", "urad", v, THESIS["platform_rms_urad"].get(ch), None,
                             "0.4-15 Hz gyro spectrum, as the thesis (mostly pickoff noise here)"))
+        cross = s.values.get("cross_axis_coherence") or {}
+        if cross:
+            rows.append(Row("X-Y autocollimator coherence, mean 1-100 Hz", "", cross.get("mean"), None, None,
+                            f"independent channels: {fmt(cross.get('null_mean'))}; "
+                            + ("significant" if cross.get("significant") else "not significant")
+                            + f" (z {fmt(cross.get('z'))}; Fig. 48)"))
+    per_channel("excitation", "inertia_kg_m2", "platform inertia (V_Td -> angle)", "kg m^2")
+    for s in by_name.get("excitation", []):
+        axis = s.params.get("axis", "X")
+        k = (s.values.get("stiffness_Nm_per_rad") or {}).get(axis)
+        iv = (s.values.get("stiffness_Nm_per_rad_ci95") or {}).get(axis) or [None, None]
+        rows.append(Row(f"bearing stiffness at {fmt(s.params.get('target_urad'))} urad rms {axis}", "N m/rad", k,
+                        THESIS["stiffness_Nm_per_rad"].get(axis), sim["stiffness_Nm_per_rad"].get(axis),
+                        f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; Dahl's describing function at this amplitude, "
+                        "eta To^2 only for small motion"))
+        rows.append(Row(f"compensation network vs design {axis}, worst 0.3-50 Hz", "dB",
+                        s.values.get("network_vs_design_max_db"), None, None,
+                        f"{fmt(s.values.get('network_vs_design_max_deg'))} deg (eq. 3.28, Fig. 40)"))
+    per_channel("excitation", "pickoff_noise_urad_rms", "pickoff noise 1-50 Hz, incoherent with V_Td", "urad")
     per_channel("drift", "bias_instability_urad_per_s", "bias instability", "urad/s")
     per_channel("drift", "arw_urad_per_sqrt_s", "angle random walk", "urad/sqrt(s)")
     return rows
