@@ -150,7 +150,7 @@ def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[s
         bounds = [(file, start, stop) for file, start, stop, _ in pieces if stop - start >= nperseg]
     S, w = [], []
     f = np.empty(0)
-    for file, start, stop in bounds[:max(n_blocks, len(bounds))]:
+    for file, start, stop in bounds:
         c = run_csd_matrix(file, channels, nperseg=nperseg, start=start, stop=stop)
         f = c.f
         S.append(c.S)
