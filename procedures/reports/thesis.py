@@ -23,8 +23,9 @@ FIGURES: dict[str, Any] = {
     "stiffness_Nm_per_rad": {"X": 410.0, "Y": 380.0},
     "platform_rms_urad": SURVEY["platform_rms_urad"],
     "dip_hz": SURVEY["dip_hz"],
-    # Ch. III C (the inertia the thesis computed for its model) and Ch. II C.1.a / Fig. 33 (the
-    # pickoff's 6.2 urad rms in 0.1-200 Hz, its lines outside 1-50 Hz: 6.2 sqrt(49 / 199.9))
+    # Ch. III C (the inertia the thesis computed for its model) and Ch. V B.4 / Fig. 33 (the
+    # pickoff's 6.2 urad rms in 0.1-200 Hz, of which the 71 (pair), 102 and 187 Hz lines, 3, 3,
+    # 4 and 2 urad, hold 19 urad^2; the white rest, over 1-50 Hz: sqrt(19.44 x 49 / 199.9))
     "inertia_kg_m2": {"X": 0.70, "Y": 0.25},
-    "pickoff_noise_urad_rms": {"X": 3.07},
+    "pickoff_noise_urad_rms": {"X": 2.18},
 }
