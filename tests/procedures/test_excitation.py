@@ -139,3 +139,33 @@ def test_excitation_pickoff_noise_is_the_simulated_within_20_percent(tmp_path):
     got = s.values["pickoff_noise_urad_rms"]["X"]
     print(f"pickoff noise 1-50 Hz: measured {got:.4g} urad rms, simulated {expected:.4g}")
     assert abs(got / expected - 1) < 0.20, (got, expected)
+
+
+@pytest.mark.slow
+def test_an_aborted_excitation_leaves_the_rig_safe_and_resumes(tmp_path):
+    """Abort while V_Td is being driven: the rig is left in the safe state (mode 1, V_Td read
+    back 0), the file closed "aborted"; the resumed run takes the quiet record over, probes and
+    excites again, and identifies the rig."""
+    import threading
+
+    from daq.reader import RunFile
+    from procedures.runner import load_resume
+
+    stop = threading.Event()
+
+    def listener(progress):
+        if progress.step == "excite" and progress.fraction > 0:
+            stop.set()
+
+    with open_rig("sim?warm=1&seed=44") as rig:
+        first = run_procedure(Excitation(Params(**FAST)), rig, tmp_path, progress=listener, abort=stop)
+        assert first.verdict == "aborted"
+        assert rig.is_safe()
+        assert rig.commands.command_torque_V("X") == 0.0
+        assert "quiet" in first.steps_done and "excite" not in first.steps_done
+        with RunFile(first.file) as rf:
+            assert rf.status.startswith("aborted")
+        second = run_procedure(Excitation(Params(**FAST)), rig, tmp_path, resume=load_resume(first.file, "excitation"))
+    assert second.exit_code == 0, second.error
+    assert second.steps_resumed == ["quiet"]
+    assert abs(second.values["inertia_kg_m2"]["X"] / 0.70 - 1) < 0.05
