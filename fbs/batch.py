@@ -2,7 +2,7 @@
 (DESIGN.md section 7; docs/batch.md).
 
 Runs one analysis command on many run files in parallel - ``gap``, ``inspect``, ``spectra``,
-``analyze-hysteresis`` (``fbs.batch_task.COMMANDS``) - each file exactly as
+``analyze-hysteresis``, ``analyze-transfer`` (``fbs.batch_task.COMMANDS``) - each file exactly as
 ``fbs COMMAND FILE --json OPTIONS`` would (the same parser, the same function behind ``--json``),
 in a local process pool (default; ``--jobs`` processes, default one per core) or on a Dask
 distributed cluster (``--scheduler ADDR``; the optional extra ``fbs-hil[cluster]``).

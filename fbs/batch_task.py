@@ -37,9 +37,11 @@ COMMANDS: dict[str, tuple[str, ...]] = {
     "inspect": ("inspect",),
     "spectra": ("spectra",),
     "analyze-hysteresis": ("analyze", "hysteresis"),
+    "analyze-transfer": ("analyze", "transfer"),
 }
 #: options that name one output place for every file: refused, the files would overwrite each other's
-SHARED_OUTPUTS: dict[str, tuple[str, ...]] = {"gap": ("report",), "spectra": ("out",), "analyze-hysteresis": ("out",)}
+SHARED_OUTPUTS: dict[str, tuple[str, ...]] = {"gap": ("report",), "spectra": ("out",), "analyze-hysteresis": ("out",),
+                                                 "analyze-transfer": ("out",)}
 #: the environment variables that hold a worker's BLAS to one thread
 BLAS_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 #: the keys of a result line, in order

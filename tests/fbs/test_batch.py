@@ -114,7 +114,8 @@ def test_batch_gap_gives_what_serial_runs_give(local, serial, runs):
     assert "0 already done" in r.stderr and f"[{N_FILES}/{N_FILES}]" in r.stderr and "exit 0" in r.stderr
 
 
-@pytest.mark.parametrize("command, args", [("inspect", []), ("spectra", ["--channels", "ac_x_ctl,gyro_x"])])
+@pytest.mark.parametrize("command, args", [("inspect", []), ("spectra", ["--channels", "ac_x_ctl,gyro_x"]),
+                                           ("analyze-transfer", ["--from", "ac_x_ctl", "--to", "pa_x"])])
 def test_inspect_and_spectra_batches_give_what_serial_runs_give(runs, tmp_path, command, args):
     files = [str(p) for p in runs[:3]]
     out = tmp_path / "r.jsonl"
@@ -123,7 +124,7 @@ def test_inspect_and_spectra_batches_give_what_serial_runs_give(runs, tmp_path, 
     got = by_file(lines_of(out))
     assert sorted(got) == sorted(files)
     for f in files:
-        s = fbs(command, f, "--json", *args)
+        s = fbs(*command.split("-"), f, "--json", *args)
         assert s.returncode == 0, s.stderr
         assert json.dumps(got[f]["result"]) == s.stdout.strip()
     if command == "spectra":
