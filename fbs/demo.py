@@ -148,6 +148,11 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
         for ch, v in (s.values.get("platform_rms_urad") or {}).items():
             rows.append(Row(f"gyro-deduced platform rms {ch}", "urad", v, THESIS["platform_rms_urad"].get(ch), None,
                             "0.4-15 Hz gyro spectrum, as the thesis (mostly pickoff noise here)"))
+        for ch, v in (s.values.get("platform_rms_net_urad") or {}).items():
+            iv = (s.values.get("platform_rms_net_urad_ci95") or {}).get(ch) or [None, None]
+            rows.append(Row(f"platform rms {ch}, net of pickoff noise", "urad", v, None, None,
+                            f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; the gyro's part coherent with the autocollimator, "
+                            "0.4-15 Hz"))
         cross = s.values.get("cross_axis_coherence") or {}
         if cross:
             rows.append(Row("X-Y autocollimator coherence, mean 1-100 Hz", "", cross.get("mean"), None, None,

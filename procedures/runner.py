@@ -372,8 +372,10 @@ class RunSummary:
         (``procedures.analysis.intervals.add_figure``)."""
         out = {k: self.values.get(k) for k in keys}
         out |= {f"{k}_ci95": self.values[f"{k}_ci95"] for k in keys if f"{k}_ci95" in self.values}
-        if "resolved" in self.values:
-            out["resolved"] = self.values["resolved"]
+        # the verdicts of the keys printed: a figure kept out of the JSON keeps its verdict out too
+        resolved = {k: v for k, v in (self.values.get("resolved") or {}).items() if k in keys}
+        if resolved:
+            out["resolved"] = resolved
         if "file" in keys:
             out["file"] = str(self.file) if self.file else None
         return out

@@ -53,8 +53,10 @@ import scipy.signal
 
 from daq.filespectra import RunCsd, run_csd_matrix
 from daq.reader import RunFile
-from daq.spectra import band_rms, coherence
+from daq.spectra import band_rms, coherence, equivalent_dof
 from drivers.calibration import RigCalibration
+from procedures.analysis.intervals import Estimate, from_stderr
+from procedures.analysis.transfer import BlockCsd, jackknife_se
 
 AXES = ("X", "Y")
 
@@ -247,6 +249,41 @@ def cross_axis_coherence(csd: SpanCsd, x: str, y: str, lo_hz: float = 1.0, hi_hz
     m = float(np.mean(g)) if g.size else float("nan")
     z = (m - null_mean) / math.sqrt(null_var / max(g.size / 2.0, 1.0)) if g.size else float("nan")
     return CrossCoherence((x, y), (lo_hz, hi_hz), m, null_mean, z, bool(z > CROSS_Z))
+
+
+def coherent_platform_rms(blocks: BlockCsd, gyro_channel: str, ac_channel: str, kg_V_per_urad: float,
+                          lo_hz: float, hi_hz: float) -> Estimate:
+    """The platform's own rms (urad) in ``lo..hi`` Hz: the part of the gyro's spectrum coherent
+    with the autocollimator, gamma^2 S_gg (the coherent output power, eq. 4.44-4.49; Ch. V C).
+
+    The gyro sees theta + n_g, the autocollimator theta + n_a; the pickoff noise n_g is
+    independent of both. In Mode 3 the platform moves mostly because the loop follows n_a
+    (theta = -T n_a, T the complementary sensitivity), so |S_ga|^2 / S_aa = |T|^2 S_nn = S_theta,
+    exactly; a disturbance torque moves theta in both sensors and counts too. Nothing here needs
+    the pickoff noise's level, or an open-loop baseline.
+
+    gamma^2 is first freed of its bias over n averaged segments, (n gamma^2 - 1) / (n - 1), n the
+    Welch EDOF / 2: with the pickoff noise ten times the platform's power the raw estimate read
+    the rms 9-30 % high. The interval is a delete-one jackknife over the blocks (Student's t)."""
+    g, a = blocks.index(gyro_channel), blocks.index(ac_channel)
+    f = blocks.f
+    band = (f >= lo_hz) & (f <= hi_hz)
+    df = float(f[1] - f[0])
+    nperseg = int(round(blocks.seg_s * blocks.fs))
+
+    def rms(S: np.ndarray, segments: float) -> float:
+        noverlap = nperseg // 2 if blocks.overlap else 0
+        n = equivalent_dof("hann", nperseg, noverlap, max(int(round(segments)), 2)) / 2.0
+        sgg, saa = S[:, g, g].real, S[:, a, a].real
+        with np.errstate(divide="ignore", invalid="ignore"):
+            g2 = np.abs(S[:, g, a]) ** 2 / (sgg * saa)
+        g2u = np.clip(np.nan_to_num((n * g2 - 1.0) / (n - 1.0)), 0.0, 1.0)
+        return math.sqrt(float(np.sum((g2u * sgg)[band])) * df) / kg_V_per_urad
+
+    total = float(blocks.weights.sum())
+    value = rms(blocks.mean(), total)
+    loo = np.array([rms(blocks.mean(leave_out=b), total - blocks.weights[b]) for b in range(blocks.n_blocks)])
+    return from_stderr(value, float(jackknife_se(loo)), dof=blocks.n_blocks - 1)
 
 
 def survey_spectra(csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[str, float],

@@ -101,6 +101,7 @@ class BlockCsd:
     fs: float
     seg_s: float
     seconds: float
+    overlap: bool = True
 
     @property
     def n_blocks(self) -> int:
@@ -119,10 +120,10 @@ class BlockCsd:
 
 
 def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[str], seg_s: float,
-              n_blocks: int = N_BLOCKS) -> BlockCsd:
-    """The Welch matrices (Hann, 50 % overlap, linear detrend) of ``n_blocks`` blocks of the
-    given file spans, each block whole segments of one span. Raises ``TransferError`` when the
-    spans hold fewer than ``n_blocks`` segments."""
+              n_blocks: int = N_BLOCKS, overlap: bool = True) -> BlockCsd:
+    """The Welch matrices (Hann, 50 % overlap or none, linear detrend) of ``n_blocks`` blocks of
+    the given file spans, each block whole segments of one span. Raises ``TransferError`` when
+    the spans hold fewer than ``n_blocks`` segments."""
     if n_blocks < 3:
         raise TransferError(f"n_blocks = {n_blocks}: a jackknife needs at least 3 blocks")
     pieces: list[tuple[Path, int, int, float]] = []
@@ -139,25 +140,26 @@ def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[s
     if total < nperseg * n_blocks:
         raise TransferError(f"{total / fs:.1f} s of record holds fewer than {n_blocks} blocks of one {seg_s:g} s "
                             f"segment: record longer or shorten the segment")
-    # blocks of about equal length, each inside one span
-    block_len = total // n_blocks
+    # about n_blocks blocks in all, each inside one span: a span gets its share of them
     bounds: list[tuple[Path, int, int]] = []
     for file, start, stop, _ in pieces:
-        n = (stop - start) // block_len if block_len else 0
-        for k in range(n):
-            bounds.append((file, start + k * block_len, start + (k + 1) * block_len))
-    if len(bounds) < n_blocks:                     # short spans: fewer, whole spans
-        bounds = [(file, start, stop) for file, start, stop, _ in pieces if stop - start >= nperseg]
+        length = stop - start
+        if length < nperseg:
+            continue
+        k = min(max(1, round(length / total * n_blocks)), length // nperseg)
+        edges = [start + (length * i) // k for i in range(k + 1)]
+        bounds += [(file, a, b) for a, b in zip(edges[:-1], edges[1:])]
     S, w = [], []
     f = np.empty(0)
     for file, start, stop in bounds:
-        c = run_csd_matrix(file, channels, nperseg=nperseg, start=start, stop=stop)
+        c = run_csd_matrix(file, channels, nperseg=nperseg, noverlap=nperseg // 2 if overlap else 0,
+                           start=start, stop=stop)
         f = c.f
         S.append(c.S)
         w.append(float(c.segments_used))
     if len(S) < 3:
         raise TransferError(f"only {len(S)} block(s) of whole {seg_s:g} s segments: a jackknife needs 3")
-    return BlockCsd(f, np.array(S), np.array(w), tuple(channels), fs, seg_s, total / fs)
+    return BlockCsd(f, np.array(S), np.array(w), tuple(channels), fs, seg_s, total / fs, overlap)
 
 
 def periodic_blocks(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[str], period_s: float,

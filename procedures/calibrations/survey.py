@@ -33,16 +33,21 @@ from pathlib import Path
 from typing import Annotated, Any
 
 from daq.plots import plot_coherence, plot_psd
+from procedures.analysis.intervals import add_figure
 from procedures.analysis.survey import (
     AXES,
     CHANNELS,
     COHERENCE_PAIRS,
     SpanError,
     ac_ctl,
+    ac_inst,
+    coherent_platform_rms,
     cross_axis_coherence,
+    gyro,
     spans_csd,
     survey_spectra,
 )
+from procedures.analysis.transfer import TransferError, block_csd
 from procedures.paramlimits import above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports import thesis
@@ -71,10 +76,16 @@ class SurveyParams:
     #: quality limits: the dip's prominence, the fraction of Welch segments usable (no lost samples)
     min_dip_depth_db: float = 6.0
     min_segments_used: float = 0.9
+    #: the platform's own rms (gyro coherent with the autocollimator): Welch segment, jackknife blocks
+    coherent_seg_s: Annotated[float, above(0)] = 8.0
+    coherent_blocks: Annotated[int, at_least(3)] = 8
 
     def __post_init__(self) -> None:
         check_limits(self, "survey")
         # what no one field can declare: limits that tie fields together
+        if self.coherent_seg_s * self.coherent_blocks > self.duration_s:
+            raise ValueError(f"survey: {self.coherent_blocks} blocks of {self.coherent_seg_s} s segments need more "
+                             f"than the record's {self.duration_s} s")
         if self.seg_s > self.duration_s:
             raise ValueError(f"survey: a Welch segment of {self.seg_s} s is longer than the record "
                              f"({self.duration_s} s)")
@@ -161,6 +172,16 @@ class Survey(Procedure[SurveyParams]):
             "band_hz": [p.band_lo_hz, p.band_hi_hz],
             "record_s": csd.seconds,
         }
+        # the platform's own motion, net of pickoff noise: the gyro's part coherent with the
+        # autocollimator (procedures.analysis.survey.coherent_platform_rms)
+        try:
+            blocks = block_csd([(s.file, s.start, s.stop) for s in spans], self.channels(), p.coherent_seg_s,
+                               p.coherent_blocks)
+            net = {a: coherent_platform_rms(blocks, gyro(a), ac_inst(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz)
+                   for a in AXES}
+        except TransferError as exc:
+            raise ProcedureError(f"survey: {exc}") from None
+        add_figure(values, "platform_rms_net_urad", net, digits=4)
         # Fig. 48: a noise common to the two autocollimator axes shows as coherence where the
         # sensors' own noise dominates; independent channels give about 1/n
         cross = cross_axis_coherence(csd, ac_ctl("X"), ac_ctl("Y"))
@@ -175,6 +196,11 @@ class Survey(Procedure[SurveyParams]):
                                   if d is None or d.depth_db < p.min_dip_depth_db else ""))
             ms.append(Measurement(f"platform rms {a}, gyro-deduced {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz",
                                   sp.platform_rms_urad[a], "urad", note=f"Kg {kg_mv[a]:.4g} mV/urad ({kg_src[a]})"))
+        for a in AXES:
+            e = net[a]
+            ms.append(Measurement(f"platform rms {a} net of pickoff noise (gyro coherent with {ac_inst(a)})",
+                                  e.value if e.resolved else None, "urad",
+                                  note=f"95 % [{e.lo:.3g}, {e.hi:.3g}]" + ("" if e.resolved else f"; not resolved: {e.why}")))
         ms.append(Measurement(f"coherence {cross.pair[0]} - {cross.pair[1]}, mean {cross.band_hz[0]:g}-"
                               f"{cross.band_hz[1]:g} Hz", cross.mean, "",
                               note=f"{'significant' if cross.significant else 'not significant'}: {cross.z:.1f} "

@@ -119,9 +119,15 @@ def check(summary, expected, label=""):
                      f"{rms:.3f} urad vs expected {exp:.3f} (true {expected['true_rms_urad'][a]:.3f}, pickoff noise "
                      f"{expected['noise_rms_urad'][a]:.3f}) ratio {rms / exp:.3f}")
     print("\n".join(lines))
+    net = summary.values["platform_rms_net_urad"]
+    net_ci = summary.values["platform_rms_net_urad_ci95"]
+    print("net of pickoff noise: " + ", ".join(f"{a} {net[a]} {net_ci[a]} vs true {expected['true_rms_urad'][a]:.3f}"
+                                               for a in "XY"))
     for a in "XY":
         assert abs(v["dip_hz"][a] - expected["resonance_hz"][a]) < DIP_TOL_HZ, lines
         assert abs(v["platform_rms_urad"][a] / expected["expected_rms_urad"][a] - 1) < RMS_TOL, lines
+        # issue 22 D: the platform's own rms, net of pickoff noise, within 20 % of the truth
+        assert net[a] is not None and abs(net[a] / expected["true_rms_urad"][a] - 1) < RMS_TOL, (net, expected)
     return v
 
 
