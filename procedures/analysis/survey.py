@@ -264,7 +264,7 @@ def coherent_platform_rms(blocks: BlockCsd, gyro_channel: str, ac_channel: str, 
 
     gamma^2 is first freed of its bias over n averaged segments, (n gamma^2 - 1) / (n - 1), n the
     Welch EDOF / 2: with the pickoff noise ten times the platform's power the raw estimate read
-    the rms 9-30 % high. The interval is a delete-one jackknife over the blocks (Student's t)."""
+    the rms 6-30 % high. The interval is a delete-one jackknife over the blocks (Student's t)."""
     g, a = blocks.index(gyro_channel), blocks.index(ac_channel)
     f = blocks.f
     band = (f >= lo_hz) & (f <= hi_hz)
