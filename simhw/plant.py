@@ -363,13 +363,17 @@ def discretize(plant: Plant, dt: float) -> DiscretePlant:
 def linearized_poles(cfg: SimConfig, mode: int = 3, axis: str | None = None) -> np.ndarray:
     """Closed-loop poles (rad/s) of the rig linearized about rest (Dahl -> spring eta To^2).
 
-    With ``axis``, only that platform axis's stabilization loop (in the optical modes the axes
-    decouple, Ch. III H.1): the states carrying the axis in their name, except the output-only
-    instrumentation filter, the gyro channels and the caging amplifiers.
+    With ``axis``, only that platform axis's stabilization loop (the axes decouple, Ch. III H.1;
+    in the gyro modes the X-Y gyro's viscous cross-axis coupling matters only at low frequency,
+    Fig. 27): the states carrying the axis in their name, except the output-only
+    instrumentation filter; in the optical modes also without the gyro channel and its caging
+    amplifier, which the platform drives but which do not drive it. In modes 4 and 5 the gyro's
+    float and its (autocollimator) caging loop are in the loop (Table 6).
     """
     plant = build_plant(cfg, RelayState(mode=mode))
     if axis is None:
         return np.linalg.eigvals(plant.A)
+    gyro_loop = mode in (4, 5)
     keep = [i for i, s in enumerate(plant.states) if axis in s.split("_")[1:]
-            and not s.startswith(("acinst", "sigma_", "cage_"))]
+            and not s.startswith("acinst") and (gyro_loop or not s.startswith(("sigma_", "cage_")))]
     return np.linalg.eigvals(plant.A[np.ix_(keep, keep)])

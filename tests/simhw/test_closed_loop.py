@@ -98,6 +98,31 @@ def test_linearized_closed_loop_poles_match_table5(axis):
     assert -light.real / abs(light) == pytest.approx(t5["platform_zeta"], abs=0.02)
 
 
+# Table 6: the gyro stabilization loops' low-frequency closed-loop roots (rad/s), read by the
+# thesis off a root locus (Fig. 28); the caging loop (0.1 rad/s, damping 0.7) is not in it.
+TABLE6 = {"X": {"c1": 5.0, "c4": 160.0, "p": (43.0, 0.24)}, "Y": {"c1": 5.0, "c4": 160.0, "p": (60.0, 0.27)}}
+
+
+@pytest.mark.parametrize("mode", [4, 5])
+@pytest.mark.parametrize("axis", ["X", "Y"])
+def test_linearized_gyro_mode_poles_beside_table6(axis, mode):
+    """Modes 4 and 5 close each loop through the gyro's float (Fig. 27): X within 11 % of
+    Table 6 (5.52, 161, 44 rad/s zeta 0.226), Y within 17 % (4.61, 134, 68.3 zeta 0.286)."""
+    poles = linearized_poles(SimConfig(), mode=mode, axis=axis)
+    assert np.all(poles.real < 0), f"the Mode-{mode} loop must be stable"
+    t6 = TABLE6[axis]
+    tol = 0.11 if axis == "X" else 0.17
+    for key in ("c1", "c4"):
+        assert abs(_pole(poles, t6[key], real=True)) == pytest.approx(t6[key], rel=tol)
+    w_p, z_p = t6["p"]
+    p = _pole(poles, w_p)
+    assert abs(p) == pytest.approx(w_p, rel=tol)
+    assert -p.real / abs(p) == pytest.approx(z_p, abs=0.02)
+    # the caging loop: natural frequency 0.1 rad/s, damping 0.7 (DESIGN.md section 3)
+    cage = _pole(poles, 0.1)
+    assert abs(cage) == pytest.approx(0.1, rel=0.1) and -cage.real / abs(cage) == pytest.approx(0.7, abs=0.06)
+
+
 def test_open_loop_platform_poles_are_the_thesis_bearing_resonances():
     """Platform with bearing spring: X (-0.8 +- j24.2), Y (-1.1 +- j39.0) (Ch. III H.1)."""
     cfg = SimConfig()
