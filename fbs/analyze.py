@@ -139,7 +139,7 @@ def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]
                            "measured": _measured_table(resp)}
     model = _transfer_model(args)
     fit = None
-    lo = max(args.lo_hz, 4.0 / blocks.seg_s if args.period is None else 1.5 / blocks.seg_s)
+    lo = max(args.lo_hz, blocks.lowest_fit_hz)
     if model == "network":
         fit = tf.fit_network(resp, lo, args.hi_hz or 100.0)
     elif model == "platform":

@@ -53,10 +53,10 @@ import scipy.signal
 
 from daq.filespectra import RunCsd, run_csd_matrix
 from daq.reader import RunFile
-from daq.spectra import band_rms, coherence, equivalent_dof
+from daq.spectra import band_rms, coherence
 from drivers.calibration import RigCalibration
 from procedures.analysis.intervals import Estimate, from_stderr
-from procedures.analysis.transfer import BlockCsd, jackknife_se
+from procedures.analysis.transfer import BlockCsd, jackknife_se, unbiased_coherence
 
 AXES = ("X", "Y")
 
@@ -269,20 +269,17 @@ def coherent_platform_rms(blocks: BlockCsd, gyro_channel: str, ac_channel: str, 
     f = blocks.f
     band = (f >= lo_hz) & (f <= hi_hz)
     df = float(f[1] - f[0])
-    nperseg = int(round(blocks.seg_s * blocks.fs))
 
-    def rms(S: np.ndarray, segments: float) -> float:
-        noverlap = nperseg // 2 if blocks.overlap else 0
-        n = equivalent_dof("hann", nperseg, noverlap, max(int(round(segments)), 2)) / 2.0
+    def rms(leave_out: int | None) -> float:
+        S = blocks.mean(leave_out)
         sgg, saa = S[:, g, g].real, S[:, a, a].real
         with np.errstate(divide="ignore", invalid="ignore"):
             g2 = np.abs(S[:, g, a]) ** 2 / (sgg * saa)
-        g2u = np.clip(np.nan_to_num((n * g2 - 1.0) / (n - 1.0)), 0.0, 1.0)
+        g2u = unbiased_coherence(g2, blocks.averages(leave_out))
         return math.sqrt(float(np.sum((g2u * sgg)[band])) * df) / kg_V_per_urad
 
-    total = float(blocks.weights.sum())
-    value = rms(blocks.mean(), total)
-    loo = np.array([rms(blocks.mean(leave_out=b), total - blocks.weights[b]) for b in range(blocks.n_blocks)])
+    value = rms(None)
+    loo = np.array([rms(b) for b in range(blocks.n_blocks)])
     return from_stderr(value, float(jackknife_se(loo)), dof=blocks.n_blocks - 1)
 
 

@@ -76,9 +76,9 @@ import scipy.stats
 
 from daq.filespectra import run_csd_matrix
 from daq.reader import RunFile
-from daq.spectra import coherence
+from daq.spectra import coherence, equivalent_dof
 from drivers.calibration import AutocollimatorConstants, PlatformConstants
-from procedures.analysis.intervals import Estimate, from_stderr
+from procedures.analysis.intervals import MAX_CORRELATION, Estimate, from_stderr
 
 URAD = 1e-6
 N_BLOCKS = 8
@@ -102,10 +102,28 @@ class BlockCsd:
     seg_s: float
     seconds: float
     overlap: bool = True
+    #: whole periods of a periodic excitation, no window (``periodic_blocks``), not Welch segments
+    periodic: bool = False
 
     @property
     def n_blocks(self) -> int:
         return int(self.S.shape[0])
+
+    @property
+    def lowest_fit_hz(self) -> float:
+        """The lowest frequency a fit should use: 1.5 lines of a period, or 4 Welch bins (the
+        Hann window and the linear detrend spoil the lowest ones)."""
+        return (1.5 if self.periodic else 4.0) / self.seg_s
+
+    def averages(self, leave_out: int | None = None) -> float:
+        """The independent averages behind ``mean(leave_out)``: the periods themselves, or the
+        Welch segments' equivalent degrees of freedom over 2 (overlapped segments are correlated)."""
+        segments = float(self.weights.sum() - (0.0 if leave_out is None else self.weights[leave_out]))
+        if self.periodic:
+            return segments
+        nperseg = int(round(self.seg_s * self.fs))
+        return equivalent_dof("hann", nperseg, nperseg // 2 if self.overlap else 0,
+                              max(int(round(segments)), 2)) / 2.0
 
     def mean(self, leave_out: int | None = None) -> np.ndarray:
         w = self.weights.copy()
@@ -203,7 +221,7 @@ def periodic_blocks(spans: Sequence[tuple[str | Path, int, int]], channels: Sequ
     S = np.array([allp[g].mean(axis=0) for g in groups])
     f = np.fft.rfftfreq(int(round(period_s * fs)), 1.0 / fs)
     return BlockCsd(f, S, np.array([float(len(g)) for g in groups]), tuple(channels), fs, period_s,
-                    len(allp) * period_s)
+                    len(allp) * period_s, overlap=False, periodic=True)
 
 
 def file_blocks(path: str | Path, channels: Sequence[str], seg_s: float, n_blocks: int = N_BLOCKS,
@@ -282,6 +300,15 @@ def response(blocks: BlockCsd, source: str, target: str, via: str | None = None)
     return Response(source, target, via, blocks.f, H, coh, log_se, phase_se, Hb, blocks.n_blocks - 1)
 
 
+def unbiased_coherence(g2: np.ndarray, n: float) -> np.ndarray:
+    """Magnitude-squared coherence freed of its bias over ``n`` independent averages,
+    (n gamma^2 - 1) / (n - 1), clipped to 0..1: with no coherence E[gamma^2] = 1 / n (Bendat and
+    Piersol), which reads a weak coherent part high and an incoherent part low."""
+    if n <= 1:
+        return np.asarray(g2)
+    return np.clip(np.nan_to_num((n * np.asarray(g2) - 1.0) / (n - 1.0)), 0.0, 1.0)
+
+
 def usable(resp: Response, lo_hz: float, hi_hz: float, min_coherence: float = 0.5) -> np.ndarray:
     """Bins in [lo, hi] with coherence above ``min_coherence`` and finite estimates."""
     f = resp.f
@@ -346,6 +373,14 @@ def _log_residual(model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se
     return np.concatenate([q.real / log_se, q.imag / phase_se])
 
 
+def _residuals(model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray
+               ) -> tuple[float, float, float]:
+    """The fit's residual: rms dB, rms deg, and rms in units of each bin's standard error."""
+    q = np.log(model / H)
+    return (float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))), float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))),
+            float(np.sqrt(np.mean(_log_residual(model, H, log_se, phase_se) ** 2))))
+
+
 def _fit_network_once(f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray,
                       start: np.ndarray) -> np.ndarray:
     def resid(x: np.ndarray) -> np.ndarray:
@@ -398,12 +433,8 @@ def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
     params = _network_params(x)
     table = response_table(lambda ff: network_response(ff, params),
                            [partial(network_response, p=_network_params(xx)) for xx in xb], resp.dof)
-    q = np.log(network_response(f, params) / H)
-    return ModelFit("network", est, (lo_hz, hi_hz), int(ok.sum()),
-                    float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))),
-                    float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))),
-                    float(np.sqrt(np.mean(_log_residual(network_response(f, params), H, ls, ps) ** 2))), correlations,
-                    curve=lambda ff: network_response(ff, params), table=table)
+    return ModelFit("network", est, (lo_hz, hi_hz), int(ok.sum()), *_residuals(network_response(f, params), H, ls, ps),
+                    correlations, curve=lambda ff: network_response(ff, params), table=table)
 
 
 #: where a fitted response is tabulated in the JSON: 0.3-100 Hz, 6 points a decade
@@ -430,7 +461,6 @@ def response_table(curve: Callable[[np.ndarray], np.ndarray], replicates: Sequen
 def _exp_estimate(x: float, e: Estimate, correlation: float, other: str) -> Estimate:
     """A positive figure fitted as its logarithm: the interval exp(lo)..exp(hi); unresolved when
     the log interval is wider than ln 10 (a decade) or it correlates with ``other`` beyond 0.95."""
-    from procedures.analysis.intervals import MAX_CORRELATION
     value, lo, hi = math.exp(x), math.exp(e.lo), math.exp(e.hi)
     if not all(math.isfinite(v) for v in (value, lo, hi)):
         return Estimate(value, lo, hi, False, "no finite interval")
@@ -529,8 +559,8 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
     xb = np.array([_solve_jdk_irls(f, platform_impedance(f, resp.H_blocks[b][ok], pc, ac, resp.target), rel)
                    for b in range(resp.H_blocks.shape[0])])
     J, D, kk = (float(v) for v in x)
-    model = platform_response(f, J, D, kk, pc, ac, resp.target)
-    normalized = float(np.sqrt(np.mean(_log_residual(model, resp.H[ok], resp.log_se[ok], resp.phase_se_rad[ok]) ** 2)))
+    res_db, res_deg, normalized = _residuals(platform_response(f, J, D, kk, pc, ac, resp.target), resp.H[ok],
+                                             resp.log_se[ok], resp.phase_se_rad[ok])
     # a fit worse than its bins' errors allow (the model misses something): widen by the Birge ratio
     se = jackknife_se(xb) * max(1.0, normalized)
     corr = np.corrcoef(xb.T)
@@ -543,10 +573,7 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
         # each interval is the jackknife's marginal one: the trade-off between J and k (both pinned
         # by the resonance, sqrt(k / J)) is inside it, so their correlation is reported, not a verdict
         est[name] = from_stderr(float(x[k]), float(se[k]), dof=resp.dof)
-    q = np.log(model / resp.H[ok])
     notes = [f"viscous damping D includes the bearing's and the gyro gimbals'; the motor's back-EMF "
              f"({pc.motor_Nm_per_A * pc.back_emf_V_s / pc.armature_ohm:.3g} N m s) is taken out"]
-    return ModelFit("platform", est, (lo_hz, hi_hz), int(ok.sum()),
-                    float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))),
-                    float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))), normalized, correlations, notes,
+    return ModelFit("platform", est, (lo_hz, hi_hz), int(ok.sum()), res_db, res_deg, normalized, correlations, notes,
                     curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target))

@@ -51,6 +51,7 @@ from procedures.analysis.transfer import (
     network_response,
     periodic_blocks,
     response,
+    unbiased_coherence,
 )
 from procedures.paramlimits import OneOf, above, at_least, check_limits
 from procedures.params import prior_values
@@ -258,10 +259,10 @@ class Excitation(Procedure[ExcitationParams]):
                                       [n["cmd"], n["pa"], n["ac_ctl"], n["ac_inst"], n["gyro"]], p.period_s,
                                       p.n_blocks)
             net_resp = response(quiet, n["ac_ctl"], n["pa"])
-            net = fit_network(net_resp, max(p.fit_lo_hz, 4.0 / p.seg_s), p.network_hi_hz)
+            net = fit_network(net_resp, max(p.fit_lo_hz, quiet.lowest_fit_hz), p.network_hi_hz)
             plat_resp = response(excited, n["pa"], n["ac_inst"], via=n["cmd"])
             plat = fit_platform(plat_resp, cal.platform[p.axis], cal.autocollimator[p.axis],
-                                max(p.fit_lo_hz, 1.5 / p.period_s), p.platform_hi_hz)
+                                max(p.fit_lo_hz, excited.lowest_fit_hz), p.platform_hi_hz)
         except TransferError as exc:
             raise ProcedureError(f"excitation: {exc}") from None
         values = analysis_values(net, plat, p.axis, cal.platform[p.axis].inertia_kg_m2)
@@ -312,7 +313,7 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) ->
     from daq.spectra import coherence
 
     S = excited.mean()
-    m = float(excited.weights.sum())
+    m = excited.averages()
     coh = coherence(S)
     f = excited.f
     band = (f >= 1.0) & (f <= 50.0)
@@ -322,7 +323,7 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) ->
     for k in ("ac_ctl", "ac_inst", "gyro"):
         i = excited.index(n[k])
         s = S[:, i, i].real
-        g = np.clip((m * coh[:, r, i] - 1) / (m - 1), 0.0, 1.0) if m > 1 else coh[:, r, i]
+        g = unbiased_coherence(coh[:, r, i], m)
         out[n[k]] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
                      "incoherent_rms_V": float(np.sqrt(np.sum(((1 - g) * s)[band]) * df)), "band_hz": [1.0, 50.0]}
     return out
