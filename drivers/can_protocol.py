@@ -36,8 +36,10 @@ HOST_HEARTBEAT_ID = HEARTBEAT_BASE
 # Opcodes.
 OP_GET, OP_SET, OP_IDENT, OP_SAFE, OP_CLEAR = 0x01, 0x02, 0x03, 0x04, 0x05
 OP_HOLD, OP_SELECT, OP_RELEASE, OP_STATUS = 0x10, 0x11, 0x12, 0x13
+#: relay node: value 1 clamps the platform to the table and opens the motor drive, 0 releases (Ch. V B)
+OP_CLAMP = 0x14
 OPS = {OP_GET: "GET", OP_SET: "SET", OP_IDENT: "IDENT", OP_SAFE: "SAFE", OP_CLEAR: "CLEAR",
-       OP_HOLD: "HOLD", OP_SELECT: "SELECT", OP_RELEASE: "RELEASE", OP_STATUS: "STATUS"}
+       OP_HOLD: "HOLD", OP_SELECT: "SELECT", OP_RELEASE: "RELEASE", OP_STATUS: "STATUS", OP_CLAMP: "CLAMP"}
 
 # Response status codes.
 ST_OK, ST_RANGE, ST_INTERLOCK, ST_BAD_INDEX, ST_BAD_OP, ST_LATCHED, ST_NOT_HELD = range(7)
@@ -62,8 +64,15 @@ EMCY_TEXT = {EMCY_HEARTBEAT_LOST: "host heartbeat lost, node went safe",
 ST_MODE_SHIFT, ST_SELECT_SHIFT = 0, 3
 ST_HELD, ST_ALARM = 1 << 6, 1 << 7
 ST_AT_SPEED_SHIFT, ST_CAGED_SHIFT, ST_SPIN_SHIFT = 8, 12, 16
-#: Interlock reason bits in the value of an INTERLOCK response to RELEASE.
+#: the platform is clamped and its motor drive open (bits 16-23 are the spin percentage)
+ST_CLAMPED = 1 << 24
+#: Interlock reason bits in the value of an INTERLOCK response to RELEASE or CLAMP.
 WHY_NOT_AT_SPEED, WHY_NOT_CAGED = 0x1, 0x2
+#: RELEASE of mode 4, 5 or 6 while clamped; CLAMP outside modes 1-3; CLAMP or unclamp with a
+#: command input (V_Td or gamma_c) not at zero
+WHY_CLAMPED, WHY_MODE, WHY_COMMAND = 0x4, 0x8, 0x10
+#: Modes the platform may be clamped in (the loops do not need it to move)
+CLAMP_MODES = (1, 2, 3)
 
 #: DAC set-points travel in microvolts; table angles in micro-degrees.
 MICRO = 1e6

@@ -52,6 +52,16 @@ class InterlockError(DriverError):
         self.detail = detail
 
 
+class PlatformClamped(InterlockError):
+    """The platform is clamped to the table with its motor drive open (the open-loop baseline's
+    state, Ch. V B): a procedure that needs the stabilization loops closed refuses to start."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__(f"{what}: platform clamped (loops open); release it with `fbs clamp off --rig URL` "
+                         f"(the command inputs at zero), then start again",
+                         reasons=("platform clamped",))
+
+
 class ModeNotAllowed(InterlockError, ValueError):
     """Modes 0 and 7 do not exist on the relay driver; selecting one lights the alarm."""
 

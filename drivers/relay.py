@@ -3,6 +3,12 @@
 The operator holds the mode register, sets the select switches and releases: the register
 clocks the selected mode in only on release, and never clocks modes 0 or 7 (the alarm
 lights instead). Modes 4 and 5 need the gyros at speed and caged.
+
+For the open-loop baselines (Ch. V B) the relay node also clamps the platform to the table and
+opens the power-amplifier drive to the gimbal motors (``clamp``/``unclamp``). Clamping is
+allowed in modes 1-3 only, with every command input (V_Td, gamma_c) at zero; modes 4-6 are
+refused while clamped; releasing needs the command inputs at zero. The node enforces these;
+the driver checks them first and says what to do. The safe state never moves the clamp.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ class RelayStatus:
     at_speed: dict[str, bool]
     caged: dict[str, bool]
     spin_fraction: float      # slowest wheel, fraction of operating speed
+    clamped: bool = False     # platform clamped to the table, motor drive open (Ch. V B)
 
 
 def check_mode(mode: object) -> int:
@@ -42,8 +49,16 @@ def check_mode(mode: object) -> int:
     return mode
 
 
+#: modes the platform may be clamped in
+CLAMP_MODES = cp.CLAMP_MODES
+UNCLAMP_HINT = "release it with `fbs clamp off --rig URL`"
+
+
 def interlock_reason(mode: int, status: RelayStatus) -> str | None:
     """Why ``mode`` may not be entered now (None if it may)."""
+    if status.clamped and mode not in CLAMP_MODES:
+        return (f"mode {mode} refused: platform clamped (loops open; modes 1-3 only while clamped); "
+                f"{UNCLAMP_HINT}")
     if mode not in CAGED_FOR_MODE:
         return None
     why = []
@@ -74,6 +89,36 @@ class RelayDriver(abc.ABC):
 
     @abc.abstractmethod
     def status(self) -> RelayStatus: ...
+
+    @abc.abstractmethod
+    def _set_clamp(self, clamped: bool) -> bool:
+        """Send the clamp request; returns the node's read-back."""
+
+    def clamp(self, commands_zero: bool = True) -> bool:
+        """Clamp the platform to the table and open the motor drive (Ch. V B). Refused, before
+        anything is sent, outside modes 1-3 or with a command input not at zero (the caller
+        reads the command DACs back: ``Rig.clamp`` does)."""
+        st = self.status()
+        if st.clamped:
+            return True
+        why = []
+        mode = st.selected if st.held else st.mode
+        if mode not in CLAMP_MODES:
+            why.append(f"mode {mode} (clamp in modes 1-3 only: switch to mode 3 first)")
+        if not commands_zero:
+            why.append("a command input (V_Td or gamma_c) is not at zero (set it to 0 V first)")
+        if why:
+            raise InterlockError("clamp refused: " + "; ".join(why), reasons=tuple(why))
+        return self._set_clamp(True)
+
+    def unclamp(self, commands_zero: bool = True) -> bool:
+        """Release the clamp (the loops close again); refused with a command input not at zero."""
+        if not commands_zero:
+            why = "a command input (V_Td or gamma_c) is not at zero (set it to 0 V first)"
+            raise InterlockError(f"unclamp refused: {why}", reasons=(why,))
+        if not self.status().clamped:
+            return False
+        return self._set_clamp(False)
 
     def _checked(self, mode: object) -> int:
         """``check_mode``, lighting the alarm on a disallowed mode."""
@@ -120,7 +165,18 @@ class CanRelayDriver(RelayDriver):
             return self.node.call(cp.OP_RELEASE, what="RELEASE")
         except InterlockError as exc:
             why = tuple(w for b, w in ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"),
-                                       (cp.WHY_NOT_CAGED, "gyros not caged")) if exc.detail & b)
+                                       (cp.WHY_NOT_CAGED, "gyros not caged"),
+                                       (cp.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}")) if exc.detail & b)
+            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
+                                 detail=exc.detail) from None
+
+    def _set_clamp(self, clamped: bool) -> bool:
+        what = "CLAMP" if clamped else "UNCLAMP"
+        try:
+            return bool(self.node.call(cp.OP_CLAMP, 0, int(clamped), what=what))
+        except InterlockError as exc:
+            why = tuple(w for b, w in ((cp.WHY_MODE, "mode outside 1-3"),
+                                       (cp.WHY_COMMAND, "a command input not at zero")) if exc.detail & b)
             raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
                                  detail=exc.detail) from None
 
@@ -131,4 +187,4 @@ class CanRelayDriver(RelayDriver):
             held=bool(w & cp.ST_HELD), alarm=bool(w & cp.ST_ALARM),
             at_speed={c: bool(w >> (cp.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
             caged={c: bool(w >> (cp.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
-            spin_fraction=((w >> cp.ST_SPIN_SHIFT) & 0xFF) / 100.0)
+            spin_fraction=((w >> cp.ST_SPIN_SHIFT) & 0xFF) / 100.0, clamped=bool(w & cp.ST_CLAMPED))

@@ -112,6 +112,33 @@ class Rig:
         self.event("mode", f"mode {now}")
         return now
 
+    def commands_zero(self) -> bool:
+        """Every command input (V_Td, gamma_c) reads back 0 V from its DAC."""
+        return all(self.commands.command_torque_V(a) == 0.0 and self.commands.ac_bias_V(a) == 0.0
+                   for a in self.commands.axes)
+
+    def clamp(self) -> bool:
+        """Clamp the platform to the table, motor drive open (Ch. V B; ``RelayDriver.clamp``)."""
+        try:
+            back = self.relays.clamp(commands_zero=self.commands_zero())
+        except DriverError as exc:
+            self.event("alarm", str(exc))
+            raise
+        self.event("clamp", "platform clamped, loops open")
+        return back
+
+    def unclamp(self) -> bool:
+        """Release the clamp: the stabilization loops take the platform again."""
+        try:
+            was = self.relays.status().clamped
+            self.relays.unclamp(commands_zero=self.commands_zero())
+        except DriverError as exc:
+            self.event("alarm", str(exc))
+            raise
+        if was:
+            self.event("clamp", "platform released, loops closed")
+        return False
+
     def set_torquer_bias_V(self, channel: str, volts: float) -> float:
         back = self.torquers.set_bias_V(channel, volts)
         self.event("setpoint", f"torquer bias {channel} = {back:+.6f} V")
@@ -169,7 +196,9 @@ class Rig:
         self._safe_thread = t
 
     def safe(self) -> SafeReport:
-        """Mode 1, every bias and command zero, caging switches released; each step read back."""
+        """Mode 1, every bias and command zero, caging switches released; each step read back.
+        The platform clamp is left where it is: engaging or releasing it is a move the software
+        never makes unasked (mode 1 is allowed either way)."""
         with self._safe_lock:
             report = SafeReport()
             for node in self._safe_nodes:

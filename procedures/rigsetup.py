@@ -7,18 +7,24 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from drivers.errors import DeviceTimeout
+from drivers.errors import DeviceTimeout, PlatformClamped
 from procedures.runner import Context
 
 
 def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_s: float = 600.0,
-                   poll_s: float = 2.0) -> dict:
+                   poll_s: float = 2.0, clamped_ok: bool = False) -> dict:
     """Mode 3 with the wheels at speed and every channel caged (II D): spin up in mode 2 if
     needed, then mode 3, then wait for the relay driver's null detectors. ``t_caged_s`` is the
     rig time from which every loop is known closed (now, if the rig was found in mode 3): a step
-    that needs the caging loops' transients gone waits from there, resumed or not."""
+    that needs the caging loops' transients gone waits from there, resumed or not. A clamped
+    platform (loops open, Ch. V B) is refused with ``PlatformClamped`` unless ``clamped_ok``
+    (the open-loop baseline, which clamps anyway)."""
     rig = ctx.rig
     st = rig.relays.status()
+    if st.clamped and not clamped_ok:
+        # the loops are open: the null detectors may never see the platform caged, and a
+        # procedure would wait for nothing; only the open-loop baseline works clamped
+        raise PlatformClamped(f"{ctx.proc.name}: cannot bring the rig to mode 3 with the loops closed")
     t0 = ctx.time_s
     if st.mode == 3 and all(st.at_speed.values()) and all(st.caged.values()):
         return {"already": True, "waited_s": 0.0, "t_caged_s": round(ctx.time_s, 3)}

@@ -104,14 +104,23 @@ class RelayNode(SimNode):
     name = "relay"
 
     def attach(self) -> None:
-        # The rig may have been running for hours: the register holds the mode in force.
+        # The rig may have been running for hours: the register holds the mode in force, and
+        # the clamp (a mechanism, not a register) is where it was left.
         self.mode = self.selected = self.server.sim.mode
+        self.clamped = self.server.sim.clamped
         self.held = self.alarm = False
 
     def go_safe(self) -> None:
+        # mode 1 is allowed clamped or not: the safe state never moves the clamp
         self.mode = self.selected = 1
         self.held = self.alarm = False
         self.server.submit(lambda sim: sim.set_mode(1))
+
+    def _commands_zero(self) -> bool:
+        """The node senses the command DAC outputs (V_Td, gamma_c) on its interlock lines."""
+        command = self.server.nodes.nodes["command"]
+        assert isinstance(command, CommandNode)
+        return not any(command.values.values())
 
     @property
     def hb_flags(self) -> int:
@@ -121,6 +130,7 @@ class RelayNode(SimNode):
         snap = self.server.snapshot
         w = (self.mode << cp.ST_MODE_SHIFT) | (self.selected << cp.ST_SELECT_SHIFT)
         w |= (cp.ST_HELD if self.held else 0) | (cp.ST_ALARM if self.alarm else 0)
+        w |= cp.ST_CLAMPED if self.clamped else 0
         for i, c in enumerate(GYRO_CHANNELS):
             w |= int(snap.at_speed) << (cp.ST_AT_SPEED_SHIFT + i)
             w |= int(snap.caged[c]) << (cp.ST_CAGED_SHIFT + i)
@@ -143,6 +153,9 @@ class RelayNode(SimNode):
                 return cp.ST_NOT_HELD, self.mode
             self.held = False
             m = self.selected
+            if self.clamped and m not in cp.CLAMP_MODES:
+                self.selected = self.mode
+                return cp.ST_INTERLOCK, cp.WHY_CLAMPED
             if m in (4, 5):
                 snap = self.server.snapshot
                 need = ("X", "Y", "Z", "XRD") if m == 4 else ("X", "Y", "XRD")
@@ -157,9 +170,32 @@ class RelayNode(SimNode):
             return cp.ST_OK, self.mode
         if req.op == cp.OP_STATUS:
             return cp.ST_OK, self.status_word()
+        if req.op == cp.OP_CLAMP:
+            return self._clamp(req.value)
         if req.op == cp.OP_GET and req.index == 0:
             return cp.ST_OK, self.mode
+        if req.op == cp.OP_GET and req.index == 1:
+            return cp.ST_OK, int(self.clamped)
         return (cp.ST_BAD_INDEX if req.op == cp.OP_GET else cp.ST_BAD_OP), 0
+
+
+    def _clamp(self, value: int) -> tuple[int, int]:
+        """CLAMP 1 / 0 (docs/protocol.md): clamping needs mode 1-3 and the command inputs at
+        zero; releasing needs the command inputs at zero (a torque waiting on an opened drive
+        would kick the platform the moment the loop closes)."""
+        if value not in (0, 1):
+            return cp.ST_RANGE, int(self.clamped)
+        on = bool(value)
+        if on == self.clamped:
+            return cp.ST_OK, int(on)
+        why = 0 if self._commands_zero() else cp.WHY_COMMAND
+        if on and (self.mode not in cp.CLAMP_MODES or (self.held and self.selected not in cp.CLAMP_MODES)):
+            why |= cp.WHY_MODE
+        if why:
+            return cp.ST_INTERLOCK, why
+        self.clamped = on
+        self.server.submit(lambda sim: sim.set_clamp(on))
+        return cp.ST_OK, int(on)
 
 
 class CagingNode(SimNode):

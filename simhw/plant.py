@@ -184,6 +184,8 @@ class RelayState:
     mode: int = 3
     caging_inhibit: tuple[bool, bool, bool, bool] = (False, False, False, False)
     spin: float = 1.0  # wheel speed as a fraction of operating speed
+    #: platform clamped to the table, power-amplifier drive to the gimbal motors open (Ch. V B)
+    clamped: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -321,6 +323,11 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         b.outputs[f"cmd_{a.lower()}"] = b.u(f"vtd_{a}") + b.u(f"gc_{a}")
         vp = pa * p.amp_gain
         vp = vp + b.correction(f"amp_{a}", NL_CLIP, vp, p1=p.amp_limit_V)
+        if relays.clamped:
+            # Ch. V B open loop: the drive to the motor is opened (the network and pa_* still
+            # read), and the clamp holds the gimbal: no torque moves it, theta and omega stay
+            # where the clamp caught them (the simulator zeroes omega as it engages)
+            vp = Lin()
         theta, omega, cur = b.x(f"theta_{a}"), b.x(f"omega_{a}"), b.x(f"i_{a}")
         # eq. 3.25-3.26: La i' = V_p - Kb theta' - Ra i
         b.set_deriv(f"i_{a}", (vp - omega * p.back_emf_V_s - cur * p.armature_ohm) * (1.0 / p.armature_H))
@@ -331,8 +338,12 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
             bb = cfg.bearing[a]
             torque = torque + b.correction(f"dahl_{a}", NL_DAHL, theta, p1=bb.To_Nm, p2=bb.eta_per_Nm,
                                            gain=-br.stiffness_Nm_per_rad)
-        b.set_deriv(f"theta_{a}", omega)
-        b.set_deriv(f"omega_{a}", torque * (1.0 / p.inertia_kg_m2))  # eq. 3.23
+        if relays.clamped:
+            b.set_deriv(f"theta_{a}", Lin())
+            b.set_deriv(f"omega_{a}", Lin())
+        else:
+            b.set_deriv(f"theta_{a}", omega)
+            b.set_deriv(f"omega_{a}", torque * (1.0 / p.inertia_kg_m2))  # eq. 3.23
         b.nonlinear.append(Nonlinearity(f"stop_{a}", NL_STOP, theta, -1, p1=math.radians(p.stop_deg),
                                         state_theta=b.states.index(f"theta_{a}"),
                                         state_omega=b.states.index(f"omega_{a}")))

@@ -9,6 +9,7 @@ how a run is cut into blocks.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Sequence
@@ -296,13 +297,33 @@ class Simulator:
 
     def set_mode(self, mode: int) -> None:
         """Switch the mode relays (the console's hold/set/release is the drivers' business)."""
-        self._switch(RelayState(mode, self.relays.caging_inhibit, self.relays.spin))
+        self._switch(dataclasses.replace(self.relays, mode=mode))
 
     def set_caging_inhibit(self, channel: str, inhibit: bool) -> None:
         flags = list(self.relays.caging_inhibit)
         flags[GYRO_CHANNELS.index(channel)] = bool(inhibit)
         x, y, z, xrd = flags
-        self._switch(RelayState(self.relays.mode, (x, y, z, xrd), self.relays.spin))
+        self._switch(dataclasses.replace(self.relays, caging_inhibit=(x, y, z, xrd)))
+
+    @property
+    def clamped(self) -> bool:
+        return self.relays.clamped
+
+    def set_clamp(self, clamped: bool) -> None:
+        """Clamp the platform to the table with the motor drive open, or release it (Ch. V B).
+
+        The clamp catches the gimbals where they are: their rates go to zero at once and the
+        angles hold; released, the loops take the platform from there. The interlocks are the
+        relay node's business (``simhw.can_nodes.RelayNode``), not the physics'."""
+        clamped = bool(clamped)
+        if clamped == self.relays.clamped:
+            return
+        if clamped:
+            plant = self._compiled.disc.plant
+            for a in AXES:
+                if f"omega_{a}" in plant.states:
+                    self.x[plant.states.index(f"omega_{a}")] = 0.0
+        self._switch(dataclasses.replace(self.relays, clamped=clamped))
 
     def set_torquer_bias_V(self, channel: str, volts: float) -> None:
         self._require(channel in GYRO_CHANNELS, f"unknown gyro channel {channel!r}")
@@ -452,7 +473,7 @@ class Simulator:
         # The model is rebuilt for the speed rounded to SPIN_MODEL_STEP: each rebuild costs a
         # matrix exponential (~0.1 s), and nothing is measured while the wheels run up.
         spin = round(round(self._spin / SPIN_MODEL_STEP) * SPIN_MODEL_STEP, 6)
-        self._switch(RelayState(self.relays.mode, self.relays.caging_inhibit, spin))
+        self._switch(dataclasses.replace(self.relays, spin=spin))
 
     def _run_internal(self, m: int) -> np.ndarray:
         cp = self._compiled
