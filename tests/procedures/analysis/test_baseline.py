@@ -1,0 +1,125 @@
+"""The open-loop baseline's numerics (``procedures.analysis.baseline``) on data from a generator
+written here from DESIGN.md section 3, not from ``simhw``: an autocollimator angle noise white
+plus 1/f at drawn levels and corners, seen through the Table 1 filters; a pickoff noise white
+plus lines at drawn frequencies. The NEA within 10 % and its interval covering the truth over
+many draws; the lines found where they were put."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from drivers.calibration import AutocollimatorConstants
+from procedures.analysis.baseline import (
+    NEA_BAND_HZ,
+    array_blocks,
+    band_rms,
+    nea_truth,
+    pickoff_lines,
+    psd_of,
+    white_flicker,
+)
+from procedures.analysis.transfer import sensor_filter
+
+FS = 250.0
+SEG_S = 40.0
+N_BLOCKS = 8
+T_S = 400.0
+AC = AutocollimatorConstants(5.70, 5.63)
+SCALE = {"ac_x_ctl": AC.control_mV_per_urad * 1e-3, "ac_x_inst": AC.inst_mV_per_urad * 1e-3}  # V/urad
+
+
+def angle_noise_through_filters(rng, white_urad2_per_hz, corner_hz, n):
+    """White + 1/f angle noise (one-sided PSD S_w (1 + f_c/f) above 1 mHz), synthesized in the
+    frequency domain, and the two channels' outputs (V) through their filters."""
+    f = np.fft.rfftfreq(n, 1 / FS)
+    S = np.zeros_like(f)
+    S[1:] = white_urad2_per_hz * (1 + corner_hz / np.maximum(f[1:], 1e-3))
+    # one-sided S: a bin's complex amplitude has E|X|^2 = S fs n / 2
+    X = (rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f))) * np.sqrt(S * FS * n / 4)
+    X[0] = 0.0
+    out = {c: np.fft.irfft(X * sensor_filter(f, AC, c), n) * SCALE[c] for c in SCALE}
+    return f, S, out
+
+
+def test_nea_within_ten_percent_and_its_interval_covers_over_many_draws():
+    rng = np.random.default_rng(2201)
+    n = int(T_S * FS)
+    draws, covered, worst = 40, {c: 0 for c in SCALE}, 0.0
+    for _ in range(draws):
+        nea = rng.uniform(0.3, 0.8)            # urad in 0.1-100 Hz on the control channel
+        corner = rng.uniform(1.0, 6.0)
+        fg = np.geomspace(*NEA_BAND_HZ, 4000)
+        unit = nea_truth(fg, 1 + corner / fg, np.abs(sensor_filter(fg, AC, "ac_x_ctl")) ** 2)
+        white = (nea / unit) ** 2
+        f, S, out = angle_noise_through_filters(rng, white, corner, n)
+        x = np.column_stack([out[c] for c in SCALE])
+        blocks = array_blocks(x, FS, tuple(SCALE), SEG_S, N_BLOCKS)
+        for c in SCALE:
+            truth = nea_truth(fg, white * (1 + corner / fg), np.abs(sensor_filter(fg, AC, c)) ** 2)
+            e = band_rms(blocks, c, SCALE[c], *NEA_BAND_HZ)
+            assert e.resolved
+            worst = max(worst, abs(e.value / truth - 1))
+            covered[c] += e.covers(truth)
+    assert worst < 0.10
+    # 95 % intervals: at least 34 of 40 (binomial 2.5 % tail at p = 0.95 is 35)
+    assert all(k >= 34 for k in covered.values()), covered
+
+
+def test_white_level_and_corner_are_found_with_intervals():
+    rng = np.random.default_rng(2202)
+    n = int(T_S * FS)
+    hits_w = hits_c = 0
+    draws = 12
+    for _ in range(draws):
+        white = rng.uniform(1e-3, 4e-3)           # urad^2/Hz
+        corner = rng.uniform(1.5, 5.0)
+        f, S, out = angle_noise_through_filters(rng, white, corner, n)
+        blocks = array_blocks(out["ac_x_ctl"][:, None], FS, ("ac_x_ctl",), SEG_S, N_BLOCKS)
+        h2 = np.abs(sensor_filter(blocks.f, AC, "ac_x_ctl")) ** 2
+        wf = white_flicker(blocks, "ac_x_ctl", SCALE["ac_x_ctl"], h2, 0.1, 35.0)
+        assert wf.white_urad_per_rtHz.value == pytest.approx(math.sqrt(white), rel=0.05)
+        assert wf.corner_hz.value == pytest.approx(corner, rel=0.25)
+        hits_w += wf.white_urad_per_rtHz.covers(math.sqrt(white))
+        hits_c += wf.corner_hz.covers(corner)
+    assert hits_w >= 10 and hits_c >= 10
+
+
+def test_a_band_the_segments_cannot_reach_is_unresolved():
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((int(80 * FS), 1))
+    blocks = array_blocks(x, FS, ("ac_x_ctl",), 8.0, 8)
+    e = band_rms(blocks, "ac_x_ctl", 1.0, *NEA_BAND_HZ)
+    assert not e.resolved and "segments" in e.why
+
+
+def test_pickoff_band_rms_and_lines_where_they_were_put():
+    rng = np.random.default_rng(2203)
+    kg = 6.03e-3                                  # V/urad
+    fs, T = 1000.0, 240.0
+    n = int(fs * T)
+    t = np.arange(n) / fs
+    hits = 0
+    for _ in range(6):
+        white = rng.uniform(0.05, 0.3)            # urad^2/Hz one-sided
+        f71 = rng.uniform(70.3, 71.0)
+        lines = [(f71, rng.uniform(2, 4)), (f71 + rng.uniform(0.7, 0.9), rng.uniform(2, 4)),
+                 (rng.uniform(101.5, 102.5), rng.uniform(3, 5)), (rng.uniform(186.5, 187.5), rng.uniform(1.5, 3))]
+        x = rng.standard_normal(n) * math.sqrt(white * fs / 2)
+        for fl, a in lines:
+            x += a * np.sin(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi))
+        blocks = array_blocks((x * kg)[:, None], fs, ("gyro_x",), 20.0, 8)
+        e = band_rms(blocks, "gyro_x", kg, 1.0, 50.0)
+        truth = math.sqrt(white * 49.0)
+        assert e.value == pytest.approx(truth, rel=0.05)
+        hits += e.covers(truth)
+        found = pickoff_lines(x * kg, fs, blocks.f, psd_of(blocks, "gyro_x"), kg, 1.0, 0.4 * fs)
+        assert len(found) == len(lines)
+        for ln, (fl, a) in zip(found, sorted(lines)):
+            assert abs(ln.freq_hz - fl) < 0.01
+            lo, hi = ln.ci95_hz
+            assert lo - 1e-3 <= fl <= hi + 1e-3
+            assert ln.amplitude_urad == pytest.approx(a, rel=0.1)
+    assert hits >= 5
