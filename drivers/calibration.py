@@ -89,6 +89,8 @@ class RigCalibration:
     earth_rate_rad_per_s: float = EARTH_RATE_RAD_PER_S
     platform: dict[str, PlatformConstants] = field(default_factory=_platform_defaults)
     autocollimator: dict[str, AutocollimatorConstants] = field(default_factory=_ac_defaults)
+    #: the azimuth (Z) reference autocollimator's scale (Table 1)
+    azimuth_mV_per_urad: float = 7.36
 
     @property
     def dac_lsb_V(self) -> float:

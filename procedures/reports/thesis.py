@@ -29,3 +29,15 @@ FIGURES: dict[str, Any] = {
     "inertia_kg_m2": {"X": 0.70, "Y": 0.25},
     "pickoff_noise_urad_rms": {"X": 2.18},
 }
+
+#: Ch. V B, Figs. 32-34 and Table 1: the open-loop baselines. The NEA is Table 1's control-channel
+#: figure (0.1-100 Hz); Ch. V B.3 found 0.55 urad on the X instrumentation channel; the azimuth
+#: unit 2.78 urad (pure 1/f); the 1/f corner "below 3 Hz"; the pickoff 6.2 / 12.4 urad rms in
+#: 0.1-200 Hz with the lines, 2.18 urad of white noise in 1-50 Hz on X (see FIGURES)
+BASELINE: dict[str, Any] = {
+    "source": "thesis (Ch. V B, Table 1)",
+    "nea_urad": {"X": {"ctl": 0.451, "inst": 0.55, "z": 2.78}, "Y": {"ctl": 0.506, "z": 2.78}},
+    "flicker_corner_hz": {"ctl": 3.0, "inst": 3.0},
+    "pickoff_rms_urad": {"X": {"1-50 Hz": 2.18, "0.1-200 Hz": 6.2}, "Y": {"0.1-200 Hz": 12.4}},
+    "pickoff_lines_hz": [70.6, 71.4, 102.0, 187.0],
+}

@@ -1,0 +1,240 @@
+"""``baseline``: the open-loop sensor spectra of Ch. V B (Figs. 32-34, Table 1).
+
+The rig is brought to mode 3 (the gyros spinning and caged), the platform is clamped to the
+table with the stabilization loops open (the relay node's CLAMP, docs/protocol.md 2.5a), and
+after a settle every sensor channel is recorded: what each reads is then its own noise. From
+the record (``procedures.analysis.baseline``):
+
+* the primary autocollimator's noise-equivalent angle in 0.1-100 Hz on the axis's control and
+  instrumentation channels (Table 1), its white level and 1/f corner (Fig. 32);
+* the azimuth autocollimator's NEA (Fig. 34);
+* the axis gyro's pickoff rms in bands and its discrete lines (Fig. 33).
+
+Volts become urad with the rig's data sheet (the autocollimator scales, Table 1; the pickoff
+scale Kg from a stopwatch summary when given, else nominal, as the survey does).
+
+The clamp is released on every way out: the clamped record is one step whose release runs on
+its normal end, on an abort, on Ctrl-C and on any error (then before the runner drives the rig
+safe; the safe state itself never moves the clamp). If the rig cannot be told (a device
+fault), the failure is logged and the clamp stays: release it with ``fbs clamp off``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Annotated, Any
+
+import numpy as np
+
+from daq.plots import plot_psd
+from daq.reader import RunFile
+from procedures.analysis.baseline import (
+    NEA_BAND_HZ,
+    PICKOFF_BANDS_HZ,
+    Line,
+    band_rms,
+    pickoff_lines,
+    psd_of,
+    white_flicker,
+)
+from procedures.analysis.intervals import Estimate, add_figure
+from procedures.analysis.transfer import TransferError, block_csd, sensor_filter
+from procedures.paramlimits import OneOf, above, at_least, check_limits
+from procedures.params import prior_values
+from procedures.reports import thesis
+from procedures.reports.baseline import markdown
+from procedures.rigsetup import bring_to_mode3
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+
+log = logging.getLogger(__name__)
+
+#: every sensor channel (DESIGN.md section 5); the analysis reads the axis's
+CHANNELS = ("ac_x_ctl", "ac_y_ctl", "ac_x_inst", "ac_y_inst", "ac_z", "gyro_x", "gyro_y", "gyro_z", "gyro_xrd")
+#: ADC ranges (V): the autocollimators read millivolts of noise about a null; the pickoffs tens
+#: of millivolts about their caged offsets (XRD's proportional loop stands at ~0.34 V)
+RANGES_V = {"ac": 1.0, "gyro": 2.0}
+#: the white band of each channel's fit (Ch. V B.3: 3-35 Hz control, 3-80 Hz instrumentation;
+#: the fit starts at 0.1 Hz so the 1/f part is in it)
+WHITE_HI_HZ = {"ctl": 35.0, "inst": 80.0}
+STEP = "clamped record"
+
+
+@dataclass
+class BaselineParams:
+    axis: Annotated[str, OneOf("X", "Y", note="Z has no primary autocollimator channel")] = "X"
+    rate_hz: Annotated[float, above(0)] = 1000.0
+    #: after clamping: the caging loops' response to the clamp's stop dies out in a few seconds
+    settle_s: Annotated[float, at_least(0)] = 10.0
+    record_s: Annotated[float, above(0)] = 480.0
+    #: Welch segment (its four lowest bins are unusable: 40 s reaches 0.1 Hz) and jackknife blocks
+    seg_s: Annotated[float, above(0)] = 40.0
+    n_blocks: Annotated[int, at_least(3)] = 8
+    #: a pickoff line stands this far above the running median of the averaged PSD
+    line_min_ratio: Annotated[float, above(1)] = 20.0
+
+    def __post_init__(self) -> None:
+        self.axis = str(self.axis).upper()
+        check_limits(self, "baseline")
+        if 4.0 / self.seg_s > NEA_BAND_HZ[0] + 1e-12:
+            raise ValueError(f"baseline: Welch segments of {self.seg_s:g} s do not resolve the NEA band's "
+                             f"{NEA_BAND_HZ[0]:g} Hz (four bins above zero): use seg_s >= {4 / NEA_BAND_HZ[0]:g}")
+        if self.record_s < self.seg_s * self.n_blocks:
+            raise ValueError(f"baseline: record_s = {self.record_s:g} s holds fewer than n_blocks = {self.n_blocks} "
+                             f"segments of {self.seg_s:g} s")
+        if NEA_BAND_HZ[1] > 0.3 * self.rate_hz:
+            raise ValueError(f"baseline: the NEA band reaches {NEA_BAND_HZ[1]:g} Hz, above the anti-alias filter "
+                             f"(0.3 fs = {0.3 * self.rate_hz:g} Hz): use rate_hz >= {NEA_BAND_HZ[1] / 0.3:g}")
+
+
+Params = BaselineParams
+
+
+def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]
+                   ) -> tuple[dict[str, float], dict[str, str]]:
+    """Kg (mV/urad) per gyro channel and where it came from: the stopwatch summary, else nominal."""
+    return prior_values(prior, "stopwatch", "K_g_mV_per_urad", ("X", "Y", "Z", "XRD"), nominal)
+
+
+class Baseline(Procedure[BaselineParams]):
+    name = "baseline"
+    title = "Open-loop sensor baselines, platform clamped (Ch. V B)"
+    json_keys = ("nea_urad", "white_urad_per_rtHz", "flicker_corner_hz", "pickoff_rms_urad", "pickoff_lines_hz",
+                 "file")
+    Params = BaselineParams
+    mode = 3
+    block_s = 1.0
+
+    def __init__(self, params: BaselineParams | None = None, *, reference: Mapping[str, Any] | None = None,
+                 **kw) -> None:
+        super().__init__(params, **kw)
+        self.rate_hz = self.params.rate_hz
+        self.axis = self.params.axis
+        self.ranges_V = {c: RANGES_V["gyro" if c.startswith("gyro") else "ac"] for c in CHANNELS}
+        #: the report's reference column (never used by the measurement)
+        self.reference = dict(thesis.BASELINE if reference is None else reference)
+
+    def channels(self) -> tuple[str, ...]:
+        return CHANNELS
+
+    def names(self) -> dict[str, str]:
+        a = self.params.axis.lower()
+        return {"ctl": f"ac_{a}_ctl", "inst": f"ac_{a}_inst", "z": "ac_z", "gyro": f"gyro_{a}"}
+
+    def plan(self) -> list[Step]:
+        p = self.params
+        return [Step("mode 3", partial(bring_to_mode3, clamped_ok=True), expected_s=300.0, setup=True),
+                Step(STEP, self._clamped_record, expected_s=p.settle_s + p.record_s)]
+
+    # ------------------------------------------------------------------ the clamped record
+    def _clamped_record(self, ctx: Context) -> dict:
+        """Clamp, settle, record, release: one step, so no abort can fall between the clamp and
+        its release (the runner checks for an abort between steps, outside any step's hands)."""
+        rig, p = ctx.rig, self.params
+        rig.clamp()
+        ctx.note("platform clamped, loops open (Ch. V B)")
+        try:
+            start = ctx.acq.pos
+            ctx.acquire(p.settle_s, keep=False)
+            settle = ctx.acq.pos - start
+            ctx.acquire(p.record_s, keep=False)
+        except BaseException as exc:   # noqa: B036 - Ctrl-C too: the clamp is released on every way out
+            self._release_after(ctx, exc)
+            raise
+        rig.unclamp()
+        ctx.note("platform released, loops closed")
+        return {"settle_samples": int(settle), "record_samples": int(round(p.record_s * ctx.acq.rate_hz))}
+
+    @staticmethod
+    def _release_after(ctx: Context, exc: BaseException) -> None:
+        try:
+            ctx.rig.unclamp()
+            log.warning("baseline stopped (%s): platform released", type(exc).__name__)
+        except Exception as why:  # the rig may be gone: say so, and let the first exception go on
+            log.error("baseline stopped (%s) and the platform could NOT be released: %s; release it with "
+                      "`fbs clamp off --rig URL`", type(exc).__name__, why)
+
+    # ------------------------------------------------------------------ analysis
+    def record_span(self, ctx: Context) -> tuple[Path, int, int]:
+        spans = ctx.data_spans([STEP])
+        if not spans:
+            raise ProcedureError("baseline: the clamped record was not taken")
+        s = spans[0]
+        settle = int((ctx.results.get(STEP) or {}).get("settle_samples", 0))
+        return s.file, s.start + settle, s.stop
+
+    def analyze(self, ctx: Context) -> Analysis:
+        p = self.params
+        cal = ctx.rig.calibration
+        ac = cal.autocollimator[p.axis]
+        n = self.names()
+        kg_mv, kg_src = pickoff_scales(self.prior, cal.pickoff_scale_mV_per_urad)
+        kg = kg_mv[p.axis] * 1e-3                                     # V/urad
+        scale = {"ctl": ac.control_mV_per_urad * 1e-3, "inst": ac.inst_mV_per_urad * 1e-3,
+                 "z": cal.azimuth_mV_per_urad * 1e-3}
+        file, start, stop = self.record_span(ctx)
+        channels = tuple(n.values())
+        try:
+            blocks = block_csd([(file, start, stop)], channels, p.seg_s, p.n_blocks)
+        except TransferError as exc:
+            raise ProcedureError(f"baseline: {exc}") from None
+        f = blocks.f
+
+        nea = {k: band_rms(blocks, n[k], scale[k], *NEA_BAND_HZ) for k in ("ctl", "inst", "z")}
+        fits = {k: white_flicker(blocks, n[k], scale[k], np.abs(sensor_filter(f, ac, n[k])) ** 2,
+                                 NEA_BAND_HZ[0], WHITE_HI_HZ[k]) for k in ("ctl", "inst")}
+        pick = {band: band_rms(blocks, n["gyro"], kg, lo, hi) for band, (lo, hi) in PICKOFF_BANDS_HZ.items()}
+        with RunFile(file) as rf:
+            x = rf.read([n["gyro"]], start, stop)[0]
+        lines = pickoff_lines(x, blocks.fs, f, psd_of(blocks, n["gyro"]), kg, 1.0, 0.4 * blocks.fs,
+                              min_ratio=p.line_min_ratio)
+
+        values: dict[str, Any] = {}
+        add_figure(values, "nea_urad", nea, digits=5)
+        add_figure(values, "white_urad_per_rtHz", {k: w.white_urad_per_rtHz for k, w in fits.items()}, digits=5)
+        add_figure(values, "flicker_corner_hz", {k: w.corner_hz for k, w in fits.items()}, digits=4)
+        add_figure(values, "pickoff_rms_urad", pick, digits=5)
+        values["pickoff_lines_hz"] = [round(ln.freq_hz, 4) for ln in lines]
+        values["pickoff_lines_hz_ci95"] = [[round(v, 4) for v in ln.ci95_hz] for ln in lines]
+        values["pickoff_line_amplitude_urad"] = [round(ln.amplitude_urad, 4) for ln in lines]
+        values |= {"axis": p.axis, "channels": n, "pickoff_scale_mV_per_urad": kg_mv[p.axis],
+                   "pickoff_scale_source": kg_src[p.axis], "nea_band_hz": list(NEA_BAND_HZ),
+                   "record_s": round((stop - start) / blocks.fs, 3)}
+
+        ms = [_measurement(f"NEA {n[k]} {NEA_BAND_HZ[0]:g}-{NEA_BAND_HZ[1]:g} Hz", nea[k], "urad") for k in nea]
+        ms += [_measurement(f"white level {n[k]}", fits[k].white_urad_per_rtHz, "urad/sqrt(Hz)") for k in fits]
+        ms += [_measurement(f"1/f corner {n[k]}", fits[k].corner_hz, "Hz") for k in fits]
+        ms += [_measurement(f"pickoff rms {n['gyro']} {band}", e, "urad") for band, e in pick.items()]
+        ms += [Measurement(f"pickoff line {i + 1} ({n['gyro']})", ln.freq_hz, "Hz", stderr=ln.freq_sigma_hz,
+                           note=f"{ln.amplitude_urad:.3g} urad, {ln.ratio:.0f}x the local median")
+               for i, ln in enumerate(lines)]
+
+        title = f"{Path(ctx.path).name}, clamped, {blocks.seconds:.0f} s at {blocks.fs:g} Hz"
+        nperseg = int(round(p.seg_s * blocks.fs))
+        dof = 2.0 * blocks.averages()
+        figures = []
+        for k, c in n.items():
+            sc = kg if k == "gyro" else scale[k]
+            figures.append(Figure(f"psd-{c}", f"Open-loop PSD of {c} in urad²/Hz (Ch. V B, Figs. 32-34)",
+                                  partial(_plot, f=f[1:-1], p=psd_of(blocks, c)[1:-1] / sc ** 2, channel=c,
+                                          dof=dof, nperseg=nperseg, title=title)))
+        md = markdown(values, p.axis, lines, self.reference.get("pickoff_lines_hz") or [], self.reference,
+                      blocks.seconds, blocks.fs, p.seg_s, blocks.n_blocks)
+        return Analysis(values, ms, figures, md)
+
+
+def _plot(path: Path, *, f: np.ndarray, p: np.ndarray, channel: str, dof: float, nperseg: int, title: str) -> Path:
+    return plot_psd(path, f, p, channel=channel, units="urad", dof=dof, nperseg=nperseg, nfft=nperseg, title=title)
+
+
+def _measurement(name: str, e: Estimate, units: str) -> Measurement:
+    note = f"95 % [{e.lo:.4g}, {e.hi:.4g}]" + ("" if e.resolved else f"; not resolved: {e.why}")
+    return Measurement(name, e.value if e.resolved else None, units, note=note)
+
+
+__all__ = ["Baseline", "BaselineParams", "Line", "Params"]
+
+PROCEDURE = Baseline
