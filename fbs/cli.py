@@ -14,7 +14,7 @@ import sys
 from contextlib import nullcontext
 
 from drivers.errors import DriverError
-from fbs import analyze, batch, campaign, demo, inspect, record, run, simulate, spectra
+from fbs import analyze, batch, campaign, clamp, demo, inspect, record, run, simulate, spectra
 from fbs import gap as gap_cli
 from fbs.logsetup import command_logging
 from fbs.signals import aborting_on_signals
@@ -45,6 +45,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     simulate.add_parser(sub)
     record.add_parser(sub)
+    clamp.add_parser(sub)
     c = sub.add_parser("console", help="the operator console (Textual): meters, modes, set-points, recording, "
                                        "procedures, spectra")
     c.add_argument("--rig", default="sim?realtime=1",

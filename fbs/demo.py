@@ -58,6 +58,12 @@ def sim_values(cfg: SimConfig) -> dict[str, Any]:
         "pickoff_noise_urad_rms": {c: _pickoff_noise_1_50(g) for c, g in cfg.gyro.items()},
         "bias_instability_urad_per_s": {c: g.bias_instability_urad_per_s for c, g in cfg.gyro.items()},
         "arw_urad_per_sqrt_s": {c: g.arw_urad_per_sqrt_s for c, g in cfg.gyro.items()},
+        # the control channel's NEA is the sim parameter's definition (Table 1); the azimuth's too
+        "nea_urad": {a: {"ctl": cfg.autocollimator[a].nea_urad, "z": cfg.azimuth.nea_urad} for a in ("X", "Y")},
+        "flicker_corner_hz": {a: cfg.autocollimator[a].flicker_corner_hz for a in ("X", "Y")},
+        "pickoff_rms_urad": {a: {"1-50 Hz": _pickoff_noise_1_50(cfg.gyro[a]),
+                                 "0.1-200 Hz": cfg.gyro[a].pickoff_noise_rms_urad} for a in ("X", "Y")},
+        "pickoff_lines_hz": {a: [f for f, _ in cfg.gyro[a].pickoff_lines] for a in ("X", "Y")},
     }
 
 
@@ -71,8 +77,8 @@ def _pickoff_noise_1_50(g: Any) -> float:
 
 #: (procedure, axis or None) in campaign order
 CAMPAIGN: list[tuple[str, str | None]] = [("earth-rate", None), ("stopwatch", None), ("hysteresis", "X"),
-                                          ("hysteresis", "Y"), ("survey", None), ("excitation", "X"),
-                                          ("drift", None)]
+                                          ("hysteresis", "Y"), ("survey", None), ("baseline", "X"),
+                                          ("excitation", "X"), ("drift", None)]
 
 
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
@@ -159,6 +165,7 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
                             f"independent channels: {fmt(cross.get('null_mean'))}; "
                             + ("significant" if cross.get("significant") else "not significant")
                             + f" (z {fmt(cross.get('z'))}; Fig. 48)"))
+    _baseline_rows(rows, by_name.get("baseline", []), sim)
     per_channel("excitation", "inertia_kg_m2", "platform inertia (V_Td -> angle)", "kg m^2")
     for s in by_name.get("excitation", []):
         axis = s.params.get("axis", "X")
@@ -175,6 +182,38 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
     per_channel("drift", "bias_instability_urad_per_s", "bias instability", "urad/s")
     per_channel("drift", "arw_urad_per_sqrt_s", "angle random walk", "urad/sqrt(s)")
     return rows
+
+
+def _baseline_rows(rows: list[Row], runs: list[RunSummary], sim: dict[str, Any]) -> None:
+    """The open-loop baseline's figures (Ch. V B, Table 1) beside the thesis's and the rig's."""
+    ref = thesis.BASELINE
+    for s in runs:
+        axis = s.params.get("axis", "X")
+        v = s.values
+        for key, label, units, thesis_of, sim_of in (
+                ("nea_urad", "autocollimator NEA 0.1-100 Hz", "urad", (ref["nea_urad"].get(axis) or {}).get,
+                 ((sim.get("nea_urad") or {}).get(axis) or {}).get),
+                ("white_urad_per_rtHz", "autocollimator white level", "urad/sqrt(Hz)", lambda ch: None,
+                 lambda ch: None),
+                ("flicker_corner_hz", "autocollimator 1/f corner", "Hz", ref["flicker_corner_hz"].get,
+                 dict.fromkeys(("ctl", "inst"), (sim.get("flicker_corner_hz") or {}).get(axis)).get),
+                ("pickoff_rms_urad", f"pickoff rms gyro {axis}", "urad",
+                 (ref["pickoff_rms_urad"].get(axis) or {}).get, ((sim.get("pickoff_rms_urad") or {}).get(axis) or {}).get)):
+            ci = v.get(f"{key}_ci95") or {}
+            resolved = (v.get("resolved") or {}).get(key) or {}
+            for ch, x in (v.get(key) or {}).items():
+                iv = ci.get(ch)
+                note = "" if not iv or iv[0] is None else f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]"
+                if resolved.get(ch) is False:
+                    note = "not resolved" + (f": {note}" if note else "")
+                name = f"{label} {axis} {ch}" if key != "pickoff_rms_urad" else f"{label} {ch}"
+                rows.append(Row(name, units, x, thesis_of(ch), sim_of(ch), note + "; clamped platform (Ch. V B)"))
+        found = v.get("pickoff_lines_hz") or []
+        truth = (sim.get("pickoff_lines_hz") or {}).get(axis) or []
+        rows.append(Row(f"pickoff lines gyro {axis}", "Hz", None, None, None,
+                        f"found {', '.join(f'{f:.3f}' for f in found) or 'none'}; thesis "
+                        f"{', '.join(f'{f:g}' for f in ref['pickoff_lines_hz'])} (Fig. 33); simulated "
+                        f"{', '.join(f'{f:g}' for f in truth)}"))
 
 
 def write_campaign_report(out: Path, summaries: list[RunSummary], sim: dict[str, Any], wall_s: float,

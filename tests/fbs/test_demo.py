@@ -31,3 +31,13 @@ def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
 def test_campaign_covers_every_procedure():
     from procedures.calibrations import catalogue
     assert {name for name, _ in CAMPAIGN} == set(catalogue())
+
+
+def test_report_sets_the_baseline_beside_table_1(tmp_path):
+    values = {"nea_urad": {"ctl": 0.447, "inst": 0.567, "z": 2.79},
+              "nea_urad_ci95": {"ctl": [0.443, 0.451], "inst": [0.56, 0.57], "z": [2.7, 2.9]},
+              "pickoff_lines_hz": [70.6, 71.4, 102.0, 187.0]}
+    text = write_campaign_report(tmp_path, [_summary("baseline", values, axis="X")], sim_values(SimConfig()), 1.0,
+                                 0).read_text()
+    assert "| autocollimator NEA 0.1-100 Hz X ctl | urad | 0.447 | 0.451 | 0.451 |" in text
+    assert "found 70.600, 71.400, 102.000, 187.000" in text
