@@ -149,6 +149,8 @@ def interlock_words(st: RelayStatus, alarm: str | None) -> Text:
     said once, by the line above (at speed, caged); a refused release once more by the alarm,
     in the drivers' words (``relay.interlock_reason``), to which these lines then point."""
     t = Text()
+    if st.clamped:   # the open-loop baseline's state (Ch. V B): modes 4-6 refused until released
+        t.append("platform CLAMPED, loops open: modes 1-3 only (fbs clamp off releases it)\n", style="bold yellow")
     for m, need in CAGED_FOR_MODE.items():
         t.append(f"mode {m} needs {' '.join(need)} at speed and caged: ")
         if interlock_reason(m, st) is None:
