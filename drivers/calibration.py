@@ -82,6 +82,11 @@ class RigCalibration:
     #: sigma is balanced by the rate sigma / (h/k) without torquer current
     restraint_time_constant_s: dict[str, float] = field(
         default_factory=lambda: {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0})
+    #: the caging loops as designed (II C.1.a(8)): natural frequency (rad/s) and damping. In the
+    #: gyro modes the autocollimator cages the float through them, inside the stabilization loop
+    caging_natural_rad_per_s: dict[str, float] = field(
+        default_factory=lambda: {"X": 0.1, "Y": 0.1, "Z": 0.1, "XRD": 1.0})
+    caging_zeta: dict[str, float] = field(default_factory=lambda: {"X": 0.7, "Y": 0.7, "Z": 0.7, "XRD": 1.0})
     max_torquing_earth_rates: float = 3.5
     dac_range_V: float = 10.0
     dac_bits: int = 16

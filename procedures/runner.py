@@ -213,7 +213,8 @@ class Procedure(abc.ABC, Generic[P]):
     title: ClassVar[str]
     json_keys: ClassVar[tuple[str, ...]]  # DESIGN.md section 7, "file" included
     Params: ClassVar[type[Any]]           # the dataclass P (a ClassVar cannot name a type variable)
-    mode: ClassVar[int] = 3
+    #: the mode the procedure measures in (the run file's ``mode``); a parameter may choose it
+    mode: int = 3
 
     def __init__(self, params: P | None = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None) -> None:
         self.params: P = params if params is not None else self.Params()

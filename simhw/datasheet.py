@@ -2,8 +2,8 @@
 
 ``rig_calibration(cfg)`` publishes, for a sim config, what a real rig's calibration file
 holds (``drivers.calibration``): site, platform inertia, motor and amplifier constants,
-autocollimator scale factors and filters. It deliberately does *not* publish what the procedures
-measure: torquer and pickoff scale factors, drifts, bearing friction and the table's azimuth
+autocollimator scale factors and filters, the caging loops' design. It deliberately does *not*
+publish what the procedures measure: torquer and pickoff scale factors, drifts, bearing friction and the table's azimuth
 offset stay at their nominal (thesis) values, whatever the config says, so a procedure run
 against another config must find those by measurement.
 """
@@ -28,4 +28,6 @@ def rig_calibration(cfg: SimConfig) -> RigCalibration:
                                      inst_filter2_zeta=c.inst_filter2_zeta)
           for a, c in ((a, cfg.autocollimator[a]) for a in AC_AXES)}
     return RigCalibration(latitude_deg=cfg.site.latitude_deg, earth_rate_rad_per_s=cfg.site.earth_rate_rad_per_s,
-                          platform=platform, autocollimator=ac)
+                          platform=platform, autocollimator=ac,
+                          caging_natural_rad_per_s={c: g.caging_natural_freq_rad_per_s for c, g in cfg.gyro.items()},
+                          caging_zeta={c: g.caging_zeta for c, g in cfg.gyro.items()})

@@ -82,6 +82,10 @@ from procedures.analysis.intervals import MAX_CORRELATION, Estimate, from_stderr
 
 URAD = 1e-6
 N_BLOCKS = 8
+#: the least standard error of ln|H| and of the phase (rad) a bin is weighted with: each ADC
+#: channel has its own 3-pole anti-alias filter at 0.3 fs (App. A.5); with 1 % parts two of them
+#: differ by ~0.4 deg at 0.1 fs, so no ratio of two channels is known better than ~0.3 %, 0.2 deg
+SE_FLOOR = 3e-3
 LEVEL = 0.95
 
 
@@ -289,14 +293,34 @@ def response(blocks: BlockCsd, source: str, target: str, via: str | None = None)
     r = None if via is None else blocks.index(via)
     if len({i, j} | ({r} if r is not None else set())) < (2 if r is None else 3):
         raise TransferError(f"source {source!r}, target {target!r} and via {via!r} must be different channels")
+    return _jackknifed(blocks, source, target, via, lambda S: _h(S, i, j, r), r if r is not None else i, j)
+
+
+def network_in_loop(blocks: BlockCsd, source: str, amplifier: str, via: str, divider: float) -> Response:
+    """The compensation network inside the excited loop: its output v_c = pa - K_d V_Td
+    (eq. 3.27) per its input, both through the injected V_Td, (S_r,pa - K_d S_r,r) / S_r,x.
+    Unlike H1 on a quiet record it is free of the network's memory: at a periodic excitation's
+    lines the loop is in steady state, while a Welch segment not many times the slowest pole's
+    6.7 s holds response to input from before it (Bendat and Piersol's time-delay bias)."""
+    i, j, r = blocks.index(source), blocks.index(amplifier), blocks.index(via)
+    if len({i, j, r}) < 3:
+        raise TransferError(f"source {source!r}, amplifier {amplifier!r} and via {via!r} must be different channels")
+    return _jackknifed(blocks, source, f"{amplifier} - {divider:g} {via}", via,
+                       lambda S: (S[:, r, j] - divider * S[:, r, r]) / S[:, r, i], r, i)
+
+
+def _jackknifed(blocks: BlockCsd, source: str, target: str, via: str | None,
+                h: Callable[[np.ndarray], np.ndarray], ci: int, cj: int) -> Response:
+    """``h`` of the blocks' mean matrix, with the leave-one-out replicates and their errors;
+    the coherence reported is that of channels ``ci`` and ``cj``."""
     S = blocks.mean()
     with np.errstate(divide="ignore", invalid="ignore"):
-        H = _h(S, i, j, r)
-        Hb = np.array([_h(blocks.mean(leave_out=b), i, j, r) for b in range(blocks.n_blocks)])
+        H = h(S)
+        Hb = np.array([h(blocks.mean(leave_out=b)) for b in range(blocks.n_blocks)])
         ratio = Hb / H
         log_se = jackknife_se(np.log(np.abs(ratio)))
         phase_se = jackknife_se(np.angle(ratio))
-        coh = coherence(S)[:, r if r is not None else i, j]
+        coh = coherence(S)[:, ci, cj]
     return Response(source, target, via, blocks.f, H, coh, log_se, phase_se, Hb, blocks.n_blocks - 1)
 
 
@@ -351,6 +375,9 @@ class ModelFit:
     curve: Callable[[np.ndarray], np.ndarray] | None = None
     #: the fitted response on a grid with jackknife intervals (``response_table``)
     table: dict[str, list[Any]] | None = None
+    #: the fitted parameters, and the same fit to each leave-one-out block (the jackknife's)
+    params: dict[str, float] = field(default_factory=dict)
+    replicates: list[dict[str, float]] = field(default_factory=list)
 
     def values(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -407,7 +434,11 @@ def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
                             f"with coherence >= {min_coherence:g}; a network fit needs 12")
     p0 = dict(DESIGN_NETWORK if start is None else start)
     x0 = np.log([p0["gain"] * p0["w1_rad_per_s"], *(p0[k] for k in NETWORK_CORNERS)])
-    f, H, ls, ps = resp.f[ok], resp.H[ok], resp.log_se[ok], resp.phase_se_rad[ok]
+    # no bin weighs beyond the channels' match (SE_FLOOR): where the network's input is a line,
+    # or Mode 4's strong pickoff noise, the jackknife error falls to 1e-5, and a 0.01 dB
+    # difference between two ADC channels would decide the fit
+    f, H = resp.f[ok], resp.H[ok]
+    ls, ps = np.maximum(resp.log_se[ok], SE_FLOOR), np.maximum(resp.phase_se_rad[ok], SE_FLOOR)
     x = _fit_network_once(f, H, ls, ps, x0)
     # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
     xb = np.array([_fit_network_once(f, resp.H_blocks[b][ok], ls, ps, x) for b in range(resp.H_blocks.shape[0])])
@@ -434,7 +465,8 @@ def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
     table = response_table(lambda ff: network_response(ff, params),
                            [partial(network_response, p=_network_params(xx)) for xx in xb], resp.dof)
     return ModelFit("network", est, (lo_hz, hi_hz), int(ok.sum()), *_residuals(network_response(f, params), H, ls, ps),
-                    correlations, curve=lambda ff: network_response(ff, params), table=table)
+                    correlations, curve=lambda ff: network_response(ff, params), table=table, params=params,
+                    replicates=[_network_params(xx) for xx in xb])
 
 
 #: where a fitted response is tabulated in the JSON: 0.3-100 Hz, 6 points a decade
@@ -576,4 +608,5 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
     notes = [f"viscous damping D includes the bearing's and the gyro gimbals'; the motor's back-EMF "
              f"({pc.motor_Nm_per_A * pc.back_emf_V_s / pc.armature_ohm:.3g} N m s) is taken out"]
     return ModelFit("platform", est, (lo_hz, hi_hz), int(ok.sum()), res_db, res_deg, normalized, correlations, notes,
-                    curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target))
+                    curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target),
+                    params=dict(zip(names, (J, D, kk))), replicates=[dict(zip(names, map(float, v))) for v in xb])

@@ -30,7 +30,6 @@ of the sensor with V_Td, gamma^2 S is what the platform's excited motion put the
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import partial
@@ -39,15 +38,21 @@ from typing import Annotated, Any
 
 import numpy as np
 
+from daq.spectra import coherence, equivalent_dof, n_segments, welch_csd_matrix
+from drivers.calibration import RigCalibration
 from procedures.analysis.intervals import add_figure
+from procedures.analysis.roots import ClosedLoop, GyroCaging, LoopParts, close_loop, sensor_gain
 from procedures.analysis.transfer import (
     DESIGN_NETWORK,
     NETWORK_CORNERS,
+    BlockCsd,
     ModelFit,
+    Response,
     TransferError,
     block_csd,
     fit_network,
     fit_platform,
+    network_in_loop,
     network_response,
     periodic_blocks,
     response,
@@ -60,17 +65,28 @@ from procedures.rigsetup import bring_to_mode3
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 URAD = 1e-6
-#: the recorded channels' ADC ranges (V): the amplifier input is millivolts
+#: the recorded channels' ADC ranges (V): the amplifier input is millivolts, tens of them in the
+#: gyro modes, where the network amplifies the pickoff noise (Mode 5 Y: 7 mV rms, 35 mV peaks;
+#: the pickoff itself 0.1 V rms, 0.47 V peaks)
 RANGES_V = {"cmd": 10.0, "ac_ctl": 1.0, "ac_inst": 1.0, "gyro": 1.0, "pa": 0.05}
+GYRO_MODE_RANGES_V = {"gyro": 2.0, "pa": 0.2}
 
 
 @dataclass
 class ExcitationParams:
     axis: Annotated[str, OneOf("X", "Y", note="Z has no primary autocollimator channel")] = "X"
+    #: 3 autocollimator stabilization; 4 and 5 gyro stabilization (entered from caged Mode 3)
+    mode: Annotated[int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")] = 3
     rate_hz: Annotated[float, above(0)] = 1000.0
     #: V_Td updates per second (a DAC set-point between ADC blocks); rate_hz / update_hz whole
     update_hz: Annotated[float, above(0)] = 250.0
     settle_s: Annotated[float, at_least(0)] = 20.0
+    #: after the switch to Mode 4 or 5: the network's input steps from the control channel to
+    #: the pickoff, and its slowest pole (w1, 0.15 rad/s: 6.7 s) and the caging loop through the
+    #: autocollimator (0.1 rad/s, zeta 0.7: 14 s) ring on; their free response in the quiet
+    #: record is output the network's input does not explain (H1 read 0.3 dB, 2 deg off at
+    #: 0.5 Hz after 10 s)
+    mode_settle_s: Annotated[float, at_least(0)] = 90.0
     quiet_s: Annotated[float, above(0)] = 120.0
     probe_s: Annotated[float, above(0)] = 16.0
     excite_s: Annotated[float, above(0)] = 256.0
@@ -81,6 +97,9 @@ class ExcitationParams:
     #: bearings (eq. 5.2) are a spring only well inside To / (eta To^2), 39 urad on X: on the
     #: thesis rig k read 396 N m/rad at 2 urad, 366 at 4 and 296 at 10 (eta To^2 = 410)
     target_urad: Annotated[float, above(0)] = 2.0
+    #: ... and at least this many times the quiet record's rms: in the gyro modes the platform
+    #: follows the pickoff noise (Mode 5 Y: 4.9 urad rms), and an excitation below it is lost
+    above_quiet: Annotated[float, at_least(0)] = 1.5
     #: V_Td rms of the probe
     probe_V: Annotated[float, above(0)] = 0.05
     max_range_fraction: Annotated[float, above(0)] = 0.6
@@ -93,6 +112,9 @@ class ExcitationParams:
     fit_lo_hz: Annotated[float, above(0)] = 0.5
     network_hi_hz: Annotated[float, above(0)] = 100.0
     platform_hi_hz: Annotated[float, above(0)] = 50.0
+    #: the band the closed-loop roots are fitted over (Tables 5 and 6: 5-160 rad/s)
+    roots_lo_hz: Annotated[float, above(0)] = 0.3
+    roots_hi_hz: Annotated[float, above(0)] = 50.0
     seed: Annotated[int, at_least(0)] = 1
 
     def __post_init__(self) -> None:
@@ -114,13 +136,34 @@ class ExcitationParams:
         for name, per in (("period_s", self.period_s * self.update_hz), ("period_s", self.period_s * self.rate_hz)):
             if abs(per - round(per)) > 1e-6:
                 raise ValueError(f"excitation: {name} = {self.period_s:g} s must be whole V_Td updates and samples")
-        if not self.fit_lo_hz < min(self.network_hi_hz, self.platform_hi_hz) <= self.rate_hz * 0.3:
+        if not (self.fit_lo_hz < min(self.network_hi_hz, self.platform_hi_hz) <= self.rate_hz * 0.3
+                and self.roots_lo_hz < self.roots_hi_hz <= self.rate_hz * 0.3):
             raise ValueError(f"excitation: fit bands from {self.fit_lo_hz:g} Hz to {self.network_hi_hz:g} / "
-                             f"{self.platform_hi_hz:g} Hz must lie below the anti-alias filter (0.3 fs = "
+                             f"{self.platform_hi_hz:g} Hz, and the roots' {self.roots_lo_hz:g}-{self.roots_hi_hz:g} Hz, "
+                             f"must lie below the anti-alias filter (0.3 fs = "
                              f"{self.rate_hz * 0.3:g} Hz)")
 
 
 Params = ExcitationParams
+
+
+#: a probe that moves the platform less than PROBE_ENOUGH x the target is repeated PROBE_GROWTH
+#: times as strong, at most PROBE_TRIES probes in all
+PROBE_ENOUGH, PROBE_GROWTH, PROBE_TRIES = 0.2, 4.0, 4
+#: peak / rms of a channel's excited part (a random-phase multisine is near Gaussian: 4.5 sigma is
+#: reached about once in the 2.5e5 samples of an excitation)
+CREST = 4.5
+
+
+def coherent_rms(x: np.ndarray, y: np.ndarray, fs: float, band_hz: tuple[float, float], seg_s: float = 2.0) -> float:
+    """The rms of ``y``'s part coherent with ``x`` in ``band_hz``: the integral of
+    gamma^2 S_yy, gamma^2 freed of its bias over the averaged segments (Ch. V C)."""
+    nperseg = min(int(round(seg_s * fs)), len(x))
+    f, S = welch_csd_matrix(np.vstack([x, y]), fs, nperseg=nperseg)
+    m = equivalent_dof("hann", nperseg, nperseg // 2, n_segments(len(x), nperseg, nperseg // 2)) / 2.0
+    g = unbiased_coherence(coherence(S)[:, 0, 1], m)
+    band = (f >= band_hz[0]) & (f <= band_hz[1])
+    return float(np.sqrt(np.sum((g * S[:, 1, 1].real)[band]) * (f[1] - f[0])))
 
 
 def excitation_signal(n: int, update_hz: float, lo_hz: float, hi_hz: float, seed: int) -> np.ndarray:
@@ -139,8 +182,9 @@ def excitation_signal(n: int, update_hz: float, lo_hz: float, hi_hz: float, seed
 
 class Excitation(Procedure[ExcitationParams]):
     name = "excitation"
-    title = "Coherent excitation through V_Td in Mode 3: network, inertia, stiffness (Ch. V C-D)"
-    json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "file")
+    title = ("Coherent excitation through V_Td in Mode 3, 4 or 5: network, inertia, stiffness, closed-loop roots "
+             "(Ch. V C-D, Tables 5-6)")
+    json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "closed_loop", "file")
     Params = ExcitationParams
     mode = 3
 
@@ -148,12 +192,16 @@ class Excitation(Procedure[ExcitationParams]):
         super().__init__(params, **kw)
         p = self.params
         self.axis = p.axis
+        self.mode = p.mode
         self.rate_hz = p.rate_hz
         self.block_s = 1.0 / p.update_hz
         a = p.axis.lower()
         self.names = {"cmd": f"cmd_{a}", "ac_ctl": f"ac_{a}_ctl", "ac_inst": f"ac_{a}_inst", "gyro": f"gyro_{a}",
                       "pa": f"pa_{a}"}
-        self.channel_ranges_V: dict[str, float] = {self.names[k]: v for k, v in RANGES_V.items()}
+        # the network's input: the control channel in Mode 3, the axis gyro's pickoff in 4 and 5 (Fig. 27)
+        self.network_input = self.names["ac_ctl"] if p.mode == 3 else self.names["gyro"]
+        ranges = RANGES_V | (GYRO_MODE_RANGES_V if p.mode != 3 else {})
+        self.channel_ranges_V: dict[str, float] = {self.names[k]: v for k, v in ranges.items()}
         self.ranges_V = self.channel_ranges_V
 
     def channels(self) -> tuple[str, ...]:
@@ -161,29 +209,48 @@ class Excitation(Procedure[ExcitationParams]):
 
     def plan(self) -> list[Step]:
         p = self.params
-        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                Step("settle", self._settle, expected_s=p.settle_s, setup=True),
-                Step("quiet", self._quiet, expected_s=p.quiet_s),
-                Step("probe", self._probe, expected_s=p.probe_s, setup=True),
-                Step("excite", self._excite, expected_s=p.excite_s),
-                Step("V_Td off", self._off, expected_s=2.0, setup=True)]
+        steps = [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+                 Step("settle", self._settle, expected_s=p.settle_s, setup=True)]
+        if p.mode != 3:
+            steps.append(Step(f"mode {p.mode}", self._gyro_mode, expected_s=p.mode_settle_s, setup=True))
+        steps += [Step("quiet", self._quiet, expected_s=p.quiet_s),
+                  Step("probe", self._probe, expected_s=p.probe_s, setup=True),
+                  Step("excite", self._excite, expected_s=p.excite_s),
+                  Step("V_Td off", self._off, expected_s=2.0, setup=True)]
+        if p.mode != 3:
+            steps.append(Step("back to mode 3", self._back_to_mode3, expected_s=2.0, setup=True))
+        return steps
 
     def _settle(self, ctx: Context) -> dict:
         ctx.rig.set_command_torque_V(self.params.axis, 0.0)
         ctx.acquire(self.params.settle_s, keep=False)
         return {"settle_s": self.params.settle_s}
 
+    def _gyro_mode(self, ctx: Context) -> dict:
+        """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then settle:
+        the loop now closes through the gyro's float, and the caging through the autocollimator."""
+        mode = ctx.rig.set_mode(self.params.mode)
+        ctx.acquire(self.params.mode_settle_s, keep=False)
+        return {"mode": mode, "settle_s": self.params.mode_settle_s}
+
+    def _back_to_mode3(self, ctx: Context) -> dict:
+        return {"mode": ctx.rig.set_mode(3)}
+
     def _quiet(self, ctx: Context) -> dict:
         ctx.acquire(self.params.quiet_s, keep=False)
         return {"seconds": self.params.quiet_s}
 
+    def _period(self) -> np.ndarray:
+        """One period of the unit-rms multisine, a value per V_Td update."""
+        p = self.params
+        return excitation_signal(int(round(p.period_s * p.update_hz)), p.update_hz, p.band_lo_hz, p.band_hi_hz,
+                                 p.seed)
+
     def _inject(self, ctx: Context, volts_rms: float, seconds: float, keep: bool) -> np.ndarray | None:
         """``seconds`` of the excitation at ``volts_rms``: one V_Td set-point per ADC block."""
         p = self.params
-        period = excitation_signal(int(round(p.period_s * p.update_hz)), p.update_hz, p.band_lo_hz, p.band_hi_hz,
-                                   p.seed)
         n = int(round(seconds * p.update_hz))
-        x = np.resize(period, n) * volts_rms             # whole periods, repeated
+        x = np.resize(self._period(), n) * volts_rms             # whole periods, repeated
         blocks = []
         try:
             for v in x:
@@ -196,7 +263,12 @@ class Excitation(Procedure[ExcitationParams]):
         return np.concatenate(blocks) if keep else None
 
     def _probe(self, ctx: Context) -> dict:
-        """The level (V_Td rms) that moves the platform ``target_urad`` rms, cut to the ranges."""
+        """The level (V_Td rms) that moves the platform ``target_urad`` rms, cut to the ranges.
+
+        The motion is the control channel's part coherent with the probe: in the gyro modes the
+        platform already follows the pickoff noise by several urad rms, which a comparison of
+        rms levels cannot see past. A probe that moves nothing measurable is repeated at
+        ``PROBE_GROWTH`` times the level, up to the DAC's limit."""
         p = self.params
         cal = ctx.rig.calibration
         quiet = ctx.acquire(min(p.probe_s, 8.0))
@@ -205,37 +277,49 @@ class Excitation(Procedure[ExcitationParams]):
             col = quiet[:, cols[k]]
             if k != "cmd" and np.nanmax(np.abs(col)) >= 0.99 * self.channel_ranges_V[name]:
                 raise ProcedureError(f"excitation: {name} is at its full scale ({self.channel_ranges_V[name]:g} V) "
-                                     f"with nothing injected: the platform is not at rest in Mode 3 (an unstable "
-                                     f"loop, or a gimbal on its stop); nothing was injected")
-        data = self._inject(ctx, p.probe_V, p.probe_s, keep=True)
-        assert data is not None
+                                     f"with nothing injected: the platform is not at rest in Mode {p.mode} (an "
+                                     f"unstable loop, or a gimbal on its stop); nothing was injected")
+        crest = float(np.max(np.abs(self._period())))
+        dac_max = 0.9 * min(cal.dac_range_V, self.channel_ranges_V[self.names["cmd"]]) / crest
         skip = int(round(min(2.0, p.probe_s / 4) * p.rate_hz))         # the loop's transient
         scale = cal.autocollimator[p.axis].control_mV_per_urad * 1e-3 / URAD
         rms_q = float(np.nanstd(quiet[:, cols["ac_ctl"]])) / scale / URAD
-        rms_p = float(np.nanstd(data[skip:, cols["ac_ctl"]])) / scale / URAD
-        moved = math.sqrt(max(rms_p ** 2 - rms_q ** 2, 0.0))
+        target = max(p.target_urad, p.above_quiet * rms_q)
+        level, tries = min(p.probe_V, dac_max), []
+        while True:
+            data = self._inject(ctx, level, p.probe_s, keep=True)
+            assert data is not None
+            moved = coherent_rms(data[skip:, cols["cmd"]], data[skip:, cols["ac_ctl"]], p.rate_hz,
+                                 (p.band_lo_hz, p.band_hi_hz)) / scale / URAD
+            tries.append({"V_rms": round(level, 6), "moved_urad_rms": round(moved, 4)})
+            if moved >= PROBE_ENOUGH * target or level >= dac_max or len(tries) >= PROBE_TRIES:
+                break
+            level = min(level * PROBE_GROWTH, dac_max)
         if not moved > 0:
-            raise ProcedureError(f"excitation: a {p.probe_V:g} V rms probe did not move the platform measurably "
-                                 f"(ac_{p.axis.lower()}_ctl {rms_p:.3g} urad rms, quiet {rms_q:.3g}): is the "
-                                 f"command-torque DAC connected? Raise probe_V.")
-        level = p.probe_V * p.target_urad / moved
-        limits = {"target": level}
-        # what each channel's excited part would peak at, scaled from the probe
+            raise ProcedureError(f"excitation: probes up to {level:g} V rms did not move the platform measurably "
+                                 f"(no part of ac_{p.axis.lower()}_ctl coherent with V_Td; quiet {rms_q:.3g} urad "
+                                 f"rms): is the command-torque DAC connected?")
+        limits = {"target": level * target / moved}
+        # each channel's peak: its quiet peak plus the excited part's, which scales with the level
+        # (a channel's noise does not: in the gyro modes the pickoff noise fills half the range)
         for k, name in self.names.items():
             if k == "cmd":
                 continue
-            col = data[skip:, cols[k]]
-            peak = float(np.nanmax(np.abs(col - np.nanmean(col))))
-            if peak > 0:
-                limits[name] = p.probe_V * p.max_range_fraction * self.channel_ranges_V[name] / peak
-        crest = float(np.max(np.abs(excitation_signal(int(round(p.period_s * p.update_hz)), p.update_hz,
-                                                      p.band_lo_hz, p.band_hi_hz, p.seed))))
-        limits["V_Td DAC"] = 0.9 * min(cal.dac_range_V, self.channel_ranges_V[self.names["cmd"]]) / crest
+            room = p.max_range_fraction * self.channel_ranges_V[name] - float(np.nanmax(np.abs(
+                quiet[:, cols[k]] - np.nanmean(quiet[:, cols[k]]))))
+            if room <= 0:
+                raise ProcedureError(f"excitation: {name}'s quiet peaks already exceed {p.max_range_fraction:g} of its "
+                                     f"{self.channel_ranges_V[name]:g} V range: no room to excite (raise "
+                                     f"max_range_fraction, or quieten the rig)")
+            var = float(np.nanvar(data[skip:, cols[k]]) - np.nanvar(quiet[:, cols[k]]))
+            if var > 0:
+                limits[name] = level * room / (CREST * var ** 0.5)
+        limits["V_Td DAC"] = dac_max
         by = min(limits, key=lambda k: limits[k])
         chosen = limits[by]
-        return {"probe_V_rms": p.probe_V, "probe_motion_urad_rms": round(moved, 4), "quiet_urad_rms": round(rms_q, 4),
-                "level_V_rms": chosen, "limited_by": by,
-                "expected_motion_urad_rms": round(moved * chosen / p.probe_V, 4)}
+        return {"probe_V_rms": round(level, 6), "probe_motion_urad_rms": round(moved, 4), "quiet_urad_rms": round(rms_q, 4),
+                "probes": tries, "target_urad_rms": round(target, 4), "level_V_rms": chosen, "limited_by": by,
+                "expected_motion_urad_rms": round(moved * chosen / level, 4)}
 
     def _excite(self, ctx: Context) -> dict:
         level = float(ctx.results["probe"]["level_V_rms"])
@@ -254,20 +338,23 @@ class Excitation(Procedure[ExcitationParams]):
         n = self.names
         try:
             quiet = block_csd([(s.file, s.start, s.stop) for s in ctx.data_spans(["quiet"])],
-                              [n["ac_ctl"], n["pa"]], p.seg_s, p.n_blocks)
+                              [self.network_input, n["pa"]], p.seg_s, p.n_blocks)
             excited = periodic_blocks([(s.file, s.start, s.stop) for s in ctx.data_spans(["excite"])],
                                       [n["cmd"], n["pa"], n["ac_ctl"], n["ac_inst"], n["gyro"]], p.period_s,
                                       p.n_blocks)
-            net_resp = response(quiet, n["ac_ctl"], n["pa"])
+            net_resp = response(quiet, self.network_input, n["pa"])
             net = fit_network(net_resp, max(p.fit_lo_hz, quiet.lowest_fit_hz), p.network_hi_hz)
             plat_resp = response(excited, n["pa"], n["ac_inst"], via=n["cmd"])
             plat = fit_platform(plat_resp, cal.platform[p.axis], cal.autocollimator[p.axis],
                                 max(p.fit_lo_hz, excited.lowest_fit_hz), p.platform_hi_hz)
+            roots, loop_resp = closed_loop(excited, net, plat, cal, n, self.network_input, p)
         except TransferError as exc:
             raise ProcedureError(f"excitation: {exc}") from None
         values = analysis_values(net, plat, p.axis, cal.platform[p.axis].inertia_kg_m2)
         values["level_V_rms"] = ctx.results["probe"]["level_V_rms"]
         values["level_limited_by"] = ctx.results["probe"]["limited_by"]
+        values["mode"] = p.mode
+        values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
         values["incoherent"] = incoherent_parts(excited, n, p)
         # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
         # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz)
@@ -276,16 +363,73 @@ class Excitation(Procedure[ExcitationParams]):
             p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
         values["pickoff_noise_band_hz"] = [1.0, 50.0]
         values["pickoff_scale_source"] = kg_src
-        ms = measurements(net, plat, values, p)
+        ms = measurements(net, plat, values, p) + root_measurements(roots, p)
         figures = [Figure("network", "Compensation network, control channel to amplifier input: measured H1 with "
                           "95 % intervals, the fit and the design (cf. Fig. 40)",
                           partial(plot_response, resp=net_resp, fit=net,
                                   design=lambda f: network_response(f, DESIGN_NETWORK))),
                    Figure("platform", "Platform, amplifier input to instrumentation angle through V_Td: measured "
                           "with 95 % intervals and the fit (cf. Fig. 52)",
-                          partial(plot_response, resp=plat_resp, fit=plat, design=None))]
-        title = f"{Path(ctx.path).name}, axis {p.axis}"
+                          partial(plot_response, resp=plat_resp, fit=plat, design=None)),
+                   Figure("loop", f"Loop sensitivity in Mode {p.mode}, V_Td to amplifier input: measured with 95 % "
+                          f"intervals (the closed-loop roots' check, Tables 5-6)",
+                          partial(plot_response, resp=loop_resp, fit=None, design=None))]
+        title = f"{Path(ctx.path).name}, axis {p.axis}, Mode {p.mode}"
         return Analysis(values, ms, figures, markdown(values, title))
+
+
+#: the thesis's closed-loop roots (rad/s): Table 5 (Mode 3; its platform pair's frequency is not
+#: legible in the scan) and Table 6 (modes 4 and 5, read off the root locus of Fig. 28)
+THESIS_ROOTS: dict[int, dict[str, dict[str, float | None]]] = {
+    3: {"X": {"c1": 5.6, "c4": 123.0, "platform_w": None, "platform_zeta": 0.13},
+        "Y": {"c1": 4.5, "c4": 96.0, "platform_w": None, "platform_zeta": 0.09}},
+    4: {"X": {"c1": 5.0, "c4": 160.0, "platform_w": 43.0, "platform_zeta": 0.24},
+        "Y": {"c1": 5.0, "c4": 160.0, "platform_w": 60.0, "platform_zeta": 0.27}},
+}
+
+
+def thesis_roots(mode: int, axis: str) -> dict[str, float | None]:
+    return dict(THESIS_ROOTS[3 if mode == 3 else 4][axis]) | {"table": 5.0 if mode == 3 else 6.0}
+
+
+def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibration, n: Mapping[str, str],
+                network_input: str, p: ExcitationParams) -> tuple[ClosedLoop, Response]:
+    """The loop closed over the identified network, platform and sensor (``analysis.roots``),
+    and the measured sensitivity pa / V_Td it is checked against."""
+    kind = "ctl" if p.mode == 3 else "gyro"
+    pc, ac = cal.platform[p.axis], cal.autocollimator[p.axis]
+    lo = max(p.roots_lo_hz, excited.lowest_fit_hz)
+    ratio = response(excited, n["ac_inst"], network_input, via=n["cmd"])
+    caging = None if p.mode == 3 else GyroCaging(cal.caging_natural_rad_per_s[p.axis], cal.caging_zeta[p.axis],
+                                                  cal.restraint_time_constant_s[p.axis])
+    gain, gain_reps = sensor_gain(ratio, kind, ac, lo, p.platform_hi_hz, caging)
+
+    # the network again, inside the excited loop: the quiet record's H1 is biased at the lowest
+    # frequencies by the network's memory (``network_in_loop``), and c1 lives there
+    in_loop = fit_network(network_in_loop(excited, network_input, n["pa"], n["cmd"], pc.command_divider), lo,
+                          p.roots_hi_hz, start=net.params)
+
+    def parts(netp: Mapping[str, float], platp: Mapping[str, float], g: float) -> LoopParts:
+        return LoopParts(netp, platp["inertia_kg_m2"], platp["damping_Nms"], platp["stiffness_Nm_per_rad"], g, caging)
+
+    reps = [parts(a, b, g) for a, b, g in zip(in_loop.replicates, plat.replicates, gain_reps)]
+    sens = response(excited, n["cmd"], n["pa"])
+    return close_loop(p.mode, parts(in_loop.params, plat.params, gain), reps, pc, ac, sens, (lo, p.roots_hi_hz),
+                      len(reps) - 1, gain_reps), sens
+
+
+def root_measurements(roots: ClosedLoop, p: ExcitationParams) -> list[Measurement]:
+    ms = []
+    for name, r in roots.named.items():
+        z = "" if r.zeta is None else (f", zeta {r.zeta.value:.3g} [{r.zeta.lo:.3g}, {r.zeta.hi:.3g}]"
+                                       if r.zeta.resolved else f", zeta not resolved: {r.zeta.why}")
+        ms.append(Measurement(f"closed-loop root {name} ({p.axis}, Mode {p.mode})", r.w.value if r.w.resolved else None,
+                              "rad/s", note=(f"95 % [{r.w.lo:.4g}, {r.w.hi:.4g}]" if r.w.resolved
+                                             else f"not resolved: {r.w.why}") + z))
+    ms.append(Measurement("closed model against the measured sensitivity / standard error", roots.check_normalized,
+                          "rms", note=f"{roots.check_db_rms:.3g} dB, {roots.check_deg_rms:.3g} deg rms unweighted"
+                          + "".join(f"; {x}" for x in roots.notes)))
+    return ms
 
 
 def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia: float) -> dict[str, Any]:
@@ -310,8 +454,6 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) ->
     coherent part gamma^2 S and of the incoherent part (1 - gamma^2) S over 1-50 Hz. gamma^2 is
     first freed of its bias over m averaged periods, (m gamma^2 - 1) / (m - 1) (for no coherence
     E[gamma^2] = 1 / m, which read the incoherent part 7 % low with 15 periods)."""
-    from daq.spectra import coherence
-
     S = excited.mean()
     m = excited.averages()
     coh = coherence(S)

@@ -76,8 +76,36 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
                      ("stiffness_Nm_per_rad", None)):
         ci = values[f"{k}_ci95"][a]
         lines.append(f"| {k} | {_fmt(values[k][a])} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {_fmt(sheet)} |")
+    lines += _roots_lines(values)
     lines += ["", "## Coherent and incoherent parts, 1-50 Hz (Ch. V C)", "",
               "| channel | coherent with V_Td (V rms) | incoherent (V rms) |", "|---|---|---|"]
     for c, v in values["incoherent"].items():
         lines.append(f"| {c} | {v['coherent_rms_V']:.4g} | {v['incoherent_rms_V']:.4g} |")
     return "\n".join(lines) + "\n"
+
+
+def _roots_lines(values: Mapping[str, Any]) -> list[str]:
+    cl = values["closed_loop"]
+    th = cl["thesis"]
+    roots = cl["roots"]
+    ck = cl["check"]
+    lines = ["", f"## Closed-loop roots, Mode {values['mode']}, from the loop's sensitivity pa / (K_d V_Td) "
+             f"(cf. Table {int(th['table'])})", "",
+             f"The loop closed over the parts identified above (network, platform, and the {cl['sensor']} sensor's "
+             f"gain measured through V_Td: {cl['sensor_mV_per_urad']:.4g} mV/urad). Checked against the measured "
+             f"sensitivity over {ck['band_hz'][0]:g}-{ck['band_hz'][1]:g} Hz: {ck['db_rms']:.3g} dB, "
+             f"{ck['deg_rms']:.3g} deg rms ({ck['normalized']:.3g} standard errors).", "",
+             "| root | measured (rad/s) | 95 % interval | zeta | 95 % interval | thesis (rad/s, zeta) |",
+             "|---|---|---|---|---|---|"]
+    for name, (tw, tz) in (("c1", (th["c1"], None)), ("platform_pair", (th["platform_w"], th["platform_zeta"])),
+                           ("c4", (th["c4"], None))):
+        r = roots.get(name)
+        thesis = f"{_fmt(tw)}" + ("" if tz is None else f", {_fmt(tz)}")
+        if r is None:
+            lines.append(f"| {name} | not found | | | | {thesis} |")
+            continue
+        w_ci, z_ci = r["w_rad_per_s_ci95"], r.get("zeta_ci95") or [None, None]
+        lines.append(f"| {name} | {_fmt(r['w_rad_per_s'])} | [{_fmt(w_ci[0])}, {_fmt(w_ci[1])}] | "
+                     f"{_fmt(r.get('zeta'))} | [{_fmt(z_ci[0])}, {_fmt(z_ci[1])}] | {thesis} |")
+    lines += [f"\n* {n}" for n in cl.get("notes", [])]
+    return lines
