@@ -7,6 +7,8 @@ before ``write`` is called.
 
 from __future__ import annotations
 
+from typing import Protocol
+
 from drivers import can_protocol as cp
 from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink, NodeClient
@@ -30,7 +32,12 @@ class CanDac:
         return cp.from_micro(self.node.call(cp.OP_GET, index, what=f"read {what}"))
 
 
-def check_readback(node: NodeClient, what: str, sent: float, back: float, lsb: float) -> float:
+class _Node(Protocol):
+    name: str
+    link: CanLink
+
+
+def check_readback(node: _Node, what: str, sent: float, back: float, lsb: float) -> float:
     """A DAC's read-back must equal the set-point within one LSB; anything else is a fault."""
     if abs(back - sent) > lsb * 1.001 + 1e-6:
         fault = ProtocolError(f"CAN node '{node.name}': {what} reads back {back:+.6f} V after setting "

@@ -5,6 +5,13 @@ heartbeat, matches responses to requests, and turns what the nodes say on their 
 (emergency frames, a reboot, a node that falls silent) into latched faults, so the rig goes
 safe. Heartbeats run on the wall clock: they are about the wire and the host being alive,
 not about rig time. ``NodeClient`` is one node as seen from a device driver.
+
+Nodes listed in ``canopen_nodes`` speak CANopen (CiA 301, ``docs/canopen-plan.md``): the link
+reads their heartbeat and EMCY itself and passes every frame of theirs to ``network`` (a
+``canopen.Network`` over the same bus, fed by this link's notifier), where their
+``drivers.canopen_client.CanopenClient`` does SDO and NMT. The host then also sends a CANopen
+heartbeat as node 0x7F. Frames of node ids the rig does not use (their boot-up and heartbeat
+too) are ignored.
 """
 
 from __future__ import annotations
@@ -12,11 +19,13 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import can
+import canopen
 
 from drivers import can_protocol as cp
+from drivers import canopen_frames as cf
 from drivers.errors import (
     DeviceLost,
     DeviceTimeout,
@@ -35,10 +44,14 @@ log = logging.getLogger(__name__)
 class CanLink:
     def __init__(self, bus: can.BusABC, nodes: list[str], *, faults: FaultLatch | None = None,
                  heartbeat_period_s: float = 0.1, node_timeout_s: float = 1.0, reply_timeout_s: float = 0.5,
-                 channel: str = "", monotonic: Callable[[], float] = time.monotonic) -> None:
+                 channel: str = "", monotonic: Callable[[], float] = time.monotonic,
+                 canopen_nodes: Sequence[str] = ()) -> None:
         unknown = [n for n in nodes if n not in cp.NODES]
         if unknown:
             raise ValueError(f"unknown CAN node(s) {unknown}; known: {', '.join(cp.NODES)}")
+        stray = [n for n in canopen_nodes if n not in nodes]
+        if stray:
+            raise ValueError(f"CANopen node(s) {stray} are not among the rig's nodes {nodes}")
         self.bus = bus
         self.channel = channel or str(getattr(bus, "channel_info", "CAN"))
         self.faults = faults or FaultLatch()
@@ -57,6 +70,12 @@ class CanLink:
         self._operational: set[int] = set()
         self._lost: set[int] = set()
         self._counter = 0
+        #: node ids that speak CANopen, and every node id this rig uses
+        self._co_ids = {cp.NODES[n] for n in canopen_nodes}
+        self._used_ids = {cp.NODES[n] for n in nodes}
+        self._foreign_seen: set[int] = set()
+        #: the CANopen side of the bus: SDO clients and NMT of the CANopen nodes live here
+        self.network = canopen.Network(bus)
         self._stop = threading.Event()
         #: When the host cannot reach a node to make it safe, it stops its heartbeat: every
         #: node's watchdog then trips and the nodes go safe by themselves.
@@ -76,6 +95,14 @@ class CanLink:
         if msg.is_error_frame:
             log.warning("CAN %s: bus error frame %s", self.channel, msg)
             return
+        node = cf.node_of(msg.arbitration_id)
+        if not msg.is_extended_id and msg.arbitration_id <= 0x7FF:
+            if node in self._co_ids and msg.arbitration_id != node:
+                self._handle_canopen(msg)
+                return
+            if node not in self._used_ids and msg.arbitration_id != cp.HOST_HEARTBEAT_ID:
+                self._foreign(msg)
+                return
         try:
             m = cp.decode(msg.arbitration_id, msg.data, msg.is_extended_id)
         except ProtocolError as exc:
@@ -106,6 +133,52 @@ class CanLink:
                                          f"(code 0x{m.code:04x}, detail {m.detail}); the rig went safe",
                                          node=name, code=m.code))
 
+    def _foreign(self, msg: can.Message) -> None:
+        """A frame of a node id this rig does not use (another device's boot-up, heartbeat,
+        PDO, SDO, NMT or SYNC): not ours, ignored; said once per identifier."""
+        first = msg.arbitration_id not in self._foreign_seen
+        self._foreign_seen.add(msg.arbitration_id)
+        log.log(logging.INFO if first else logging.DEBUG, "CAN %s: ignored frame 0x%03x of node %d, which this "
+                "rig does not use (%d bytes)", self.channel, msg.arbitration_id, cf.node_of(msg.arbitration_id),
+                len(msg.data))
+
+    def _handle_canopen(self, msg: can.Message) -> None:
+        """A frame from a CANopen node of this rig: to the ``canopen`` network (SDO answers),
+        and its heartbeat and EMCY to the watch."""
+        self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+        function = msg.arbitration_id & 0x780
+        try:
+            if function == 0x700:
+                self._on_co_heartbeat(cf.decode_heartbeat(msg.arbitration_id, msg.data))
+            elif function == 0x080:
+                self._on_co_emergency(cf.decode_emergency(msg.arbitration_id, msg.data))
+        except ProtocolError as exc:
+            self.faults.report(ProtocolError(f"CAN {self.channel}: {exc}"))
+
+    def _on_co_heartbeat(self, m: cf.CoHeartbeat) -> None:
+        name = cp.NODE_NAMES[m.node]
+        self._last_hb[m.node] = self._mono()
+        was_up = m.node in self._operational
+        if m.state == cf.NMT_OPERATIONAL:
+            self._operational.add(m.node)
+        elif m.state == cf.NMT_BOOT and was_up:
+            self._operational.discard(m.node)
+            self.faults.report(NodeReset(f"CAN node '{name}' (id {m.node}) rebooted (CANopen boot-up) and lost "
+                                         f"its set-points; the rig went safe"))
+        elif was_up:
+            self._operational.discard(m.node)
+            self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) left the operational state by itself "
+                                         f"(now {m.text()})", node=name))
+
+    def _on_co_emergency(self, m: cf.CoEmergency) -> None:
+        name = cp.NODE_NAMES[m.node]
+        if m.code == cf.EMCY_ERROR_RESET:
+            log.info("CAN node '%s' (id %d): error reset (EMCY 0x0000)", name, m.node)
+            return
+        self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) reports an error: {m.text()} "
+                                     f"(EMCY 0x{m.code:04x}, error register 0x{m.register:02x}, "
+                                     f"data {m.data.hex()}); the rig went safe", node=name, code=m.code))
+
     def _on_heartbeat(self, m: cp.Heartbeat) -> None:
         name = cp.NODE_NAMES[m.node]
         self._last_hb[m.node] = self._mono()
@@ -129,6 +202,8 @@ class CanLink:
             try:
                 if not self.heartbeat_suspended:
                     self._send(*cp.encode_heartbeat(cp.Heartbeat(0, cp.HB_OPERATIONAL, 0, self._counter)))
+                    if self._co_ids:
+                        self._send(cf.HOST_HEARTBEAT_COB, bytes([cf.NMT_OPERATIONAL]))
             except DeviceLost as exc:
                 self.faults.report(exc)
                 return
@@ -255,3 +330,7 @@ class NodeClient:
 
     def safe(self) -> None:
         self.call(cp.OP_SAFE, check_faults=False)
+
+    def raw_get(self, index: int) -> int:
+        """GET ``index`` as the node has it, while a fault is latched too (the safe state's read-back)."""
+        return self.call(cp.OP_GET, index, check_faults=False)

@@ -6,6 +6,15 @@
     sim?realtime=1&seed=3&warm=1         paced to the wall clock; started in mode 3, caged
     sim?config=F.toml&table=manual       a sim config; a hand-cranked table (the operator is asked)
     serial:///dev/ttyACM0?can=socketcan:can0[&baud=2000000][&table=manual|can]
+    serial:///dev/ttyACM0?can=slcan:/dev/ttyUSB0&bitrate=500000&can_tty_baudrate=115200&canopen=torquer
+    sim?can=virtual:NAME&external=torquer&canopen=torquer
+                                         the sim on virtual channel NAME, its torquer left to a
+                                         CANopen node the caller runs (tests: acceptance A of issue 21)
+
+``bitrate`` and every ``can_<option>`` go to ``can.Bus``; ``canopen=`` lists the nodes that speak
+CANopen (``docs/canopen-plan.md``). python-can's ``virtual`` bus exists only inside one process:
+a device in another process needs ``udp_multicast``, ``slcan`` on a pty pair, or ``socketcan`` on
+a ``vcan`` interface (``docs/protocol.md`` 2.1).
 
 ``serial`` is built in. Other schemes are found by name in the ``fbs.rig_schemes`` entry-point
 group (``pyproject.toml``): ``sim`` is ``simhw.rig_scheme:open_sim_rig``, which serves the same
@@ -26,12 +35,11 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from typing import Any
+from typing import Any, Protocol
 from urllib.parse import parse_qsl, urlsplit
 
 import can
 
-from drivers import can_protocol as cp
 from drivers.adc import Adc
 from drivers.caging import CagingSwitches, CanCagingSwitches
 from drivers.calibration import RigCalibration
@@ -43,12 +51,43 @@ from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanRelayDriver, RelayDriver
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
 from drivers.table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
-from drivers.torquer import CanTorquerDac, TorquerDac
+from drivers.torquer import CanopenTorquerDac, CanTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
 
 #: An event listener gets (rig time s, kind, text); the recorder writes them to /events.
 EventListener = Callable[[float, str, str], None]
+
+
+class RigNode(Protocol):
+    """A CAN node as the rig connects it and makes it safe: ``NodeClient`` (the rig's own
+    protocol) or ``CanopenClient``."""
+
+    name: str
+
+    def identify(self) -> int: ...
+
+    def clear(self) -> None: ...
+
+    def safe(self) -> None: ...
+
+    def raw_get(self, index: int) -> int: ...
+
+
+#: nodes that can speak CANopen so far (``docs/canopen-plan.md``, "State")
+CANOPEN_READY = ("torquer",)
+
+
+def canopen_nodes(url: str, value: str) -> list[str]:
+    """The ``canopen=`` list of a rig URL: node names, or ``all`` for every one that can."""
+    names = [n for n in value.split(",") if n]
+    if names == ["all"]:
+        return list(CANOPEN_READY)
+    bad = [n for n in names if n not in CANOPEN_READY]
+    if bad:
+        raise ValueError(f"rig URL {url!r}: canopen={value!r}: node(s) {', '.join(bad)} do not speak CANopen yet "
+                         f"(ready: {', '.join(CANOPEN_READY)})")
+    return names
 
 
 @dataclass
@@ -66,7 +105,7 @@ class SafeReport:
 class Rig:
     def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
                  caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
-                 link: CanLink | None = None, safe_nodes: Sequence[NodeClient] = (),
+                 link: CanLink | None = None, safe_nodes: Sequence[RigNode] = (),
                  closers: Sequence[Callable[[], None]] = (), emulator: Any = None) -> None:
         self.url = url
         self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
@@ -228,17 +267,17 @@ class Rig:
             return report
 
     def _mode_is_safe(self) -> bool:
-        return self._raw("relay", cp.OP_GET, 0) == SAFE_MODE
+        return self._raw("relay", 0) == SAFE_MODE
 
     def _outputs_zero(self) -> bool:
-        return (all(self._raw("torquer", cp.OP_GET, i) == 0 for i in range(4))
-                and all(self._raw("command", cp.OP_GET, i) == 0 for i in range(6))
-                and all(self._raw("caging", cp.OP_GET, i) == 0 for i in range(4)))
+        return (all(self._raw("torquer", i) == 0 for i in range(4))
+                and all(self._raw("command", i) == 0 for i in range(6))
+                and all(self._raw("caging", i) == 0 for i in range(4)))
 
-    def _raw(self, name: str, op: int, index: int) -> int:
+    def _raw(self, name: str, index: int) -> int:
         for node in self._safe_nodes:
             if node.name == name:
-                return node.call(op, index, check_faults=False)
+                return node.raw_get(index)
         raise DriverError(f"no node {name!r} on this rig")
 
     def is_safe(self) -> bool:
@@ -267,7 +306,34 @@ class Rig:
 
 
 # ---------------------------------------------------------------------------- open_rig
-_SERIAL_KEYS = {"can", "baud", "table"}
+_SERIAL_KEYS = {"can", "baud", "table", "bitrate", "canopen"}
+#: URL keys ``can_<option>=<value>`` pass ``<option>`` to ``can.Bus`` (and so does ``bitrate``)
+BUS_OPTION_PREFIX = "can_"
+
+
+def bus_options(url: str, params: Mapping[str, str]) -> dict[str, Any]:
+    """python-can bus options from a rig URL: ``bitrate=500000`` and every ``can_<option>=<value>``
+    (``can_tty_baudrate=115200`` for slcan, ``can_receive_own_messages=0``); a value is an int, a
+    float, a flag (true/false/yes/no/on/off) or else a string."""
+    out: dict[str, Any] = {}
+    for key, text in params.items():
+        if key == "bitrate" or (key.startswith(BUS_OPTION_PREFIX) and len(key) > len(BUS_OPTION_PREFIX)):
+            option = key if key == "bitrate" else key[len(BUS_OPTION_PREFIX):]
+            out[option] = _option_value(text)
+    if "bitrate" in out and (not isinstance(out["bitrate"], int) or out["bitrate"] <= 0):
+        raise ValueError(f"rig URL {url!r}: bitrate={params['bitrate']!r} must be a positive integer (bit/s)")
+    return out
+
+
+def _option_value(text: str) -> Any:
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    if text.lower() in ("true", "yes", "on", "false", "no", "off"):
+        return text.lower() in ("true", "yes", "on")
+    return text
 #: the entry-point group where rig URL schemes other than ``serial`` are registered
 SCHEME_GROUP = "fbs.rig_schemes"
 
@@ -313,8 +379,10 @@ def scheme_opener(name: str) -> RigOpener | None:
 
 
 def check_keys(url: str, params: Mapping[str, str], allowed: set[str]) -> None:
-    """Refuse a URL parameter the scheme does not know, naming the known ones."""
-    unknown = sorted(set(params) - allowed)
+    """Refuse a URL parameter the scheme does not know, naming the known ones (``can_<option>``
+    bus options are known wherever ``bitrate`` is)."""
+    unknown = sorted(k for k in set(params) - allowed
+                     if not ("bitrate" in allowed and k.startswith(BUS_OPTION_PREFIX)))
     if unknown:
         raise ValueError(f"rig URL {url!r}: unknown parameter(s) {', '.join(unknown)} "
                          f"(known: {', '.join(sorted(allowed))})")
@@ -335,29 +403,36 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
         baud = int(params.get("baud", "2000000"))
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
+    options = bus_options(url, params)
+    co = canopen_nodes(url, params.get("canopen", ""))
     try:
-        bus = can.Bus(interface=iface, channel=channel)
-    except (can.CanError, OSError, ValueError, ImportError) as exc:
-        raise DeviceLost(f"cannot open CAN interface {iface}:{channel}: {exc}") from exc
+        bus = can.Bus(interface=iface, channel=channel, **options)
+    except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
+        raise DeviceLost(f"cannot open CAN interface {iface}:{channel} with {options or 'no options'}: {exc}") from exc
     tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
-    return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)
+    return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud, canopen=co)
 
 
 def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
               reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None,
-              monotonic: Callable[[], float] = time.monotonic) -> Rig:
+              monotonic: Callable[[], float] = time.monotonic, canopen: Sequence[str] = ()) -> Rig:
     """The rig from its ADC port and CAN bus. ``monotonic``: the drivers' deadline clock (the
-    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s)."""
+    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s).
+    ``canopen``: the nodes that speak CANopen (``CANOPEN_READY``); the others the rig's own
+    protocol."""
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
     link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
-                   reply_timeout_s=reply_timeout_s, monotonic=monotonic)
+                   reply_timeout_s=reply_timeout_s, monotonic=monotonic, canopen_nodes=canopen)
     adc = None
     try:
         link.wait_for_nodes(max(2.0, node_timeout_s))
-        clients = [NodeClient(link, n) for n in names]
+        torquers: TorquerDac = (CanopenTorquerDac(link, calibration) if "torquer" in canopen
+                                else CanTorquerDac(link, calibration))
+        clients: list[RigNode] = [torquers.node if n == "torquer" and isinstance(torquers, CanopenTorquerDac)
+                                  else NodeClient(link, n) for n in names]
         for c in clients:
             c.identify()
             c.clear()  # a node latched safe by an earlier session's end starts fresh
@@ -367,7 +442,7 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
                         reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
                         stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
         tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
-        rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=CanTorquerDac(link, calibration),
+        rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=torquers,
                   commands=CanCommandDac(link, calibration), caging=CanCagingSwitches(link), table=tab,
                   clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
                   closers=[link.close, *(closers or [])], emulator=emulator)

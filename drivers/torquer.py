@@ -11,6 +11,7 @@ from typing import Protocol
 from drivers.calibration import GYRO_CHANNELS, RigCalibration
 from drivers.can_dac import CanDac
 from drivers.can_link import CanLink
+from drivers.canopen_dac import CanopenDac
 from drivers.setpoints import SetpointLimits, check_name
 
 
@@ -33,13 +34,18 @@ class TorquerDac(Protocol):
         ...
 
 
-class CanTorquerDac(CanDac):
-    """The torquer DACs on their CAN node."""
+class TorquerChannels:
+    """The torquer channels on a DAC node's outputs 0-3, whatever its protocol (``CanDac`` or
+    ``CanopenDac`` provide ``write``, ``read`` and ``limits``)."""
 
     channels: tuple[str, ...] = GYRO_CHANNELS
+    limits: SetpointLimits
 
-    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(link, "torquer", calibration)
+    def write(self, index: int, volts: float, what: str) -> float:
+        raise NotImplementedError
+
+    def read(self, index: int, what: str) -> float:
+        raise NotImplementedError
 
     def set_bias_V(self, channel: str, volts: float) -> float:
         v = self.limits.torquer_bias(channel, volts)
@@ -52,3 +58,17 @@ class CanTorquerDac(CanDac):
     def zero(self) -> None:
         for c in self.channels:
             self.set_bias_V(c, 0.0)
+
+
+class CanTorquerDac(CanDac, TorquerChannels):
+    """The torquer DACs on their CAN node (the rig's own protocol, docs/protocol.md 2.4)."""
+
+    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
+        super().__init__(link, "torquer", calibration)
+
+
+class CanopenTorquerDac(CanopenDac, TorquerChannels):
+    """The torquer DACs on a CiA 401 analogue-output node (``drivers/eds/torquer.eds``)."""
+
+    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
+        super().__init__(link, "torquer", len(GYRO_CHANNELS), calibration)

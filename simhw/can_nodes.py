@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING
 
 import can
@@ -309,14 +309,16 @@ class CanNodeHost:
     """All simulated nodes on one virtual bus: a receive thread and a heartbeat/watchdog thread."""
 
     def __init__(self, server: SimRigServer, channel: str, heartbeat_period_s: float = 0.1,
-                 watchdog_s: float = 1.0, monotonic: Callable[[], float] = time.monotonic) -> None:
+                 watchdog_s: float = 1.0, monotonic: Callable[[], float] = time.monotonic,
+                 external: Collection[str] = ()) -> None:
         self.server = server
         self._mono = monotonic          # the watchdogs' clock (``SimRigServer.monotonic``)
         self.channel = channel
         self.heartbeat_period_s = heartbeat_period_s
         self.watchdog_s = watchdog_s
         self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-        self.nodes = {n.name: n for n in (cls(server) for cls in NODE_CLASSES)}
+        #: ``external``: nodes left to a device the caller runs on the same bus (not simulated here)
+        self.nodes = {n.name: n for n in (cls(server) for cls in NODE_CLASSES if cls.name not in external)}
         self._by_id = {n.node_id: n for n in self.nodes.values()}
         self._last_host_hb: float | None = None  # watchdogs arm on the first host heartbeat
         self._counter = 0
@@ -381,7 +383,10 @@ class CanNodeHost:
         """A request-shaped frame with an unknown opcode is answered BAD_OP; other junk is ignored."""
         node = msg.arbitration_id - cp.REQUEST_BASE
         n = self._by_id.get(node)
-        if n is None or msg.is_extended_id or len(msg.data) != 8 or not n.connected or n.stalled:
+        if n is None:   # another device's frame (a CANopen node's SDO, NMT, heartbeat): not ours
+            log.debug("simulated CAN nodes: ignored frame not for them: %s", exc)
+            return
+        if msg.is_extended_id or len(msg.data) != 8 or not n.connected or n.stalled:
             log.warning("simulated CAN nodes: ignored bad frame: %s", exc)
             return
         data = bytearray(msg.data)

@@ -19,7 +19,7 @@ import math
 import threading
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -71,7 +71,8 @@ class SimRigServer:
     def __init__(self, cfg: SimConfig | None = None, *, seed: int = 0, realtime: bool = False, speed: float = 1.0,
                  warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 1.0,
                  paced_block_s: float = 0.01, watchdog_s: float = 1.0,
-                 monotonic: Callable[[], float] = time.monotonic) -> None:
+                 monotonic: Callable[[], float] = time.monotonic, can_channel: str | None = None,
+                 external_nodes: Collection[str] = ()) -> None:
         self.seed = seed
         #: the devices' deadline clock (``drivers.runclock.RunningClock`` from the sim rig scheme)
         self.monotonic = monotonic
@@ -93,8 +94,11 @@ class SimRigServer:
         self.stall_reason = ""
         self._stop = threading.Event()
         self.adc = AdcDevice(self)
-        self.can_channel = f"fbs-sim-{uuid.uuid4().hex[:12]}"
-        self.nodes = CanNodeHost(self, self.can_channel, watchdog_s=watchdog_s, monotonic=monotonic)
+        #: the virtual CAN channel (python-can ``virtual``: this process only); ``external_nodes``
+        #: are left to devices the caller puts on it
+        self.can_channel = can_channel or f"fbs-sim-{uuid.uuid4().hex[:12]}"
+        self.nodes = CanNodeHost(self, self.can_channel, watchdog_s=watchdog_s, monotonic=monotonic,
+                                 external=external_nodes)
         self.clock = SimClock(self)
         self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
         self._thread.start()

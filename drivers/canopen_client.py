@@ -1,0 +1,171 @@
+"""One CANopen node as a device driver sees it: checked SDO reads and writes, typed errors,
+and the connect sequence (identify, configure the host-heartbeat watchdog, NMT start).
+
+The counterpart of ``drivers.can_link.NodeClient`` for a node in ``CanLink``'s
+``canopen_nodes`` (``docs/canopen-plan.md`` section 2). The SDO transfers are the
+``canopen`` package's, over the link's ``network``; one transfer at a time per node.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+import threading
+from collections.abc import Sequence
+
+import can
+import canopen
+from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
+
+from drivers import can_protocol as cp
+from drivers import canopen_frames as cf
+from drivers.can_link import CanLink
+from drivers.errors import DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SetpointRangeError
+
+log = logging.getLogger(__name__)
+
+#: SDO abort codes (CiA 301) the host turns into refusals rather than faults
+ABORT_RANGE = (0x06090030, 0x06090031, 0x06090032, 0x06090036)
+ABORT_STATE = (0x08000020, 0x08000021, 0x08000022)
+ABORT_NO_OBJECT = 0x06020000
+
+#: one object of a node: (index, subindex)
+Address = tuple[int, int]
+
+
+class CanopenClient:
+    """Node ``name`` (an id of ``can_protocol.NODES``) on ``link``, described by its EDS file."""
+
+    def __init__(self, link: CanLink, name: str, device_type: int, *, safe_values: Sequence[tuple[Address, int]] = (),
+                 raw_index: int = 0, configure: Sequence[tuple[Address, int]] = ()) -> None:
+        self.link = link
+        self.name = name
+        self.node_id = cp.NODES[name]
+        self.device_type = device_type
+        #: what ``safe`` writes, in order; ``raw_get(i)`` reads ``(raw_index, i + 1)``
+        self.safe_values = list(safe_values)
+        self.raw_index = raw_index
+        #: written at connect (after the heartbeat settings): error modes, error values
+        self.configuration = list(configure)
+        self.node = canopen.RemoteNode(self.node_id, str(cf.eds_path(name)))
+        self.node.sdo.RESPONSE_TIMEOUT = link.reply_timeout_s
+        self.node.sdo.MAX_RETRIES = 1
+        link.network.add_node(self.node)
+        self._lock = threading.Lock()
+
+    # ------------------------------------------------------------------ SDO
+    def _where(self, index: int, sub: int) -> str:
+        return f"CAN node '{self.name}' (id {self.node_id}) object 0x{index:04x}:{sub}"
+
+    def read(self, index: int, sub: int = 0, *, what: str = "", check_faults: bool = True) -> int:
+        """Upload one numeric object (its raw integer, typed by the EDS)."""
+        raw = self._transfer(index, sub, None, what or f"read 0x{index:04x}:{sub}", check_faults)
+        assert raw is not None
+        value = self._variable(index, sub).decode_raw(raw)
+        if not isinstance(value, int):
+            raise ProtocolError(f"{self._where(index, sub)} is not an integer object ({value!r})")
+        return value
+
+    def read_if_present(self, index: int, sub: int = 0, *, what: str = "") -> int | None:
+        """``read``, but None where the node has no such object (a commercial module without a
+        manufacturer object): the caller falls back to the EDS."""
+        raw = self._transfer(index, sub, None, what or f"read 0x{index:04x}:{sub}", True, missing_ok=True)
+        if raw is None:
+            return None
+        value = self._variable(index, sub).decode_raw(raw)
+        if not isinstance(value, int):
+            raise ProtocolError(f"{self._where(index, sub)} is not an integer object ({value!r})")
+        return value
+
+    def write(self, index: int, sub: int, value: int, *, what: str = "", check_faults: bool = True) -> None:
+        """Download one numeric object; a refusal raises its typed error, a fault latches."""
+        var = self._variable(index, sub)
+        try:
+            data = var.encode_raw(value)
+        except (struct.error, OverflowError, ValueError, TypeError) as exc:
+            raise SetpointRangeError(f"{self._where(index, sub)}: {value!r} does not fit its type "
+                                     f"({exc}); nothing was sent", value=value) from None
+        self._transfer(index, sub, data, what or f"write 0x{index:04x}:{sub} = {value}", check_faults)
+
+    def eds_default(self, index: int, sub: int = 0) -> int:
+        """The EDS's default value of an integer object."""
+        value = self._variable(index, sub).default
+        if not isinstance(value, int):
+            raise ProtocolError(f"{self._where(index, sub)} has no integer default in its EDS")
+        return value
+
+    def _variable(self, index: int, sub: int) -> canopen.objectdictionary.ODVariable:
+        try:
+            obj = self.node.object_dictionary[index]
+            var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[sub]
+        except KeyError:
+            raise ProtocolError(f"{self._where(index, sub)} is not in its EDS ({cf.eds_path(self.name).name})") from None
+        assert isinstance(var, canopen.objectdictionary.ODVariable)
+        return var
+
+    def _transfer(self, index: int, sub: int, data: bytes | None, what: str, check_faults: bool,
+                  missing_ok: bool = False) -> bytes | None:
+        if check_faults:
+            self.link.faults.check()
+        try:
+            with self._lock:
+                if data is None:
+                    return self.node.sdo.upload(index, sub)
+                self.node.sdo.download(index, sub, data)
+                return data
+        except SdoAbortedError as exc:
+            if missing_ok and exc.code == ABORT_NO_OBJECT:
+                return None
+            raise self._refusal(index, sub, what, exc.code) from None
+        except SdoCommunicationError as exc:
+            fault: DriverError = DeviceTimeout(f"{self._where(index, sub)}: no SDO answer to {what} within "
+                                               f"{self.link.reply_timeout_s:g} s ({exc}); the rig went safe")
+        except (can.CanError, OSError, ValueError) as exc:
+            fault = DeviceLost(f"CAN {self.link.channel}: cannot send to node '{self.name}' ({exc}); "
+                               f"is the interface up?")
+        self.link.faults.report(fault)
+        raise fault
+
+    def _refusal(self, index: int, sub: int, what: str, code: int) -> DriverError:
+        text = f"{self._where(index, sub)} refused {what}: {SdoAbortedError(code)}"
+        if code in ABORT_RANGE:
+            var = self._variable(index, sub)
+            return SetpointRangeError(text, limit=(var.min, var.max))
+        if code in ABORT_STATE:
+            return InterlockError(text)
+        fault = ProtocolError(text)
+        self.link.faults.report(fault)
+        return fault
+
+    # ------------------------------------------------------------------ connect and safe
+    def identify(self) -> int:
+        """Check the node's device type (0x1000); returns its product code (0x1018:2)."""
+        kind = self.read(0x1000, 0, what="read device type", check_faults=False)
+        if kind != self.device_type:
+            raise ProtocolError(f"CAN node id {self.node_id} has device type 0x{kind:08x}, expected "
+                                f"0x{self.device_type:08x} for '{self.name}'; check the node ids and its EDS")
+        product = self.read(0x1018, 2, what="read product code", check_faults=False)
+        log.info("CAN node '%s' (id %d): device type 0x%08x, product code 0x%08x", self.name, self.node_id, kind,
+                 product)
+        return product
+
+    def clear(self) -> None:
+        """Configure the node's watchdog on the host heartbeat and its error values, then NMT
+        start it (the old CLEAR): from then on it counts as up, so a reboot is caught."""
+        ms = max(1, round(self.link.node_timeout_s * 1000))
+        self.write(0x1016, 1, (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), what="set host heartbeat consumer",
+                   check_faults=False)
+        self.write(0x1017, 0, max(1, round(self.link.heartbeat_period_s * 1000)), what="set heartbeat period",
+                   check_faults=False)
+        for (index, sub), value in self.configuration:
+            self.write(index, sub, value, check_faults=False)
+        self.node.nmt.send_command(cf.NMT_START)
+        self.link.mark_operational(self.name)
+
+    def safe(self) -> None:
+        for (index, sub), value in self.safe_values:
+            self.write(index, sub, value, what="safe value", check_faults=False)
+
+    def raw_get(self, index: int) -> int:
+        """Output ``index`` (0-based) as the node has it, while a fault is latched too."""
+        return self.read(self.raw_index, index + 1, what=f"read output {index + 1}", check_faults=False)

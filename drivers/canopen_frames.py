@@ -1,0 +1,85 @@
+"""CiA 301 frames the host's CAN link reads itself: heartbeat / boot-up and EMCY.
+
+The rest of CANopen (SDO, NMT, PDO) is the ``canopen`` package's. The plan and the object
+dictionaries are in ``docs/canopen-plan.md``. The EDS file of each node is
+``drivers/eds/<node>.eds``.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+from drivers.errors import ProtocolError
+
+#: the host's own CANopen node id: its heartbeat goes out on 0x700 + 0x7F
+HOST_NODE_ID = 0x7F
+HOST_HEARTBEAT_COB = 0x700 + HOST_NODE_ID
+
+NMT_BOOT, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
+NMT_STATE_TEXT = {NMT_BOOT: "boot-up", NMT_STOPPED: "stopped", NMT_OPERATIONAL: "operational",
+                  NMT_PRE_OPERATIONAL: "pre-operational"}
+NMT_START = 0x01
+
+#: CiA 301 emergency codes the rig's nodes send
+EMCY_ERROR_RESET = 0x0000
+EMCY_HEARTBEAT = 0x8130
+EMCY_TEXT = {EMCY_HEARTBEAT: "host heartbeat lost, outputs at their error values", 0x5000: "hardware fault",
+             0x2310: "output over-current", 0x4210: "over-temperature"}
+
+#: CiA 303-2 SI unit code of the volt, as in 0x6450
+SI_VOLT = 0x00260000
+#: CiA 401 device types (0x1000): analogue outputs, digital outputs
+DEVICE_TYPE_401_AO = 0x00080191
+DEVICE_TYPE_401_DO = 0x00020191
+
+EDS_DIR = Path(__file__).with_name("eds")
+
+_EMCY = struct.Struct("<HB5s")
+
+
+def eds_path(node: str) -> Path:
+    """The EDS file of the rig node ``node`` (its object dictionary)."""
+    return EDS_DIR / f"{node}.eds"
+
+
+@dataclass(frozen=True)
+class CoHeartbeat:
+    node: int
+    state: int
+
+    def text(self) -> str:
+        return NMT_STATE_TEXT.get(self.state, f"state 0x{self.state:02x}")
+
+
+@dataclass(frozen=True)
+class CoEmergency:
+    node: int
+    code: int
+    register: int
+    data: bytes
+
+    def text(self) -> str:
+        return EMCY_TEXT.get(self.code, f"error code 0x{self.code:04x}")
+
+
+def node_of(cob_id: int) -> int:
+    """The node id in a predefined-connection-set COB-ID (0 for NMT and SYNC)."""
+    return cob_id & 0x7F
+
+
+def decode_heartbeat(cob_id: int, data: bytes | bytearray) -> CoHeartbeat:
+    if len(data) != 1:
+        raise ProtocolError(f"CANopen heartbeat 0x{cob_id:03x}: {len(data)} data bytes (expected 1)")
+    state = data[0] & 0x7F           # bit 7 is the node-guarding toggle
+    if state not in NMT_STATE_TEXT:
+        raise ProtocolError(f"CANopen heartbeat 0x{cob_id:03x}: unknown NMT state 0x{state:02x}")
+    return CoHeartbeat(node_of(cob_id), state)
+
+
+def decode_emergency(cob_id: int, data: bytes | bytearray) -> CoEmergency:
+    if len(data) != 8:
+        raise ProtocolError(f"CANopen EMCY 0x{cob_id:03x}: {len(data)} data bytes (expected 8)")
+    code, register, rest = _EMCY.unpack(bytes(data))
+    return CoEmergency(node_of(cob_id), code, register, rest)
