@@ -145,8 +145,13 @@ class CanLink:
     def _handle_canopen(self, msg: can.Message) -> None:
         """A frame from a CANopen node of this rig: to the ``canopen`` network (SDO answers),
         and its heartbeat and EMCY to the watch."""
-        self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
         function = msg.arbitration_id & 0x780
+        if function == 0x580 and len(msg.data) != 8:   # CiA 301: every SDO frame carries 8 bytes
+            self.faults.report(ProtocolError(f"CAN {self.channel}: SDO answer 0x{msg.arbitration_id:03x} of node "
+                                             f"'{cp.NODE_NAMES[cf.node_of(msg.arbitration_id)]}': "
+                                             f"{len(msg.data)} data bytes (expected 8)"))
+            return
+        self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
         try:
             if function == 0x700:
                 self._on_co_heartbeat(cf.decode_heartbeat(msg.arbitration_id, msg.data))

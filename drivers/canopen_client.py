@@ -117,8 +117,12 @@ class CanopenClient:
             if missing_ok and exc.code == ABORT_NO_OBJECT:
                 return None
             raise self._refusal(index, sub, what, exc.code) from None
-        except SdoCommunicationError as exc:
-            fault: DriverError = DeviceTimeout(f"{self._where(index, sub)}: no SDO answer to {what} within "
+        except (SdoCommunicationError, struct.error) as exc:
+            if isinstance(exc, struct.error) or "No SDO response" not in str(exc):
+                fault: DriverError = ProtocolError(f"{self._where(index, sub)}: bad SDO answer to {what} ({exc})")
+                self.link.faults.report(fault)
+                raise fault from None
+            fault = DeviceTimeout(f"{self._where(index, sub)}: no SDO answer to {what} within "
                                                f"{self.link.reply_timeout_s:g} s ({exc}); the rig went safe")
         except (can.CanError, OSError, ValueError) as exc:
             fault = DeviceLost(f"CAN {self.link.channel}: cannot send to node '{self.name}' ({exc}); "

@@ -23,6 +23,7 @@ import can
 
 from drivers import can_protocol as cp
 from drivers.errors import ProtocolError
+from simhw.canopen_nodes import CanopenDacNode
 from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
@@ -310,7 +311,7 @@ class CanNodeHost:
 
     def __init__(self, server: SimRigServer, channel: str, heartbeat_period_s: float = 0.1,
                  watchdog_s: float = 1.0, monotonic: Callable[[], float] = time.monotonic,
-                 external: Collection[str] = ()) -> None:
+                 external: Collection[str] = (), canopen: Collection[str] = ()) -> None:
         self.server = server
         self._mono = monotonic          # the watchdogs' clock (``SimRigServer.monotonic``)
         self.channel = channel
@@ -318,8 +319,20 @@ class CanNodeHost:
         self.watchdog_s = watchdog_s
         self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         #: ``external``: nodes left to a device the caller runs on the same bus (not simulated here)
-        self.nodes = {n.name: n for n in (cls(server) for cls in NODE_CLASSES if cls.name not in external)}
-        self._by_id = {n.node_id: n for n in self.nodes.values()}
+        #: ``canopen``: nodes simulated as CANopen slaves (``simhw.canopen_nodes``), each on a
+        #: network of its own; the rest speak the rig's own protocol through this host's threads
+        self._own: dict[str, SimNode] = {n.name: n for n in (cls(server) for cls in NODE_CLASSES
+                                                              if cls.name not in external and cls.name not in canopen)}
+        self.canopen_nodes: dict[str, CanopenDacNode] = {}
+        for name in canopen:
+            if name in external:
+                continue
+            if name != CanopenDacNode.name:
+                raise ValueError(f"the simulated {name} node does not speak CANopen yet (only {CanopenDacNode.name})")
+            self.canopen_nodes[name] = CanopenDacNode(server, channel, watchdog_s, monotonic)
+        #: every simulated node by name (tests look at their registers)
+        self.nodes: dict[str, SimNode | CanopenDacNode] = {**self._own, **self.canopen_nodes}
+        self._by_id = {n.node_id: n for n in self._own.values()}
         self._last_host_hb: float | None = None  # watchdogs arm on the first host heartbeat
         self._counter = 0
         self._lock = threading.Lock()
@@ -334,7 +347,10 @@ class CanNodeHost:
             raise ValueError(f"unknown node {node!r} (one of {', '.join(self.nodes)})")
         if fault not in NODE_FAULTS:
             raise ValueError(f"unknown node fault {fault!r} (one of {', '.join(NODE_FAULTS)})")
-        n = self.nodes[node]
+        if node in self.canopen_nodes:
+            self.canopen_nodes[node].inject(fault, code, delay_s)
+            return
+        n = self._own[node]
         with self._lock:
             if fault == "stall":
                 n.stalled = True
@@ -417,7 +433,7 @@ class CanNodeHost:
             self._counter += 1
             now = self._mono()
             with self._lock:
-                for n in self.nodes.values():
+                for n in self._own.values():
                     if not n.connected:
                         # Off the bus it hears no host either: its watchdog trips, silently.
                         if not n.latched and now - n.silent_since > self.watchdog_s:
@@ -436,4 +452,6 @@ class CanNodeHost:
         self._stop.set()
         for t in self._threads:
             t.join(timeout=1.0)
+        for co in self.canopen_nodes.values():
+            co.close()
         self.bus.shutdown()

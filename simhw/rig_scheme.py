@@ -36,7 +36,7 @@ SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog", 
 def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str], list[str]]:
     """The sim's CAN options: ``can=virtual:NAME`` (the channel; virtual only: the sim's nodes
     run in this process), ``external=a,b`` (nodes the caller runs on it itself) and
-    ``canopen=a,b`` (nodes that speak CANopen; so far each must be external)."""
+    ``canopen=a,b`` (nodes that speak CANopen: simulated as CANopen slaves unless external)."""
     channel = None
     if "can" in params:
         iface, _, channel = params["can"].partition(":")
@@ -48,12 +48,7 @@ def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str], li
     if bad:
         raise ValueError(f"rig URL {url!r}: external={params['external']!r}: unknown node(s) {', '.join(bad)} "
                          f"(nodes: {', '.join(cp.NODES)})")
-    co = canopen_nodes(url, params.get("canopen", ""))
-    not_ext = [n for n in co if n not in external]
-    if not_ext:
-        raise ValueError(f"rig URL {url!r}: the simulated {', '.join(not_ext)} node(s) do not speak CANopen yet: "
-                         f"run your own on can=virtual:NAME and give external={','.join(not_ext)}")
-    return channel, external, co
+    return channel, external, canopen_nodes(url, params.get("canopen", ""))
 
 
 def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
@@ -83,7 +78,7 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
     try:
         server = SimRigServer(cfg, seed=seed, realtime=flag("realtime", params.get("realtime", "0")), speed=speed,
                               warm=flag("warm", params.get("warm", "0")), watchdog_s=watchdog, monotonic=running,
-                              can_channel=channel, external_nodes=external)
+                              can_channel=channel, external_nodes=external, canopen_nodes=co)
     except BaseException:
         running.close()
         raise

@@ -1,0 +1,203 @@
+"""Simulated CAN nodes that speak CANopen (issue 21, ``docs/canopen-plan.md`` section 8).
+
+Each one is the ``canopen`` package's ``LocalNode``, built from the node's EDS file, on a
+network of its own on the sim's virtual channel. The package gives the SDO server, the NMT
+slave, the heartbeat producer and the EMCY producer. This module adds what CiA 301 and
+CiA 401 ask of the device and LocalNode lacks:
+* the heartbeat consumer (0x1016), on the sim's deadline clock. When the host's heartbeat
+  stops, the outputs go to their error values (0x6443/0x6444), EMCY 0x8130 is sent and the
+  node goes pre-operational;
+* value checks (SDO abort 0x06090030);
+* the outputs' effect on the physics (``server.submit``);
+* the fault injections of ``simhw.can_nodes`` (``NODE_FAULTS``).
+
+So far the torquer DACs (CiA 401 analogue outputs) are here; the other nodes follow
+(``docs/canopen-plan.md``, "State").
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, cast
+
+import canopen
+from canopen.sdo.exceptions import SdoAbortedError
+
+from drivers import can_protocol as cp
+from drivers import canopen_frames as cf
+from simhw.params import GYRO_CHANNELS
+
+if TYPE_CHECKING:
+    from simhw.rig_server import SimRigServer
+
+log = logging.getLogger(__name__)
+
+ABORT_VALUE_RANGE = 0x06090030
+AO_16, AO_ERROR_MODE, AO_ERROR_VALUE = 0x6411, 0x6443, 0x6444
+FULL_SCALE_V = 10.0
+LSB_V = FULL_SCALE_V / 32768
+
+
+class CanopenDacNode:
+    """The torquer DACs as a CiA 401 analogue-output module: four outputs, 16-bit counts
+    over +-10 V (``drivers/eds/torquer.eds``)."""
+
+    name = "torquer"
+    outputs: tuple[str, ...] = GYRO_CHANNELS
+
+    def __init__(self, server: SimRigServer, channel: str, watchdog_s: float,
+                 monotonic: Callable[[], float] = time.monotonic) -> None:
+        self.server = server
+        self.node_id = cp.NODES[self.name]
+        self._mono = monotonic
+        self.watchdog_s = watchdog_s
+        self.network = canopen.Network()
+        self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
+        self.node = canopen.LocalNode(self.node_id, str(cf.eds_path(self.name)))
+        self.network.add_node(self.node)
+        # the SDO server behind a gate, for the fault injections
+        self.network.unsubscribe(0x600 + self.node_id, self.node.sdo.on_request)
+        self.network.subscribe(0x600 + self.node_id, self._on_sdo)
+        self._send_response = self.node.sdo.send_response
+        setattr(self.node.sdo, "send_response", self._sdo_response)  # noqa: B010 - an instance's method replaced
+        self.node.add_write_callback(self._on_write)
+        self.network.subscribe(0, self._on_nmt)
+        self.network.subscribe(cf.HOST_HEARTBEAT_COB, self._on_host_heartbeat)
+        #: True from a trip of the watchdog or an error until the host's NMT start
+        self.latched = False
+        self.stalled = False
+        self.reply_delay_s = 0.0
+        self.bad_response = 0
+        self._connected = True
+        self._last_host: float | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name=f"sim-canopen-{self.name}", daemon=True)
+        self.power_on()
+        self._thread.start()
+
+    # ------------------------------------------------------------------ state
+    def power_on(self) -> None:
+        """Power-on values (outputs 0, the EDS's defaults), boot-up, then pre-operational."""
+        self.node.data_store.clear()
+        self.node.data_store[0x1016] = {1: ((cf.HOST_NODE_ID << 16) | round(self.watchdog_s * 1000)).to_bytes(4, "little")}
+        for out in self.outputs:
+            self._apply(out, 0.0)
+        self._last_host = None
+        self.node.nmt.send_command(0x81)   # reset node: boot-up frame ...
+        self.node.nmt.send_command(0x80)   # ... pre-operational; heartbeat per 0x1017
+
+    @property
+    def values(self) -> dict[str, int]:
+        """Each output in microvolts (``simhw.can_nodes``'s DAC nodes have the same)."""
+        return {out: round(self.counts(i + 1) * LSB_V * 1e6) for i, out in enumerate(self.outputs)}
+
+    def counts(self, sub: int) -> int:
+        return self.get(AO_16, sub)
+
+    def get(self, index: int, sub: int) -> int:
+        """An integer object as the node has it (through its own SDO server's view)."""
+        value = cast(Any, self.node.sdo)[index][sub].raw
+        assert isinstance(value, int)
+        return value
+
+    def set(self, index: int, sub: int, value: int) -> None:
+        """Write an object as the node itself does (the write callbacks run)."""
+        cast(Any, self.node.sdo)[index][sub].raw = value
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    @connected.setter
+    def connected(self, on: bool) -> None:
+        self._connected = on
+        if not on:
+            self.node.nmt.stop_heartbeat()
+            self._last_host = self._mono()          # off the bus: its watchdog runs out
+
+    # ------------------------------------------------------------------ the bus
+    def _on_sdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if self.reply_delay_s:
+            time.sleep(self.reply_delay_s)          # a host too busy to run the node's thread
+        if not self._connected or self.stalled:
+            return
+        self.node.sdo.on_request(can_id, data, timestamp)
+
+    def _sdo_response(self, response: bytes | bytearray) -> None:
+        if self.bad_response:
+            self.bad_response -= 1
+            response = bytes(response)[:5]
+        self._send_response(response)
+
+    def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if len(data) == 2 and data[0] == cf.NMT_START and data[1] in (0, self.node_id):
+            self.latched = False                     # the old CLEAR: outputs stay as they are
+
+    def _on_host_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        if self._connected and len(data) == 1:
+            self._last_host = self._mono()          # the first one arms the consumer
+
+    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+        value = od.decode_raw(data)
+        if index == AO_ERROR_MODE and value not in (0, 1):
+            raise SdoAbortedError(ABORT_VALUE_RANGE)
+        if index == AO_16 and 1 <= subindex <= len(self.outputs):
+            assert isinstance(value, int)
+            self._apply(self.outputs[subindex - 1], value * LSB_V)
+
+    def _apply(self, output: str, volts: float) -> None:
+        self.server.submit(lambda sim: sim.set_torquer_bias_V(output, volts))
+
+    # ------------------------------------------------------------------ watchdog and faults
+    def _consumer_s(self) -> float:
+        entry = self.get(0x1016, 1)
+        return (entry & 0xFFFF) / 1000.0
+
+    def _watch(self) -> None:
+        while not self._stop.wait(0.05):
+            last, period = self._last_host, self._consumer_s()
+            if last is not None and period and self._mono() - last > period:
+                self._last_host = None              # disarmed until the host is heard again
+                if not self.latched:
+                    log.warning("simulated CANopen node %s: host heartbeat lost, error values", self.name)
+                    self.go_error(cf.EMCY_HEARTBEAT, emcy=self._connected)
+
+    def go_error(self, code: int, emcy: bool = True) -> None:
+        """Outputs to their error values, error register, EMCY ``code``, pre-operational."""
+        for sub in range(1, len(self.outputs) + 1):
+            if self.get(AO_ERROR_MODE, sub) == 1:
+                self.set(AO_16, sub, self.get(AO_ERROR_VALUE, sub))
+        self.latched = True
+        cast(Any, self.node.sdo)[0x1001].raw = 0x11
+        if emcy:
+            self.node.emcy.send(code, 0x11)
+        if self._connected:
+            self.node.nmt.state = "PRE-OPERATIONAL"
+
+    def go_safe(self) -> None:
+        for sub in range(1, len(self.outputs) + 1):
+            self.set(AO_16, sub, 0)
+
+    def inject(self, fault: str, code: int, delay_s: float) -> None:
+        if fault == "stall":
+            self.stalled = True
+        elif fault == "busy":
+            self.reply_delay_s = float(delay_s)
+        elif fault == "disconnect":
+            self.connected = False
+        elif fault == "bad_response":
+            self.bad_response += 1
+        elif fault == "reset":
+            self.latched = False
+            self.power_on()
+        elif fault == "error":
+            self.go_error(code)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=1.0)
+        self.node.nmt.stop_heartbeat()
+        self.network.disconnect()

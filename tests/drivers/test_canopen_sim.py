@@ -1,0 +1,163 @@
+"""Issue 21 on the simulated rig with a CANopen torquer (``sim?canopen=torquer``):
+
+* acceptance D, second half: the simulated node answers every object of its EDS over SDO, as
+  the EDS says;
+* acceptance C for the torquer: every fault of the old transport's tests
+  (``test_faults.py``) on the new one: stall, silence, reboot, EMCY, malformed answer, a busy
+  host, the host's heartbeat lost: typed errors, the latch, the safe state read back.
+"""
+
+from __future__ import annotations
+
+import time
+
+import canopen
+import pytest
+from canopen.objectdictionary import ODVariable
+
+from drivers import canopen_frames as cf
+from drivers.errors import DeviceLost, DeviceTimeout, NodeError, NodeReset, ProtocolError
+from drivers.rig import open_rig
+
+pytestmark = pytest.mark.slow
+
+LSB = 10.0 / 32768
+URL = "sim?warm=1&canopen=torquer"
+
+
+@pytest.fixture
+def rig():
+    r = open_rig(URL + "&watchdog=1")   # the watchdog tests: the real rig's 1 s
+    r.set_torquer_bias_V("X", 1.5)
+    r.set_command_torque_V("Y", 0.5)
+    r.set_caging_inhibit("Z", True)
+    yield r
+    r.close()
+
+
+def wait_for(predicate, timeout_s: float = 5.0) -> bool:
+    t_end = time.monotonic() + timeout_s
+    while time.monotonic() < t_end:
+        if predicate():
+            return True
+        time.sleep(0.02)
+    return predicate()
+
+
+def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
+    """The nodes' own registers (not the host's view): mode 1, outputs zero, caging released."""
+    nodes = rig.emulator.nodes.nodes
+    return wait_for(lambda: nodes["relay"].mode == 1 and not any(nodes["torquer"].values.values())
+                    and not any(nodes["command"].values.values()) and not any(nodes["caging"].inhibit.values()),
+                    timeout_s)
+
+
+def test_the_simulated_node_answers_every_object_as_its_eds_says():
+    """Acceptance D: each object read over SDO, decoded by the EDS's type, equals the EDS
+    default, except what the host set at connect (its heartbeat consumer time)."""
+    rig = open_rig(URL)
+    try:
+        sdo = rig.torquers.node.node.sdo
+        od = canopen.import_od(str(cf.eds_path("torquer")), 3)
+        configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
+        checked = 0
+        for obj in od.values():
+            for var in [obj] if isinstance(obj, ODVariable) else list(obj.values()):
+                if not var.readable:
+                    continue
+                got = var.decode_raw(sdo.upload(var.index, var.subindex))
+                want = configured.get((var.index, var.subindex), var.default)
+                assert got == want, f"0x{var.index:04x}:{var.subindex} {var.name}: {got!r} != {want!r}"
+                checked += 1
+        assert checked > 40
+    finally:
+        rig.close()
+
+
+def test_set_points_reach_the_physics_and_read_back(rig):
+    node = rig.emulator.nodes.nodes["torquer"]
+    assert rig.set_torquer_bias_V("Y", -2.0) == pytest.approx(round(-2.0 / LSB) * LSB)
+    assert node.counts(2) == round(-2.0 / LSB)
+    rig.wait(0.05)                                              # settings reach the physics at a block
+    assert rig.emulator.sim.bias["Y"] == pytest.approx(round(-2.0 / LSB) * LSB)
+    assert rig.torquers.bias_V("X") == pytest.approx(round(1.5 / LSB) * LSB)
+    report = rig.safe()
+    assert report.ok, report.failed
+    assert node.values == dict.fromkeys(node.outputs, 0)
+
+
+def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
+    rig.emulator.inject("torquer", "stall")
+    with pytest.raises(DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"):
+        rig.set_torquer_bias_V("X", 0.2)
+    assert emulated_nodes_safe(rig, timeout_s=5.0)
+    assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)  # safe by its own watchdog
+    assert rig.link.heartbeat_suspended
+
+
+def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig):
+    rig.emulator.inject("torquer", "disconnect")
+    assert wait_for(lambda: rig.faults.fault is not None)
+    assert isinstance(rig.faults.fault, DeviceLost)
+    assert "CAN node 'torquer' (id 3) is silent: no heartbeat for" in str(rig.faults.fault)
+    assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)
+    assert not any(rig.emulator.nodes.nodes["torquer"].values.values())
+
+
+def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
+    rig.emulator.inject("torquer", "reset")
+    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+    assert isinstance(rig.faults.fault, NodeReset)
+    assert "CAN node 'torquer' (id 3) rebooted (CANopen boot-up) and lost its set-points" in str(rig.faults.fault)
+    assert emulated_nodes_safe(rig)
+    with pytest.raises(NodeReset):
+        rig.set_torquer_bias_V("X", 0.1)
+
+
+def test_node_error_frame_is_reported_with_its_code(rig):
+    rig.emulator.inject("torquer", "error", code=0x4210)
+    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+    fault = rig.faults.fault
+    assert isinstance(fault, NodeError) and fault.code == 0x4210 and fault.node == "torquer"
+    assert "over-temperature (EMCY 0x4210" in str(fault)
+    assert emulated_nodes_safe(rig)
+
+
+def test_malformed_response_is_a_protocol_error(rig):
+    rig.emulator.inject("torquer", "bad_response")
+    with pytest.raises((DeviceTimeout, ProtocolError)):
+        rig.set_torquer_bias_V("X", 0.3)
+    assert isinstance(rig.faults.fault, ProtocolError)
+    assert "SDO answer 0x583 of node 'torquer': 5 data bytes (expected 8)" in str(rig.faults.fault)
+    assert emulated_nodes_safe(rig)
+
+
+def test_host_heartbeat_loss_trips_every_watchdog():
+    rig = open_rig(URL + "&watchdog=1")
+    try:
+        rig.set_torquer_bias_V("Y", -1.0)
+        rig.link.heartbeat_suspended = True
+        assert emulated_nodes_safe(rig, timeout_s=5.0)
+        nodes = rig.emulator.nodes.nodes
+        assert wait_for(lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command")))
+        assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+        assert isinstance(rig.faults.fault, (NodeError, DeviceLost))
+    finally:
+        rig.close()
+
+
+def test_a_busy_host_does_not_fail_the_simulated_rig():
+    rig = open_rig(URL)
+    try:
+        rig.emulator.inject("torquer", "busy", delay_s=1.5)
+        assert rig.set_torquer_bias_V("X", 0.2) == pytest.approx(0.2, abs=LSB)
+        assert rig.faults.fault is None
+    finally:
+        rig.close()
+    rig = open_rig(URL + "&watchdog=1")
+    try:
+        rig.emulator.inject("torquer", "busy", delay_s=1.5)
+        with pytest.raises(DeviceTimeout, match="no SDO answer"):
+            rig.set_torquer_bias_V("X", 0.2)
+    finally:
+        rig.close()
