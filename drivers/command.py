@@ -9,6 +9,7 @@ from typing import Protocol
 from drivers.calibration import AXES, RigCalibration
 from drivers.can_dac import CanDac
 from drivers.can_link import CanLink
+from drivers.canopen_dac import CanopenDac
 from drivers.setpoints import SetpointKind, SetpointLimits, check_name
 
 #: DAC outputs on the command node, in index order.
@@ -42,13 +43,18 @@ class CommandDac(Protocol):
         ...
 
 
-class CanCommandDac(CanDac):
-    """The command DACs on their CAN node."""
+class CommandChannels:
+    """V_Td and gamma_c on a DAC node's outputs (``OUTPUTS`` order), whatever its protocol
+    (``CanDac`` or ``CanopenDac`` provide ``write``, ``read`` and ``limits``)."""
 
     axes: tuple[str, ...] = AXES
+    limits: SetpointLimits
 
-    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(link, "command", calibration)
+    def write(self, index: int, volts: float, what: str) -> float:
+        raise NotImplementedError
+
+    def read(self, index: int, what: str) -> float:
+        raise NotImplementedError
 
     def set_command_torque_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts)
@@ -68,3 +74,17 @@ class CanCommandDac(CanDac):
         for a in self.axes:
             self.set_command_torque_V(a, 0.0)
             self.set_ac_bias_V(a, 0.0)
+
+
+class CanCommandDac(CanDac, CommandChannels):
+    """The command DACs on their CAN node (the rig's own protocol, docs/protocol.md 2.4)."""
+
+    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
+        super().__init__(link, "command", calibration)
+
+
+class CanopenCommandDac(CanopenDac, CommandChannels):
+    """The command DACs on a CiA 401 analogue-output node (``drivers/eds/command.eds``)."""
+
+    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
+        super().__init__(link, "command", len(OUTPUTS), calibration)

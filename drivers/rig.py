@@ -45,7 +45,7 @@ from drivers.caging import CagingSwitches, CanCagingSwitches
 from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink, NodeClient
 from drivers.clock import RigClock, WallClock
-from drivers.command import CanCommandDac, CommandDac
+from drivers.command import CanCommandDac, CanopenCommandDac, CommandDac
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanRelayDriver, RelayDriver
@@ -75,7 +75,7 @@ class RigNode(Protocol):
 
 
 #: nodes that can speak CANopen so far (``docs/canopen-plan.md``, "State")
-CANOPEN_READY = ("torquer",)
+CANOPEN_READY = ("torquer", "command")
 
 
 def canopen_nodes(url: str, value: str) -> list[str]:
@@ -431,8 +431,11 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         link.wait_for_nodes(max(2.0, node_timeout_s))
         torquers: TorquerDac = (CanopenTorquerDac(link, calibration) if "torquer" in canopen
                                 else CanTorquerDac(link, calibration))
-        clients: list[RigNode] = [torquers.node if n == "torquer" and isinstance(torquers, CanopenTorquerDac)
-                                  else NodeClient(link, n) for n in names]
+        commands: CommandDac = (CanopenCommandDac(link, calibration) if "command" in canopen
+                                else CanCommandDac(link, calibration))
+        co_clients = {dac.node.name: dac.node for dac in (torquers, commands)
+                      if isinstance(dac, CanopenTorquerDac | CanopenCommandDac)}
+        clients: list[RigNode] = [co_clients[n] if n in co_clients else NodeClient(link, n) for n in names]
         for c in clients:
             c.identify()
             c.clear()  # a node latched safe by an earlier session's end starts fresh
@@ -443,7 +446,7 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
                         stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
         tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
         rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=torquers,
-                  commands=CanCommandDac(link, calibration), caging=CanCagingSwitches(link), table=tab,
+                  commands=commands, caging=CanCagingSwitches(link), table=tab,
                   clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
                   closers=[link.close, *(closers or [])], emulator=emulator)
     except BaseException:

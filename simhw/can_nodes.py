@@ -23,7 +23,7 @@ import can
 
 from drivers import can_protocol as cp
 from drivers.errors import ProtocolError
-from simhw.canopen_nodes import CanopenDacNode
+from simhw.canopen_nodes import CANOPEN_NODE_CLASSES, CanopenDacNode
 from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
@@ -119,8 +119,8 @@ class RelayNode(SimNode):
 
     def _commands_zero(self) -> bool:
         """The node senses the command DAC outputs (V_Td, gamma_c) on its interlock lines."""
-        command = self.server.nodes.nodes["command"]
-        assert isinstance(command, CommandNode)
+        command = self.server.nodes.nodes["command"]     # the rig's own protocol or CANopen
+        assert isinstance(command, CommandNode | CanopenDacNode)
         return not any(command.values.values())
 
     @property
@@ -327,9 +327,10 @@ class CanNodeHost:
         for name in canopen:
             if name in external:
                 continue
-            if name != CanopenDacNode.name:
-                raise ValueError(f"the simulated {name} node does not speak CANopen yet (only {CanopenDacNode.name})")
-            self.canopen_nodes[name] = CanopenDacNode(server, channel, watchdog_s, monotonic)
+            if name not in CANOPEN_NODE_CLASSES:
+                raise ValueError(f"the simulated {name} node does not speak CANopen yet "
+                                 f"(only {', '.join(CANOPEN_NODE_CLASSES)})")
+            self.canopen_nodes[name] = CANOPEN_NODE_CLASSES[name](server, channel, watchdog_s, monotonic)
         #: every simulated node by name (tests look at their registers)
         self.nodes: dict[str, SimNode | CanopenDacNode] = {**self._own, **self.canopen_nodes}
         self._by_id = {n.node_id: n for n in self._own.values()}

@@ -11,8 +11,8 @@ CiA 401 ask of the device and LocalNode lacks:
 * the outputs' effect on the physics (``server.submit``);
 * the fault injections of ``simhw.can_nodes`` (``NODE_FAULTS``).
 
-So far the torquer DACs (CiA 401 analogue outputs) are here; the other nodes follow
-(``docs/canopen-plan.md``, "State").
+So far the torquer and command DACs (CiA 401 analogue outputs) are here; the other nodes
+follow (``docs/canopen-plan.md``, "State").
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
-from simhw.params import GYRO_CHANNELS
+from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
     from simhw.rig_server import SimRigServer
@@ -42,11 +42,10 @@ LSB_V = FULL_SCALE_V / 32768
 
 
 class CanopenDacNode:
-    """The torquer DACs as a CiA 401 analogue-output module: four outputs, 16-bit counts
-    over +-10 V (``drivers/eds/torquer.eds``)."""
+    """A CiA 401 analogue-output module: 16-bit counts over +-10 V (``drivers/eds/<name>.eds``)."""
 
-    name = "torquer"
-    outputs: tuple[str, ...] = GYRO_CHANNELS
+    name = ""
+    outputs: tuple[str, ...] = ()
 
     def __init__(self, server: SimRigServer, channel: str, watchdog_s: float,
                  monotonic: Callable[[], float] = time.monotonic) -> None:
@@ -149,7 +148,7 @@ class CanopenDacNode:
             self._apply(self.outputs[subindex - 1], value * LSB_V)
 
     def _apply(self, output: str, volts: float) -> None:
-        self.server.submit(lambda sim: sim.set_torquer_bias_V(output, volts))
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ watchdog and faults
     def _consumer_s(self) -> float:
@@ -201,3 +200,31 @@ class CanopenDacNode:
         self._thread.join(timeout=1.0)
         self.node.nmt.stop_heartbeat()
         self.network.disconnect()
+
+
+class CanopenTorquerNode(CanopenDacNode):
+    """The four torquer bias DACs (``drivers/eds/torquer.eds``)."""
+
+    name = "torquer"
+    outputs = GYRO_CHANNELS
+
+    def _apply(self, output: str, volts: float) -> None:
+        self.server.submit(lambda sim: sim.set_torquer_bias_V(output, volts))
+
+
+class CanopenCommandNode(CanopenDacNode):
+    """The six command DACs, V_Td and gamma_c per axis (``drivers/eds/command.eds``)."""
+
+    name = "command"
+    outputs = tuple(f"vtd_{a}" for a in AXES) + tuple(f"gc_{a}" for a in AXES)
+
+    def _apply(self, output: str, volts: float) -> None:
+        kind, axis = output.split("_")
+        if kind == "vtd":
+            self.server.submit(lambda sim: sim.set_command_torque_V(axis, volts))
+        else:
+            self.server.submit(lambda sim: sim.set_ac_bias_V(axis, volts))
+
+
+#: the simulated nodes that can speak CANopen, by name
+CANOPEN_NODE_CLASSES: dict[str, type[CanopenDacNode]] = {c.name: c for c in (CanopenTorquerNode, CanopenCommandNode)}

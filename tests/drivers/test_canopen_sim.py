@@ -1,4 +1,4 @@
-"""Issue 21 on the simulated rig with a CANopen torquer (``sim?canopen=torquer``):
+"""Issue 21 on the simulated rig with CANopen DAC nodes (``sim?canopen=torquer,command``):
 
 * acceptance D, second half: the simulated node answers every object of its EDS over SDO, as
   the EDS says;
@@ -15,14 +15,15 @@ import canopen
 import pytest
 from canopen.objectdictionary import ODVariable
 
+from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
-from drivers.errors import DeviceLost, DeviceTimeout, NodeError, NodeReset, ProtocolError
+from drivers.errors import DeviceLost, DeviceTimeout, InterlockError, NodeError, NodeReset, ProtocolError
 from drivers.rig import open_rig
 
 pytestmark = pytest.mark.slow
 
 LSB = 10.0 / 32768
-URL = "sim?warm=1&canopen=torquer"
+URL = "sim?warm=1&canopen=torquer,command"
 
 
 @pytest.fixture
@@ -52,13 +53,14 @@ def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
                     timeout_s)
 
 
-def test_the_simulated_node_answers_every_object_as_its_eds_says():
+@pytest.mark.parametrize("name", ["torquer", "command"])
+def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     """Acceptance D: each object read over SDO, decoded by the EDS's type, equals the EDS
     default, except what the host set at connect (its heartbeat consumer time)."""
     rig = open_rig(URL)
     try:
-        sdo = rig.torquers.node.node.sdo
-        od = canopen.import_od(str(cf.eds_path("torquer")), 3)
+        sdo = {"torquer": rig.torquers, "command": rig.commands}[name].node.node.sdo
+        od = canopen.import_od(str(cf.eds_path(name)), cp.NODES[name])
         configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
         checked = 0
         for obj in od.values():
@@ -84,6 +86,21 @@ def test_set_points_reach_the_physics_and_read_back(rig):
     report = rig.safe()
     assert report.ok, report.failed
     assert node.values == dict.fromkeys(node.outputs, 0)
+
+
+def test_command_dacs_and_the_clamp_interlock_that_senses_them(rig):
+    node = rig.emulator.nodes.nodes["command"]
+    assert rig.set_ac_bias_V("Z", 0.25) == pytest.approx(round(0.25 / LSB) * LSB)
+    assert node.counts(6) == round(0.25 / LSB)
+    assert rig.commands.command_torque_V("Y") == pytest.approx(round(0.5 / LSB) * LSB)   # set by the fixture
+    rig.wait(0.05)
+    assert rig.emulator.sim.vtd["Y"] == pytest.approx(round(0.5 / LSB) * LSB)
+    node.set(0x6411, 2, 0)                      # behind the host's back: the relay node still senses gamma_c
+    with pytest.raises(InterlockError, match="command input"):
+        rig.relays._set_clamp(True)
+    rig.commands.zero()
+    assert rig.clamp() and rig.unclamp() is False
+    assert not any(node.values.values())
 
 
 def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
