@@ -10,13 +10,14 @@ here, before any frame.
 from __future__ import annotations
 
 import logging
+import struct
 
 from drivers import canopen_frames as cf
 from drivers.calibration import RigCalibration
 from drivers.can_dac import check_readback
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
-from drivers.errors import ProtocolError, SetpointRangeError
+from drivers.errors import DeviceLost, ProtocolError, SetpointRangeError
 from drivers.setpoints import SetpointLimits
 
 log = logging.getLogger(__name__)
@@ -41,6 +42,10 @@ class CanopenDac:
             safe_values=[((AO_16, s), 0) for s in subs],
             configure=[*(((AO_ERROR_MODE, s), 1) for s in subs), *(((AO_ERROR_VALUE, s), 0) for s in subs)])
         self._lsb_V: list[float] | None = None
+        #: the receive PDOs of the EDS: (COB-ID, [output index per mapped I16]); outputs as last
+        #: sent by the host (counts), for the outputs a PDO carries but a stream does not change
+        self.rpdos = self._rpdos()
+        self._sent: dict[int, int] = {}
 
     # ------------------------------------------------------------------ scaling
     def lsb_V(self, index: int) -> float:
@@ -77,8 +82,64 @@ class CanopenDac:
         """Set output ``index`` (already checked against the limits) by SDO; returns its read-back (V)."""
         counts = self.counts(index, volts)
         self.node.write(AO_16, index + 1, counts, what=f"{what} = {volts:+.6f} V ({counts} counts)")
+        self._sent[index] = counts
         back = self.read(index, what)
         return check_readback(self.node, what, volts, back, self.lsb_V(index))
 
     def read(self, index: int, what: str) -> float:
-        return self.node.read(AO_16, index + 1, what=f"read {what}") * self.lsb_V(index)
+        counts = self.node.read(AO_16, index + 1, what=f"read {what}")
+        self._sent[index] = counts
+        return counts * self.lsb_V(index)
+
+    # ------------------------------------------------------------------ receive PDOs (streams)
+    def _rpdos(self) -> list[tuple[int, list[int]]]:
+        out = []
+        for n in range(4):
+            if 0x1400 + n not in self.node.node.object_dictionary:
+                break
+            cob = self.node.eds_default(0x1400 + n, 1)
+            mapped = []
+            for s in range(1, self.node.eds_default(0x1600 + n, 0) + 1):
+                entry = self.node.eds_default(0x1600 + n, s)
+                index, sub, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
+                if index != AO_16 or bits != 16:
+                    raise ProtocolError(f"CAN node '{self.node.name}': RPDO{n + 1} maps 0x{entry:08x}, not a "
+                                        f"16-bit analogue output; check its EDS")
+                mapped.append(sub - 1)
+            out.append((cob, mapped))
+        return out
+
+    def stream(self, index: int, volts: float, what: str) -> float:
+        """Set output ``index`` (already checked against the limits) by its receive PDO: one
+        frame, unconfirmed, for a stream of set-points (a bias slew). Returns the volts the
+        counts stand for; ``confirm`` reads every streamed output back."""
+        self.node.link.faults.check()
+        counts = self.counts(index, volts)
+        cob, mapped = next(((c, m) for c, m in self.rpdos if index in m), (0, []))
+        if not mapped:
+            raise ProtocolError(f"CAN node '{self.node.name}': output {index + 1} ({what}) is on no receive PDO")
+        for i in mapped:              # the PDO carries its other outputs as they are
+            if i != index and i not in self._sent:
+                self.read(i, f"output {i + 1}")
+        self._sent[index] = counts
+        data = struct.pack(f"<{len(mapped)}h", *(self._sent[i] for i in mapped))
+        try:
+            self.node.link.network.send_message(cob, data)
+        except (OSError, ValueError) as exc:   # can.CanError is an OSError
+            fault = DeviceLost(f"CAN {self.node.link.channel}: cannot send RPDO 0x{cob:03x} to node "
+                               f"'{self.node.name}' ({exc}); is the interface up?")
+            self.node.link.faults.report(fault)
+            raise fault from exc
+        return counts * self.lsb_V(index)
+
+    def confirm(self) -> None:
+        """Read back, by SDO, every output a stream set: each must be what was sent (a lost
+        or refused PDO is a ``ProtocolError``, latched)."""
+        for index, counts in sorted(self._sent.items()):
+            got = self.node.read(AO_16, index + 1, what=f"read back output {index + 1}")
+            if got != counts:
+                fault = ProtocolError(f"CAN node '{self.node.name}': output {index + 1} reads back {got} counts "
+                                      f"after the stream sent {counts} (a receive PDO lost, or the node not "
+                                      f"operational)")
+                self.node.link.faults.report(fault)
+                raise fault

@@ -72,3 +72,9 @@ class CanopenTorquerDac(CanopenDac, TorquerChannels):
 
     def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
         super().__init__(link, "torquer", len(GYRO_CHANNELS), calibration)
+
+    def stream_bias_V(self, channel: str, volts: float) -> float:
+        """One step of a bias slew by receive PDO (checked against ``limits`` first, nothing
+        sent otherwise); unconfirmed: ``confirm`` reads every streamed bias back."""
+        v = self.limits.torquer_bias(channel, volts)
+        return self.stream(self.channels.index(channel), v, f"torquer bias on {channel}")

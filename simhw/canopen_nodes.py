@@ -63,6 +63,12 @@ class CanopenDacNode:
         self._send_response = self.node.sdo.send_response
         setattr(self.node.sdo, "send_response", self._sdo_response)  # noqa: B010 - an instance's method replaced
         self.node.add_write_callback(self._on_write)
+        # receive PDOs as the EDS maps them (RPDO1: outputs 1-4, RPDO2: 5-6)
+        self.node.rpdo.read(from_od=True)
+        assert self.node.rpdo.map is not None
+        for pdo_map in self.node.rpdo.map.values():
+            pdo_map.add_callback(self._on_rpdo)
+        self.node.rpdo.subscribe()
         self.network.subscribe(0, self._on_nmt)
         self.network.subscribe(cf.HOST_HEARTBEAT_COB, self._on_host_heartbeat)
         #: True from a trip of the watchdog or an error until the host's NMT start
@@ -130,6 +136,13 @@ class CanopenDacNode:
             self.bad_response -= 1
             response = bytes(response)[:5]
         self._send_response(response)
+
+    def _on_rpdo(self, pdo_map: canopen.pdo.PdoMap) -> None:
+        """A receive PDO: its outputs, as written by SDO, in the operational state only (CiA 301)."""
+        if not self._connected or self.stalled or self.node.nmt.state != "OPERATIONAL":
+            return
+        for var in pdo_map.map:
+            self.node.set_data(var.index, var.subindex, var.get_data())
 
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) == 2 and data[0] == cf.NMT_START and data[1] in (0, self.node_id):

@@ -9,6 +9,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 
 import canopen
@@ -17,7 +18,15 @@ from canopen.objectdictionary import ODVariable
 
 from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
-from drivers.errors import DeviceLost, DeviceTimeout, InterlockError, NodeError, NodeReset, ProtocolError
+from drivers.errors import (
+    DeviceLost,
+    DeviceTimeout,
+    InterlockError,
+    NodeError,
+    NodeReset,
+    ProtocolError,
+    SetpointRangeError,
+)
 from drivers.rig import open_rig
 
 pytestmark = pytest.mark.slow
@@ -178,3 +187,40 @@ def test_a_busy_host_does_not_fail_the_simulated_rig():
             rig.set_torquer_bias_V("X", 0.2)
     finally:
         rig.close()
+
+
+def test_a_bias_slew_goes_by_receive_pdo_and_is_read_back(rig, caplog):
+    """Issue 21 item 4: set-points by receive PDO (one unconfirmed frame each) for a stream,
+    by SDO (download and read-back upload) otherwise; both timed on the virtual bus and
+    logged, no timing asserted (the host is shared)."""
+    node = rig.emulator.nodes.nodes["torquer"]
+    steps = [round(0.01 * i, 4) for i in range(-100, 101, 4)]
+    t0 = time.perf_counter()
+    for v in steps:
+        rig.torquers.set_bias_V("Y", v)
+    sdo_s = (time.perf_counter() - t0) / len(steps)
+    t0 = time.perf_counter()
+    for v in steps:
+        assert rig.torquers.stream_bias_V("Z", v) == pytest.approx(v, abs=LSB)
+    pdo_sent_s = (time.perf_counter() - t0) / len(steps)
+    t_end = time.monotonic() + 5.0
+    while node.counts(3) != round(steps[-1] / LSB) and time.monotonic() < t_end:
+        time.sleep(0)                                                  # until the last frame arrived
+    pdo_all_s = (time.perf_counter() - t0) / len(steps)
+    rig.torquers.confirm()
+    assert node.counts(1) == round(1.5 / LSB)                          # the PDO carried X as it was
+    logging.getLogger(__name__).warning(
+        "set-point latency on the virtual bus: SDO download + read-back %.2f ms; receive PDO %.3f ms to send, "
+        "%.3f ms per set-point until the node had the last", sdo_s * 1e3, pdo_sent_s * 1e3, pdo_all_s * 1e3)
+    with pytest.raises(SetpointRangeError):
+        rig.torquers.stream_bias_V("X", 8.2)                            # checked before any frame
+    assert rig.faults.fault is None
+
+
+def test_a_lost_stream_is_a_protocol_error_at_confirm(rig):
+    node = rig.emulator.nodes.nodes["torquer"]
+    node.network.unsubscribe(0x203)              # RPDO1 frames are lost on the way
+    rig.torquers.stream_bias_V("X", 0.7)
+    with pytest.raises(ProtocolError, match=r"output 1 reads back 4915 counts after the stream sent 2294"):
+        rig.torquers.confirm()
+    assert isinstance(rig.faults.fault, ProtocolError)

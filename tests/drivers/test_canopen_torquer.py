@@ -45,8 +45,8 @@ class Cia401AnalogueOutputs:
         self.network.add_node(self.node)
         self.outputs = self.node.sdo[0x6411][0].raw
         self._last_consumed: float | None = None
-        #: the outputs (counts) right after each trip of the heartbeat consumer
-        self.trips: list[list[int]] = []
+        #: per trip of the heartbeat consumer: the outputs it set to their error values (sub: counts)
+        self.trips: list[dict[int, int]] = []
         for producer in range(1, 0x80):
             self.network.subscribe(0x700 + producer, self._on_heartbeat)
         self._stop = threading.Event()
@@ -76,10 +76,11 @@ class Cia401AnalogueOutputs:
                 self._trip()
 
     def _trip(self) -> None:
+        applied = {}
         for sub in range(1, self.outputs + 1):
             if self.node.sdo[0x6443][sub].raw == 1:
-                self.node.sdo[0x6411][sub].raw = self.node.sdo[0x6444][sub].raw
-        self.trips.append([self.output(s) for s in range(1, self.outputs + 1)])
+                applied[sub] = self.node.sdo[0x6411][sub].raw = self.node.sdo[0x6444][sub].raw
+        self.trips.append(applied)
         self.node.sdo[0x1001].raw = 0x11            # generic + communication error
         self.node.emcy.send(0x8130, 0x11)
         self.node.nmt.state = "PRE-OPERATIONAL"
@@ -164,7 +165,9 @@ def test_the_module_takes_its_error_values_when_the_host_heartbeat_stops(channel
         rig.set_torquer_bias_V("XRD", 1.5)
         rig.link.heartbeat_suspended = True
         wait_for(lambda: module.trips, "the module's heartbeat consumer tripping")
-        assert module.trips[0] == [0, 0, -1234, round(1.5 / LSB)]
+        # the error values the host set up at connect (mode 1, value 0), Z's own, XRD kept
+        # (the host's safe state, after the other nodes' EMCY, may zero XRD by SDO: that is the host's)
+        assert module.trips[0] == {1: 0, 2: 0, 3: -1234}
         # every node trips: the first fault latched may be another's; the torquer's EMCY is seen
         wait_for(lambda: any("'torquer' (id 3) reports an error: host heartbeat lost" in r.getMessage()
                              and "EMCY 0x8130" in r.getMessage()
