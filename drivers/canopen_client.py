@@ -37,14 +37,16 @@ class CanopenClient:
     """Node ``name`` (an id of ``can_protocol.NODES``) on ``link``, described by its EDS file."""
 
     def __init__(self, link: CanLink, name: str, device_type: int, *, safe_values: Sequence[tuple[Address, int]] = (),
-                 raw_index: int = 0, configure: Sequence[tuple[Address, int]] = ()) -> None:
+                 raw_index: int = 0, raw_bits: bool = False, configure: Sequence[tuple[Address, int]] = ()) -> None:
         self.link = link
         self.name = name
         self.node_id = cp.NODES[name]
         self.device_type = device_type
-        #: what ``safe`` writes, in order; ``raw_get(i)`` reads ``(raw_index, i + 1)``
+        #: what ``safe`` writes, in order; ``raw_get(i)`` reads ``(raw_index, i + 1)``, or with
+        #: ``raw_bits`` bit i of ``(raw_index, 1)`` (a digital-output block)
         self.safe_values = list(safe_values)
         self.raw_index = raw_index
+        self.raw_bits = raw_bits
         #: written at connect (after the heartbeat settings): error modes, error values
         self.configuration = list(configure)
         self.node = canopen.RemoteNode(self.node_id, str(cf.eds_path(name)))
@@ -172,4 +174,6 @@ class CanopenClient:
 
     def raw_get(self, index: int) -> int:
         """Output ``index`` (0-based) as the node has it, while a fault is latched too."""
+        if self.raw_bits:
+            return self.read(self.raw_index, 1, what="read outputs 1-8", check_faults=False) >> index & 1
         return self.read(self.raw_index, index + 1, what=f"read output {index + 1}", check_faults=False)

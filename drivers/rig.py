@@ -41,7 +41,7 @@ from urllib.parse import parse_qsl, urlsplit
 import can
 
 from drivers.adc import Adc
-from drivers.caging import CagingSwitches, CanCagingSwitches
+from drivers.caging import CagingSwitches, CanCagingSwitches, CanopenCagingSwitches
 from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink, NodeClient
 from drivers.clock import RigClock, WallClock
@@ -75,7 +75,7 @@ class RigNode(Protocol):
 
 
 #: nodes that can speak CANopen so far (``docs/canopen-plan.md``, "State")
-CANOPEN_READY = ("torquer", "command")
+CANOPEN_READY = ("torquer", "command", "caging")
 
 
 def canopen_nodes(url: str, value: str) -> list[str]:
@@ -433,8 +433,9 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
                                 else CanTorquerDac(link, calibration))
         commands: CommandDac = (CanopenCommandDac(link, calibration) if "command" in canopen
                                 else CanCommandDac(link, calibration))
-        co_clients = {dac.node.name: dac.node for dac in (torquers, commands)
-                      if isinstance(dac, CanopenTorquerDac | CanopenCommandDac)}
+        caging: CagingSwitches = CanopenCagingSwitches(link) if "caging" in canopen else CanCagingSwitches(link)
+        co_clients = {dev.node.name: dev.node for dev in (torquers, commands, caging)
+                      if isinstance(dev, CanopenTorquerDac | CanopenCommandDac | CanopenCagingSwitches)}
         clients: list[RigNode] = [co_clients[n] if n in co_clients else NodeClient(link, n) for n in names]
         for c in clients:
             c.identify()
@@ -446,7 +447,7 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
                         stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
         tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
         rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=torquers,
-                  commands=commands, caging=CanCagingSwitches(link), table=tab,
+                  commands=commands, caging=caging, table=tab,
                   clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
                   closers=[link.close, *(closers or [])], emulator=emulator)
     except BaseException:

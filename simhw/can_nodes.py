@@ -23,7 +23,7 @@ import can
 
 from drivers import can_protocol as cp
 from drivers.errors import ProtocolError
-from simhw.canopen_nodes import CANOPEN_NODE_CLASSES, CanopenDacNode
+from simhw.canopen_nodes import CANOPEN_NODE_CLASSES, CanopenDacNode, CanopenSimNode
 from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
@@ -323,7 +323,7 @@ class CanNodeHost:
         #: network of its own; the rest speak the rig's own protocol through this host's threads
         self._own: dict[str, SimNode] = {n.name: n for n in (cls(server) for cls in NODE_CLASSES
                                                               if cls.name not in external and cls.name not in canopen)}
-        self.canopen_nodes: dict[str, CanopenDacNode] = {}
+        self.canopen_nodes: dict[str, CanopenSimNode] = {}
         for name in canopen:
             if name in external:
                 continue
@@ -332,7 +332,7 @@ class CanNodeHost:
                                  f"(only {', '.join(CANOPEN_NODE_CLASSES)})")
             self.canopen_nodes[name] = CANOPEN_NODE_CLASSES[name](server, channel, watchdog_s, monotonic)
         #: every simulated node by name (tests look at their registers)
-        self.nodes: dict[str, SimNode | CanopenDacNode] = {**self._own, **self.canopen_nodes}
+        self.nodes: dict[str, SimNode | CanopenSimNode] = {**self._own, **self.canopen_nodes}
         self._by_id = {n.node_id: n for n in self._own.values()}
         self._last_host_hb: float | None = None  # watchdogs arm on the first host heartbeat
         self._counter = 0

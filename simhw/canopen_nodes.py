@@ -11,8 +11,8 @@ CiA 401 ask of the device and LocalNode lacks:
 * the outputs' effect on the physics (``server.submit``);
 * the fault injections of ``simhw.can_nodes`` (``NODE_FAULTS``).
 
-So far the torquer and command DACs (CiA 401 analogue outputs) are here; the other nodes
-follow (``docs/canopen-plan.md``, "State").
+So far the torquer and command DACs (CiA 401 analogue outputs) and the caging switches
+(CiA 401 digital outputs) are here; the relay and the table follow (``docs/canopen-plan.md``, "State").
 """
 
 from __future__ import annotations
@@ -37,15 +37,17 @@ log = logging.getLogger(__name__)
 
 ABORT_VALUE_RANGE = 0x06090030
 AO_16, AO_ERROR_MODE, AO_ERROR_VALUE = 0x6411, 0x6443, 0x6444
+DO_8, DO_ERROR_MODE, DO_ERROR_VALUE = 0x6200, 0x6206, 0x6207
 FULL_SCALE_V = 10.0
 LSB_V = FULL_SCALE_V / 32768
 
 
-class CanopenDacNode:
-    """A CiA 401 analogue-output module: 16-bit counts over +-10 V (``drivers/eds/<name>.eds``)."""
+class CanopenSimNode:
+    """A simulated node as a CANopen slave: LocalNode from ``drivers/eds/<name>.eds``, the
+    heartbeat consumer, error behaviour and fault injections. Subclasses give the outputs:
+    ``reset_outputs``, ``error_outputs``, ``go_safe``, ``_on_write``."""
 
     name = ""
-    outputs: tuple[str, ...] = ()
 
     def __init__(self, server: SimRigServer, channel: str, watchdog_s: float,
                  monotonic: Callable[[], float] = time.monotonic) -> None:
@@ -88,19 +90,24 @@ class CanopenDacNode:
         """Power-on values (outputs 0, the EDS's defaults), boot-up, then pre-operational."""
         self.node.data_store.clear()
         self.node.data_store[0x1016] = {1: ((cf.HOST_NODE_ID << 16) | round(self.watchdog_s * 1000)).to_bytes(4, "little")}
-        for out in self.outputs:
-            self._apply(out, 0.0)
+        self.reset_outputs()
         self._last_host = None
         self.node.nmt.send_command(0x81)   # reset node: boot-up frame ...
         self.node.nmt.send_command(0x80)   # ... pre-operational; heartbeat per 0x1017
 
-    @property
-    def values(self) -> dict[str, int]:
-        """Each output in microvolts (``simhw.can_nodes``'s DAC nodes have the same)."""
-        return {out: round(self.counts(i + 1) * LSB_V * 1e6) for i, out in enumerate(self.outputs)}
+    def reset_outputs(self) -> None:
+        """Outputs to their power-on values, in the physics too (the data store is cleared)."""
+        raise NotImplementedError
 
-    def counts(self, sub: int) -> int:
-        return self.get(AO_16, sub)
+    def error_outputs(self) -> None:
+        """Outputs to their error values (CiA 401 error mode / error value objects)."""
+        raise NotImplementedError
+
+    def go_safe(self) -> None:
+        raise NotImplementedError
+
+    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+        """Check a written value (``SdoAbortedError`` refuses it) and apply it."""
 
     def get(self, index: int, sub: int) -> int:
         """An integer object as the node has it (through its own SDO server's view)."""
@@ -152,17 +159,6 @@ class CanopenDacNode:
         if self._connected and len(data) == 1:
             self._last_host = self._mono()          # the first one arms the consumer
 
-    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
-        value = od.decode_raw(data)
-        if index == AO_ERROR_MODE and value not in (0, 1):
-            raise SdoAbortedError(ABORT_VALUE_RANGE)
-        if index == AO_16 and 1 <= subindex <= len(self.outputs):
-            assert isinstance(value, int)
-            self._apply(self.outputs[subindex - 1], value * LSB_V)
-
-    def _apply(self, output: str, volts: float) -> None:
-        raise NotImplementedError
-
     # ------------------------------------------------------------------ watchdog and faults
     def _consumer_s(self) -> float:
         entry = self.get(0x1016, 1)
@@ -179,19 +175,13 @@ class CanopenDacNode:
 
     def go_error(self, code: int, emcy: bool = True) -> None:
         """Outputs to their error values, error register, EMCY ``code``, pre-operational."""
-        for sub in range(1, len(self.outputs) + 1):
-            if self.get(AO_ERROR_MODE, sub) == 1:
-                self.set(AO_16, sub, self.get(AO_ERROR_VALUE, sub))
+        self.error_outputs()
         self.latched = True
         cast(Any, self.node.sdo)[0x1001].raw = 0x11
         if emcy:
             self.node.emcy.send(code, 0x11)
         if self._connected:
             self.node.nmt.state = "PRE-OPERATIONAL"
-
-    def go_safe(self) -> None:
-        for sub in range(1, len(self.outputs) + 1):
-            self.set(AO_16, sub, 0)
 
     def inject(self, fault: str, code: int, delay_s: float) -> None:
         if fault == "stall":
@@ -213,6 +203,82 @@ class CanopenDacNode:
         self._thread.join(timeout=1.0)
         self.node.nmt.stop_heartbeat()
         self.network.disconnect()
+
+
+class CanopenDacNode(CanopenSimNode):
+    """A CiA 401 analogue-output module: 16-bit counts over +-10 V (``drivers/eds/<name>.eds``)."""
+
+    outputs: tuple[str, ...] = ()
+
+    @property
+    def values(self) -> dict[str, int]:
+        """Each output in microvolts (``simhw.can_nodes``'s DAC nodes have the same)."""
+        return {out: round(self.counts(i + 1) * LSB_V * 1e6) for i, out in enumerate(self.outputs)}
+
+    def counts(self, sub: int) -> int:
+        return self.get(AO_16, sub)
+
+    def reset_outputs(self) -> None:
+        for out in self.outputs:
+            self._apply(out, 0.0)
+
+    def error_outputs(self) -> None:
+        for sub in range(1, len(self.outputs) + 1):
+            if self.get(AO_ERROR_MODE, sub) == 1:
+                self.set(AO_16, sub, self.get(AO_ERROR_VALUE, sub))
+
+    def go_safe(self) -> None:
+        for sub in range(1, len(self.outputs) + 1):
+            self.set(AO_16, sub, 0)
+
+    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+        value = od.decode_raw(data)
+        if index == AO_ERROR_MODE and value not in (0, 1):
+            raise SdoAbortedError(ABORT_VALUE_RANGE)
+        if index == AO_16 and 1 <= subindex <= len(self.outputs):
+            assert isinstance(value, int)
+            self._apply(self.outputs[subindex - 1], value * LSB_V)
+
+    def _apply(self, output: str, volts: float) -> None:
+        raise NotImplementedError
+
+
+class CanopenCagingNode(CanopenSimNode):
+    """The caging-inhibit switches as a CiA 401 digital-output module: 0x6200 sub 1, bit 0 X,
+    1 Y, 2 Z, 3 XRD (1 = inhibited), bits 4-7 refused (``drivers/eds/caging.eds``)."""
+
+    name = "caging"
+    channels = GYRO_CHANNELS
+
+    @property
+    def inhibit(self) -> dict[str, bool]:
+        """Each switch (``simhw.can_nodes.CagingNode`` has the same)."""
+        word = self.get(DO_8, 1)
+        return {c: bool(word >> i & 1) for i, c in enumerate(self.channels)}
+
+    def reset_outputs(self) -> None:
+        self._apply(0)
+
+    def error_outputs(self) -> None:
+        mask, value = self.get(DO_ERROR_MODE, 1), self.get(DO_ERROR_VALUE, 1)
+        self.set(DO_8, 1, (self.get(DO_8, 1) & ~mask) | (value & mask))
+
+    def go_safe(self) -> None:
+        self.set(DO_8, 1, 0)
+
+    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+        value = od.decode_raw(data)
+        assert isinstance(value, int)
+        if index == DO_8 and subindex == 1:
+            if value & ~0x0F:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)   # outputs 5-8 are not wired
+            self._apply(value)
+
+    def _apply(self, word: int) -> None:
+        def apply(sim) -> None:
+            for i, c in enumerate(self.channels):
+                sim.set_caging_inhibit(c, bool(word >> i & 1))
+        self.server.submit(apply)
 
 
 class CanopenTorquerNode(CanopenDacNode):
@@ -240,4 +306,5 @@ class CanopenCommandNode(CanopenDacNode):
 
 
 #: the simulated nodes that can speak CANopen, by name
-CANOPEN_NODE_CLASSES: dict[str, type[CanopenDacNode]] = {c.name: c for c in (CanopenTorquerNode, CanopenCommandNode)}
+CANOPEN_NODE_CLASSES: dict[str, type[CanopenSimNode]] = {
+    c.name: c for c in (CanopenTorquerNode, CanopenCommandNode, CanopenCagingNode)}

@@ -1,4 +1,4 @@
-"""Issue 21 on the simulated rig with CANopen DAC nodes (``sim?canopen=torquer,command``):
+"""Issue 21 on the simulated rig with CANopen DAC and caging nodes (``sim?canopen=torquer,command,caging``):
 
 * acceptance D, second half: the simulated node answers every object of its EDS over SDO, as
   the EDS says;
@@ -32,7 +32,7 @@ from drivers.rig import open_rig
 pytestmark = pytest.mark.slow
 
 LSB = 10.0 / 32768
-URL = "sim?warm=1&canopen=torquer,command"
+URL = "sim?warm=1&canopen=torquer,command,caging"
 
 
 @pytest.fixture
@@ -62,13 +62,13 @@ def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
                     timeout_s)
 
 
-@pytest.mark.parametrize("name", ["torquer", "command"])
+@pytest.mark.parametrize("name", ["torquer", "command", "caging"])
 def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     """Acceptance D: each object read over SDO, decoded by the EDS's type, equals the EDS
     default, except what the host set at connect (its heartbeat consumer time)."""
     rig = open_rig(URL)
     try:
-        sdo = {"torquer": rig.torquers, "command": rig.commands}[name].node.node.sdo
+        sdo = {"torquer": rig.torquers, "command": rig.commands, "caging": rig.caging}[name].node.node.sdo
         od = canopen.import_od(str(cf.eds_path(name)), cp.NODES[name])
         configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
         checked = 0
@@ -80,7 +80,8 @@ def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
                 want = configured.get((var.index, var.subindex), var.default)
                 assert got == want, f"0x{var.index:04x}:{var.subindex} {var.name}: {got!r} != {want!r}"
                 checked += 1
-        assert checked > 40
+        assert checked == sum(1 for obj in od.values()
+                              for var in ([obj] if isinstance(obj, ODVariable) else obj.values()) if var.readable)
     finally:
         rig.close()
 
@@ -110,6 +111,24 @@ def test_command_dacs_and_the_clamp_interlock_that_senses_them(rig):
     rig.commands.zero()
     assert rig.clamp() and rig.unclamp() is False
     assert not any(node.values.values())
+
+
+def test_caging_switches_are_digital_outputs(rig):
+    node = rig.emulator.nodes.nodes["caging"]
+    assert node.inhibit == {"X": False, "Y": False, "Z": True, "XRD": False}      # set by the fixture
+    assert rig.set_caging_inhibit("XRD", True) is True
+    assert node.get(0x6200, 1) == 0b1100
+    assert rig.caging.inhibited("XRD") and not rig.caging.inhibited("X")
+    rig.wait(0.05)
+    assert list(rig.emulator.sim.relays.caging_inhibit) == [False, False, True, True]
+    with pytest.raises(SetpointRangeError, match="must be True or False"):
+        rig.set_caging_inhibit("X", 1)
+    rig.caging.clear()
+    assert node.get(0x6200, 1) == 0
+    node.set(0x6200, 1, 0b0001)                           # the host reads the module, not its memory
+    assert rig.caging.inhibited("X")
+    report = rig.safe()
+    assert report.ok and node.get(0x6200, 1) == 0
 
 
 def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
