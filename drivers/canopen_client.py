@@ -26,7 +26,12 @@ log = logging.getLogger(__name__)
 
 #: SDO abort codes (CiA 301) the host turns into refusals rather than faults
 ABORT_RANGE = (0x06090030, 0x06090031, 0x06090032, 0x06090036)
-ABORT_STATE = (0x08000020, 0x08000021, 0x08000022)
+#: "data cannot be transferred or stored": the relay node's refusals (docs/canopen-plan.md 5):
+#: an interlock (reasons in 0x2003), the mode switches not held, the node not operational
+ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL = 0x08000020, 0x08000021, 0x08000022
+ABORT_STATE = (ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL)
+ABORT_TEXT = {ABORT_INTERLOCK: "interlock", ABORT_NOT_HELD: "mode switches not held",
+              ABORT_NOT_OPERATIONAL: "node not operational (latched safe: the host's NMT start releases it)"}
 ABORT_NO_OBJECT = 0x06020000
 
 #: one object of a node: (index, subindex)
@@ -138,7 +143,7 @@ class CanopenClient:
             var = self._variable(index, sub)
             return SetpointRangeError(text, limit=(var.min, var.max))
         if code in ABORT_STATE:
-            return InterlockError(text)
+            return InterlockError(f"{text} ({ABORT_TEXT[code]})", detail=code)
         fault = ProtocolError(text)
         self.link.faults.report(fault)
         return fault
@@ -176,4 +181,6 @@ class CanopenClient:
         """Output ``index`` (0-based) as the node has it, while a fault is latched too."""
         if self.raw_bits:
             return self.read(self.raw_index, 1, what="read outputs 1-8", check_faults=False) >> index & 1
+        if isinstance(self.node.object_dictionary[self.raw_index], canopen.objectdictionary.ODVariable):
+            return self.read(self.raw_index, 0, what="read its state", check_faults=False)
         return self.read(self.raw_index, index + 1, what=f"read output {index + 1}", check_faults=False)

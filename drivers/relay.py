@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import abc
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from drivers import can_protocol as cp
 from drivers.calibration import GYRO_CHANNELS
 from drivers.can_link import CanLink, NodeClient
+from drivers.canopen_client import ABORT_INTERLOCK, CanopenClient
 from drivers.errors import DriverError, InterlockError, ModeNotAllowed
 
 log = logging.getLogger(__name__)
@@ -181,10 +183,63 @@ class CanRelayDriver(RelayDriver):
                                  detail=exc.detail) from None
 
     def status(self) -> RelayStatus:
-        w = self.node.call(cp.OP_STATUS, what="STATUS")
-        return RelayStatus(
-            mode=(w >> cp.ST_MODE_SHIFT) & 7, selected=(w >> cp.ST_SELECT_SHIFT) & 7,
-            held=bool(w & cp.ST_HELD), alarm=bool(w & cp.ST_ALARM),
-            at_speed={c: bool(w >> (cp.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
-            caged={c: bool(w >> (cp.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
-            spin_fraction=((w >> cp.ST_SPIN_SHIFT) & 0xFF) / 100.0, clamped=bool(w & cp.ST_CLAMPED))
+        return decode_status(self.node.call(cp.OP_STATUS, what="STATUS"))
+
+
+#: the relay node's manufacturer objects (docs/canopen-plan.md section 5, drivers/eds/relay.eds)
+R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2000, 0x2007)
+SWITCH_HOLD, SWITCH_RELEASE = 1, 2
+#: the reason bits of 0x2003, spelled out
+REASONS = ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"), (cp.WHY_NOT_CAGED, "gyros not caged"),
+           (cp.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}"), (cp.WHY_MODE, "mode outside 1-3"),
+           (cp.WHY_COMMAND, "a command input not at zero"))
+
+
+def decode_status(w: int) -> RelayStatus:
+    """The STATUS word (docs/protocol.md 2.5; the relay node's 0x2004 in CANopen)."""
+    return RelayStatus(
+        mode=(w >> cp.ST_MODE_SHIFT) & 7, selected=(w >> cp.ST_SELECT_SHIFT) & 7,
+        held=bool(w & cp.ST_HELD), alarm=bool(w & cp.ST_ALARM),
+        at_speed={c: bool(w >> (cp.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+        caged={c: bool(w >> (cp.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+        spin_fraction=((w >> cp.ST_SPIN_SHIFT) & 0xFF) / 100.0, clamped=bool(w & cp.ST_CLAMPED))
+
+
+class CanopenRelayDriver(RelayDriver):
+    """The relay driver node over CANopen: the same hold/select/release, interlocks, alarm and
+    clamp, in the node, behind manufacturer objects; a refusal is an SDO abort, its reasons
+    in 0x2003."""
+
+    def __init__(self, link: CanLink) -> None:
+        self.node = CanopenClient(link, "relay", 0, raw_index=R_MODE, safe_values=[((R_SAFE, 0), 1)])
+
+    def hold(self) -> None:
+        self.node.write(R_SWITCHES, 0, SWITCH_HOLD, what="HOLD")
+
+    def select(self, mode: int) -> None:
+        mode = self._checked(mode)
+        self.node.write(R_SELECTED, 0, mode, what=f"SELECT mode {mode}")
+
+    def release(self) -> int:
+        self._refined(lambda: self.node.write(R_SWITCHES, 0, SWITCH_RELEASE, what="RELEASE"))
+        return self.node.read(R_MODE, 0, what="read the mode")
+
+    def _set_clamp(self, clamped: bool) -> bool:
+        what = "CLAMP" if clamped else "UNCLAMP"
+        self._refined(lambda: self.node.write(R_CLAMP, 0, int(clamped), what=what))
+        return bool(self.node.read(R_CLAMP, 0, what="read the clamp"))
+
+    def _refined(self, write: Callable[[], None]) -> None:
+        """Run ``write``; an interlock refusal is raised with the node's reasons spelled out."""
+        try:
+            write()
+        except InterlockError as exc:
+            if exc.detail != ABORT_INTERLOCK:
+                raise
+            bits = self.node.read(R_REASONS, 0, what="read the interlock reasons")
+            why = tuple(w for b, w in REASONS if bits & b)
+            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
+                                 detail=bits) from None
+
+    def status(self) -> RelayStatus:
+        return decode_status(self.node.read(R_STATUS, 0, what="STATUS"))

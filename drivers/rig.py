@@ -48,7 +48,7 @@ from drivers.clock import RigClock, WallClock
 from drivers.command import CanCommandDac, CanopenCommandDac, CommandDac
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
-from drivers.relay import SAFE_MODE, CanRelayDriver, RelayDriver
+from drivers.relay import SAFE_MODE, CanopenRelayDriver, CanRelayDriver, RelayDriver
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
 from drivers.table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
 from drivers.torquer import CanopenTorquerDac, CanTorquerDac, TorquerDac
@@ -75,7 +75,7 @@ class RigNode(Protocol):
 
 
 #: nodes that can speak CANopen so far (``docs/canopen-plan.md``, "State")
-CANOPEN_READY = ("torquer", "command", "caging")
+CANOPEN_READY = ("torquer", "command", "caging", "relay")
 
 
 def canopen_nodes(url: str, value: str) -> list[str]:
@@ -434,8 +434,10 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         commands: CommandDac = (CanopenCommandDac(link, calibration) if "command" in canopen
                                 else CanCommandDac(link, calibration))
         caging: CagingSwitches = CanopenCagingSwitches(link) if "caging" in canopen else CanCagingSwitches(link)
-        co_clients = {dev.node.name: dev.node for dev in (torquers, commands, caging)
-                      if isinstance(dev, CanopenTorquerDac | CanopenCommandDac | CanopenCagingSwitches)}
+        relays: RelayDriver = CanopenRelayDriver(link) if "relay" in canopen else CanRelayDriver(link)
+        co_clients = {dev.node.name: dev.node for dev in (torquers, commands, caging, relays)
+                      if isinstance(dev, CanopenTorquerDac | CanopenCommandDac | CanopenCagingSwitches
+                                    | CanopenRelayDriver)}
         clients: list[RigNode] = [co_clients[n] if n in co_clients else NodeClient(link, n) for n in names]
         for c in clients:
             c.identify()
@@ -446,7 +448,7 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
                         reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
                         stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
         tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
-        rig = Rig(url=url, adc=adc, relays=CanRelayDriver(link), torquers=torquers,
+        rig = Rig(url=url, adc=adc, relays=relays, torquers=torquers,
                   commands=commands, caging=caging, table=tab,
                   clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
                   closers=[link.close, *(closers or [])], emulator=emulator)

@@ -11,8 +11,8 @@ CiA 401 ask of the device and LocalNode lacks:
 * the outputs' effect on the physics (``server.submit``);
 * the fault injections of ``simhw.can_nodes`` (``NODE_FAULTS``).
 
-So far the torquer and command DACs (CiA 401 analogue outputs) and the caging switches
-(CiA 401 digital outputs) are here; the relay and the table follow (``docs/canopen-plan.md``, "State").
+So far the torquer and command DACs (CiA 401 analogue outputs), the caging switches (CiA 401
+digital outputs) and the relay driver (manufacturer objects) are here; the table follows (``docs/canopen-plan.md``, "State").
 """
 
 from __future__ import annotations
@@ -38,6 +38,8 @@ log = logging.getLogger(__name__)
 ABORT_VALUE_RANGE = 0x06090030
 AO_16, AO_ERROR_MODE, AO_ERROR_VALUE = 0x6411, 0x6443, 0x6444
 DO_8, DO_ERROR_MODE, DO_ERROR_VALUE = 0x6200, 0x6206, 0x6207
+R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2000, 0x2007)
+ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL = 0x08000020, 0x08000021, 0x08000022
 FULL_SCALE_V = 10.0
 LSB_V = FULL_SCALE_V / 32768
 
@@ -65,6 +67,7 @@ class CanopenSimNode:
         self._send_response = self.node.sdo.send_response
         setattr(self.node.sdo, "send_response", self._sdo_response)  # noqa: B010 - an instance's method replaced
         self.node.add_write_callback(self._on_write)
+        self.node.add_read_callback(self._on_read)
         # receive PDOs as the EDS maps them (RPDO1: outputs 1-4, RPDO2: 5-6)
         self.node.rpdo.read(from_od=True)
         assert self.node.rpdo.map is not None
@@ -108,6 +111,10 @@ class CanopenSimNode:
 
     def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
         """Check a written value (``SdoAbortedError`` refuses it) and apply it."""
+
+    def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
+        """An object the node computes when read (None: the data store's, or the EDS default)."""
+        return None
 
     def get(self, index: int, sub: int) -> int:
         """An integer object as the node has it (through its own SDO server's view)."""
@@ -281,6 +288,122 @@ class CanopenCagingNode(CanopenSimNode):
         self.server.submit(apply)
 
 
+class CanopenRelayNode(CanopenSimNode):
+    """The relay driver: the mode register, hold/select/release, the interlocks of modes 4
+    and 5, the alarm and the platform clamp (docs/protocol.md 2.5, 2.5a) behind manufacturer
+    objects 0x2000-0x2006 (``drivers/eds/relay.eds``). Refusals are SDO aborts: 0x08000020 an
+    interlock (reasons in 0x2003), 0x08000021 not held, 0x08000022 not operational."""
+
+    name = "relay"
+
+    def reset_outputs(self) -> None:
+        if not getattr(self, "_attached", False):
+            # the rig may have been running for hours: the register holds the mode in force, the
+            # clamp (a mechanism) is where it was left
+            self._attached = True
+            self.mode = self.selected = self.server.sim.mode
+            self.clamped = self.server.sim.clamped
+            self.held = self.alarm = False
+            self.reasons = 0
+        else:
+            self.go_safe()
+
+    def error_outputs(self) -> None:
+        self.go_safe()
+
+    def go_safe(self) -> None:
+        # mode 1 is allowed clamped or not: the safe state never moves the clamp
+        self.mode = self.selected = 1
+        self.held = self.alarm = False
+        self.server.submit(lambda sim: sim.set_mode(1))
+
+    def _commands_zero(self) -> bool:
+        """The node senses the command DAC outputs (V_Td, gamma_c) on its interlock lines."""
+        command = self.server.nodes.nodes["command"]
+        return not any(cast(Any, command).values.values())   # CommandNode or CanopenCommandNode
+
+    def status_word(self) -> int:
+        snap = self.server.snapshot
+        w = (self.mode << cp.ST_MODE_SHIFT) | (self.selected << cp.ST_SELECT_SHIFT)
+        w |= (cp.ST_HELD if self.held else 0) | (cp.ST_ALARM if self.alarm else 0)
+        w |= cp.ST_CLAMPED if self.clamped else 0
+        for i, c in enumerate(GYRO_CHANNELS):
+            w |= int(snap.at_speed) << (cp.ST_AT_SPEED_SHIFT + i)
+            w |= int(snap.caged[c]) << (cp.ST_CAGED_SHIFT + i)
+        return w | (min(100, int(snap.spin * 100)) << cp.ST_SPIN_SHIFT)
+
+    def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
+        return {R_MODE: lambda: self.mode, R_SELECTED: lambda: self.selected, R_REASONS: lambda: self.reasons,
+                R_STATUS: self.status_word, R_CLAMP: lambda: int(self.clamped)}.get(index, lambda: None)()
+
+    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+        if index not in (R_SWITCHES, R_SELECTED, R_CLAMP, R_SAFE):
+            return
+        value = od.decode_raw(data)
+        assert isinstance(value, int)
+        if index == R_SAFE:
+            if value != 1:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            self.go_safe()
+            return
+        if self.node.nmt.state != "OPERATIONAL":
+            raise SdoAbortedError(ABORT_NOT_OPERATIONAL)
+        if index == R_SWITCHES:
+            if value == 1:
+                self.held, self.selected = True, self.mode
+            elif value == 2:
+                self._release()
+            else:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+        elif index == R_SELECTED:
+            if not self.held:
+                raise SdoAbortedError(ABORT_NOT_HELD)
+            if not 1 <= value <= 6:
+                self.alarm = True            # the register is not clocked; the lamp lights
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            self.selected, self.alarm = value, False
+        else:
+            self._clamp(value)
+
+    def _refuse(self, why: int) -> None:
+        self.reasons = why
+        raise SdoAbortedError(ABORT_INTERLOCK)
+
+    def _release(self) -> None:
+        if not self.held:
+            raise SdoAbortedError(ABORT_NOT_HELD)
+        self.held = False
+        m = self.selected
+        if self.clamped and m not in cp.CLAMP_MODES:
+            self.selected = self.mode
+            self._refuse(cp.WHY_CLAMPED)
+        if m in (4, 5):
+            snap = self.server.snapshot
+            need = ("X", "Y", "Z", "XRD") if m == 4 else ("X", "Y", "XRD")
+            why = (0 if snap.at_speed else cp.WHY_NOT_AT_SPEED) | (
+                0 if all(snap.caged[c] for c in need) else cp.WHY_NOT_CAGED)
+            if why:
+                self.selected = self.mode
+                self._refuse(why)
+        if m != self.mode:
+            self.mode = m
+            self.server.submit(lambda sim: sim.set_mode(m))
+
+    def _clamp(self, value: int) -> None:
+        if value not in (0, 1):
+            raise SdoAbortedError(ABORT_VALUE_RANGE)
+        on = bool(value)
+        if on == self.clamped:
+            return
+        why = 0 if self._commands_zero() else cp.WHY_COMMAND
+        if on and (self.mode not in cp.CLAMP_MODES or (self.held and self.selected not in cp.CLAMP_MODES)):
+            why |= cp.WHY_MODE
+        if why:
+            self._refuse(why)
+        self.clamped = on
+        self.server.submit(lambda sim: sim.set_clamp(on))
+
+
 class CanopenTorquerNode(CanopenDacNode):
     """The four torquer bias DACs (``drivers/eds/torquer.eds``)."""
 
@@ -307,4 +430,4 @@ class CanopenCommandNode(CanopenDacNode):
 
 #: the simulated nodes that can speak CANopen, by name
 CANOPEN_NODE_CLASSES: dict[str, type[CanopenSimNode]] = {
-    c.name: c for c in (CanopenTorquerNode, CanopenCommandNode, CanopenCagingNode)}
+    c.name: c for c in (CanopenTorquerNode, CanopenCommandNode, CanopenCagingNode, CanopenRelayNode)}
