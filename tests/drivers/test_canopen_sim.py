@@ -1,4 +1,5 @@
-"""Issue 21 on the simulated rig with CANopen DAC and caging nodes (``sim?canopen=torquer,command,caging``):
+"""Issue 21 on the simulated rig with every node that speaks CANopen so far
+(``sim?canopen=all``: relay, caging, torquer, command):
 
 * acceptance D, second half: the simulated node answers every object of its EDS over SDO, as
   the EDS says;
@@ -27,12 +28,13 @@ from drivers.errors import (
     ProtocolError,
     SetpointRangeError,
 )
+from drivers.relay import CanopenRelayDriver
 from drivers.rig import open_rig
 
 pytestmark = pytest.mark.slow
 
 LSB = 10.0 / 32768
-URL = "sim?warm=1&canopen=torquer,command,caging"
+URL = "sim?warm=1&canopen=all"
 
 
 @pytest.fixture
@@ -62,15 +64,18 @@ def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
                     timeout_s)
 
 
-@pytest.mark.parametrize("name", ["torquer", "command", "caging"])
+@pytest.mark.parametrize("name", ["torquer", "command", "caging", "relay"])
 def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     """Acceptance D: each object read over SDO, decoded by the EDS's type, equals the EDS
     default, except what the host set at connect (its heartbeat consumer time)."""
     rig = open_rig(URL)
     try:
-        sdo = {"torquer": rig.torquers, "command": rig.commands, "caging": rig.caging}[name].node.node.sdo
+        sdo = {"torquer": rig.torquers, "command": rig.commands, "caging": rig.caging,
+               "relay": rig.relays}[name].node.node.sdo
         od = canopen.import_od(str(cf.eds_path(name)), cp.NODES[name])
         configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
+        if name == "relay":   # what the node computes: the register, the status word (a warm rig: mode 3)
+            configured |= {(0x2000, 0): 3, (0x2002, 0): 3, (0x2004, 0): rig.emulator.nodes.nodes["relay"].status_word()}
         checked = 0
         for obj in od.values():
             for var in [obj] if isinstance(obj, ODVariable) else list(obj.values()):
@@ -131,6 +136,73 @@ def test_caging_switches_are_digital_outputs(rig):
     assert report.ok and node.get(0x6200, 1) == 0
 
 
+def test_modes_and_their_interlocks_over_canopen():
+    """The relay node's hold/select/release and the interlocks of modes 4 and 5, on a cold rig."""
+    rig = open_rig("sim?canopen=all")
+    try:
+        assert isinstance(rig.relays, CanopenRelayDriver)
+        st = rig.relays.status()
+        assert st.mode == 1 and not any(st.at_speed.values())
+        with pytest.raises(InterlockError, match="not at speed"):
+            rig.set_mode(4)                                  # the driver's own check, nothing sent
+        rig.relays.hold()
+        rig.relays.select(4)
+        with pytest.raises(InterlockError, match=r"interlock\) \(gyros not at speed; gyros not caged\)") as exc:
+            rig.relays.release()                             # the node's, whatever the host checked
+        assert exc.value.detail == 0x3
+        with pytest.raises(InterlockError, match="mode switches not held"):
+            rig.relays.select(2)
+        rig.relays.hold()
+        with pytest.raises(SetpointRangeError, match="0x2002:0"):
+            rig.relays.node.write(0x2002, 0, 7)               # mode 7: the node refuses it itself
+        assert rig.relays.status().alarm
+        rig.relays.release()
+        assert rig.set_mode(2) == 2 and rig.emulator.nodes.nodes["relay"].mode == 2
+        assert not rig.relays.status().alarm
+        assert rig.faults.fault is None
+        assert rig.safe().ok and rig.relays.status().mode == 1
+    finally:
+        rig.close()
+
+
+FAULTS = {  # node, what the host does next, the error it raises
+    "torquer": lambda rig: rig.set_torquer_bias_V("X", 0.2),
+    "command": lambda rig: rig.set_ac_bias_V("X", 0.1),
+    "caging": lambda rig: rig.set_caging_inhibit("X", True),
+    "relay": lambda rig: rig.set_mode(2),
+}
+
+
+@pytest.mark.parametrize("name", list(FAULTS))
+def test_stalled_node_times_out_and_the_watchdogs_make_the_rig_safe(rig, name):
+    rig.emulator.inject(name, "stall")
+    with pytest.raises(DeviceTimeout, match=rf"CAN node '{name}' \(id {cp.NODES[name]}\) object 0x\w+:\d: no SDO"):
+        FAULTS[name](rig)
+    assert emulated_nodes_safe(rig, timeout_s=5.0)
+    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)   # safe by its own watchdog
+    assert rig.link.heartbeat_suspended
+
+
+@pytest.mark.parametrize("name", list(FAULTS))
+def test_any_node_reset_is_reported_and_the_rig_goes_safe(rig, name):
+    rig.emulator.inject(name, "reset")
+    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+    assert isinstance(rig.faults.fault, NodeReset) and f"'{name}'" in str(rig.faults.fault)
+    assert emulated_nodes_safe(rig)
+    with pytest.raises(NodeReset):
+        FAULTS[name](rig)
+
+
+@pytest.mark.parametrize("name", ["relay", "caging", "command"])
+def test_any_malformed_answer_is_a_protocol_error(rig, name):
+    rig.emulator.inject(name, "bad_response")
+    with pytest.raises((DeviceTimeout, ProtocolError)):
+        FAULTS[name](rig)
+    assert isinstance(rig.faults.fault, ProtocolError)
+    assert f"of node '{name}': 5 data bytes (expected 8)" in str(rig.faults.fault)
+    assert emulated_nodes_safe(rig)
+
+
 def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
     rig.emulator.inject("torquer", "stall")
     with pytest.raises(DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"):
@@ -185,6 +257,7 @@ def test_host_heartbeat_loss_trips_every_watchdog():
         assert emulated_nodes_safe(rig, timeout_s=5.0)
         nodes = rig.emulator.nodes.nodes
         assert wait_for(lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command")))
+        assert all(type(nodes[n]).__name__.startswith("Canopen") for n in ("relay", "caging", "torquer", "command"))
         assert wait_for(lambda: rig.faults.fault is not None, 3.0)
         assert isinstance(rig.faults.fault, (NodeError, DeviceLost))
     finally:

@@ -8,12 +8,13 @@ import pytest
 
 from drivers import can_protocol as cp
 from drivers.errors import InterlockError
+from drivers.relay import R_CLAMP, CanopenRelayDriver
 from drivers.rig import open_rig
 
 
-@pytest.fixture
-def rig():
-    r = open_rig("sim?warm=1")
+@pytest.fixture(params=["sim?warm=1", "sim?warm=1&canopen=all"], ids=["own-protocol", "canopen"])
+def rig(request):
+    r = open_rig(request.param)
     yield r
     r.close()
 
@@ -22,7 +23,10 @@ def test_clamp_and_release_read_back_in_the_status_word(rig):
     assert rig.relays.status().clamped is False
     assert rig.clamp() is True
     assert rig.relays.status().clamped is True
-    assert rig.relays.node.call(cp.OP_GET, 1) == 1
+    if isinstance(rig.relays, CanopenRelayDriver):
+        assert rig.relays.node.read(R_CLAMP) == 1
+    else:
+        assert rig.relays.node.call(cp.OP_GET, 1) == 1
     rig.unclamp()
     assert rig.relays.status().clamped is False
 
