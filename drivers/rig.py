@@ -50,7 +50,7 @@ from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanopenRelayDriver, CanRelayDriver, RelayDriver
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
-from drivers.table import CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
+from drivers.table import CanopenTable, CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
 from drivers.torquer import CanopenTorquerDac, CanTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
@@ -75,7 +75,7 @@ class RigNode(Protocol):
 
 
 #: nodes that can speak CANopen so far (``docs/canopen-plan.md``, "State")
-CANOPEN_READY = ("torquer", "command", "caging", "relay")
+CANOPEN_READY = ("torquer", "command", "caging", "relay", "table")
 
 
 def canopen_nodes(url: str, value: str) -> list[str]:
@@ -424,6 +424,7 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
+    canopen = [n for n in canopen if n in names]      # canopen=all with a manual table
     link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
                    reply_timeout_s=reply_timeout_s, monotonic=monotonic, canopen_nodes=canopen)
     adc = None
@@ -435,9 +436,11 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
                                 else CanCommandDac(link, calibration))
         caging: CagingSwitches = CanopenCagingSwitches(link) if "caging" in canopen else CanCagingSwitches(link)
         relays: RelayDriver = CanopenRelayDriver(link) if "relay" in canopen else CanRelayDriver(link)
-        co_clients = {dev.node.name: dev.node for dev in (torquers, commands, caging, relays)
+        tab: RotaryTable = ((CanopenTable(link, clock) if "table" in canopen else CanTable(link, clock))
+                            if table[0] == "can" else ManualTable(table[1], table[2]))
+        co_clients = {dev.node.name: dev.node for dev in (torquers, commands, caging, relays, tab)
                       if isinstance(dev, CanopenTorquerDac | CanopenCommandDac | CanopenCagingSwitches
-                                    | CanopenRelayDriver)}
+                                    | CanopenRelayDriver | CanopenTable)}
         clients: list[RigNode] = [co_clients[n] if n in co_clients else NodeClient(link, n) for n in names]
         for c in clients:
             c.identify()
@@ -447,7 +450,6 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate, monotonic=monotonic,
                         reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
                         stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
-        tab: RotaryTable = CanTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
         rig = Rig(url=url, adc=adc, relays=relays, torquers=torquers,
                   commands=commands, caging=caging, table=tab,
                   clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 from drivers import can_protocol as cp
 from drivers.can_link import CanLink, NodeClient
+from drivers.canopen_client import CanopenClient
 from drivers.clock import RigClock
 from drivers.errors import DeviceTimeout, DriverError, OperatorAbort, SetpointRangeError
 from drivers.setpoints import check_value
@@ -131,3 +132,42 @@ class CanTable(RotaryTable):
     def position(self) -> TablePosition:
         return TablePosition(cp.from_micro(self.node.call(cp.OP_GET, I_TILT, what="read table tilt")),
                              cp.from_micro(self.node.call(cp.OP_GET, I_SPINDLE, what="read table spindle")))
+
+
+#: the table node's manufacturer objects (docs/canopen-plan.md section 6, drivers/eds/table.eds)
+T_TILT, T_SPINDLE, T_ACTUAL_TILT, T_ACTUAL_SPINDLE, T_MOVING = range(0x2200, 0x2205)
+
+
+class CanopenTable(RotaryTable):
+    """A motorized table node over CANopen: targets 0x2200/0x2201, actual 0x2202/0x2203 (micro-
+    degrees), moving 0x2204; the move is complete when moving reads 0."""
+
+    def __init__(self, link: CanLink, clock: RigClock, move_timeout_s: float = 120.0) -> None:
+        self.node = CanopenClient(link, "table", 0)
+        self.clock = clock
+        self.move_timeout_s = move_timeout_s
+
+    def move_to(self, tilt_deg=None, spindle_deg=None) -> TablePosition:
+        tilt, spindle = check_target(tilt_deg, spindle_deg)
+        for index, value, what in ((T_TILT, tilt, "tilt"), (T_SPINDLE, spindle, "spindle")):
+            if value is not None:
+                self.node.write(index, 0, cp.to_micro(value), what=f"table {what} {value:.6f} deg")
+        t_end = self.clock.now() + self.move_timeout_s
+        while self.node.read(T_MOVING, 0, what="read table moving flag"):
+            if self.clock.now() > t_end:
+                fault: DriverError = DeviceTimeout(f"rotary table not in position after {self.move_timeout_s:g} s of "
+                                                   f"rig time")
+                self.node.link.faults.report(fault)
+                raise fault
+            self.clock.sleep(0.1)
+        pos = self.position()
+        for got, value in ((pos.tilt_deg, tilt), (pos.spindle_deg, spindle)):
+            if value is not None and abs((got - value + 180.0) % 360.0 - 180.0) > 1e-3:
+                fault = DriverError(f"rotary table stopped at {got:.6f} deg, commanded {value:.6f} deg")
+                self.node.link.faults.report(fault)
+                raise fault
+        return pos
+
+    def position(self) -> TablePosition:
+        return TablePosition(cp.from_micro(self.node.read(T_ACTUAL_TILT, 0, what="read table tilt")),
+                             cp.from_micro(self.node.read(T_ACTUAL_SPINDLE, 0, what="read table spindle")))

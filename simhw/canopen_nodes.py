@@ -12,7 +12,7 @@ CiA 401 ask of the device and LocalNode lacks:
 * the fault injections of ``simhw.can_nodes`` (``NODE_FAULTS``).
 
 So far the torquer and command DACs (CiA 401 analogue outputs), the caging switches (CiA 401
-digital outputs) and the relay driver (manufacturer objects) are here; the table follows (``docs/canopen-plan.md``, "State").
+digital outputs), the relay driver and the rotary table (manufacturer objects): every node (``docs/canopen-plan.md``, "State").
 """
 
 from __future__ import annotations
@@ -39,6 +39,7 @@ ABORT_VALUE_RANGE = 0x06090030
 AO_16, AO_ERROR_MODE, AO_ERROR_VALUE = 0x6411, 0x6443, 0x6444
 DO_8, DO_ERROR_MODE, DO_ERROR_VALUE = 0x6200, 0x6206, 0x6207
 R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2000, 0x2007)
+T_TILT, T_SPINDLE, T_ACTUAL_TILT, T_ACTUAL_SPINDLE, T_MOVING = range(0x2200, 0x2205)
 ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL = 0x08000020, 0x08000021, 0x08000022
 FULL_SCALE_V = 10.0
 LSB_V = FULL_SCALE_V / 32768
@@ -404,6 +405,41 @@ class CanopenRelayNode(CanopenSimNode):
         self.server.submit(lambda sim: sim.set_clamp(on))
 
 
+class CanopenTableNode(CanopenSimNode):
+    """A motorized rotary table behind manufacturer objects 0x2200-0x2204 (micro-degrees;
+    ``drivers/eds/table.eds``); it reaches the commanded angle at the next block."""
+
+    name = "table"
+
+    def reset_outputs(self) -> None:
+        t = self.server.sim.cfg.table          # at power-on the table reports where it is
+        self.tilt, self.spindle = cp.to_micro(t.tilt_deg), cp.to_micro(t.spindle_deg % 360.0)
+
+    def error_outputs(self) -> None:
+        pass                                   # a table at rest is safe where it is
+
+    def go_safe(self) -> None:
+        pass
+
+    def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
+        return {T_TILT: self.tilt, T_SPINDLE: self.spindle, T_ACTUAL_TILT: self.tilt,
+                T_ACTUAL_SPINDLE: self.spindle, T_MOVING: 0}.get(index)
+
+    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+        value = od.decode_raw(data)
+        assert isinstance(value, int)
+        if index == T_TILT:
+            deg = cp.from_micro(value)
+            if not 0.0 <= deg <= 90.0:
+                raise SdoAbortedError(ABORT_VALUE_RANGE)
+            self.tilt = value
+            self.server.submit(lambda sim: sim.set_table(tilt_deg=deg))
+        elif index == T_SPINDLE:
+            spindle = cp.from_micro(value) % 360.0
+            self.spindle = cp.to_micro(spindle)
+            self.server.submit(lambda sim: sim.set_table(spindle_deg=spindle))
+
+
 class CanopenTorquerNode(CanopenDacNode):
     """The four torquer bias DACs (``drivers/eds/torquer.eds``)."""
 
@@ -430,4 +466,4 @@ class CanopenCommandNode(CanopenDacNode):
 
 #: the simulated nodes that can speak CANopen, by name
 CANOPEN_NODE_CLASSES: dict[str, type[CanopenSimNode]] = {
-    c.name: c for c in (CanopenTorquerNode, CanopenCommandNode, CanopenCagingNode, CanopenRelayNode)}
+    c.name: c for c in (CanopenTorquerNode, CanopenCommandNode, CanopenCagingNode, CanopenRelayNode, CanopenTableNode)}

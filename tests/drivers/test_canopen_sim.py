@@ -64,18 +64,22 @@ def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
                     timeout_s)
 
 
-@pytest.mark.parametrize("name", ["torquer", "command", "caging", "relay"])
+@pytest.mark.parametrize("name", ["torquer", "command", "caging", "relay", "table"])
 def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     """Acceptance D: each object read over SDO, decoded by the EDS's type, equals the EDS
     default, except what the host set at connect (its heartbeat consumer time)."""
     rig = open_rig(URL)
     try:
         sdo = {"torquer": rig.torquers, "command": rig.commands, "caging": rig.caging,
-               "relay": rig.relays}[name].node.node.sdo
+               "relay": rig.relays, "table": rig.table}[name].node.node.sdo
         od = canopen.import_od(str(cf.eds_path(name)), cp.NODES[name])
         configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
         if name == "relay":   # what the node computes: the register, the status word (a warm rig: mode 3)
             configured |= {(0x2000, 0): 3, (0x2002, 0): 3, (0x2004, 0): rig.emulator.nodes.nodes["relay"].status_word()}
+        if name == "table":   # where the table is
+            table = rig.emulator.nodes.nodes["table"]
+            configured |= {(0x2200, 0): table.tilt, (0x2201, 0): table.spindle, (0x2202, 0): table.tilt,
+                           (0x2203, 0): table.spindle}
         checked = 0
         for obj in od.values():
             for var in [obj] if isinstance(obj, ODVariable) else list(obj.values()):
@@ -163,6 +167,19 @@ def test_modes_and_their_interlocks_over_canopen():
         assert rig.safe().ok and rig.relays.status().mode == 1
     finally:
         rig.close()
+
+
+def test_the_motorized_table_over_canopen(rig):
+    pos = rig.move_table(tilt_deg=12.5, spindle_deg=390.0)
+    assert pos.tilt_deg == pytest.approx(12.5) and pos.spindle_deg == pytest.approx(30.0)
+    rig.wait(0.05)
+    assert rig.emulator.sim.cfg.table.spindle_deg == pytest.approx(30.0)
+    with pytest.raises(SetpointRangeError, match=r"91\.0 is outside 0\.\.90"):
+        rig.move_table(tilt_deg=91.0)                            # the host's check, nothing sent
+    with pytest.raises(SetpointRangeError, match="0x2200:0"):
+        rig.table.node.write(0x2200, 0, 91_000_000)              # the node's own
+    assert rig.table.position().tilt_deg == pytest.approx(12.5)
+    assert rig.faults.fault is None
 
 
 FAULTS = {  # node, what the host does next, the error it raises
