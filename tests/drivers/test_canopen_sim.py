@@ -229,13 +229,14 @@ def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
     assert rig.link.heartbeat_suspended
 
 
-def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig):
-    rig.emulator.inject("torquer", "disconnect")
+@pytest.mark.parametrize("name", list(FAULTS))
+def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig, name):
+    rig.emulator.inject(name, "disconnect")
     assert wait_for(lambda: rig.faults.fault is not None)
     assert isinstance(rig.faults.fault, DeviceLost)
-    assert "CAN node 'torquer' (id 3) is silent: no heartbeat for" in str(rig.faults.fault)
-    assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)
-    assert not any(rig.emulator.nodes.nodes["torquer"].values.values())
+    assert f"CAN node '{name}' (id {cp.NODES[name]}) is silent: no heartbeat for" in str(rig.faults.fault)
+    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)   # its own watchdog, silently
+    assert emulated_nodes_safe(rig)
 
 
 def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
@@ -248,11 +249,12 @@ def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
         rig.set_torquer_bias_V("X", 0.1)
 
 
-def test_node_error_frame_is_reported_with_its_code(rig):
-    rig.emulator.inject("torquer", "error", code=0x4210)
+@pytest.mark.parametrize("name", list(FAULTS))
+def test_node_error_frame_is_reported_with_its_code(rig, name):
+    rig.emulator.inject(name, "error", code=0x4210)
     assert wait_for(lambda: rig.faults.fault is not None, 3.0)
     fault = rig.faults.fault
-    assert isinstance(fault, NodeError) and fault.code == 0x4210 and fault.node == "torquer"
+    assert isinstance(fault, NodeError) and fault.code == 0x4210 and fault.node == name
     assert "over-temperature (EMCY 0x4210" in str(fault)
     assert emulated_nodes_safe(rig)
 
