@@ -7,7 +7,10 @@ nodes on the bus latch nothing.
 from __future__ import annotations
 
 import logging
+import random
 import struct
+import subprocess
+import sys
 import threading
 import time
 import uuid
@@ -16,9 +19,11 @@ import can
 import canopen
 import pytest
 
+from drivers.can_link import CanLink
 from drivers.canopen_frames import eds_path
 from drivers.errors import NodeError, SetpointRangeError
 from drivers.rig import open_rig
+from drivers.torquer import CanopenTorquerDac
 
 pytestmark = pytest.mark.slow
 
@@ -38,9 +43,10 @@ class Cia401AnalogueOutputs:
     and the node goes pre-operational (0x1029 sub 1 = 0).
     """
 
-    def __init__(self, channel: str, node_id: int = TORQUER, eds: str = str(eds_path("torquer"))) -> None:
+    def __init__(self, channel: str, node_id: int = TORQUER, eds: str = str(eds_path("torquer")),
+                 interface: str = "virtual") -> None:
         self.network = canopen.Network()
-        self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
+        self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
         self.node = canopen.LocalNode(node_id, eds)
         self.network.add_node(self.node)
         self.outputs = self.node.sdo[0x6411][0].raw
@@ -214,3 +220,44 @@ def test_sdo_set_point_round_trip_is_measured(channel):
     finally:
         rig.close()
         module.close()
+
+
+def test_a_module_in_another_process_over_udp_multicast():
+    """docs/protocol.md 2.1: a device in another process needs a bus that crosses processes.
+    The module above runs in a subprocess (this file as a script) on udp_multicast; the
+    host's link and torquer driver reach it, and its error values show when the host's
+    heartbeat stops."""
+    group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
+    proc = subprocess.Popen([sys.executable, __file__, "udp_multicast", group], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    link = None
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        bus = can.Bus(interface="udp_multicast", channel=group, receive_own_messages=False)
+        link = CanLink(bus, ["torquer"], canopen_nodes=["torquer"], channel=f"udp_multicast:{group}",
+                       node_timeout_s=1.0, reply_timeout_s=2.0)
+        link.wait_for_nodes(10.0)
+        dac = CanopenTorquerDac(link)
+        assert dac.node.identify() == 0x13
+        dac.node.clear()
+        assert dac.set_bias_V("X", 1.0) == pytest.approx(3277 * LSB)
+        assert dac.node.raw_get(0) == 3277
+        link.heartbeat_suspended = True
+        wait_for(lambda: link.faults.fault is not None, "the module's EMCY")
+        assert isinstance(link.faults.fault, NodeError) and "'torquer'" in str(link.faults.fault)
+        assert dac.node.raw_get(0) == 0                      # its error value
+    finally:
+        if link is not None:
+            link.close()
+        if proc.stdin is not None:
+            proc.stdin.close()
+        proc.wait(timeout=10)
+
+
+if __name__ == "__main__":
+    # serve the module in this process: python test_canopen_torquer.py INTERFACE CHANNEL;
+    # "ready" once it is on the bus, until stdin closes
+    served = Cia401AnalogueOutputs(sys.argv[2], interface=sys.argv[1])
+    print("ready", flush=True)
+    sys.stdin.read()
+    served.close()
