@@ -68,7 +68,8 @@ def test_pickoff_scale_comes_from_the_stopwatch_else_nominal():
 
 def test_procedure_is_catalogued_with_the_design_json_keys():
     assert catalogue()["survey"] is Survey
-    assert Survey.json_keys == ("platform_rms_urad", "dip_hz", "file")
+    # DESIGN.md's keys, and the platform rms net of the baseline's pickoff noise (issue 22 part 6)
+    assert Survey.json_keys == ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file")
     s = Survey()
     assert s.rate_hz == 1000.0 and s.mode == 3
     assert {"ac_x_ctl", "ac_y_ctl", "gyro_x", "gyro_y"} <= set(s.channels())
@@ -110,7 +111,10 @@ def expected_values(cfg: SimConfig, params: Params, seed: int = 11) -> dict:
 def check(summary, expected, label=""):
     assert summary.exit_code == 0, (summary.error, [m.to_json() for m in summary.measurements])
     v = summary.json_values(Survey.json_keys)
-    assert set(v) == {"platform_rms_urad", "dip_hz", "file"}
+    # without a baseline the net-of-baseline figure is printed unresolved, with why in the summary
+    assert set(v) == {"platform_rms_urad", "platform_rms_baseline_net_urad", "platform_rms_baseline_net_urad_ci95",
+                      "resolved", "dip_hz", "file"}
+    assert v["resolved"] == {"platform_rms_baseline_net_urad": {"X": False, "Y": False}}
     lines = [label]
     for a in "XY":
         dip, res = v["dip_hz"][a], expected["resonance_hz"][a]
