@@ -2,9 +2,10 @@
 
 The rig starts cold (mode 1, wheels stopped), as a lab's would. The procedures run in the
 order the lab runs them, each using the results before it: earth-rate (K_TO) -> stopwatch
-(K_g, with the measured K_TO) -> hysteresis X and Y -> survey (with the measured K_g) ->
-drift (with the measured K_TO). Each leaves its HDF5 file, JSON summary, report and log in
-``--out`` and shows its progress as ``fbs run`` does; ``out/report.md`` sets every figure
+(K_g, with the measured K_TO) -> hysteresis X and Y -> baseline X (the clamped platform's sensor
+noise) -> survey (with the measured K_g, and the baseline's pickoff spectrum taken out of the
+gyro's) -> excitation X -> drift (with the measured K_TO). Each leaves its HDF5 file, JSON
+summary, report and log in ``--out`` and shows its progress as ``fbs run`` does; ``out/report.md`` sets every figure
 measured beside the thesis's value and the simulated rig's own value. The demo, unlike the
 procedures, may read the sim config: only to fill that last column.
 """
@@ -77,7 +78,7 @@ def _pickoff_noise_1_50(g: Any) -> float:
 
 #: (procedure, axis or None) in campaign order
 CAMPAIGN: list[tuple[str, str | None]] = [("earth-rate", None), ("stopwatch", None), ("hysteresis", "X"),
-                                          ("hysteresis", "Y"), ("survey", None), ("baseline", "X"),
+                                          ("hysteresis", "Y"), ("baseline", "X"), ("survey", None),
                                           ("excitation", "X"), ("drift", None)]
 
 
@@ -106,7 +107,8 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
                 progress(f"{name}{' ' + axis if axis else ''}: {s.verdict} ({s.status}), "
                          f"{time.monotonic() - t0:.0f} s so far")
             if s.verdict in ("pass", "fail"):
-                prior[name] = dict(s.values)
+                # ``_file`` as find_prior gives it: the survey reads the baseline's record there
+                prior[name] = dict(s.values) | ({"_file": str(s.file)} if s.file else {})
             if s.verdict == "aborted" and s.error and "interrupted" in s.error:
                 break
     report = write_campaign_report(out, summaries, sim_values(load_config(cfg_path)), time.monotonic() - t0, seed)
@@ -154,9 +156,17 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
         for ch, v in (s.values.get("platform_rms_urad") or {}).items():
             rows.append(Row(f"gyro-deduced platform rms {ch}", "urad", v, THESIS["platform_rms_urad"].get(ch), None,
                             "0.4-15 Hz gyro spectrum, as the thesis (mostly pickoff noise here)"))
+        base = s.values.get("baseline") or {}
+        for ch in (s.values.get("platform_rms_baseline_net_urad") or {}):
+            rows.append(_figure_row(s, "platform_rms_baseline_net_urad", ch, f"platform rms {ch}, net of the baseline's "
+                                    "pickoff noise", "urad", THESIS["platform_rms_urad"].get(ch),
+                                    "0.4-15 Hz gyro spectrum less the clamped pickoff's (Ch. V B, Fig. 33), "
+                                    + (f"baseline {base.get('axis')}" if base.get("file") else
+                                       f"no baseline: {base.get('from')}")))
         for ch, v in (s.values.get("platform_rms_net_urad") or {}).items():
             iv = (s.values.get("platform_rms_net_urad_ci95") or {}).get(ch) or [None, None]
-            rows.append(Row(f"platform rms {ch}, net of pickoff noise", "urad", v, None, None,
+            rows.append(Row(f"platform rms {ch}, net of pickoff noise (coherent part)", "urad", v,
+                            THESIS["platform_rms_urad"].get(ch), None,
                             f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; the gyro's part coherent with the autocollimator, "
                             "0.4-15 Hz"))
         cross = s.values.get("cross_axis_coherence") or {}
@@ -182,6 +192,15 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
     per_channel("drift", "bias_instability_urad_per_s", "bias instability", "urad/s")
     per_channel("drift", "arw_urad_per_sqrt_s", "angle random walk", "urad/sqrt(s)")
     return rows
+
+
+def _figure_row(s: RunSummary, key: str, ch: str, label: str, units: str, thesis_value: Any, why: str) -> Row:
+    """A figure with its 95 % interval, "not resolved" where the data do not resolve it."""
+    iv = (s.values.get(f"{key}_ci95") or {}).get(ch) or [None, None]
+    note = "" if iv[0] is None else f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; "
+    if ((s.values.get("resolved") or {}).get(key) or {}).get(ch) is False:
+        note = "not resolved" + (f": {note}" if note else "; ")
+    return Row(label, units, (s.values.get(key) or {}).get(ch), thesis_value, None, note + why)
 
 
 def _baseline_rows(rows: list[Row], runs: list[RunSummary], sim: dict[str, Any]) -> None:
