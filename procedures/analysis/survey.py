@@ -94,6 +94,14 @@ class SurveySettings(Protocol):
     dip_lo_hz: float
     dip_hi_hz: float
     dip_smooth_hz: float
+    mode: int
+
+
+def loop_sensor(axis: str, mode: int) -> str:
+    """The sensor the axis's loop closes on: the control channel in Mode 3, the pickoff in the
+    gyro modes 4 and 5 (Fig. 27). Its spectrum has the dip: the loop's sensitivity has zeros at
+    the open-loop platform poles, the bearing resonance."""
+    return ac_ctl(axis) if mode == 3 else gyro(axis)
 
 
 class SpanError(ValueError):
@@ -366,7 +374,7 @@ def survey_spectra(csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[st
     psd_urad = {c: csd.psd(c) / scale[c] ** 2 for c in csd.channels}              # urad^2/Hz
     coh = coherence(csd.S)
 
-    dips = {a: find_dip(f, psd_urad[ac_ctl(a)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
+    dips = {a: find_dip(f, psd_urad[loop_sensor(a, p.mode)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
     rms = {a: band_rms(f, psd_urad[gyro(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
     ac_rms = {a: band_rms(f, psd_urad[ac_ctl(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
     stiffness = {a: (cal.platform[a].inertia_kg_m2 * (2 * math.pi * d.freq_hz) ** 2

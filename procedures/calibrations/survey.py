@@ -33,6 +33,7 @@ and averages the Welch segments of all spans (a resumed piece lives in the earli
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 from collections.abc import Mapping
@@ -42,6 +43,7 @@ from pathlib import Path
 from typing import Annotated, Any, Protocol
 
 from daq.plots import plot_coherence, plot_psd
+from daq.spectra import band_rms
 from procedures.analysis.intervals import Estimate, add_figure
 from procedures.analysis.survey import (
     AXES,
@@ -61,7 +63,7 @@ from procedures.analysis.survey import (
 )
 from procedures.analysis.transfer import BlockCsd, TransferError, block_csd
 from procedures.calibrations.baseline import BaselineFileError, ClampedRecord, clamped_record
-from procedures.paramlimits import above, at_least, check_limits
+from procedures.paramlimits import OneOf, above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
@@ -73,12 +75,16 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class SurveyParams:
+    #: 3 autocollimator stabilization (the thesis's survey, Ch. V E); 4 and 5 gyro stabilization
+    mode: Annotated[int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")] = 3
     duration_s: Annotated[float, above(0)] = 300.0
     rate_hz: Annotated[float, above(0)] = 1000.0
     #: record in steps of this length (the unit an aborted run can be resumed by)
     piece_s: Annotated[float, above(0)] = 60.0
     #: wait after reaching mode 3 (a rig already caged in mode 3 waits at most 5 s)
     settle_s: Annotated[float, at_least(0)] = 30.0
+    #: after the switch to Mode 4 or 5: the network's and the caging loop's transients (14 s)
+    mode_settle_s: Annotated[float, at_least(0)] = 90.0
     #: Welch segment length (Hann, 50 % overlap): bin spacing 1/seg_s
     seg_s: Annotated[float, above(0)] = 16.0
     #: band of the gyro-deduced platform rms (the thesis's method: 0.4-15 Hz)
@@ -154,7 +160,7 @@ Params = SurveyParams
 
 class Survey(Procedure[SurveyParams]):
     name = "survey"
-    title = "Closed-loop spectral survey in Mode 3 (Ch. V E)"
+    title = "Closed-loop spectral survey in Mode 3, 4 or 5 (Ch. V E)"
     json_keys = ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file")
     Params = SurveyParams
     mode = 3
@@ -163,6 +169,7 @@ class Survey(Procedure[SurveyParams]):
     def __init__(self, params: SurveyParams | None = None, *, reference: Mapping[str, Any] | None = None, **kw) -> None:
         super().__init__(params, **kw)
         self.rate_hz = self.params.rate_hz
+        self.mode = self.params.mode
         #: the report's reference column (never used by the measurement)
         self.reference = dict(thesis.SURVEY if reference is None else reference)
         #: the baseline's clamped record and where it came from, fixed when the plan is made
@@ -202,10 +209,24 @@ class Survey(Procedure[SurveyParams]):
     def plan(self) -> list[Step]:
         # the baseline is chosen before the first step records (and again on a resume)
         self.baseline, self.baseline_note = self.find_baseline()
+        p = self.params
+        gyro_mode = [Step(f"mode {p.mode}", self._gyro_mode, expected_s=p.mode_settle_s, setup=True)]
+        back = [Step("back to mode 3", self._back_to_mode3, expected_s=1.0, setup=True)]
         return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                Step("settle", self._settle, expected_s=self.params.settle_s, setup=True),
+                Step("settle", self._settle, expected_s=p.settle_s, setup=True),
+                *(gyro_mode if p.mode != 3 else []),
                 *(Step(name, partial(self._record, seconds=seconds), expected_s=seconds)
-                  for name, seconds in self.pieces())]
+                  for name, seconds in self.pieces()),
+                *(back if p.mode != 3 else [])]
+
+    def _gyro_mode(self, ctx: Context) -> dict:
+        """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then settle."""
+        mode = ctx.rig.set_mode(self.params.mode)
+        ctx.acquire(self.params.mode_settle_s, keep=False)
+        return {"mode": mode, "settle_s": self.params.mode_settle_s}
+
+    def _back_to_mode3(self, ctx: Context) -> dict:
+        return {"mode": ctx.rig.set_mode(3)}
 
     def _settle(self, ctx: Context) -> dict:
         already = bool((ctx.results.get("mode 3") or {}).get("already"))
@@ -232,6 +253,7 @@ class Survey(Procedure[SurveyParams]):
         used = csd.segments_used / max(1, csd.segments_total)
 
         values: dict[str, Any] = {
+            "mode": p.mode,
             "platform_rms_urad": {a: sp.platform_rms_urad[a] for a in AXES},
             "dip_hz": {a: (d.freq_hz if (d := dips[a]) is not None else None) for a in AXES},
             "dip_depth_db": {a: (d.depth_db if (d := dips[a]) is not None else None) for a in AXES},
@@ -251,9 +273,22 @@ class Survey(Procedure[SurveyParams]):
                    for a in AXES}
         except TransferError as exc:
             raise ProcedureError(f"survey: {exc}") from None
+        base = self._baseline_net(blocks, kg_mv)
+        if p.mode != 3:
+            # the pickoff is in the loop: the platform follows its noise, so neither its part
+            # coherent with the autocollimator nor its spectrum less the clamped one is the
+            # platform's; the out-of-loop autocollimator is (platform_rms_autocollimator_urad)
+            why = (f"in Mode {p.mode} the pickoff is in the loop and the platform follows its noise; see "
+                   f"platform_rms_autocollimator_urad")
+            net = {a: Estimate(e.value, e.lo, e.hi, False, why) for a, e in net.items()}
+            base = {a: dataclasses.replace(b, estimate=Estimate(b.estimate.value, b.estimate.lo, b.estimate.hi,
+                                                                 False, why)) for a, b in base.items()}
+            # in 4 and 5 the autocollimator is out of the loop: its band rms is the platform's,
+            # with its own NEA (0.45 urad, Table 1) in quadrature
+            values["platform_rms_autocollimator_urad"] = {
+                a: _r(band_rms(f, psd_urad[ac_inst(a)], p.band_lo_hz, p.band_hi_hz)) for a in AXES}
         add_figure(values, "platform_rms_net_urad", net, digits=4)
         # Ch. V E.2 less the clamped platform's pickoff spectrum (Ch. V B, Fig. 33), bin by bin
-        base = self._baseline_net(blocks, kg_mv)
         add_figure(values, "platform_rms_baseline_net_urad", {a: b.estimate for a, b in base.items()}, digits=4)
         values["baseline_pickoff_band_rms_urad"] = {a: _r(b.baseline_rms_urad) for a, b in base.items()}
         values["gyro_band_rms_urad"] = {a: _r(b.survey_rms_urad) for a, b in base.items()}
@@ -286,6 +321,10 @@ class Survey(Procedure[SurveyParams]):
                                   f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz)", e.value if e.resolved else None, "urad",
                                   note=(f"95 % [{e.lo:.3g}, {e.hi:.3g}]" if math.isfinite(e.lo) else "")
                                   + ("" if e.resolved else f"{'; ' if math.isfinite(e.lo) else ''}not resolved: {e.why}")))
+        for a, v in (values.get("platform_rms_autocollimator_urad") or {}).items():
+            ms.append(Measurement(f"platform rms {a}, out-of-loop autocollimator ({ac_inst(a)}) "
+                                  f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, Mode {p.mode}", v, "urad",
+                                  note="the pickoff is in the loop here: the gyro-deduced figure is not the platform's"))
         ms.append(Measurement(f"coherence {cross.pair[0]} - {cross.pair[1]}, mean {cross.band_hz[0]:g}-"
                               f"{cross.band_hz[1]:g} Hz", cross.mean, "",
                               note=f"{'significant' if cross.significant else 'not significant'}: {cross.z:.1f} "
@@ -293,7 +332,7 @@ class Survey(Procedure[SurveyParams]):
         ms.append(Measurement("Welch segments usable (no lost samples)", used, "", lo=p.min_segments_used,
                               note=f"{csd.segments_used} of {csd.segments_total}"))
 
-        title = f"{Path(ctx.path).name}, Mode 3, {csd.seconds:.0f} s at {csd.fs:g} Hz, {csd.segments_used} segments"
+        title = f"{Path(ctx.path).name}, Mode {p.mode}, {csd.seconds:.0f} s at {csd.fs:g} Hz, {csd.segments_used} segments"
         figures = [Figure("dip", "Autocollimator control-channel spectra (smoothed dB) over the dip search band, "
                           "with the dips found", partial(plot_dips, f=f, psd_urad=psd_urad, dips=dips, p=p))]
         dof_bin = csd.dof

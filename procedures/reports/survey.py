@@ -34,13 +34,15 @@ def markdown(values: Mapping[str, Any], dips: Mapping[str, Dip | None], kg_src: 
     def r(v: object, fmt: str = ".3g") -> str:
         return "-" if v is None else v if isinstance(v, str) else format(v, fmt)
 
+    mode = int(values.get("mode", 3))
+    sensor = "control-channel" if mode == 3 else "pickoff (in-loop sensor)"
     lines = ["## Survey", "",
-             f"Record: {csd.seconds:.0f} s at {csd.fs:g} Hz; Welch, Hann segments of {csd.nperseg / csd.fs:g} s "
+             f"Mode {mode}. Record: {csd.seconds:.0f} s at {csd.fs:g} Hz; Welch, Hann segments of {csd.nperseg / csd.fs:g} s "
              f"(bin {csd.fs / csd.nfft:.4g} Hz), 50 % overlap, {csd.segments_used} of {csd.segments_total} "
              f"segments used.", ""]
     src = ref.get("source", "reference")
     lines += [f"| quantity | X | Y | {src} X | {src} Y |", "|---|---|---|---|---|",
-              f"| dip of the control-channel spectrum (Hz) | {r(values['dip_hz']['X'], '.3f')} | "
+              f"| dip of the {sensor} spectrum (Hz) | {r(values['dip_hz']['X'], '.3f')} | "
               f"{r(values['dip_hz']['Y'], '.3f')} | {r(dref.get('X'))} | {r(dref.get('Y'))} |",
               f"| dip depth, prominence (dB) | {r(values['dip_depth_db']['X'], '.1f')} | "
               f"{r(values['dip_depth_db']['Y'], '.1f')} | | |",
@@ -52,6 +54,10 @@ def markdown(values: Mapping[str, Any], dips: Mapping[str, Dip | None], kg_src: 
               f"{r(rref.get('X'))} | {r(rref.get('Y'))} |",
               f"| autocollimator control rms, {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz (urad) | "
               f"{r(values['ac_ctl_rms_urad']['X'], '.3f')} | {r(values['ac_ctl_rms_urad']['Y'], '.3f')} | | |",
+              *([f"| platform rms, out-of-loop autocollimator (instrumentation), {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz "
+                 f"(urad) | {r(values['platform_rms_autocollimator_urad']['X'], '.3f')} | "
+                 f"{r(values['platform_rms_autocollimator_urad']['Y'], '.3f')} | | |"]
+                if "platform_rms_autocollimator_urad" in values else []),
               f"| pickoff scale Kg used (mV/urad) | {values['pickoff_scale_mV_per_urad']['X']:.4g} "
               f"({kg_src['X']}) | {values['pickoff_scale_mV_per_urad']['Y']:.4g} ({kg_src['Y']}) | | |", ""]
     lines += ["The gyro-deduced platform rms is the thesis's estimate (Ch. V E.2): the pickoff spectrum "
