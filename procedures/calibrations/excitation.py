@@ -356,13 +356,16 @@ class Excitation(Procedure[ExcitationParams]):
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
         values["incoherent"] = incoherent_parts(excited, n, p)
-        # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
-        # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz)
-        kg, kg_src = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad)
-        values["pickoff_noise_urad_rms"] = {
-            p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
-        values["pickoff_noise_band_hz"] = [1.0, 50.0]
-        values["pickoff_scale_source"] = kg_src
+        if p.mode == 3:
+            # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
+            # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz). Not
+            # in the gyro modes: there the loop closes on the pickoff and reshapes its noise
+            kg, kg_src = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis],
+                                      cal.pickoff_scale_mV_per_urad)
+            values["pickoff_noise_urad_rms"] = {
+                p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
+            values["pickoff_noise_band_hz"] = [1.0, 50.0]
+            values["pickoff_scale_source"] = kg_src
         ms = measurements(net, plat, values, p) + root_measurements(roots, p)
         figures = [Figure("network", "Compensation network, control channel to amplifier input: measured H1 with "
                           "95 % intervals, the fit and the design (cf. Fig. 40)",

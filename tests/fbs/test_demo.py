@@ -30,7 +30,7 @@ def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
 
 def test_campaign_covers_every_procedure():
     from procedures.calibrations import catalogue
-    assert {name for name, _ in CAMPAIGN} == set(catalogue())
+    assert {name for name, _, _ in CAMPAIGN} == set(catalogue())
 
 
 def test_report_sets_the_baseline_beside_table_1(tmp_path):
@@ -47,7 +47,7 @@ def test_the_survey_runs_after_the_baseline_and_sets_its_net_figure_beside_the_t
     """Issue 22 part 6: the survey takes the baseline's pickoff spectrum out of the gyro's, so the
     baseline runs first; the report sets the thesis method, the net figure and the coherent part
     beside the thesis's 1.6 / 3.6 urad, an unresolved one as such."""
-    order = [name for name, _ in CAMPAIGN]
+    order = [name for name, _, _ in CAMPAIGN]
     assert order.index("baseline") < order.index("survey")
     values = {"platform_rms_urad": {"X": 0.73, "Y": 3.21},
               "platform_rms_baseline_net_urad": {"X": 0.447, "Y": None},
