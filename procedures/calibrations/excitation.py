@@ -355,7 +355,11 @@ class Excitation(Procedure[ExcitationParams]):
         values["level_limited_by"] = ctx.results["probe"]["limited_by"]
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
-        values["incoherent"] = incoherent_parts(excited, n, p)
+        kg_all, _ = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad)
+        ac = cal.autocollimator[p.axis]
+        scales = {n["ac_ctl"]: ac.control_mV_per_urad * 1e-3, n["ac_inst"]: ac.inst_mV_per_urad * 1e-3,
+                  n["gyro"]: kg_all[p.axis] * 1e-3}
+        values["incoherent"] = incoherent_parts(excited, n, p, scales)
         if p.mode == 3:
             # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
             # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz). Not
@@ -452,11 +456,18 @@ def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia:
     return values
 
 
-def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) -> dict[str, Any]:
+def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams,
+                     scales_V_per_urad: Mapping[str, float] | None = None) -> dict[str, Any]:
     """Each sensor's spectrum split by its coherence with V_Td (Ch. V C): the rms (V) of the
     coherent part gamma^2 S and of the incoherent part (1 - gamma^2) S over 1-50 Hz. gamma^2 is
     first freed of its bias over m averaged periods, (m gamma^2 - 1) / (m - 1) (for no coherence
-    E[gamma^2] = 1 / m, which read the incoherent part 7 % low with 15 periods)."""
+    E[gamma^2] = 1 / m, which read the incoherent part 7 % low with 15 periods).
+
+    With the sensors' scales, the incoherent part also in urad: its rms (the sensor's noise
+    equivalent angle in the band, with the platform's unexcited motion) and its median level
+    (the noise floor, urad/sqrt(Hz)). For the sensor the loop closes on (the control channel in
+    Mode 3, the pickoff in 4 and 5) the loop reshapes its own noise: ``in_loop`` says so, and
+    the open-loop figure is the ``baseline`` procedure's."""
     S = excited.mean()
     m = excited.averages()
     coh = coherence(S)
@@ -464,13 +475,21 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) ->
     band = (f >= 1.0) & (f <= 50.0)
     df = f[1] - f[0]
     r = excited.index(n["cmd"])
+    loop_sensor = "ac_ctl" if p.mode == 3 else "gyro"
     out: dict[str, Any] = {}
     for k in ("ac_ctl", "ac_inst", "gyro"):
         i = excited.index(n[k])
         s = S[:, i, i].real
         g = unbiased_coherence(coh[:, r, i], m)
-        out[n[k]] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
-                     "incoherent_rms_V": float(np.sqrt(np.sum(((1 - g) * s)[band]) * df)), "band_hz": [1.0, 50.0]}
+        incoherent = float(np.sqrt(np.sum(((1 - g) * s)[band]) * df))
+        part: dict[str, Any] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
+                                "incoherent_rms_V": incoherent, "band_hz": [1.0, 50.0],
+                                "in_loop": k == loop_sensor or (p.mode == 3 and k == "ac_inst")}
+        if scales_V_per_urad and n[k] in scales_V_per_urad:
+            sc = scales_V_per_urad[n[k]]
+            part["incoherent_urad_rms"] = round(incoherent / sc, 5)
+            part["floor_urad_per_rtHz"] = round(float(np.sqrt(np.median(((1 - g) * s)[band]))) / sc, 6)
+        out[n[k]] = part
     return out
 
 
