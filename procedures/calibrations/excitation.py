@@ -61,6 +61,7 @@ from procedures.analysis.transfer import (
 from procedures.paramlimits import OneOf, above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports.excitation import markdown, plot_response
+from procedures.reports.thesis import closed_loop_roots as thesis_roots
 from procedures.rigsetup import bring_to_mode3
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
@@ -383,20 +384,6 @@ class Excitation(Procedure[ExcitationParams]):
                           partial(plot_response, resp=loop_resp, fit=None, design=None))]
         title = f"{Path(ctx.path).name}, axis {p.axis}, Mode {p.mode}"
         return Analysis(values, ms, figures, markdown(values, title))
-
-
-#: the thesis's closed-loop roots (rad/s): Table 5 (Mode 3; its platform pair's frequency is not
-#: legible in the scan) and Table 6 (modes 4 and 5, read off the root locus of Fig. 28)
-THESIS_ROOTS: dict[int, dict[str, dict[str, float | None]]] = {
-    3: {"X": {"c1": 5.6, "c4": 123.0, "platform_w": None, "platform_zeta": 0.13},
-        "Y": {"c1": 4.5, "c4": 96.0, "platform_w": None, "platform_zeta": 0.09}},
-    4: {"X": {"c1": 5.0, "c4": 160.0, "platform_w": 43.0, "platform_zeta": 0.24},
-        "Y": {"c1": 5.0, "c4": 160.0, "platform_w": 60.0, "platform_zeta": 0.27}},
-}
-
-
-def thesis_roots(mode: int, axis: str) -> dict[str, float | None]:
-    return dict(THESIS_ROOTS[3 if mode == 3 else 4][axis]) | {"table": 5.0 if mode == 3 else 6.0}
 
 
 def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibration, n: Mapping[str, str],
