@@ -62,7 +62,7 @@ from procedures.paramlimits import OneOf, above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports.excitation import markdown, plot_response
 from procedures.reports.thesis import closed_loop_roots as thesis_roots
-from procedures.rigsetup import bring_to_mode3
+from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 URAD = 1e-6
@@ -213,29 +213,20 @@ class Excitation(Procedure[ExcitationParams]):
         steps = [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
                  Step("settle", self._settle, expected_s=p.settle_s, setup=True)]
         if p.mode != 3:
-            steps.append(Step(f"mode {p.mode}", self._gyro_mode, expected_s=p.mode_settle_s, setup=True))
+            steps.append(Step(f"mode {p.mode}", partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
+                              expected_s=p.mode_settle_s, setup=True))
         steps += [Step("quiet", self._quiet, expected_s=p.quiet_s),
                   Step("probe", self._probe, expected_s=p.probe_s, setup=True),
                   Step("excite", self._excite, expected_s=p.excite_s),
                   Step("V_Td off", self._off, expected_s=2.0, setup=True)]
         if p.mode != 3:
-            steps.append(Step("back to mode 3", self._back_to_mode3, expected_s=2.0, setup=True))
+            steps.append(Step("back to mode 3", back_to_mode3, expected_s=2.0, setup=True))
         return steps
 
     def _settle(self, ctx: Context) -> dict:
         ctx.rig.set_command_torque_V(self.params.axis, 0.0)
         ctx.acquire(self.params.settle_s, keep=False)
         return {"settle_s": self.params.settle_s}
-
-    def _gyro_mode(self, ctx: Context) -> dict:
-        """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then settle:
-        the loop now closes through the gyro's float, and the caging through the autocollimator."""
-        mode = ctx.rig.set_mode(self.params.mode)
-        ctx.acquire(self.params.mode_settle_s, keep=False)
-        return {"mode": mode, "settle_s": self.params.mode_settle_s}
-
-    def _back_to_mode3(self, ctx: Context) -> dict:
-        return {"mode": ctx.rig.set_mode(3)}
 
     def _quiet(self, ctx: Context) -> dict:
         ctx.acquire(self.params.quiet_s, keep=False)
@@ -356,17 +347,15 @@ class Excitation(Procedure[ExcitationParams]):
         values["level_limited_by"] = ctx.results["probe"]["limited_by"]
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
-        kg_all, _ = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad)
+        kg, kg_src = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad)
         ac = cal.autocollimator[p.axis]
         scales = {n["ac_ctl"]: ac.control_mV_per_urad * 1e-3, n["ac_inst"]: ac.inst_mV_per_urad * 1e-3,
-                  n["gyro"]: kg_all[p.axis] * 1e-3}
+                  n["gyro"]: kg[p.axis] * 1e-3}
         values["incoherent"] = incoherent_parts(excited, n, p, scales)
         if p.mode == 3:
             # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
             # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz). Not
             # in the gyro modes: there the loop closes on the pickoff and reshapes its noise
-            kg, kg_src = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis],
-                                      cal.pickoff_scale_mV_per_urad)
             values["pickoff_noise_urad_rms"] = {
                 p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
             values["pickoff_noise_band_hz"] = [1.0, 50.0]

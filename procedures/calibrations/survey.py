@@ -67,7 +67,7 @@ from procedures.paramlimits import OneOf, above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
-from procedures.rigsetup import bring_to_mode3
+from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 log = logging.getLogger(__name__)
@@ -210,23 +210,15 @@ class Survey(Procedure[SurveyParams]):
         # the baseline is chosen before the first step records (and again on a resume)
         self.baseline, self.baseline_note = self.find_baseline()
         p = self.params
-        gyro_mode = [Step(f"mode {p.mode}", self._gyro_mode, expected_s=p.mode_settle_s, setup=True)]
-        back = [Step("back to mode 3", self._back_to_mode3, expected_s=1.0, setup=True)]
+        gyro_mode = [Step(f"mode {p.mode}", partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
+                          expected_s=p.mode_settle_s, setup=True)]
+        back = [Step("back to mode 3", back_to_mode3, expected_s=1.0, setup=True)]
         return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
                 Step("settle", self._settle, expected_s=p.settle_s, setup=True),
                 *(gyro_mode if p.mode != 3 else []),
                 *(Step(name, partial(self._record, seconds=seconds), expected_s=seconds)
                   for name, seconds in self.pieces()),
                 *(back if p.mode != 3 else [])]
-
-    def _gyro_mode(self, ctx: Context) -> dict:
-        """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then settle."""
-        mode = ctx.rig.set_mode(self.params.mode)
-        ctx.acquire(self.params.mode_settle_s, keep=False)
-        return {"mode": mode, "settle_s": self.params.mode_settle_s}
-
-    def _back_to_mode3(self, ctx: Context) -> dict:
-        return {"mode": ctx.rig.set_mode(3)}
 
     def _settle(self, ctx: Context) -> dict:
         already = bool((ctx.results.get("mode 3") or {}).get("already"))
