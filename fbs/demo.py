@@ -2,9 +2,11 @@
 
 The rig starts cold (mode 1, wheels stopped), as a lab's would. The procedures run in the
 order the lab runs them, each using the results before it: earth-rate (K_TO) -> stopwatch
-(K_g, with the measured K_TO) -> hysteresis X and Y -> survey (with the measured K_g) ->
-drift (with the measured K_TO). Each leaves its HDF5 file, JSON summary, report and log in
-``--out`` and shows its progress as ``fbs run`` does; ``out/report.md`` sets every figure
+(K_g, with the measured K_TO) -> hysteresis X and Y -> baseline X (the clamped platform's sensor
+noise) -> survey (with the measured K_g, and the baseline's pickoff spectrum taken out of the
+gyro's) -> excitation X in Mode 3, then in Mode 4 (the closed-loop roots of Tables 5 and 6) ->
+drift (with the measured K_TO). Each leaves its HDF5 file, JSON
+summary, report and log in ``--out`` and shows its progress as ``fbs run`` does; ``out/report.md`` sets every figure
 measured beside the thesis's value and the simulated rig's own value. The demo, unlike the
 procedures, may read the sim config: only to fill that last column.
 """
@@ -25,6 +27,7 @@ from procedures.reports import thesis
 from procedures.reports.report import fmt
 from procedures.runner import RunSummary
 from simhw.params import SimConfig, load_config
+from simhw.plant import linearized_poles
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +58,8 @@ def sim_values(cfg: SimConfig) -> dict[str, Any]:
         "stiffness_Nm_per_rad": stiff,
         "dip_hz": {a: math.sqrt(stiff[a] / cfg.platform[a].inertia_kg_m2) / (2 * math.pi) for a in ("X", "Y")},
         "inertia_kg_m2": {a: cfg.platform[a].inertia_kg_m2 for a in ("X", "Y")},
+        "linearized_poles": {f"{m}{a}": [[float(q.real), float(q.imag)] for q in linearized_poles(cfg, m, a)]
+                             for m in (3, 4) for a in ("X", "Y")},
         "pickoff_noise_urad_rms": {c: _pickoff_noise_1_50(g) for c, g in cfg.gyro.items()},
         "bias_instability_urad_per_s": {c: g.bias_instability_urad_per_s for c, g in cfg.gyro.items()},
         "arw_urad_per_sqrt_s": {c: g.arw_urad_per_sqrt_s for c, g in cfg.gyro.items()},
@@ -75,10 +80,14 @@ def _pickoff_noise_1_50(g: Any) -> float:
     return math.sqrt(white * 49.0 + sum(a * a / 2 for f, a in g.pickoff_lines if 1.0 <= f <= 50.0))
 
 
-#: (procedure, axis or None) in campaign order
-CAMPAIGN: list[tuple[str, str | None]] = [("earth-rate", None), ("stopwatch", None), ("hysteresis", "X"),
-                                          ("hysteresis", "Y"), ("survey", None), ("baseline", "X"),
-                                          ("excitation", "X"), ("drift", None)]
+#: the Mode-4 excitation's records, shorter than a lab's (the roots need no more: the tests use these)
+GYRO_MODE_EXCITATION = ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40")
+
+#: (procedure, axis or None, its parameters) in campaign order
+CAMPAIGN: list[tuple[str, str | None, tuple[str, ...]]] = [
+    ("earth-rate", None, ()), ("stopwatch", None, ()), ("hysteresis", "X", ()), ("hysteresis", "Y", ()),
+    ("baseline", "X", ()), ("survey", None, ()), ("excitation", "X", ()), ("excitation", "X", GYRO_MODE_EXCITATION),
+    ("drift", None, ())]
 
 
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
@@ -94,9 +103,9 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
     summaries: list[RunSummary] = []
     t0 = time.monotonic()
     with open_rig(url) as rig:
-        for name, axis in CAMPAIGN:
+        for name, axis, params in CAMPAIGN:
             cls = get(name)
-            proc = cls(parse_params(cls, [], axis), prior=prior)
+            proc = cls(parse_params(cls, list(params), axis), prior=prior)
             if progress:
                 progress(f"{name}{' ' + axis if axis else ''} ...")
             with RunLog() as runlog:
@@ -106,7 +115,8 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
                 progress(f"{name}{' ' + axis if axis else ''}: {s.verdict} ({s.status}), "
                          f"{time.monotonic() - t0:.0f} s so far")
             if s.verdict in ("pass", "fail"):
-                prior[name] = dict(s.values)
+                # ``_file`` as find_prior gives it: the survey reads the baseline's record there
+                prior[name] = dict(s.values) | ({"_file": str(s.file)} if s.file else {})
             if s.verdict == "aborted" and s.error and "interrupted" in s.error:
                 break
     report = write_campaign_report(out, summaries, sim_values(load_config(cfg_path)), time.monotonic() - t0, seed)
@@ -129,7 +139,7 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
                 note = "" if not iv or iv[0] is None else f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]"
                 if resolved.get(ch) is False:
                     note = "not resolved" + (f": {note}" if note else "")
-                rows.append(Row(f"{label} {ch}", units, v, (THESIS.get(thesis_key or key) or {}).get(ch),
+                rows.append(Row(f"{label} {ch}{_in_mode(s)}", units, v, (THESIS.get(thesis_key or key) or {}).get(ch),
                                 (sim.get(key) or {}).get(ch), note))
 
     per_channel("earth-rate", "K_TO_urad_per_s_per_V", "K_TO", "urad/s/V")
@@ -154,9 +164,17 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
         for ch, v in (s.values.get("platform_rms_urad") or {}).items():
             rows.append(Row(f"gyro-deduced platform rms {ch}", "urad", v, THESIS["platform_rms_urad"].get(ch), None,
                             "0.4-15 Hz gyro spectrum, as the thesis (mostly pickoff noise here)"))
+        base = s.values.get("baseline") or {}
+        for ch in (s.values.get("platform_rms_baseline_net_urad") or {}):
+            rows.append(_figure_row(s, "platform_rms_baseline_net_urad", ch, f"platform rms {ch}, net of the baseline's "
+                                    "pickoff noise", "urad", THESIS["platform_rms_urad"].get(ch),
+                                    "0.4-15 Hz gyro spectrum less the clamped pickoff's (Ch. V B, Fig. 33), "
+                                    + (f"baseline {base.get('axis')}" if base.get("file") else
+                                       f"no baseline: {base.get('from')}")))
         for ch, v in (s.values.get("platform_rms_net_urad") or {}).items():
             iv = (s.values.get("platform_rms_net_urad_ci95") or {}).get(ch) or [None, None]
-            rows.append(Row(f"platform rms {ch}, net of pickoff noise", "urad", v, None, None,
+            rows.append(Row(f"platform rms {ch}, net of pickoff noise (coherent part)", "urad", v,
+                            THESIS["platform_rms_urad"].get(ch), None,
                             f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; the gyro's part coherent with the autocollimator, "
                             "0.4-15 Hz"))
         cross = s.values.get("cross_axis_coherence") or {}
@@ -171,17 +189,57 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
         axis = s.params.get("axis", "X")
         k = (s.values.get("stiffness_Nm_per_rad") or {}).get(axis)
         iv = (s.values.get("stiffness_Nm_per_rad_ci95") or {}).get(axis) or [None, None]
-        rows.append(Row(f"bearing stiffness at {fmt(s.params.get('target_urad'))} urad rms {axis}", "N m/rad", k,
+        rows.append(Row(f"bearing stiffness at {fmt(s.params.get('target_urad'))} urad rms {axis}{_in_mode(s)}",
+                        "N m/rad", k,
                         THESIS["stiffness_Nm_per_rad"].get(axis), sim["stiffness_Nm_per_rad"].get(axis),
                         f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; Dahl's describing function at this amplitude, "
                         "eta To^2 only for small motion"))
-        rows.append(Row(f"compensation network vs design {axis}, worst 0.3-50 Hz", "dB",
+        rows.append(Row(f"compensation network vs design {axis}{_in_mode(s)}, worst 0.3-50 Hz", "dB",
                         s.values.get("network_vs_design_max_db"), None, None,
                         f"{fmt(s.values.get('network_vs_design_max_deg'))} deg (eq. 3.28, Fig. 40)"))
+        _root_rows(rows, s, sim)
     per_channel("excitation", "pickoff_noise_urad_rms", "pickoff noise 1-50 Hz, incoherent with V_Td", "urad")
     per_channel("drift", "bias_instability_urad_per_s", "bias instability", "urad/s")
     per_channel("drift", "arw_urad_per_sqrt_s", "angle random walk", "urad/sqrt(s)")
     return rows
+
+
+def _figure_row(s: RunSummary, key: str, ch: str, label: str, units: str, thesis_value: Any, why: str) -> Row:
+    """A figure with its 95 % interval, "not resolved" where the data do not resolve it."""
+    iv = (s.values.get(f"{key}_ci95") or {}).get(ch) or [None, None]
+    note = "" if iv[0] is None else f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]; "
+    if ((s.values.get("resolved") or {}).get(key) or {}).get(ch) is False:
+        note = "not resolved" + (f": {note}" if note else "; ")
+    return Row(label, units, (s.values.get(key) or {}).get(ch), thesis_value, None, note + why)
+
+
+def _in_mode(s: RunSummary) -> str:
+    """A label's mode, when it is not the thesis's usual Mode 3."""
+    mode = s.values.get("mode", 3)
+    return "" if mode == 3 else f" (Mode {mode})"
+
+
+def _root_rows(rows: list[Row], s: RunSummary, sim: dict[str, Any]) -> None:
+    """The closed-loop roots measured (Tables 5 and 6) beside the thesis's and the simulated rig's
+    linearized model's nearest root."""
+    cl = s.values.get("closed_loop") or {}
+    if not cl:
+        return
+    axis, mode, th = s.params.get("axis", "X"), int(cl.get("mode", 3)), cl.get("thesis") or {}
+    lin = (sim.get("linearized_poles") or {}).get(f"{mode}{axis}") or []
+    for name, thesis_key in (("c1", "c1"), ("platform_pair", "platform_w"), ("c4", "c4")):
+        r = (cl.get("roots") or {}).get(name)
+        if r is None:
+            continue
+        p = complex(*r["pole"])
+        near = min((complex(*q) for q in lin), key=lambda q: abs(q - p), default=None)
+        iv = r.get("w_rad_per_s_ci95") or [None, None]
+        zeta = (f"; zeta {fmt(r.get('zeta'))} (thesis {fmt(th.get('platform_zeta'))}"
+                + (f", model {fmt(-near.real / abs(near))})" if near else ")") if "zeta" in r else "")
+        rows.append(Row(f"closed-loop root {name} {axis} (Mode {mode})", "rad/s", r.get("w_rad_per_s"),
+                        th.get(thesis_key), abs(near) if near is not None else None,
+                        f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]{zeta}; Table {int(th.get('table', 5))}; simulated: the "
+                        "linearized model's (Dahl -> eta To^2)"))
 
 
 def _baseline_rows(rows: list[Row], runs: list[RunSummary], sim: dict[str, Any]) -> None:

@@ -2,7 +2,8 @@
 
 ``parse_params`` turns ``--param k=v`` (and ``--axis``) into the procedure's ``Params``;
 ``find_prior`` finds the newest completed summary of each procedure (stopwatch needs
-earth-rate's K_TO); ``prior_value`` reads one figure from them, else the data sheet's value.
+earth-rate's K_TO; each carries ``_from``, its JSON file, and ``_file``, its run file: the survey
+reads the baseline's record there); ``prior_value`` reads one figure from them, else the data sheet's value.
 The command line and the console use the same three.
 """
 
@@ -47,7 +48,7 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
             continue
         mtime = path.stat().st_mtime
         if data["procedure"] not in found or mtime >= found[data["procedure"]][0]:
-            found[data["procedure"]] = (mtime, data["values"] | {"_from": str(path)})
+            found[data["procedure"]] = (mtime, data["values"] | _provenance(path, data))
     prior = {name: values for name, (_, values) in found.items()}
     for spec in extra or []:
         path = Path(spec)
@@ -59,8 +60,19 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
             raise ValueError(f"--prior {path}: not JSON ({exc})") from None
         if not isinstance(data, dict) or "procedure" not in data or "values" not in data:
             raise ValueError(f"--prior {path}: not a procedure summary (written by `fbs run` beside its .h5)")
-        prior[data["procedure"]] = data["values"] | {"_from": str(path)}
+        prior[data["procedure"]] = data["values"] | _provenance(path, data)
     return prior
+
+
+def _provenance(path: Path, data: Mapping[str, Any]) -> dict[str, Any]:
+    """Where a prior summary came from: ``_from`` its JSON file, ``_file`` its run file (the survey
+    reads the baseline's clamped record there), looked for beside the JSON when moved with it."""
+    out: dict[str, Any] = {"_from": str(path)}
+    run = data.get("file")
+    if isinstance(run, str) and run:
+        f = Path(run)
+        out["_file"] = str(path.parent / f.name if not f.exists() and (path.parent / f.name).exists() else f)
+    return out
 
 
 def parse_params(proc_cls: type[Procedure], specs: list[str], axis: str | None) -> Any:

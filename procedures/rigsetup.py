@@ -38,6 +38,20 @@ def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_
     return {"already": False, "waited_s": round(ctx.time_s - t0, 3), "t_caged_s": round(ctx.time_s, 3)}
 
 
+def enter_gyro_mode(ctx: Context, mode: int, settle_s: float) -> dict:
+    """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then ``settle_s``
+    for the network's and the caging loop's transients: the loop now closes through the gyro's
+    float, and the caging through the autocollimator."""
+    now = ctx.rig.set_mode(mode)
+    ctx.acquire(settle_s, keep=False)
+    return {"mode": now, "settle_s": settle_s}
+
+
+def back_to_mode3(ctx: Context) -> dict:
+    """Hand the rig back in Mode 3, where the other procedures start."""
+    return {"mode": ctx.rig.set_mode(3)}
+
+
 def _poll(ctx: Context, ok, timeout_s: float, poll_s: float, what: str) -> None:
     t_end = ctx.time_s + timeout_s
     while not ok(ctx.rig.relays.status()):

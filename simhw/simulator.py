@@ -235,6 +235,8 @@ class Simulator:
         self.nl_state = np.zeros((n_nl, 2))
         self.nl_state[:, 1] = np.nan
         self.x = np.zeros(len(self._compiled.disc.plant.states))
+        #: the slow inputs (names, values) of the last chunk simulated (None before the first)
+        self._last_slow: tuple[tuple[str, ...], np.ndarray] | None = None
         if self.relays.spin >= SPIN_READY and self.relays.mode in (3, 4, 5):
             self._settle()
 
@@ -485,7 +487,19 @@ class Simulator:
                 continue
             u[:, j] = self.sources.take(name, m)
         y = np.empty((m, len(plant.outputs)))
-        cp.run(self.x, u, self._slow_inputs(), self.nl_state, y)
+        slow = self._slow_inputs()
+        cp.run(self.x, u, slow, self.nl_state, y)
+        names = tuple(plant.slow_inputs)
+        if self._last_slow is not None and self._last_slow[0] == names and m > 0:
+            # A set-point (V_Td, gamma_c, a torquer bias) steps at this chunk's first sample: the
+            # analog filter before the ADC sees a staircase there, whose sample at the edge is the
+            # mean of its two sides, as the samples of smooth signals are their values; taking the
+            # new side alone put every staircase half an internal step ahead of the smooth
+            # signals (V_Td's direct path in pa against the compensation's, eq. 3.27)
+            step = slow - self._last_slow[1]
+            if np.any(step != 0.0):
+                y[0] -= cp.ds @ (0.5 * step)
+        self._last_slow = (names, slow)
         self.step += m
         order = [plant.outputs.index(c) for c in self._outputs]
         return y[:, order]

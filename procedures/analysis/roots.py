@@ -5,7 +5,9 @@ The thesis read the closed-loop roots off root loci of its model: Table 5 for Mo
 (autocollimator stabilization), Table 6 for the gyro modes 4 and 5. Here the loop is closed
 over parts measured in the same run:
 
-* the compensation network C(s), eq. 3.28, fitted to the quiet record (network input -> pa);
+* the compensation network C(s), eq. 3.28, fitted inside the excited loop (the excitation's
+  ``network_in_loop``: the quiet record's H1 is biased at the lowest frequencies by the
+  network's 6.7 s pole);
 * the gimbal axis, amplifier input -> angle, P(s) = Kp Km / ((La s + Ra)(J s^2 + D s + k)
   + Km Kb s) (eqs. 3.23-3.27), with J, D and k fitted to the excited record;
 * the loop's sensor: in Mode 3 the control channel, K_ac F(s) (F its 2nd-order filter,
@@ -34,9 +36,9 @@ one, bin by bin, in units of each bin's standard error.
 Naming: the *platform pair* is the complex pair of least damping with |p| in the band; ``c1``
 the real root below it and ``c4`` the real root above it nearest to it (Tables 5 and 6).
 
-Intervals: each part's fit is repeated on each leave-one-out block (the network's blocks of the
-quiet record, the platform's and the sensor ratio's of the excited record: independent
-records, so pairing replicate b with replicate b adds their variances); the loop is closed
+Intervals: each part's fit is repeated on each leave-one-out block of the excited record (the
+network, the platform and the sensor ratio all leave out the same block b, so what they share
+is carried along); the loop is closed
 for each, each named root matched to the nearest root, and the delete-one jackknife gives
 the standard error of its natural frequency and damping (Student's t, ``n_blocks - 1`` dof).
 

@@ -34,6 +34,12 @@ that records is ``procedures.calibrations.survey``; the report's text and plots 
   docs/procedures/survey.md). ``Kg`` is an argument: the procedure passes the stopwatch's
   measured value or the rig's nominal data-sheet value.
 
+* **the platform rms net of the baseline's pickoff noise** (Ch. V E.2 less Ch. V B, Fig. 33):
+  the same band integral of the survey's gyro PSD less the open-loop (clamped platform) PSD of
+  the same pickoff, bin by bin, ``sqrt(max(0, integral (S_g - S_b) / Kg^2 df))``
+  (``baseline_net_rms``): the pickoff noise the thesis method credits to the platform, taken
+  out as the baseline measured it.
+
 * PSDs (urad^2/Hz) of the four autocollimator and two gyro channels, and the coherences
   autocollimator control - gyro per axis (Figs. 44/47), X - Y control channels (Fig. 48) and
   X - Y gyro (Fig. 49), as App. A.8 plots (``COHERENCE_PAIRS``).
@@ -50,12 +56,13 @@ from typing import Protocol
 import numpy as np
 import scipy.ndimage
 import scipy.signal
+import scipy.stats
 
 from daq.filespectra import RunCsd, run_csd_matrix
 from daq.reader import RunFile
 from daq.spectra import band_rms, coherence
 from drivers.calibration import RigCalibration
-from procedures.analysis.intervals import Estimate, from_stderr
+from procedures.analysis.intervals import LEVEL, Estimate, from_stderr, judged
 from procedures.analysis.transfer import BlockCsd, jackknife_se, unbiased_coherence
 
 AXES = ("X", "Y")
@@ -87,6 +94,14 @@ class SurveySettings(Protocol):
     dip_lo_hz: float
     dip_hi_hz: float
     dip_smooth_hz: float
+    mode: int
+
+
+def loop_sensor(axis: str, mode: int) -> str:
+    """The sensor the axis's loop closes on: the control channel in Mode 3, the pickoff in the
+    gyro modes 4 and 5 (Fig. 27). Its spectrum has the dip: the loop's sensitivity has zeros at
+    the open-loop platform poles, the bearing resonance."""
+    return ac_ctl(axis) if mode == 3 else gyro(axis)
 
 
 class SpanError(ValueError):
@@ -283,6 +298,70 @@ def coherent_platform_rms(blocks: BlockCsd, gyro_channel: str, ac_channel: str, 
     return from_stderr(value, float(jackknife_se(loo)), dof=blocks.n_blocks - 1)
 
 
+class BaselineMismatch(ValueError):
+    """The baseline's spectrum cannot be set bin by bin against the survey's."""
+
+
+@dataclass(frozen=True)
+class BaselineNet:
+    """The platform's rms net of the baseline's pickoff noise, and the two band rms it is made of."""
+
+    estimate: Estimate          # urad; unresolved when the difference is not significantly above zero
+    survey_rms_urad: float      # the gyro's rms in the band in the survey (the thesis method on these blocks)
+    baseline_rms_urad: float    # the same pickoff's rms in the band with the platform clamped
+    dof: float                  # Welch-Satterthwaite degrees of freedom of the difference's interval
+
+
+def baseline_net_rms(survey: BlockCsd, survey_channel: str, baseline: BlockCsd, baseline_channel: str,
+                     kg_V_per_urad: float, lo_hz: float, hi_hz: float) -> BaselineNet:
+    """sqrt(max(0, integral over lo..hi Hz of (S_survey - S_baseline) / Kg^2 df)) in urad (Ch. V E.2
+    with the open-loop pickoff spectrum of Ch. V B, Fig. 33, taken out bin by bin).
+
+    The gyro reads theta + n_g in the survey and n_g alone with the platform clamped; with n_g
+    stationary and independent of theta the band variances subtract. Each record's band variance
+    is a mean over its blocks, so a delete-one jackknife over each record's blocks gives its
+    standard error exactly as a linear statistic's; the two records are independent, so the
+    difference's variance is the sum, its degrees of freedom Welch-Satterthwaite's. The 95 %
+    interval of the variance maps to the rms through sqrt(max(0, .)) (monotone, so it covers as
+    the variance's does). A difference whose lower bound is not above zero is reported
+    unresolved, with the interval [0, sqrt(hi)]."""
+    fs_, fb_ = survey.f, baseline.f
+    bs = (fs_ >= lo_hz) & (fs_ <= hi_hz)
+    bb = (fb_ >= lo_hz) & (fb_ <= hi_hz)
+    if bs.sum() != bb.sum() or not np.allclose(fs_[bs], fb_[bb], rtol=0, atol=1e-9):
+        raise BaselineMismatch(f"the baseline's Welch bins ({baseline.seg_s:g} s segments at {baseline.fs:g} Hz) "
+                               f"are not the survey's ({survey.seg_s:g} s at {survey.fs:g} Hz) in {lo_hz:g}-{hi_hz:g} Hz")
+    df = float(fs_[1] - fs_[0])
+    k2 = kg_V_per_urad ** 2
+
+    def variance(blocks: BlockCsd, channel: str, band: np.ndarray) -> tuple[float, float, int]:
+        i = blocks.index(channel)
+
+        def v(leave_out: int | None) -> float:
+            return float(np.sum(blocks.mean(leave_out)[band, i, i].real)) * df / k2      # urad^2
+
+        loo = np.array([v(b) for b in range(blocks.n_blocks)])
+        return v(None), float(jackknife_se(loo)), blocks.n_blocks - 1
+
+    vs, ses, ns = variance(survey, survey_channel, bs)
+    vb, seb, nb = variance(baseline, baseline_channel, bb)
+    d = vs - vb
+    se2 = ses ** 2 + seb ** 2
+    quart = ses ** 4 / ns + seb ** 4 / nb
+    dof = se2 ** 2 / quart if quart > 0 else float(ns + nb)
+    q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof))
+    lo, hi = d - q * math.sqrt(se2), d + q * math.sqrt(se2)
+    value = math.sqrt(max(0.0, d))
+    rms_hi = math.sqrt(max(0.0, hi))
+    if not lo > 0:
+        est = Estimate(value, 0.0, rms_hi, False,
+                       f"the survey's gyro variance in the band ({vs:.4g} urad²) is not significantly above the "
+                       f"baseline's pickoff noise ({vb:.4g} urad²): difference {d:+.3g} +- {q * math.sqrt(se2):.3g}")
+    else:
+        est = judged(value, math.sqrt(lo), rms_hi)
+    return BaselineNet(est, math.sqrt(max(vs, 0.0)), math.sqrt(max(vb, 0.0)), dof)
+
+
 def survey_spectra(csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[str, float],
                    p: SurveySettings) -> SurveySpectra:
     """The PSDs in urad^2/Hz (the autocollimators' scales from the data sheet ``cal``, the
@@ -295,7 +374,7 @@ def survey_spectra(csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[st
     psd_urad = {c: csd.psd(c) / scale[c] ** 2 for c in csd.channels}              # urad^2/Hz
     coh = coherence(csd.S)
 
-    dips = {a: find_dip(f, psd_urad[ac_ctl(a)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
+    dips = {a: find_dip(f, psd_urad[loop_sensor(a, p.mode)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
     rms = {a: band_rms(f, psd_urad[gyro(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
     ac_rms = {a: band_rms(f, psd_urad[ac_ctl(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
     stiffness = {a: (cal.platform[a].inertia_kg_m2 * (2 * math.pi * d.freq_hz) ** 2

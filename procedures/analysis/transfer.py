@@ -43,12 +43,12 @@ sheet's inertia is not used.
 The damping is the figure to trust least. At the resonance, where D is seen, the closed loop
 puts a deep notch in the amplifier input: the compensation's output and K_d V_Td nearly cancel,
 so a timing error between the two recorded parts of ``pa`` is a large error of D. The
-simulated rig has one: its ADC's anti-alias filter treats every signal as held over the
-internal step, which delays smooth signals by half a step (0.25 ms) but not V_Td's steps.
-There the fitted D read 1.05 and 1.09 N m s for 1.02 in two runs, outside their intervals
-(noise-free, the bins at the resonance alone read 1.25), while J and k stayed within 0.3 % and
-inside theirs; the independent generator of the tests, exact in the frequency domain, has no
-such error, and there the intervals of all three covered their truths in 39, 38 and 39 of 40
+simulated rig had one: its ADC took a set-point's step at the internal sample where it came,
+half a step (0.25 ms) ahead of the smooth signals' samples, and D read 1.05-1.13 N m s for
+1.02, outside its interval. With the edge sampled as the analog filter sees it (the step's
+mean, ``simhw.simulator``) it read 1.002, 1.015 and 0.531 for 1.02, 1.02 and 0.51 on three
+drawn rigs, each inside its interval. The independent generator of the tests, exact in the
+frequency domain, covered J, k and D in 39, 38 and 39 of 40
 drawn rigs. With Dahl friction (eq. 5.2) k and D are the describing function
 at the excitation's amplitude: eta To^2 only for motions well inside To / (eta To^2).
 

@@ -48,7 +48,7 @@ from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.baseline import markdown
 from procedures.rigsetup import bring_to_mode3
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step, steps_done
 
 log = logging.getLogger(__name__)
 
@@ -226,6 +226,67 @@ class Baseline(Procedure[BaselineParams]):
         return Analysis(values, ms, figures, md)
 
 
+# ---------------------------------------------------------------------------- a finished run's record
+class BaselineFileError(ValueError):
+    """A file that is not a usable baseline run; the message names the file and what is wrong."""
+
+
+@dataclass(frozen=True)
+class ClampedRecord:
+    """Where a baseline run's clamped record lies: samples ``start <= i < stop`` of ``file`` (the
+    run file named, or the one it resumed), the settle after the clamp left out."""
+
+    source: Path
+    file: Path
+    start: int
+    stop: int
+    rate_hz: float
+    axis: str
+    channels: tuple[str, ...]
+
+    @property
+    def seconds(self) -> float:
+        return (self.stop - self.start) / self.rate_hz
+
+
+def clamped_record(path: str | Path, what: str = "baseline file") -> ClampedRecord:
+    """The clamped record of the baseline run file ``path`` (its ``step-done`` events say where),
+    read from metadata and events only. Raises ``BaselineFileError`` naming ``what`` and the path
+    when the file is missing, is not an fbs-run file, is not a baseline run, or holds no completed
+    clamped record."""
+    path = Path(path)
+    name = f"{what} {str(path)!r}"
+    if not path.is_file():
+        raise BaselineFileError(f"{name}: no such file" if not path.exists() else f"{name}: not a regular file")
+    try:
+        with RunFile(path) as rf:
+            attrs, events = rf.attrs, rf.events
+    except OSError as exc:     # RunFileError (an OSError) included: the contract broken, not HDF5
+        raise BaselineFileError(f"{name}: not a readable fbs-run file ({exc})") from None
+    proc = attrs.get("procedure")
+    if proc != "baseline":
+        raise BaselineFileError(f"{name}: a {proc!r} run, not a 'baseline' run" if proc else
+                                f"{name}: names no procedure (root attribute 'procedure'); a baseline run is "
+                                f"written by `fbs run baseline`")
+    try:
+        results, spans = steps_done(path, events)
+    except ProcedureError as exc:
+        raise BaselineFileError(f"{name}: {exc}") from None
+    if STEP not in spans:
+        raise BaselineFileError(f"{name}: holds no completed {STEP!r} step (status {attrs.get('status', '?')!r})")
+    span = spans[STEP]
+    settle = int((results.get(STEP) or {}).get("settle_samples", 0))
+    try:
+        with RunFile(span.file) as rf:
+            channels, rate, n = rf.channels, float(rf.rate_hz), rf.n_samples
+    except OSError as exc:
+        raise BaselineFileError(f"{name}: its clamped record's file {str(span.file)!r} cannot be read ({exc})") from None
+    start, stop = span.start + settle, min(span.stop, n)
+    if stop <= start:
+        raise BaselineFileError(f"{name}: the clamped record in {str(span.file)!r} is empty")
+    return ClampedRecord(path, span.file, start, stop, rate, str(attrs.get("axis", "")), tuple(channels))
+
+
 def _plot(path: Path, *, f: np.ndarray, p: np.ndarray, channel: str, dof: float, nperseg: int, title: str) -> Path:
     return plot_psd(path, f, p, channel=channel, units="urad", dof=dof, nperseg=nperseg, nfft=nperseg, title=title)
 
@@ -235,6 +296,6 @@ def _measurement(name: str, e: Estimate, units: str) -> Measurement:
     return Measurement(name, e.value if e.resolved else None, units, note=note)
 
 
-__all__ = ["Baseline", "BaselineParams", "Line", "Params"]
+__all__ = ["Baseline", "BaselineFileError", "BaselineParams", "ClampedRecord", "Line", "Params", "clamped_record"]
 
 PROCEDURE = Baseline

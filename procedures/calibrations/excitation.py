@@ -61,7 +61,8 @@ from procedures.analysis.transfer import (
 from procedures.paramlimits import OneOf, above, at_least, check_limits
 from procedures.params import prior_values
 from procedures.reports.excitation import markdown, plot_response
-from procedures.rigsetup import bring_to_mode3
+from procedures.reports.thesis import closed_loop_roots as thesis_roots
+from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
 
 URAD = 1e-6
@@ -212,29 +213,20 @@ class Excitation(Procedure[ExcitationParams]):
         steps = [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
                  Step("settle", self._settle, expected_s=p.settle_s, setup=True)]
         if p.mode != 3:
-            steps.append(Step(f"mode {p.mode}", self._gyro_mode, expected_s=p.mode_settle_s, setup=True))
+            steps.append(Step(f"mode {p.mode}", partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
+                              expected_s=p.mode_settle_s, setup=True))
         steps += [Step("quiet", self._quiet, expected_s=p.quiet_s),
                   Step("probe", self._probe, expected_s=p.probe_s, setup=True),
                   Step("excite", self._excite, expected_s=p.excite_s),
                   Step("V_Td off", self._off, expected_s=2.0, setup=True)]
         if p.mode != 3:
-            steps.append(Step("back to mode 3", self._back_to_mode3, expected_s=2.0, setup=True))
+            steps.append(Step("back to mode 3", back_to_mode3, expected_s=2.0, setup=True))
         return steps
 
     def _settle(self, ctx: Context) -> dict:
         ctx.rig.set_command_torque_V(self.params.axis, 0.0)
         ctx.acquire(self.params.settle_s, keep=False)
         return {"settle_s": self.params.settle_s}
-
-    def _gyro_mode(self, ctx: Context) -> dict:
-        """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then settle:
-        the loop now closes through the gyro's float, and the caging through the autocollimator."""
-        mode = ctx.rig.set_mode(self.params.mode)
-        ctx.acquire(self.params.mode_settle_s, keep=False)
-        return {"mode": mode, "settle_s": self.params.mode_settle_s}
-
-    def _back_to_mode3(self, ctx: Context) -> dict:
-        return {"mode": ctx.rig.set_mode(3)}
 
     def _quiet(self, ctx: Context) -> dict:
         ctx.acquire(self.params.quiet_s, keep=False)
@@ -355,14 +347,19 @@ class Excitation(Procedure[ExcitationParams]):
         values["level_limited_by"] = ctx.results["probe"]["limited_by"]
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
-        values["incoherent"] = incoherent_parts(excited, n, p)
-        # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
-        # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz)
         kg, kg_src = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad)
-        values["pickoff_noise_urad_rms"] = {
-            p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
-        values["pickoff_noise_band_hz"] = [1.0, 50.0]
-        values["pickoff_scale_source"] = kg_src
+        ac = cal.autocollimator[p.axis]
+        scales = {n["ac_ctl"]: ac.control_mV_per_urad * 1e-3, n["ac_inst"]: ac.inst_mV_per_urad * 1e-3,
+                  n["gyro"]: kg[p.axis] * 1e-3}
+        values["incoherent"] = incoherent_parts(excited, n, p, scales)
+        if p.mode == 3:
+            # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
+            # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz). Not
+            # in the gyro modes: there the loop closes on the pickoff and reshapes its noise
+            values["pickoff_noise_urad_rms"] = {
+                p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
+            values["pickoff_noise_band_hz"] = [1.0, 50.0]
+            values["pickoff_scale_source"] = kg_src
         ms = measurements(net, plat, values, p) + root_measurements(roots, p)
         figures = [Figure("network", "Compensation network, control channel to amplifier input: measured H1 with "
                           "95 % intervals, the fit and the design (cf. Fig. 40)",
@@ -376,20 +373,6 @@ class Excitation(Procedure[ExcitationParams]):
                           partial(plot_response, resp=loop_resp, fit=None, design=None))]
         title = f"{Path(ctx.path).name}, axis {p.axis}, Mode {p.mode}"
         return Analysis(values, ms, figures, markdown(values, title))
-
-
-#: the thesis's closed-loop roots (rad/s): Table 5 (Mode 3; its platform pair's frequency is not
-#: legible in the scan) and Table 6 (modes 4 and 5, read off the root locus of Fig. 28)
-THESIS_ROOTS: dict[int, dict[str, dict[str, float | None]]] = {
-    3: {"X": {"c1": 5.6, "c4": 123.0, "platform_w": None, "platform_zeta": 0.13},
-        "Y": {"c1": 4.5, "c4": 96.0, "platform_w": None, "platform_zeta": 0.09}},
-    4: {"X": {"c1": 5.0, "c4": 160.0, "platform_w": 43.0, "platform_zeta": 0.24},
-        "Y": {"c1": 5.0, "c4": 160.0, "platform_w": 60.0, "platform_zeta": 0.27}},
-}
-
-
-def thesis_roots(mode: int, axis: str) -> dict[str, float | None]:
-    return dict(THESIS_ROOTS[3 if mode == 3 else 4][axis]) | {"table": 5.0 if mode == 3 else 6.0}
 
 
 def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibration, n: Mapping[str, str],
@@ -449,11 +432,18 @@ def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia:
     return values
 
 
-def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) -> dict[str, Any]:
+def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams,
+                     scales_V_per_urad: Mapping[str, float] | None = None) -> dict[str, Any]:
     """Each sensor's spectrum split by its coherence with V_Td (Ch. V C): the rms (V) of the
     coherent part gamma^2 S and of the incoherent part (1 - gamma^2) S over 1-50 Hz. gamma^2 is
     first freed of its bias over m averaged periods, (m gamma^2 - 1) / (m - 1) (for no coherence
-    E[gamma^2] = 1 / m, which read the incoherent part 7 % low with 15 periods)."""
+    E[gamma^2] = 1 / m, which read the incoherent part 7 % low with 15 periods).
+
+    With the sensors' scales, the incoherent part also in urad: its rms (the sensor's noise
+    equivalent angle in the band, with the platform's unexcited motion) and its median level
+    (the noise floor, urad/sqrt(Hz)). For the sensor the loop closes on (the control channel in
+    Mode 3, the pickoff in 4 and 5) the loop reshapes its own noise: ``in_loop`` says so, and
+    the open-loop figure is the ``baseline`` procedure's."""
     S = excited.mean()
     m = excited.averages()
     coh = coherence(S)
@@ -461,13 +451,21 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams) ->
     band = (f >= 1.0) & (f <= 50.0)
     df = f[1] - f[0]
     r = excited.index(n["cmd"])
+    loop_sensor = "ac_ctl" if p.mode == 3 else "gyro"
     out: dict[str, Any] = {}
     for k in ("ac_ctl", "ac_inst", "gyro"):
         i = excited.index(n[k])
         s = S[:, i, i].real
         g = unbiased_coherence(coh[:, r, i], m)
-        out[n[k]] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
-                     "incoherent_rms_V": float(np.sqrt(np.sum(((1 - g) * s)[band]) * df)), "band_hz": [1.0, 50.0]}
+        incoherent = float(np.sqrt(np.sum(((1 - g) * s)[band]) * df))
+        part: dict[str, Any] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
+                                "incoherent_rms_V": incoherent, "band_hz": [1.0, 50.0],
+                                "in_loop": k == loop_sensor or (p.mode == 3 and k == "ac_inst")}
+        if scales_V_per_urad and n[k] in scales_V_per_urad:
+            sc = scales_V_per_urad[n[k]]
+            part["incoherent_urad_rms"] = round(incoherent / sc, 5)
+            part["floor_urad_per_rtHz"] = round(float(np.sqrt(np.median(((1 - g) * s)[band]))) / sc, 6)
+        out[n[k]] = part
     return out
 
 

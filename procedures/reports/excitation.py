@@ -78,9 +78,12 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
         lines.append(f"| {k} | {_fmt(values[k][a])} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {_fmt(sheet)} |")
     lines += _roots_lines(values)
     lines += ["", "## Coherent and incoherent parts, 1-50 Hz (Ch. V C)", "",
-              "| channel | coherent with V_Td (V rms) | incoherent (V rms) |", "|---|---|---|"]
+              "| channel | coherent with V_Td (V rms) | incoherent (V rms) | incoherent (urad rms) | "
+              "floor (urad/sqrt(Hz)) | in the loop |", "|---|---|---|---|---|---|"]
     for c, v in values["incoherent"].items():
-        lines.append(f"| {c} | {v['coherent_rms_V']:.4g} | {v['incoherent_rms_V']:.4g} |")
+        lines.append(f"| {c} | {v['coherent_rms_V']:.4g} | {v['incoherent_rms_V']:.4g} | "
+                     f"{_fmt(v.get('incoherent_urad_rms'))} | {_fmt(v.get('floor_urad_per_rtHz'))} | "
+                     f"{'yes: the loop reshapes its noise' if v.get('in_loop') else 'no'} |")
     return "\n".join(lines) + "\n"
 
 

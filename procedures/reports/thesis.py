@@ -2,7 +2,8 @@
 
 Procedures never measure with these: they are what a report sets a measurement beside.
 K_TO and K_g: II C.1.a (Table 4); bearing To, eta and stiffness: Ch. V F; closed-loop
-platform rms and the autocollimator spectrum's dip: Ch. V E.1-2 (Figs. 42, 45).
+platform rms and the autocollimator spectrum's dip: Ch. V E.1-2 (Figs. 42, 45); closed-loop roots:
+Tables 5 and 6.
 """
 
 from __future__ import annotations
@@ -41,3 +42,18 @@ BASELINE: dict[str, Any] = {
     "pickoff_rms_urad": {"X": {"1-50 Hz": 2.18, "0.1-200 Hz": 6.2}, "Y": {"0.1-200 Hz": 12.4}},
     "pickoff_lines_hz": [70.6, 71.4, 102.0, 187.0],
 }
+
+
+#: the thesis's closed-loop roots (rad/s): Table 5 (Mode 3; its platform pair's frequency is not
+#: legible in the scan) and Table 6 (modes 4 and 5, read off the root locus of Fig. 28)
+CLOSED_LOOP_ROOTS: dict[int, dict[str, dict[str, float | None]]] = {
+    3: {"X": {"c1": 5.6, "c4": 123.0, "platform_w": None, "platform_zeta": 0.13},
+        "Y": {"c1": 4.5, "c4": 96.0, "platform_w": None, "platform_zeta": 0.09}},
+    4: {"X": {"c1": 5.0, "c4": 160.0, "platform_w": 43.0, "platform_zeta": 0.24},
+        "Y": {"c1": 5.0, "c4": 160.0, "platform_w": 60.0, "platform_zeta": 0.27}},
+}
+
+
+def closed_loop_roots(mode: int, axis: str) -> dict[str, float | None]:
+    """Table 5's roots for Mode 3, Table 6's for the gyro modes, with the table's number."""
+    return dict(CLOSED_LOOP_ROOTS[3 if mode == 3 else 4][axis]) | {"table": 5.0 if mode == 3 else 6.0}

@@ -30,7 +30,7 @@ def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
 
 def test_campaign_covers_every_procedure():
     from procedures.calibrations import catalogue
-    assert {name for name, _ in CAMPAIGN} == set(catalogue())
+    assert {name for name, _, _ in CAMPAIGN} == set(catalogue())
 
 
 def test_report_sets_the_baseline_beside_table_1(tmp_path):
@@ -41,3 +41,22 @@ def test_report_sets_the_baseline_beside_table_1(tmp_path):
                                  0).read_text()
     assert "| autocollimator NEA 0.1-100 Hz X ctl | urad | 0.447 | 0.451 | 0.451 |" in text
     assert "found 70.600, 71.400, 102.000, 187.000" in text
+
+
+def test_the_survey_runs_after_the_baseline_and_sets_its_net_figure_beside_the_thesis(tmp_path):
+    """Issue 22 part 6: the survey takes the baseline's pickoff spectrum out of the gyro's, so the
+    baseline runs first; the report sets the thesis method, the net figure and the coherent part
+    beside the thesis's 1.6 / 3.6 urad, an unresolved one as such."""
+    order = [name for name, _, _ in CAMPAIGN]
+    assert order.index("baseline") < order.index("survey")
+    values = {"platform_rms_urad": {"X": 0.73, "Y": 3.21},
+              "platform_rms_baseline_net_urad": {"X": 0.447, "Y": None},
+              "platform_rms_baseline_net_urad_ci95": {"X": [0.42, 0.472], "Y": [0.0, 1.13]},
+              "resolved": {"platform_rms_baseline_net_urad": {"X": True, "Y": False}},
+              "baseline": {"file": "baseline.h5", "axis": "X"}}
+    text = write_campaign_report(tmp_path, [_summary("survey", values)], sim_values(SimConfig()), 1.0, 0).read_text()
+    assert "| gyro-deduced platform rms X | urad | 0.73 | 1.6 |" in text
+    assert "| platform rms X, net of the baseline's pickoff noise | urad | 0.447 | 1.6 |" in text
+    assert "95 % [0.42, 0.472]" in text
+    assert "| platform rms Y, net of the baseline's pickoff noise | urad | - | 3.6 |" in text
+    assert "not resolved: 95 % [0, 1.13]" in text

@@ -97,6 +97,11 @@ def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, 
     K, K_ci = v["stiffness_Nm_per_rad"][axis], v["stiffness_Nm_per_rad_ci95"][axis]
     assert abs(J / inertia - 1) < 0.05 and J_ci[0] <= inertia <= J_ci[1], (J, J_ci, inertia)
     assert abs(K / stiffness - 1) < 0.10 and K_ci[0] <= stiffness <= K_ci[1], (K, K_ci, stiffness)
+    # the damping: the gyro gimbals' (the spring bearing adds none)
+    damping = load_config(cfg).platform[axis].gyro_damping_Nms
+    D, D_ci = v["damping_Nms"][axis], v["damping_Nms_ci95"][axis]
+    print(f"{axis}: J {J} {J_ci} / {inertia}; k {K} {K_ci} / {stiffness}; D {D} {D_ci} / {damping}")
+    assert abs(D / damping - 1) < 0.10 and D_ci[0] <= damping <= D_ci[1], (D, D_ci, damping)
     # the data sheet's inertia (the sim publishes the drawn one) is only set beside it
     assert v["datasheet_inertia_kg_m2"] == pytest.approx(inertia)
     # the Mode-3 closed-loop roots (Table 5) against the linearized model of the drawn rig

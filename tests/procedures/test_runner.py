@@ -246,7 +246,8 @@ def test_catalogue_finds_every_procedure_and_keys_are_design_section_7():
     design = {"earth-rate": ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"),
               "stopwatch": ("K_g_mV_per_urad", "file"),
               "hysteresis": ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "file"),
-              "survey": ("platform_rms_urad", "dip_hz", "file"),
+              # and the platform rms net of the baseline's pickoff noise: docs/procedures/survey.md
+              "survey": ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file"),
               "drift": ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file"),
               # not in DESIGN.md section 7 (which names `fbs run excitation` but not its keys):
               # docs/procedures/excitation.md
