@@ -81,6 +81,8 @@ CANOPEN_READY = ("torquer", "command", "caging", "relay", "table")
 def canopen_nodes(url: str, value: str) -> list[str]:
     """The ``canopen=`` list of a rig URL: node names, or ``all`` for every one that can."""
     names = [n for n in value.split(",") if n]
+    if names == ["none"]:
+        return []
     if names == ["all"]:
         return list(CANOPEN_READY)
     bad = [n for n in names if n not in CANOPEN_READY]
@@ -404,7 +406,7 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     options = bus_options(url, params)
-    co = canopen_nodes(url, params.get("canopen", ""))
+    co = canopen_nodes(url, params.get("canopen", "all"))
     try:
         bus = can.Bus(interface=iface, channel=channel, **options)
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:

@@ -48,7 +48,7 @@ def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str], li
     if bad:
         raise ValueError(f"rig URL {url!r}: external={params['external']!r}: unknown node(s) {', '.join(bad)} "
                          f"(nodes: {', '.join(cp.NODES)})")
-    return channel, external, canopen_nodes(url, params.get("canopen", ""))
+    return channel, external, canopen_nodes(url, params.get("canopen", "all"))
 
 
 def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
