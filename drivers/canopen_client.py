@@ -1,9 +1,9 @@
 """One CANopen node as a device driver sees it: checked SDO reads and writes, typed errors,
 and the connect sequence (identify, configure the host-heartbeat watchdog, NMT start).
 
-The counterpart of ``drivers.can_link.NodeClient`` for a node in ``CanLink``'s
-``canopen_nodes`` (``docs/canopen-plan.md`` section 2). The SDO transfers are the
-``canopen`` package's, over the link's ``network``; one transfer at a time per node.
+Every rig node is one (``docs/protocol.md`` section 2, ``docs/canopen-plan.md`` section 2).
+The SDO transfers are the ``canopen`` package's, over ``CanLink``'s ``network``; one
+transfer at a time per node.
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import can
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
-from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
+from drivers import rig_nodes as rn
 from drivers.can_link import CanLink
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SetpointRangeError
 
@@ -39,13 +39,13 @@ Address = tuple[int, int]
 
 
 class CanopenClient:
-    """Node ``name`` (an id of ``can_protocol.NODES``) on ``link``, described by its EDS file."""
+    """Node ``name`` (an id of ``rig_nodes.NODES``) on ``link``, described by its EDS file."""
 
     def __init__(self, link: CanLink, name: str, device_type: int, *, safe_values: Sequence[tuple[Address, int]] = (),
                  raw_index: int = 0, raw_bits: bool = False, configure: Sequence[tuple[Address, int]] = ()) -> None:
         self.link = link
         self.name = name
-        self.node_id = cp.NODES[name]
+        self.node_id = rn.NODES[name]
         self.device_type = device_type
         #: what ``safe`` writes, in order; ``raw_get(i)`` reads ``(raw_index, i + 1)``, or with
         #: ``raw_bits`` bit i of ``(raw_index, 1)`` (a digital-output block)
@@ -162,7 +162,7 @@ class CanopenClient:
 
     def clear(self) -> None:
         """Configure the node's watchdog on the host heartbeat and its error values, then NMT
-        start it (the old CLEAR): from then on it counts as up, so a reboot is caught."""
+        start it: from then on it counts as up, so a reboot is caught."""
         ms = max(1, round(self.link.node_timeout_s * 1000))
         self.write(0x1016, 1, (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), what="set host heartbeat consumer",
                    check_faults=False)

@@ -1,8 +1,7 @@
 """A CiA 401 analogue-output node: volts out by index, counts scaled from the module's own
 objects, each set-point read back within one LSB (``docs/canopen-plan.md`` section 3).
 
-The CANopen counterpart of ``drivers.can_dac.CanDac``: the same ``write``/``read``/``limits``,
-so ``drivers.torquer`` and ``drivers.command`` put their channels on either. The set-point
+``drivers.torquer`` and ``drivers.command`` put their channels on it. The set-point
 limits are checked by the caller before ``write``; the counts' own range (16 bits) is checked
 here, before any frame.
 """
@@ -14,7 +13,6 @@ import struct
 
 from drivers import canopen_frames as cf
 from drivers.calibration import RigCalibration
-from drivers.can_dac import check_readback
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
 from drivers.errors import DeviceLost, ProtocolError, SetpointRangeError
@@ -143,3 +141,13 @@ class CanopenDac:
                                       f"operational)")
                 self.node.link.faults.report(fault)
                 raise fault
+
+
+def check_readback(node: CanopenClient, what: str, sent: float, back: float, lsb: float) -> float:
+    """A DAC's read-back must equal the set-point within one LSB; anything else is a fault."""
+    if abs(back - sent) > lsb * 1.001 + 1e-6:
+        fault = ProtocolError(f"CAN node '{node.name}': {what} reads back {back:+.6f} V after setting "
+                              f"{sent:+.6f} V (more than one LSB, {lsb * 1e3:.3f} mV, apart)")
+        node.link.faults.report(fault)
+        raise fault
+    return back

@@ -24,9 +24,10 @@ NMT_START = 0x01
 
 #: CiA 301 emergency codes the rig's nodes send
 EMCY_ERROR_RESET = 0x0000
-EMCY_HEARTBEAT = 0x8130
-EMCY_TEXT = {EMCY_HEARTBEAT: "host heartbeat lost, outputs at their error values", 0x5000: "hardware fault",
-             0x2310: "output over-current", 0x4210: "over-temperature"}
+EMCY_HEARTBEAT = 0x8130          # the host's heartbeat stopped: outputs at their error values
+EMCY_HARDWARE, EMCY_OVERCURRENT, EMCY_OVERTEMP = 0x5000, 0x2310, 0x4210
+EMCY_TEXT = {EMCY_HEARTBEAT: "host heartbeat lost, outputs at their error values", EMCY_HARDWARE: "hardware fault",
+             EMCY_OVERCURRENT: "output over-current", EMCY_OVERTEMP: "over-temperature"}
 
 #: CiA 303-2 SI unit code of the volt, as in 0x6450
 SI_VOLT = 0x00260000

@@ -7,7 +7,6 @@ from __future__ import annotations
 from typing import Protocol
 
 from drivers.calibration import AXES, RigCalibration
-from drivers.can_dac import CanDac
 from drivers.can_link import CanLink
 from drivers.canopen_dac import CanopenDac
 from drivers.setpoints import SetpointKind, SetpointLimits, check_name
@@ -43,18 +42,14 @@ class CommandDac(Protocol):
         ...
 
 
-class CommandChannels:
-    """V_Td and gamma_c on a DAC node's outputs (``OUTPUTS`` order), whatever its protocol
-    (``CanDac`` or ``CanopenDac`` provide ``write``, ``read`` and ``limits``)."""
+class CanopenCommandDac(CanopenDac):
+    """The command DACs on a CiA 401 analogue-output node (``drivers/eds/command.eds``),
+    outputs 1-6 in ``OUTPUTS`` order."""
 
     axes: tuple[str, ...] = AXES
-    limits: SetpointLimits
 
-    def write(self, index: int, volts: float, what: str) -> float:
-        raise NotImplementedError
-
-    def read(self, index: int, what: str) -> float:
-        raise NotImplementedError
+    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
+        super().__init__(link, "command", len(OUTPUTS), calibration)
 
     def set_command_torque_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts)
@@ -74,17 +69,3 @@ class CommandChannels:
         for a in self.axes:
             self.set_command_torque_V(a, 0.0)
             self.set_ac_bias_V(a, 0.0)
-
-
-class CanCommandDac(CanDac, CommandChannels):
-    """The command DACs on their CAN node (the rig's own protocol, docs/protocol.md 2.4)."""
-
-    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(link, "command", calibration)
-
-
-class CanopenCommandDac(CanopenDac, CommandChannels):
-    """The command DACs on a CiA 401 analogue-output node (``drivers/eds/command.eds``)."""
-
-    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(link, "command", len(OUTPUTS), calibration)

@@ -18,9 +18,9 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from drivers import can_protocol as cp
+from drivers import rig_nodes as rn
 from drivers.calibration import GYRO_CHANNELS
-from drivers.can_link import CanLink, NodeClient
+from drivers.can_link import CanLink
 from drivers.canopen_client import ABORT_INTERLOCK, CanopenClient
 from drivers.errors import DriverError, InterlockError, ModeNotAllowed
 
@@ -52,7 +52,7 @@ def check_mode(mode: object) -> int:
 
 
 #: modes the platform may be clamped in
-CLAMP_MODES = cp.CLAMP_MODES
+CLAMP_MODES = rn.CLAMP_MODES
 UNCLAMP_HINT = "release it with `fbs clamp off --rig URL`"
 
 
@@ -151,58 +151,23 @@ class RelayDriver(abc.ABC):
         return now
 
 
-class CanRelayDriver(RelayDriver):
-    def __init__(self, link: CanLink) -> None:
-        self.node = NodeClient(link, "relay")
-
-    def hold(self) -> None:
-        self.node.call(cp.OP_HOLD, what="HOLD")
-
-    def select(self, mode: int) -> None:
-        mode = self._checked(mode)
-        self.node.call(cp.OP_SELECT, 0, mode, what=f"SELECT mode {mode}")
-
-    def release(self) -> int:
-        try:
-            return self.node.call(cp.OP_RELEASE, what="RELEASE")
-        except InterlockError as exc:
-            why = tuple(w for b, w in ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"),
-                                       (cp.WHY_NOT_CAGED, "gyros not caged"),
-                                       (cp.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}")) if exc.detail & b)
-            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
-                                 detail=exc.detail) from None
-
-    def _set_clamp(self, clamped: bool) -> bool:
-        what = "CLAMP" if clamped else "UNCLAMP"
-        try:
-            return bool(self.node.call(cp.OP_CLAMP, 0, int(clamped), what=what))
-        except InterlockError as exc:
-            why = tuple(w for b, w in ((cp.WHY_MODE, "mode outside 1-3"),
-                                       (cp.WHY_COMMAND, "a command input not at zero")) if exc.detail & b)
-            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
-                                 detail=exc.detail) from None
-
-    def status(self) -> RelayStatus:
-        return decode_status(self.node.call(cp.OP_STATUS, what="STATUS"))
-
-
 #: the relay node's manufacturer objects (docs/canopen-plan.md section 5, drivers/eds/relay.eds)
 R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2000, 0x2007)
 SWITCH_HOLD, SWITCH_RELEASE = 1, 2
 #: the reason bits of 0x2003, spelled out
-REASONS = ((cp.WHY_NOT_AT_SPEED, "gyros not at speed"), (cp.WHY_NOT_CAGED, "gyros not caged"),
-           (cp.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}"), (cp.WHY_MODE, "mode outside 1-3"),
-           (cp.WHY_COMMAND, "a command input not at zero"))
+REASONS = ((rn.WHY_NOT_AT_SPEED, "gyros not at speed"), (rn.WHY_NOT_CAGED, "gyros not caged"),
+           (rn.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}"), (rn.WHY_MODE, "mode outside 1-3"),
+           (rn.WHY_COMMAND, "a command input not at zero"))
 
 
 def decode_status(w: int) -> RelayStatus:
-    """The STATUS word (docs/protocol.md 2.5; the relay node's 0x2004 in CANopen)."""
+    """The relay node's status word (object 0x2004, docs/protocol.md 2.5)."""
     return RelayStatus(
-        mode=(w >> cp.ST_MODE_SHIFT) & 7, selected=(w >> cp.ST_SELECT_SHIFT) & 7,
-        held=bool(w & cp.ST_HELD), alarm=bool(w & cp.ST_ALARM),
-        at_speed={c: bool(w >> (cp.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
-        caged={c: bool(w >> (cp.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
-        spin_fraction=((w >> cp.ST_SPIN_SHIFT) & 0xFF) / 100.0, clamped=bool(w & cp.ST_CLAMPED))
+        mode=(w >> rn.ST_MODE_SHIFT) & 7, selected=(w >> rn.ST_SELECT_SHIFT) & 7,
+        held=bool(w & rn.ST_HELD), alarm=bool(w & rn.ST_ALARM),
+        at_speed={c: bool(w >> (rn.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+        caged={c: bool(w >> (rn.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+        spin_fraction=((w >> rn.ST_SPIN_SHIFT) & 0xFF) / 100.0, clamped=bool(w & rn.ST_CLAMPED))
 
 
 class CanopenRelayDriver(RelayDriver):

@@ -6,13 +6,13 @@
     sim?realtime=1&seed=3&warm=1         paced to the wall clock; started in mode 3, caged
     sim?config=F.toml&table=manual       a sim config; a hand-cranked table (the operator is asked)
     serial:///dev/ttyACM0?can=socketcan:can0[&baud=2000000][&table=manual|can]
-    serial:///dev/ttyACM0?can=slcan:/dev/ttyUSB0&bitrate=500000&can_tty_baudrate=115200&canopen=torquer
-    sim?can=virtual:NAME&external=torquer&canopen=torquer
+    serial:///dev/ttyACM0?can=slcan:/dev/ttyUSB0&bitrate=500000&can_tty_baudrate=115200
+    sim?can=virtual:NAME&external=torquer
                                          the sim on virtual channel NAME, its torquer left to a
                                          CANopen node the caller runs (tests: acceptance A of issue 21)
 
-``bitrate`` and every ``can_<option>`` go to ``can.Bus``; ``canopen=`` lists the nodes that speak
-CANopen (``docs/canopen-plan.md``). python-can's ``virtual`` bus exists only inside one process:
+Every CAN node is a CANopen device (``docs/protocol.md`` section 2). ``bitrate`` and every
+``can_<option>`` go to ``can.Bus``. python-can's ``virtual`` bus exists only inside one process:
 a device in another process needs ``udp_multicast``, ``slcan`` on a pty pair, or ``socketcan`` on
 a ``vcan`` interface (``docs/protocol.md`` 2.1).
 
@@ -35,61 +35,29 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from typing import Any, Protocol
+from typing import Any
 from urllib.parse import parse_qsl, urlsplit
 
 import can
 
 from drivers.adc import Adc
-from drivers.caging import CagingSwitches, CanCagingSwitches, CanopenCagingSwitches
+from drivers.caging import CagingSwitches, CanopenCagingSwitches
 from drivers.calibration import RigCalibration
-from drivers.can_link import CanLink, NodeClient
+from drivers.can_link import CanLink
+from drivers.canopen_client import CanopenClient
 from drivers.clock import RigClock, WallClock
-from drivers.command import CanCommandDac, CanopenCommandDac, CommandDac
+from drivers.command import CanopenCommandDac, CommandDac
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
-from drivers.relay import SAFE_MODE, CanopenRelayDriver, CanRelayDriver, RelayDriver
+from drivers.relay import SAFE_MODE, CanopenRelayDriver, RelayDriver
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
-from drivers.table import CanopenTable, CanTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
-from drivers.torquer import CanopenTorquerDac, CanTorquerDac, TorquerDac
+from drivers.table import CanopenTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
+from drivers.torquer import CanopenTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
 
 #: An event listener gets (rig time s, kind, text); the recorder writes them to /events.
 EventListener = Callable[[float, str, str], None]
-
-
-class RigNode(Protocol):
-    """A CAN node as the rig connects it and makes it safe: ``NodeClient`` (the rig's own
-    protocol) or ``CanopenClient``."""
-
-    name: str
-
-    def identify(self) -> int: ...
-
-    def clear(self) -> None: ...
-
-    def safe(self) -> None: ...
-
-    def raw_get(self, index: int) -> int: ...
-
-
-#: nodes that can speak CANopen so far (``docs/canopen-plan.md``, "State")
-CANOPEN_READY = ("torquer", "command", "caging", "relay", "table")
-
-
-def canopen_nodes(url: str, value: str) -> list[str]:
-    """The ``canopen=`` list of a rig URL: node names, or ``all`` for every one that can."""
-    names = [n for n in value.split(",") if n]
-    if names == ["none"]:
-        return []
-    if names == ["all"]:
-        return list(CANOPEN_READY)
-    bad = [n for n in names if n not in CANOPEN_READY]
-    if bad:
-        raise ValueError(f"rig URL {url!r}: canopen={value!r}: node(s) {', '.join(bad)} do not speak CANopen yet "
-                         f"(ready: {', '.join(CANOPEN_READY)})")
-    return names
 
 
 @dataclass
@@ -107,7 +75,7 @@ class SafeReport:
 class Rig:
     def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
                  caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
-                 link: CanLink | None = None, safe_nodes: Sequence[RigNode] = (),
+                 link: CanLink | None = None, safe_nodes: Sequence[CanopenClient] = (),
                  closers: Sequence[Callable[[], None]] = (), emulator: Any = None) -> None:
         self.url = url
         self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
@@ -308,7 +276,7 @@ class Rig:
 
 
 # ---------------------------------------------------------------------------- open_rig
-_SERIAL_KEYS = {"can", "baud", "table", "bitrate", "canopen"}
+_SERIAL_KEYS = {"can", "baud", "table", "bitrate"}
 #: URL keys ``can_<option>=<value>`` pass ``<option>`` to ``can.Bus`` (and so does ``bitrate``)
 BUS_OPTION_PREFIX = "can_"
 
@@ -406,44 +374,36 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     options = bus_options(url, params)
-    co = canopen_nodes(url, params.get("canopen", "all"))
     try:
         bus = can.Bus(interface=iface, channel=channel, **options)
     except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
         raise DeviceLost(f"cannot open CAN interface {iface}:{channel} with {options or 'no options'}: {exc}") from exc
     tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
-    return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud, canopen=co)
+    return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)
 
 
 def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
               reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None,
-              monotonic: Callable[[], float] = time.monotonic, canopen: Sequence[str] = ()) -> Rig:
+              monotonic: Callable[[], float] = time.monotonic) -> Rig:
     """The rig from its ADC port and CAN bus. ``monotonic``: the drivers' deadline clock (the
-    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s).
-    ``canopen``: the nodes that speak CANopen (``CANOPEN_READY``); the others the rig's own
-    protocol."""
+    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s)."""
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
-    canopen = [n for n in canopen if n in names]      # canopen=all with a manual table
     link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
-                   reply_timeout_s=reply_timeout_s, monotonic=monotonic, canopen_nodes=canopen)
+                   reply_timeout_s=reply_timeout_s, monotonic=monotonic)
     adc = None
     try:
         link.wait_for_nodes(max(2.0, node_timeout_s))
-        torquers: TorquerDac = (CanopenTorquerDac(link, calibration) if "torquer" in canopen
-                                else CanTorquerDac(link, calibration))
-        commands: CommandDac = (CanopenCommandDac(link, calibration) if "command" in canopen
-                                else CanCommandDac(link, calibration))
-        caging: CagingSwitches = CanopenCagingSwitches(link) if "caging" in canopen else CanCagingSwitches(link)
-        relays: RelayDriver = CanopenRelayDriver(link) if "relay" in canopen else CanRelayDriver(link)
-        tab: RotaryTable = ((CanopenTable(link, clock) if "table" in canopen else CanTable(link, clock))
-                            if table[0] == "can" else ManualTable(table[1], table[2]))
-        co_clients = {dev.node.name: dev.node for dev in (torquers, commands, caging, relays, tab)
-                      if isinstance(dev, CanopenTorquerDac | CanopenCommandDac | CanopenCagingSwitches
-                                    | CanopenRelayDriver | CanopenTable)}
-        clients: list[RigNode] = [co_clients[n] if n in co_clients else NodeClient(link, n) for n in names]
+        torquers = CanopenTorquerDac(link, calibration)
+        commands = CanopenCommandDac(link, calibration)
+        caging = CanopenCagingSwitches(link)
+        relays = CanopenRelayDriver(link)
+        tab: RotaryTable = CanopenTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
+        clients: list[CanopenClient] = [relays.node, caging.node, torquers.node, commands.node]
+        if isinstance(tab, CanopenTable):
+            clients.append(tab.node)
         for c in clients:
             c.identify()
             c.clear()  # a node latched safe by an earlier session's end starts fresh

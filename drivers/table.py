@@ -1,8 +1,8 @@
 """The rotary table: tilt 0-90 deg about an east-west axis, spindle rotation (Ch. II B).
 
 In the thesis the table is cranked by hand: ``ManualTable`` asks the operator (console or
-terminal) and waits for the confirmed angle. ``CanTable`` is a motorized table (the simulated
-rig's), commanded over CAN; it reports when it is in position.
+terminal) and waits for the confirmed angle. ``CanopenTable`` is a motorized table (the
+simulated rig's), commanded over CANopen; it reports when it is in position.
 """
 
 from __future__ import annotations
@@ -14,8 +14,8 @@ import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from drivers import can_protocol as cp
-from drivers.can_link import CanLink, NodeClient
+from drivers import rig_nodes as rn
+from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
 from drivers.clock import RigClock
 from drivers.errors import DeviceTimeout, DriverError, OperatorAbort, SetpointRangeError
@@ -24,8 +24,6 @@ from drivers.setpoints import check_value
 log = logging.getLogger(__name__)
 
 TILT_LIMITS_DEG = (0.0, 90.0)
-#: index of each quantity on the table node
-I_TILT, I_SPINDLE, I_MOVING = 0, 1, 2
 
 
 @dataclass(frozen=True)
@@ -100,40 +98,6 @@ class ManualTable(RotaryTable):
         return self._pos
 
 
-class CanTable(RotaryTable):
-    """A motorized table node; the move is complete when the node clears its moving flag."""
-
-    def __init__(self, link: CanLink, clock: RigClock, move_timeout_s: float = 120.0) -> None:
-        self.node = NodeClient(link, "table")
-        self.clock = clock
-        self.move_timeout_s = move_timeout_s
-
-    def move_to(self, tilt_deg=None, spindle_deg=None) -> TablePosition:
-        tilt, spindle = check_target(tilt_deg, spindle_deg)
-        for index, value in ((I_TILT, tilt), (I_SPINDLE, spindle)):
-            if value is not None:
-                self.node.call(cp.OP_SET, index, cp.to_micro(value), what=f"table {('tilt', 'spindle')[index]} "
-                                                                          f"{value:.6f} deg")
-        t_end = self.clock.now() + self.move_timeout_s
-        while self.node.call(cp.OP_GET, I_MOVING, what="read table moving flag"):
-            if self.clock.now() > t_end:
-                fault: DriverError = DeviceTimeout(f"rotary table not in position after {self.move_timeout_s:g} s of rig time")
-                self.node.link.faults.report(fault)
-                raise fault
-            self.clock.sleep(0.1)
-        pos = self.position()
-        for got, value in ((pos.tilt_deg, tilt), (pos.spindle_deg, spindle)):
-            if value is not None and abs((got - value + 180.0) % 360.0 - 180.0) > 1e-3:
-                fault = DriverError(f"rotary table stopped at {got:.6f} deg, commanded {value:.6f} deg")
-                self.node.link.faults.report(fault)
-                raise fault
-        return pos
-
-    def position(self) -> TablePosition:
-        return TablePosition(cp.from_micro(self.node.call(cp.OP_GET, I_TILT, what="read table tilt")),
-                             cp.from_micro(self.node.call(cp.OP_GET, I_SPINDLE, what="read table spindle")))
-
-
 #: the table node's manufacturer objects (docs/canopen-plan.md section 6, drivers/eds/table.eds)
 T_TILT, T_SPINDLE, T_ACTUAL_TILT, T_ACTUAL_SPINDLE, T_MOVING = range(0x2200, 0x2205)
 
@@ -151,7 +115,7 @@ class CanopenTable(RotaryTable):
         tilt, spindle = check_target(tilt_deg, spindle_deg)
         for index, value, what in ((T_TILT, tilt, "tilt"), (T_SPINDLE, spindle, "spindle")):
             if value is not None:
-                self.node.write(index, 0, cp.to_micro(value), what=f"table {what} {value:.6f} deg")
+                self.node.write(index, 0, rn.to_micro(value), what=f"table {what} {value:.6f} deg")
         t_end = self.clock.now() + self.move_timeout_s
         while self.node.read(T_MOVING, 0, what="read table moving flag"):
             if self.clock.now() > t_end:
@@ -169,5 +133,5 @@ class CanopenTable(RotaryTable):
         return pos
 
     def position(self) -> TablePosition:
-        return TablePosition(cp.from_micro(self.node.read(T_ACTUAL_TILT, 0, what="read table tilt")),
-                             cp.from_micro(self.node.read(T_ACTUAL_SPINDLE, 0, what="read table spindle")))
+        return TablePosition(rn.from_micro(self.node.read(T_ACTUAL_TILT, 0, what="read table tilt")),
+                             rn.from_micro(self.node.read(T_ACTUAL_SPINDLE, 0, what="read table spindle")))

@@ -9,7 +9,6 @@ from __future__ import annotations
 from typing import Protocol
 
 from drivers.calibration import GYRO_CHANNELS, RigCalibration
-from drivers.can_dac import CanDac
 from drivers.can_link import CanLink
 from drivers.canopen_dac import CanopenDac
 from drivers.setpoints import SetpointLimits, check_name
@@ -34,18 +33,14 @@ class TorquerDac(Protocol):
         ...
 
 
-class TorquerChannels:
-    """The torquer channels on a DAC node's outputs 0-3, whatever its protocol (``CanDac`` or
-    ``CanopenDac`` provide ``write``, ``read`` and ``limits``)."""
+class CanopenTorquerDac(CanopenDac):
+    """The torquer DACs on a CiA 401 analogue-output node (``drivers/eds/torquer.eds``),
+    outputs 1-4 the channels X, Y, Z, XRD."""
 
     channels: tuple[str, ...] = GYRO_CHANNELS
-    limits: SetpointLimits
 
-    def write(self, index: int, volts: float, what: str) -> float:
-        raise NotImplementedError
-
-    def read(self, index: int, what: str) -> float:
-        raise NotImplementedError
+    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
+        super().__init__(link, "torquer", len(GYRO_CHANNELS), calibration)
 
     def set_bias_V(self, channel: str, volts: float) -> float:
         v = self.limits.torquer_bias(channel, volts)
@@ -58,20 +53,6 @@ class TorquerChannels:
     def zero(self) -> None:
         for c in self.channels:
             self.set_bias_V(c, 0.0)
-
-
-class CanTorquerDac(CanDac, TorquerChannels):
-    """The torquer DACs on their CAN node (the rig's own protocol, docs/protocol.md 2.4)."""
-
-    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(link, "torquer", calibration)
-
-
-class CanopenTorquerDac(CanopenDac, TorquerChannels):
-    """The torquer DACs on a CiA 401 analogue-output node (``drivers/eds/torquer.eds``)."""
-
-    def __init__(self, link: CanLink, calibration: RigCalibration | None = None) -> None:
-        super().__init__(link, "torquer", len(GYRO_CHANNELS), calibration)
 
     def stream_bias_V(self, channel: str, volts: float) -> float:
         """One step of a bias slew by receive PDO (checked against ``limits`` first, nothing

@@ -11,8 +11,8 @@ CiA 401 ask of the device and LocalNode lacks:
 * the outputs' effect on the physics (``server.submit``);
 * the fault injections of ``simhw.can_nodes`` (``NODE_FAULTS``).
 
-So far the torquer and command DACs (CiA 401 analogue outputs), the caging switches (CiA 401
-digital outputs), the relay driver and the rotary table (manufacturer objects): every node (``docs/canopen-plan.md``, "State").
+The torquer and command DACs are CiA 401 analogue outputs, the caging switches CiA 401 digital
+outputs, the relay driver and the rotary table manufacturer objects.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, Any, cast
 import canopen
 from canopen.sdo.exceptions import SdoAbortedError
 
-from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
+from drivers import rig_nodes as rn
 from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
@@ -55,7 +55,7 @@ class CanopenSimNode:
     def __init__(self, server: SimRigServer, channel: str, watchdog_s: float,
                  monotonic: Callable[[], float] = time.monotonic) -> None:
         self.server = server
-        self.node_id = cp.NODES[self.name]
+        self.node_id = rn.NODES[self.name]
         self._mono = monotonic
         self.watchdog_s = watchdog_s
         self.network = canopen.Network()
@@ -161,7 +161,7 @@ class CanopenSimNode:
 
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) == 2 and data[0] == cf.NMT_START and data[1] in (0, self.node_id):
-            self.latched = False                     # the old CLEAR: outputs stay as they are
+            self.latched = False                     # back to work: outputs stay as they are
 
     def _on_host_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self._connected and len(data) == 1:
@@ -220,7 +220,7 @@ class CanopenDacNode(CanopenSimNode):
 
     @property
     def values(self) -> dict[str, int]:
-        """Each output in microvolts (``simhw.can_nodes``'s DAC nodes have the same)."""
+        """Each output in microvolts."""
         return {out: round(self.counts(i + 1) * LSB_V * 1e6) for i, out in enumerate(self.outputs)}
 
     def counts(self, sub: int) -> int:
@@ -260,7 +260,7 @@ class CanopenCagingNode(CanopenSimNode):
 
     @property
     def inhibit(self) -> dict[str, bool]:
-        """Each switch (``simhw.can_nodes.CagingNode`` has the same)."""
+        """Each switch, True inhibited."""
         word = self.get(DO_8, 1)
         return {c: bool(word >> i & 1) for i, c in enumerate(self.channels)}
 
@@ -321,17 +321,17 @@ class CanopenRelayNode(CanopenSimNode):
     def _commands_zero(self) -> bool:
         """The node senses the command DAC outputs (V_Td, gamma_c) on its interlock lines."""
         command = self.server.nodes.nodes["command"]
-        return not any(cast(Any, command).values.values())   # CommandNode or CanopenCommandNode
+        return not any(cast(Any, command).values.values())   # a CanopenCommandNode
 
     def status_word(self) -> int:
         snap = self.server.snapshot
-        w = (self.mode << cp.ST_MODE_SHIFT) | (self.selected << cp.ST_SELECT_SHIFT)
-        w |= (cp.ST_HELD if self.held else 0) | (cp.ST_ALARM if self.alarm else 0)
-        w |= cp.ST_CLAMPED if self.clamped else 0
+        w = (self.mode << rn.ST_MODE_SHIFT) | (self.selected << rn.ST_SELECT_SHIFT)
+        w |= (rn.ST_HELD if self.held else 0) | (rn.ST_ALARM if self.alarm else 0)
+        w |= rn.ST_CLAMPED if self.clamped else 0
         for i, c in enumerate(GYRO_CHANNELS):
-            w |= int(snap.at_speed) << (cp.ST_AT_SPEED_SHIFT + i)
-            w |= int(snap.caged[c]) << (cp.ST_CAGED_SHIFT + i)
-        return w | (min(100, int(snap.spin * 100)) << cp.ST_SPIN_SHIFT)
+            w |= int(snap.at_speed) << (rn.ST_AT_SPEED_SHIFT + i)
+            w |= int(snap.caged[c]) << (rn.ST_CAGED_SHIFT + i)
+        return w | (min(100, int(snap.spin * 100)) << rn.ST_SPIN_SHIFT)
 
     def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
         return {R_MODE: lambda: self.mode, R_SELECTED: lambda: self.selected, R_REASONS: lambda: self.reasons,
@@ -375,14 +375,14 @@ class CanopenRelayNode(CanopenSimNode):
             raise SdoAbortedError(ABORT_NOT_HELD)
         self.held = False
         m = self.selected
-        if self.clamped and m not in cp.CLAMP_MODES:
+        if self.clamped and m not in rn.CLAMP_MODES:
             self.selected = self.mode
-            self._refuse(cp.WHY_CLAMPED)
+            self._refuse(rn.WHY_CLAMPED)
         if m in (4, 5):
             snap = self.server.snapshot
             need = ("X", "Y", "Z", "XRD") if m == 4 else ("X", "Y", "XRD")
-            why = (0 if snap.at_speed else cp.WHY_NOT_AT_SPEED) | (
-                0 if all(snap.caged[c] for c in need) else cp.WHY_NOT_CAGED)
+            why = (0 if snap.at_speed else rn.WHY_NOT_AT_SPEED) | (
+                0 if all(snap.caged[c] for c in need) else rn.WHY_NOT_CAGED)
             if why:
                 self.selected = self.mode
                 self._refuse(why)
@@ -396,9 +396,9 @@ class CanopenRelayNode(CanopenSimNode):
         on = bool(value)
         if on == self.clamped:
             return
-        why = 0 if self._commands_zero() else cp.WHY_COMMAND
-        if on and (self.mode not in cp.CLAMP_MODES or (self.held and self.selected not in cp.CLAMP_MODES)):
-            why |= cp.WHY_MODE
+        why = 0 if self._commands_zero() else rn.WHY_COMMAND
+        if on and (self.mode not in rn.CLAMP_MODES or (self.held and self.selected not in rn.CLAMP_MODES)):
+            why |= rn.WHY_MODE
         if why:
             self._refuse(why)
         self.clamped = on
@@ -413,7 +413,7 @@ class CanopenTableNode(CanopenSimNode):
 
     def reset_outputs(self) -> None:
         t = self.server.sim.cfg.table          # at power-on the table reports where it is
-        self.tilt, self.spindle = cp.to_micro(t.tilt_deg), cp.to_micro(t.spindle_deg % 360.0)
+        self.tilt, self.spindle = rn.to_micro(t.tilt_deg), rn.to_micro(t.spindle_deg % 360.0)
 
     def error_outputs(self) -> None:
         pass                                   # a table at rest is safe where it is
@@ -429,14 +429,14 @@ class CanopenTableNode(CanopenSimNode):
         value = od.decode_raw(data)
         assert isinstance(value, int)
         if index == T_TILT:
-            deg = cp.from_micro(value)
+            deg = rn.from_micro(value)
             if not 0.0 <= deg <= 90.0:
                 raise SdoAbortedError(ABORT_VALUE_RANGE)
             self.tilt = value
             self.server.submit(lambda sim: sim.set_table(tilt_deg=deg))
         elif index == T_SPINDLE:
-            spindle = cp.from_micro(value) % 360.0
-            self.spindle = cp.to_micro(spindle)
+            spindle = rn.from_micro(value) % 360.0
+            self.spindle = rn.to_micro(spindle)
             self.server.submit(lambda sim: sim.set_table(spindle_deg=spindle))
 
 

@@ -9,18 +9,18 @@ bus - with ``emulator`` set to the server, for fault injection in tests::
     sim?warm=1&seed=3            started in mode 3, caged, as after hours of running
     sim?realtime=1               paced to the wall clock
     sim?config=F.toml&table=manual&speed=1&watchdog=1   heartbeat/reply deadline 1 s (default 5 s)
-    sim?can=virtual:NAME&external=torquer&canopen=torquer
+    sim?can=virtual:NAME&external=torquer
                                  on virtual channel NAME; the torquer is a CANopen node the
-                                 caller runs there (docs/canopen-plan.md)
+                                 caller runs there (docs/protocol.md section 2)
 """
 
 from __future__ import annotations
 
 import can
 
-from drivers import can_protocol as cp
+from drivers import rig_nodes as rn
 from drivers.calibration import RigCalibration
-from drivers.rig import Rig, assemble, canopen_nodes, check_keys, flag
+from drivers.rig import Rig, assemble, check_keys, flag
 from drivers.runclock import RunningClock
 from drivers.table import Operator, TablePosition, terminal_operator
 from simhw.datasheet import rig_calibration
@@ -30,13 +30,12 @@ from simhw.rig_server import SimRigServer
 #: the simulated rig's default heartbeat and reply deadline (s, on a clock that leaves out the
 #: host's pauses: ``drivers.runclock``)
 SIM_WATCHDOG_S = 5.0
-SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog", "can", "external", "canopen"}
+SIM_KEYS = {"realtime", "seed", "config", "warm", "table", "speed", "watchdog", "can", "external"}
 
 
-def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str], list[str]]:
+def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str]]:
     """The sim's CAN options: ``can=virtual:NAME`` (the channel; virtual only: the sim's nodes
-    run in this process), ``external=a,b`` (nodes the caller runs on it itself) and
-    ``canopen=a,b`` (nodes that speak CANopen: simulated as CANopen slaves unless external)."""
+    run in this process) and ``external=a,b`` (nodes the caller runs on it itself)."""
     channel = None
     if "can" in params:
         iface, _, channel = params["can"].partition(":")
@@ -44,11 +43,11 @@ def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str], li
             raise ValueError(f"rig URL {url!r}: can={params['can']!r}: the sim's bus is python-can's "
                              f"virtual one, give can=virtual:NAME")
     external = [n for n in params.get("external", "").split(",") if n]
-    bad = [n for n in external if n not in cp.NODES]
+    bad = [n for n in external if n not in rn.NODES]
     if bad:
         raise ValueError(f"rig URL {url!r}: external={params['external']!r}: unknown node(s) {', '.join(bad)} "
-                         f"(nodes: {', '.join(cp.NODES)})")
-    return channel, external, canopen_nodes(url, params.get("canopen", "all"))
+                         f"(nodes: {', '.join(rn.NODES)})")
+    return channel, external
 
 
 def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
@@ -68,7 +67,7 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         watchdog = float(params.get("watchdog", str(SIM_WATCHDOG_S)))
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
-    channel, external, co = sim_can(url, params)
+    channel, external = sim_can(url, params)
     cfg = load_config(params.get("config"))
     if calibration is None:
         calibration = rig_calibration(cfg)   # the data sheet the simulated rig ships with
@@ -78,7 +77,7 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
     try:
         server = SimRigServer(cfg, seed=seed, realtime=flag("realtime", params.get("realtime", "0")), speed=speed,
                               warm=flag("warm", params.get("warm", "0")), watchdog_s=watchdog, monotonic=running,
-                              can_channel=channel, external_nodes=external, canopen_nodes=co)
+                              can_channel=channel, external_nodes=external)
     except BaseException:
         running.close()
         raise
@@ -92,7 +91,7 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
             tab = ("can",)
         return assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
                         node_timeout_s=watchdog, reply_timeout_s=max(0.5, watchdog),
-                        closers=[server.stop, running.close], emulator=server, monotonic=running, canopen=co)
+                        closers=[server.stop, running.close], emulator=server, monotonic=running)
     except BaseException:
         server.stop()
         running.close()

@@ -316,7 +316,7 @@ class Simulator:
 
         The clamp catches the gimbals where they are: their rates go to zero at once and the
         angles hold; released, the loops take the platform from there. The interlocks are the
-        relay node's business (``simhw.can_nodes.RelayNode``), not the physics'."""
+        relay node's business (``simhw.canopen_nodes.CanopenRelayNode``), not the physics'."""
         clamped = bool(clamped)
         if clamped == self.relays.clamped:
             return

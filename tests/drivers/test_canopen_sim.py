@@ -1,11 +1,12 @@
-"""Issue 21 on the simulated rig with every node that speaks CANopen so far
-(``sim?canopen=all``: relay, caging, torquer, command):
+"""The simulated rig's CANopen nodes (issue 21; relay, caging, torquer, command, table):
 
-* acceptance D, second half: the simulated node answers every object of its EDS over SDO, as
-  the EDS says;
-* acceptance C for the torquer: every fault of the old transport's tests
-  (``test_faults.py``) on the new one: stall, silence, reboot, EMCY, malformed answer, a busy
-  host, the host's heartbeat lost: typed errors, the latch, the safe state read back.
+* acceptance D, second half: each simulated node answers every object of its EDS over SDO,
+  as the EDS says;
+* each node's objects through the drivers: set-points to the physics and read back, the
+  caging outputs, the relay's modes and interlocks refused by the node itself, the table;
+* set-point streams by receive PDO and their read-back.
+
+Their faults are in ``test_faults.py``.
 """
 
 from __future__ import annotations
@@ -17,14 +18,10 @@ import canopen
 import pytest
 from canopen.objectdictionary import ODVariable
 
-from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
+from drivers import rig_nodes as rn
 from drivers.errors import (
-    DeviceLost,
-    DeviceTimeout,
     InterlockError,
-    NodeError,
-    NodeReset,
     ProtocolError,
     SetpointRangeError,
 )
@@ -34,7 +31,7 @@ from drivers.rig import open_rig
 pytestmark = pytest.mark.slow
 
 LSB = 10.0 / 32768
-URL = "sim?warm=1&canopen=all"
+URL = "sim?warm=1"
 
 
 @pytest.fixture
@@ -72,7 +69,7 @@ def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     try:
         sdo = {"torquer": rig.torquers, "command": rig.commands, "caging": rig.caging,
                "relay": rig.relays, "table": rig.table}[name].node.node.sdo
-        od = canopen.import_od(str(cf.eds_path(name)), cp.NODES[name])
+        od = canopen.import_od(str(cf.eds_path(name)), rn.NODES[name])
         configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
         if name == "relay":   # what the node computes: the register, the status word (a warm rig: mode 3)
             configured |= {(0x2000, 0): 3, (0x2002, 0): 3, (0x2004, 0): rig.emulator.nodes.nodes["relay"].status_word()}
@@ -142,7 +139,7 @@ def test_caging_switches_are_digital_outputs(rig):
 
 def test_modes_and_their_interlocks_over_canopen():
     """The relay node's hold/select/release and the interlocks of modes 4 and 5, on a cold rig."""
-    rig = open_rig("sim?canopen=all")
+    rig = open_rig("sim")
     try:
         assert isinstance(rig.relays, CanopenRelayDriver)
         st = rig.relays.status()
@@ -180,124 +177,6 @@ def test_the_motorized_table_over_canopen(rig):
         rig.table.node.write(0x2200, 0, 91_000_000)              # the node's own
     assert rig.table.position().tilt_deg == pytest.approx(12.5)
     assert rig.faults.fault is None
-
-
-FAULTS = {  # node, what the host does next, the error it raises
-    "torquer": lambda rig: rig.set_torquer_bias_V("X", 0.2),
-    "command": lambda rig: rig.set_ac_bias_V("X", 0.1),
-    "caging": lambda rig: rig.set_caging_inhibit("X", True),
-    "relay": lambda rig: rig.set_mode(2),
-}
-
-
-@pytest.mark.parametrize("name", list(FAULTS))
-def test_stalled_node_times_out_and_the_watchdogs_make_the_rig_safe(rig, name):
-    rig.emulator.inject(name, "stall")
-    with pytest.raises(DeviceTimeout, match=rf"CAN node '{name}' \(id {cp.NODES[name]}\) object 0x\w+:\d: no SDO"):
-        FAULTS[name](rig)
-    assert emulated_nodes_safe(rig, timeout_s=5.0)
-    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)   # safe by its own watchdog
-    assert rig.link.heartbeat_suspended
-
-
-@pytest.mark.parametrize("name", list(FAULTS))
-def test_any_node_reset_is_reported_and_the_rig_goes_safe(rig, name):
-    rig.emulator.inject(name, "reset")
-    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
-    assert isinstance(rig.faults.fault, NodeReset) and f"'{name}'" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
-    with pytest.raises(NodeReset):
-        FAULTS[name](rig)
-
-
-@pytest.mark.parametrize("name", ["relay", "caging", "command"])
-def test_any_malformed_answer_is_a_protocol_error(rig, name):
-    rig.emulator.inject(name, "bad_response")
-    with pytest.raises((DeviceTimeout, ProtocolError)):
-        FAULTS[name](rig)
-    assert isinstance(rig.faults.fault, ProtocolError)
-    assert f"of node '{name}': 5 data bytes (expected 8)" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
-
-
-def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
-    rig.emulator.inject("torquer", "stall")
-    with pytest.raises(DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"):
-        rig.set_torquer_bias_V("X", 0.2)
-    assert emulated_nodes_safe(rig, timeout_s=5.0)
-    assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)  # safe by its own watchdog
-    assert rig.link.heartbeat_suspended
-
-
-@pytest.mark.parametrize("name", list(FAULTS))
-def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig, name):
-    rig.emulator.inject(name, "disconnect")
-    assert wait_for(lambda: rig.faults.fault is not None)
-    assert isinstance(rig.faults.fault, DeviceLost)
-    assert f"CAN node '{name}' (id {cp.NODES[name]}) is silent: no heartbeat for" in str(rig.faults.fault)
-    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)   # its own watchdog, silently
-    assert emulated_nodes_safe(rig)
-
-
-def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
-    rig.emulator.inject("torquer", "reset")
-    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
-    assert isinstance(rig.faults.fault, NodeReset)
-    assert "CAN node 'torquer' (id 3) rebooted (CANopen boot-up) and lost its set-points" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
-    with pytest.raises(NodeReset):
-        rig.set_torquer_bias_V("X", 0.1)
-
-
-@pytest.mark.parametrize("name", list(FAULTS))
-def test_node_error_frame_is_reported_with_its_code(rig, name):
-    rig.emulator.inject(name, "error", code=0x4210)
-    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
-    fault = rig.faults.fault
-    assert isinstance(fault, NodeError) and fault.code == 0x4210 and fault.node == name
-    assert "over-temperature (EMCY 0x4210" in str(fault)
-    assert emulated_nodes_safe(rig)
-
-
-def test_malformed_response_is_a_protocol_error(rig):
-    rig.emulator.inject("torquer", "bad_response")
-    with pytest.raises((DeviceTimeout, ProtocolError)):
-        rig.set_torquer_bias_V("X", 0.3)
-    assert isinstance(rig.faults.fault, ProtocolError)
-    assert "SDO answer 0x583 of node 'torquer': 5 data bytes (expected 8)" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
-
-
-def test_host_heartbeat_loss_trips_every_watchdog():
-    rig = open_rig(URL + "&watchdog=1")
-    try:
-        rig.set_torquer_bias_V("Y", -1.0)
-        rig.link.heartbeat_suspended = True
-        assert emulated_nodes_safe(rig, timeout_s=5.0)
-        nodes = rig.emulator.nodes.nodes
-        assert wait_for(lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command")))
-        assert all(type(nodes[n]).__name__.startswith("Canopen") for n in ("relay", "caging", "torquer", "command"))
-        assert wait_for(lambda: rig.faults.fault is not None, 3.0)
-        assert isinstance(rig.faults.fault, (NodeError, DeviceLost))
-    finally:
-        rig.close()
-
-
-def test_a_busy_host_does_not_fail_the_simulated_rig():
-    rig = open_rig(URL)
-    try:
-        rig.emulator.inject("torquer", "busy", delay_s=1.5)
-        assert rig.set_torquer_bias_V("X", 0.2) == pytest.approx(0.2, abs=LSB)
-        assert rig.faults.fault is None
-    finally:
-        rig.close()
-    rig = open_rig(URL + "&watchdog=1")
-    try:
-        rig.emulator.inject("torquer", "busy", delay_s=1.5)
-        with pytest.raises(DeviceTimeout, match="no SDO answer"):
-            rig.set_torquer_bias_V("X", 0.2)
-    finally:
-        rig.close()
 
 
 def test_a_bias_slew_goes_by_receive_pdo_and_is_read_back(rig, caplog):

@@ -114,7 +114,7 @@ def channel():
 def open_with_module(channel: str, extra: str = ""):
     module = Cia401AnalogueOutputs(channel)
     try:
-        rig = open_rig(f"sim?can=virtual:{channel}&external=torquer&canopen=torquer{extra}")
+        rig = open_rig(f"sim?can=virtual:{channel}&external=torquer{extra}")
     except BaseException:
         module.close()
         raise
@@ -234,7 +234,7 @@ def test_a_module_in_another_process_over_udp_multicast():
     try:
         assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
         bus = can.Bus(interface="udp_multicast", channel=group, receive_own_messages=False)
-        link = CanLink(bus, ["torquer"], canopen_nodes=["torquer"], channel=f"udp_multicast:{group}",
+        link = CanLink(bus, ["torquer"], channel=f"udp_multicast:{group}",
                        node_timeout_s=1.0, reply_timeout_s=2.0)
         link.wait_for_nodes(10.0)
         dac = CanopenTorquerDac(link)

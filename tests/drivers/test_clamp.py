@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import pytest
 
-from drivers import can_protocol as cp
+from drivers import rig_nodes as rn
 from drivers.errors import InterlockError
-from drivers.relay import R_CLAMP, CanopenRelayDriver
+from drivers.relay import R_CLAMP
 from drivers.rig import open_rig
 
 
-@pytest.fixture(params=["sim?warm=1", "sim?warm=1&canopen=all"], ids=["own-protocol", "canopen"])
-def rig(request):
-    r = open_rig(request.param)
+@pytest.fixture
+def rig():
+    r = open_rig("sim?warm=1")
     yield r
     r.close()
 
@@ -23,10 +23,7 @@ def test_clamp_and_release_read_back_in_the_status_word(rig):
     assert rig.relays.status().clamped is False
     assert rig.clamp() is True
     assert rig.relays.status().clamped is True
-    if isinstance(rig.relays, CanopenRelayDriver):
-        assert rig.relays.node.read(R_CLAMP) == 1
-    else:
-        assert rig.relays.node.call(cp.OP_GET, 1) == 1
+    assert rig.relays.node.read(R_CLAMP) == 1
     rig.unclamp()
     assert rig.relays.status().clamped is False
 
@@ -41,7 +38,7 @@ def test_gyro_and_external_modes_are_refused_while_clamped(rig, mode):
     rig.relays.select(mode)
     with pytest.raises(InterlockError, match="platform clamped") as exc:
         rig.relays.release()
-    assert exc.value.detail & cp.WHY_CLAMPED
+    assert exc.value.detail & rn.WHY_CLAMPED
     assert rig.relays.status().mode == 3
 
 
@@ -52,7 +49,7 @@ def test_clamp_is_refused_in_the_gyro_modes(rig, mode):
         rig.clamp()
     with pytest.raises(InterlockError, match="mode outside 1-3") as exc:
         rig.relays._set_clamp(True)
-    assert exc.value.detail & cp.WHY_MODE
+    assert exc.value.detail & rn.WHY_MODE
     assert rig.relays.status().clamped is False
 
 
@@ -67,7 +64,7 @@ def test_clamp_and_release_need_the_command_inputs_at_zero(rig):
         rig.unclamp()
     with pytest.raises(InterlockError, match="command input not at zero") as exc:
         rig.relays._set_clamp(False)
-    assert exc.value.detail & cp.WHY_COMMAND
+    assert exc.value.detail & rn.WHY_COMMAND
     assert rig.relays.status().clamped is True
     rig.set_command_torque_V("X", 0.0)
     rig.unclamp()

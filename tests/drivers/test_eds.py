@@ -7,8 +7,8 @@ import canopen
 import pytest
 from canopen.objectdictionary import ODArray, ODRecord, ODVariable
 
-from drivers import can_protocol as cp
 from drivers import canopen_frames as cf
+from drivers import rig_nodes as rn
 
 DEVICE_TYPES = {"relay": 0, "caging": cf.DEVICE_TYPE_401_DO, "torquer": cf.DEVICE_TYPE_401_AO,
                 "command": cf.DEVICE_TYPE_401_AO, "table": 0}
@@ -25,12 +25,12 @@ def variables(od: canopen.ObjectDictionary) -> list[ODVariable]:
     return out
 
 
-@pytest.mark.parametrize("name", list(cp.NODES))
+@pytest.mark.parametrize("name", list(rn.NODES))
 def test_each_eds_loads_and_has_the_cia301_objects(name):
-    node_id = cp.NODES[name]
+    node_id = rn.NODES[name]
     od = canopen.import_od(str(cf.eds_path(name)), node_id)
     assert od[0x1000].default == DEVICE_TYPES[name]
-    assert od[0x1018][2].default == cp.NODE_TYPES[name]          # product code: the old IDENT type
+    assert od[0x1018][2].default == rn.PRODUCT_CODES[name]       # product code
     assert od[0x1016][1].default >> 16 == cf.HOST_NODE_ID         # consumes the host's heartbeat
     assert od[0x1017].default == 100
     assert od[0x1200][1].default == 0x600 + node_id and od[0x1200][2].default == 0x580 + node_id
@@ -40,7 +40,7 @@ def test_each_eds_loads_and_has_the_cia301_objects(name):
 
 @pytest.mark.parametrize("name,outputs", [("torquer", 4), ("command", 6)])
 def test_the_dac_nodes_are_cia401_analogue_outputs(name, outputs):
-    od = canopen.import_od(str(cf.eds_path(name)), cp.NODES[name])
+    od = canopen.import_od(str(cf.eds_path(name)), rn.NODES[name])
     for index in (0x6411, 0x6443, 0x6444, 0x6450, 0x2100):
         assert od[index][0].default == outputs, hex(index)
     assert all(od[0x6411][s].data_type == canopen.objectdictionary.INTEGER16 and od[0x6411][s].pdo_mappable
@@ -53,17 +53,17 @@ def test_the_dac_nodes_are_cia401_analogue_outputs(name, outputs):
 
 
 def test_the_caging_node_is_cia401_digital_outputs():
-    od = canopen.import_od(str(cf.eds_path("caging")), cp.NODES["caging"])
+    od = canopen.import_od(str(cf.eds_path("caging")), rn.NODES["caging"])
     assert od[0x6200][1].data_type == canopen.objectdictionary.UNSIGNED8 and od[0x6200][1].pdo_mappable
     assert od[0x6206][1].default == 0x0F and od[0x6207][1].default == 0
 
 
 def test_the_relay_and_table_objects_are_manufacturer_specific():
-    relay = canopen.import_od(str(cf.eds_path("relay")), cp.NODES["relay"])
+    relay = canopen.import_od(str(cf.eds_path("relay")), rn.NODES["relay"])
     assert [relay[i].name for i in range(0x2000, 0x2007)] == [
         "Mode in force", "Mode switches (1 = hold, 2 = release)", "Selected mode",
         "Interlock reasons of the last refusal", "Status word", "Platform clamp (1 = clamped, motor drive open)",
         "Safe (write 1)"]
     assert relay[0x2002].min == 1 and relay[0x2002].max == 6
-    table = canopen.import_od(str(cf.eds_path("table")), cp.NODES["table"])
+    table = canopen.import_od(str(cf.eds_path("table")), rn.NODES["table"])
     assert table[0x2200].max == 90_000_000

@@ -1,11 +1,11 @@
-"""Rig URL options for the CAN bus (issue 21 item 6): bus options reach python-can, the
-CANopen node list is checked, the sim's own CAN keys are checked; nothing here opens a bus."""
+"""Rig URL options for the CAN bus (issue 21 item 6): bus options reach python-can, the sim's
+own CAN keys are checked; nothing here opens a bus."""
 
 from __future__ import annotations
 
 import pytest
 
-from drivers.rig import bus_options, canopen_nodes, open_rig
+from drivers.rig import bus_options, open_rig
 
 
 def test_bitrate_and_can_options_become_bus_options():
@@ -21,14 +21,6 @@ def test_a_bad_bitrate_is_named(bad):
         bus_options("u", {"bitrate": bad})
 
 
-def test_canopen_lists_only_nodes_that_speak_it():
-    assert canopen_nodes("u", "") == []
-    assert canopen_nodes("u", "torquer") == ["torquer"]
-    assert "torquer" in canopen_nodes("u", "all")
-    with pytest.raises(ValueError, match=r"node\(s\) nope do not speak CANopen yet"):
-        canopen_nodes("u", "torquer,nope")
-
-
 def test_serial_url_refuses_unknown_keys_but_takes_bus_options():
     with pytest.raises(ValueError, match=r"unknown parameter\(s\) bogus"):
         open_rig("serial:///dev/null?can=virtual:x&bogus=1")
@@ -37,8 +29,8 @@ def test_serial_url_refuses_unknown_keys_but_takes_bus_options():
 @pytest.mark.parametrize("url, message", [
     ("sim?can=socketcan:can0", r"the sim's bus is python-can's virtual one"),
     ("sim?external=pump", r"unknown node\(s\) pump"),
-    ("sim?canopen=relay,nope", r"do not speak CANopen yet"),
     ("sim?bitrate=500000", r"unknown parameter\(s\) bitrate"),
+    ("sim?canopen=all", r"unknown parameter\(s\) canopen"),   # every node speaks CANopen: no choice left
 ])
 def test_sim_url_can_keys_are_checked(url, message):
     with pytest.raises(ValueError, match=message):
