@@ -50,7 +50,7 @@ class CanLink:
         self.reply_timeout_s = reply_timeout_s
         #: the clock of every deadline here: the wall's, or one that leaves out the host's pauses
         #: (``drivers.runclock``) for nodes that run in this process
-        self._mono = monotonic
+        self.monotonic = monotonic
         self._send_lock = threading.Lock()
         self._last_hb: dict[int, float] = {}
         self._operational: set[int] = set()
@@ -109,7 +109,7 @@ class CanLink:
 
     def _on_heartbeat(self, m: cf.CoHeartbeat) -> None:
         name = rn.NODE_NAMES[m.node]
-        self._last_hb[m.node] = self._mono()
+        self._last_hb[m.node] = self.monotonic()
         was_up = m.node in self._operational
         if m.state == cf.NMT_OPERATIONAL:
             self._operational.add(m.node)
@@ -133,7 +133,7 @@ class CanLink:
 
     # ------------------------------------------------------------------ heartbeat and watch
     def _heartbeat_loop(self) -> None:
-        t_start = self._mono()
+        t_start = self.monotonic()
         while True:  # the first heartbeat goes out at once: it arms the nodes' watchdogs
             try:
                 if not self.heartbeat_suspended:
@@ -141,7 +141,7 @@ class CanLink:
             except DeviceLost as exc:
                 self.faults.report(exc)
                 return
-            now = self._mono()
+            now = self.monotonic()
             for name in self.nodes:
                 node = rn.NODES[name]
                 last = self._last_hb.get(node, t_start)
@@ -156,12 +156,12 @@ class CanLink:
 
     def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
-        deadline = self._mono() + timeout_s
+        deadline = self.monotonic() + timeout_s
         while True:
             missing = [n for n in self.nodes if rn.NODES[n] not in self._last_hb]
             if not missing:
                 return
-            if self._mono() > deadline:
+            if self.monotonic() > deadline:
                 raise DeviceLost(f"CAN {self.channel}: no heartbeat from node(s) "
                                  f"{', '.join(f'{n} (id {rn.NODES[n]})' for n in missing)} within {timeout_s:g} s; "
                                  f"check the bus wiring, termination and node power")

@@ -9,12 +9,15 @@ transfer at a time per node.
 from __future__ import annotations
 
 import logging
+import queue
 import struct
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import can
 import canopen
+from canopen.sdo import SdoClient
+from canopen.sdo.constants import RESPONSE_ABORTED
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from drivers import canopen_frames as cf
@@ -38,6 +41,45 @@ ABORT_NO_OBJECT = 0x06020000
 Address = tuple[int, int]
 
 
+class DeadlineSdoClient(SdoClient):
+    """The ``canopen`` package's SDO client, waiting for an answer on the link's deadline clock
+    (``CanLink.monotonic``) instead of the wall's: the sim rig's nodes run in this process, so
+    its deadline leaves out the time the host could not run them (``drivers.runclock``)."""
+
+    def __init__(self, rx_cobid: int, tx_cobid: int, od: canopen.ObjectDictionary,
+                 monotonic: Callable[[], float]) -> None:
+        super().__init__(rx_cobid, tx_cobid, od)
+        self.monotonic = monotonic
+
+    def read_response(self) -> bytes:
+        deadline = self.monotonic() + self.RESPONSE_TIMEOUT
+        while True:
+            try:
+                response: bytes = self.responses.get(block=True, timeout=min(0.05, self.RESPONSE_TIMEOUT))
+                break
+            except queue.Empty:
+                if self.monotonic() > deadline:
+                    raise SdoCommunicationError("No SDO response received") from None
+        if response[0] == RESPONSE_ABORTED:
+            raise SdoAbortedError(struct.unpack_from("<L", response, 4)[0])
+        return response
+
+
+class RigRemoteNode(canopen.RemoteNode):
+    """A remote node whose SDO clients are ``DeadlineSdoClient`` on ``monotonic``."""
+
+    def __init__(self, node_id: int, eds: str, monotonic: Callable[[], float]) -> None:
+        self._monotonic = monotonic          # before the base class adds the default SDO channel
+        super().__init__(node_id, eds)
+
+    def add_sdo(self, rx_cobid: int, tx_cobid: int) -> SdoClient:
+        client = DeadlineSdoClient(rx_cobid, tx_cobid, self.object_dictionary, self._monotonic)
+        self.sdo_channels.append(client)
+        if self.has_network():
+            self.network.subscribe(client.tx_cobid, client.on_response)
+        return client
+
+
 class CanopenClient:
     """Node ``name`` (an id of ``rig_nodes.NODES``) on ``link``, described by its EDS file."""
 
@@ -54,7 +96,7 @@ class CanopenClient:
         self.raw_bits = raw_bits
         #: written at connect (after the heartbeat settings): error modes, error values
         self.configuration = list(configure)
-        self.node = canopen.RemoteNode(self.node_id, str(cf.eds_path(name)))
+        self.node = RigRemoteNode(self.node_id, str(cf.eds_path(name)), link.monotonic)
         self.node.sdo.RESPONSE_TIMEOUT = link.reply_timeout_s
         self.node.sdo.MAX_RETRIES = 1
         link.network.add_node(self.node)
