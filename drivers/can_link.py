@@ -16,7 +16,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import can
 import canopen
@@ -25,6 +25,7 @@ from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
 from drivers.errors import (
     DeviceLost,
+    DeviceTimeout,
     NodeError,
     NodeReset,
     ProtocolError,
@@ -156,19 +157,28 @@ class CanLink:
 
     def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
+        missing = self._wait(timeout_s, self.nodes, lambda node: node in self._last_hb)
+        if missing:
+            raise DeviceLost(f"CAN {self.channel}: no heartbeat from node(s) {missing} within {timeout_s:g} s; "
+                             f"check the bus wiring, termination and node power")
+
+    def wait_operational(self, names: Sequence[str], timeout_s: float) -> None:
+        """Block until each node of ``names`` says operational in its heartbeat (after the
+        host's NMT start, which is not answered); DeviceTimeout names the ones that do not.
+        From then on a boot-up or a change of state of theirs is a fault."""
+        missing = self._wait(timeout_s, names, lambda node: node in self._operational)
+        if missing:
+            raise DeviceTimeout(f"CAN {self.channel}: node(s) {missing} did not report the operational state "
+                                f"within {timeout_s:g} s of the NMT start; check their error register (0x1001)")
+
+    def _wait(self, timeout_s: float, names: Sequence[str], ready: Callable[[int], bool]) -> str:
+        """Wait until ``ready`` holds for each node of ``names``; '' or the ones it does not hold for."""
         deadline = self.monotonic() + timeout_s
         while True:
-            missing = [n for n in self.nodes if rn.NODES[n] not in self._last_hb]
-            if not missing:
-                return
-            if self.monotonic() > deadline:
-                raise DeviceLost(f"CAN {self.channel}: no heartbeat from node(s) "
-                                 f"{', '.join(f'{n} (id {rn.NODES[n]})' for n in missing)} within {timeout_s:g} s; "
-                                 f"check the bus wiring, termination and node power")
+            missing = [n for n in names if not ready(rn.NODES[n])]
+            if not missing or self.monotonic() > deadline:
+                return ", ".join(f"{n} (id {rn.NODES[n]})" for n in missing)
             time.sleep(0.01)
-
-    def mark_operational(self, name: str) -> None:
-        self._operational.add(rn.NODES[name])
 
     # ------------------------------------------------------------------ send
     def _send(self, arbitration_id: int, data: bytes) -> None:

@@ -202,9 +202,11 @@ class CanopenClient:
                  product)
         return product
 
-    def clear(self) -> None:
-        """Configure the node's watchdog on the host heartbeat and its error values, then NMT
-        start it: from then on it counts as up, so a reboot is caught."""
+    def clear(self, wait: bool = True) -> None:
+        """Configure the node's watchdog on the host heartbeat and its error values, NMT start
+        it and (``wait``) wait for its heartbeat to say operational: from then on it counts as
+        up, so a reboot is caught. Without ``wait`` the caller waits (``CanLink.wait_operational``),
+        for several nodes at once."""
         ms = max(1, round(self.link.node_timeout_s * 1000))
         self.write(0x1016, 1, (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), what="set host heartbeat consumer",
                    check_faults=False)
@@ -213,7 +215,8 @@ class CanopenClient:
         for (index, sub), value in self.configuration:
             self.write(index, sub, value, check_faults=False)
         self.node.nmt.send_command(cf.NMT_START)
-        self.link.mark_operational(self.name)
+        if wait:
+            self.link.wait_operational([self.name], self.link.reply_timeout_s)
 
     def safe(self) -> None:
         for (index, sub), value in self.safe_values:

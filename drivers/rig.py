@@ -406,7 +406,8 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
             clients.append(tab.node)
         for c in clients:
             c.identify()
-            c.clear()  # a node latched safe by an earlier session's end starts fresh
+            c.clear(wait=False)  # a node latched safe by an earlier session's end starts fresh
+        link.wait_operational([c.name for c in clients], max(2.0, reply_timeout_s))
         # the ADC's own deadlines (2 s for a reply, 3 s of silence while streaming) stretch with a
         # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them
         adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate, monotonic=monotonic,

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
 from drivers.can_link import CanLink
-from drivers.errors import NodeError, NodeReset, ProtocolError
+from drivers.errors import DeviceTimeout, NodeError, NodeReset, ProtocolError
 
 OURS = ("relay", "torquer")                      # the link below uses these two
 OUR_IDS = [rn.NODES[n] for n in OURS]
@@ -105,3 +105,18 @@ def test_an_operational_node_that_boots_or_leaves_operational_latches(link):
                                      is_extended_id=False))
         fault = feed(link, 0x700 + torquer, bytes([state]))
         assert isinstance(fault, kind) and "'torquer' (id 3)" in str(fault)
+
+
+def test_a_node_counts_as_up_only_once_its_heartbeat_says_operational(link):
+    """The NMT start is not answered: a pre-operational heartbeat the node sent before it saw
+    the start may still arrive after it. Until an operational one arrives the node is not up,
+    so that frame latches nothing; a node that never gets there is named."""
+    torquer = rn.NODES["torquer"]
+    link._operational.clear()
+    assert feed(link, 0x700 + torquer, bytes([cf.NMT_PRE_OPERATIONAL])) is None
+    with pytest.raises(DeviceTimeout, match=r"node\(s\) torquer \(id 3\) did not report the operational state"):
+        link.wait_operational(["torquer"], 0.05)
+    link._on_message(can.Message(arbitration_id=0x700 + torquer, data=bytes([cf.NMT_OPERATIONAL]),
+                                 is_extended_id=False))
+    link.wait_operational(["torquer"], 0.05)
+    assert link.faults.fault is None
