@@ -44,23 +44,6 @@ def rig():
     r.close()
 
 
-def wait_for(predicate, timeout_s: float = 5.0) -> bool:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
-
-
-def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
-    """The nodes' own registers (not the host's view): mode 1, outputs zero, caging released."""
-    nodes = rig.emulator.nodes.nodes
-    return wait_for(lambda: nodes["relay"].mode == 1 and not any(nodes["torquer"].values.values())
-                    and not any(nodes["command"].values.values()) and not any(nodes["caging"].inhibit.values()),
-                    timeout_s)
-
-
 @pytest.mark.parametrize("name", ["torquer", "command", "caging", "relay", "table"])
 def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     """Acceptance D: each object read over SDO, decoded by the EDS's type, equals the EDS
