@@ -46,10 +46,16 @@ class CanopenDac:
         self._sent: dict[int, int] = {}
 
     # ------------------------------------------------------------------ scaling
+    def read_scale(self) -> None:
+        """Read every output's unit and full scale from the module (the rig does at connect, so
+        a module not set up per its EDS stops the open: ``ProtocolError``)."""
+        self._lsb_V = [self._read_lsb(s) for s in range(1, self.outputs + 1)]
+
     def lsb_V(self, index: int) -> float:
         """Volts per count of output ``index``, from the module (read once)."""
         if self._lsb_V is None:
-            self._lsb_V = [self._read_lsb(s) for s in range(1, self.outputs + 1)]
+            self.read_scale()
+        assert self._lsb_V is not None
         return self._lsb_V[index]
 
     def _read_lsb(self, sub: int) -> float:

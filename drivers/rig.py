@@ -408,6 +408,8 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
             c.identify()
             c.clear(wait=False)  # a node latched safe by an earlier session's end starts fresh
         link.wait_operational([c.name for c in clients], max(2.0, reply_timeout_s))
+        torquers.read_scale()
+        commands.read_scale()
         # the ADC's own deadlines (2 s for a reply, 3 s of silence while streaming) stretch with a
         # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them
         adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate, monotonic=monotonic,

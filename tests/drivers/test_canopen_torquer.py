@@ -21,7 +21,7 @@ import pytest
 
 from drivers.can_link import CanLink
 from drivers.canopen_frames import eds_path
-from drivers.errors import NodeError, SetpointRangeError
+from drivers.errors import NodeError, ProtocolError, SetpointRangeError
 from drivers.rig import open_rig
 from drivers.torquer import CanopenTorquerDac
 
@@ -139,6 +139,18 @@ def test_a_cia401_module_serves_as_the_torquer_dacs(channel):
         assert rig.faults.fault is None
     finally:
         rig.close()
+        module.close()
+
+
+def test_a_module_not_set_up_in_volts_stops_the_open(channel):
+    """The drivers map volts to counts from the module's own objects, read at connect: an
+    output whose SI unit (0x6450) is not the volt is named, and the rig does not open."""
+    module = Cia401AnalogueOutputs(channel)
+    module.node.set_data(0x6450, 2, (0x00040000).to_bytes(4, "little"))       # CiA 303-2: ampere
+    try:
+        with pytest.raises(ProtocolError, match=r"'torquer' output 2 is in SI unit 0x00040000, not volts"):
+            open_rig(f"sim?can=virtual:{channel}&external=torquer")
+    finally:
         module.close()
 
 
