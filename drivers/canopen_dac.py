@@ -59,7 +59,11 @@ class CanopenDac:
         return self._lsb_V[index]
 
     def _read_lsb(self, sub: int) -> float:
-        unit = self.node.read(AO_SI_UNIT, sub, what=f"read SI unit of output {sub}")
+        unit = self.node.read_if_present(AO_SI_UNIT, sub, what=f"read SI unit of output {sub}")
+        if unit is None:                     # optional in CiA 401: the module is set up per its EDS
+            unit = self.node.eds_default(AO_SI_UNIT, sub)
+            log.info("CAN node '%s' has no SI-unit object for output %d: 0x%08x from its EDS",
+                     self.node.name, sub, unit)
         if unit != cf.SI_VOLT:
             raise ProtocolError(f"CAN node '{self.node.name}' output {sub} is in SI unit 0x{unit:08x}, "
                                 f"not volts (0x{cf.SI_VOLT:08x}); set the module up per its EDS")

@@ -30,6 +30,7 @@ pytestmark = pytest.mark.slow
 log = logging.getLogger(__name__)
 
 TORQUER = 3
+TORQUER_EDS = str(eds_path("torquer"))
 LSB = 10.0 / 32768
 
 
@@ -43,7 +44,7 @@ class Cia401AnalogueOutputs:
     and the node goes pre-operational (0x1029 sub 1 = 0).
     """
 
-    def __init__(self, channel: str, node_id: int = TORQUER, eds: str = str(eds_path("torquer")),
+    def __init__(self, channel: str, node_id: int = TORQUER, eds: str | canopen.ObjectDictionary = TORQUER_EDS,
                  interface: str = "virtual") -> None:
         self.network = canopen.Network()
         self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
@@ -139,6 +140,24 @@ def test_a_cia401_module_serves_as_the_torquer_dacs(channel):
         assert rig.faults.fault is None
     finally:
         rig.close()
+        module.close()
+
+
+def test_a_module_without_the_optional_unit_and_scale_objects_serves(channel):
+    """0x6450 (SI unit) is optional in CiA 401 and 0x2100 (full scale) is the EDS's own: a
+    module that has neither is taken as set up per the EDS, +-10 V over 16 bits."""
+    od = canopen.import_od(TORQUER_EDS, TORQUER)
+    del od[0x6450], od[0x2100]
+    module = Cia401AnalogueOutputs(channel, eds=od)
+    try:
+        rig = open_rig(f"sim?can=virtual:{channel}&external=torquer")
+        try:
+            assert rig.set_torquer_bias_V("Y", 1.0) == pytest.approx(3277 * LSB)
+            assert module.output(2) == 3277
+            assert rig.faults.fault is None
+        finally:
+            rig.close()
+    finally:
         module.close()
 
 
