@@ -41,6 +41,15 @@ ABORT_NO_OBJECT = 0x06020000
 Address = tuple[int, int]
 
 
+def device_type_serves(found: int, expected: int) -> bool:
+    """Whether a node of device type ``found`` (0x1000) serves where ``expected`` is asked for.
+    CiA 301: the low 16 bits are the device profile (401 = 0x0191), the high 16 bits additional
+    information; in CiA 401 one bit per kind of I/O (16 digital inputs, 17 digital outputs,
+    18 analogue inputs, 19 analogue outputs). The profile must match and every expected bit be
+    set: a module with more kinds of I/O than the rig uses serves too."""
+    return (found & 0xFFFF) == (expected & 0xFFFF) and found & expected == expected
+
+
 class DeadlineSdoClient(SdoClient):
     """The ``canopen`` package's SDO client, waiting for an answer on the link's deadline clock
     (``CanLink.monotonic``) instead of the wall's: the sim rig's nodes run in this process, so
@@ -194,7 +203,7 @@ class CanopenClient:
     def identify(self) -> int:
         """Check the node's device type (0x1000); returns its product code (0x1018:2)."""
         kind = self.read(0x1000, 0, what="read device type", check_faults=False)
-        if kind != self.device_type:
+        if not device_type_serves(kind, self.device_type):
             raise ProtocolError(f"CAN node id {self.node_id} has device type 0x{kind:08x}, expected "
                                 f"0x{self.device_type:08x} for '{self.name}'; check the node ids and its EDS")
         product = self.read(0x1018, 2, what="read product code", check_faults=False)

@@ -161,6 +161,28 @@ def test_a_module_without_the_optional_unit_and_scale_objects_serves(channel):
         module.close()
 
 
+@pytest.mark.parametrize("device_type, serves", [(0x000F0191, True),     # DI, DO, AI and AO
+                                                  (0x00080191, True),     # AO only, as the EDS
+                                                  (0x00020191, False),    # DO only
+                                                  (0x00080192, False)])   # another profile
+def test_a_module_with_more_kinds_of_io_serves_one_without_analogue_outputs_does_not(channel, device_type, serves):
+    od = canopen.import_od(TORQUER_EDS, TORQUER)
+    od[0x1000].default = device_type
+    module = Cia401AnalogueOutputs(channel, eds=od)
+    try:
+        if serves:
+            rig = open_rig(f"sim?can=virtual:{channel}&external=torquer")
+            try:
+                assert rig.set_torquer_bias_V("X", -0.5) == pytest.approx(-1638 * LSB)
+            finally:
+                rig.close()
+        else:
+            with pytest.raises(ProtocolError, match=rf"device type 0x{device_type:08x}, expected 0x00080191"):
+                open_rig(f"sim?can=virtual:{channel}&external=torquer")
+    finally:
+        module.close()
+
+
 def test_a_module_not_set_up_in_volts_stops_the_open(channel):
     """The drivers map volts to counts from the module's own objects, read at connect: an
     output whose SI unit (0x6450) is not the volt is named, and the rig does not open."""
