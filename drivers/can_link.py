@@ -7,8 +7,9 @@ host heartbeat as node 0x7F, which arms each node's heartbeat consumer (its watc
 the nodes' heartbeat and EMCY itself, and turns what the nodes say on their own (an EMCY, a
 reboot, leaving the operational state, falling silent) into latched faults, so the rig goes
 safe. Frames of node ids the rig does not use (their boot-up and heartbeat too) are ignored.
-Heartbeats run on the link's deadline clock: they are about the wire and the host being
-alive, not about rig time.
+The host heartbeat goes out every ``heartbeat_period_s`` of wall time; a node's silence is
+measured on the link's deadline clock (``monotonic``): both are about the wire and the host
+being alive, not about rig time.
 """
 
 from __future__ import annotations
