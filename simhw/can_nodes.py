@@ -14,6 +14,7 @@ too loaded to schedule the node's thread).
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING
@@ -53,5 +54,9 @@ class CanNodeHost:
         self.nodes[node].inject(fault, code, delay_s)
 
     def close(self) -> None:
-        for node in self.nodes.values():
-            node.close()
+        # side by side: each node's close waits for its own network's notifier to stop
+        closers = [threading.Thread(target=node.close, name=f"close-{name}") for name, node in self.nodes.items()]
+        for t in closers:
+            t.start()
+        for t in closers:
+            t.join()

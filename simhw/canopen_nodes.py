@@ -42,6 +42,9 @@ R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2
 T_TILT, T_SPINDLE, T_ACTUAL_TILT, T_ACTUAL_SPINDLE, T_MOVING = range(0x2200, 0x2205)
 ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL = 0x08000020, 0x08000021, 0x08000022
 FULL_SCALE_V = 10.0
+NOTIFIER_CYCLE_S = 0.05
+#: the heartbeat byte of each of the package's NMT state names
+NMT_CODES = {name: code for code, name in canopen.nmt.NMT_STATES.items()}
 LSB_V = FULL_SCALE_V / 32768
 
 
@@ -59,6 +62,8 @@ class CanopenSimNode:
         self._mono = monotonic
         self.watchdog_s = watchdog_s
         self.network = canopen.Network()
+        # its notifier's receive wait: the package's 1 s would hold up every close by up to that
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
         self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
         self.node = canopen.LocalNode(self.node_id, str(cf.eds_path(self.name)))
         self.network.add_node(self.node)
@@ -162,6 +167,10 @@ class CanopenSimNode:
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) == 2 and data[0] == cf.NMT_START and data[1] in (0, self.node_id):
             self.latched = False                     # back to work: outputs stay as they are
+            if self._connected and not self.stalled:
+                # the new state at once, besides the periodic heartbeat (LocalNode's NMT slave has
+                # already switched: it subscribed first), so the host's wait for it is short
+                self.network.send_message(0x700 + self.node_id, bytes([NMT_CODES[self.node.nmt.state]]))
 
     def _on_host_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self._connected and len(data) == 1:
