@@ -28,6 +28,11 @@ from canopen.sdo.exceptions import SdoAbortedError
 
 from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
+from drivers.caging import DO_8, DO_ERROR_MODE, DO_ERROR_VALUE
+from drivers.canopen_client import ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL, ABORT_RANGE
+from drivers.canopen_dac import AO_16, AO_ERROR_MODE, AO_ERROR_VALUE
+from drivers.relay import R_CLAMP, R_MODE, R_REASONS, R_SAFE, R_SELECTED, R_STATUS, R_SWITCHES
+from drivers.table import T_ACTUAL_SPINDLE, T_ACTUAL_TILT, T_MOVING, T_SPINDLE, T_TILT
 from simhw.params import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
@@ -35,12 +40,7 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-ABORT_VALUE_RANGE = 0x06090030
-AO_16, AO_ERROR_MODE, AO_ERROR_VALUE = 0x6411, 0x6443, 0x6444
-DO_8, DO_ERROR_MODE, DO_ERROR_VALUE = 0x6200, 0x6206, 0x6207
-R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2000, 0x2007)
-T_TILT, T_SPINDLE, T_ACTUAL_TILT, T_ACTUAL_SPINDLE, T_MOVING = range(0x2200, 0x2205)
-ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL = 0x08000020, 0x08000021, 0x08000022
+ABORT_VALUE_RANGE = ABORT_RANGE[0]
 FULL_SCALE_V = 10.0
 NOTIFIER_CYCLE_S = 0.05
 #: the heartbeat byte of each of the package's NMT state names
