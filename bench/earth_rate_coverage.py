@@ -38,6 +38,8 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 from coverage_pool import run_cases, toml_of  # noqa: E402
 
+from simhw.params import nominal_pickoff_lines  # noqa: E402
+
 ROOT = Path(__file__).resolve().parent.parent
 CHANNELS = ("X", "Y", "Z", "XRD")
 NOMINAL = {"X": (31.6, 6.03), "Y": (33.4, 6.70), "Z": (34.1, 7.51), "XRD": (32.0, 5.74)}
@@ -77,7 +79,10 @@ def draw(seed: int, random_drift: bool = True, vary_noise: bool = False) -> dict
             if random_drift:
                 g.update({k: float(v) for k, v in levels.items()})
             g["restraint_time_s"] = float(RESTRAINT_S[ch] * rng2.uniform(0.85, 1.15))
-            g["pickoff_noise_rms_urad"] = float(PICKOFF_NOISE_URAD[ch] * rng2.uniform(0.8, 2))
+            rms = float(PICKOFF_NOISE_URAD[ch] * rng2.uniform(0.8, 2))
+            g["pickoff_noise_rms_urad"] = rms
+            # the lines carry 85 % of the pickoff's variance (Ch. VI A): they scale with it
+            g["pickoff_lines"] = nominal_pickoff_lines(rms)
     return cfg
 
 

@@ -8,15 +8,19 @@ lags driven by independent white noises, with time constants spread evenly in lo
 With lags at corner frequencies f_i spaced by d = ln(f_{i+1}/f_i) and white intensities
 q_i = 4 pi d A f_i (two-sided), the sum has one-sided PSD A/f between the extreme corners
 (integrate q(fc)/(4 pi^2 (fc^2 + f^2)) over ln fc). Slow lags run at a decimated rate and are
-held, so a bank spanning 1e-5..50 Hz costs little per sample.
+held, so a bank spanning 1e-5..50 Hz costs little per sample. Any other spectrum (the
+autocollimator's knee of any form and slope, docs/simhw.md section 4) takes non-negative lag
+weights fitted to it, and its sharp corner a low-pass on some of the lags (``_fitted_bank``).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numba
 import numpy as np
+import scipy.optimize
 import scipy.signal
 
 
@@ -65,36 +69,183 @@ def _gm_bank(state, a, b, xi, out_sum):
         out_sum[k] = acc
 
 
+def knee_excess(f: np.ndarray | float, corner_hz: float, knee: float, slope: float) -> np.ndarray:
+    """K(f) - 1 of the autocollimator's 1/f knee (``simhw.simulator.ac_knee``): with
+    r = (fc/f)^slope, K = knee (1 + r) + (1 - knee) max(1, r), so K - 1 = knee r + (1 - knee)
+    max(0, r - 1); zero for a corner of 0."""
+    f = np.asarray(f, float)
+    if corner_hz <= 0:
+        return np.zeros_like(f)
+    r = (corner_hz / f) ** slope
+    return knee * r + (1.0 - knee) * np.maximum(0.0, r - 1.0)
+
+
+def _box2(dec: int, w: np.ndarray) -> np.ndarray:
+    """|P(w)|^2 of the ``dec``-step box (zero-order-hold upsampling by ``dec``)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(np.abs(np.sin(w / 2)) < 1e-300, float(dec * dec), (np.sin(dec * w / 2) / np.sin(w / 2)) ** 2)
+
+
+def _decimation(fc: np.ndarray, dt: float, margin: float | None = 40.0) -> np.ndarray:
+    """Each lag's decimation (a power of two): it runs at >= ``margin`` x its corner (None:
+    every lag at every step)."""
+    if margin is None:
+        return np.ones(len(fc), np.int64)
+    return np.maximum(1, 2 ** np.floor(np.log2(1.0 / (margin * fc * dt)))).astype(np.int64)
+
+
+def _fit_margin(slope: float) -> float | None:
+    """How many times its corner each lag of a fitted bank runs at (None: every step). A lag
+    held over ``dec`` steps has nulls in its spectrum from 1/(dec dt) = margin x its corner on.
+    At a frequency f the lags near f carry a PSD ~ f^-slope and a lag of corner c far below
+    carries (c/f)^(2 - slope) of that; the nulls cost under 0.1 % where (1/margin)^(2 - slope)
+    < 1e-3. A 1/f bank needs 1000 (its 40 loses 2.5 %, in its own ripple below a per cent); a
+    steep one leans on its slow lags' tails, and from slope 1.75 on runs every lag every step."""
+    return 1000.0 ** (1.0 / (2.0 - slope)) if slope < 1.75 else None
+
+
+def _lag_psd(fc: np.ndarray, q: np.ndarray, dt: float, f: np.ndarray, margin: float | None) -> np.ndarray:
+    """One-sided PSD (len(f), len(fc)) of each lag of corner ``fc`` and white intensity ``q`` as
+    the bank makes it (an AR(1) at its decimated step, held): as :meth:`FlickerNoise.spectrum`."""
+    w = 2 * np.pi * np.asarray(f, float) * dt
+    dec = _decimation(fc, dt, margin)
+    wc = 2 * np.pi * fc
+    a = np.exp(-wc * dt * dec)
+    b2 = q / (2 * wc) * (1 - a * a)
+    out = np.empty((len(w), len(fc)))
+    for d in sorted(set(dec.tolist())):
+        sel = dec == d
+        sx = _ar1_norm(a[sel][None, :], b2[sel][None, :], d * w[:, None])
+        if d > 1:
+            sx = sx * (_box2(d, w) / d)[:, None]
+        out[:, sel] = held_psd(sx, dt)
+    return out
+
+
+def _minimax_nonneg(M: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Non-negative x minimizing max |M x - t| (a linear program: minimize e subject to
+    -e <= M x - t <= e, x >= 0; HiGHS). Falls back to the least-squares ``scipy.optimize.nnls``
+    should the solver fail."""
+    m, n = M.shape
+    c = np.zeros(n + 1)
+    c[-1] = 1.0
+    ones = np.ones((m, 1))
+    A = np.vstack([np.hstack([M, -ones]), np.hstack([-M, -ones])])
+    res = scipy.optimize.linprog(c, A_ub=A, b_ub=np.concatenate([t, -t]), bounds=[(0, None)] * (n + 1),
+                                 method="highs")
+    if res.status == 0:
+        return np.maximum(res.x[:n], 0.0)
+    return scipy.optimize.nnls(M, t, maxiter=50 * n)[0]
+
+
+@functools.lru_cache(maxsize=64)
+def _fitted_bank(f_lo: float, f_top: float, dt: float, corner_hz: float, knee: float,
+                 slope: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """Lags for the one-sided PSD K(f) - 1 (white level 1, ``knee_excess``) from 10 f_lo to
+    f_top: corners, intensities, whether each passes the knee's low-pass, and that low-pass (SOS).
+
+    First-order lags have f^2 S(f) non-decreasing in f, so a sum of them cannot follow the sharp
+    corner of max(1, r): the part max(0, r - 1) falls to zero at fc, and the best the lags alone
+    do is 17 % of K (slope 1, knee 0). That part therefore also has lags that pass a 6th-order
+    Butterworth low-pass at 0.8 fc (``FlickerNoise.KNEE_LOWPASS``), which bends them down at the
+    corner. The non-negative weights minimize the largest error relative to K (the whole
+    spectrum, white included) on a log-frequency grid (``_minimax_nonneg``), with each lag's
+    spectrum as the bank makes it (``_lag_psd``). At the nominal unit's slopes (0.8-1.2) the
+    bank is within 1 % of K - 1 for knee 1, 1.5 % for knee 0.5 and 4.5 % for knee 0 (relative to K,
+    from 10 f_lo to f_top; ``tests/simhw/test_noise.py``)."""
+    per_decade = FlickerNoise.FIT_PER_DECADE
+    decades = math.log10(f_top / f_lo)
+    n = max(2, int(math.ceil(decades * per_decade)) + 1)
+    fc = np.geomspace(f_lo, f_top, n)
+    d = math.log(fc[1] / fc[0])
+    q1 = 4 * math.pi * d * fc            # 1/f at unit level (the closed form): weights near 1
+    f = np.geomspace(min(10.0 * f_lo, math.sqrt(f_lo * f_top)), f_top, max(50, int(40 * (decades - 1))))
+    k = 1.0 + knee_excess(f, corner_hz, knee, slope)
+    cols = [_lag_psd(fc, q1, dt, f, _fit_margin(slope))]
+    filtered = [np.zeros(n, bool)]
+    order, frac = FlickerNoise.KNEE_LOWPASS
+    sos = None
+    if knee < 1.0 and frac * corner_hz < 0.4 / dt and frac * corner_hz > 10.0 * f_lo:
+        sos = scipy.signal.butter(order, frac * corner_hz, fs=1.0 / dt, output="sos")
+        lp2 = np.abs(scipy.signal.sosfreqz(sos, worN=f, fs=1.0 / dt)[1]) ** 2
+        cols.append(cols[0] * lp2[:, None])
+        filtered.append(np.ones(n, bool))
+    M = np.hstack(cols) / k[:, None]
+    scale = np.max(M, axis=0)  # columns of unit peak: the fit is as well conditioned for any slope
+    g = _minimax_nonneg(M / scale, (k - 1.0) / k)
+    keep = g > 1e-9  # a lag below a billionth of the largest error is no lag
+    g = g / scale
+    return (np.concatenate([fc] * len(cols))[keep], (np.concatenate([q1] * len(cols)) * g)[keep],
+            np.concatenate(filtered)[keep], sos)
+
+
 class FlickerNoise:
-    """One-sided PSD ``level / f`` between ``f_lo`` and ``f_hi`` (units^2/Hz at 1 Hz = level)."""
+    """One-sided PSD ``level / f`` between ``f_lo`` and ``f_hi`` (units^2/Hz at 1 Hz = level).
+
+    With a knee (``corner_hz``, ``knee``, ``slope``; docs/simhw.md section 4) the PSD is
+    ``level / corner_hz * (K(f) - 1)``, K the autocollimator's knee (``knee_excess``): at
+    knee = slope = 1 that is ``level / f`` again, made exactly as before (the closed form of
+    the module docstring); any other knee or slope is fitted (``_fitted_bank``).
+    """
 
     PER_DECADE = 2.5
+    #: a fitted bank's candidate lags per decade
+    FIT_PER_DECADE = 5.0
+    #: (order, corner / fc) of the Butterworth low-pass that bends the sharp knee's lags
+    KNEE_LOWPASS = (6, 0.8)
+    #: the knee's low-pass starts this many of its time constants 1 / (2 pi f) before t = 0
+    PREROLL = 60.0
 
-    def __init__(self, rng: np.random.Generator, level: float, f_lo: float, f_hi: float, dt: float) -> None:
+    def __init__(self, rng: np.random.Generator, level: float, f_lo: float, f_hi: float, dt: float, *,
+                 corner_hz: float = 1.0, knee: float = 1.0, slope: float = 1.0) -> None:
         self.level, self.f_lo, self.f_hi, self.dt = level, f_lo, f_hi, dt
+        self.corner_hz, self.knee, self.slope = float(corner_hz), float(knee), float(slope)
         self.rng = rng
         self._groups: list[dict] | None = None
+        self._zi: np.ndarray | None = None
+        self._y0 = 0.0
         self.ahead = np.zeros(0)
 
-    def _bank(self) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
-        """The lags, deterministic: (decimation, a, b, stationary variance) per group."""
+    @property
+    def fitted(self) -> bool:
+        """The bank is fitted to a knee (not the closed form of ``level / f``)."""
+        return not (self.knee == 1.0 and self.slope == 1.0)
+
+    def _sos(self) -> np.ndarray | None:
+        """The knee's low-pass (second-order sections), or None."""
+        if self.level <= 0 or self.corner_hz <= 0 or not self.fitted:
+            return None
+        return _fitted_bank(self.f_lo, min(self.f_hi, 0.2 / self.dt), self.dt, self.corner_hz, self.knee,
+                            self.slope)[3]
+
+    def _bank(self) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray, bool]]:
+        """The lags, deterministic: (decimation, a, b, stationary variance, through the knee's
+        low-pass) per group."""
         if self.level <= 0:
             return []
         dt = self.dt
         f_hi = min(self.f_hi, 0.2 / dt)
-        n = max(2, int(math.ceil(math.log10(f_hi / self.f_lo) * self.PER_DECADE)) + 1)
-        fc = np.geomspace(self.f_lo, f_hi, n)
-        d = math.log(fc[1] / fc[0])
-        q = 4 * math.pi * d * self.level * fc
+        if self.fitted:
+            if self.corner_hz <= 0:
+                return []
+            fc, q, through, _ = _fitted_bank(self.f_lo, f_hi, dt, self.corner_hz, self.knee, self.slope)
+            q = q * (self.level / self.corner_hz)
+        else:
+            n = max(2, int(math.ceil(math.log10(f_hi / self.f_lo) * self.PER_DECADE)) + 1)
+            fc = np.geomspace(self.f_lo, f_hi, n)
+            d = math.log(fc[1] / fc[0])
+            q = 4 * math.pi * d * self.level * fc
+            through = np.zeros(n, bool)
         # Group lags by decimation (power of two) so each runs at >= 40 x its corner.
-        decim = np.maximum(1, 2 ** np.floor(np.log2(1.0 / (40.0 * fc * dt)))).astype(np.int64)
+        decim = _decimation(fc, dt, _fit_margin(self.slope) if self.fitted else 40.0)
         out = []
-        for dec in sorted(set(decim.tolist())):
-            sel = decim == dec
-            w = 2 * math.pi * fc[sel]
-            a = np.exp(-w * dt * dec)
-            var = q[sel] / (2 * w)  # stationary variance of each lag
-            out.append((int(dec), a, np.sqrt(var * (1 - a * a)), var))
+        for lp in (False, True):
+            for dec in sorted(set(decim[through == lp].tolist())):
+                sel = (decim == dec) & (through == lp)
+                w = 2 * math.pi * fc[sel]
+                a = np.exp(-w * dt * dec)
+                var = q[sel] / (2 * w)  # stationary variance of each lag
+                out.append((int(dec), a, np.sqrt(var * (1 - a * a)), var, lp))
         return out
 
     @property
@@ -102,35 +253,53 @@ class FlickerNoise:
         """The running lags, made on first use (the random draws happen then, in a fixed order)."""
         if self._groups is None:
             self._groups = []
-            for dec, a, b, var in self._bank():
+            for dec, a, b, var, lp in self._bank():
                 x0 = np.sqrt(var) * self.rng.standard_normal(len(a))  # start in steady state
-                self._groups.append({"dec": dec, "a": a, "b": b, "state": x0,
+                self._groups.append({"dec": dec, "a": a, "b": b, "state": x0, "lowpass": lp,
                                      "rng": np.random.Generator(np.random.PCG64(self.rng.integers(2**63))),
                                      "held": np.zeros(0), "pos": 0})
+            sos = self._sos()
+            through = [g for g in self._groups if g["lowpass"]]
+            if sos is not None and through:
+                # The low-pass starts settled on the lags' value and runs ahead of t = 0 until
+                # its start has died away: the sum is stationary from the first sample.
+                x0 = float(sum(g["state"].sum() for g in through))
+                zi = scipy.signal.sosfilt_zi(sos) * x0
+                f_lp = self.KNEE_LOWPASS[1] * self.corner_hz
+                n_pre = int(math.ceil(self.PREROLL / (2 * math.pi * f_lp * self.dt)))
+                y, self._zi = scipy.signal.sosfilt(sos, self._sum(through, n_pre), zi=zi)
+                self._y0 = float(y[-1])
         return self._groups
 
     def spectrum_key(self) -> tuple:
-        return ("FlickerNoise", self.level, self.f_lo, self.f_hi, self.dt)
+        key = ("FlickerNoise", self.level, self.f_lo, self.f_hi, self.dt)
+        return key + ((self.corner_hz, self.knee, self.slope) if self.fitted else ())
 
     def initial(self) -> float:
         """The bank's value at the start (its lags' steady-state draws)."""
-        return float(sum(g["state"].sum() for g in self.groups))
+        groups = self.groups
+        return float(sum(g["state"].sum() for g in groups if not g["lowpass"])) + self._y0
 
     def spectrum(self, f: np.ndarray, dt: float) -> np.ndarray:
         """One-sided PSD of the bank as the plant sees it: each group is a set of AR(1) lags at
         step ``dec dt``, held for ``dec`` steps; a held sequence has per-sample spectrum
-        |P(w)|^2 S_x(dec w) / dec with P the ``dec``-step box (zero-order-hold upsampling)."""
+        |P(w)|^2 S_x(dec w) / dec with P the ``dec``-step box (zero-order-hold upsampling). The
+        knee's lags then pass its low-pass, |L(e^(jw))|^2."""
         f = np.asarray(f, float)
         w = 2 * np.pi * f * dt
         total = np.zeros_like(f)
-        for dec, a_all, b_all, _ in self._bank():
+        bent = np.zeros_like(f)
+        for dec, a_all, b_all, _, lp in self._bank():
             sx = sum(_ar1_norm(a, b * b, dec * w) for a, b in zip(a_all, b_all))
             if dec > 1:
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    box = np.where(np.abs(np.sin(w / 2)) < 1e-300, float(dec * dec),
-                                   (np.sin(dec * w / 2) / np.sin(w / 2)) ** 2)
-                sx = sx * box / dec
-            total += sx
+                sx = sx * _box2(dec, w) / dec
+            if lp:
+                bent += sx
+            else:
+                total += sx
+        sos = self._sos()
+        if sos is not None and np.any(bent):
+            total += bent * np.abs(scipy.signal.sosfreqz(sos, worN=f, fs=1.0 / dt)[1]) ** 2
         return held_psd(total, dt)
 
     #: Samples are made ahead in chunks of this many steps, always on the same grid from the
@@ -140,14 +309,27 @@ class FlickerNoise:
     def take(self, n: int) -> np.ndarray:
         if not self.groups:
             return np.zeros(n)
-        while len(self.ahead) < n:
-            self.ahead = np.concatenate([self.ahead, self._generate(self.CHUNK)])
-        out, self.ahead = self.ahead[:n], self.ahead[n:]
+        chunks, have = [self.ahead], len(self.ahead)
+        while have < n:
+            chunks.append(self._generate(self.CHUNK))
+            have += self.CHUNK
+        made = np.concatenate(chunks) if len(chunks) > 1 else self.ahead
+        out, self.ahead = made[:n], made[n:]
         return out
 
     def _generate(self, n: int) -> np.ndarray:
+        out = self._sum([g for g in self.groups if not g["lowpass"]], n)
+        through = [g for g in self.groups if g["lowpass"]]
+        if through:
+            y, self._zi = scipy.signal.sosfilt(self._sos(), self._sum(through, n), zi=self._zi)
+            out += y
+        return out
+
+    @staticmethod
+    def _sum(groups: list[dict], n: int) -> np.ndarray:
+        """The next ``n`` fine steps of the sum of ``groups``."""
         out = np.zeros(n)
-        for g in self.groups:
+        for g in groups:
             # ``held`` are slow samples not yet fully used; ``pos`` fine steps of held[0] used.
             dec, pos = g["dec"], g["pos"]
             need = -(-(pos + n) // dec) - len(g["held"])

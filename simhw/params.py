@@ -116,14 +116,26 @@ class Autocollimator:
     #: std of the control channel's noise-equivalent angle in 0.1-100 Hz (Table 1); the white
     #: level is derived from it together with the 1/f corner (docs/simhw.md).
     nea_urad: float = _f(0.451, lo=0.0)
+    #: the 1/f noise: one-sided angle PSD W K(f), r = (fc/f)^slope, fc = ``flicker_corner_hz``,
+    #: K = knee (1 + r) + (1 - knee) max(1, r) (``simhw.simulator.ac_knee``). Fig. 32 shows a
+    #: white floor with 1/f below about 3 Hz; how the two meet (``flicker_knee``: 1 adds them,
+    #: 0 is the sharp corner max(1, fc/f)) and the slope are unit-to-unit variation (DESIGN.md
+    #: section 8: any knee between the two, slope -0.8 .. -1.2 in a nominal unit)
     flicker_corner_hz: float = _f(3.0, lo=0.0)
+    flicker_knee: float = _f(1.0, lo=0.0, hi=1.0)
+    flicker_slope: float = _f(1.0, lo=0.5, hi=2.0)
     #: the fraction of the white noise's PSD common to the X and Y channels (one source seen by
     #: both, Fig. 48: their coherence in the white band is the product of the two fractions)
     common_noise_fraction: float = _f(0.0, lo=0.0, hi=1.0)
     # Effects (DESIGN.md section 8); zero means absent.
     mount_freq_hz: float = _f(0.0, lo=0.0)
     mount_damping: float = _f(0.02, lo=0.0, lo_open=True)
+    #: floor motion exciting the mount (angular acceleration, white): the undisturbed mount's
+    #: peak PSD in the sensed angle, as a multiple of the autocollimator's white angle PSD W
+    mount_excitation: float = _f(0.0, lo=0.0)
     delay_s: float = _f(0.0, lo=0.0, hi=0.05)
+    #: an excess 1/f added to the unit's own, meeting the white level here (configs from before
+    #: the ``flicker_noise`` effect set ``flicker_corner_hz`` instead; still honoured)
     extra_flicker_corner_hz: float = _f(0.0, lo=0.0)
     offset_jump_urad: float = _f(0.0, lo=0.0)
     offset_jump_interval_s: float = _f(100.0, lo=0.0, lo_open=True)
@@ -136,6 +148,21 @@ class Azimuth:
     scale_mV_per_urad: float = _f(7.36, lo=0.0, lo_open=True)
     linear_range_urad: float = _f(5000.0, lo=0.0, lo_open=True)
     nea_urad: float = _f(2.78, lo=0.0)
+
+
+#: The pickoff's discrete lines (Ch. V B.4: a 71 Hz pair 0.8 Hz apart, 102 Hz, 187 Hz) and the
+#: share of the lines' variance each carries (sim parameters: the thesis gives no split).
+PICKOFF_LINE_SHARES = ((70.6, 0.30), (71.4, 0.30), (102.0, 0.25), (187.0, 0.15))
+#: "The discrete components contribute over 85 percent" of the pickoff noise (Ch. VI A).
+PICKOFF_LINES_FRACTION = 0.85
+
+
+def nominal_pickoff_lines(rms_urad: float) -> list[list[float]]:
+    """The data sheet's pickoff lines for a channel of ``rms_urad`` rms noise in 0.1-200 Hz:
+    together 85 % of its variance (Ch. VI A), split as ``PICKOFF_LINE_SHARES``. A sinusoid of
+    amplitude a has variance a^2/2, so a line's amplitude is sqrt(2 share 0.85 rms^2); the
+    white part is the rest (``simhw.simulator.pickoff_white_psd``)."""
+    return [[f, math.sqrt(2.0 * share * PICKOFF_LINES_FRACTION * rms_urad**2)] for f, share in PICKOFF_LINE_SHARES]
 
 
 @dataclass
@@ -157,8 +184,10 @@ class GyroChannel:
     rrw_urad_per_s_per_sqrt_s: float = _f(2e-5, lo=0.0)
     #: pickoff noise rms in 0.1-200 Hz, lines included (Fig. 33: 6.2 X / 12.4 Y urad)
     pickoff_noise_rms_urad: float = _f(6.2, lo=0.0)
-    #: discrete lines as (freq_hz, amplitude_urad) pairs (Ch. V B.4)
-    pickoff_lines: list = field(default_factory=lambda: [[70.6, 3.0], [71.4, 3.0], [102.0, 4.0], [187.0, 2.0]])
+    #: discrete lines as (freq_hz, amplitude_urad) pairs (Ch. V B.4); by default they carry
+    #: 85 % of the variance of the default ``pickoff_noise_rms_urad`` (:func:`nominal_pickoff_lines`);
+    #: a config that lowers the rms below them must give its lines too
+    pickoff_lines: list = field(default_factory=lambda: nominal_pickoff_lines(6.2))
     caging_natural_freq_rad_per_s: float = _f(0.1, lo=0.0, lo_open=True)
     caging_zeta: float = _f(0.7, lo=0.0, lo_open=True)
     #: the redundant channel keeps the Minuteman proportional-only caging amplifier (II C.1.a(7))
@@ -218,19 +247,22 @@ def _ac_defaults() -> dict[str, Autocollimator]:
 
 def _gyro_defaults() -> dict[str, GyroChannel]:
     # KTO, Kg, h/k, h/c per channel (II C.1.a); drift values are sim parameters of our choosing.
+    # Pickoff noise 6.2 (X) / 12.4 (Y) urad rms, Z and XRD as X (Fig. 33), 85 % of its variance
+    # in the lines (Ch. VI A), so Y's lines are twice X's.
     return {
         "X": GyroChannel(31.6, 6.03, restraint_time_s=424.0, viscous_coupling_h_over_c=1.96,
                          fixed_drift_urad_per_s=0.35, g_drift_y_urad_per_s_per_g=0.08,
-                         pickoff_noise_rms_urad=6.2),
+                         pickoff_noise_rms_urad=6.2, pickoff_lines=nominal_pickoff_lines(6.2)),
         "Y": GyroChannel(33.4, 6.70, restraint_time_s=708.0, viscous_coupling_h_over_c=21.0,
                          fixed_drift_urad_per_s=-0.22, g_drift_x_urad_per_s_per_g=-0.05,
-                         pickoff_noise_rms_urad=12.4),
+                         pickoff_noise_rms_urad=12.4, pickoff_lines=nominal_pickoff_lines(12.4)),
         "Z": GyroChannel(34.1, 7.51, restraint_time_s=1072.0, viscous_coupling_h_over_c=35.7,
                          fixed_drift_urad_per_s=0.15, g_drift_x_urad_per_s_per_g=0.06,
-                         pickoff_noise_rms_urad=6.2),
+                         pickoff_noise_rms_urad=6.2, pickoff_lines=nominal_pickoff_lines(6.2)),
         "XRD": GyroChannel(32.0, 5.74, restraint_time_s=515.0, viscous_coupling_h_over_c=2.43,
                            fixed_drift_urad_per_s=0.41, g_drift_z_urad_per_s_per_g=0.04,
-                           pickoff_noise_rms_urad=6.2, caging_natural_freq_rad_per_s=1.0,
+                           pickoff_noise_rms_urad=6.2, pickoff_lines=nominal_pickoff_lines(6.2),
+                           caging_natural_freq_rad_per_s=1.0,
                            caging_proportional_only=True),
     }
 

@@ -239,6 +239,11 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         theta = b.x(f"theta_{a}")
         if ac.mount_freq_hz > 0:  # flexible mount: the sensed angle lags the gimbal (III B)
             theta = b.second_order(f"mount_{a}", theta, 2 * math.pi * ac.mount_freq_hz, ac.mount_damping)
+            if ac.mount_excitation > 0:
+                # floor motion shakes the mount too (DESIGN.md section 8): its angular
+                # acceleration n drives the mode, th_b'' + 2 zeta w th_b' + w^2 th_b = w^2 th + n
+                v = b.states.index(f"mount_{a}_v")
+                b.deriv[v] = b.deriv[v] + b.u(f"nmount_{a}")
         seen = theta + b.u(f"nac_{a}")
         seen = seen + b.correction(f"ac_{a}", NL_SOFTSAT, seen, p1=ac.linear_range_urad * URAD,
                                    p2=1.2 * ac.linear_range_urad * URAD)

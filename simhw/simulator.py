@@ -72,14 +72,30 @@ class Block:
         return len(self.volts)
 
 
-def ac_white_psd(nea_urad: float, corner_hz: float, w: float, zeta: float) -> float:
-    """One-sided white PSD (rad^2/Hz) of the autocollimator angle noise such that the control
+def ac_knee(f: np.ndarray | float, corner_hz: float, knee: float, slope: float) -> np.ndarray:
+    """The autocollimator angle noise's PSD over its white level W: with r = (fc/f)^slope,
+    K(f) = knee (1 + r) + (1 - knee) max(1, r), fc = ``corner_hz``.
+
+    Fig. 32 shows a white (shot-noise) floor with 1/f below about 3 Hz; how the two meet is
+    the unit's: ``knee`` 1 adds them (1 + fc/f at slope 1, the thesis's reading), 0 is the
+    sharp corner max(1, fc/f), and a nominal unit lies anywhere between, with a slope of
+    0.8-1.2 (DESIGN.md section 8). The noise the simulator makes follows W K(f)
+    (``simhw.noise.FlickerNoise`` realizes W (K - 1))."""
+    f = np.asarray(f, float)
+    r = (corner_hz / f) ** slope
+    return knee * (1.0 + r) + (1.0 - knee) * np.maximum(1.0, r)
+
+
+def ac_white_psd(nea_urad: float, corner_hz: float, w: float, zeta: float, *, knee: float = 1.0,
+                 slope: float = 1.0) -> float:
+    """One-sided white PSD W (rad^2/Hz) of the autocollimator angle noise such that the control
     channel (second-order filter w, zeta; eq. 3.21) shows ``nea_urad`` rms in 0.1-100 Hz
-    with a 1/f part meeting the white level at ``corner_hz`` (Table 1, Fig. 32)."""
+    when the noise's PSD is W K(f) (``ac_knee``: a 1/f part of that slope meeting the white
+    level at ``corner_hz`` with that knee; Table 1, Fig. 32)."""
     f = np.geomspace(*NEA_BAND_HZ, 4000)
     s = 2j * math.pi * f
     h2 = np.abs(w * w / (s * s + 2 * zeta * w * s + w * w)) ** 2
-    gain = np.trapezoid((1.0 + corner_hz / f) * h2, f)
+    gain = np.trapezoid(ac_knee(f, corner_hz, knee, slope) * h2, f)
     return (nea_urad * URAD) ** 2 / gain
 
 
@@ -108,14 +124,23 @@ class Sources:
         # never reads costs nothing). Spawned after every other stream: a rig without it is
         # bit-identical to one from before it existed.
         common_seed = ss.spawn(1)[0]
+        # Floor motion at each flexible mount: streams spawned after all of the above, so a rig
+        # without it draws what it drew before it existed.
+        mount_seeds = dict(zip(AC_AXES, ss.spawn(len(AC_AXES))))
+        white_of = {}
         for a in AC_AXES:
             ac = cfg.autocollimator[a]
-            white = ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s,
-                                 ac.control_filter_zeta)
+            fc = ac.flicker_corner_hz
+            white = white_of[a] = ac_white_psd(ac.nea_urad, fc, ac.control_filter_rad_per_s, ac.control_filter_zeta,
+                                               knee=ac.flicker_knee, slope=ac.flicker_slope)
             frac = ac.common_noise_fraction
+            # The unit's own 1/f, W (K - 1) (``ac_knee``); the bank reaches 10 x the corner (for
+            # a high corner, the flicker_noise effect's) and at least the 50 Hz it always had.
+            f_top = max(50.0, 10.0 * fc)
             self.parts[f"nac_{a}"] = [
                 WhiteNoise(sub(f"nac_{a}"), white * (1.0 - frac), dt),
-                FlickerNoise(sub(f"nac_{a}"), white * ac.flicker_corner_hz, 1e-4, 50.0, dt),
+                FlickerNoise(sub(f"nac_{a}"), white * fc, 1e-4, f_top, dt, corner_hz=fc, knee=ac.flicker_knee,
+                             slope=ac.flicker_slope),
                 ExcessFlickerNoise(sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt),
                 TelegraphJumps(sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt),
             ]
@@ -144,6 +169,14 @@ class Sources:
             p = cfg.platform[a]
             # Optional platform disturbance torque (effect `platform_disturbance`).
             self.parts[f"md_{a}"] = [LagNoise(sub(f"md_{a}"), p.disturbance_torque_rms_Nm, p.disturbance_corner_hz, dt)]
+        for a in AC_AXES:
+            # A flexible mount's floor excitation (angular acceleration, rad/s^2, white): the
+            # mode th_b'' + 2 zeta w th_b' + w^2 th_b = w^2 th + n has |H(jw)|^2 = 1/(2 zeta w^2)^2
+            # at w, so S_n = excitation W (2 zeta w^2)^2 puts excitation x W there (simhw.plant).
+            ac = cfg.autocollimator[a]
+            w = 2 * math.pi * ac.mount_freq_hz
+            psd = ac.mount_excitation * white_of[a] * (2 * ac.mount_damping * w * w) ** 2 if w > 0 else 0.0
+            self.parts[f"nmount_{a}"] = [WhiteNoise(np.random.Generator(np.random.PCG64(mount_seeds[a])), psd, dt)]
 
     def take(self, name: str, n: int) -> np.ndarray:
         out = np.zeros(n)

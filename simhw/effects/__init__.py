@@ -60,6 +60,9 @@ class Effect:
     #: parts of the model-gap analysis's nuisance (``procedures.analysis.gap.model``) that this
     #: effect describes itself: held while the effect is fitted or in the model
     owns: tuple[str, ...] = ()
+    #: the effect may be present more than once (several mains harmonics are several pickup
+    #: lines); each instance is applied on top of the others
+    repeatable: bool = False
 
     @property
     def fit_params(self) -> tuple[Param, ...]:

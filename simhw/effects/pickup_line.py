@@ -1,7 +1,8 @@
 """``pickup_line``: electrical pickup, a sinusoid on a recorded channel (Ch. V D-E).
 
 The thesis saw 200 Hz (the gyro spin-motor drive) in its autocollimator and compensation
-signals. The line is added to the axis's autocollimator control channel as recorded.
+signals. The line is added to the axis's autocollimator control channel as recorded; several
+lines (mains and its harmonics) are several instances of the effect.
 """
 
 from simhw.effects import Effect, Param
@@ -29,4 +30,5 @@ def _spread(evidence, params: dict[str, float]) -> dict[str, float]:
 EFFECT = Effect("pickup_line", __doc__.strip().splitlines()[0],
                 (Param("freq_hz", 200.0, 1.0, 450.0, log=True),
                  Param("amplitude_V", 0.003, 1e-4, 0.1, log=True)),
-                _apply, key_param="freq_hz", fit=("amplitude_V",), guess=_guess, spread=_spread)
+                _apply, key_param="freq_hz", fit=("amplitude_V",), guess=_guess, spread=_spread,
+                repeatable=True)

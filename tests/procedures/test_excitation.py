@@ -21,7 +21,7 @@ from procedures.analysis.transfer import network_response
 from procedures.calibrations import catalogue
 from procedures.calibrations.excitation import Excitation, Params, excitation_signal
 from procedures.runner import run_procedure
-from simhw.params import load_config
+from simhw.params import load_config, nominal_pickoff_lines
 from simhw.plant import linearized_poles
 
 #: shorter than the defaults (which a lab would use), long enough for the tolerances
@@ -145,9 +145,10 @@ def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode
                    "w3_rad_per_s": round(float(rng.uniform(25, 36)), 3),
                    "w4_rad_per_s": round(float(rng.uniform(170, 240)), 2)}
         cfg = _config(tmp_path, axis, inertia, stiffness, corners)
+        rms = round(float(rng.uniform(4.0, 12.0)), 2)
         cfg.write_text(cfg.read_text() + f"[gyro.{axis}]\npickoff_scale_mV_per_urad = "
-                       f"{round(float(rng.uniform(5.5, 7.5)), 3)}\npickoff_noise_rms_urad = "
-                       f"{round(float(rng.uniform(4.0, 12.0)), 2)}\n")
+                       f"{round(float(rng.uniform(5.5, 7.5)), 3)}\npickoff_noise_rms_urad = {rms}\n"
+                       f"pickoff_lines = {nominal_pickoff_lines(rms)!r}\n")
         if np.max(linearized_poles(load_config(cfg), mode, axis).real) < -0.05:
             break
     with open_rig(f"sim?warm=1&seed={60 + k}&config={cfg}") as rig:

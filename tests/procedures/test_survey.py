@@ -22,7 +22,7 @@ from procedures.analysis.survey import cross_axis_coherence, find_dip, spans_csd
 from procedures.calibrations import catalogue
 from procedures.calibrations.survey import Params, Survey, pickoff_scales
 from procedures.runner import load_resume, run_procedure
-from simhw.params import SimConfig, load_config
+from simhw.params import SimConfig, load_config, nominal_pickoff_lines
 from simhw.simulator import Simulator, pickoff_white_psd
 
 from .conftest import assert_spans_are_the_record_steps
@@ -182,8 +182,9 @@ def _toml(c: dict) -> str:
         eta = inertia[a] * (2 * math.pi * f) ** 2 / to ** 2
         parts.append(f"[bearing.{a}]\nTo_Nm = {to!r}\neta_per_Nm = {eta!r}\n")
         g = f"[gyro.{a}]\npickoff_noise_rms_urad = {c[f'n{a}']!r}\n"
-        if c[f"n{a}"] < 4.5:   # the default lines alone carry 4.4 urad rms
-            g += "pickoff_lines = []\n"
+        # the data sheet's lines for that rms (85 % of its variance), none on a quiet pickoff
+        lines = [] if c[f"n{a}"] < 4.5 else nominal_pickoff_lines(c[f"n{a}"])
+        g += f"pickoff_lines = {lines!r}\n"
         if c[f"Kg{a}"] is not None:
             g += f"pickoff_scale_mV_per_urad = {c[f'Kg{a}']!r}\n"
         parts.append(g)
@@ -322,7 +323,7 @@ def test_a_survey_in_the_gyro_modes(tmp_path, mode):
     cfg_path = tmp_path / "spring.toml"
     cfg_path.write_text('[bearing.X]\nmodel = "spring"\nstiffness_Nm_per_rad = 520.0\n'
                         '[bearing.Y]\nmodel = "spring"\nstiffness_Nm_per_rad = 300.0\n'
-                        '[gyro.Y]\npickoff_noise_rms_urad = 9.0\n')
+                        f'[gyro.Y]\npickoff_noise_rms_urad = 9.0\npickoff_lines = {nominal_pickoff_lines(9.0)!r}\n')
     cfg = load_config(cfg_path)
     params = Params(mode=mode, duration_s=200.0, mode_settle_s=40.0)
     with open_rig(f"sim?warm=1&seed={70 + mode}&config={cfg_path}") as rig:

@@ -84,6 +84,55 @@ def test_default_pickoff_lines_fit_inside_the_pickoff_noise_rms():
         assert 0 < lines_rms <= ch.pickoff_noise_rms_urad, c
 
 
+@pytest.mark.parametrize("channel, rms", [("X", 6.2), ("Y", 12.4), ("Z", 6.2), ("XRD", 6.2)])
+def test_default_pickoff_lines_carry_85_percent_of_the_variance_split_30_30_25_15(channel, rms):
+    # Ch. VI A: "the discrete components contribute over 85 percent"; a line of amplitude a
+    # has variance a^2/2
+    ch = SimConfig().gyro[channel]
+    assert ch.pickoff_noise_rms_urad == rms
+    assert [f for f, _ in ch.pickoff_lines] == [70.6, 71.4, 102.0, 187.0]
+    shares = [a * a / 2 / (0.85 * rms**2) for _, a in ch.pickoff_lines]
+    assert shares == pytest.approx([0.30, 0.30, 0.25, 0.15], rel=1e-12)
+
+
+def test_y_pickoff_lines_are_twice_x_s():
+    cfg = SimConfig()
+    assert [a for _, a in cfg.gyro["Y"].pickoff_lines] == pytest.approx(
+        [2 * a for _, a in cfg.gyro["X"].pickoff_lines], rel=1e-12)
+    assert P.GyroChannel().pickoff_lines == cfg.gyro["X"].pickoff_lines  # a bare channel is X's
+
+
+def test_a_config_lowering_the_pickoff_rms_below_the_default_lines_must_give_its_lines():
+    with pytest.raises(ConfigError, match="gyro.Y.pickoff_lines carry 11.4 urad rms"):
+        from_dict({"gyro": {"Y": {"pickoff_noise_rms_urad": 9.0}}})
+    cfg = from_dict({"gyro": {"Y": {"pickoff_noise_rms_urad": 9.0, "pickoff_lines": P.nominal_pickoff_lines(9.0)}}})
+    assert cfg.gyro["Y"].pickoff_lines == P.nominal_pickoff_lines(9.0)
+
+
+def test_default_pickoff_white_part_is_the_other_15_percent():
+    from simhw.simulator import PICKOFF_BAND_HZ, pickoff_white_psd
+    for ch in SimConfig().gyro.values():
+        white_var = pickoff_white_psd(ch.pickoff_noise_rms_urad, ch.pickoff_lines) * (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
+        assert white_var == pytest.approx(0.15 * (ch.pickoff_noise_rms_urad * 1e-6) ** 2, rel=1e-9)
+
+
+def test_autocollimator_knee_and_mount_excitation_default_to_the_plain_unit():
+    for ac in SimConfig().autocollimator.values():
+        assert (ac.flicker_knee, ac.flicker_slope, ac.mount_excitation) == (1.0, 1.0, 0.0)
+
+
+def test_autocollimator_knee_slope_and_mount_excitation_are_read_from_a_config():
+    cfg = from_dict({"autocollimator": {"Y": {"flicker_knee": 0.0, "flicker_slope": 1.2, "mount_excitation": 30}}})
+    ac = cfg.autocollimator["Y"]
+    assert (ac.flicker_knee, ac.flicker_slope, ac.mount_excitation) == (0.0, 1.2, 30.0)
+    assert cfg.autocollimator["X"].flicker_knee == 1.0
+
+
+def test_old_extra_flicker_corner_key_still_loads():
+    cfg = from_dict({"autocollimator": {"X": {"extra_flicker_corner_hz": 8.0}}})
+    assert cfg.autocollimator["X"].extra_flicker_corner_hz == 8.0
+
+
 def test_default_site_is_stanford_and_has_no_pickup():
     cfg = SimConfig()
     assert cfg.site.latitude_deg == pytest.approx(37.43)
@@ -131,6 +180,7 @@ def test_from_dict_builds_pickup_lines():
     ({"gyro": {"X": {"foo": 1.0}}}, "'gyro.X.foo'"),
     ({"platform": {"XRD": {}}}, "'platform.XRD'"),
     ({"autocollimator": {"Z": {}}}, "'autocollimator.Z'"),
+    ({"autocollimator": {"X": {"flicker_form": 0.5}}}, "'autocollimator.X.flicker_form'"),
     ({"site": {"latitude": 10.0}}, "'site.latitude'"),
     ({"pickup": [{"channel": "ac_x_ctl", "freq_hz": 1.0, "ampl": 1.0}]}, "'pickup[0].ampl'"),
 ])
@@ -152,6 +202,11 @@ def test_unknown_field_message_lists_the_known_fields():
     ({"site": {"latitude_deg": 91.0}}, ["site.latitude_deg", "91.0", "<= 90"]),
     ({"table": {"tilt_deg": -1}}, ["table.tilt_deg", "-1", ">= 0"]),
     ({"autocollimator": {"X": {"delay_s": 0.1}}}, ["autocollimator.X.delay_s", "0.1", "<= 0.05"]),
+    ({"autocollimator": {"X": {"flicker_knee": 1.5}}}, ["autocollimator.X.flicker_knee", "1.5", "<= 1.0"]),
+    ({"autocollimator": {"Y": {"flicker_knee": -0.1}}}, ["autocollimator.Y.flicker_knee", "-0.1", ">= 0.0"]),
+    ({"autocollimator": {"X": {"flicker_slope": 0.4}}}, ["autocollimator.X.flicker_slope", "0.4", ">= 0.5"]),
+    ({"autocollimator": {"X": {"flicker_slope": 2.5}}}, ["autocollimator.X.flicker_slope", "2.5", "<= 2.0"]),
+    ({"autocollimator": {"X": {"mount_excitation": -1.0}}}, ["autocollimator.X.mount_excitation", "-1.0", ">= 0.0"]),
     ({"bearing": {"Z": {"damping_Nms": -1.0}}}, ["bearing.Z.damping_Nms", "-1.0", ">= 0"]),
     ({"sampling": {"adc_bits": 30}}, ["sampling.adc_bits", "30", "8..24"]),
     ({"sampling": {"oversample": 0}}, ["sampling.oversample", "0", "1..64"]),
@@ -370,7 +425,7 @@ def test_copy_is_equal_but_deep():
     cp.site.latitude_deg = 0.0
     assert orig == from_dict({"pickup": [{"channel": "ac_x_ctl", "freq_hz": 200.0, "amplitude_V": 0.003}]})
     assert orig.platform["X"].inertia_kg_m2 == 0.70
-    assert orig.gyro["Z"].pickoff_lines[0][1] == 3.0
+    assert orig.gyro["Z"].pickoff_lines[0][1] == SimConfig().gyro["Z"].pickoff_lines[0][1]
 
 
 def test_without_random_drift_zeroes_only_the_random_drift_terms():

@@ -24,17 +24,29 @@ amplifier dead zone / limit below.
 
 Every keyword below defaults to the data sheet (or to "absent"); at the defaults a run is
 sample for sample the run this module wrote before they existed (same random draws in the
-same order), so a test's seed keeps its meaning.
+same order), so a test's seed keeps its meaning. One exception: the gyro pickoff's data-sheet
+noise follows DESIGN.md section 3 as revised (the lines carry 85 % of the variance, see
+:data:`PICKOFF_LINES_URAD`), so the gyro channel's samples changed then; the pickoff does not
+enter the platform loop, and the other three channels did not.
 
 **Effects of the catalogue** (DESIGN.md section 8; 0 = absent; any combination may be given
 at once, they act on different parts of the loop):
 
 * ``stiffness_Nm_per_rad``: ``bearing_friction`` as its small-motion spring eta To^2 (Ch. V F).
-* ``mount_freq_hz``, ``mount_damping``: ``mount_resonance``, the sensed angle through a
-  second-order mount mode (Ch. II B.9, III B).
+* ``mount_freq_hz``, ``mount_damping``, ``mount_excitation``: ``mount_resonance``, the sensed
+  angle through a second-order mount mode (Ch. II B.9, III B),
+  th_b'' + 2 zeta w th_b' + w^2 th_b = w^2 th + a. ``a`` is the floor's white angular
+  acceleration on the mount (DESIGN.md section 8: how strongly the mount is shaken is part
+  of the effect), sized so that the undisturbed mount's (th = 0) peak PSD of th_b is
+  ``mount_excitation`` times this unit's white autocollimator angle PSD (0 = only the loop
+  moves the mount, as before the keyword existed).
 * ``pickup``: ``pickup_line``, sinusoids (Hz, V) on the recorded control channel (Ch. V D-E).
-* ``extra_flicker_corner_hz``: ``flicker_noise``, extra 1/f autocollimator noise meeting this
-  unit's white level at that frequency (Ch. V B.3).
+* ``flicker_corner_hz``: ``flicker_noise`` (Ch. V B.3): the autocollimator's 1/f corner is this
+  instead of the unit's own (the 1/f meets this unit's white level there); the knee's form and
+  the slope stay the unit's (as the gapdata set's simulator does). :func:`draw_effect` uses it.
+* ``extra_flicker_corner_hz`` (older form, kept for old callers): extra 1/f autocollimator
+  noise, ``S_w a_w^2 c / f`` added to the unit's noise, i.e. a pure 1/f meeting this unit's
+  white level at ``c`` (with the default sum knee and slope 1 the corners add).
 * ``offset_jump_urad``, ``offset_jump_interval_s``: ``offset_jumps``, a +-A telegraph on the
   sensed angle at Poisson times (Ch. II B.10).
 * ``extra_damping_Nms``: ``extra_damping``, viscous gimbal damping added to D (Ch. V F).
@@ -46,26 +58,36 @@ at once, they act on different parts of the loop):
   is rounded; not a Pade approximant).
 
 **Unit-to-unit variation** (nuisance: what differs between two rigs built to the same data
-sheet and is no effect; :func:`draw_nuisance` draws all of it, :data:`NUISANCE_RANGES`):
+sheet and is no effect; :func:`draw_nuisance` draws DESIGN.md section 8's envelope of a
+nominal unit, :data:`NUISANCE_RANGES`):
 
-* ``ac_white_scale`` (0.6-1.4): the autocollimator's white (dark-current shot noise) rms
+* ``ac_white_scale`` (x0.6-1.6): the autocollimator's white (dark-current shot noise) rms
   relative to the data sheet's NEA (0.451 / 0.506 urad in 0.1-100 Hz, DESIGN.md section 3,
-  Table 1); its PSD scales by the square.
-* ``ac_flicker_scale`` (0.6-1.4) and ``ac_flicker_corner_hz`` (2-4 Hz): the autocollimator's
-  1/f noise, DESIGN.md section 3 "1/f below ~3 Hz" (Ch. II B: flicker noise of the
-  photodetector). The sensor PSD is ``S_w (a_w^2 + a_f^2 f_c / f)`` with ``S_w`` the data
-  sheet's white level: ``f_c`` is where the 1/f part meets the data sheet's white level and
-  ``a_f`` scales its rms. A pure 1/f has one level, so the two draws together spread it
-  over x0.24 to x2.6 of the data sheet's (``a_f^2 f_c / 3``), and the unit's own corner
-  ``a_f^2 f_c / a_w^2`` has median 3 Hz, 80 % of draws within 1.1-7.6 Hz, 95 % within
-  0.8-11.5 Hz and 0.4-21 Hz at the joint extremes.
-* ``pickoff_white_scale`` (0.6-1.4): the gyro pickoff's white noise rms relative to the data
-  sheet's (6.2 / 12.4 urad rms in 0.1-200 Hz with the lines, DESIGN.md section 3, Table 4).
-* ``pickoff_lines``: the pickoff's discrete lines, ``[(freq_hz, amplitude_urad), ...]``
-  (default :data:`PICKOFF_LINES_URAD`: DESIGN.md's "71 Hz pair 0.8 Hz apart, 102 Hz, 187 Hz",
-  amplitudes ours). :func:`draw_nuisance` moves each by up to +-0.5 Hz (the pair keeps
-  together, 0.7-0.9 Hz apart) and scales each amplitude by 0.6-1.4: another gyro's
-  spin-motor and excitation harmonics sit a fraction of a hertz elsewhere.
+  Table 1); its PSD ``S_w a_w^2`` scales by the square, and the 1/f with it.
+* ``ac_flicker_corner_hz`` (1.5-5 Hz; data sheet 3), ``ac_knee`` (0-1; data sheet 1) and
+  ``ac_flicker_slope`` (0.8-1.2; data sheet 1): the autocollimator's 1/f noise, DESIGN.md
+  section 3 "1/f below ~3 Hz" (Ch. II B: flicker noise of the photodetector). The sensor PSD
+  is ``S_w a_w^2 K(f)`` with ``r = (f_c / f)^a`` and
+  ``K = knee (1 + r) + (1 - knee) max(1, r)``: knee 1 is the smooth sum ``1 + (f_c/f)^a``,
+  knee 0 the sharp ``max(1, (f_c/f)^a)``, between them their mix. ``f_c`` is the unit's own
+  corner, where the 1/f meets the unit's white level.
+* ``ac_flicker_scale`` (older form, default None; not drawn any more): given a number
+  ``a_f``, the 1/f has the old meaning, independent of the white: its level is
+  ``S_w a_f^2 f_c / f`` (``f_c`` where it meets the *data sheet's* white), so the unit's own
+  corner is ``a_f^2 f_c / a_w^2`` (the old sensor PSD ``S_w (a_w^2 + a_f^2 f_c / f)`` exactly,
+  with the default knee and slope).
+* ``pickoff_white_scale`` (x0.5-2): the gyro pickoff's white noise rms relative to the data
+  sheet's (:func:`white_level_pickoff`: 15 % of the variance of 6.2 / 12.4 urad rms in
+  0.1-200 Hz, DESIGN.md section 3, Table 4).
+* ``pickoff_line_freqs_hz``, ``pickoff_line_scales``: the pickoff's discrete lines
+  (:data:`PICKOFF_LINES_URAD`, per axis) moved to these frequencies and their amplitudes times
+  these factors, one per data-sheet line (None = the data sheet's). :func:`draw_nuisance` moves
+  the whole set by up to +-0.8 Hz together, 102 and 187 Hz by a further +-0.2 Hz each, the
+  71 Hz pair's spacing to 0.7-0.9 Hz (each line within +-1 Hz), and scales each amplitude by
+  x0.5-2: another gyro's spin-motor and excitation harmonics sit a fraction of a hertz
+  elsewhere.
+* ``pickoff_lines`` (older form): the lines themselves, ``[(freq_hz, amplitude_urad), ...]``,
+  replacing the data sheet's (not together with the two keywords above).
 * ``adc_range_V``: the converter range (+-V; 16 bits), one number for all four channels or a
   mapping by channel name or by kind (``ctl``, ``inst``, ``gyro``, ``pa``); it sets the ADC
   floor q^2/(6 fs) (App. A.5). Default +-10 V everywhere; :func:`draw_nuisance` picks a lab's
@@ -123,6 +145,8 @@ __all__ = [
     "AXES",
     "MODULE_NAME",
     "NUISANCE_RANGES",
+    "PICKOFF_LINES_URAD",
+    "ac_noise_psd",
     "anti_alias_sos",
     "axis_model",
     "channel_names",
@@ -130,6 +154,7 @@ __all__ = [
     "draw_nuisance",
     "generate",
     "simulate",
+    "unit_pickoff_lines",
     "white_level_ac",
     "white_level_pickoff",
 ]
@@ -146,7 +171,19 @@ AC_INST = dict(w1=755.0, w2=1250.0, zeta=0.71)
 AC_FLICKER_CORNER_HZ = 3.0
 NEA_BAND_HZ = (0.1, 100.0)
 PICKOFF_BAND_HZ = (0.1, 200.0)
-PICKOFF_LINES_URAD = ((70.6, 3.0), (71.4, 3.0), (102.0, 4.0), (187.0, 2.0))
+#: DESIGN.md section 3: the pickoff's lines carry 85 % of the variance of its rms (6.2 / 12.4 urad,
+#: X / Y), split 30/30/25/15 % over the 71 Hz pair (0.8 Hz apart), 102 and 187 Hz; the white
+#: noise holds the rest (:func:`white_level_pickoff`).
+PICKOFF_LINE_FREQS_HZ = (70.6, 71.4, 102.0, 187.0)
+PICKOFF_LINE_SHARES = (0.30, 0.30, 0.25, 0.15)
+PICKOFF_LINES_FRACTION = 0.85
+PICKOFF_RMS_URAD = {"X": 6.2, "Y": 12.4}
+#: The data sheet's lines per axis, ``(freq_hz, amplitude_urad)``: amplitude
+#: sqrt(2 share 0.85 rms^2) (X 4.43, 4.43, 4.04, 3.13 urad; Y twice that).
+PICKOFF_LINES_URAD = {
+    ax: tuple((f, math.sqrt(2.0 * share * PICKOFF_LINES_FRACTION * rms**2))
+              for f, share in zip(PICKOFF_LINE_FREQS_HZ, PICKOFF_LINE_SHARES))
+    for ax, rms in PICKOFF_RMS_URAD.items()}
 SENSE_OHM = 92.1
 KTC_A_PER_V = -6.04e-3
 CAGING_WN, CAGING_ZETA = 0.1, 0.7
@@ -158,10 +195,10 @@ AXES = {
     # I kg m^2, D N m s (2 Do on X, Do on Y), Kp, autocollimator mV/urad, NEA urad,
     # gyro channel: h/k s, KTO urad/s/V, Kg mV/urad, pickoff rms urad, constant rate urad/s
     "X": dict(I=0.70, D=1.02, Kp=302.0, K_ctl=5.70, K_inst=5.63, nea=0.451,
-              tau_r=424.0, KTO=31.6, Kg=6.03, pickoff_rms=6.2,
+              tau_r=424.0, KTO=31.6, Kg=6.03, pickoff_rms=PICKOFF_RMS_URAD["X"],
               omega_const=(EARTH_RATE * math.cos(math.radians(LATITUDE_DEG))) * 1e6 + 0.35),
     "Y": dict(I=0.25, D=0.51, Kp=164.0, K_ctl=5.99, K_inst=5.92, nea=0.506,
-              tau_r=708.0, KTO=33.4, Kg=6.70, pickoff_rms=12.4,
+              tau_r=708.0, KTO=33.4, Kg=6.70, pickoff_rms=PICKOFF_RMS_URAD["Y"],
               omega_const=-0.22),
 }
 #: Output order of the state-space model (and of the channels written).
@@ -207,7 +244,7 @@ def caging_gains(m: dict) -> tuple[float, float]:
 def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_freq_hz: float = 0.0,
                      mount_damping: float = 0.05, *, extra_damping_Nms: float = 0.0, scale_factor_error: float = 0.0,
                      comp_zeros_rad_s=None, comp_poles_rad_s=None, amp_gain_factor: float = 1.0,
-                     amp_input: bool = False, delayed_sensor: bool = False):
+                     amp_input: bool = False, delayed_sensor: bool = False, mount_input: bool = False):
     """(A, B, C, D, x0, names) of one axis in Mode 3.
 
     Inputs: autocollimator angle noise n_ac (urad), pickoff angle noise n_p (urad), constant
@@ -215,12 +252,16 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
     gyro pickoff, power-amplifier input V_c. ``x0`` is the steady state for the constant
     Omega (caging integrator holding it), with all outputs zero there.
 
+    ``mount_input`` (with a mount mode) adds an input column, the angular acceleration ``a``
+    shaking the mount (urad/s^2: th_b'' + 2 zeta w th_b' + w^2 th_b = w^2 th + a).
+
     Opened for the elements :func:`simulate` runs outside the linear model (the states stay
     the same, in the same order): ``amp_input`` cuts the power amplifier out, its output
     voltage (V, at the motor) becomes an extra input column; ``delayed_sensor`` feeds both
     autocollimator filters from an extra input column, the delayed sensed angle (urad), and
     adds the sensed angle (theta_m + n_ac, urad) as an extra output row. Extra columns
-    follow Omega in that order; the extra row follows V_c.
+    follow Omega in the order mount acceleration, amplifier output, delayed sensed angle;
+    the extra row follows V_c.
     """
     m = axis_model(axis)
     zeros = COMP_ZEROS if comp_zeros_rad_s is None else tuple(float(z) for z in comp_zeros_rad_s)
@@ -240,7 +281,11 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
     n = len(names)
     NAC, NP, OM = 0, 1, 2
     n_in = 3
-    VAMP = SD = -1
+    VAMP = SD = MNT = -1
+    if mount_input:
+        if mount is None:
+            raise ValueError("mount_input needs a mount mode (mount_freq_hz > 0)")
+        MNT, n_in = n_in, n_in + 1
     if amp_input:
         VAMP, n_in = n_in, n_in + 1
     if delayed_sensor:
@@ -259,6 +304,8 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
         m1, m2 = mount
         A[m1, m2] = w
         A[m2, th], A[m2, m1], A[m2, m2] = w, -w, -2 * mount_damping * w
+        if mount_input:
+            B[m2, MNT] = 1.0 / w          # mount1'' = w mount2' gets the acceleration
         s_x[m1] = 1.0
     # What the filters see: the sensed angle, or (delayed_sensor) the input column SD.
     f_x, f_u = s_x, s_u
@@ -342,9 +389,11 @@ def white_level_ac(axis: str = "X") -> float:
 
 
 def white_level_pickoff(axis: str = "X") -> float:
-    """White pickoff PSD (urad^2/Hz) that with the lines gives the rms in 0.1-200 Hz."""
-    lines_var = sum(a * a / 2 for f, a in PICKOFF_LINES_URAD if PICKOFF_BAND_HZ[0] <= f <= PICKOFF_BAND_HZ[1])
-    return (axis_model(axis)["pickoff_rms"] ** 2 - lines_var) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
+    """White pickoff PSD (urad^2/Hz) that with the axis's data-sheet lines gives the rms in
+    0.1-200 Hz: 15 % of the variance (X 0.0288, Y 0.115 urad^2/Hz: 1.7 / 3.4 urad in 0.1-100 Hz)."""
+    m = axis_model(axis)
+    lines_var = sum(a * a / 2 for f, a in PICKOFF_LINES_URAD[axis] if PICKOFF_BAND_HZ[0] <= f <= PICKOFF_BAND_HZ[1])
+    return (m["pickoff_rms"] ** 2 - lines_var) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
 
 
 def anti_alias_sos(rate_hz: float, fs_int: float) -> np.ndarray:
@@ -419,37 +468,127 @@ def _settle_time(A: np.ndarray, names: list[str]) -> float:
 
 
 # --------------------------------------------------------------------------- the generator
-#: Uniform ranges of :func:`draw_nuisance` (the module docstring gives each one's source).
+#: DESIGN.md section 8's tolerances of a nominal unit, as :func:`draw_nuisance` draws them (the
+#: module docstring gives each one's meaning). Factors and the corner are drawn log-uniform
+#: (:data:`NUISANCE_LOG_UNIFORM`), the rest uniform; the ADC ranges uniform among those listed.
 NUISANCE_RANGES = dict(
-    ac_white_scale=(0.6, 1.4),
-    ac_flicker_scale=(0.6, 1.4),
-    ac_flicker_corner_hz=(2.0, 4.0),
-    pickoff_white_scale=(0.6, 1.4),
-    line_shift_hz=(-0.5, 0.5),        # each line, the 71 Hz pair's centre by up to 0.45 Hz
+    ac_white_scale=(0.6, 1.6),
+    ac_knee=(0.0, 1.0),               # a third each: 0 (max), 1 (sum), uniform in between
+    ac_flicker_corner_hz=(1.5, 5.0),
+    ac_flicker_slope=(0.8, 1.2),
+    pickoff_white_scale=(0.5, 2.0),
+    line_shift_hz=(-1.0, 1.0),        # each line's move: the common shift and its own jitter
+    line_common_shift_hz=(-0.8, 0.8),  # the whole set, the 71 Hz pair's centre with it
+    line_jitter_hz=(-0.2, 0.2),       # 102 and 187 Hz each, beyond the common shift
     pair_spacing_hz=(0.7, 0.9),       # the 71 Hz pair stays a pair
-    line_amplitude_scale=(0.6, 1.4),
+    line_amplitude_scale=(0.5, 2.0),
     adc_range_V={"ctl": (1.0, 2.0, 5.0, 10.0), "inst": (1.0, 2.0, 5.0, 10.0), "gyro": (1.0, 2.0, 5.0, 10.0),
                  "pa": (0.05, 0.1, 0.2, 0.5)},
 )
+NUISANCE_LOG_UNIFORM = ("ac_white_scale", "ac_flicker_corner_hz", "pickoff_white_scale", "line_amplitude_scale")
 _KINDS = ("ctl", "inst", "gyro", "pa")
 
 
 def draw_nuisance(rng: np.random.Generator) -> dict:
-    """Keywords of :func:`simulate` / :func:`generate` for one unit drawn at random: every
-    nuisance knob uniform within :data:`NUISANCE_RANGES` (the ADC ranges uniform among the
-    listed ones). "Nominal with ordinary unit-to-unit variation": no effect is drawn."""
+    """Keywords of :func:`simulate` / :func:`generate` for one unit drawn at random within
+    :data:`NUISANCE_RANGES` (DESIGN.md section 8's envelope). "Nominal with ordinary unit-to-unit
+    variation": no effect is drawn. The same keywords serve both axes (the pickoff lines are
+    given relative to the axis's data sheet).
+
+    The draws keep the old order where a quantity kept its place: white, [the knee, where the
+    old 1/f level was], corner, pickoff white, the lines' common shift (the old pair centre),
+    the pair's spacing, the 102 / 187 Hz jitters, four amplitudes, four ADC ranges; then the
+    slope (new, last)."""
     R = NUISANCE_RANGES
-    out = {k: float(rng.uniform(*R[k])) for k in ("ac_white_scale", "ac_flicker_scale", "ac_flicker_corner_hz",
-                                                  "pickoff_white_scale")}
-    (f_a, _), (f_b, _) = PICKOFF_LINES_URAD[:2]
-    centre = 0.5 * (f_a + f_b) + float(rng.uniform(R["line_shift_hz"][0] + 0.05, R["line_shift_hz"][1] - 0.05))
-    spacing = float(rng.uniform(*R["pair_spacing_hz"]))
+
+    def draw(key):
+        lo, hi = R[key]
+        if key in NUISANCE_LOG_UNIFORM:
+            return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+        return float(rng.uniform(lo, hi))
+
+    white = draw("ac_white_scale")
+    u = float(rng.uniform(0.0, 1.0))
+    knee = 0.0 if u < 1 / 3 else 1.0 if u < 2 / 3 else 3.0 * u - 2.0
+    corner = draw("ac_flicker_corner_hz")
+    pickoff_white = draw("pickoff_white_scale")
+    shift = draw("line_common_shift_hz")
+    spacing = draw("pair_spacing_hz")
+    f_a, f_b = PICKOFF_LINE_FREQS_HZ[:2]
+    centre = 0.5 * (f_a + f_b) + shift
     freqs = [centre - spacing / 2, centre + spacing / 2]
-    freqs += [f + float(rng.uniform(*R["line_shift_hz"])) for f, _ in PICKOFF_LINES_URAD[2:]]
-    out["pickoff_lines"] = [(round(f, 4), round(a * float(rng.uniform(*R["line_amplitude_scale"])), 4))
-                            for f, (_, a) in zip(freqs, PICKOFF_LINES_URAD)]
-    out["adc_range_V"] = {k: float(rng.choice(R["adc_range_V"][k])) for k in _KINDS}
-    return out
+    freqs += [f + shift + draw("line_jitter_hz") for f in PICKOFF_LINE_FREQS_HZ[2:]]
+    scales = [draw("line_amplitude_scale") for _ in PICKOFF_LINE_FREQS_HZ]
+    adc = {k: float(rng.choice(R["adc_range_V"][k])) for k in _KINDS}
+    slope = draw("ac_flicker_slope")
+    return {"ac_white_scale": white, "ac_knee": knee, "ac_flicker_corner_hz": corner, "ac_flicker_slope": slope,
+            "pickoff_white_scale": pickoff_white, "pickoff_line_freqs_hz": [round(f, 4) for f in freqs],
+            "pickoff_line_scales": [round(a, 4) for a in scales], "adc_range_V": adc}
+
+
+def unit_pickoff_lines(axis: str = "X", pickoff_line_freqs_hz=None, pickoff_line_scales=None,
+                       pickoff_lines=None) -> list[tuple[float, float]]:
+    """The unit's pickoff lines ``[(freq_hz, amplitude_urad), ...]``: ``pickoff_lines`` if given,
+    else the axis's data-sheet lines (:data:`PICKOFF_LINES_URAD`) moved to
+    ``pickoff_line_freqs_hz`` and scaled by ``pickoff_line_scales`` (each one per line)."""
+    axis = axis.upper()
+    axis_model(axis)
+    if pickoff_lines is not None:
+        if pickoff_line_freqs_hz is not None or pickoff_line_scales is not None:
+            raise ValueError("pickoff_lines replaces the data sheet's lines: not together with "
+                             "pickoff_line_freqs_hz / pickoff_line_scales")
+        return [(float(f), float(a)) for f, a in pickoff_lines]
+    sheet = PICKOFF_LINES_URAD[axis]
+    freqs = [f for f, _ in sheet] if pickoff_line_freqs_hz is None else [float(f) for f in pickoff_line_freqs_hz]
+    scales = [1.0] * len(sheet) if pickoff_line_scales is None else [float(a) for a in pickoff_line_scales]
+    if len(freqs) != len(sheet) or len(scales) != len(sheet):
+        raise ValueError(f"pickoff_line_freqs_hz / pickoff_line_scales: one per data-sheet line ({len(sheet)})")
+    if min(freqs) <= 0 or min(scales) < 0:
+        raise ValueError(f"pickoff lines: frequencies > 0 and scales >= 0, not {freqs}, {scales}")
+    return [(f, a * k) for f, (_, a), k in zip(freqs, sheet, scales)]
+
+
+def ac_noise_psd(f, axis: str = "X", *, ac_white_scale=1.0, ac_flicker_scale=None,
+                 ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ, ac_knee=1.0, ac_flicker_slope=1.0,
+                 flicker_corner_hz=0.0, extra_flicker_corner_hz=0.0) -> np.ndarray:
+    """One-sided PSD (urad^2/Hz) of the autocollimator angle noise at ``f`` (> 0):
+    ``S_w (a_w^2 K(f) + a_w^2 extra / f)``, ``K = knee (1 + r) + (1 - knee) max(1, r)``,
+    ``r = (f_c / f)^a`` (the module docstring; ``f_c`` = ``flicker_corner_hz`` if given, else
+    the unit's own corner). At the data sheet: ``S_w (1 + 3 / f)``."""
+    for name, v in (("ac_white_scale", ac_white_scale), ("ac_flicker_corner_hz", ac_flicker_corner_hz),
+                    ("flicker_corner_hz", flicker_corner_hz), ("extra_flicker_corner_hz", extra_flicker_corner_hz)):
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError(f"{name} must be finite and >= 0, not {v!r}")
+    if ac_flicker_scale is not None and not (ac_flicker_scale >= 0 and math.isfinite(ac_flicker_scale)):
+        raise ValueError(f"ac_flicker_scale must be None or finite and >= 0, not {ac_flicker_scale!r}")
+    if not 0.0 <= ac_knee <= 1.0:
+        raise ValueError(f"ac_knee must be within 0 (max form) .. 1 (sum form), not {ac_knee!r}")
+    if not (ac_flicker_slope > 0 and math.isfinite(ac_flicker_slope)):
+        raise ValueError(f"ac_flicker_slope must be finite and > 0, not {ac_flicker_slope!r}")
+    f = np.asarray(f, dtype=float)
+    sw = white_level_ac(axis)
+    white = ac_white_scale ** 2
+    # The 1/f's level at 1 Hz in units of S_w (slope 1): where it meets the unit's white is the
+    # unit's corner. The old ac_flicker_scale ties it to the data sheet's white instead.
+    if flicker_corner_hz > 0:
+        level = white * flicker_corner_hz
+    elif ac_flicker_scale is None:
+        level = white * ac_flicker_corner_hz
+    else:
+        level = ac_flicker_scale ** 2 * ac_flicker_corner_hz
+    extra = white * extra_flicker_corner_hz
+    if ac_knee == 1.0 and ac_flicker_slope == 1.0:   # the sum form, slope 1: the old expression
+        return sw * (white + (level + extra) / f)
+    if ac_flicker_slope == 1.0:
+        flick = level / f
+    elif white > 0:
+        flick = white * ((level / white) / f) ** ac_flicker_slope
+    elif level > 0:
+        raise ValueError("a 1/f slope other than 1 needs a white level to meet (ac_white_scale > 0)")
+    else:
+        flick = np.zeros_like(f)
+    k = ac_knee * (white + flick) + (1.0 - ac_knee) * np.maximum(white, flick)
+    return sw * (k + extra / f)
 
 
 def _adc_ranges(adc_range_V, axis: str) -> np.ndarray:
@@ -543,9 +682,10 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
              mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
              offset_jump_urad=0.0, offset_jump_interval_s=60.0,
              extra_damping_Nms=0.0, scale_factor_error=0.0, time_delay_s=0.0,
-             ac_white_scale=1.0, ac_flicker_scale=1.0, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
-             pickoff_white_scale=1.0, pickoff_lines=None, adc_range_V=ADC_RANGE_V,
-             amp_dead_zone_V=0.0, amp_limit_V=math.inf, amp_gain_factor=1.0,
+             ac_white_scale=1.0, ac_flicker_scale=None, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
+             ac_knee=1.0, ac_flicker_slope=1.0, flicker_corner_hz=0.0, mount_excitation=0.0,
+             pickoff_white_scale=1.0, pickoff_lines=None, pickoff_line_freqs_hz=None, pickoff_line_scales=None,
+             adc_range_V=ADC_RANGE_V, amp_dead_zone_V=0.0, amp_limit_V=math.inf, amp_gain_factor=1.0,
              comp_zeros_rad_s=None, comp_poles_rad_s=None) -> dict[str, np.ndarray]:
     """The recorded channels (volts, ADC-quantized) as a dict, without writing a file.
     Keywords: see the module docstring."""
@@ -553,13 +693,20 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     m = axis_model(axis)
     if not (rate_hz > 0 and duration_s > 0):
         raise ValueError("rate_hz and duration_s must be positive")
-    for name, v in (("ac_white_scale", ac_white_scale), ("ac_flicker_scale", ac_flicker_scale),
-                    ("ac_flicker_corner_hz", ac_flicker_corner_hz), ("pickoff_white_scale", pickoff_white_scale),
-                    ("amp_gain_factor", amp_gain_factor)):
+    for name, v in (("pickoff_white_scale", pickoff_white_scale), ("amp_gain_factor", amp_gain_factor),
+                    ("mount_excitation", mount_excitation)):
         if not (v >= 0 and math.isfinite(v)):
             raise ValueError(f"{name} must be finite and >= 0, not {v!r}")
+    if mount_excitation > 0 and not mount_freq_hz > 0:
+        raise ValueError("mount_excitation shakes a mount mode: it needs mount_freq_hz > 0")
     if amp_dead_zone_V < 0 or not amp_limit_V > 0 or time_delay_s < 0:
         raise ValueError("amp_dead_zone_V and time_delay_s must be >= 0, amp_limit_V > 0")
+    ac_noise = dict(ac_white_scale=ac_white_scale, ac_flicker_scale=ac_flicker_scale,
+                    ac_flicker_corner_hz=ac_flicker_corner_hz, ac_knee=ac_knee, ac_flicker_slope=ac_flicker_slope,
+                    flicker_corner_hz=flicker_corner_hz, extra_flicker_corner_hz=max(extra_flicker_corner_hz, 0.0))
+    ac_noise_psd(1.0, axis, **ac_noise)        # checks the keywords before the long part
+    lines = unit_pickoff_lines(axis, pickoff_line_freqs_hz, pickoff_line_scales, pickoff_lines)
+    mount_in = mount_excitation > 0
     ranges = _adc_ranges(adc_range_V, axis)
     n_out = int(round(duration_s * rate_hz))
     over = max(8, int(math.ceil(8000.0 / rate_hz)))
@@ -572,7 +719,8 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     loop = dict(extra_damping_Nms=extra_damping_Nms, scale_factor_error=scale_factor_error,
                 comp_zeros_rad_s=comp_zeros_rad_s, comp_poles_rad_s=comp_poles_rad_s, amp_gain_factor=amp_gain_factor)
 
-    A, B, C, D, x0, names = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping, **loop)
+    A, B, C, D, x0, names = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping,
+                                             mount_input=mount_in, **loop)
     if np.max(np.linalg.eigvals(A).real) >= 0:
         raise ValueError(f"the loop is unstable with these settings ({loop}): no steady run to record")
     settle_out = int(math.ceil(_settle_time(A, names) * rate_hz))
@@ -580,15 +728,13 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     n_fft = scipy.fft.next_fast_len(n_run, real=True)
 
     ss = np.random.SeedSequence(seed)
-    rng_ac, rng_jump, rng_p, rng_lines = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(4))
+    # spawn(5)'s first four are spawn(4)'s: the old streams keep their draws
+    rng_ac, rng_jump, rng_p, rng_lines, rng_mount = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(5))
 
-    # Autocollimator angle noise (urad): S_w (a_w^2 + (a_f^2 f_c + a_w^2 extra)/f), plus offset
-    # jumps. At the data sheet (a_w = a_f = 1, f_c = 3) this is S_w (1 + (3 + extra)/f).
-    sw = white_level_ac(axis)
-    white = ac_white_scale ** 2
-    corner = ac_flicker_scale ** 2 * ac_flicker_corner_hz + white * max(extra_flicker_corner_hz, 0.0)
-    u = np.empty((n_run, 2))
-    u[:, 0] = _shaped_noise(rng_ac, n_fft, fs, lambda f: sw * (white + corner / f))[:n_run]
+    # Autocollimator angle noise (urad): S_w a_w^2 K(f) (ac_noise_psd), plus offset jumps. At
+    # the data sheet (a_w = 1, f_c = 3, sum knee, slope 1) this is S_w (1 + (3 + extra)/f).
+    u = np.empty((n_run, 3 if mount_in else 2))
+    u[:, 0] = _shaped_noise(rng_ac, n_fft, fs, lambda f: ac_noise_psd(f, axis, **ac_noise))[:n_run]
     # The sensor's offset at the start: the slow part of the noise (a 0.2 s mean, which
     # leaves out the white part) plus the telegraph's level.
     offset0 = float(np.mean(u[: int(0.2 * fs), 0]))
@@ -600,31 +746,42 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     sp = white_level_pickoff(axis)
     u[:, 1] = math.sqrt(sp * fs / 2.0) * pickoff_white_scale * rng_p.standard_normal(n_run)
     t = np.arange(n_run) * dt
-    for f_line, amp in (PICKOFF_LINES_URAD if pickoff_lines is None else pickoff_lines):
+    for f_line, amp in lines:
         phase = rng_lines.uniform(0.0, 2 * math.pi)
         if f_line < fs / 2:
             u[:, 1] += amp * np.sin(2 * math.pi * f_line * t + phase)
+    if mount_in:
+        # White angular acceleration on the mount (urad/s^2): |1/(s^2 + 2 zeta w s + w^2)|^2 peaks
+        # at 1/(4 zeta^2 w^4 (1 - zeta^2)) (1/w^4 from zeta = 1/sqrt 2 up), so this PSD puts the
+        # undisturbed mount's peak at mount_excitation x the unit's white sensor PSD.
+        w, z = 2 * math.pi * mount_freq_hz, mount_damping
+        peak_gain = 1.0 / (4 * z * z * w**4 * (1 - z * z)) if z * z < 0.5 else 1.0 / w**4
+        s_acc = mount_excitation * white_level_ac(axis) * ac_white_scale**2 / peak_gain
+        u[:, 2] = math.sqrt(s_acc * fs / 2.0) * rng_mount.standard_normal(n_run)
 
     # Start in the steady state for the sensor offset present at t = 0 (the telegraph level
     # and the slow 1/f wander), as on a rig that has been running: the platform already
     # follows it, so no acquisition transient (and no false offset step) opens the record.
     x = np.ascontiguousarray(x0 + np.linalg.solve(A, -B[:, 0] * offset0), dtype=float)
     y = np.empty((n_run, 4))
+    # Input columns: n_ac, n_p, Omega (a constant), [mount acceleration], [amplifier], [delay].
+    noise_cols = [0, 1, 3] if mount_in else [0, 1]
     if not (nonlinear_amp or n_delay):
         Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
         bconst = np.ascontiguousarray(Bd[:, 2] * m["omega_const"])
         dconst = np.ascontiguousarray(Dd[:, 2] * m["omega_const"])
-        _tustin_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, :2]), np.ascontiguousarray(Cd),
-                    np.ascontiguousarray(Dd[:, :2]), bconst, dconst, x, u, y)
+        _tustin_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, noise_cols]), np.ascontiguousarray(Cd),
+                    np.ascontiguousarray(Dd[:, noise_cols]), bconst, dconst, x, u, y)
     else:
         # The same states, the amplifier and/or the sensor path opened (continuous_model); the
         # kernel closes them with the dead zone / limit and the delay line.
         Ao, Bo, Co, Do, _, names_o = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping,
-                                                      amp_input=nonlinear_amp, delayed_sensor=bool(n_delay), **loop)
+                                                      amp_input=nonlinear_amp, delayed_sensor=bool(n_delay),
+                                                      mount_input=mount_in, **loop)
         assert names_o == names
         Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((Ao, Bo, Co, Do), dt, method="bilinear")
         keep = [j for j in range(Bd.shape[1]) if j != 2]          # Omega enters as a constant
-        col_amp = keep.index(3) if nonlinear_amp else -1
+        col_amp = keep.index(len(noise_cols) + 1) if nonlinear_amp else -1
         col_sd = keep.index(Bd.shape[1] - 1) if n_delay else -1
         # The delay line starts full of the steady sensed angle (the Tustin state's steady
         # state is the continuous one, so the continuous output row applies).
@@ -654,8 +811,10 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
 #: generate()'s keywords beyond the original ones, with their defaults (written to the file's
 #: meta only when given otherwise, so an old call's file keeps its meta).
 _NEW_DEFAULTS = dict(extra_damping_Nms=0.0, scale_factor_error=0.0, time_delay_s=0.0, ac_white_scale=1.0,
-                     ac_flicker_scale=1.0, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ, pickoff_white_scale=1.0,
-                     pickoff_lines=None, adc_range_V=ADC_RANGE_V, amp_dead_zone_V=0.0, amp_limit_V=math.inf,
+                     ac_flicker_scale=None, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ, ac_knee=1.0,
+                     ac_flicker_slope=1.0, flicker_corner_hz=0.0, mount_excitation=0.0, pickoff_white_scale=1.0,
+                     pickoff_lines=None, pickoff_line_freqs_hz=None, pickoff_line_scales=None,
+                     adc_range_V=ADC_RANGE_V, amp_dead_zone_V=0.0, amp_limit_V=math.inf,
                      amp_gain_factor=1.0, comp_zeros_rad_s=None, comp_poles_rad_s=None)
 
 
@@ -740,15 +899,17 @@ def draw_effect(name: str, rng: np.random.Generator) -> tuple[dict[str, Any], di
     if name == "bearing_friction":      # DESIGN.md: eta To^2 = 410 (X) / 380 (Y) N m/rad
         k = round(float(rng.uniform(300.0, 900.0)), 1)
         return {"stiffness_Nm_per_rad": k}, {"stiffness_Nm_per_rad": k}
-    if name == "mount_resonance":
+    if name == "mount_resonance":       # shaken by the floor too: peak x3-30 the unit's white (DESIGN.md 8)
         f, z = round(float(rng.uniform(25.0, 80.0)), 2), round(float(rng.uniform(0.02, 0.06)), 4)
-        return {"mount_freq_hz": f, "mount_damping": z}, {"freq_hz": f, "damping": z}
+        e = round(_log_uniform(rng, 3.0, 30.0), 3)
+        return ({"mount_freq_hz": f, "mount_damping": z, "mount_excitation": e},
+                {"freq_hz": f, "damping": z, "excitation": e})
     if name == "pickup_line":
         f, a = round(float(rng.uniform(30.0, 250.0)), 2), round(_log_uniform(rng, 0.002, 0.006), 5)
         return {"pickup": [(f, a)]}, {"freq_hz": f, "amplitude_V": a}
-    if name == "flicker_noise":         # well above the unit-to-unit corner (2-4 Hz, x0.36-1.96 level)
-        c = round(float(rng.uniform(15.0, 30.0)), 2)
-        return {"extra_flicker_corner_hz": c}, {"corner_hz": c}
+    if name == "flicker_noise":         # the unit's corner (1.5-5 Hz) replaced by one well above it
+        c = round(float(rng.uniform(12.0, 30.0)), 2)
+        return {"flicker_corner_hz": c}, {"corner_hz": c}
     if name == "offset_jumps":          # Ch. II B.10 saw ~100 urad every 40-400 s; smaller here
         a, t = round(float(rng.uniform(8.0, 20.0)), 2), round(float(rng.uniform(30.0, 60.0)), 1)
         return {"offset_jump_urad": a, "offset_jump_interval_s": t}, {"amplitude_urad": a, "interval_s": t}
