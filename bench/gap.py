@@ -9,6 +9,9 @@ every catalogue effect, joint re-fits, intervals):
   (``independent.draw_nuisance``) and two effects at once (a bearing and a pickup line), so
   two passes, a joint re-fit and the pruning run.
 
+Then the development set of another team's simulator (``bench/_devset.py``, issue 34 E): its
+twelve files scored by their own rules, the 95 % intervals' coverage and the time per file.
+
 The baseline measured in the same run is one simulation of the same record (what the workflow
 would cost if it only simulated the nominal model once). Benchmarks report, they never fail:
 the exit code is 0 and a missed target prints ``TARGET MISSED``. Usage: ``python bench/gap.py``.
@@ -78,6 +81,9 @@ def main() -> int:
     print(f"baseline: one simulation of the record {sim_s:.2f} s; slowest analysis = {worst / sim_s:.1f} x baseline")
     print(f"target <= {TARGET_S:.0f} s: slowest run {worst:.1f} s, ratio {worst / TARGET_S:.2f} of the target"
           + ("" if worst <= TARGET_S else "  TARGET MISSED"))
+    print("development set of an independent simulator (tests/data/gapdata):", flush=True)
+    devset = _load("fbs_bench_devset", Path(__file__).resolve().parent / "_devset.py")
+    devset.main(["--jobs", "1"])
     return 0
 
 

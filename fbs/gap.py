@@ -3,8 +3,10 @@
 ``--json`` prints one object with DESIGN section 7's keys (``effect``, ``parameters``,
 ``significant``, ``gap_before_db``, ``gap_after_db``, ``candidates``, ``file``) plus
 ``uncertainties`` and ``effects`` (every effect named, in the order found). ``--report DIR``
-writes ``model_before.h5``, ``model_after.h5``, the spectra plots and ``gap.md``. A file that
-cannot be analysed is an error naming the problem (exit 2).
+writes ``model_before.h5``, ``model_after.h5``, the spectra plots, ``gap.md`` and
+``refined.toml`` (the refined model as a sim config for ``fbs simulate --sim-config``); with
+``--report`` the JSON adds ``refined_config``, that file's path (null if none was written). A
+file that cannot be analysed is an error naming the problem (exit 2).
 """
 
 from __future__ import annotations
@@ -24,9 +26,21 @@ def _analyse(args: argparse.Namespace) -> GapResult:
     return analyse(args.file, axis=args.axis, options=opt, report_dir=args.report)
 
 
+def _refined_config(res: GapResult, report: str) -> str | None:
+    from procedures.analysis.gap.report import refined_config_path
+
+    path = refined_config_path(res, report)
+    return str(path) if path is not None else None
+
+
 def json_result(args: argparse.Namespace) -> dict[str, Any]:
-    """The object ``--json`` prints (``fbs batch gap`` collects the same)."""
-    return _analyse(args).to_json()
+    """The object ``--json`` prints (``fbs batch gap`` collects the same); with ``--report``
+    also ``refined_config``, the path of the refined model's sim config (``DIR/refined.toml``)."""
+    res = _analyse(args)
+    out = res.to_json()
+    if getattr(args, "report", None):
+        out["refined_config"] = _refined_config(res, args.report)
+    return out
 
 
 def _gap(args: argparse.Namespace) -> int:
@@ -62,7 +76,10 @@ def _gap(args: argparse.Namespace) -> int:
     for w in res.warnings:
         print(f"  warning: {w}")
     if args.report:
-        print(f"  wrote {args.report}/model_before.h5, model_after.h5, gap.md and plots")
+        refined = _refined_config(res, args.report)
+        print(f"  wrote {args.report}/model_before.h5, model_after.h5, gap.md and plots"
+              + (f"; the refined model as a sim config: {refined} (fbs simulate --sim-config {refined})" if refined
+                 else "; no refined sim config (see gap.md)"))
     return 0
 
 
@@ -72,8 +89,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     g.add_argument("file", metavar="FILE.h5", help="an fbs-run file (any writer)")
     g.add_argument("--json", action="store_true", help="one JSON object on stdout: effect, parameters (with uncertainties "
                    "and 95 %% intervals), significant, gap_before_db, gap_after_db, candidates, effects, explained, "
-                   "unexplained, file")
-    g.add_argument("--report", metavar="DIR", help="write model_before.h5, model_after.h5, plots and gap.md to DIR")
+                   "unexplained, file; with --report also refined_config, the path of DIR/refined.toml")
+    g.add_argument("--report", metavar="DIR", help="write model_before.h5, model_after.h5, plots, gap.md and "
+                   "refined.toml (the refined model as a sim config for --sim-config) to DIR")
     g.add_argument("--axis", help="platform axis X, Y or Z (default: the file's 'axis' attribute)")
     g.add_argument("--sim-config", help="TOML sim config the nominal model starts from (default: the data sheet)")
     g.add_argument("--seed", type=int, default=1, help="seed of the model simulations (default 1)")

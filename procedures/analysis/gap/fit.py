@@ -29,21 +29,25 @@ from typing import Any
 import numpy as np
 import scipy.optimize
 
-from procedures.analysis.gap.model import PARTS, ModelSpectrum, SpectralModel
+from procedures.analysis.gap.model import PARTS, ModelSpectrum, SpectralModel, knee, knee_gradient
 from simhw.effects import Effect, Param
 from simhw.params import SimConfig
 
 log = logging.getLogger(__name__)
 
-#: Nuisance scales (of a part's power) are searched within this factor of the data sheet's
-#: noise levels: the noise sources', and each pickoff line's (amplitude x 0.25 .. 4).
-NUISANCE_RANGE = 4.0
-LINE_RANGE = 16.0
-#: The autocollimator's own 1/f level may differ from its white level's scaling by this factor
-#: (its corner within 1-9 Hz; DESIGN.md section 3: "1/f below ~3 Hz"; an independent
-#: unit-to-unit draw of 1/f level x0.6-1.4 rms, corner 2-4 Hz and white x0.6-1.4 rms puts 80 %
-#: of corners within 1.1-7.6 Hz).
-FLICKER_SHAPE_RANGE = 3.0
+#: The nominal unit (DESIGN.md section 8): what a unit may differ from the data sheet by, and
+#: no more. Power scales of the autocollimator's white noise (amplitude x0.6 .. x1.6), of the
+#: gyro pickoff's white noise (x0.5 .. x2) and of each pickoff line (x0.5 .. x2); the 1/f knee's
+#: corner (1.5 .. 5 Hz about the data sheet's 3: x1/2 .. x5/3 of the configuration's), its form
+#: (any between max(1, fc/f) and 1 + fc/f) and its slope (-0.8 .. -1.2: +-0.2 about the
+#: configuration's). Beyond these is an effect.
+AC_WHITE_RANGE = (0.6**2, 1.6**2)
+PICKOFF_RANGE = (0.5**2, 2.0**2)
+LINE_RANGE = (0.5**2, 2.0**2)
+CORNER_RANGE = (0.5, 5.0 / 3.0)
+SLOPE_SPAN = 0.2
+#: the azimuth autocollimator's pure 1/f level (its data sheet gives only one NEA)
+AZIMUTH_RANGE = (0.25, 4.0)
 
 
 def whittle_nll(P: np.ndarray, S: np.ndarray, dof: np.ndarray) -> float:
@@ -58,57 +62,158 @@ class NuisanceFit:
     S: np.ndarray
 
 
-def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum, hold: frozenset[str] = frozenset(),
-                 offsets: dict[str, float] | None = None) -> NuisanceFit:
-    """Noise scales of the nuisance parts that minimize the Whittle likelihood (analytic gradient).
+def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
+                 hold: frozenset[str] = frozenset(), start: dict[str, float] | None = None) -> NuisanceFit:
+    """The nominal unit's noise that minimizes the Whittle likelihood (analytic gradient).
 
-    Each part's power scale is free within its range, but the autocollimator's own 1/f
-    ("ac_flicker") moves with its white ("ac") and differs from it only by a shape factor within
-    ``FLICKER_SHAPE_RANGE`` (a corner from 1 to 9 Hz around the data sheet's 3 Hz); an excess
-    1/f ("ac_excess") moves with the white and has no freedom of its own; a part in ``hold``
-    (one an effect in the model describes itself) has none either, its shape factor staying at
-    1 or at ``offsets[part]`` (a natural log: the ends of its range bound the systematic error
-    of the effect that holds it, ``Fitter.held_envelope``).
+    Free within the nominal unit's envelope (DESIGN.md section 8): the power scale of the
+    autocollimator's white ("ac"), its 1/f knee (corner ``ac_corner_hz``, form ``ac_knee``,
+    slope ``ac_slope``; ``model.knee``), the pickoff's white ("pickoff") and each pickoff line
+    ("line0", ...). A part in ``hold`` (one an effect in the model describes itself) is held at
+    the configuration's: "ac_flicker" in ``hold`` holds the knee's corner (the ``flicker_noise``
+    effect sets it; the form and slope stay the unit's). The knee's form makes the likelihood
+    kinked, so the search starts from both forms and between them, or only from ``start`` (the
+    scales of a fit nearby: an effect's trials barely move the unit's noise).
     """
-    active = [p for p in ms.parts if p != "fixed" and np.any(ms.parts[p] > 0)]
+    parts = {p: v for p, v in ms.parts.items() if p != "fixed" and np.any(v > 0)}
     fixed = ms.parts["fixed"]
-    comps = [ms.parts[p] for p in active]
-    tied = [p for p in ("ac_flicker", "ac_excess") if p in active]  # move with "ac"
-    # log scale of each active part = M @ u + u0, u the free parameters within ``bounds``
-    u0 = np.array([(offsets or {}).get(p, 0.0) if p in hold else 0.0 for p in active])
-    columns: list[np.ndarray] = []
+    names: list[str] = []          # free parameters, in the vector's order
     bounds: list[tuple[float, float]] = []
+    x0: list[float] = []
 
-    def free(rows: list[int], limit: float) -> None:
-        col = np.zeros(len(active))
-        col[rows] = 1.0
-        columns.append(col)
-        bounds.append((-math.log(limit), math.log(limit)))
+    def free(name: str, lo: float, hi: float, start: float) -> None:
+        names.append(name)
+        bounds.append((lo, hi))
+        x0.append(min(max(start, lo), hi))
 
-    for i, p in enumerate(active):
-        if p in ("ac_flicker", "ac_excess"):
+    shaped = "ac" in parts and ms.shape is not None and ms.f is not None
+    for p in parts:
+        if p in hold or p == "ac_excess":
             continue
-        rows = [i] + ([active.index(t) for t in tied] if p == "ac" else [])
-        if p not in hold:
-            free(rows, LINE_RANGE if p not in PARTS else NUISANCE_RANGE)
-    if "ac_flicker" in active and "ac_flicker" not in hold:
-        free([active.index("ac_flicker")], FLICKER_SHAPE_RANGE if "ac" in active else NUISANCE_RANGE)
-    M = np.array(columns).T if columns else np.zeros((len(active), 0))
+        if p == "ac":
+            free("ac", *_log_range(AC_WHITE_RANGE), 0.0)
+        elif p == "pickoff":
+            free(p, *_log_range(PICKOFF_RANGE), 0.0)
+        elif p == "ac_flicker":
+            free(p, *_log_range(AZIMUTH_RANGE), 0.0)
+        elif p not in PARTS:
+            free(p, *_log_range(LINE_RANGE), 0.0)
+    if shaped:
+        assert ms.shape is not None
+        fc0, form0, slope0 = ms.shape
+        if "ac_flicker" not in hold and fc0 > 0:
+            free("ac_corner_hz", math.log(fc0 * CORNER_RANGE[0]), math.log(fc0 * CORNER_RANGE[1]), math.log(fc0))
+        free("ac_knee", 0.0, 1.0, 0.5)
+        free("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0)
+    f_band = ms.f if ms.f is not None else np.ones(fixed.shape[1])
+    shape0 = ms.shape or (0.0, 1.0, 1.0)
 
-    def f(u: np.ndarray) -> tuple[float, np.ndarray]:
-        s = np.exp(M @ u + u0)
-        S = fixed + sum(si * c for si, c in zip(s, comps))
-        S = np.maximum(S, 1e-300)
-        w = 0.5 * dof * (1.0 / S - P / S**2)
-        grad = np.array([np.sum(w * c) * si for si, c in zip(s, comps)])
-        return whittle_nll(P, S, dof), M.T @ grad
+    def unpack(x: np.ndarray) -> dict[str, float]:
+        v = dict(zip(names, x.tolist()))
+        sc = {p: 1.0 for p in parts}
+        for p in parts:
+            if p in v:
+                sc[p] = math.exp(v[p])
+        if "ac_excess" in parts:
+            sc["ac_excess"] = sc.get("ac", 1.0)
+        if shaped:
+            sc["ac_corner_hz"] = math.exp(v["ac_corner_hz"]) if "ac_corner_hz" in v else shape0[0]
+            sc["ac_knee"] = v.get("ac_knee", shape0[1])
+            sc["ac_slope"] = v.get("ac_slope", shape0[2])
+        return sc
 
-    u = np.zeros(M.shape[1])
-    if M.shape[1]:
-        u = scipy.optimize.minimize(f, u, jac=True, method="L-BFGS-B", bounds=bounds).x
-    scales = dict(zip(active, np.exp(M @ u + u0).tolist()))
+    lo_b, hi_b = np.array([b[0] for b in bounds]), np.array([b[1] for b in bounds])
+    half_dof = 0.5 * np.broadcast_to(dof, fixed.shape).ravel()
+
+    def spectrum_and_jacobian(x: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """S and dS/dx_i of every free parameter."""
+        sc = unpack(x)
+        K = knee(f_band, sc["ac_corner_hz"], sc["ac_knee"], sc["ac_slope"]) if shaped else 1.0
+        S = np.array(fixed, float)
+        terms: dict[str, np.ndarray] = {}
+        for p, part in parts.items():
+            t = part * sc[p] * (K if p == "ac" else 1.0)
+            terms[p] = t
+            S = S + t
+        jac: dict[str, np.ndarray] = {n: terms[n] for n in names if n in terms}
+        if "ac" in jac:
+            jac["ac"] = terms["ac"] + terms.get("ac_excess", 0.0)
+        if shaped:
+            d_fc, d_form, d_slope = knee_gradient(f_band, sc["ac_corner_hz"], sc["ac_knee"], sc["ac_slope"])
+            base = parts["ac"] * sc["ac"]
+            for key, d in (("ac_corner_hz", d_fc), ("ac_knee", d_form), ("ac_slope", d_slope)):
+                if key in names:
+                    jac[key] = base * d
+        return np.maximum(S, 1e-300), [jac[n] for n in names]
+
+    def scoring(x: np.ndarray) -> tuple[np.ndarray, float]:
+        """Bounded Fisher scoring (Levenberg-Marquardt damped): the Whittle likelihood's
+        expected curvature sum nu/2 J_i J_j / S^2 is its exact Hessian at the optimum and
+        positive definite everywhere, so a few steps converge (L-BFGS-B took ~30 evaluations
+        and most of the analysis's time in its own bookkeeping)."""
+        S, J = spectrum_and_jacobian(x)
+        nll = whittle_nll(P, S, dof)
+        lam = 1e-3
+        for _ in range(60):
+            Jm = np.array(J).reshape(len(J), -1)
+            w = (0.5 * dof * (1.0 / S - P / S**2)).ravel()
+            g = Jm @ w
+            JS = Jm / S.ravel()
+            H = (JS * half_dof) @ JS.T
+            # parameters at a bound the gradient pushes against stay there
+            stuck = ((x <= lo_b + 1e-12) & (g > 0)) | ((x >= hi_b - 1e-12) & (g < 0))
+            act = ~stuck
+            if not act.any():
+                break
+            improved = False
+            while lam < 1e8:
+                Ha = H[np.ix_(act, act)]
+                step = np.zeros_like(x)
+                try:
+                    step[act] = -np.linalg.solve(Ha + lam * np.diag(np.diag(Ha) + 1e-12), g[act])
+                except np.linalg.LinAlgError:
+                    lam *= 10.0
+                    continue
+                xn = np.clip(x + step, lo_b, hi_b)
+                Sn, Jn = spectrum_and_jacobian(xn)
+                nll_n = whittle_nll(P, Sn, dof)
+                if nll_n <= nll:
+                    improved = True
+                    lam = max(lam / 10.0, 1e-6)
+                    done = nll - nll_n < 1e-6 * (1.0 + abs(nll)) * 1e-3 or np.max(np.abs(xn - x)) < 1e-7
+                    x, S, J, nll = xn, Sn, Jn, nll_n
+                    break
+                lam *= 10.0
+            if not improved or done:
+                break
+        return x, nll
+
+    x = np.array(x0, float)
+    if names:
+        starts = [x] + ([_with(x, names, "ac_knee", v) for v in (0.0, 1.0)] if "ac_knee" in names else [])
+        if start is not None:
+            starts = [np.clip([_coordinate(n, start) for n in names], lo_b, hi_b)]
+        x = min((scoring(s0) for s0 in starts), key=lambda r: r[1])[0]
+    scales = unpack(x)
     S = ms.total(scales)
     return NuisanceFit(scales, whittle_nll(P, S, dof), S)
+
+
+def _coordinate(name: str, scales: dict[str, float]) -> float:
+    """A nuisance parameter's search coordinate from a fit's scales (log for scales, corner)."""
+    if name in ("ac_knee", "ac_slope"):
+        return scales.get(name, 0.5 if name == "ac_knee" else 1.0)
+    return math.log(max(scales.get(name, 1.0), 1e-300))
+
+
+def _log_range(r: tuple[float, float]) -> tuple[float, float]:
+    return math.log(r[0]), math.log(r[1])
+
+
+def _with(x: np.ndarray, names: list[str], key: str, value: float) -> np.ndarray:
+    y = x.copy()
+    y[names.index(key)] = value
+    return y
 
 
 @dataclass
@@ -150,6 +255,8 @@ def _from_unit(p: Param, t: float) -> float:
 #: ("sandwich") covariance: a model error is smooth across neighbouring 1/24-octave bands, so
 #: their scores are not independent.
 CLUSTER_BANDS = 4
+#: added to the negative log-likelihood of a model whose closed loop is unstable
+UNSTABLE_PENALTY = 1e12
 Z95 = 1.959964
 
 
@@ -163,20 +270,22 @@ class Fitter:
         self.evaluations = 0
         #: nuisance parts held because an effect already in the model describes them
         self.hold: frozenset[str] = frozenset()
+        #: the last base model's noise: where an effect's trials start their noise fit
+        self.near: dict[str, float] | None = None
 
     def base(self, cfg: SimConfig) -> NuisanceFit:
-        return fit_nuisance(self.P, self.dof, self.model(cfg), self.hold)
+        nf = fit_nuisance(self.P, self.dof, self.model(cfg), self.hold)
+        self.near = nf.scales
+        return nf
 
     def fit(self, effect: Effect, base_cfg: SimConfig, evidence: Any, *, refine: bool = True,
-            errors: bool = True, start: dict[str, float] | None = None,
-            offsets: dict[str, float] | None = None) -> EffectFit | None:
+            errors: bool = True, start: dict[str, float] | None = None) -> EffectFit | None:
         """The maximum-likelihood fit of ``effect`` on ``base_cfg``; None if it does not apply.
         Without ``refine``, the best of the starting points (a screening); without ``errors``,
         no curvature (NaN uncertainties). ``start``: begin from these values instead of the
         prior grid and the guesses (and hold what it gives of the parameters the spectra cannot
         see). A guess that gives such a parameter (a line's frequency measured in the time
-        series, a jump's size) is a candidate of its own: each is fitted and the best kept.
-        ``offsets``: the shape factors (natural log) of the nuisance parts the effect holds."""
+        series, a jump's size) is a candidate of its own: each is fitted and the best kept."""
         fitted = effect.fit_params
         defaults: dict[str, float] = {p.name: p.default for p in effect.params if p not in fitted}
         guesses = effect.guess(evidence) if effect.guess else []
@@ -193,14 +302,14 @@ class Fitter:
         best: EffectFit | None = None
         for held in held_sets or [defaults]:
             f = self._fit_held(effect, base_cfg, evidence, held, guesses, refine=refine, errors=errors,
-                               start=start, offsets=offsets)
+                               start=start)
             if f is not None and (best is None or f.nll < best.nll):
                 best = f
         return best
 
     def _fit_held(self, effect: Effect, base_cfg: SimConfig, evidence: Any, held: dict[str, float],
                   guesses: list[dict[str, float]], *, refine: bool, errors: bool,
-                  start: dict[str, float] | None, offsets: dict[str, float] | None) -> EffectFit | None:
+                  start: dict[str, float] | None) -> EffectFit | None:
         fitted = effect.fit_params
         try:
             effect.inject(base_cfg, self.axis, **{p.name: p.default for p in fitted}, **held)
@@ -219,9 +328,11 @@ class Fitter:
             if key not in cache:
                 vals = {p.name: _from_unit(p, ti) for p, ti in zip(fitted, key)}
                 cfg = effect.inject(base_cfg, self.axis, **vals, **held)
-                nf = fit_nuisance(self.P, self.dof, self.model(cfg), hold, offsets)
+                ms = self.model(cfg)
+                nf = fit_nuisance(self.P, self.dof, ms, hold, self.near)
                 self.evaluations += 1
-                cache[key] = (nf.nll, nf, cfg)
+                # a loop that diverges could not have made the record: never a candidate
+                cache[key] = (nf.nll if ms.stable else nf.nll + UNSTABLE_PENALTY, nf, cfg)
             return cache[key][0]
 
         def spectrum(t: np.ndarray) -> np.ndarray:
@@ -263,30 +374,6 @@ class Fitter:
                         errs[k] = sd
                         intervals[k] = (params[k] - Z95 * sd, params[k] + Z95 * sd)
         return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S, intervals=intervals)
-
-    def held_envelope(self, effect: Effect, base_cfg: SimConfig, evidence: Any, found: EffectFit) -> EffectFit:
-        """``found`` with its intervals widened by what the nuisance it holds leaves open.
-
-        An effect that owns a nuisance part holds that part's shape at the data sheet's (the
-        ``flicker_noise`` effect's excess 1/f and the unit's own 1/f have one shape and cannot
-        be told apart): its estimate moves as that shape moves within its range. The interval
-        is the union of the statistical intervals refitted with the held shape at each end of
-        its range (a systematic error is bounded, not averaged)."""
-        ranges = {p: FLICKER_SHAPE_RANGE for p in effect.owns if p == "ac_flicker"}
-        if not ranges or not found.intervals:
-            return found
-        lo = dict((k, v[0]) for k, v in found.intervals.items())
-        hi = dict((k, v[1]) for k, v in found.intervals.items())
-        for sign in (-1.0, 1.0):
-            alt = self.fit(effect, base_cfg, evidence, start=found.params,
-                           offsets={p: sign * math.log(r) for p, r in ranges.items()})
-            if alt is None:
-                continue
-            for k, (a, b) in alt.intervals.items():
-                if k in lo:
-                    lo[k], hi[k] = min(lo[k], a), max(hi[k], b)
-        found.intervals = {k: (lo[k], hi[k]) for k in lo}
-        return found
 
     def _errors(self, evaluate, spectrum, t: np.ndarray,
                 fitted: tuple[Param, ...]) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:

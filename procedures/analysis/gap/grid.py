@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.signal
 
-from daq.spectra import equivalent_dof, n_segments, psd
+from daq.spectra import equivalent_dof, n_segments, psd, welch_csd_matrix
 
 #: Bins per band below which a band's bins are all evaluated by the model; above, a subset.
 MODEL_POINTS_PER_BAND = 8
@@ -135,3 +135,33 @@ def bin_spectra(x: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
 def band_spectra(x: np.ndarray, grid: Grid) -> np.ndarray:
     """Band-averaged one-sided Welch PSD of each row of ``x`` (n_channels, n) -> (n_channels, n_bands)."""
     return grid.band_mean(bin_spectra(x, grid)[1])
+
+
+def channel_weights(x: np.ndarray, grid: Grid) -> np.ndarray:
+    """Each (channel, band)'s share of the evidence, (n_channels, n_bands): 1 / sum_d gamma^2_cd
+    over the channels d (itself included), gamma^2 the band's magnitude-squared coherence
+    (eq. 4.44) from the record's cross-spectral matrix.
+
+    The channels are one measurement, not independent evidence (DESIGN.md section 8): the two
+    autocollimator channels see one angle and one noise, and the power amplifier's input is the
+    compensation network's image of the control channel, so in Mode 3 three of the four
+    channels carry one spectrum (coherence near 1) and the gyro sees the platform through a
+    noise of its own. Summing their Whittle terms as independent counts that spectrum three
+    times, and a noise level the model misses by a little outweighs the plant physics the
+    gyro tells apart. Weighting each channel's term by the inverse of its coherent
+    multiplicity is the composite likelihood of the cross-spectral matrix's diagonal [Lindsay
+    1988; Varin, Reid and Firth 2011]: coherent channels count once together, an incoherent
+    channel counts in full, and the weights, fixed by the record, are the same for every model
+    compared."""
+    x = np.atleast_2d(x)
+    if x.shape[0] == 1:
+        return np.ones((1, grid.n_bands))
+    _, S = welch_csd_matrix(x, grid.rate_hz, window="hann", nperseg=grid.nperseg, noverlap=grid.noverlap,
+                            detrend="linear")
+    S = S[grid.bins]
+    n = x.shape[0]
+    band = np.zeros((grid.n_bands, n, n), complex)
+    np.add.at(band, grid.band_of_bin, S)
+    d = np.maximum(np.real(np.einsum("bii->bi", band)), 1e-300)
+    gamma2 = np.abs(band) ** 2 / (d[:, :, None] * d[:, None, :])
+    return (1.0 / np.clip(gamma2, 0.0, 1.0).sum(axis=2)).T

@@ -34,14 +34,32 @@ from procedures.analysis.gap.grid import Grid
 from simhw.params import SimConfig
 from simhw.plant import RelayState, build_plant, discretize
 from simhw.sampling import anti_alias_sos, internal_rate
-from simhw.simulator import Sources, ac_white_psd
+from simhw.simulator import Sources, ac_knee, ac_white_psd
 
-#: Parts of the spectrum whose level is a nuisance parameter: the axis's autocollimator white
-#: noise ("ac") and its own 1/f noise ("ac_flicker"), and the gyro pickoff's white noise; the
-#: axis gyro's pickoff lines are nuisance parts of their own (``line_part``). An excess 1/f (the
-#: ``flicker_noise`` effect, "ac_excess") is physics, not nuisance: its corner is where it meets
-#: the unit's white level, so its power moves with "ac" and has no freedom of its own.
+#: Parts of the spectrum whose level is a nuisance parameter: the axis's autocollimator noise
+#: ("ac": the response to its white level, times the unit's 1/f knee ``ac_knee`` when the axis
+#: has a primary autocollimator; the azimuth autocollimator's pure 1/f is "ac_flicker"), and
+#: the gyro pickoff's white noise; the axis gyro's pickoff lines are nuisance parts of their own
+#: (``line_part``). An excess 1/f from an old configuration's ``extra_flicker_corner_hz``
+#: ("ac_excess") moves with "ac".
 PARTS = ("ac", "ac_flicker", "ac_excess", "pickoff", "fixed")
+
+#: the nuisance keys of the autocollimator's 1/f knee (DESIGN.md section 8): its corner (Hz),
+#: its form (0 = max(1, r), 1 = 1 + r) and its slope, r = (corner / f)^slope
+SHAPE_KEYS = ("ac_corner_hz", "ac_knee", "ac_slope")
+
+
+#: K(f) of the nominal unit's 1/f knee: the one the simulator realizes (DESIGN.md section 8)
+knee = ac_knee
+
+
+def knee_gradient(f: np.ndarray, corner_hz: float, form: float, slope: float) -> tuple[np.ndarray, ...]:
+    """dK/d ln(corner), dK/d form, dK/d slope of :func:`knee` (K = form (1 + r) + (1 - form)
+    max(1, r), r = (corner/f)^slope)."""
+    ln = np.log(corner_hz / np.asarray(f, float))
+    r = np.exp(slope * ln)
+    dk_dr = form + (1.0 - form) * (r > 1.0)
+    return dk_dr * slope * r, np.minimum(1.0, r), dk_dr * r * ln
 
 
 def line_part(k: int) -> str:
@@ -49,12 +67,13 @@ def line_part(k: int) -> str:
     return f"line{k}"
 
 
-def part_of(input_name: str, kind: str, axis: str) -> str:
-    """Which part of the spectrum a noise source feeds."""
+def part_of(input_name: str, kind: str, axis: str) -> str | None:
+    """Which part of the spectrum a noise source feeds (None: the primary autocollimator's 1/f
+    bank, which the analytic knee replaces)."""
     if input_name == f"nac_{axis}" and kind == "WhiteNoise":
         return "ac"
     if input_name == f"nac_{axis}" and kind == "FlickerNoise":
-        return "ac_flicker"
+        return "ac_flicker" if axis == "Z" else None
     if input_name == f"nac_{axis}" and kind == "ExcessFlickerNoise":
         return "ac_excess"
     if input_name == f"np_{axis}" and kind == "WhiteNoise":
@@ -62,25 +81,32 @@ def part_of(input_name: str, kind: str, axis: str) -> str:
     return "fixed"
 
 
+def ac_shape(cfg: SimConfig, axis: str) -> tuple[float, float, float]:
+    """The configuration's own 1/f knee of the axis autocollimator: (corner Hz, form, slope)."""
+    ac = cfg.autocollimator[axis]
+    return (ac.flicker_corner_hz, float(getattr(ac, "flicker_knee", 1.0)), float(getattr(ac, "flicker_slope", 1.0)))
+
+
 def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimConfig:
-    """A copy of ``cfg`` whose noise levels are the fitted nuisance scales of the parts. The
-    autocollimator's white PSD scales by ``ac`` and its own 1/f PSD by ``ac_flicker``: in the
-    simulator's terms (white level from the NEA and the corner, 1/f level = white x corner,
-    ``simhw.simulator.ac_white_psd``) the corner moves by their ratio and the NEA follows; an
-    excess 1/f (the ``flicker_noise`` effect, level = white x its corner) follows the white. The azimuth autocollimator's
-    noise is 1/f only (``ac_flicker``). The pickoff's white PSD is the quoted rms's variance less
-    the lines' (``simhw.simulator.pickoff_white_psd``); each line's power scales by its part's."""
+    """A copy of ``cfg`` whose noise is the fitted nuisance: the autocollimator's white PSD
+    scaled by ``ac`` with the fitted knee (``SHAPE_KEYS``: corner, form, slope; the NEA follows
+    from them, ``simhw.simulator.ac_white_psd``); the azimuth autocollimator's 1/f by
+    ``ac_flicker``; the pickoff's white PSD (the quoted rms's variance less the lines',
+    ``simhw.simulator.pickoff_white_psd``) by ``pickoff``; each line's power by its part's."""
     cfg = cfg.copy()
-    s_w, s_f, s_np = scales.get("ac", 1.0), scales.get("ac_flicker", 1.0), scales.get("pickoff", 1.0)
+    s_w, s_np = scales.get("ac", 1.0), scales.get("pickoff", 1.0)
     if axis in cfg.autocollimator:
         ac = cfg.autocollimator[axis]
-        white = ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s, ac.control_filter_zeta)
-        corner = ac.flicker_corner_hz * s_f / s_w
-        moved = ac_white_psd(ac.nea_urad, corner, ac.control_filter_rad_per_s, ac.control_filter_zeta)
+        fc0, form0, slope0 = ac_shape(cfg, axis)
+        w, z = ac.control_filter_rad_per_s, ac.control_filter_zeta
+        white = ac_white_psd(ac.nea_urad, fc0, w, z, knee=form0, slope=slope0)
+        fc = scales.get("ac_corner_hz", fc0)
+        form, slope = scales.get("ac_knee", form0), scales.get("ac_slope", slope0)
+        moved = ac_white_psd(ac.nea_urad, fc, w, z, knee=form, slope=slope)
         ac.nea_urad *= math.sqrt(s_w * white / moved)
-        ac.flicker_corner_hz = corner
+        ac.flicker_corner_hz, ac.flicker_knee, ac.flicker_slope = fc, form, slope
     elif axis == "Z":
-        cfg.azimuth.nea_urad *= math.sqrt(s_f)
+        cfg.azimuth.nea_urad *= math.sqrt(scales.get("ac_flicker", 1.0))
     g = cfg.gyro[axis]
     white = max(s_np * (g.pickoff_noise_rms_urad**2 - sum(a * a / 2 for _, a in g.pickoff_lines)), 0.0)
     g.pickoff_lines = [[f0, a * math.sqrt(scales.get(line_part(k), 1.0))] for k, (f0, a) in enumerate(g.pickoff_lines)]
@@ -90,15 +116,37 @@ def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimCo
 
 @dataclass
 class ModelSpectrum:
-    """Band spectra of the analysed channels, (n_channels, n_bands) per part."""
+    """Band spectra of the analysed channels, (n_channels, n_bands) per part, and the
+    configuration's own 1/f knee (``shape``: corner, form, slope) at the bands' centres ``f``.
+    The "ac" part is the response to the autocollimator's white level; its total is that part
+    times the knee (``knee``), at the shape given in the scales (``SHAPE_KEYS``) or the
+    configuration's."""
 
     channels: tuple[str, ...]
     parts: dict[str, np.ndarray]
+    f: np.ndarray | None = None
+    shape: tuple[float, float, float] | None = None
+    #: the closed loop is stable: a model whose loop diverges has no stationary spectrum, and
+    #: could not have made a record (its "expected spectrum" is no prediction of anything)
+    stable: bool = True
+
+    def ac_knee(self, scales: dict[str, float] | None = None) -> np.ndarray | float:
+        """K(f) of the bands at the scales' knee (or the configuration's)."""
+        if self.f is None or self.shape is None:
+            return 1.0
+        scales = scales or {}
+        fc, form, slope = (scales.get(k, d) for k, d in zip(SHAPE_KEYS, self.shape))
+        return knee(self.f, fc, form, slope)
 
     def total(self, scales: dict[str, float] | None = None) -> np.ndarray:
         scales = scales or {}
-        return sum((part * scales.get(name, 1.0) for name, part in self.parts.items()),
-                   np.zeros_like(self.parts["fixed"]))
+        out = np.array(self.parts["fixed"], float)
+        for name, part in self.parts.items():
+            if name == "fixed":
+                continue
+            s = scales.get(name, 1.0) if name != "ac_excess" else scales.get("ac", 1.0)
+            out = out + part * s * (self.ac_knee(scales) if name == "ac" else 1.0)
+        return out
 
 
 #: Equivalent viscous damping of a Dahl bearing under the rig's random motion, per unit
@@ -112,7 +160,10 @@ DAHL_DAMPING = 2.25e-5
 
 def linearized(cfg: SimConfig) -> SimConfig:
     """The plant the spectra see: each Dahl bearing as its spring eta To^2 plus the equivalent
-    damping of its hysteresis (random-input linearization)."""
+    damping of its hysteresis (random-input linearization). Without a Dahl bearing, ``cfg``
+    itself (read only: a copy costs more than the rest of a model evaluation)."""
+    if not any(b.model == "dahl" for b in cfg.bearing.values()):
+        return cfg
     out = cfg.copy()
     for axis, b in out.bearing.items():
         if b.model == "dahl":
@@ -208,6 +259,8 @@ class SpectralModel:
         self._cache: dict[str, tuple] = {}
         self._source_cache: dict[tuple, list[dict]] = {}
         self._aa_cache: dict[tuple, np.ndarray] = {}
+        self._aa_alias_cache: dict[tuple, list[np.ndarray]] = {}
+        self._kernel_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self.plant_evaluations = 0
 
     def _plant(self, cfg: SimConfig, dt: float):
@@ -240,7 +293,8 @@ class SpectralModel:
             H = frequency_response(disc.Ad, disc.Bd[:, cols], C, D, z)
         n = len(f_eval)
         H_alias = [H[i * n:(i + 1) * n] for i in range(len(aliases))]
-        result = (aliases, H_alias, H[len(aliases) * n:])
+        stable = bool(np.max(np.linalg.eigvals(plant.A).real) < 0.0)
+        result = (aliases, H_alias, H[len(aliases) * n:], stable)
         if len(self._cache) > 256:
             self._cache.clear()
         self._cache[key] = result
@@ -260,8 +314,8 @@ class SpectralModel:
                          for a, cache in zip(probe, caches)]
             for kind in per_alias[0]:
                 s = [np.where(np.isnan(a), 0.0, sp[kind]) for a, sp in zip(probe, per_alias)]
-                if any(np.any(x > 0) for x in s):
-                    part = part_of(name, kind, self.axis)
+                part = part_of(name, kind, self.axis)
+                if part is not None and any(np.any(x > 0) for x in s):
                     acc = spectra.setdefault(name, {}).get(part)
                     spectra[name][part] = s if acc is None else [x + y for x, y in zip(acc, s)]
         fs = self.grid.rate_hz
@@ -289,9 +343,12 @@ class SpectralModel:
         spectra, line_list = self._sources(cfg, m, dt, probe)
         inputs = sorted(set(spectra) | {name for name, _, _ in line_list})
         line_freqs = np.array([f0 for _, f0, _ in line_list], float)
-        aliases, H_alias, H_lines = self._responses(cfg, m, dt, inputs, line_freqs)
+        aliases, H_alias, H_lines, stable = self._responses(cfg, m, dt, inputs, line_freqs)
         aa2 = self._aa2(cfg, m)
-        aa_alias = [aa2(a) for a in aliases]
+        aa_key = (m, dt, cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction)
+        aa_alias = self._aa_alias_cache.get(aa_key)
+        if aa_alias is None:
+            aa_alias = self._aa_alias_cache[aa_key] = [aa2(a) for a in aliases]
 
         nch = len(self.channels)
         parts = {p: np.zeros((nch, grid.n_bands)) for p in PARTS}
@@ -315,18 +372,24 @@ class SpectralModel:
                 self._add_line(per_bin, f0, amp)
         for p in cfg.pickup:
             if p.channel in self.channels and 0 < p.freq_hz < fs * m / 2:
-                g = math.sqrt(aa2(p.freq_hz)[0])
+                gain = math.sqrt(aa2(p.freq_hz)[0])
                 amp = np.zeros(nch)
-                amp[self.channels.index(p.channel)] = p.amplitude_V * g
+                amp[self.channels.index(p.channel)] = p.amplitude_V * gain
                 self._add_line(per_bin, p.freq_hz, amp)
         parts["fixed"] += grid.band_mean(per_bin) + self.quant[:, None]
-        return ModelSpectrum(self.channels, parts)
+        shape = ac_shape(cfg, self.axis) if self.axis in cfg.autocollimator else None
+        return ModelSpectrum(self.channels, parts, grid.band_center_hz, shape, stable)
 
     def _add_line(self, per_bin: np.ndarray, f0: float, amplitudes: np.ndarray) -> None:
         fs = self.grid.rate_hz
         fo = f0 % fs
         fo = fs - fo if fo > fs / 2 else fo  # the decimator folds it
-        pos, kern = hann_line_kernel(self.grid, fo, 1.0)
+        hit = self._kernel_cache.get(fo)
+        if hit is None:
+            if len(self._kernel_cache) > 1024:
+                self._kernel_cache.clear()
+            hit = self._kernel_cache[fo] = hann_line_kernel(self.grid, fo, 1.0)
+        pos, kern = hit
         if len(pos):
             per_bin[:, pos] += np.asarray(amplitudes)[:, None] ** 2 * kern[None, :]
 

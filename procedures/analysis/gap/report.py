@@ -1,13 +1,23 @@
-"""``fbs gap --report DIR``: spectra plots (measured, nominal, refined) and ``gap.md``."""
+"""``fbs gap --report DIR``: spectra plots (measured, nominal, refined), ``gap.md`` and
+``refined.toml``, the refined model as a sim config (DESIGN.md section 8: a named effect is
+written into the model as a TOML file ``fbs simulate --sim-config`` and ``fbs run --sim-config``
+accept)."""
 
 from __future__ import annotations
 
+import logging
 from pathlib import Path
 
 import numpy as np
 
 from daq.plots import new_figure, save_figure
 from procedures.analysis.gap.workflow import GapResult
+from simhw.config_dump import dump_config
+
+log = logging.getLogger(__name__)
+
+#: the refined model's sim config in the report directory
+REFINED_NAME = "refined.toml"
 
 
 def plot_spectra(res: GapResult, path: Path) -> Path:
@@ -61,7 +71,65 @@ def plot_ratio(res: GapResult, path: Path) -> Path:
     return save_figure(fig, path)
 
 
-def markdown(res: GapResult) -> str:
+def refined_header(res: GapResult) -> str:
+    """The comment block of ``refined.toml``: what it was fitted to, the effects and their
+    parameters, the noise levels, and how to use it."""
+    lines = [f"fbs gap: the refined model of {res.file}",
+             f"(axis {res.axis}, mode {res.mode}, {res.duration_s:.0f} s at {res.rate_hz:g} Hz; "
+             f"channels {', '.join(res.channels)})", ""]
+    if res.findings:
+        lines.append("Effects named, in the order found, on axis " + res.axis + " (95 % intervals in brackets):")
+        lines += [f"  {i}. {f.effect}: {f.parameter_text()}" for i, f in enumerate(res.findings, 1)]
+    else:
+        lines.append("No effect named: the nominal model with the noise levels fitted to the measurement.")
+    if res.unexplained:
+        lines.append("A significant departure remains that no catalogue effect explains: this model does not close it.")
+    lines += [f"Noise levels fitted (scale of the data sheet's PSD): {_fmt(res.scales_after)}.",
+              "The nominal model omits the gimbal-bearing torque (DESIGN.md section 8): a bearing without a",
+              'named bearing_friction is model = "none" here.',
+              "Only the values that differ from the data sheet (simhw.params.SimConfig()) are written;",
+              "load_config overlays them on it.", "",
+              "Use:",
+              f"  fbs simulate --sim-config {REFINED_NAME} --mode {res.mode} --duration {res.duration_s:g} "
+              f"--rate {res.rate_hz:g} --out refined.h5",
+              f"  fbs run PROCEDURE --sim-config {REFINED_NAME}"]
+    return "\n".join(lines)
+
+
+def write_refined(res: GapResult, out: Path) -> tuple[Path | None, str]:
+    """Write ``out/refined.toml`` from ``res.cfg_after``; returns its path (None if not
+    written) and the sentence ``gap.md`` says of it. A stale file from an earlier report in the
+    same directory is removed when there is nothing to write."""
+    path = out / REFINED_NAME
+    why = ""
+    if res.cfg_after is None:
+        why = "this result carries no refined model configuration"
+    else:
+        try:
+            text = dump_config(res.cfg_after, header=refined_header(res))
+        except (TypeError, ValueError) as e:  # a value TOML cannot hold: say so, keep the rest of the report
+            why = f"the refined configuration cannot be written as TOML ({e})"
+            log.warning("fbs gap: %s not written: %s", path, why)
+        else:
+            path.write_text(text)
+            effects = ", ".join(f"`{f.effect}`" for f in res.findings)
+            what = (f"the nominal model with {effects} at the fitted parameters, and the fitted noise levels"
+                    if effects else "the nominal model (no effect named) with the fitted noise levels")
+            return path, (f"`{REFINED_NAME}` is the refined model as a sim config: {what}. Simulate it with "
+                          f"`fbs simulate --sim-config {REFINED_NAME} --mode {res.mode} --duration {res.duration_s:g} "
+                          f"--rate {res.rate_hz:g} --out refined.h5`, or run a procedure on it with "
+                          f"`fbs run PROCEDURE --sim-config {REFINED_NAME}`.")
+    path.unlink(missing_ok=True)
+    return None, f"No `{REFINED_NAME}` was written: {why}."
+
+
+def refined_config_path(res: GapResult, out: str | Path) -> Path | None:
+    """Where :func:`write_report` put the refined sim config, or None if it wrote none."""
+    path = Path(out) / REFINED_NAME
+    return path if res.cfg_after is not None and path.exists() else None
+
+
+def markdown(res: GapResult, refined_note: str = "") -> str:
     lines = [f"# fbs gap {Path(res.file).name}", "",
              f"Axis {res.axis}, mode {res.mode}, {res.duration_s:.0f} s at {res.rate_hz:g} Hz; channels "
              f"{', '.join(res.channels)}. Analysed in {res.elapsed_s:.1f} s.", ""]
@@ -96,6 +164,8 @@ def markdown(res: GapResult) -> str:
         lines += [f"- {s.time_s:.1f} s: {s.size * 1e6:+.3g} urad (z = {s.z:.1f})" for s in res.steps] + [""]
     lines += [f"Noise levels fitted (scale of the data sheet's PSD): before {_fmt(res.scales_before)}, "
               f"after {_fmt(res.scales_after)}.", ""]
+    if refined_note:
+        lines += ["## The refined model as a sim config", "", refined_note, ""]
     lines += [f"- warning: {w}" for w in res.warnings]
     lines += ["", "![spectra](spectra.png)", "", "![ratio](ratio.png)", ""]
     return "\n".join(lines)
@@ -106,8 +176,10 @@ def _fmt(d: dict[str, float]) -> str:
 
 
 def write_report(res: GapResult, out: Path) -> list[Path]:
+    """The plots, ``refined.toml`` (when the result has a refined model) and ``gap.md``."""
     out.mkdir(parents=True, exist_ok=True)
     written = [plot_spectra(res, out / "spectra.png"), plot_ratio(res, out / "ratio.png")]
+    refined, note = write_refined(res, out)
     md = out / "gap.md"
-    md.write_text(markdown(res))
-    return written + [md]
+    md.write_text(markdown(res, note))
+    return written + ([refined] if refined else []) + [md]

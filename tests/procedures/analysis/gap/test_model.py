@@ -54,23 +54,41 @@ def test_expected_spectra_match_the_simulator_to_chi_square_precision(nominal_ru
     assert not departures(P, S, g.dof).any()
 
 
-def test_nuisance_fit_recovers_noise_levels(nominal_run):
-    """Scaled autocollimator and pickoff noise come back as their scales."""
+@pytest.mark.parametrize("unit", [
+    {"ac": 2.0, "ac_corner_hz": 4.0, "ac_knee": 0.3, "ac_slope": 1.1, "pickoff": 0.5, "line": 3.0},
+    {"ac": 0.5, "ac_corner_hz": 1.8, "ac_knee": 1.0, "ac_slope": 0.85, "pickoff": 2.5, "line": 0.4},
+    {"ac": 1.2, "ac_corner_hz": 3.0, "ac_knee": 0.0, "ac_slope": 1.0, "pickoff": 1.0, "line": 1.0},
+])
+def test_nuisance_fit_recovers_a_nominal_unit(nominal_run, unit):
+    """A unit anywhere in DESIGN.md's nominal envelope (white level, the 1/f knee's corner, form
+    and slope, pickoff white and lines) comes back as its scales from its expected spectrum."""
     cfg, data = nominal_run
     g = make_grid(1000.0, data.shape[1])
     P = band_spectra(data, g)
     ms = SpectralModel(g, CH, 3, "X")(cfg)
-    lines = sum(ms.parts[p] for p in ms.parts if p.startswith("line"))
-    fake = (ms.parts["ac"] + ms.parts["ac_flicker"]) * 2.0 + ms.parts["pickoff"] * 0.5 + lines * 3.0 + ms.parts["fixed"]
+    line_parts = [p for p in ms.parts if p.startswith("line")]
+    scales = {k: v for k, v in unit.items() if k != "line"} | {p: unit["line"] for p in line_parts}
+    fake = ms.total(scales)
     nf = fit_nuisance(fake, g.dof, ms)
-    assert nf.scales["ac"] == pytest.approx(2.0, rel=1e-3)
-    assert nf.scales["ac_flicker"] == pytest.approx(2.0, rel=1e-3)
-    assert nf.scales["pickoff"] == pytest.approx(0.5, rel=1e-3)
+    for k in ("ac", "ac_corner_hz", "ac_slope", "pickoff"):
+        assert nf.scales[k] == pytest.approx(unit[k], rel=2e-2), k
+    assert nf.scales["ac_knee"] == pytest.approx(unit["ac_knee"], abs=0.05)
     # the 71 Hz pair shares its bands, so only the lines' total power there is identified
-    fitted = sum(nf.scales[p] * ms.parts[p] for p in ms.parts if p.startswith("line"))
-    assert fitted == pytest.approx(3.0 * lines, rel=2e-2, abs=1e-30)
+    fitted = sum(nf.scales[p] * ms.parts[p] for p in line_parts)
+    assert fitted == pytest.approx(unit["line"] * sum(ms.parts[p] for p in line_parts), rel=2e-2, abs=1e-30)
     assert nf.nll <= whittle_nll(fake, ms.total(), g.dof)
-    assert fit_nuisance(P, g.dof, ms).scales["ac"] == pytest.approx(1.0, abs=0.05)
+    assert fit_nuisance(P, g.dof, ms).scales["ac"] == pytest.approx(1.0, abs=0.1)
+
+
+def test_nuisance_fit_stays_in_the_nominal_envelope(nominal_run):
+    """A unit beyond the envelope (white x3 in amplitude, a 12 Hz corner) is fitted at the
+    envelope's edge, not followed: beyond it is an effect (DESIGN.md section 8)."""
+    cfg, data = nominal_run
+    g = make_grid(1000.0, data.shape[1])
+    ms = SpectralModel(g, CH, 3, "X")(cfg)
+    nf = fit_nuisance(ms.total({"ac": 9.0, "ac_corner_hz": 12.0}), g.dof, ms)
+    assert nf.scales["ac"] == pytest.approx(1.6**2, rel=1e-6)
+    assert nf.scales["ac_corner_hz"] <= 5.0 + 1e-9
 
 
 @pytest.mark.parametrize("effect, params", [("bearing_friction", {"stiffness_Nm_per_rad": 600}),
