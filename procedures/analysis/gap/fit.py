@@ -63,7 +63,8 @@ class NuisanceFit:
 
 
 def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
-                 hold: frozenset[str] = frozenset(), start: dict[str, float] | None = None) -> NuisanceFit:
+                 hold: frozenset[str] = frozenset(), start: dict[str, float] | None = None,
+                 pinned: dict[str, float] | None = None) -> NuisanceFit:
     """The nominal unit's noise that minimizes the Whittle likelihood (analytic gradient).
 
     Free within the nominal unit's envelope (DESIGN.md section 8): the power scale of the
@@ -73,7 +74,8 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
     the configuration's: "ac_flicker" in ``hold`` holds the knee's corner (the ``flicker_noise``
     effect sets it; the form and slope stay the unit's). The knee's form makes the likelihood
     kinked, so the search starts from both forms and between them, or only from ``start`` (the
-    scales of a fit nearby: an effect's trials barely move the unit's noise).
+    scales of a fit nearby: an effect's trials barely move the unit's noise). ``pinned`` holds
+    named knee parameters (``ac_knee``, ``ac_slope``) at given values (``Fitter.held_envelope``).
     """
     parts = {p: v for p, v in ms.parts.items() if p != "fixed" and np.any(v > 0)}
     fixed = ms.parts["fixed"]
@@ -103,8 +105,11 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
         fc0, form0, slope0 = ms.shape
         if "ac_flicker" not in hold and fc0 > 0:
             free("ac_corner_hz", math.log(fc0 * CORNER_RANGE[0]), math.log(fc0 * CORNER_RANGE[1]), math.log(fc0))
-        free("ac_knee", 0.0, 1.0, 0.5)
-        free("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0)
+        for key, lo, hi, x_start in (("ac_knee", 0.0, 1.0, 0.5),
+                                     ("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0)):
+            if pinned and key in pinned:
+                lo = hi = x_start = pinned[key]
+            free(key, lo, hi, x_start)
     f_band = ms.f if ms.f is not None else np.ones(fixed.shape[1])
     shape0 = ms.shape or (0.0, 1.0, 1.0)
 
@@ -272,6 +277,8 @@ class Fitter:
         self.hold: frozenset[str] = frozenset()
         #: the last base model's noise: where an effect's trials start their noise fit
         self.near: dict[str, float] | None = None
+        #: knee parameters of the unit held at given values (``held_envelope``)
+        self.pinned: dict[str, float] | None = None
 
     def base(self, cfg: SimConfig) -> NuisanceFit:
         nf = fit_nuisance(self.P, self.dof, self.model(cfg), self.hold)
@@ -329,7 +336,7 @@ class Fitter:
                 vals = {p.name: _from_unit(p, ti) for p, ti in zip(fitted, key)}
                 cfg = effect.inject(base_cfg, self.axis, **vals, **held)
                 ms = self.model(cfg)
-                nf = fit_nuisance(self.P, self.dof, ms, hold, self.near)
+                nf = fit_nuisance(self.P, self.dof, ms, hold, self.near, self.pinned)
                 self.evaluations += 1
                 # a loop that diverges could not have made the record: never a candidate
                 cache[key] = (nf.nll if ms.stable else nf.nll + UNSTABLE_PENALTY, nf, cfg)
@@ -374,6 +381,33 @@ class Fitter:
                         errs[k] = sd
                         intervals[k] = (params[k] - Z95 * sd, params[k] + Z95 * sd)
         return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S, intervals=intervals)
+
+    def held_envelope(self, effect: Effect, base_cfg: SimConfig, evidence: Any, found: EffectFit) -> EffectFit:
+        """``found`` with its intervals widened by what the unit's knee leaves open.
+
+        An effect that sets the unit's 1/f corner (``flicker_noise``, which owns "ac_flicker")
+        reads its corner against the knee's slope, which the nominal unit may have anywhere in
+        -0.8 .. -1.2: over the decade a record resolves, a steeper 1/f with a lower corner and a
+        shallower one with a higher corner fit alike. That is a systematic, bounded, not
+        averaged: the interval is the union of the statistical intervals refitted with the slope
+        held at each end of its range."""
+        if "ac_flicker" not in effect.owns or not found.intervals:
+            return found
+        lo = {k: v[0] for k, v in found.intervals.items()}
+        hi = {k: v[1] for k, v in found.intervals.items()}
+        slope0 = float(getattr(base_cfg.autocollimator.get(self.axis), "flicker_slope", 1.0))
+        saved = self.pinned
+        try:
+            for slope in (slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN):
+                self.pinned = {"ac_slope": slope}
+                alt = self.fit(effect, base_cfg, evidence, start=found.params)
+                for k, (a, b) in (alt.intervals.items() if alt is not None else ()):
+                    if k in lo:
+                        lo[k], hi[k] = min(lo[k], a), max(hi[k], b)
+        finally:
+            self.pinned = saved
+        found.intervals = {k: (lo[k], hi[k]) for k in lo}
+        return found
 
     def _errors(self, evaluate, spectrum, t: np.ndarray,
                 fitted: tuple[Param, ...]) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:

@@ -277,6 +277,7 @@ def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tu
         others = _with_effects(cfg0, axis, [x for j, x in enumerate(in_model) if j != i])
         again = fitter.fit(eff, others, evidence, start=f.params)
         if again is not None:
+            again = fitter.held_envelope(eff, others, evidence, again)
             # a held parameter's spread came from the pass that found it (its line or steps are
             # no longer a departure now that the effect is in the model): it stays
             again.errors = f.errors | again.errors
@@ -563,7 +564,7 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
             final = fitter.fit(catalogue.get(f.effect), cfg, evidence, start=f.params)
             if final is not None and final.nll <= f.nll + 1e-6:
                 final.score = bic_score(final, cur.nll, n_obs)
-                f = final
+                f = fitter.held_envelope(catalogue.get(f.effect), cfg, evidence, final)
             # the cells the effect itself moves: against the model without it at the same noise
             # levels (a refitted noise level moves every band a little, and is no effect's doing)
             # (the unit's knee as fitted without it: an effect that sets the corner moves it)
