@@ -13,6 +13,7 @@ the set's own rules (its README, "How an answer is scored"):
   tolerance;
 * an effect outside the catalogue is right when ``significant`` and not ``explained``.
 
+The rules live in ``tests/procedures/analysis/gap/devset_rules.py`` (shared with the test).
 Also reported: whether each named key parameter's 95 % interval covers the truth, and the time
 per file. Benchmarks report, they never fail: the exit code is 0 unless the bench itself breaks.
 ``bench/gap.py`` (in ``make bench``) runs it; alone:
@@ -27,6 +28,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")  # before numpy: the workers run one thread each
 
 import argparse  # noqa: E402
+import importlib.util  # noqa: E402
 import json  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
@@ -37,59 +39,19 @@ from typing import Any  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 DEVSET = ROOT / "tests" / "data" / "gapdata"
-
-#: the key parameters the set's README scores, and their relative tolerances
-KEYS: dict[str, dict[str, float]] = {
-    "bearing_friction": {"stiffness_Nm_per_rad": 0.15},
-    "mount_resonance": {"freq_hz": 0.05},
-    "pickup_line": {"freq_hz": 0.05, "amplitude_V": 0.15},
-    "flicker_noise": {"corner_hz": 0.30},
-    "offset_jumps": {"amplitude_urad": 0.15},
-    "time_delay": {"delay_s": 0.15},
-    "extra_damping": {"damping_Nms": 0.15},
-    "scale_factor_error": {"fraction": 0.15},
-}
+RULES = ROOT / "tests" / "procedures" / "analysis" / "gap" / "devset_rules.py"
 
 
-def truth_effects(t: dict[str, Any]) -> dict[str, dict[str, float]]:
-    """{effect: its true parameters} of one truth entry ({} for a null or an unknown)."""
-    if "effects" in t:
-        return {e: t["by_effect"][e] for e in t["effects"]}
-    if t["effect"] in ("none", "unknown"):
-        return {}
-    return {t["effect"]: {k: v for k, v in t.items() if isinstance(v, (int, float))}}
-
-
-def score(t: dict[str, Any], res: dict[str, Any]) -> tuple[bool, str, list[bool]]:
-    """(right, why, interval coverage of each scored key) for one file's JSON result."""
-    named = [e["effect"] for e in res["effects"]]
-    if t["effect"] == "none":
-        return (not res["significant"], f"significant={res['significant']} named={named}", [])
-    if t["effect"] == "unknown":
-        ok = res["significant"] and not res["explained"]
-        return ok, f"significant={res['significant']} explained={res['explained']} named={named}", []
-    want = truth_effects(t)
-    covers: list[bool] = []
-    why = []
-    ok = sorted(named) == sorted(want)
-    if len(want) == 1 and named and named[0] != next(iter(want)):
-        ok = False
-    for e in res["effects"]:
-        true = want.get(e["effect"])
-        if true is None:
-            continue
-        for k, tol in KEYS.get(e["effect"], {}).items():
-            if k not in true or k not in e["parameters"] or e["parameters"][k] is None:
-                continue
-            est = e["parameters"][k]
-            rel = est / true[k] - 1
-            why.append(f"{e['effect']}.{k} {est:.4g} ({rel:+.1%})")
-            ok = ok and abs(rel) <= tol
-            iv = e.get("parameters_ci95", {}).get(k)
-            if iv and None not in iv:
-                covers.append(iv[0] <= true[k] <= iv[1])
-                why[-1] += f" [{iv[0]:.4g}, {iv[1]:.4g}]"
-    return ok, f"named={named} " + "; ".join(why), covers
+def _rules():
+    """The set's scoring rules (a module of the test suite, loaded by path)."""
+    mod = sys.modules.get("fbs_tests_gap_devset_rules")
+    if mod is None:
+        spec = importlib.util.spec_from_file_location("fbs_tests_gap_devset_rules", RULES)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules["fbs_tests_gap_devset_rules"] = mod
+        spec.loader.exec_module(mod)
+    return mod
 
 
 def run_one(name: str) -> dict[str, Any]:
@@ -126,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
             if "error" in o:
                 print(f"{o['file']} {t['axis']} {label:32s} ERROR {o['error']}")
                 continue
-            ok, why, cov = score(t, o["result"])
+            ok, why, cov = _rules().score(t, o["result"])
             right += ok
             covered += cov
             print(f"{o['file']} {t['axis']} {label:32s} {'right' if ok else 'WRONG'}  {why}  "

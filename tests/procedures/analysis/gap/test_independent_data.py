@@ -31,3 +31,16 @@ def test_effects_in_independent_runs_are_named_and_closed(independent, tmp_path,
     assert j["effect"] == effect, (j["candidates"][:3], res.located[:3])
     assert j["parameters"][key] == pytest.approx(value, rel=0.15)
     assert j["gap_after_db"] <= 0.5 * j["gap_before_db"]
+
+
+def test_three_mains_lines_are_three_pickup_lines(independent, tmp_path):
+    """Issue 34 item 7: an effect may be present more than once; 60, 180 and 250 Hz lines are
+    three ``pickup_line`` entries at their frequencies, and nothing else is named."""
+    lines = [(60.0, 0.003), (180.0, 0.003), (250.0, 0.002)]
+    j = analyse(independent.generate(tmp_path / "mains.h5", seed=4, pickup=lines)).to_json()
+    assert [e["effect"] for e in j["effects"]] == ["pickup_line"] * 3, j["effects"]
+    found = sorted((e["parameters"]["freq_hz"], e["parameters"]["amplitude_V"]) for e in j["effects"])
+    for (f, a), (f_true, a_true) in zip(found, lines):
+        assert f == pytest.approx(f_true, rel=0.01)
+        assert a == pytest.approx(a_true, rel=0.15)
+    assert j["explained"]

@@ -185,3 +185,13 @@ def test_the_gap_takes_out_the_estimates_own_scatter():
     assert gap_db(P, S, cells) == pytest.approx(4.34 * np.sqrt(2 / 20.0), rel=0.1)
     assert gap_db(P, S, cells, nu) < 0.25
     assert gap_db(2.0 * P, S, cells, nu) == pytest.approx(3.01, abs=0.15)
+
+
+def test_a_loop_that_diverges_has_no_expected_spectrum(nominal_run):
+    """Issue 34 item 6: a 15 ms delay makes the X loop unstable (5.7 ms already does, docs/gap.md):
+    its model is flagged, and a fit scores it as impossible rather than as a small gap."""
+    cfg, data = nominal_run
+    g = make_grid(1000.0, data.shape[1])
+    model = SpectralModel(g, CH, 3, "X")
+    assert model(cfg).stable
+    assert not model(effects.get("time_delay").inject(cfg, "X", delay_s=0.015)).stable
