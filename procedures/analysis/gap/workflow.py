@@ -321,6 +321,10 @@ def _order_by_gap_closed(fitter: Fitter, cfg0: SimConfig, axis: str,
 #: spectrum's gap before the two measures are said to disagree
 SIM_AGREEMENT_DB = 3.0
 
+#: where no band departs (after a first effect), a candidate is named only on this many times
+#: ``min_score`` of BIC and if it closes at least ``tol_db`` where it acts
+QUIET_SCORE_FACTOR = 5.0
+
 #: a fitted parameter within this share of its prior's (log) width of a bound sits at it
 BOUND_SHARE = 0.005
 
@@ -558,8 +562,11 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         for f in order:
             if f.score < opt.min_score:
                 continue
-            if quiet and _at_bound(catalogue.get(f.effect), f.params):
-                continue  # where nothing departs, a form that reaches the data only at its extreme is no finding
+            if quiet and (f.score < QUIET_SCORE_FACTOR * opt.min_score
+                          or _at_bound(catalogue.get(f.effect), f.params)):
+                # where nothing departs, the evidence must be strong, and a form that reaches the
+                # data only at its extreme is no finding
+                continue
             # refined again, with its uncertainties, before it is judged
             final = fitter.fit(catalogue.get(f.effect), cfg, evidence, start=f.params)
             if final is not None and final.nll <= f.nll + 1e-6:
@@ -575,7 +582,8 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
             # steps seen in the time domain are a departure of their own: an effect that makes
             # them in the model explains them, whatever an earlier effect left of their spectrum
             explains_steps = unexplained_steps and _model_makes_steps(f.cfg, rec.axis)
-            if explains_steps or g0 - g1 >= max(opt.min_closed_db, opt.min_closed_share * g0):
+            need = max(opt.tol_db if quiet else opt.min_closed_db, opt.min_closed_share * g0)
+            if explains_steps or g0 - g1 >= need:
                 chosen = (f, moved, g0, g1)
                 break
             log.info("%s %s wins on the score (%.1f) but closes only %.2f of %.2f dB where it acts (%d cells): "
