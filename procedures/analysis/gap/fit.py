@@ -104,9 +104,11 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
         assert ms.shape is not None
         fc0, form0, slope0 = ms.shape
         if "ac_flicker" not in hold and fc0 > 0:
-            free("ac_corner_hz", math.log(fc0 * CORNER_RANGE[0]), math.log(fc0 * CORNER_RANGE[1]), math.log(fc0))
-        for key, lo, hi, x_start in (("ac_knee", 0.0, 1.0, 0.5),
-                                     ("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0)):
+            free("ac_corner_hz", math.log(fc0 * CORNER_RANGE[0]), math.log(fc0 * CORNER_RANGE[1]),
+                 math.log(fc0))
+        knee_params = (("ac_knee", 0.0, 1.0, 0.5),
+                       ("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0))
+        for key, lo, hi, x_start in knee_params:
             if pinned and key in pinned:
                 lo = hi = x_start = pinned[key]
             free(key, lo, hi, x_start)
@@ -144,7 +146,8 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
         if "ac" in jac:
             jac["ac"] = terms["ac"] + terms.get("ac_excess", 0.0)
         if shaped:
-            d_fc, d_form, d_slope = knee_gradient(f_band, sc["ac_corner_hz"], sc["ac_knee"], sc["ac_slope"])
+            d_fc, d_form, d_slope = knee_gradient(f_band, sc["ac_corner_hz"], sc["ac_knee"],
+                                                  sc["ac_slope"])
             base = parts["ac"] * sc["ac"]
             for key, d in (("ac_corner_hz", d_fc), ("ac_knee", d_form), ("ac_slope", d_slope)):
                 if key in names:
@@ -185,7 +188,8 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
                 if nll_n <= nll:
                     improved = True
                     lam = max(lam / 10.0, 1e-6)
-                    done = nll - nll_n < 1e-6 * (1.0 + abs(nll)) * 1e-3 or np.max(np.abs(xn - x)) < 1e-7
+                    done = (nll - nll_n < 1e-9 * (1.0 + abs(nll))
+                            or np.max(np.abs(xn - x)) < 1e-7)
                     x, S, J, nll = xn, Sn, Jn, nll_n
                     break
                 lam *= 10.0
@@ -195,7 +199,9 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
 
     x = np.array(x0, float)
     if names:
-        starts = [x] + ([_with(x, names, "ac_knee", v) for v in (0.0, 1.0)] if "ac_knee" in names else [])
+        starts = [x]
+        if "ac_knee" in names:
+            starts += [_with(x, names, "ac_knee", v) for v in (0.0, 1.0)]
         if start is not None:
             starts = [np.clip([_coordinate(n, start) for n in names], lo_b, hi_b)]
         x = min((scoring(s0) for s0 in starts), key=lambda r: r[1])[0]

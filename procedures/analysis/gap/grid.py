@@ -156,8 +156,8 @@ def channel_weights(x: np.ndarray, grid: Grid) -> np.ndarray:
     x = np.atleast_2d(x)
     if x.shape[0] == 1:
         return np.ones((1, grid.n_bands))
-    _, S = welch_csd_matrix(x, grid.rate_hz, window="hann", nperseg=grid.nperseg, noverlap=grid.noverlap,
-                            detrend="linear")
+    _, S = welch_csd_matrix(x, grid.rate_hz, window="hann", nperseg=grid.nperseg,
+                            noverlap=grid.noverlap, detrend="linear")
     S = S[grid.bins]
     n = x.shape[0]
     band = np.zeros((grid.n_bands, n, n), complex)

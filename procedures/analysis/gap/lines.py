@@ -73,7 +73,8 @@ def found_pickoff_lines(cfg: SimConfig, axis: str, channels: tuple[str, ...], p_
         return cfg
     f, p, df = grid.f, p_bins[channels.index(name)], grid.df
     for group in _clusters([ln[0] for ln in lines]):
-        lo, hi = min(lines[i][0] for i in group) - SEARCH_HZ, max(lines[i][0] for i in group) + SEARCH_HZ
+        lo = min(lines[i][0] for i in group) - SEARCH_HZ
+        hi = max(lines[i][0] for i in group) + SEARCH_HZ
         idx = np.flatnonzero((f >= lo) & (f <= hi))
         if len(idx) < 3:
             continue

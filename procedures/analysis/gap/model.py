@@ -53,7 +53,8 @@ SHAPE_KEYS = ("ac_corner_hz", "ac_knee", "ac_slope")
 knee = ac_knee
 
 
-def knee_gradient(f: np.ndarray, corner_hz: float, form: float, slope: float) -> tuple[np.ndarray, ...]:
+def knee_gradient(f: np.ndarray, corner_hz: float, form: float,
+                  slope: float) -> tuple[np.ndarray, ...]:
     """dK/d ln(corner), dK/d form, dK/d slope of :func:`knee` (K = form (1 + r) + (1 - form)
     max(1, r), r = (corner/f)^slope)."""
     ln = np.log(corner_hz / np.asarray(f, float))
@@ -84,7 +85,7 @@ def part_of(input_name: str, kind: str, axis: str) -> str | None:
 def ac_shape(cfg: SimConfig, axis: str) -> tuple[float, float, float]:
     """The configuration's own 1/f knee of the axis autocollimator: (corner Hz, form, slope)."""
     ac = cfg.autocollimator[axis]
-    return (ac.flicker_corner_hz, float(getattr(ac, "flicker_knee", 1.0)), float(getattr(ac, "flicker_slope", 1.0)))
+    return ac.flicker_corner_hz, float(ac.flicker_knee), float(ac.flicker_slope)
 
 
 def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimConfig:

@@ -26,10 +26,24 @@ import numpy as np
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunWriter
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
-from procedures.analysis.gap.grid import GapInputError, Grid, band_spectra, bin_spectra, channel_weights, make_grid
+from procedures.analysis.gap.grid import (
+    GapInputError,
+    Grid,
+    band_spectra,
+    bin_spectra,
+    channel_weights,
+    make_grid,
+)
 from procedures.analysis.gap.lines import MeasuredLine, found_pickoff_lines, refine_line
 from procedures.analysis.gap.locate import Band, Evidence, bands, departures, gap_db
-from procedures.analysis.gap.model import SHAPE_KEYS, SpectralModel, apply_nuisance, lsb, quantization_psd, step_response
+from procedures.analysis.gap.model import (
+    SHAPE_KEYS,
+    SpectralModel,
+    apply_nuisance,
+    lsb,
+    quantization_psd,
+    step_response,
+)
 from procedures.analysis.gap.steps import Step, find_steps, robust_scale, step_like, template_gain, window_difference
 from simhw import effects as catalogue
 from simhw.params import Sampling, SimConfig, load_config, to_dict
@@ -538,7 +552,8 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         for rank, (f, eff) in enumerate(screened):
             # refined: the leaders; where nothing departs, only a leader already within reach of
             # being named (a refinement gains a few BIC units, not tens)
-            if rank < opt.refine_top and (not quiet or bic_score(f, cur.nll, n_obs) > opt.min_score / 2):
+            leader = rank < opt.refine_top
+            if leader and (not quiet or bic_score(f, cur.nll, n_obs) > opt.min_score / 2):
                 refined = fitter.fit(eff, cfg, evidence, errors=False, start=f.params)
                 f = refined if refined is not None and refined.nll <= f.nll else f
             f.score = bic_score(f, cur.nll, n_obs)
@@ -650,8 +665,9 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         # so a simulated run far from it (beyond one realization's scatter, ~1 dB) says the
         # expected spectrum is no prediction of that model (a loop on the edge of stability).
         if sim_gaps[1] > gap_after + SIM_AGREEMENT_DB:
-            rec.warnings.append(f"the refined model's simulated run is {sim_gaps[1]:.1f} dB from the record where "
-                                f"its expected spectrum is {gap_after:.1f} dB: its figures are not to be trusted")
+            rec.warnings.append(f"the refined model's simulated run is {sim_gaps[1]:.1f} dB from the "
+                                f"record where its expected spectrum is {gap_after:.1f} dB: its "
+                                "figures are not to be trusted")
     result = GapResult(str(rec.path), rec.axis, rec.mode, rec.rate_hz, rec.duration_s, rec.channels, significant,
                        findings, first_located, steps, step_channel, gap_before, gap_after, first_candidates,
                        base.scales, cur.scales, rec.warnings, unexplained, grid, spectra, cfg_before, cfg_after,
