@@ -10,6 +10,7 @@ gyros Ch. II C.1.a and Tables 3-4; autocollimators Table 1 and eqs. 3.21-3.22.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import tomllib
@@ -293,7 +294,9 @@ class SimConfig:
     pickup: list[PickupLine] = field(default_factory=list)
 
     def copy(self) -> SimConfig:
-        return from_dict(to_dict(self))
+        """An independent copy (structural: every section, list and table its own; the values
+        themselves are immutable). Not revalidated: model fits copy a config per trial."""
+        return _clone(self)
 
     def without_random_drift(self) -> SimConfig:
         """A copy with the gyros' random drift switched off (fixed and g drift stay)."""
@@ -301,6 +304,21 @@ class SimConfig:
         for ch in cfg.gyro.values():
             ch.arw_urad_per_sqrt_s = ch.bias_instability_urad_per_s = ch.rrw_urad_per_s_per_sqrt_s = 0.0
         return cfg
+
+
+def _clone(obj: Any) -> Any:
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        new = copy.copy(obj)
+        for f in dataclasses.fields(obj):
+            v = getattr(obj, f.name)
+            if isinstance(v, (dict, list)) or dataclasses.is_dataclass(v):
+                setattr(new, f.name, _clone(v))
+        return new
+    if isinstance(obj, dict):
+        return {k: _clone(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_clone(v) for v in obj]
+    return obj
 
 
 _KEYED = {"platform": (PlatformAxis, AXES), "bearing": (Bearing, AXES),

@@ -30,7 +30,7 @@ from simhw.noise import (
     TelegraphJumps,
     WhiteNoise,
 )
-from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig
+from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig, validate
 from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, Plant, RelayState, build_plant, discretize, torquer_limit_V
 from simhw.reduction import Kept, kept, reduce
 from simhw.sampling import SamplingChain, internal_rate
@@ -108,14 +108,21 @@ def pickoff_white_psd(rms_urad: float, lines: list) -> float:
 class Sources:
     """All random inputs of the plant, one independent stream each."""
 
-    def __init__(self, cfg: SimConfig, seed: int | tuple[int, int], dt: float) -> None:
-        self.dt = dt
+    def __init__(self, cfg: SimConfig, seed: int | tuple[int, int], dt: float, *,
+                 spectral: bool = False) -> None:
+        """``spectral``: for ``spectrum`` and ``lines`` only (a model of the spectra builds one
+        per trial): every source shares one generator, so ``take`` refuses."""
+        self.dt, self.spectral = dt, spectral
         ss = np.random.SeedSequence(seed)
         names = ([f"nac_{a}" for a in AXES] + [f"np_{c}" for c in GYRO_CHANNELS]
                  + [f"wrand_{c}" for c in GYRO_CHANNELS] + [f"md_{a}" for a in AXES])
-        rngs = dict(zip(names, (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(len(names)))))
+        shared = np.random.Generator(np.random.PCG64(0)) if spectral else None
+        rngs = {} if spectral else dict(zip(names, (np.random.Generator(np.random.PCG64(s))
+                                                    for s in ss.spawn(len(names)))))
 
         def sub(name: str) -> np.random.Generator:
+            if shared is not None:
+                return shared
             return np.random.Generator(np.random.PCG64(rngs[name].integers(2**63)))
 
         self.parts: dict[str, list] = {}
@@ -145,7 +152,7 @@ class Sources:
                 TelegraphJumps(sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt),
             ]
             if frac > 0:
-                common = np.random.Generator(np.random.PCG64(common_seed))
+                common = shared or np.random.Generator(np.random.PCG64(common_seed))
                 self.parts[f"nac_{a}"].append(WhiteNoise(common, white * frac, dt))
         az = cfg.azimuth
         level = (az.nea_urad * URAD) ** 2 / math.log(NEA_BAND_HZ[1] / NEA_BAND_HZ[0])
@@ -176,9 +183,11 @@ class Sources:
             ac = cfg.autocollimator[a]
             w = 2 * math.pi * ac.mount_freq_hz
             psd = ac.mount_excitation * white_of[a] * (2 * ac.mount_damping * w * w) ** 2 if w > 0 else 0.0
-            self.parts[f"nmount_{a}"] = [WhiteNoise(np.random.Generator(np.random.PCG64(mount_seeds[a])), psd, dt)]
+            self.parts[f"nmount_{a}"] = [WhiteNoise(shared or np.random.Generator(np.random.PCG64(mount_seeds[a])), psd, dt)]
 
     def take(self, name: str, n: int) -> np.ndarray:
+        if self.spectral:
+            raise RuntimeError("these Sources were made for spectra (spectral=True): they draw no streams")
         out = np.zeros(n)
         for part in self.parts[name]:
             out += part.take(n)
@@ -239,6 +248,7 @@ class Simulator:
                  mode: int = 3, spin: float | None = None, truth: bool = False,
                  clock: VirtualClock | None = None, channels: Sequence[str] | None = None) -> None:
         self.cfg = cfg = (cfg or SimConfig()).copy()
+        validate(cfg)  # a config built in code has not been through from_dict's checks
         self.channels: tuple[str, ...] = CHANNELS if channels is None else tuple(channels)
         bad = [c for c in self.channels if c not in CHANNELS]
         if bad or not self.channels or len(set(self.channels)) != len(self.channels):

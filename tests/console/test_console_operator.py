@@ -107,10 +107,10 @@ async def test_the_rig_is_polled_and_shown_while_a_procedure_runs(out_dir):
             return len(cp.passed) >= 6 or bool(cp.failed)
 
         # cold: spin-up in mode 2, mode 3, caged; then step 2 inhibits caging on X and biases it
-        await wait_for(pilot, progress, timeout_s=600, what="the procedure to open the X loop")
+        await wait_for(pilot, progress, what="the procedure to open the X loop")
         rig.unsubscribe(on_event)
         await pilot.press("f8")
-        await wait_for(pilot, lambda: app.last_summary is not None, timeout_s=120, what="the abort")
+        await wait_for(pilot, lambda: app.last_summary is not None, what="the abort")
         assert app.last_summary.verdict == "aborted"
     assert not cp.failed and cp.passed[:4] == ["mode 2", "wheels", "mode 3", "caging X on"], cp.passed
 

@@ -149,7 +149,7 @@ async def test_stopwatch_runs_to_its_results(out_dir):
     async with app.run_test(size=(80, 24)) as pilot:
         await rig_ready(pilot)
         await start_procedure(pilot, "stopwatch", 'channels=["X"] repetitions=1')
-        await wait_for(pilot, lambda: app.last_summary is not None, timeout_s=60, what="the procedure to end")
+        await wait_for(pilot, lambda: app.last_summary is not None, what="the procedure to end")
         s = app.last_summary
         assert s.status == "complete" and s.verdict in ("pass", "fail") and s.file == out_dir / "stopwatch.h5"
         # one repetition on the data sheet's K_TO: measured, shown, but not a resolved figure

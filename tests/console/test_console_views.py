@@ -106,7 +106,7 @@ async def test_results_parameters_and_paths_are_shown_whole(out_dir):
         for name in params:
             assert f"{name}=" in defaults, name
         assert reachable(app.query_one("#proc-about", VerticalScroll), app.query_one("#proc-defaults", Static))
-        await wait_for(pilot, lambda: app.last_summary is not None, timeout_s=300, what="the procedure to end")
+        await wait_for(pilot, lambda: app.last_summary is not None, what="the procedure to end")
         s = app.last_summary
         assert s.status == "complete" and len(s.measurements) >= 6
         await pilot.pause(0.2)
@@ -134,17 +134,17 @@ async def test_an_aborted_run_says_how_to_resume_and_f9_resumes_it(out_dir):
         await rig_ready(pilot)
         await start_procedure(pilot, "stopwatch", 'channels=["X","Y"] repetitions=1')
         state = app.worker_.state
-        await wait_for(pilot, lambda: (p := state.get().procedure) is not None and p.index >= 2, timeout_s=300,
+        await wait_for(pilot, lambda: (p := state.get().procedure) is not None and p.index >= 2,
                        what="channel X done")
         await pilot.press("f8")
-        await wait_for(pilot, lambda: app.last_summary is not None, timeout_s=120, what="the abort")
+        await wait_for(pilot, lambda: app.last_summary is not None, what="the abort")
         first = app.last_summary
         assert first.verdict == "aborted" and "channel X" in first.steps_done
         await pilot.pause(0.2)
         result = " ".join(text_of(app, "#proc-result").split())
         assert f"resume f9 here, or: fbs run stopwatch --resume {first.file}" in result
         await pilot.press("f9")                             # resume it here, as fbs run --resume does
-        await wait_for(pilot, lambda: app.last_summary is not first, timeout_s=300, what="the resumed run")
+        await wait_for(pilot, lambda: app.last_summary is not first, what="the resumed run")
         second = app.last_summary
         assert second.status == "complete" and second.steps_resumed == ["channel X"]
         assert second.file == out_dir / "stopwatch-2.h5"
@@ -268,7 +268,7 @@ async def test_spin_up_shows_its_time_and_an_interlock_reason_is_said_once(out_d
         await wait_for(pilot, lambda: app.worker_.state.get().relay.mode == 2, what="mode 2")
         state = app.worker_.state
         await wait_for(pilot, lambda: state.get().relay.spin_fraction >= 0.3 and state.get().spin_left_s is not None,
-                       timeout_s=300, what="a third of the speed")
+                       what="a third of the speed")
         snap = state.get()
         tau = load_config(None).gyros.spin_up_time_s / math.log(100.0)
         truth = tau * math.log((1 - snap.relay.spin_fraction) / (1 - AT_SPEED))

@@ -13,9 +13,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.signal
+import scipy.sparse
 
 from daq.spectra import equivalent_dof, n_segments, psd, welch_csd_matrix
 
@@ -63,18 +65,33 @@ class Grid:
 
     def band_mean(self, per_bin: np.ndarray) -> np.ndarray:
         """Mean over each band's bins of ``per_bin`` (..., n_bins) -> (..., n_bands)."""
-        return _group_mean(per_bin, self.band_of_bin, self.n_bands)
+        return _group_mean(per_bin, self._bin_averages)
 
     def eval_mean(self, per_point: np.ndarray) -> np.ndarray:
         """Mean over each band's evaluation points (..., n_points) -> (..., n_bands)."""
-        return _group_mean(per_point, self.eval_band, self.n_bands)
+        return _group_mean(per_point, self._eval_averages)
+
+    # a model evaluation averages a few dozen arrays: one sparse product each, its matrix made once
+    @cached_property
+    def _bin_averages(self) -> scipy.sparse.csr_matrix:
+        return _averaging(self.band_of_bin, self.n_bands)
+
+    @cached_property
+    def _eval_averages(self) -> scipy.sparse.csr_matrix:
+        return _averaging(self.eval_band, self.n_bands)
 
 
-def _group_mean(values: np.ndarray, group: np.ndarray, n: int) -> np.ndarray:
-    counts = np.bincount(group, minlength=n)
+def _averaging(group: np.ndarray, n: int) -> scipy.sparse.csr_matrix:
+    """(n, len(group)): row b averages the points of group b."""
+    counts = np.bincount(group, minlength=n).astype(float)
+    return scipy.sparse.csr_matrix((1.0 / counts[group], (group, np.arange(len(group)))),
+                                   shape=(n, len(group)))
+
+
+def _group_mean(values: np.ndarray, averages: scipy.sparse.csr_matrix) -> np.ndarray:
     flat = values.reshape(-1, values.shape[-1])
-    out = np.stack([np.bincount(group, weights=row, minlength=n) for row in flat]) / counts
-    return out.reshape(values.shape[:-1] + (n,))
+    out = np.asarray(averages @ flat.T).T
+    return out.reshape(values.shape[:-1] + (averages.shape[0],))
 
 
 def _bin_correlation(window: np.ndarray, max_lag: int = 4) -> np.ndarray:
