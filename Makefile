@@ -26,8 +26,10 @@ check: $(STAMP)
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 
+# One pytest worker per core (pytest-xdist), a file to a worker (its module fixtures made once).
+# The sim rig runs in virtual time: a busy machine changes how long a test takes, not its verdict.
 test: check
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 # The suite with every runtime dependency at its lower bound in pyproject.toml (a fresh venv in a
 # temporary copy of the work tree, .ci/lowest); 20-40 min, so not part of `make test` or CI.

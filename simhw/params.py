@@ -306,19 +306,21 @@ class SimConfig:
         return cfg
 
 
+_IMMUTABLE = (float, int, str, bool, type(None))
+
+
 def _clone(obj: Any) -> Any:
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        new = copy.copy(obj)
-        for f in dataclasses.fields(obj):
-            v = getattr(obj, f.name)
-            if isinstance(v, (dict, list)) or dataclasses.is_dataclass(v):
-                setattr(new, f.name, _clone(v))
-        return new
+    if isinstance(obj, _IMMUTABLE):
+        return obj
     if isinstance(obj, dict):
         return {k: _clone(v) for k, v in obj.items()}
-    if isinstance(obj, list):
-        return [_clone(v) for v in obj]
-    return obj
+    if isinstance(obj, (list, tuple)):
+        return type(obj)(_clone(v) for v in obj)
+    new = copy.copy(obj)  # a section (dataclass): its scalars are shared, its containers cloned
+    for name, v in vars(obj).items():
+        if not isinstance(v, _IMMUTABLE):
+            setattr(new, name, _clone(v))
+    return new
 
 
 _KEYED = {"platform": (PlatformAxis, AXES), "bearing": (Bearing, AXES),

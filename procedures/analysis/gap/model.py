@@ -268,6 +268,7 @@ class SpectralModel:
         self._sources_cache: dict[tuple, tuple[dict, list]] = {}
         self._aa_cache: dict[tuple, np.ndarray] = {}
         self._aa_alias_cache: dict[tuple, list[np.ndarray]] = {}
+        self._aa_line_cache: dict[tuple, np.ndarray] = {}
         self._kernel_cache: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self.plant_evaluations = 0
 
@@ -300,9 +301,11 @@ class SpectralModel:
             disc = discretize(plant, dt)
             H = frequency_response(disc.Ad, disc.Bd[:, cols], C, D, z)
         n = len(f_eval)
-        H_alias = [H[i * n:(i + 1) * n] for i in range(len(aliases))]
+        # |H|^2 per alias, (n_in, n_out, n_points): what the noise parts are weighted by
+        power = [np.ascontiguousarray(np.transpose(np.abs(H[i * n:(i + 1) * n]) ** 2, (2, 1, 0)))
+                 for i in range(len(aliases))]
         stable = bool(np.max(np.linalg.eigvals(plant.A).real) < 0.0)
-        result = (aliases, H_alias, H[len(aliases) * n:], stable)
+        result = (aliases, power, H[len(aliases) * n:], stable)
         if len(self._cache) > 256:
             self._cache.clear()
         self._cache[key] = result
@@ -360,7 +363,7 @@ class SpectralModel:
         spectra, line_list = self._sources(cfg, m, dt, probe)
         inputs = sorted(set(spectra) | {name for name, _, _ in line_list})
         line_freqs = np.array([f0 for _, f0, _ in line_list], float)
-        aliases, H_alias, H_lines, stable = self._responses(cfg, m, dt, inputs, line_freqs)
+        aliases, power, H_lines, stable = self._responses(cfg, m, dt, inputs, line_freqs)
         aa2 = self._aa2(cfg, m)
         aa_key = (m, dt, cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction)
         aa_alias = self._aa_alias_cache.get(aa_key)
@@ -368,15 +371,15 @@ class SpectralModel:
             aa_alias = self._aa_alias_cache[aa_key] = [aa2(a) for a in aliases]
 
         nch = len(self.channels)
-        parts = {p: np.zeros((nch, grid.n_bands)) for p in PARTS}
+        per_part = {p: np.zeros((nch, len(f_eval))) for p in PARTS}  # band means taken once, at the end
         for j, name in enumerate(inputs):
             for part, spec in spectra.get(name, {}).items():
-                per_point = np.zeros((nch, len(f_eval)))
-                for H, g, sp in zip(H_alias, aa_alias, spec):
-                    per_point += np.abs(H[:, :, j].T) ** 2 * (g * sp)[None, :]
-                parts[part] += grid.eval_mean(per_point)
+                acc = per_part[part]
+                for H2, g, sp in zip(power, aa_alias, spec):
+                    acc += H2[j] * (g * sp)[None, :]
+        parts = {p: grid.eval_mean(v) for p, v in per_part.items()}
         per_bin = np.zeros((nch, len(grid.bins)))
-        aa_lines = np.sqrt(aa2(line_freqs)) if len(line_freqs) else []
+        aa_lines = self._aa_lines(aa2, aa_key, line_freqs)
         own = 0  # the axis gyro's pickoff lines, in the data sheet's order: each a part of its own
         for k, (name, f0, a) in enumerate(line_list):
             amp = a * np.abs(H_lines[k, :, inputs.index(name)]) * aa_lines[k]
@@ -396,6 +399,16 @@ class SpectralModel:
         parts["fixed"] += grid.band_mean(per_bin) + self.quant[:, None]
         shape = ac_shape(cfg, self.axis) if self.axis in cfg.autocollimator else None
         return ModelSpectrum(self.channels, parts, grid.band_center_hz, shape, stable)
+
+    def _aa_lines(self, aa2, aa_key: tuple, line_freqs: np.ndarray) -> np.ndarray:
+        """|AA| at the lines' frequencies (cached: most trials keep the lines)."""
+        key = aa_key + (line_freqs.tobytes(),)
+        hit = self._aa_line_cache.get(key)
+        if hit is None:
+            if len(self._aa_line_cache) > 256:
+                self._aa_line_cache.clear()
+            hit = self._aa_line_cache[key] = np.sqrt(aa2(line_freqs)) if len(line_freqs) else np.zeros(0)
+        return hit
 
     def _add_line(self, per_bin: np.ndarray, f0: float, amplitudes: np.ndarray) -> None:
         fs = self.grid.rate_hz
