@@ -7,6 +7,9 @@ host heartbeat as node 0x7F, which arms each node's heartbeat consumer (its watc
 the nodes' heartbeat and EMCY itself, and turns what the nodes say on their own (an EMCY, a
 reboot, leaving the operational state, falling silent) into latched faults, so the rig goes
 safe. Frames of node ids the rig does not use (their boot-up and heartbeat too) are ignored.
+A node's silence counts from when the host set its heartbeat period (``watch``); its EMCY is a
+fault from the host's NMT start on (``started``). With ``listen_s`` the link first listens for
+another host's heartbeat and refuses the bus if it hears one (``drivers.claim``).
 The host heartbeat goes out every ``heartbeat_period_s`` of wall time; a node's silence is
 measured on the link's deadline clock (``monotonic``): both are about the wire and the host
 being alive, not about rig time.
@@ -30,6 +33,7 @@ from drivers.errors import (
     NodeError,
     NodeReset,
     ProtocolError,
+    RigBusy,
 )
 from drivers.faults import FaultLatch
 
@@ -39,7 +43,11 @@ log = logging.getLogger(__name__)
 class CanLink:
     def __init__(self, bus: can.BusABC, nodes: list[str], *, faults: FaultLatch | None = None,
                  heartbeat_period_s: float = 0.1, node_timeout_s: float = 1.0, reply_timeout_s: float = 0.5,
-                 channel: str = "", monotonic: Callable[[], float] = time.monotonic) -> None:
+                 channel: str = "", monotonic: Callable[[], float] = time.monotonic,
+                 listen_s: float = 0.0) -> None:
+        """``listen_s``: first listen that long, sending nothing, for another host's heartbeat
+        (``0x77F``); one heard raises ``RigBusy`` (``drivers.claim``). A bus only this process
+        can reach (the sim rig's) needs none."""
         unknown = [n for n in nodes if n not in rn.NODES]
         if unknown:
             raise ValueError(f"unknown CAN node(s) {unknown}; known: {', '.join(rn.NODES)}")
@@ -55,6 +63,13 @@ class CanLink:
         self.monotonic = monotonic
         self._send_lock = threading.Lock()
         self._last_hb: dict[int, float] = {}
+        #: nodes whose silence is a fault, since when: from the host's heartbeat settings on
+        #: (a module at factory defaults may send none before)
+        self._watched: dict[int, float] = {}
+        #: nodes this host has NMT-started: an EMCY from one not yet started predates this
+        #: connection (a trip at the previous session's end) and is not a fault of this one
+        self._started: set[int] = set()
+        self._other_host: can.Message | None = None
         self._operational: set[int] = set()
         self._lost: set[int] = set()
         #: every node id this rig uses
@@ -68,7 +83,22 @@ class CanLink:
         self.heartbeat_suspended = False
         self._notifier = can.Notifier(bus, [self._on_message], timeout=0.05)
         self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="can-heartbeat", daemon=True)
+        if listen_s > 0:
+            self._listen(listen_s)
         self._hb_thread.start()
+
+    def _listen(self, listen_s: float) -> None:
+        """Refuse a bus another host is driving, before this one sends a frame."""
+        end = time.monotonic() + listen_s
+        while self._other_host is None and time.monotonic() < end:
+            time.sleep(0.01)
+        if self._other_host is not None:
+            try:
+                self._notifier.stop(timeout=1.0)
+            finally:
+                self.bus.shutdown()
+            raise RigBusy(f"CAN {self.channel}: another host is driving this bus (its heartbeat 0x{cf.HOST_HEARTBEAT_COB:03x} "
+                          f"was heard); this host sent nothing. Close the other session (or its PC's), then try again")
 
     # ------------------------------------------------------------------ receive
     def _on_message(self, msg: can.Message) -> None:
@@ -82,6 +112,8 @@ class CanLink:
             log.warning("CAN %s: bus error frame %s", self.channel, msg)
             return
         node = cf.node_of(msg.arbitration_id)
+        if msg.arbitration_id == cf.HOST_HEARTBEAT_COB and not msg.is_extended_id and not self._hb_thread.is_alive():
+            self._other_host = msg   # before this host's first heartbeat: another host's
         if msg.is_extended_id or node not in self._used_ids or msg.arbitration_id == node:
             # another device's frame, NMT and SYNC (node 0), a 29-bit frame: not ours
             self._foreign(msg)
@@ -90,8 +122,8 @@ class CanLink:
         if function == 0x580 and len(msg.data) != 8:   # CiA 301: every SDO frame carries 8 bytes
             self.faults.report(ProtocolError(f"CAN {self.channel}: SDO answer 0x{msg.arbitration_id:03x} of node "
                                              f"'{rn.NODE_NAMES[node]}': {len(msg.data)} data bytes (expected 8)"))
-            return
-        self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
+            # passed on all the same: the transfer waiting for it fails now, not at its deadline
+        # the project's own checks first: a frame the canopen package chokes on still latches
         try:
             if function == 0x700:
                 self._on_heartbeat(cf.decode_heartbeat(msg.arbitration_id, msg.data))
@@ -99,6 +131,8 @@ class CanLink:
                 self._on_emergency(cf.decode_emergency(msg.arbitration_id, msg.data))
         except ProtocolError as exc:
             self.faults.report(ProtocolError(f"CAN {self.channel}: {exc}"))
+            return
+        self.network.notify(msg.arbitration_id, msg.data, msg.timestamp)
 
     def _foreign(self, msg: can.Message) -> None:
         """A frame of a node id this rig does not use (another device's boot-up, heartbeat,
@@ -129,13 +163,17 @@ class CanLink:
         if m.code == cf.EMCY_ERROR_RESET:
             log.info("CAN node '%s' (id %d): error reset (EMCY 0x0000)", name, m.node)
             return
+        if m.node not in self._started:
+            log.warning("CAN node '%s' (id %d): EMCY 0x%04x (%s) before this host's NMT start: from before this "
+                        "connection (a node tripped at the previous session's end sits at its error values); "
+                        "not a fault of this one", name, m.node, m.code, m.text())
+            return
         self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) reports an error: {m.text()} "
                                      f"(EMCY 0x{m.code:04x}, error register 0x{m.register:02x}, "
                                      f"data {m.data.hex()}); the rig went safe", node=name, code=m.code))
 
     # ------------------------------------------------------------------ heartbeat and watch
     def _heartbeat_loop(self) -> None:
-        t_start = self.monotonic()
         while True:  # the first heartbeat goes out at once: it arms the nodes' watchdogs
             try:
                 if not self.heartbeat_suspended:
@@ -146,7 +184,10 @@ class CanLink:
             now = self.monotonic()
             for name in self.nodes:
                 node = rn.NODES[name]
-                last = self._last_hb.get(node, t_start)
+                since = self._watched.get(node)
+                if since is None:
+                    continue
+                last = max(self._last_hb.get(node, since), since)
                 if node not in self._lost and now - last > self.node_timeout_s:
                     self._lost.add(node)
                     self._operational.discard(node)
@@ -155,6 +196,15 @@ class CanLink:
                         f"(limit {self.node_timeout_s:g} s); check its cable and power; the rig went safe"))
             if self._stop.wait(self.heartbeat_period_s):
                 return
+
+    def watch(self, name: str) -> None:
+        """From now on node ``name``'s silence for longer than the node timeout is a fault
+        (called once the host has set the node's heartbeat period)."""
+        self._watched.setdefault(rn.NODES[name], self.monotonic())
+
+    def started(self, name: str) -> None:
+        """The host has NMT-started node ``name``: from now on its EMCY frames are faults."""
+        self._started.add(rn.NODES[name])
 
     def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""

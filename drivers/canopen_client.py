@@ -117,9 +117,10 @@ class CanopenClient:
 
     def read(self, index: int, sub: int = 0, *, what: str = "", check_faults: bool = True) -> int:
         """Upload one numeric object (its raw integer, typed by the EDS)."""
-        raw = self._transfer(index, sub, None, what or f"read 0x{index:04x}:{sub}", check_faults)
+        what = what or f"read 0x{index:04x}:{sub}"
+        raw = self._transfer(index, sub, None, what, check_faults)
         assert raw is not None
-        value = self._variable(index, sub).decode_raw(raw)
+        value = self._decode(index, sub, raw, what)
         if not isinstance(value, int):
             raise ProtocolError(f"{self._where(index, sub)} is not an integer object ({value!r})")
         return value
@@ -127,13 +128,20 @@ class CanopenClient:
     def read_if_present(self, index: int, sub: int = 0, *, what: str = "") -> int | None:
         """``read``, but None where the node has no such object (a commercial module without a
         manufacturer object): the caller falls back to the EDS."""
-        raw = self._transfer(index, sub, None, what or f"read 0x{index:04x}:{sub}", True, missing_ok=True)
+        what = what or f"read 0x{index:04x}:{sub}"
+        raw = self._transfer(index, sub, None, what, True, missing_ok=True)
         if raw is None:
             return None
-        value = self._variable(index, sub).decode_raw(raw)
+        value = self._decode(index, sub, raw, what)
         if not isinstance(value, int):
             raise ProtocolError(f"{self._where(index, sub)} is not an integer object ({value!r})")
         return value
+
+    def _decode(self, index: int, sub: int, raw: bytes, what: str) -> object:
+        try:
+            return self._variable(index, sub).decode_raw(raw)
+        except (canopen.objectdictionary.ObjectDictionaryError, struct.error) as exc:
+            raise self._bad_answer(index, sub, what, exc) from None   # a short or long answer
 
     def write(self, index: int, sub: int, value: int, *, what: str = "", check_faults: bool = True) -> None:
         """Download one numeric object; a refusal raises its typed error, a fault latches."""
@@ -177,10 +185,8 @@ class CanopenClient:
             raise self._refusal(index, sub, what, exc.code) from None
         except (SdoCommunicationError, struct.error) as exc:
             if isinstance(exc, struct.error) or "No SDO response" not in str(exc):
-                fault: DriverError = ProtocolError(f"{self._where(index, sub)}: bad SDO answer to {what} ({exc})")
-                self.link.faults.report(fault)
-                raise fault from None
-            fault = DeviceTimeout(f"{self._where(index, sub)}: no SDO answer to {what} within "
+                raise self._bad_answer(index, sub, what, exc) from None
+            fault: DriverError = DeviceTimeout(f"{self._where(index, sub)}: no SDO answer to {what} within "
                                                f"{self.link.reply_timeout_s:g} s ({exc}); the rig went safe")
         except (can.CanError, OSError, ValueError) as exc:
             fault = DeviceLost(f"CAN {self.link.channel}: cannot send to node '{self.name}' ({exc}); "
@@ -200,6 +206,43 @@ class CanopenClient:
         return fault
 
     # ------------------------------------------------------------------ connect and safe
+    def connect(self, deadline: float, window_s: float) -> int:
+        """Bring the node up as a CiA 301 master does, before it counts as the rig's: NMT
+        "enter pre-operational" (a stopped node answers SDO again), then its device type asked
+        until it answers or ``deadline`` (the link's clock) passes: a module at factory
+        defaults sends no heartbeat, and one powered up with the PC boots later than the host.
+        Then ``identify`` and ``clear`` without its wait. Returns the product code."""
+        self.node.nmt.send_command(cf.NMT_ENTER_PRE_OPERATIONAL)
+        timeout = self.node.sdo.RESPONSE_TIMEOUT
+        try:
+            while True:
+                left = deadline - self.link.monotonic()
+                self.node.sdo.RESPONSE_TIMEOUT = max(0.05, min(timeout, left))
+                try:
+                    with self._lock:
+                        self.node.sdo.upload(0x1000, 0)
+                    break
+                except SdoCommunicationError as exc:
+                    if "No SDO response" not in str(exc):
+                        raise self._bad_answer(0x1000, 0, "read device type", exc) from None
+                    if self.link.monotonic() >= deadline:
+                        raise DeviceLost(f"CAN node '{self.name}' (id {self.node_id}) did not answer within the "
+                                         f"connect window of {window_s:g} s (rig URL connect_s=S); check its "
+                                         f"power, its cable and termination, and that its node id is "
+                                         f"{self.node_id}") from None
+                except SdoAbortedError:
+                    break              # it answers: ``identify`` says what
+        finally:
+            self.node.sdo.RESPONSE_TIMEOUT = timeout
+        product = self.identify()
+        self.clear(wait=False)
+        return product
+
+    def _bad_answer(self, index: int, sub: int, what: str, exc: Exception) -> ProtocolError:
+        fault = ProtocolError(f"{self._where(index, sub)}: bad SDO answer to {what} ({exc})")
+        self.link.faults.report(fault)
+        return fault
+
     def identify(self) -> int:
         """Check the node's device type (0x1000); returns its product code (0x1018:2)."""
         kind = self.read(0x1000, 0, what="read device type", check_faults=False)
@@ -217,13 +260,24 @@ class CanopenClient:
         up, so a reboot is caught. Without ``wait`` the caller waits (``CanLink.wait_operational``),
         for several nodes at once."""
         ms = max(1, round(self.link.node_timeout_s * 1000))
-        self.write(0x1016, 1, (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), what="set host heartbeat consumer",
-                   check_faults=False)
-        self.write(0x1017, 0, max(1, round(self.link.heartbeat_period_s * 1000)), what="set heartbeat period",
-                   check_faults=False)
+        settings = [((0x1016, 1), (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), "host heartbeat consumer"),
+                    ((0x1017, 0), max(1, round(self.link.heartbeat_period_s * 1000)), "heartbeat period"),
+                    # CiA 301 error behaviour: a communication error takes it to pre-operational
+                    # (2 would stop it, and a stopped module never opens again until power-cycled)
+                    ((0x1029, 1), 0, "error behaviour")]
+        for (index, sub), value, what in settings:
+            if index == 0x1029 and self.read_if_present(index, sub, what=f"read {what}") is None:
+                continue                  # a module without it: pre-operational is CiA 301's default
+            self.write(index, sub, value, what=f"set {what}", check_faults=False)
+            back = self.read(index, sub, what=f"read back {what}", check_faults=False)
+            if back != value:
+                raise ProtocolError(f"{self._where(index, sub)} ({what}) reads back 0x{back:x} after 0x{value:x} "
+                                    f"was written; the module does not keep it")
+        self.link.watch(self.name)
         for (index, sub), value in self.configuration:
             self.write(index, sub, value, check_faults=False)
         self.node.nmt.send_command(cf.NMT_START)
+        self.link.started(self.name)
         if wait:
             self.link.wait_operational([self.name], self.link.reply_timeout_s)
 

@@ -21,6 +21,7 @@ NMT_BOOT, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0x00, 0x04, 0x05, 
 NMT_STATE_TEXT = {NMT_BOOT: "boot-up", NMT_STOPPED: "stopped", NMT_OPERATIONAL: "operational",
                   NMT_PRE_OPERATIONAL: "pre-operational"}
 NMT_START = 0x01
+NMT_ENTER_PRE_OPERATIONAL = 0x80   # CiA 301: a stopped node answers SDO again
 
 #: CiA 301 emergency codes the rig's nodes send
 EMCY_ERROR_RESET = 0x0000

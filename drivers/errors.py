@@ -75,6 +75,11 @@ class DeviceLost(DriverError):
     """A device stopped talking (pulled cable, dead node, closed port). The rig has gone safe."""
 
 
+class RigBusy(DriverError):
+    """Another host holds the rig (its lock, its ADC port, or its heartbeat on the CAN bus).
+    Raised before this host sent any byte: the other host's session is untouched."""
+
+
 class NodeReset(DeviceLost):
     """A CAN node rebooted on its own and lost its set-points. The rig has gone safe."""
 

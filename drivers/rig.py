@@ -45,6 +45,7 @@ from drivers.caging import CagingSwitches, CanopenCagingSwitches
 from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
+from drivers.claim import RigClaim
 from drivers.clock import RigClock, WallClock
 from drivers.command import CanopenCommandDac, CommandDac
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
@@ -276,7 +277,11 @@ class Rig:
 
 
 # ---------------------------------------------------------------------------- open_rig
-_SERIAL_KEYS = {"can", "baud", "table", "bitrate"}
+_SERIAL_KEYS = {"can", "baud", "table", "bitrate", "connect_s"}
+#: how long a serial rig's nodes have to answer at connect (docs/protocol.md 2.8), s
+CONNECT_WINDOW_S = 2.0
+#: how long a serial rig's host listens for another host's heartbeat before it sends (3 periods), s
+LISTEN_S = 0.3
 #: URL keys ``can_<option>=<value>`` pass ``<option>`` to ``can.Bus`` (and so does ``bitrate``)
 BUS_OPTION_PREFIX = "can_"
 
@@ -373,29 +378,47 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
         baud = int(params.get("baud", "2000000"))
     except ValueError as exc:
         raise ValueError(f"rig URL {url!r}: {exc}") from None
-    options = bus_options(url, params)
+    window = params.get("connect_s", str(CONNECT_WINDOW_S))
     try:
-        bus = can.Bus(interface=iface, channel=channel, **options)
-    except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
-        raise DeviceLost(f"cannot open CAN interface {iface}:{channel} with {options or 'no options'}: {exc}") from exc
-    tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
-    return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud)
+        connect_s = float(window)
+    except ValueError:
+        connect_s = float("nan")
+    if not 0.1 <= connect_s <= 600:   # NaN fails too
+        raise ValueError(f"rig URL {url!r}: connect_s={window!r} must be a number of seconds in 0.1..600")
+    options = bus_options(url, params)
+    # One host per rig: the locks before any byte, then the bus heard before it is spoken on
+    claim = RigClaim(url, [("adc", path), ("can", f"{iface}:{channel}")])
+    try:
+        try:
+            bus = can.Bus(interface=iface, channel=channel, **options)
+        except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
+            raise DeviceLost(f"cannot open CAN interface {iface}:{channel} with {options or 'no options'}: "
+                             f"{exc}") from exc
+        tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
+        return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud,
+                        connect_s=connect_s, listen_s=LISTEN_S, closers=[claim.release])
+    except BaseException:
+        claim.release()
+        raise
 
 
 def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
               reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None,
-              monotonic: Callable[[], float] = time.monotonic) -> Rig:
+              monotonic: Callable[[], float] = time.monotonic, connect_s: float = CONNECT_WINDOW_S,
+              listen_s: float = 0.0) -> Rig:
     """The rig from its ADC port and CAN bus. ``monotonic``: the drivers' deadline clock (the
-    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s)."""
+    wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s).
+    ``connect_s``: how long the nodes have to answer; ``listen_s``: how long to listen for
+    another host first (``CanLink``). ``closers`` run when the rig closes."""
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
-    link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
-                   reply_timeout_s=reply_timeout_s, monotonic=monotonic)
     adc = None
+    link = None
     try:
-        link.wait_for_nodes(max(2.0, node_timeout_s))
+        link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
+                       reply_timeout_s=reply_timeout_s, monotonic=monotonic, listen_s=listen_s)
         torquers = CanopenTorquerDac(link, calibration)
         commands = CanopenCommandDac(link, calibration)
         caging = CanopenCagingSwitches(link)
@@ -404,9 +427,10 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         clients: list[CanopenClient] = [relays.node, caging.node, torquers.node, commands.node]
         if isinstance(tab, CanopenTable):
             clients.append(tab.node)
+        # every node brought up within one window: a rig powered up with its PC boots together
+        deadline = link.monotonic() + max(connect_s, node_timeout_s)
         for c in clients:
-            c.identify()
-            c.clear(wait=False)  # a node latched safe by an earlier session's end starts fresh
+            c.connect(deadline, max(connect_s, node_timeout_s))
         link.wait_operational([c.name for c in clients], max(2.0, reply_timeout_s))
         torquers.read_scale()
         commands.read_scale()
@@ -422,7 +446,8 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
     except BaseException:
         if adc is not None:
             adc.close()
-        link.close()
+        if link is not None:
+            link.close()
         raise
     log.info("rig %s open: ADC %s %s on %s; CAN nodes %s on %s", url, adc.identity.model, adc.identity.serial,
              adc_port, ", ".join(names), channel)

@@ -41,7 +41,16 @@ from drivers.adc_protocol import (
     encode_resync,
 )
 from drivers.clock import RigClock, WallClock
-from drivers.errors import DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SampleGap, SetpointRangeError
+from drivers.errors import (
+    DeviceLost,
+    DeviceTimeout,
+    DriverError,
+    InterlockError,
+    ProtocolError,
+    RigBusy,
+    SampleGap,
+    SetpointRangeError,
+)
 from drivers.faults import FaultLatch
 
 log = logging.getLogger(__name__)
@@ -147,8 +156,16 @@ class SerialAdc(Adc):
         self.stall_timeout_s = stall_timeout_s
         self.buffer_s = buffer_s
         try:
-            self.ser = serial.Serial(port, baudrate=baudrate, timeout=0.05, write_timeout=reply_timeout_s)
-        except (serial.SerialException, OSError, ValueError) as exc:
+            # exclusive (flock): a second host's open fails here, before it sends a byte
+            self.ser = serial.Serial(port, baudrate=baudrate, timeout=0.05, write_timeout=reply_timeout_s,
+                                     exclusive=True)
+        except serial.SerialException as exc:
+            if "exclusively lock" in str(exc):
+                raise RigBusy(f"the ADC's serial port {port} is held by another program ({exc}); this command "
+                              f"sent nothing to it. Close the other session, then try again") from exc
+            raise DeviceLost(f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
+                             f"the device path and that no other program holds the port") from exc
+        except (OSError, ValueError) as exc:
             raise DeviceLost(f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
                              f"the device path and that no other program holds the port") from exc
         self._decoder = StreamDecoder()

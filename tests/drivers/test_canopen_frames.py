@@ -58,6 +58,8 @@ def link():
     bus = can.Bus(interface="virtual", channel=f"frames-{uuid.uuid4().hex[:8]}", receive_own_messages=False)
     # no node answers here: a silence limit beyond the test's length keeps the watch quiet
     lk = CanLink(bus, list(OURS), node_timeout_s=1e6, heartbeat_period_s=3600.0, channel="test")
+    for name in OURS:
+        lk.started(name)               # connected: from here an EMCY is this session's fault
     yield lk
     lk.close()
 
@@ -120,3 +122,22 @@ def test_a_node_counts_as_up_only_once_its_heartbeat_says_operational(link):
                                  is_extended_id=False))
     link.wait_operational(["torquer"], 0.05)
     assert link.faults.fault is None
+
+
+def test_an_emcy_from_before_the_hosts_nmt_start_is_not_this_sessions_fault():
+    """Issue 35 item 7: a node tripped at the previous session's end (its watchdog: the host
+    heartbeat stopped) may send its EMCY while this host connects; it sits at its error values
+    and the NMT start changes none of them. Once started, the same frame latches."""
+    bus = can.Bus(interface="virtual", channel=f"stale-{uuid.uuid4().hex[:8]}", receive_own_messages=False)
+    lk = CanLink(bus, ["torquer"], node_timeout_s=1e6, heartbeat_period_s=3600.0, channel="test")
+    try:
+        trip = struct.pack("<HB5s", cf.EMCY_HEARTBEAT, 0x11, bytes(5))
+        lk._on_message(can.Message(arbitration_id=0x083, data=trip, is_extended_id=False))
+        assert lk.faults.fault is None
+        lk._on_message(can.Message(arbitration_id=0x083, data=trip[:5], is_extended_id=False))
+        assert isinstance(lk.faults.clear(), ProtocolError)      # malformed latches, started or not
+        lk.started("torquer")
+        lk._on_message(can.Message(arbitration_id=0x083, data=trip, is_extended_id=False))
+        assert isinstance(lk.faults.fault, NodeError)
+    finally:
+        lk.close()

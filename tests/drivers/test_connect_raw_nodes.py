@@ -1,0 +1,196 @@
+"""Issue 35 items 1-4, 7, 12 and B: the host connects to modules as a CiA 301 master would, and
+never to a rig another host holds. The modules are ``rawnode.RawNode`` (raw frames, written from
+the standards), so nothing here shares code with the sim's nodes or the canopen package's
+LocalNode.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import subprocess
+import sys
+import time
+import uuid
+
+import can
+import pytest
+
+from drivers.can_link import CanLink
+from drivers.claim import RigClaim
+from drivers.errors import DeviceLost, NodeError, ProtocolError, RigBusy
+from drivers.torquer import CanopenTorquerDac
+from tests.drivers.rawnode import AO_401_OBJECTS, OPERATIONAL, STOPPED, RawNode
+
+TORQUER = 3
+EMCY_TRIP = 0x8130
+
+
+@pytest.fixture
+def channel():
+    return f"raw-{uuid.uuid4().hex[:8]}"
+
+
+def host(channel: str, **kw) -> tuple[CanLink, CanopenTorquerDac]:
+    bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    link = CanLink(bus, ["torquer"], channel=channel, **kw)
+    return link, CanopenTorquerDac(link)
+
+
+def connect(link: CanLink, dac: CanopenTorquerDac, window_s: float = 2.0) -> int:
+    product = dac.node.connect(link.monotonic() + window_s, window_s)
+    link.wait_operational(["torquer"], 2.0)
+    return product
+
+
+@pytest.mark.parametrize("case, node_kw", [
+    ("heartbeat off at power-on (0x1017 = 0)", {}),
+    ("boots 1.1 s after the host", {"boot_delay_s": 1.1}),
+    ("left stopped by its last master", {"state": STOPPED}),
+    ("slow SDO answers (0.2 s)", {"sdo_delay_s": 0.2}),
+])
+def test_a_conforming_module_opens(channel, case, node_kw):
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS, **node_kw)
+    link, dac = host(channel)
+    try:
+        assert connect(link, dac) == 0x13, case
+        # configured as the host asked, read back: its heartbeat now runs, its errors go pre-op
+        assert node.objects[(0x1017, 0)][0] == 100 and node.objects[(0x1029, 1)][0] == 0
+        assert node.objects[(0x1016, 1)][0] == 0x007F03E8 and node.state == OPERATIONAL
+        time.sleep(0.3)
+        assert link.faults.fault is None, link.faults.fault
+    finally:
+        link.close()
+        node.close()
+
+
+def test_a_module_that_never_answers_is_named_with_the_window(channel):
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS, boot_delay_s=3600)
+    link, dac = host(channel)
+    try:
+        with pytest.raises(DeviceLost, match=r"'torquer' \(id 3\) did not answer within the connect window of 0.5 s"):
+            dac.node.connect(link.monotonic() + 0.5, 0.5)
+    finally:
+        link.close()
+        node.close()
+
+
+def test_a_stale_trip_emcy_during_connect_does_not_fail_the_open(channel):
+    """Item 7: the previous session's watchdog trip, arriving while this host connects."""
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
+    link, dac = host(channel)
+    try:
+        node.emcy(EMCY_TRIP)
+        connect(link, dac)
+        assert link.faults.fault is None
+        node.emcy(EMCY_TRIP)                            # after the start: this session's fault
+        time.sleep(0.2)
+        assert isinstance(link.faults.fault, NodeError)
+    finally:
+        link.close()
+        node.close()
+
+
+def test_an_emcy_that_is_not_8_bytes_latches(channel):
+    """Item 4: it raised inside the canopen package's EMCY handler and latched nothing."""
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
+    link, dac = host(channel)
+    try:
+        connect(link, dac)
+        node.emcy(EMCY_TRIP, length=5)
+        time.sleep(0.2)
+        assert isinstance(link.faults.fault, ProtocolError) and "expected 8" in str(link.faults.fault)
+    finally:
+        link.close()
+        node.close()
+
+
+def test_a_7_byte_sdo_answer_fails_the_transfer_as_a_bad_answer(channel):
+    """Item 12: it latched, but the transfer still waited for its deadline and said 'no answer'."""
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
+    link, dac = host(channel, reply_timeout_s=30.0)   # a deadline no transfer here may reach
+    try:
+        connect(link, dac)
+        node.short_sdo = True
+        with pytest.raises(ProtocolError, match="bad SDO answer|7 data bytes"):
+            dac.node.read(0x1018, 2, check_faults=False)
+        assert isinstance(link.faults.fault, ProtocolError)
+    finally:
+        link.close()
+        node.close()
+
+
+def test_a_second_host_on_the_bus_is_refused_before_it_sends(channel):
+    """B: another host's heartbeat on the bus: this one refuses and sends not one frame."""
+    other = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    spy = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+    task = other.send_periodic(can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False), 0.1)
+    try:
+        time.sleep(0.15)
+        while spy.recv(timeout=0) is not None:
+            pass
+        bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+        with pytest.raises(RigBusy, match="another host is driving this bus"):
+            CanLink(bus, ["torquer"], channel=channel, listen_s=0.3)
+        ours = [m for m in iter(lambda: spy.recv(timeout=0.05), None) if m.arbitration_id != 0x77F]
+        assert ours == []
+    finally:
+        task.stop()
+        other.shutdown()
+        spy.shutdown()
+
+
+HOLDER = """
+import sys, time
+from drivers.claim import RigClaim
+claim = RigClaim("serial:///dev/ttyX?can=socketcan:can9", [("adc", sys.argv[1]), ("can", "socketcan:can9")])
+print("held", flush=True)
+sys.stdin.readline()
+"""
+
+
+def test_a_rig_held_by_another_command_is_refused_naming_it(tmp_path, monkeypatch):
+    """B: the lock names its holder (pid, command, since); the holder's end frees it, however it ends."""
+    monkeypatch.setenv("FBS_LOCK_DIR", str(tmp_path / "locks"))
+    port = tmp_path / "ttyX"
+    port.touch()
+    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(port)], stdin=subprocess.PIPE,
+                              stdout=subprocess.PIPE, text=True, env=os.environ | {"PYTHONPATH": os.getcwd()})
+    try:
+        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+        with pytest.raises(RigBusy) as err:
+            RigClaim("serial:///dev/ttyX?can=socketcan:can9", [("adc", str(port)), ("can", "socketcan:can9")])
+        assert f"pid {holder.pid} (" in str(err.value) and "since 20" in str(err.value)
+        assert "sent nothing" in str(err.value)
+    finally:
+        holder.kill()                     # SIGKILL: no clean-up of its own
+        holder.wait()
+    with RigClaim("u", [("adc", str(port)), ("can", "socketcan:can9")]):
+        pass                              # the kernel dropped the dead holder's lock
+
+
+def test_the_adc_port_is_opened_exclusively(tmp_path):
+    """B: a second open of the ADC's port fails before a byte is written."""
+    import serial
+
+    from drivers.serial_adc import SerialAdc
+
+    master, slave = os.openpty()
+    path = os.ttyname(slave)
+    first = serial.Serial(path, exclusive=True)
+    try:
+        with pytest.raises(RigBusy, match="held by another program"):
+            SerialAdc(path)
+        os.set_blocking(master, False)
+        with pytest.raises(BlockingIOError):
+            os.read(master, 64)           # nothing reached the device
+    finally:
+        first.close()
+        os.close(master)
+        os.close(slave)
+
+
+def test_the_emcy_frame_of_the_module_is_what_ci_a_301_says():
+    """The raw node's EMCY is CiA 301's layout (a check on the test double itself)."""
+    data = struct.pack("<HB5s", EMCY_TRIP, 0x11, bytes(5))
+    assert len(data) == 8 and data[:3] == bytes([0x30, 0x81, 0x11])
