@@ -522,6 +522,12 @@ class RunWriter:
 def _set_status(path: Path, status: str) -> None:
     """Set the root status of a closed run file. A live SWMR reader (the console) holds a
     read lock on it; the one attribute is then written without taking the lock."""
+    set_root_attr(path, "status", status)
+
+
+def set_root_attr(path: str | Path, name: str, value: str) -> None:
+    """Set one root attribute of a closed run file (what became known after it closed: whether
+    the rig's safe state was read back at the end)."""
     try:
         f = h5py.File(path, "r+")
     except OSError as exc:
@@ -529,4 +535,4 @@ def _set_status(path: Path, status: str) -> None:
             raise
         f = h5py.File(path, "r+", locking=False)
     with f:
-        f.attrs["status"] = status
+        f.attrs[name] = value

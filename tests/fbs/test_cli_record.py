@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -44,6 +45,32 @@ def test_record_writes_a_complete_run_file(tmp_path, capsys):
         assert sorted(f["channels"]) == ["ac_x_ctl", "gyro_x", "torq_x"]
         assert f["channels/gyro_x"].shape == (1000,)
         assert f["channels/gyro_x"].attrs["sample_rate_hz"] == 500.0
+        assert f.attrs["rig_safe_at_close"] == "read back"
+
+
+def test_a_safe_state_not_read_back_at_close_exits_2_and_says_so(tmp_path, capsys, monkeypatch):
+    """Issue 35 item 8: the relay stops answering once the recording is written; the close's
+    read-back fails. It exited 0 "complete"; now 2, in the JSON and the file."""
+    import daq.recorder
+
+    real = daq.recorder.record
+
+    def then_the_relay_stalls(rig, *a, **kw):   # the real recording; the fault after it
+        result = real(rig, *a, **kw)
+        rig.emulator.inject("relay", "stall")
+        return result
+
+    monkeypatch.setattr(daq.recorder, "record", then_the_relay_stalls)
+    out = tmp_path / "r.h5"
+    code = main(["record", "--rig", "sim?warm=1&watchdog=1", "--mode", "3", "--duration", "1", "--rate", "500",
+                 "--channels", "gyro_x", "--out", str(out), "--json"])
+    captured = capsys.readouterr()
+    assert code == 2, captured.err
+    j = json.loads(captured.out)
+    assert j["status"] == "complete" and j["n_samples"] == 500 and j["rig_safe_at_close"] is False
+    assert "relay" in j["rig_safe_detail"] and "safe state was not read back" in captured.err
+    with h5py.File(out, "r") as f:
+        assert f.attrs["status"] == "complete" and f.attrs["rig_safe_at_close"].startswith("NOT confirmed: ")
 
 
 @pytest.mark.parametrize("duration, rate, message", [
