@@ -59,6 +59,17 @@ class DeadlineSdoClient(SdoClient):
                  monotonic: Callable[[], float]) -> None:
         super().__init__(rx_cobid, tx_cobid, od)
         self.monotonic = monotonic
+        #: the object of the transfer under way (from its initiate request): what an initiate
+        #: answer must name, and what an abort frame names (CiA 301 7.2.4.3.17)
+        self._object = bytes(3)
+
+    def send_request(self, request: bytes | bytearray) -> None:
+        request = bytearray(request)
+        if request[0] & 0xE0 in (0x20, 0x40):         # initiate download / upload
+            self._object = bytes(request[1:4])
+        elif request[0] == 0x80:                       # abort: the package leaves 0x0000:00
+            request[1:4] = self._object
+        super().send_request(request)
 
     def read_response(self) -> bytes:
         deadline = self.monotonic() + self.RESPONSE_TIMEOUT
@@ -71,6 +82,11 @@ class DeadlineSdoClient(SdoClient):
                     raise SdoCommunicationError("No SDO response received") from None
         if response[0] == RESPONSE_ABORTED:
             raise SdoAbortedError(struct.unpack_from("<L", response, 4)[0])
+        if response[0] & 0xE0 in (0x40, 0x60) and bytes(response[1:4]) != self._object:
+            # an initiate answer for another object (the package checks uploads, not downloads)
+            got, want = (int.from_bytes(o[:2], "little") for o in (response[1:4], self._object))
+            raise SdoCommunicationError(f"the answer names object 0x{got:04x}:{response[3]}, not the "
+                                        f"0x{want:04x}:{self._object[2]} asked")
         return response
 
 

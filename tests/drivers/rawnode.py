@@ -33,7 +33,7 @@ class RawNode:
 
     def __init__(self, channel: str, node_id: int, objects: dict[tuple[int, int], tuple[int, int]], *,
                  boot_delay_s: float = 0.0, state: int = PRE_OPERATIONAL, sdo_delay_s: float = 0.0,
-                 short_sdo: bool = False) -> None:
+                 short_sdo: bool = False, other_object: bool = False, mute_sdo: bool = False) -> None:
         self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.node_id = node_id
         self.objects = {k: list(v) for k, v in objects.items()}
@@ -41,6 +41,8 @@ class RawNode:
         self.initial_state = state
         self.sdo_delay_s = sdo_delay_s
         self.short_sdo = short_sdo
+        #: download answers name the next object (a confused module); no SDO answers at all
+        self.other_object, self.mute_sdo = other_object, mute_sdo
         self.received: list[can.Message] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -82,7 +84,7 @@ class RawNode:
             self.received.append(msg)
             if msg.arbitration_id == 0x000 and len(msg.data) == 2 and msg.data[1] in (0, self.node_id):
                 self._nmt(msg.data[0])
-            elif msg.arbitration_id == 0x600 + self.node_id and self.state != STOPPED:
+            elif msg.arbitration_id == 0x600 + self.node_id and self.state != STOPPED and not self.mute_sdo:
                 self._sdo(bytes(msg.data))    # CiA 301: a stopped node serves no SDO
 
     def _nmt(self, command: int) -> None:
@@ -110,7 +112,7 @@ class RawNode:
             self.objects[key][0] = raw
             if key == (0x1017, 0):
                 self._schedule_heartbeat(time.monotonic())
-            self._answer(struct.pack("<BHB4x", 0x60, index, sub))
+            self._answer(struct.pack("<BHB4x", 0x60, index + self.other_object, sub))
         else:
             self._answer(struct.pack("<BHBI", 0x80, index, sub, 0x05040001))
 

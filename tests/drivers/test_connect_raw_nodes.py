@@ -18,7 +18,7 @@ import pytest
 
 from drivers.can_link import CanLink
 from drivers.claim import RigClaim
-from drivers.errors import DeviceLost, NodeError, ProtocolError, RigBusy
+from drivers.errors import DeviceLost, DeviceTimeout, NodeError, ProtocolError, RigBusy
 from drivers.torquer import CanopenTorquerDac
 from tests.drivers.rawnode import AO_401_OBJECTS, OPERATIONAL, STOPPED, RawNode
 
@@ -115,6 +115,37 @@ def test_a_7_byte_sdo_answer_fails_the_transfer_as_a_bad_answer(channel):
         with pytest.raises(ProtocolError, match="bad SDO answer|7 data bytes"):
             dac.node.read(0x1018, 2, check_faults=False)
         assert isinstance(link.faults.fault, ProtocolError)
+    finally:
+        link.close()
+        node.close()
+
+
+def test_a_download_answer_naming_another_object_is_a_bad_answer(channel):
+    """Item 12: the canopen package checks an upload's answer, not a download's."""
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
+    link, dac = host(channel)
+    try:
+        connect(link, dac)
+        node.other_object = True
+        with pytest.raises(ProtocolError, match=r"names object 0x6412:1, not the 0x6411:1 asked"):
+            dac.node.write(0x6411, 1, 0, check_faults=False)
+    finally:
+        link.close()
+        node.close()
+
+
+def test_the_hosts_abort_frame_names_the_transfers_object(channel):
+    """Item 12: CiA 301's abort carries the object of the transfer (the package sent 0x0000:00)."""
+    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
+    link, dac = host(channel, reply_timeout_s=0.2)
+    try:
+        connect(link, dac)
+        node.mute_sdo = True
+        with pytest.raises(DeviceTimeout):
+            dac.node.read(0x1018, 2, check_faults=False)
+        time.sleep(0.1)
+        aborts = [m.data for m in node.received if m.arbitration_id == 0x600 + TORQUER and m.data[0] == 0x80]
+        assert aborts and bytes(aborts[-1][1:4]) == bytes([0x18, 0x10, 2])
     finally:
         link.close()
         node.close()
