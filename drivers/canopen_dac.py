@@ -15,7 +15,7 @@ from drivers import canopen_frames as cf
 from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
-from drivers.errors import DeviceLost, ProtocolError, SetpointRangeError
+from drivers.errors import DeviceLost, DriverError, ProtocolError, SetpointRangeError
 from drivers.setpoints import SetpointLimits
 
 log = logging.getLogger(__name__)
@@ -25,6 +25,7 @@ AO_ERROR_MODE = 0x6443   # 1: the output takes its error value on a communicatio
 AO_ERROR_VALUE = 0x6444  # the error value, counts
 AO_SI_UNIT = 0x6450      # CiA 303-2 unit of the output
 AO_FULL_SCALE = 0x2100   # manufacturer: microvolts at 32768 counts
+RPDO_ASYNC = 255         # CiA 301 transmission type: a receive PDO acts on arrival
 COUNTS_MIN, COUNTS_MAX = -32768, 32767
 
 
@@ -116,6 +117,54 @@ class CanopenDac:
                 mapped.append(sub - 1)
             out.append((cob, mapped))
         return out
+
+    def configure_rpdos(self) -> None:
+        """Make the module's receive PDOs the EDS's (at connect): each one's COB-ID, transmission
+        type and mapping is read; one that differs (a module with X and Y swapped, CiA 401's
+        default mapping, a PDO left disabled) is rewritten per CiA 301 - disabled, mapping
+        cleared, entries, count, enabled - and read back. A module that refuses, or keeps
+        something else, is a ``ProtocolError`` naming what differs: a stream on a mapping the
+        host does not know would drive the wrong output."""
+        for n, (cob, mapped) in enumerate(self.rpdos):
+            comm, mapping = 0x1400 + n, 0x1600 + n
+            want = [(AO_16 << 16) | ((i + 1) << 8) | 16 for i in mapped]
+            if self._rpdo_is(comm, mapping, cob, want):
+                continue
+            found = self._rpdo_text(comm, mapping)
+            log.warning("CAN node '%s': RPDO%d (%s) differs from its EDS; configuring it per the EDS",
+                        self.node.name, n + 1, found)
+            why = "does not keep"
+            try:
+                self.node.write(comm, 1, cob | 0x80000000, what=f"disable RPDO{n + 1}", check_faults=False)
+                self.node.write(mapping, 0, 0, what=f"clear RPDO{n + 1} mapping", check_faults=False)
+                for s, entry in enumerate(want, start=1):
+                    self.node.write(mapping, s, entry, what=f"map RPDO{n + 1} entry {s}", check_faults=False)
+                self.node.write(mapping, 0, len(want), what=f"RPDO{n + 1} mapping count", check_faults=False)
+                self.node.write(comm, 2, RPDO_ASYNC, what=f"RPDO{n + 1} transmission type", check_faults=False)
+                self.node.write(comm, 1, cob, what=f"enable RPDO{n + 1}", check_faults=False)
+                ok = self._rpdo_is(comm, mapping, cob, want)
+            except DriverError as exc:
+                ok, why = False, f"refused its EDS mapping ({exc})"
+            if not ok:
+                fault = ProtocolError(f"CAN node '{self.node.name}': RPDO{n + 1} {why}: it has {found}; the EDS "
+                                      f"has COB-ID 0x{cob:03x}, maps {', '.join(f'0x{e:08x}' for e in want)}. "
+                                      f"Set the module up per its EDS")
+                self.node.link.faults.report(fault)
+                raise fault
+
+    def _rpdo_is(self, comm: int, mapping: int, cob: int, want: list[int]) -> bool:
+        got_cob = self.node.read(comm, 1, what=f"read RPDO COB-ID 0x{comm:04x}", check_faults=False)
+        kind = self.node.read_if_present(comm, 2, what=f"read RPDO transmission type 0x{comm:04x}")
+        count = self.node.read(mapping, 0, what=f"read RPDO mapping count 0x{mapping:04x}", check_faults=False)
+        entries = [self.node.read(mapping, s, what=f"read RPDO mapping 0x{mapping:04x}:{s}", check_faults=False)
+                   for s in range(1, min(count, 8) + 1)]
+        return (got_cob & 0x800007FF == cob and kind in (None, 254, RPDO_ASYNC) and entries == want)
+
+    def _rpdo_text(self, comm: int, mapping: int) -> str:
+        cob = self.node.read(comm, 1, check_faults=False)
+        count = self.node.read(mapping, 0, check_faults=False)
+        entries = [self.node.read(mapping, s, check_faults=False) for s in range(1, min(count, 8) + 1)]
+        return f"COB-ID 0x{cob:08x}, maps {', '.join(f'0x{e:08x}' for e in entries) or 'nothing'}"
 
     def stream(self, index: int, volts: float, what: str) -> float:
         """Set output ``index`` (already checked against the limits) by its receive PDO: one

@@ -432,8 +432,9 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         for c in clients:
             c.connect(deadline, max(connect_s, node_timeout_s))
         link.wait_operational([c.name for c in clients], max(2.0, reply_timeout_s))
-        torquers.read_scale()
-        commands.read_scale()
+        for dac in (torquers, commands):
+            dac.read_scale()
+            dac.configure_rpdos()   # a stream must drive the output it is meant for
         # the ADC's own deadlines (2 s for a reply, 3 s of silence while streaming) stretch with a
         # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them
         adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate, monotonic=monotonic,

@@ -24,6 +24,9 @@ AO_401_OBJECTS: dict[tuple[int, int], tuple[int, int]] = {
     (0x1016, 1): (0, 4), (0x1017, 0): (0, 2), (0x1029, 1): (0, 1),
     **{(0x6411, s): (0, 2) for s in range(1, 5)}, **{(0x6443, s): (0, 1) for s in range(1, 5)},
     **{(0x6444, s): (0, 4) for s in range(1, 5)},
+    # RPDO1 as the EDS has it: outputs 1-4 in order, on 0x200 + node id, acting on arrival
+    (0x1400, 1): (0x203, 4), (0x1400, 2): (255, 1), (0x1600, 0): (4, 1),
+    **{(0x1600, s): (0x64110010 | (s << 8), 4) for s in range(1, 5)},
 }
 
 
@@ -33,7 +36,8 @@ class RawNode:
 
     def __init__(self, channel: str, node_id: int, objects: dict[tuple[int, int], tuple[int, int]], *,
                  boot_delay_s: float = 0.0, state: int = PRE_OPERATIONAL, sdo_delay_s: float = 0.0,
-                 short_sdo: bool = False, other_object: bool = False, mute_sdo: bool = False) -> None:
+                 short_sdo: bool = False, other_object: bool = False, mute_sdo: bool = False,
+                 read_only: set[int] = frozenset()) -> None:
         self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.node_id = node_id
         self.objects = {k: list(v) for k, v in objects.items()}
@@ -43,6 +47,8 @@ class RawNode:
         self.short_sdo = short_sdo
         #: download answers name the next object (a confused module); no SDO answers at all
         self.other_object, self.mute_sdo = other_object, mute_sdo
+        #: objects (by index) whose writes are aborted 0x06010002 (a module that keeps its own)
+        self.read_only = set(read_only)
         self.received: list[can.Message] = []
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -86,6 +92,8 @@ class RawNode:
                 self._nmt(msg.data[0])
             elif msg.arbitration_id == 0x600 + self.node_id and self.state != STOPPED and not self.mute_sdo:
                 self._sdo(bytes(msg.data))    # CiA 301: a stopped node serves no SDO
+            elif self.state == OPERATIONAL:
+                self._rpdo(msg)
 
     def _nmt(self, command: int) -> None:
         if command in NMT_STATE:
@@ -106,6 +114,8 @@ class RawNode:
         if ccs == 2:                          # upload: expedited, size given
             n = 4 - size
             self._answer(struct.pack("<BHB", 0x43 | (n << 2), index, sub) + (value & 0xFFFFFFFF).to_bytes(4, "little"))
+        elif ccs == 1 and index in self.read_only:
+            self._answer(struct.pack("<BHBI", 0x80, index, sub, 0x06010002))
         elif ccs == 1 and req[0] & 0x02:      # expedited download
             n = (req[0] >> 2) & 3 if req[0] & 0x01 else 0
             raw = int.from_bytes(req[4:8 - n], "little")
@@ -115,6 +125,20 @@ class RawNode:
             self._answer(struct.pack("<BHB4x", 0x60, index + self.other_object, sub))
         else:
             self._answer(struct.pack("<BHBI", 0x80, index, sub, 0x05040001))
+
+    def _rpdo(self, msg: can.Message) -> None:
+        """A receive PDO: its mapped objects from the frame, in the order of its own mapping."""
+        for n in range(4):
+            cob = self.objects.get((0x1400 + n, 1), [0x80000000])[0]
+            if cob & 0x80000000 or msg.arbitration_id != cob & 0x7FF:
+                continue
+            pos = 0
+            for s in range(1, self.objects[(0x1600 + n, 0)][0] + 1):
+                entry = self.objects[(0x1600 + n, s)][0]
+                key, nbytes = (entry >> 16, (entry >> 8) & 0xFF), (entry & 0xFF) // 8
+                if key in self.objects:
+                    self.objects[key][0] = int.from_bytes(msg.data[pos:pos + nbytes], "little", signed=True)
+                pos += nbytes
 
     def _answer(self, data: bytes) -> None:
         self.send(0x580 + self.node_id, data[:7] if self.short_sdo else data)

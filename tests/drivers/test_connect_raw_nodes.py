@@ -151,6 +151,44 @@ def test_the_hosts_abort_frame_names_the_transfers_object(channel):
         node.close()
 
 
+def swapped_xy() -> dict:
+    objects = dict(AO_401_OBJECTS)
+    objects[(0x1600, 1)], objects[(0x1600, 2)] = objects[(0x1600, 2)], objects[(0x1600, 1)]
+    return objects
+
+
+def test_a_module_whose_rpdo_swaps_x_and_y_is_mapped_per_the_eds_before_a_stream(channel):
+    """Item 6: a stream meant for X drove Y to 2.5 V; only ``confirm`` saw it, afterwards."""
+    node = RawNode(channel, TORQUER, swapped_xy())
+    link, dac = host(channel)
+    try:
+        connect(link, dac)
+        dac.read_scale()
+        dac.configure_rpdos()
+        assert [node.objects[(0x1600, s)][0] for s in range(1, 5)] == [0x64110110, 0x64110210, 0x64110310,
+                                                                         0x64110410]
+        dac.stream_bias_V("X", 2.5)
+        time.sleep(0.1)
+        assert node.objects[(0x6411, 1)][0] == round(2.5 / (10 / 32768)) and node.objects[(0x6411, 2)][0] == 0
+        dac.confirm()
+    finally:
+        link.close()
+        node.close()
+
+
+def test_a_module_that_keeps_another_mapping_is_refused_naming_it(channel):
+    node = RawNode(channel, TORQUER, swapped_xy(), read_only={0x1600})
+    link, dac = host(channel)
+    try:
+        connect(link, dac)
+        dac.read_scale()
+        with pytest.raises(ProtocolError, match=r"RPDO1 .*(refused|does not keep).*0x64110210, 0x64110110"):
+            dac.configure_rpdos()
+    finally:
+        link.close()
+        node.close()
+
+
 def test_a_second_host_on_the_bus_is_refused_before_it_sends(channel):
     """B: another host's heartbeat on the bus: this one refuses and sends not one frame."""
     other = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
