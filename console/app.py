@@ -10,7 +10,6 @@ on a device. See docs/console.md.
 from __future__ import annotations
 
 import logging
-import signal
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
 
@@ -23,6 +22,7 @@ from textual.notifications import SeverityLevel
 from textual.widgets import Footer, Static, TabbedContent, TabPane, Tabs
 
 from console.channels import unknown_channels
+from console.exitguard import EXIT_SIGNALLED, ExitGuard
 from console.feeds import Feed
 from console.keyhelp import HelpScreen
 from console.limits import Entry
@@ -159,7 +159,6 @@ class ConsoleApp(App[int]):
         self.w_meters.show(self.specs, MeterSnapshot(0))
         self.w_meters.focus()
         self._check_size()
-        self._install_signals()
 
     def _start_background(self) -> None:
         if not self.worker_.stopped.is_set():
@@ -198,19 +197,10 @@ class ConsoleApp(App[int]):
                           "lamps, meters and keys are cut off. Enlarge it.")
         notice.display = small
 
-    def _install_signals(self) -> None:
-        # SIGTERM, or SIGHUP when an SSH session drops: quit the same way as the quit key
-        try:
-            import asyncio
-            loop = asyncio.get_running_loop()
-            for sig in (signal.SIGTERM, signal.SIGHUP):
-                loop.add_signal_handler(sig, self._signalled, sig)
-        except (RuntimeError, NotImplementedError, ValueError):  # not the main thread (tests): nothing to do
-            pass
-
-    def _signalled(self, sig: int) -> None:
-        log.warning("console got signal %s: going safe and quitting", signal.Signals(sig).name)
-        self.worker_.request_shutdown(f"the console got {signal.Signals(sig).name}")
+    def stop_from_outside(self, why: str) -> None:
+        """A signal or a lost terminal (``console.exitguard``, any thread): the rig thread
+        stops (procedure aborted, recording closed, rig safe) and the app quits when it has."""
+        self.worker_.request_shutdown(why)
         self._quitting = True
 
     def on_unmount(self) -> None:
@@ -482,16 +472,19 @@ def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
     root.handlers[:] = [file_handler]
     root.setLevel(logging.INFO)
     app = ConsoleApp(rig_url, out_dir=out)
+    # SIGHUP (the SSH session or tmux window went), SIGTERM, a hung-up terminal: leave, screen or not
+    guard = ExitGuard(app.stop_from_outside, app.worker_.shutdown).install()
     try:
         app.run()
     finally:
+        guard.done()
         app.worker_.shutdown("the console exited")  # already done by on_unmount; a no-op then
         root.handlers[:] = saved[0]
         root.setLevel(saved[1])
         file_handler.close()
     if app.stopped is not None:
         print(exit_line(app.stopped))
-    return app.return_code or 0
+    return EXIT_SIGNALLED if guard.tripped else (app.return_code or 0)
 
 
 def exit_line(stopped: WorkerStopped) -> str:

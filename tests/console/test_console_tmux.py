@@ -22,6 +22,8 @@ pytestmark = [pytest.mark.slow,
                                                                      "needs a real terminal multiplexer")]
 
 FBS = Path(sys.executable).with_name("fbs")
+#: a guard against a hang, not a deadline
+HANG_S = 120.0
 
 
 def tmux(*args: str) -> str:
@@ -93,3 +95,45 @@ def test_fbs_console_in_tmux_shows_meters_and_quits_cleanly(tmp_path):
         subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True)
     log = (out / "console.log").read_text()
     assert "safe state: yes (read back)" in log
+
+
+def test_killing_the_tmux_session_while_recording_ends_the_console_safely(tmp_path):
+    """Issue 35 F / acceptance D: the console outlived its terminal (its main thread blocked on
+    the dead screen, SIGTERM ignored). Killing its tmux session mid-recording now ends the
+    process, the file closed "aborted: <why>", the rig safe, read back. The time to exit is
+    printed (the issue asks for 10 s); the test asserts the outcome behind a hang guard."""
+    session = f"fbs-console-{uuid.uuid4().hex[:8]}"
+    out = tmp_path / "out"
+    cmd = f"cd {tmp_path} && exec {FBS} console --out {out}"
+    tmux("new-session", "-d", "-s", session, "-x", "80", "-y", "24", cmd)
+    try:
+        pane_pid = int(tmux("display-message", "-p", "-t", session, "#{pane_pid}").strip())
+        t_end = time.monotonic() + HANG_S
+        while "torq_xrd" not in capture(session) and time.monotonic() < t_end:
+            time.sleep(0.1)
+        tmux("send-keys", "-t", session, "F4")
+        while " open (" not in capture(session) and time.monotonic() < t_end:   # the event log: rig open
+            time.sleep(0.1)
+        tmux("send-keys", "-t", session, "F7")                     # record, with the panel's defaults
+        while not list(out.glob("*.h5")) and time.monotonic() < t_end:
+            time.sleep(0.1)
+        files = list(out.glob("*.h5"))
+        assert files, f"no recording started:\n{capture(session)}"
+        time.sleep(1.0)                                              # a second of samples
+        procs = [pane_pid, *descendants(pane_pid)]
+        t_kill = time.monotonic()
+        subprocess.run(["tmux", "kill-session", "-t", session], check=True)
+        while any(alive(p) for p in procs) and time.monotonic() - t_kill < HANG_S:
+            time.sleep(0.1)
+        left = [p for p in procs if alive(p)]
+        assert not left, f"the console outlived its terminal: {left}"
+        print(f"\nfbs console: gone {time.monotonic() - t_kill:.1f} s after its tmux session was killed "
+              f"(issue 35 asks for 10 s)")
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True)
+    from daq.reader import RunFile
+
+    with RunFile(files[0]) as rf:
+        assert rf.status.startswith("aborted: ") and ("SIGHUP" in rf.status or "terminal" in rf.status), rf.status
+    log = (out / "console.log").read_text()
+    assert "safe state reached" in log or "safe state: yes (read back)" in log, log[-2000:]
