@@ -5,12 +5,14 @@
     sim                                  the loopback rig, virtual time, cold (mode 1, wheels stopped)
     sim?realtime=1&seed=3&warm=1         paced to the wall clock; started in mode 3, caged
     sim?config=F.toml&table=manual       a sim config; a hand-cranked table (the operator is asked)
-    serial:///dev/ttyACM0?can=socketcan:can0[&baud=2000000][&table=manual|can]
+    serial:///dev/ttyACM0?can=socketcan:can0[&baud=2000000][&table=manual|can][&connect_s=2]
     serial:///dev/ttyACM0?can=slcan:/dev/ttyUSB0&bitrate=500000&can_tty_baudrate=115200
     sim?can=virtual:NAME&external=torquer
                                          the sim on virtual channel NAME, its torquer left to a
                                          CANopen node the caller runs (tests: acceptance A of issue 21)
 
+A serial rig is claimed before any byte goes to it (``drivers.claim``: one host per rig); its
+nodes have ``connect_s`` seconds (default 2) to answer at connect (``docs/protocol.md`` 2.8).
 Every CAN node is a CANopen device (``docs/protocol.md`` section 2). ``bitrate`` and every
 ``can_<option>`` go to ``can.Bus``. python-can's ``virtual`` bus exists only inside one process:
 a device in another process needs ``udp_multicast``, ``slcan`` on a pty pair, or ``socketcan`` on
