@@ -25,6 +25,15 @@ class CommandDac(Protocol):
         """Set V_Td on ``axis`` (checked against ``limits`` first); returns the read-back (V)."""
         ...
 
+    def put_command_torque_V(self, axis: str, volts: float) -> float:
+        """One step of a stream of V_Td set-points on ``axis`` (checked against ``limits``
+        first): taken by the node, not read back until ``confirm``; returns the volts sent."""
+        ...
+
+    def confirm(self) -> None:
+        """Read back every output a stream set; a difference is a latched ``ProtocolError``."""
+        ...
+
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
         """Set gamma_c on ``axis`` (checked against ``limits`` first); returns the read-back (V)."""
         ...
@@ -54,6 +63,10 @@ class CanopenCommandDac(CanopenDac):
     def set_command_torque_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts)
         return self.write(OUTPUTS.index(f"vtd_{axis}"), v, f"vtd_{axis}")
+
+    def put_command_torque_V(self, axis: str, volts: float) -> float:
+        v = self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts)
+        return self.put(OUTPUTS.index(f"vtd_{axis}"), v, f"vtd_{axis}")
 
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.AC_BIAS, axis, volts)

@@ -161,6 +161,24 @@ class Rig:
         self.event("setpoint", f"command torque V_Td {axis} = {back:+.6f} V")
         return back
 
+    def stream_command_torque_V(self, axis: str, values_V, step: Callable[[], object]) -> int:
+        """V_Td on ``axis`` through ``values_V``, ``step()`` (the caller's acquisition) after
+        each: every value checked before it is sent and taken by the node (its SDO answer), the
+        last read back at the end (``confirm``), one event for the whole stream rather than one
+        per set-point. V_Td is set to 0 V afterwards, however the stream ends. Returns how many
+        set-points were sent."""
+        n = 0
+        try:
+            for v in values_V:
+                self.commands.put_command_torque_V(axis, float(v))
+                n += 1
+                step()
+            self.commands.confirm()
+        finally:
+            back = self.commands.set_command_torque_V(axis, 0.0)
+            self.event("setpoint", f"command torque V_Td {axis}: {n} set-points streamed, then {back:+.6f} V")
+        return n
+
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
         back = self.commands.set_ac_bias_V(axis, volts)
         self.event("setpoint", f"autocollimator bias gamma_c {axis} = {back:+.6f} V")

@@ -148,15 +148,22 @@ class Span:
     def samples(self) -> int:
         return self.stop - self.start
 
-    def to_json(self) -> dict[str, Any]:
-        return {"file": str(self.file), "start": self.start, "stop": self.stop, "rate_hz": self.rate_hz}
+    def to_json(self, recorded_in: Path | None = None) -> dict[str, Any]:
+        """With ``recorded_in`` (the run file this is written into), a data file beside it is
+        named by its name alone: the step's event then fits whatever the directory's depth."""
+        beside = recorded_in is not None and self.file.parent == Path(recorded_in).resolve().parent
+        return {"file": self.file.name if beside else str(self.file), "start": self.start, "stop": self.stop,
+                "rate_hz": self.rate_hz}
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any], recorded_in: Path) -> Span:
-        """A span read from the file ``recorded_in``; a data file that is no longer where it was
-        recorded is looked for beside that file (a run directory copied elsewhere)."""
+        """A span read from the file ``recorded_in``: a bare name is beside it; a data file that
+        is no longer where it was recorded is looked for beside it (a run directory copied
+        elsewhere)."""
         path = Path(data["file"])
-        if not path.exists() and (recorded_in.parent / path.name).exists():
+        if not path.is_absolute():
+            path = recorded_in.parent / path
+        elif not path.exists() and (recorded_in.parent / path.name).exists():
             path = recorded_in.parent / path.name
         return cls(path, int(data["start"]), int(data["stop"]), float(data["rate_hz"]))
 
@@ -520,7 +527,10 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
         ctx.check()
         if resume is not None and not step.setup and step.name in resume.results:
             result = resume.results[step.name]
-            done: dict[str, Any] = {"step": step.name, "result": result, "resumed": str(resume.path)}
+            source = Path(resume.path).resolve()
+            beside = source.parent == Path(ctx.path).resolve().parent
+            done: dict[str, Any] = {"step": step.name, "result": result,
+                                    "resumed": source.name if beside else str(source)}
             if step.name in resume.spans:
                 ctx.spans[step.name] = resume.spans[step.name]
                 done["span"] = resume.spans[step.name].to_json()
@@ -534,7 +544,7 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
             done = {"step": step.name, "result": result}
             if not step.setup:
                 ctx.spans[step.name] = Span(Path(ctx.path).resolve(), start, acq.pos, acq.rate_hz)
-                done["span"] = ctx.spans[step.name].to_json()
+                done["span"] = ctx.spans[step.name].to_json(recorded_in=Path(ctx.path))
             acq.note(EVENT_STEP_DONE, _step_done_text(done))
         ctx.results[step.name] = result
         summary.steps_done.append(step.name)

@@ -244,14 +244,13 @@ class Excitation(Procedure[ExcitationParams]):
         n = int(round(seconds * p.update_hz))
         x = np.resize(self._period(), n) * volts_rms             # whole periods, repeated
         blocks = []
-        try:
-            for v in x:
-                ctx.rig.set_command_torque_V(p.axis, float(v))
-                got = ctx.acquire(self.block_s, keep=keep, chunk_s=self.block_s)  # type: ignore[call-overload]
-                if keep:
-                    blocks.append(got)
-        finally:
-            ctx.rig.set_command_torque_V(p.axis, 0.0)
+
+        def step() -> None:
+            got = ctx.acquire(self.block_s, keep=keep, chunk_s=self.block_s)  # type: ignore[call-overload]
+            if keep:
+                blocks.append(got)
+
+        ctx.rig.stream_command_torque_V(p.axis, x, step)   # ends at 0 V, however it ends
         return np.concatenate(blocks) if keep else None
 
     def _probe(self, ctx: Context) -> dict:

@@ -260,3 +260,20 @@ def test_catalogue_finds_every_procedure_and_keys_are_design_section_7():
     for name, keys in design.items():
         # DESIGN.md's keys, in its order; a procedure may report more figures (earth-rate's g-drifts)
         assert [k for k in procs[name].json_keys if k in keys] == list(keys)
+
+
+def test_a_step_span_beside_its_run_file_is_named_by_its_name_and_read_back_whole(tmp_path):
+    """A step's event holds its span; with the absolute path in it, a run directory deep enough
+    (CI's temporary paths) pushed the event past its 1024 bytes and aborted the run."""
+    from procedures.runner import Span
+
+    deep = tmp_path.joinpath(*["a-rather-long-directory-name"] * 30)
+    deep.mkdir(parents=True)
+    run, data = deep / "stopwatch-2.h5", deep / "stopwatch.h5"
+    data.touch()
+    span = Span(data.resolve(), 10, 2010, 1000.0)
+    text = span.to_json(recorded_in=run)
+    assert text["file"] == "stopwatch.h5"
+    assert Span.from_json(text, run) == span
+    elsewhere = Span(tmp_path.resolve() / "other.h5", 0, 5, 1000.0)
+    assert elsewhere.to_json(recorded_in=run)["file"] == str(tmp_path.resolve() / "other.h5")
