@@ -22,6 +22,7 @@ settings.register_profile("fbs", derandomize=True)
 settings.load_profile("fbs")
 
 
+@pytest.hookimpl(tryfirst=True)   # before xdist's own hook turns the marks into group names
 def pytest_collection_modifyitems(config, items):
     """For ``make test``'s ``pytest -n auto --dist loadgroup``: a test that uses a module- or
     session-scoped fixture of this suite (the dev set's twelve analyses, a campaign's runs)
