@@ -26,11 +26,12 @@ check: $(STAMP)
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 
-# One pytest worker per core (pytest-xdist); a file with a module fixture stays on one worker
-# (tests/conftest.py), every other test goes where a worker is free.
+# One pytest worker per core (pytest-xdist), a file to a worker (its module fixtures made once);
+# the files of end-to-end runs first (tests/conftest.py). (--dist loadgroup would spread a file's
+# tests, but xdist 3.8 cannot name groups under pytest 9: every test landed anywhere.)
 # The sim rig runs in virtual time: a busy machine changes how long a test takes, not its verdict.
 test: check
-	$(PY) -m pytest -q -n auto --dist loadgroup --durations=25
+	$(PY) -m pytest -q -n auto --dist loadfile --durations=25
 
 # The suite with every runtime dependency at its lower bound in pyproject.toml (a fresh venv in a
 # temporary copy of the work tree, .ci/lowest); 20-40 min, so not part of `make test` or CI.

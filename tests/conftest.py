@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import inspect
 import os
 import shutil
 import subprocess
@@ -14,32 +13,19 @@ from hypothesis import settings
 
 import drivers.safety
 
-TESTS = Path(__file__).resolve().parent
-
 # Every run of the suite draws the same hypothesis examples: CI starts from a fresh clone (no
 # example database), and a verdict must not depend on which examples a run happened to draw.
 settings.register_profile("fbs", derandomize=True)
 settings.load_profile("fbs")
 
 
-@pytest.hookimpl(tryfirst=True)   # before xdist's own hook turns the marks into group names
 def pytest_collection_modifyitems(config, items):
-    """For ``make test``'s ``pytest -n auto --dist loadgroup``: a test that uses a module- or
-    session-scoped fixture of this suite (the dev set's twelve analyses, a campaign's runs)
-    stays on one worker with the rest of its file, so the fixture is made once; every other
-    test goes to whichever worker is free (a file of long procedure runs is spread)."""
-    for item in items:
-        defs = getattr(getattr(item, "_fixtureinfo", None), "name2fixturedefs", {})
-        shared = any(d.scope in ("module", "session") and _ours(d.func) for fds in defs.values() for d in fds)
-        if shared:
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::", 1)[0]))
-
-
-def _ours(func) -> bool:
-    try:
-        return Path(inspect.getfile(func)).resolve().is_relative_to(TESTS)
-    except (TypeError, OSError):
-        return False
+    """For ``make test``'s ``pytest -n auto --dist loadfile`` (a file to a worker, so a module
+    fixture is made once): the files with end-to-end runs on the sim rig (``slow``) first, so
+    the long ones start at once and the short ones fill in around them, instead of one long
+    file starting last and running alone. Within a file, the order is the file's."""
+    slow_files = {item.nodeid.split("::", 1)[0] for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.nodeid.split("::", 1)[0] not in slow_files)   # stable
 
 
 @pytest.fixture
