@@ -138,9 +138,10 @@ class CanopenDac:
         for n, (cob, mapped) in enumerate(self.rpdos):
             comm, mapping = 0x1400 + n, 0x1600 + n
             want = [(AO_16 << 16) | ((i + 1) << 8) | 16 for i in mapped]
-            if self._rpdo_is(comm, mapping, cob, want):
+            got = self._read_rpdo(comm, mapping)
+            if self._rpdo_is(got, cob, want):
                 continue
-            found = self._rpdo_text(comm, mapping)
+            found = self._rpdo_text(got)
             log.warning("CAN node '%s': RPDO%d (%s) differs from its EDS; configuring it per the EDS",
                         self.node.name, n + 1, found)
             why = "does not keep"
@@ -152,7 +153,7 @@ class CanopenDac:
                 self.node.write(mapping, 0, len(want), what=f"RPDO{n + 1} mapping count", check_faults=False)
                 self.node.write(comm, 2, RPDO_ASYNC, what=f"RPDO{n + 1} transmission type", check_faults=False)
                 self.node.write(comm, 1, cob, what=f"enable RPDO{n + 1}", check_faults=False)
-                ok = self._rpdo_is(comm, mapping, cob, want)
+                ok = self._rpdo_is(self._read_rpdo(comm, mapping), cob, want)
             except DriverError as exc:
                 ok, why = False, f"refused its EDS mapping ({exc})"
             if not ok:
@@ -162,18 +163,24 @@ class CanopenDac:
                 self.node.link.faults.report(fault)
                 raise fault
 
-    def _rpdo_is(self, comm: int, mapping: int, cob: int, want: list[int]) -> bool:
-        got_cob = self.node.read(comm, 1, what=f"read RPDO COB-ID 0x{comm:04x}", check_faults=False)
+    def _read_rpdo(self, comm: int, mapping: int) -> tuple[int, int | None, list[int]]:
+        """The module's RPDO as it has it: COB-ID, transmission type (None: no such object),
+        mapping entries."""
+        cob = self.node.read(comm, 1, what=f"read RPDO COB-ID 0x{comm:04x}", check_faults=False)
         kind = self.node.read_if_present(comm, 2, what=f"read RPDO transmission type 0x{comm:04x}")
         count = self.node.read(mapping, 0, what=f"read RPDO mapping count 0x{mapping:04x}", check_faults=False)
         entries = [self.node.read(mapping, s, what=f"read RPDO mapping 0x{mapping:04x}:{s}", check_faults=False)
                    for s in range(1, min(count, 8) + 1)]
-        return (got_cob & 0x800007FF == cob and kind in (None, 254, RPDO_ASYNC) and entries == want)
+        return cob, kind, entries
 
-    def _rpdo_text(self, comm: int, mapping: int) -> str:
-        cob = self.node.read(comm, 1, check_faults=False)
-        count = self.node.read(mapping, 0, check_faults=False)
-        entries = [self.node.read(mapping, s, check_faults=False) for s in range(1, min(count, 8) + 1)]
+    @staticmethod
+    def _rpdo_is(got: tuple[int, int | None, list[int]], cob: int, want: list[int]) -> bool:
+        got_cob, kind, entries = got
+        return got_cob & 0x800007FF == cob and kind in (None, 254, RPDO_ASYNC) and entries == want
+
+    @staticmethod
+    def _rpdo_text(got: tuple[int, int | None, list[int]]) -> str:
+        cob, _, entries = got
         return f"COB-ID 0x{cob:08x}, maps {', '.join(f'0x{e:08x}' for e in entries) or 'nothing'}"
 
     def stream(self, index: int, volts: float, what: str) -> float:

@@ -12,6 +12,7 @@ import subprocess
 import sys
 import time
 import uuid
+from contextlib import contextmanager
 
 import can
 import pytest
@@ -37,6 +38,22 @@ def host(channel: str, **kw) -> tuple[CanLink, CanopenTorquerDac]:
     return link, CanopenTorquerDac(link)
 
 
+@contextmanager
+def module_and_host(channel: str, objects: dict = AO_401_OBJECTS, node_kw: dict | None = None, **host_kw):
+    """A raw module on ``channel`` and a host link with the torquer client; both closed after."""
+    node = RawNode(channel, TORQUER, objects, **(node_kw or {}))
+    try:
+        link, dac = host(channel, **host_kw)
+    except BaseException:
+        node.close()
+        raise
+    try:
+        yield node, link, dac
+    finally:
+        link.close()
+        node.close()
+
+
 def connect(link: CanLink, dac: CanopenTorquerDac, window_s: float = 2.0) -> int:
     product = dac.node.connect(link.monotonic() + window_s, window_s)
     link.wait_operational(["torquer"], 2.0)
@@ -50,95 +67,64 @@ def connect(link: CanLink, dac: CanopenTorquerDac, window_s: float = 2.0) -> int
     ("slow SDO answers (0.2 s)", {"sdo_delay_s": 0.2}),
 ])
 def test_a_conforming_module_opens(channel, case, node_kw):
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS, **node_kw)
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel, node_kw=node_kw) as (node, link, dac):
         assert connect(link, dac) == 0x13, case
         # configured as the host asked, read back: its heartbeat now runs, its errors go pre-op
         assert node.objects[(0x1017, 0)][0] == 100 and node.objects[(0x1029, 1)][0] == 0
         assert node.objects[(0x1016, 1)][0] == 0x007F03E8 and node.state == OPERATIONAL
         time.sleep(0.3)
         assert link.faults.fault is None, link.faults.fault
-    finally:
-        link.close()
-        node.close()
 
 
 def test_a_module_that_never_answers_is_named_with_the_window(channel):
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS, boot_delay_s=3600)
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel, node_kw={"boot_delay_s": 3600}) as (node, link, dac):
         with pytest.raises(DeviceLost, match=r"'torquer' \(id 3\) did not answer within the connect window of 0.5 s"):
             dac.node.connect(link.monotonic() + 0.5, 0.5)
-    finally:
-        link.close()
-        node.close()
 
 
 def test_a_stale_trip_emcy_during_connect_does_not_fail_the_open(channel):
     """Item 7: the previous session's watchdog trip, arriving while this host connects."""
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel) as (node, link, dac):
         node.emcy(EMCY_TRIP)
         connect(link, dac)
         assert link.faults.fault is None
         node.emcy(EMCY_TRIP)                            # after the start: this session's fault
         time.sleep(0.2)
         assert isinstance(link.faults.fault, NodeError)
-    finally:
-        link.close()
-        node.close()
 
 
 def test_an_emcy_that_is_not_8_bytes_latches(channel):
     """Item 4: it raised inside the canopen package's EMCY handler and latched nothing."""
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel) as (node, link, dac):
         connect(link, dac)
         node.emcy(EMCY_TRIP, length=5)
         time.sleep(0.2)
         assert isinstance(link.faults.fault, ProtocolError) and "expected 8" in str(link.faults.fault)
-    finally:
-        link.close()
-        node.close()
 
 
 def test_a_7_byte_sdo_answer_fails_the_transfer_as_a_bad_answer(channel):
     """Item 12: it latched, but the transfer still waited for its deadline and said 'no answer'."""
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
-    link, dac = host(channel, reply_timeout_s=30.0)   # a deadline no transfer here may reach
-    try:
+    # a reply deadline no transfer here may reach
+    with module_and_host(channel, reply_timeout_s=30.0) as (node, link, dac):
         connect(link, dac)
         node.short_sdo = True
         with pytest.raises(ProtocolError, match="bad SDO answer|7 data bytes"):
             dac.node.read(0x1018, 2, check_faults=False)
         assert isinstance(link.faults.fault, ProtocolError)
-    finally:
-        link.close()
-        node.close()
 
 
 def test_a_download_answer_naming_another_object_is_a_bad_answer(channel):
     """Item 12: the canopen package checks an upload's answer, not a download's."""
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel) as (node, link, dac):
         connect(link, dac)
         node.other_object = True
         with pytest.raises(ProtocolError, match=r"names object 0x6412:1, not the 0x6411:1 asked"):
             dac.node.write(0x6411, 1, 0, check_faults=False)
-    finally:
-        link.close()
-        node.close()
 
 
 def test_the_hosts_abort_frame_names_the_transfers_object(channel):
     """Item 12: CiA 301's abort carries the object of the transfer (the package sent 0x0000:00)."""
-    node = RawNode(channel, TORQUER, AO_401_OBJECTS)
-    link, dac = host(channel, reply_timeout_s=0.2)
-    try:
+    with module_and_host(channel, reply_timeout_s=0.2) as (node, link, dac):
         connect(link, dac)
         node.mute_sdo = True
         with pytest.raises(DeviceTimeout):
@@ -146,9 +132,6 @@ def test_the_hosts_abort_frame_names_the_transfers_object(channel):
         time.sleep(0.1)
         aborts = [m.data for m in node.received if m.arbitration_id == 0x600 + TORQUER and m.data[0] == 0x80]
         assert aborts and bytes(aborts[-1][1:4]) == bytes([0x18, 0x10, 2])
-    finally:
-        link.close()
-        node.close()
 
 
 def swapped_xy() -> dict:
@@ -159,9 +142,7 @@ def swapped_xy() -> dict:
 
 def test_a_module_whose_rpdo_swaps_x_and_y_is_mapped_per_the_eds_before_a_stream(channel):
     """Item 6: a stream meant for X drove Y to 2.5 V; only ``confirm`` saw it, afterwards."""
-    node = RawNode(channel, TORQUER, swapped_xy())
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel, swapped_xy()) as (node, link, dac):
         connect(link, dac)
         dac.read_scale()
         dac.configure_rpdos()
@@ -171,22 +152,14 @@ def test_a_module_whose_rpdo_swaps_x_and_y_is_mapped_per_the_eds_before_a_stream
         time.sleep(0.1)
         assert node.objects[(0x6411, 1)][0] == round(2.5 / (10 / 32768)) and node.objects[(0x6411, 2)][0] == 0
         dac.confirm()
-    finally:
-        link.close()
-        node.close()
 
 
 def test_a_module_that_keeps_another_mapping_is_refused_naming_it(channel):
-    node = RawNode(channel, TORQUER, swapped_xy(), read_only={0x1600})
-    link, dac = host(channel)
-    try:
+    with module_and_host(channel, swapped_xy(), node_kw={"read_only": {0x1600}}) as (node, link, dac):
         connect(link, dac)
         dac.read_scale()
         with pytest.raises(ProtocolError, match=r"RPDO1 .*(refused|does not keep).*0x64110210, 0x64110110"):
             dac.configure_rpdos()
-    finally:
-        link.close()
-        node.close()
 
 
 def test_a_second_host_on_the_bus_is_refused_before_it_sends(channel):
