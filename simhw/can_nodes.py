@@ -14,14 +14,15 @@ too loaded to schedule the node's thread).
 
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING
 
+import canopen
+
 from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
-from simhw.canopen_nodes import CANOPEN_NODE_CLASSES, CanopenSimNode
+from simhw.canopen_nodes import CANOPEN_NODE_CLASSES, NOTIFIER_CYCLE_S, CanopenSimNode
 
 if TYPE_CHECKING:
     from simhw.rig_server import SimRigServer
@@ -38,10 +39,15 @@ class CanNodeHost:
         self.channel = channel
         #: every simulated node by name (tests look at their objects)
         self.nodes: dict[str, CanopenSimNode] = {}
+        #: the one network of the simulated nodes (one receiving thread for all of them)
+        self.network = canopen.Network()
+        # its notifier's receive wait: the package's 1 s would hold up every close by up to that
+        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
+        self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
         try:
             for name in rn.NODES:
                 if name not in external:
-                    self.nodes[name] = CANOPEN_NODE_CLASSES[name](server, channel, watchdog_s, monotonic)
+                    self.nodes[name] = CANOPEN_NODE_CLASSES[name](server, self.network, watchdog_s, monotonic)
         except BaseException:
             self.close()
             raise
@@ -54,9 +60,6 @@ class CanNodeHost:
         self.nodes[node].inject(fault, code, delay_s)
 
     def close(self) -> None:
-        # side by side: each node's close waits for its own network's notifier to stop
-        closers = [threading.Thread(target=node.close, name=f"close-{name}") for name, node in self.nodes.items()]
-        for t in closers:
-            t.start()
-        for t in closers:
-            t.join()
+        for node in self.nodes.values():
+            node.close()
+        self.network.disconnect()

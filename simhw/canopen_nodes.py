@@ -1,7 +1,10 @@
 """Simulated CAN nodes that speak CANopen (issue 21, ``docs/canopen-plan.md`` section 8).
 
-Each one is the ``canopen`` package's ``LocalNode``, built from the node's EDS file, on a
-network of its own on the sim's virtual channel. The package gives the SDO server, the NMT
+Each one is the ``canopen`` package's ``LocalNode``, built from the node's EDS file. All of
+them share one ``canopen.Network`` on the sim's virtual channel (``simhw.can_nodes``), as the
+modules of a real rig share one bus: a frame wakes one receiving thread on the device side
+rather than one per node (five nodes each with its own network put ten thread hand-offs into
+every SDO round trip). The package gives the SDO server, the NMT
 slave, the heartbeat producer and the EMCY producer. This module adds what CiA 301 and
 CiA 401 ask of the device and LocalNode lacks:
 * the heartbeat consumer (0x1016), on the sim's deadline clock. When the host's heartbeat
@@ -55,16 +58,13 @@ class CanopenSimNode:
 
     name = ""
 
-    def __init__(self, server: SimRigServer, channel: str, watchdog_s: float,
+    def __init__(self, server: SimRigServer, network: canopen.Network, watchdog_s: float,
                  monotonic: Callable[[], float] = time.monotonic) -> None:
         self.server = server
         self.node_id = rn.NODES[self.name]
         self._mono = monotonic
         self.watchdog_s = watchdog_s
-        self.network = canopen.Network()
-        # its notifier's receive wait: the package's 1 s would hold up every close by up to that
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
+        self.network = network
         self.node = canopen.LocalNode(self.node_id, str(cf.eds_path(self.name)))
         self.network.add_node(self.node)
         # the SDO server behind a gate, for the fault injections
@@ -90,6 +90,8 @@ class CanopenSimNode:
         self._connected = True
         self._last_host: float | None = None
         self._stop = threading.Event()
+        #: answers held back by the ``busy`` fault, cancelled at close
+        self._timers: list[threading.Timer] = []
         self._thread = threading.Thread(target=self._watch, name=f"sim-canopen-{self.name}", daemon=True)
         self.power_on()
         self._thread.start()
@@ -146,10 +148,19 @@ class CanopenSimNode:
     # ------------------------------------------------------------------ the bus
     def _on_sdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self.reply_delay_s:
-            time.sleep(self.reply_delay_s)          # a host too busy to run the node's thread
-        if not self._connected or self.stalled:
+            # a host too busy to run the node's thread; the other nodes on the shared network
+            # answer meanwhile (a sleep here would hold up the whole bus's receive thread)
+            timer = threading.Timer(self.reply_delay_s, self._serve_sdo, (can_id, bytes(data), timestamp))
+            timer.daemon = True
+            self._timers = [t for t in self._timers if t.is_alive()] + [timer]
+            timer.start()
             return
-        self.node.sdo.on_request(can_id, data, timestamp)
+        self._serve_sdo(can_id, data, timestamp)
+
+    def _serve_sdo(self, can_id: int, data: bytes | bytearray, timestamp: float) -> None:
+        if not self._connected or self.stalled or self._stop.is_set():
+            return
+        self.node.sdo.on_request(can_id, bytearray(data), timestamp)
 
     def _sdo_response(self, response: bytes | bytearray) -> None:
         if self.bad_response:
@@ -216,10 +227,13 @@ class CanopenSimNode:
             self.go_error(code)
 
     def close(self) -> None:
+        """Stop the node's threads (the shared network is closed by its owner)."""
         self._stop.set()
+        for timer in self._timers:
+            timer.cancel()
+            timer.join(timeout=1.0)
         self._thread.join(timeout=1.0)
         self.node.nmt.stop_heartbeat()
-        self.network.disconnect()
 
 
 class CanopenDacNode(CanopenSimNode):

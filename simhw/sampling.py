@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.signal
 
@@ -38,8 +39,28 @@ def quantize(v: np.ndarray, range_V: float | np.ndarray, bits: int) -> tuple[np.
     lo, hi = -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
     code = np.rint(v / q)
     over = (v > range_V) | (v < -range_V) | ~np.isfinite(v)
-    code = np.clip(np.nan_to_num(code, nan=0.0), lo, hi)
+    code = np.clip(code, lo, hi)                   # +-inf to the end codes; NaN stays NaN ...
+    code = np.where(np.isnan(code), 0.0, code)     # ... and reads 0 (flagged in ``over``)
     return code * q, over
+
+
+@numba.njit(cache=True, nogil=True)
+def _sosfilt_cols(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> np.ndarray:
+    """``scipy.signal.sosfilt(sos, x, axis=0, zi=zi)`` for (n, channels) ``x``, ``zi`` updated in
+    place: the same direct-form-II-transposed arithmetic in the same order (equal to the bit),
+    without scipy's per-call checks, which cost 10x the filtering on a 4 ms block."""
+    n, nch = x.shape
+    y = np.empty_like(x)
+    for c in range(nch):
+        for k in range(n):
+            x_cur = x[k, c]
+            for s in range(sos.shape[0]):
+                x_new = sos[s, 0] * x_cur + zi[s, 0, c]
+                zi[s, 0, c] = sos[s, 1] * x_cur - sos[s, 4] * x_new + zi[s, 1, c]
+                zi[s, 1, c] = sos[s, 2] * x_cur - sos[s, 5] * x_new
+                x_cur = x_new
+            y[k, c] = x_cur
+    return y
 
 
 def internal_rate(sampling, rate_hz: float) -> tuple[int, float]:
@@ -83,8 +104,8 @@ class SamplingChain:
         if len(analog) == 0:
             return np.zeros(0, int), np.zeros((0, len(self.channels))), np.zeros((0, len(self.channels)), bool)
         if self.zi is None:
-            self.zi = scipy.signal.sosfilt_zi(self.sos)[:, :, None] * analog[0][None, None, :]
-        filtered, self.zi = scipy.signal.sosfilt(self.sos, analog, axis=0, zi=self.zi)
+            self.zi = np.ascontiguousarray(scipy.signal.sosfilt_zi(self.sos)[:, :, None] * analog[0][None, None, :])
+        filtered = _sosfilt_cols(self.sos, np.asarray(analog, np.float64), self.zi)
         keep = np.arange(self.phase, len(analog), self.oversample)
         self.phase = (self.phase - len(analog)) % self.oversample
         # quantize() broadcasts: one call for all channels, each with its own range.

@@ -113,6 +113,8 @@ class Sources:
         """``spectral``: for ``spectrum`` and ``lines`` only (a model of the spectra builds one
         per trial): every source shares one generator, so ``take`` refuses."""
         self.dt, self.spectral = dt, spectral
+        #: samples of each input drawn ahead and not yet taken (``take``)
+        self._ahead: dict[str, np.ndarray] = {}
         ss = np.random.SeedSequence(seed)
         names = ([f"nac_{a}" for a in AXES] + [f"np_{c}" for c in GYRO_CHANNELS]
                  + [f"wrand_{c}" for c in GYRO_CHANNELS] + [f"md_{a}" for a in AXES])
@@ -185,16 +187,30 @@ class Sources:
             psd = ac.mount_excitation * white_of[a] * (2 * ac.mount_damping * w * w) ** 2 if w > 0 else 0.0
             self.parts[f"nmount_{a}"] = [WhiteNoise(shared or np.random.Generator(np.random.PCG64(mount_seeds[a])), psd, dt)]
 
+    #: Internal steps drawn ahead per input. Every part has its own stream and continues it
+    #: exactly whatever the cut (``simhw.noise``), so drawing ahead changes no sample; it turns
+    #: a sim rig's many short blocks (a set-point every 4 ms) into a few long draws.
+    AHEAD = 4096
+
     def take(self, name: str, n: int) -> np.ndarray:
         if self.spectral:
             raise RuntimeError("these Sources were made for spectra (spectral=True): they draw no streams")
-        out = np.zeros(n)
-        for part in self.parts[name]:
-            out += part.take(n)
+        buf = self._ahead.get(name)
+        have = 0 if buf is None else len(buf)
+        if have < n:
+            m = max(n - have, self.AHEAD)
+            fresh = np.zeros(m)
+            for part in self.parts[name]:
+                fresh += part.take(m)
+            buf = fresh if buf is None or not have else np.concatenate([buf, fresh])
+        assert buf is not None
+        out, self._ahead[name] = buf[:n], buf[n:]
         return out
 
     def initial(self, name: str) -> float:
         """The slowly varying part of input ``name`` at t = 0 (white noise and lines count 0)."""
+        if name in self._ahead:
+            raise RuntimeError(f"input {name!r} has been drawn from: its value at t = 0 is gone")
         return float(sum(getattr(part, "initial", lambda: 0.0)() for part in self.parts[name]))
 
     @property
@@ -260,6 +276,9 @@ class Simulator:
         self.seed = seed
         self.clock = clock or VirtualClock()
         self.truth = truth
+        # per-block bookkeeping kept between blocks (``_table_geometry``, ``_layout``)
+        self._geometry: tuple[tuple[float, ...], np.ndarray, np.ndarray] | None = None
+        self._last_layout: tuple[CompiledPlant, list[tuple[int, str]], list[int]] | None = None
         self._t_base = 0.0  # time of the last rate change
         self._rate_changes = 0
         self._set_timebase(rate_hz)
@@ -416,10 +435,8 @@ class Simulator:
     def _slow_inputs(self, plant: Plant | None = None) -> np.ndarray:
         """The values of ``plant``'s slow inputs (default: the compiled plant's), in its order."""
         cfg = self.cfg
-        axes = geometry.platform_axes_enu(math.radians(cfg.table.tilt_deg), math.radians(cfg.table.spindle_deg),
-                                          math.radians(cfg.table.base_azimuth_offset_deg))
-        w = geometry.earth_rate_platform(math.radians(cfg.site.latitude_deg), cfg.site.earth_rate_rad_per_s, axes)
-        f = geometry.specific_force_platform(axes)
+        w, f = self._table_geometry((cfg.table.tilt_deg, cfg.table.spindle_deg, cfg.table.base_azimuth_offset_deg,
+                                     cfg.site.latitude_deg, cfg.site.earth_rate_rad_per_s))
         axis_i = {"X": 0, "Y": 1, "Z": 2, "XRD": 0}
         values = {}
         for a in AXES:
@@ -432,6 +449,16 @@ class Simulator:
             values[f"vb_{c}"] = self.bias[c]
             values[f"wconst_{c}"] = w[axis_i[c]] + drift
         return np.array([values[s] for s in (plant or self._compiled.disc.plant).slow_inputs])
+
+    def _table_geometry(self, key: tuple[float, float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+        """Earth rate and specific force on the platform axes for (tilt, spindle, azimuth offset
+        deg, latitude deg, earth rate): asked for every block, changed by a table move."""
+        if self._geometry is None or self._geometry[0] != key:
+            tilt, spindle, offset, lat, rate = key
+            axes = geometry.platform_axes_enu(math.radians(tilt), math.radians(spindle), math.radians(offset))
+            self._geometry = (key, geometry.earth_rate_platform(math.radians(lat), rate, axes),
+                              geometry.specific_force_platform(axes))
+        return self._geometry[1], self._geometry[2]
 
     def _settle(self) -> None:
         """Start in the steady state of the linear model for the present slow inputs.
@@ -523,11 +550,9 @@ class Simulator:
     def _run_internal(self, m: int) -> np.ndarray:
         cp = self._compiled
         plant = cp.disc.plant
+        fast, order = self._layout(cp)
         u = np.zeros((m, len(cp.fast_cols)))
-        for j, i in enumerate(cp.fast_cols):
-            name = plant.inputs[i]
-            if name.startswith("corr_"):
-                continue
+        for j, name in fast:
             u[:, j] = self.sources.take(name, m)
         y = np.empty((m, len(plant.outputs)))
         slow = self._slow_inputs()
@@ -544,8 +569,17 @@ class Simulator:
                 y[0] -= cp.ds @ (0.5 * step)
         self._last_slow = (names, slow)
         self.step += m
-        order = [plant.outputs.index(c) for c in self._outputs]
         return y[:, order]
+
+    def _layout(self, cp: CompiledPlant) -> tuple[list[tuple[int, str]], list[int]]:
+        """(column, name) of ``cp``'s noise inputs and the output columns in ``_outputs``'s order
+        (asked for every block; the last plant's kept)."""
+        if self._last_layout is None or self._last_layout[0] is not cp:
+            plant = cp.disc.plant
+            fast = [(j, plant.inputs[i]) for j, i in enumerate(cp.fast_cols)
+                    if not plant.inputs[i].startswith("corr_")]
+            self._last_layout = (cp, fast, [plant.outputs.index(c) for c in self._outputs])
+        return self._last_layout[1], self._last_layout[2]
 
     def run(self, duration_s: float, block_s: float = 10.0):
         """Yield blocks covering ``duration_s`` seconds (rounded to whole samples)."""

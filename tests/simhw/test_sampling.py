@@ -241,3 +241,22 @@ def test_anti_alias_filter_starts_settled_on_the_first_sample():
     np.testing.assert_allclose(volts[:, 0], 3.3, atol=_lsb(10.0, 16) / 2)
     np.testing.assert_allclose(volts[:, 1], -0.05, atol=_lsb(0.1, 16) / 2)
     assert not over.any()
+
+
+@settings(max_examples=40, deadline=None)
+@given(x=hnp.arrays(np.float64, st.tuples(st.integers(1, 60), st.integers(1, 5)),
+                    elements=st.floats(-20.0, 20.0, allow_nan=False)),
+       cut=st.integers(0, 60))
+def test_the_chain_filters_as_scipy_sosfilt_does_to_the_bit(x, cut):
+    """The chain's own filter loop (``_sosfilt_cols``) against ``scipy.signal.sosfilt``, the
+    state carried over a cut of the block."""
+    import scipy.signal
+
+    from simhw.sampling import _sosfilt_cols, anti_alias_sos
+
+    sos = anti_alias_sos(3, 0.3, 1000.0, 10)
+    zi0 = scipy.signal.sosfilt_zi(sos)[:, :, None] * x[0][None, None, :]
+    want, want_zi = scipy.signal.sosfilt(sos, x, axis=0, zi=zi0)
+    zi = np.ascontiguousarray(zi0)
+    got = np.concatenate([_sosfilt_cols(sos, x[:cut], zi), _sosfilt_cols(sos, x[cut:], zi)])
+    assert np.array_equal(got, want) and np.array_equal(zi, want_zi)

@@ -122,3 +122,20 @@ def test_bad_settings_are_refused_with_the_value_named():
         sim.set_range("gyro_x", 3.0)
     with pytest.raises(ValueError, match="sample rate"):
         Simulator(rate_hz=0.0)
+
+
+def test_inputs_drawn_ahead_are_the_parts_drawn_block_by_block():
+    """``Sources`` draws each input ahead in long runs; every part keeps its own stream, so the
+    samples are those the parts give when asked block by block."""
+    from simhw.simulator import Sources
+
+    cfg = SimConfig()
+    ahead, direct = Sources(cfg, 11, 1e-4), Sources(cfg, 11, 1e-4)
+    for n in (3, 40, Sources.AHEAD + 5, 1, 700):
+        for name in ("nac_X", "np_Y", "wrand_Z", "md_X"):
+            want = np.zeros(n)
+            for part in direct.parts[name]:
+                want += part.take(n)
+            assert np.array_equal(ahead.take(name, n), want), (name, n)
+    with pytest.raises(RuntimeError, match="drawn"):
+        ahead.initial("nac_X")
