@@ -21,20 +21,9 @@ from procedures.analysis.transfer import network_response
 from procedures.calibrations import catalogue
 from procedures.calibrations.excitation import Excitation, Params, excitation_signal
 from procedures.runner import run_procedure
-from simhw.params import load_config, nominal_pickoff_lines
+from simhw.params import load_config
 from simhw.plant import linearized_poles
-
-#: shorter than the defaults (which a lab would use), long enough for the tolerances
-FAST = {"settle_s": 10.0, "quiet_s": 64.0, "excite_s": 160.0}
-
-
-def _config(tmp_path, axis, inertia, stiffness, corners):
-    text = [f"[platform.{axis}]", f"inertia_kg_m2 = {inertia}", f"[bearing.{axis}]", 'model = "spring"',
-            f"stiffness_Nm_per_rad = {stiffness}", "[compensation]"]
-    text += [f"{k} = {v}" for k, v in corners.items()]
-    path = tmp_path / "drawn.toml"
-    path.write_text("\n".join(text) + "\n")
-    return path
+from tests.procedures.excitation_rigs import FAST, assert_roots_near_the_linearized, drawn_config
 
 
 def _truth_network(corners):
@@ -76,7 +65,7 @@ def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, 
         corners = {"w2_rad_per_s": round(float(rng.uniform(7, 14)), 3),
                    "w3_rad_per_s": round(float(rng.uniform(22, 40)), 3),
                    "w4_rad_per_s": round(float(rng.uniform(150, 260)), 2)}
-        cfg = _config(tmp_path, axis, inertia, stiffness, corners)
+        cfg = drawn_config(tmp_path, axis, inertia, stiffness, corners)
         if np.max(linearized_poles(load_config(cfg), 3, axis).real) < -0.5:
             break
     with open_rig(f"sim?warm=1&seed={30 + k}&config={cfg}") as rig:
@@ -105,63 +94,11 @@ def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, 
     # the data sheet's inertia (the sim publishes the drawn one) is only set beside it
     assert v["datasheet_inertia_kg_m2"] == pytest.approx(inertia)
     # the Mode-3 closed-loop roots (Table 5) against the linearized model of the drawn rig
-    _assert_roots_near_the_linearized(v["closed_loop"], load_config(cfg), 3, axis)
+    assert_roots_near_the_linearized(v["closed_loop"], load_config(cfg), 3, axis)
     saved = json.loads((tmp_path / "out" / "excitation.json").read_text())
     assert saved["verdict"] == "pass"
     md = (tmp_path / "out" / "excitation.md").read_text()
     assert "Compensation network" in md and "inertia_kg_m2" in md
-
-
-def _assert_roots_near_the_linearized(cl, cfg, mode, axis, tol=0.10):
-    """Issue 22 C: each named root within ``tol`` of the nearest root of ``linearized_poles``
-    (complex distance over modulus), the platform pair's damping too."""
-    lin = linearized_poles(cfg, mode, axis)
-    assert set(cl["roots"]) == {"c1", "platform_pair", "c4"}, cl
-    for name, r in cl["roots"].items():
-        p = complex(*r["pole"])
-        q = lin[np.argmin(np.abs(lin - p))]
-        print(f"Mode {mode} {axis} {name}: {abs(p):.4g} rad/s {r['w_rad_per_s_ci95']}, linearized {abs(q):.4g} "
-              f"(zeta {-p.real / abs(p):.3f} / {-q.real / abs(q):.3f})")
-        assert abs(p - q) / abs(q) < tol, (name, p, q)
-        assert r["resolved"]["w_rad_per_s"], r
-    pair = complex(*cl["roots"]["platform_pair"]["pole"])
-    q = lin[np.argmin(np.abs(lin - pair))]
-    assert abs((-pair.real / abs(pair)) / (-q.real / abs(q)) - 1) < tol
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("k, mode, axis", [(0, 4, "X"), (1, 5, "Y")])
-def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode, axis):
-    """Issue 22 C: in the gyro-stabilized modes the closed-loop roots (Table 6: c1, the platform
-    pair, c4), from the loop closed over the parts the run identifies, within 10 % of the
-    linearized model of a drawn rig (spring bearings, drawn inertia, corners, pickoff scale and
-    noise). The pickoff scale is measured in the run, not taken from the data sheet."""
-    rng = np.random.default_rng(400 + k)
-    nominal_inertia = {"X": 0.70, "Y": 0.25}[axis]
-    while True:
-        inertia = round(float(nominal_inertia * rng.uniform(0.8, 1.25)), 4)
-        stiffness = round(float(rng.uniform(250, 600)), 1)
-        corners = {"w2_rad_per_s": round(float(rng.uniform(8, 12)), 3),
-                   "w3_rad_per_s": round(float(rng.uniform(25, 36)), 3),
-                   "w4_rad_per_s": round(float(rng.uniform(170, 240)), 2)}
-        cfg = _config(tmp_path, axis, inertia, stiffness, corners)
-        rms = round(float(rng.uniform(4.0, 12.0)), 2)
-        cfg.write_text(cfg.read_text() + f"[gyro.{axis}]\npickoff_scale_mV_per_urad = "
-                       f"{round(float(rng.uniform(5.5, 7.5)), 3)}\npickoff_noise_rms_urad = {rms}\n"
-                       f"pickoff_lines = {nominal_pickoff_lines(rms)!r}\n")
-        if np.max(linearized_poles(load_config(cfg), mode, axis).real) < -0.05:
-            break
-    with open_rig(f"sim?warm=1&seed={60 + k}&config={cfg}") as rig:
-        s = run_procedure(Excitation(Params(axis=axis, mode=mode, mode_settle_s=40.0, **FAST)), rig,
-                          tmp_path / "out")
-        assert rig.relays.status().mode == 3       # the procedure hands the rig back in Mode 3
-    assert s.exit_code == 0, s.error
-    cl = s.values["closed_loop"]
-    _assert_roots_near_the_linearized(cl, load_config(cfg), mode, axis)
-    kg = load_config(cfg).gyro[axis].pickoff_scale_mV_per_urad
-    assert abs(cl["sensor_mV_per_urad"] / kg - 1) < 0.05, (cl["sensor_mV_per_urad"], kg)
-    md = (tmp_path / "out" / "excitation.md").read_text()
-    assert f"Closed-loop roots, Mode {mode}" in md and "Table 6" in md
 
 
 @pytest.mark.slow

@@ -82,6 +82,9 @@ class GapOptions:
     min_closed_db: float = 0.2
     #: after an effect is named, look for another even where no band departs (``analyse``)
     look_when_quiet: bool = True
+    #: where no single candidate closes its share, pairs of the leading this many are fitted
+    #: together (``_pair_that_closes``)
+    pair_top: int = 3
     seed: int = 1              # of the model simulations
     sim_config: str | Path | None = None
 
@@ -282,12 +285,14 @@ def _without(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[ca
 def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[catalogue.Effect, EffectFit]],
                    findings: list[Finding], evidence: Evidence, n_obs: int,
                    opt: GapOptions) -> tuple[SimConfig, NuisanceFit]:
-    """After an addition, each earlier effect re-fitted with all the others in the model (one
-    pass, from its values), then each kept only while it still earns its place: its removal,
+    """After an addition, each earlier effect re-fitted with all the others in the model, then
+    the new one with the earlier ones as re-fitted (one pass, each from its values: two effects
+    that overlap pull on each other, and the first fit of the new one was made beside the
+    earlier ones' values from before it), then each kept only while it still earns its place: its removal,
     the others and the noise levels staying fitted, must cost at least ``opt.min_score`` of
     BIC. ``in_model`` and ``findings`` are updated in place (the same order); returns the
     refined model's configuration and noise fit."""
-    for i, (eff, f) in enumerate(in_model[:-1]):
+    for i, (eff, f) in enumerate(in_model):
         others = _with_effects(cfg0, axis, [x for j, x in enumerate(in_model) if j != i])
         again = fitter.fit(eff, others, evidence, start=f.params)
         if again is not None:
@@ -355,6 +360,54 @@ def _at_bound(effect: catalogue.Effect, params: dict[str, float]) -> list[str]:
             out.append(f"{p.name} = {v:.4g} at {'lower' if t <= BOUND_SHARE else 'upper'} bound "
                        f"{p.lo if t <= BOUND_SHARE else p.hi:g}")
     return out
+
+
+def _pair_that_closes(fitter: Fitter, cfg: SimConfig, cur: NuisanceFit, fits: list[EffectFit], evidence: Evidence,
+                      flags: np.ndarray, base_ms: Any, n_obs: int, opt: GapOptions, P: np.ndarray,
+                      dof: np.ndarray) -> list[tuple[EffectFit, np.ndarray, float, float]]:
+    """Two effects that together close what neither closes alone, or nothing.
+
+    Where two effects overlap in frequency (a pickup line inside a loop peak that a delay
+    raises; a mount mode beside a scale-factor change of the loop gain), each one fitted alone
+    on the nominal model has to bend to cover the other's share too, and closes too little
+    where it acts to be named; the sequential search then names neither. Each pair of the
+    ``opt.pair_top`` leading candidates is fitted as the first at its fit and the second fitted
+    on top; the pair is named (the first, then the second) when together they close the share
+    a single effect must, and the second earns its place on the first by the BIC. The joint
+    re-fit that follows (``_refit_jointly``) re-fits the first beside the second and drops
+    either one that no longer earns its place. Returns the two as (fit, moved cells, gap
+    before, gap after) for the caller to name, or []."""
+    leaders = [f for f in fits if f.score >= opt.min_score][:opt.pair_top]
+    best: tuple[float, list[tuple[EffectFit, np.ndarray, float, float]]] | None = None
+    held = fitter.hold
+    for i, a in enumerate(leaders):
+        eff_a = catalogue.get(a.effect)
+        for b in leaders[i + 1:]:
+            eff_b = catalogue.get(b.effect)
+            fitter.hold = held | frozenset(eff_a.owns)
+            try:
+                fb = fitter.fit(eff_b, a.cfg, evidence, start=b.params)
+                if fb is not None:
+                    fb = fitter.held_envelope(eff_b, a.cfg, evidence, fb)
+            finally:
+                fitter.hold = held
+            if fb is None or bic_score(fb, a.nll, n_obs) < opt.min_score:
+                continue
+            same = fb.scales | {k: cur.scales[k] for k in SHAPE_KEYS if k in cur.scales}
+            moved = np.abs(10.0 * np.log10(fb.S / base_ms.total(same))) > opt.tol_db
+            where = _where_it_acts(flags, moved)
+            g0, g_a, g2 = gap_db(P, cur.S, where, dof), gap_db(P, a.S, where, dof), gap_db(P, fb.S, where, dof)
+            need = max(opt.min_closed_db, opt.min_closed_share * g0)
+            log.info("pair %s + %s closes %.2f of %.2f dB where it acts (%d cells)", a.effect, b.effect,
+                     g0 - g2, g0, int(where.sum()))
+            if g0 - g2 >= need and (best is None or g2 < best[0]):
+                fa = fitter.fit(eff_a, cfg, evidence, start=a.params)
+                fa = a if fa is None or fa.nll > a.nll + 1e-6 else fitter.held_envelope(eff_a, cfg, evidence, fa)
+                fa.score = bic_score(fa, cur.nll, n_obs)
+                fb.score = bic_score(fb, fa.nll, n_obs)
+                moved_a = np.abs(10.0 * np.log10(fa.S / base_ms.total(same))) > opt.tol_db
+                best = (g2, [(fa, moved_a, g0, g_a), (fb, moved, g_a, g2)])
+    return [] if best is None else best[1]
 
 
 def _where_it_acts(flags: np.ndarray, moved: np.ndarray) -> np.ndarray:
@@ -608,23 +661,27 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         if chosen is None and quiet:
             partial = []
             break
-        if chosen is None:
+        accepted = [chosen] if chosen is not None else []
+        if not accepted:
+            accepted = _pair_that_closes(fitter, cfg, cur, fits, evidence, flags, base_ms, n_obs, opt, P, grid.dof)
+        if not accepted:
             partial = partial or [{"effect": f.effect, "score": round(f.score, 2)} for f in fits[:2] if f.score > 0]
             unexplained = True
             break
-        best, moved, g0, g1 = chosen
-        winner = catalogue.get(best.effect)
-        runner: dict[str, Any] = next((c for c in candidates if c["effect"] != best.effect),
-                                      {"effect": "none", "score": 0.0})
-        cells |= moved
-        findings.append(Finding(best.effect, best.params, best.errors, best.score, runner["effect"],
-                                best.score - runner["score"], g0, g1, located, candidates, best.intervals))
-        log.info("named %s (score %.1f, %.1f over %s): %s", best.effect, best.score,
-                 best.score - runner["score"], runner["effect"], best.params)
-        named.add(best.effect)
-        fitter.hold |= frozenset(winner.owns)
-        cfg, cur = best.cfg, NuisanceFit(best.scales, best.nll, best.S)
-        in_model.append((winner, best))
+        partial = []
+        for best, moved, g0, g1 in accepted:
+            winner = catalogue.get(best.effect)
+            runner: dict[str, Any] = next((c for c in candidates if c["effect"] != best.effect),
+                                          {"effect": "none", "score": 0.0})
+            cells |= moved
+            findings.append(Finding(best.effect, best.params, best.errors, best.score, runner["effect"],
+                                    best.score - runner["score"], g0, g1, located, candidates, best.intervals))
+            log.info("named %s (score %.1f, %.1f over %s): %s", best.effect, best.score,
+                     best.score - runner["score"], runner["effect"], best.params)
+            named.add(best.effect)
+            fitter.hold |= frozenset(winner.owns)
+            cfg, cur = best.cfg, NuisanceFit(best.scales, best.nll, best.S)
+            in_model.append((winner, best))
         if len(in_model) > 1:
             cfg, cur = _refit_jointly(fitter, cfg0, rec.axis, in_model, findings, evidence, n_obs, opt)
 

@@ -13,7 +13,7 @@ prints the table; this suite runs a subset of A and B and all of C and D:
   parameter within 15 % in >= 85 %, its 95 % interval covering the truth in >= 85 %, the gap
   at least halved in >= 85 %.
 * C: two effects of different kinds, 6 pairs x 2 draws: both named and no third in >= 80 %
-  (issue 34's target; measured 9 of 12, held at that), both key parameters within 20 % in >= 80 %.
+  (issue 34's target), both key parameters within 20 % in >= 80 %.
 * D: effects outside the catalogue, 8 files: ``explained: false`` in >= 80 %, a name with
   ``explained: true`` in none.
 """
@@ -109,12 +109,11 @@ def test_b_single_effects_are_named_measured_and_covered(independent, runs):
 def test_c_two_effects_both_named_and_no_third(independent, runs):
     n = len(runs["C"])
     clean = [sorted(e["effect"] for e in j["effects"]) == sorted(pair) for pair, _, j in runs["C"]]
-    # Issue 34's target is 80 % (10 of 12). Measured 9 of 12 since the units span DESIGN.md's
-    # nominal envelope (a Y time delay beside a 70.3 Hz pickup line inside the pickoff pair's
-    # window, and a Y scale-factor error beside a floor-excited mount, are named by neither
-    # alone: each leaves most of the gap where it acts; one spurious 0.2 ms delay): the target
-    # is not met, issue 34 stays open, and this floor keeps it from sliding back.
-    assert sum(clean) >= 9, [(pair, [e["effect"] for e in j["effects"]]) for pair, _, j in runs["C"]]
+    # Issue 34's target: 80 % (10 of 12). A Y time delay beside a 70.3 Hz pickup line inside the
+    # pickoff pair's window, and a Y scale-factor error beside a floor-excited mount, are named
+    # by neither alone (each leaves most of the gap where it acts): the pair search names them
+    # together (measured 11 of 12 by bench/gap_holdout.py; one spurious 0.2 ms delay is left).
+    assert sum(clean) >= math.ceil(0.8 * n), [(pair, [e["effect"] for e in j["effects"]]) for pair, _, j in runs["C"]]
     close = 0
     for pair, truth, j in runs["C"]:
         ok = True
