@@ -109,3 +109,59 @@ class Adc(abc.ABC):
 
     @abc.abstractmethod
     def close(self) -> None: ...
+
+
+class AdcDecorator(Adc):
+    """An ``Adc`` around another, every call forwarded unchanged, each block it delivers shown to
+    ``_deliver`` first (the rig's mode supervision, the console's meters). What ``_deliver``
+    raises reaches the reader: a decorator that must never cost a sample catches its own."""
+
+    def __init__(self, inner: Adc) -> None:
+        self.inner = inner
+        self.identity = inner.identity
+
+    def _deliver(self, block: AdcBlock) -> None:
+        """See a block on its way to the reader (nothing here)."""
+
+    def identify(self) -> AdcIdentity:
+        return self.inner.identify()
+
+    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
+                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig:
+        return self.inner.configure(channels, rate_hz, ranges_V, frame_sets)
+
+    @property
+    def config(self) -> AdcConfig | None:
+        return self.inner.config
+
+    @property
+    def streaming(self) -> bool:
+        return self.inner.streaming
+
+    def start(self) -> float:
+        return self.inner.start()
+
+    def read(self, n: int, timeout_s: float | None = None) -> AdcBlock:
+        block = self.inner.read(n, timeout_s)
+        if len(block):
+            self._deliver(block)
+        return block
+
+    def read_available(self) -> AdcBlock | None:
+        block = self.inner.read_available()
+        if block is not None and len(block):
+            self._deliver(block)
+        return block
+
+    def stop(self) -> AdcStatus:
+        return self.inner.stop()
+
+    def status(self) -> AdcStatus:
+        return self.inner.status()
+
+    def close(self) -> None:
+        self.inner.close()
+
+    def __getattr__(self, name: str):
+        # driver-specific extras (a serial ADC's port, timeouts) stay reachable
+        return getattr(self.inner, name)

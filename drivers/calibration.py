@@ -96,6 +96,9 @@ class RigCalibration:
     autocollimator: dict[str, AutocollimatorConstants] = field(default_factory=_ac_defaults)
     #: the azimuth (Z) reference autocollimator's scale (Table 1)
     azimuth_mV_per_urad: float = 7.36
+    #: linear ranges: the primary autocollimator's (Table 1) and the gyro pickoffs' (II C.1.a)
+    ac_linear_range_urad: float = 2300.0
+    pickoff_linear_range_urad: float = 1000.0
 
     @property
     def dac_lsb_V(self) -> float:

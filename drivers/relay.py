@@ -78,6 +78,13 @@ def interlock_reason(mode: int, status: RelayStatus) -> str | None:
 class RelayDriver(abc.ABC):
     #: Reason the last selection was refused (the console's alarm lamp), or None.
     alarm: str | None = None
+    #: called with the mode in force whenever the driver learns it (a release, a status read)
+    mode_seen: Callable[[int], None] | None = None
+
+    def _seen(self, mode: int) -> int:
+        if self.mode_seen is not None:
+            self.mode_seen(mode)
+        return mode
 
     @abc.abstractmethod
     def hold(self) -> None: ...
@@ -187,7 +194,7 @@ class CanopenRelayDriver(RelayDriver):
 
     def release(self) -> int:
         self._refined(lambda: self.node.write(R_SWITCHES, 0, SWITCH_RELEASE, what="RELEASE"))
-        return self.node.read(R_MODE, 0, what="read the mode")
+        return self._seen(self.node.read(R_MODE, 0, what="read the mode"))
 
     def _set_clamp(self, clamped: bool) -> bool:
         what = "CLAMP" if clamped else "UNCLAMP"
@@ -207,4 +214,6 @@ class CanopenRelayDriver(RelayDriver):
                                  detail=bits) from None
 
     def status(self) -> RelayStatus:
-        return decode_status(self.node.read(R_STATUS, 0, what="STATUS"))
+        st = decode_status(self.node.read(R_STATUS, 0, what="STATUS"))
+        self._seen(st.mode)
+        return st

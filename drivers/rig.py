@@ -54,6 +54,7 @@ from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanopenRelayDriver, RelayDriver
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
+from drivers.supervision import ModeSupervisor, SupervisedAdc
 from drivers.table import CanopenTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
 from drivers.torquer import CanopenTorquerDac, TorquerDac
 
@@ -81,10 +82,14 @@ class Rig:
                  link: CanLink | None = None, safe_nodes: Sequence[CanopenClient] = (),
                  closers: Sequence[Callable[[], None]] = (), emulator: Any = None) -> None:
         self.url = url
-        self.adc, self.relays, self.torquers, self.commands = adc, relays, torquers, commands
-        self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
         #: the rig's data sheet (instrument constants, set-point limits)
         self.calibration = torquers.limits.calibration
+        #: watches the gyro modes while they are in force (every block read passes it)
+        self.supervisor = ModeSupervisor(self.calibration, faults)
+        relays.mode_seen = self._mode_seen
+        self.adc: Adc = SupervisedAdc(adc, self.supervisor)
+        self.relays, self.torquers, self.commands = relays, torquers, commands
+        self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
         #: the simulated rig's server, for fault injection in tests; None on hardware
         self.emulator = emulator
         self.link = link
@@ -217,6 +222,9 @@ class Rig:
     def check(self) -> None:
         self.faults.check()
 
+    def _mode_seen(self, mode: int) -> None:
+        self.supervisor.mode = mode
+
     def _on_fault(self, fault: DriverError) -> None:
         # Runs on whichever thread saw the fault (maybe the CAN receive thread, which the
         # safe-state requests need): go safe on a thread of its own.
@@ -258,7 +266,9 @@ class Rig:
             return report
 
     def _mode_is_safe(self) -> bool:
-        return self._raw("relay", 0) == SAFE_MODE
+        mode = self._raw("relay", 0)
+        self._mode_seen(mode)
+        return mode == SAFE_MODE
 
     def _outputs_zero(self) -> bool:
         return (all(self._raw("torquer", i) == 0 for i in range(4))
