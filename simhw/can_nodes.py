@@ -35,7 +35,8 @@ class CanNodeHost:
     ones, which the caller runs there itself (a CiA 401 module written in a test)."""
 
     def __init__(self, server: SimRigServer, channel: str, watchdog_s: float = 1.0,
-                 monotonic: Callable[[], float] = time.monotonic, external: Collection[str] = ()) -> None:
+                 monotonic: Callable[[], float] = time.monotonic, external: Collection[str] = (),
+                 interface: str = "virtual") -> None:
         self.channel = channel
         #: every simulated node by name (tests look at their objects)
         self.nodes: dict[str, CanopenSimNode] = {}
@@ -43,7 +44,7 @@ class CanNodeHost:
         self.network = canopen.Network()
         # its notifier's receive wait: the package's 1 s would hold up every close by up to that
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        self.network.connect(interface="virtual", channel=channel, receive_own_messages=False)
+        self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
         try:
             for name in rn.NODES:
                 if name not in external:

@@ -72,7 +72,7 @@ class SimRigServer:
                  warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 1.0,
                  paced_block_s: float = 0.01, watchdog_s: float = 1.0,
                  monotonic: Callable[[], float] = time.monotonic, can_channel: str | None = None,
-                 external_nodes: Collection[str] = ()) -> None:
+                 external_nodes: Collection[str] = (), can_interface: str = "virtual") -> None:
         self.seed = seed
         #: the devices' deadline clock (``drivers.runclock.RunningClock`` from the sim rig scheme)
         self.monotonic = monotonic
@@ -94,11 +94,12 @@ class SimRigServer:
         self.stall_reason = ""
         self._stop = threading.Event()
         self.adc = AdcDevice(self)
-        #: the virtual CAN channel (python-can ``virtual``: this process only); ``external_nodes``
-        #: are left to devices the caller puts on it
+        #: the CAN channel (python-can ``virtual``, this process only, unless ``can_interface``
+        #: says otherwise: ``udp_multicast`` serves hosts in other processes, ``simhw.serve``);
+        #: ``external_nodes`` are left to devices the caller puts on it
         self.can_channel = can_channel or f"fbs-sim-{uuid.uuid4().hex[:12]}"
-        self.nodes = CanNodeHost(self, self.can_channel, watchdog_s=watchdog_s, monotonic=monotonic,
-                                 external=external_nodes)
+        self.nodes = CanNodeHost(self, self.can_channel, interface=can_interface, watchdog_s=watchdog_s,
+                                 monotonic=monotonic, external=external_nodes)
         self.clock = SimClock(self)
         self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
         self._thread.start()

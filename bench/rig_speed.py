@@ -1,0 +1,89 @@
+"""Speed of the simulated rig through the drivers, procedure by procedure (issue 39).
+
+Every procedure of ``fbs demo``'s campaign (``fbs.demo.CAMPAIGN``, its default parameters) runs
+on the sim rig (``open_rig("sim?...")``: real bytes over a pty and CANopen frames on a virtual
+bus) and is timed: rig seconds (the rig's clock across the run) per wall second, its x real
+time. The baseline is measured in the same run: the offline simulator
+(``simhw.simulator.Simulator``, no drivers) advancing the same channels at the same rate, in
+1 s blocks, for the same rig time (at most ``BASELINE_CAP_S``), in the same process. Reported:
+x real time (target >= 50) and the share of the offline speed the rig reaches (target >= 0.3).
+
+Benchmarks report, they never fail: the exit code is 0 and a missed target prints
+``TARGET MISSED``. Usage: ``python bench/rig_speed.py [--only excitation,hysteresis]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import h5py
+
+TARGET_X_REALTIME = 50.0
+TARGET_SHARE = 0.3
+BASELINE_CAP_S = 300.0
+
+
+def offline_speed(channels: list[str], rate_hz: float, rig_s: float, seed: int = 0) -> float:
+    """Rig seconds per wall second of the offline simulator on ``channels`` at ``rate_hz``."""
+    from simhw.simulator import Simulator
+
+    sim = Simulator(None, rate_hz=rate_hz, seed=seed, mode=3, channels=channels)
+    sim.advance(int(rate_hz))                                   # kernels compiled, caches warm
+    seconds = min(rig_s, BASELINE_CAP_S)
+    t0 = time.perf_counter()
+    for _ in sim.run(seconds, block_s=1.0):
+        pass
+    return seconds / (time.perf_counter() - t0)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from drivers.rig import open_rig
+    from fbs.demo import CAMPAIGN
+    from procedures.calibrations import get
+    from procedures.params import parse_params
+    from procedures.runner import run_procedure
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--only", default="", help="comma-separated procedure names (default: the whole campaign)")
+    a = ap.parse_args(argv)
+    only = {s.strip() for s in a.only.split(",") if s.strip()}
+    rows = []
+    prior: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory() as d, open_rig("sim?seed=0&watchdog=5") as rig:
+        for i, (name, axis, params) in enumerate(CAMPAIGN):
+            cls = get(name)
+            proc = cls(parse_params(cls, list(params), axis), prior=prior)
+            t_rig, t_wall = rig.now(), time.perf_counter()
+            s = run_procedure(proc, rig, Path(d) / f"{i}-{name}")
+            wall = time.perf_counter() - t_wall
+            rig_s = rig.now() - t_rig
+            if s.verdict in ("pass", "fail"):
+                prior[name] = dict(s.values) | ({"_file": str(s.file)} if s.file else {})
+            if only and name not in only:
+                continue
+            label = name + (f" {axis}" if axis else "") + (" (gyro mode)" if params else "")
+            if s.file is None:
+                print(f"{label}: no file ({s.status})", file=sys.stderr)
+                continue
+            with h5py.File(s.file, "r") as f:
+                chans = list(f["channels"])
+                rate = float(f["channels"][chans[0]].attrs["sample_rate_hz"])
+            base = offline_speed(chans, rate, rig_s)
+            rows.append((label, rig_s, wall, rig_s / wall, base, rig_s / wall / base, len(chans), rate, s.verdict))
+            print(f"{label}: {rig_s:.0f} rig s in {wall:.1f} s, {rig_s / wall:.1f}x real time; offline "
+                  f"{base:.0f}x ({len(chans)} channels at {rate:g} Hz)", file=sys.stderr, flush=True)
+    print(f"{'procedure':<28} {'rig s':>7} {'wall s':>7} {'x real':>7} {'offline x':>9} {'share':>6}  channels, rate")
+    for label, rig_s, wall, x, base, share, nch, rate, verdict in rows:
+        miss = [f"x real {x:.1f} < {TARGET_X_REALTIME:g}"] if x < TARGET_X_REALTIME else []
+        miss += [f"share {share:.2f} < {TARGET_SHARE:g}"] if share < TARGET_SHARE else []
+        print(f"{label:<28} {rig_s:7.0f} {wall:7.1f} {x:7.1f} {base:9.0f} {share:6.2f}  {nch} at {rate:g} Hz"
+              f" ({verdict})" + (f"  TARGET MISSED: {'; '.join(miss)}" if miss else ""))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,89 @@
+"""Issue 35 B end to end: two `fbs record` commands on one rig, each in its own process.
+
+The rig is the simulated one served by another process (``python -m simhw.serve``: the ADC on
+a pty, the CANopen nodes on ``udp_multicast``, paced to the wall clock), so every host reaches
+it as it would hardware: ``serial:///dev/pts/N?can=udp_multicast:GROUP``. The second command
+refuses before any byte is sent, names the holder, opens no output; the first records on,
+untouched. A second *machine* (its own lock directory) is refused by the bus itself: the first
+host's heartbeat is on it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import subprocess
+import sys
+import time
+
+import h5py
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.slow
+
+FBS = [sys.executable, "-m", "fbs"]
+
+
+def _wait_for(cond, what: str, guard_s: float = 120.0) -> None:
+    """Poll ``cond`` (a hang guard, not a timing assertion: the served rig runs on wall time)."""
+    t_end = time.monotonic() + guard_s
+    while not cond():
+        if time.monotonic() > t_end:
+            raise AssertionError(f"{what}: not seen within {guard_s:g} s")
+        time.sleep(0.1)
+
+
+@pytest.fixture
+def served_rig():
+    group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
+    proc = subprocess.Popen([sys.executable, "-m", "simhw.serve", "--can", group, "--warm"],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline().split()
+        adc = dict(kv.split("=", 1) for kv in line)["adc"]
+        yield f"serial://{adc}?can=udp_multicast:{group}"
+    finally:
+        if proc.stdin is not None:
+            proc.stdin.close()
+        proc.wait(timeout=30)
+
+
+def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path):
+    first_out, second_out, third_out = tmp_path / "first.h5", tmp_path / "second.h5", tmp_path / "third.h5"
+    record = ["record", "--rig", served_rig, "--mode", "3", "--rate", "200", "--json"]
+    first = subprocess.Popen([*FBS, *record, "--duration", "8", "--out", str(first_out)],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        _wait_for(first_out.exists, "the first recording's file")
+        # the same machine: the rig claim names the holder
+        second = subprocess.run([*FBS, *record, "--duration", "2", "--out", str(second_out)],
+                                capture_output=True, text=True, timeout=120)
+        # another machine (a lock directory of its own): the first host's heartbeat is on the bus
+        other = tmp_path / "other-host-locks"
+        other.mkdir()
+        third = subprocess.run([*FBS, *record, "--duration", "2", "--out", str(third_out)],
+                               capture_output=True, text=True, timeout=120, env=os.environ | {"FBS_LOCK_DIR": str(other)})
+        out, err = first.communicate(timeout=120)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert second.returncode == 2, second.stderr
+    assert f"held by pid {first.pid}" in second.stderr and "sent nothing" in second.stderr, second.stderr
+    assert third.returncode == 2, third.stderr
+    assert "another host is driving this bus" in third.stderr and "sent nothing" in third.stderr, third.stderr
+    assert not second_out.exists() and not third_out.exists()
+    # the first: complete, every sample, no gap, safe at its close
+    assert first.returncode == 0, err
+    j = json.loads(out)
+    assert (j["status"], j["n_samples"], j["lost"], j["gaps"], j["rig_safe_at_close"]) == ("complete", 1600, 0, [],
+                                                                                          True)
+    with h5py.File(first_out, "r") as f:
+        assert f.attrs["status"] == "complete"
+        assert all(len(f["channels"][c]) == 1600 and np.all(np.isfinite(f["channels"][c][:])) for c in f["channels"])
+        kinds = [k.decode() if isinstance(k, bytes) else k for k in f["events"]["kind"][:]]
+        texts = [t.decode() if isinstance(t, bytes) else t for t in f["events"]["text"][:]]
+    # nothing happened to the rig while it recorded: no mode change, alarm, error or gap
+    assert kinds == ["start"], list(zip(kinds, texts))
