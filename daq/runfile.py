@@ -133,6 +133,9 @@ def _write_hint(exc: BaseException) -> str:
 def check_new_path(path: str | Path, overwrite: bool = False) -> None:
     """Raise ``RunFileError`` unless a run file can be created at ``path`` (its folder is
     made if missing). Call it before moving the rig, so a bad ``--out`` fails first."""
+    if isinstance(path, str) and path.endswith(("/", os.sep)):
+        raise RunFileError(f"cannot create run file {path!r}: it names a folder (it ends with '/'); give a file "
+                           f"name in it, e.g. {path}run.h5")
     path = Path(path)
     if path.is_dir():
         raise RunFileError(f"cannot create run file {path}: it is a directory")
@@ -162,8 +165,8 @@ def check_request(out: str | Path, *, duration_s: float, rate_hz: float, n_chann
     if samples < 2:
         raise ValueError(f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz gives {samples:.3g} samples; "
                          f"at least 2 are needed")
-    out = Path(out)
     check_new_path(out, overwrite)
+    out = Path(out)
     if out.exists():
         try:
             with h5py.File(out, "r") as f:

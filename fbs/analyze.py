@@ -110,6 +110,29 @@ def _transfer_model(args: argparse.Namespace) -> str | None:
     return None
 
 
+#: the shortest segment (or excitation period) a spectrum is made of
+MIN_SEGMENT_SAMPLES = 8
+
+
+def _check_transfer_options(args: argparse.Namespace) -> None:
+    """Every number of ``fbs analyze transfer`` within its limits, before the file is read."""
+    def finite(name: str, v: float | None, lo: float | None = None, *, above: bool = True) -> None:
+        if v is None:
+            return
+        if not math.isfinite(v) or (lo is not None and (v <= lo if above else v < lo)):
+            rel = f"{'>' if above else '>='} {lo:g}" if lo is not None else "finite"
+            raise ValueError(f"{name} {v!r} must be a finite number {rel}")
+
+    finite("--seg-s", args.seg_s, 0.0)
+    finite("--period", args.period, 0.0)
+    finite("--start", args.start, 0.0, above=False)
+    finite("--stop", args.stop, 0.0)
+    finite("--lo-hz", args.lo_hz, 0.0, above=False)
+    finite("--hi-hz", args.hi_hz, 0.0)
+    if args.blocks < 2:
+        raise ValueError(f"--blocks {args.blocks} must be at least 2 (the jackknife needs two blocks)")
+
+
 def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]:
     """The ``--json`` object of ``fbs analyze transfer``, the response and the fit."""
     from daq.reader import RunFile
@@ -118,13 +141,16 @@ def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]
     from procedures.analysis.hysteresis import calibration_from_meta
 
     names = [c for c in (args.via, args.source, args.target) if c]
-    if not (args.seg_s > 0):
-        raise ValueError(f"--seg-s {args.seg_s} must be > 0")
+    _check_transfer_options(args)
     with RunFile(args.file) as rf:
         fs, n_total, meta = rf.rate_hz, rf.n_samples, rf.meta
         missing = [c for c in names if c not in rf.channels]
         if missing:
             raise ValueError(f"{args.file} has no channel {', '.join(missing)} (its channels: {', '.join(rf.channels)})")
+    for flag, seconds in (("--period", args.period), ("--seg-s", None if args.period is not None else args.seg_s)):
+        if seconds is not None and seconds * fs < MIN_SEGMENT_SAMPLES:
+            raise ValueError(f"{flag} {seconds:g} s is {seconds * fs:.3g} samples at {fs:g} Hz: at least "
+                             f"{MIN_SEGMENT_SAMPLES} samples ({MIN_SEGMENT_SAMPLES / fs:g} s) are needed")
     start = int(round((args.start or 0.0) * fs))
     stop = n_total if args.stop is None else min(n_total, int(round(args.stop * fs)))
     if not 0 <= start < stop:

@@ -19,11 +19,12 @@ from fbs import gap as gap_cli
 from fbs.logsetup import command_logging
 from fbs.signals import aborting_on_signals
 from fbs.usage import EXIT_CODES_HELP, EXIT_ERROR, Parser, version
+from procedures.runner import ProcedureError
 from simhw.params import ConfigError
 
 log = logging.getLogger("fbs")
 #: what a command reports as ``fbs CMD: error: ...`` and exit 2 (``fbs batch`` records the same per file)
-COMMAND_ERRORS = (ConfigError, ValueError, OSError, DriverError)
+COMMAND_ERRORS = (ConfigError, ValueError, OSError, DriverError, ProcedureError)
 
 
 def _console(args: argparse.Namespace) -> int:
@@ -79,6 +80,11 @@ def main(argv: list[str] | None = None) -> int:
             return EXIT_ERROR
         except KeyboardInterrupt:
             print(f"fbs {args.command}: interrupted", file=sys.stderr)
+            return EXIT_ERROR
+        except Exception as exc:  # a defect of this program: said so, never "limits failed" (exit 1)
+            log.exception("fbs %s: internal error", args.command)
+            print(f"fbs {args.command}: internal error: {type(exc).__name__}: {exc} (the traceback is above; "
+                  "please report it with the command line)", file=sys.stderr)
             return EXIT_ERROR
 
 

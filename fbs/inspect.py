@@ -182,9 +182,15 @@ def summary(path: str | Path, max_events: int = MAX_EVENTS) -> dict[str, Any]:
         }
 
 
+def _max_events(args: argparse.Namespace) -> int:
+    if args.max_events < 0:
+        raise ValueError(f"--max-events {args.max_events} must be >= 0 (0 lists none, only the count)")
+    return int(args.max_events)
+
+
 def json_result(args: argparse.Namespace) -> dict[str, Any]:
     """The object ``--json`` prints (``fbs batch inspect`` collects the same)."""
-    return summary(args.file, args.max_events)
+    return summary(args.file, _max_events(args))
 
 
 def _inspect(args: argparse.Namespace) -> int:
@@ -192,7 +198,7 @@ def _inspect(args: argparse.Namespace) -> int:
         print(json.dumps(json_result(args)))
         return 0
     try:
-        lines = describe(args.file, args.max_events)
+        lines = describe(args.file, _max_events(args))
     except ContractError as exc:      # shown as far as it reads, then an error (exit 2) naming the rules
         print("\n".join(describe_broken(args.file, exc.problems)))
         raise

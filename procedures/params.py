@@ -44,8 +44,9 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
             data = json.loads(path.read_text())
         except (OSError, ValueError):
             continue
-        if not isinstance(data, dict) or data.get("verdict") not in ("pass", "fail") or "procedure" not in data:
-            continue
+        if (not isinstance(data, dict) or data.get("verdict") not in ("pass", "fail")
+                or not isinstance(data.get("procedure"), str) or not isinstance(data.get("values"), dict)):
+            continue   # not a summary `fbs run` wrote (notes, another tool's JSON): not evidence
         mtime = path.stat().st_mtime
         if data["procedure"] not in found or mtime >= found[data["procedure"]][0]:
             found[data["procedure"]] = (mtime, data["values"] | _provenance(path, data))
@@ -58,7 +59,8 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
             raise ValueError(f"--prior {path}: cannot read it ({exc.strerror or exc})") from None
         except ValueError as exc:
             raise ValueError(f"--prior {path}: not JSON ({exc})") from None
-        if not isinstance(data, dict) or "procedure" not in data or "values" not in data:
+        if (not isinstance(data, dict) or not isinstance(data.get("procedure"), str)
+                or not isinstance(data.get("values"), dict)):
             raise ValueError(f"--prior {path}: not a procedure summary (written by `fbs run` beside its .h5)")
         prior[data["procedure"]] = data["values"] | _provenance(path, data)
     return prior

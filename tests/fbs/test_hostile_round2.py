@@ -1,0 +1,83 @@
+"""Issue 36 (round 2 of the hostile-input campaign), the cases fixed so far, each through
+``fbs.cli.main`` as a script would call the command: an error names the value and its limit,
+exits 2 (never 1, which says "limits failed"), opens no output and shows no traceback."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import fbs.inspect
+from fbs.cli import main
+from procedures.params import find_prior
+
+
+@pytest.fixture(scope="module")
+def record(tmp_path_factory):
+    path = tmp_path_factory.mktemp("rec") / "s.h5"
+    assert main(["simulate", "--mode", "3", "--duration", "2", "--rate", "100", "--out", str(path)]) == 0
+    return path
+
+
+def _fails(capsys, argv: list[str], *needles: str) -> str:
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert "Traceback" not in err, err
+    for n in needles:
+        assert n in err, err
+    return err
+
+
+def test_resume_from_a_file_no_procedure_wrote_is_an_error_not_a_traceback(capsys, record, tmp_path):
+    """Item 1: ``ProcedureError`` reached the shell as a traceback and exit 1."""
+    _fails(capsys, ["run", "stopwatch", "--resume", str(record), "--out", str(tmp_path / "o")],
+           "fbs run: error:", "not a procedure run")
+
+
+def test_a_stray_json_in_the_output_folder_is_not_a_prior_result(tmp_path):
+    """Item 6: ``{"procedure": ..., "verdict": "pass"}`` without values crashed with KeyError."""
+    (tmp_path / "notes.json").write_text(json.dumps({"procedure": "earth-rate", "verdict": "pass"}))
+    (tmp_path / "other.json").write_text(json.dumps({"procedure": ["x"], "verdict": "pass", "values": {}}))
+    assert find_prior(tmp_path) == {}
+    with pytest.raises(ValueError, match="not a procedure summary"):
+        find_prior(tmp_path, [str(tmp_path / "notes.json")])
+
+
+@pytest.mark.parametrize("option, needle", [
+    (["--period", "0"], "--period 0.0 must be a finite number > 0"),
+    (["--period", "inf"], "--period inf must be"),
+    (["--seg-s", "1e-9"], "at least 8 samples"),
+    (["--period", "0.01"], "at least 8 samples"),
+    (["--blocks", "1"], "--blocks 1 must be at least 2"),
+    (["--lo-hz", "nan"], "--lo-hz nan must be"),
+])
+def test_transfer_options_out_of_range_are_refused_by_name(capsys, record, option, needle):
+    """Item 5: ``--period 0`` was a ZeroDivisionError, ``--seg-s 1e-9`` too."""
+    _fails(capsys, ["analyze", "transfer", str(record), "--from", "ac_x_ctl", "--to", "pa_x", *option], needle)
+
+
+def test_an_output_naming_a_folder_is_refused_and_nothing_is_written(capsys, tmp_path):
+    """Item 12: ``--out newdir/`` wrote a file named ``newdir``."""
+    _fails(capsys, ["simulate", "--mode", "3", "--duration", "1", "--rate", "100", "--out", f"{tmp_path}/newdir/"],
+           "names a folder")
+    assert not (tmp_path / "newdir").exists()
+
+
+def test_a_negative_event_count_is_refused(capsys, record):
+    """Item 12: ``--max-events -1`` printed "... 2 more" for one event."""
+    _fails(capsys, ["inspect", str(record), "--max-events", "-1"], "--max-events -1 must be >= 0")
+    _fails(capsys, ["inspect", str(record), "--json", "--max-events", "-1"], "--max-events -1 must be >= 0")
+
+
+def test_a_defect_is_an_internal_error_with_exit_2_not_1(capsys, record, monkeypatch):
+    """The one handler: an exception no command expects is said to be this program's defect,
+    its traceback logged, and the exit code is 2 (1 is reserved for "limits failed")."""
+    def broken(path, max_events):
+        raise RuntimeError("a defect")
+
+    monkeypatch.setattr(fbs.inspect, "describe", broken)
+    code = main(["inspect", str(record)])
+    err = capsys.readouterr().err
+    assert code == 2 and "fbs inspect: internal error: RuntimeError: a defect" in err, err
