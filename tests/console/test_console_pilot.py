@@ -282,3 +282,24 @@ async def test_manual_table_asks_the_operator_in_a_modal(out_dir):
         await pilot.press(*"90.5", "enter")
         await wait_for(pilot, lambda: outcome(app, "table") is not None, what="the move")
         assert "spindle_deg=90.5" in outcome(app, "table").text
+
+
+@run_async
+async def test_a_caging_lost_in_mode_4_is_an_alarm_the_console_shows(out_dir):
+    """Issue 35 C: mode 4 in force, XRD's caging switch fails open at the rig (no command of the
+    host's); the float runs off, the host's mode supervision alarms, the rig goes safe and the
+    console says why."""
+    app = ConsoleApp(WARM, out_dir=out_dir)
+    async with app.run_test(size=(80, 24)) as pilot:
+        await rig_ready(pilot)
+        await pilot.press("f2", "h", "4", "r")
+        await wait_for(pilot, lambda: app.worker_.state.get().relay.mode == 4, what="mode 4 in force")
+        emulator = app.worker_.rig.emulator
+        emulator.submit(lambda sim: sim.set_caging_inhibit("XRD", True))
+        await wait_for(pilot, lambda: app.worker_.state.get().phase == "fault", what="the supervision alarm")
+        assert "mode 4 supervision" in app.worker_.state.get().fault and "gyro_xrd" in app.worker_.state.get().fault
+        assert nodes_safe(emulator) and emulator.sim.mode == 1
+        await pilot.pause(0.2)
+        assert "FAULT" in text_of(app, "#status")
+        await pilot.press("f2")
+        assert "device fault" in text_of(app, "#mode-alarm")
