@@ -207,36 +207,26 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     if not segments:
         raise ValueError(f"{path}: {names[0]} has no run of at least {2 + settle_cycles} cycles at one amplitude "
                          f"(a sinusoid near {freq:.4g} Hz); too short, or not a hysteresis sweep{lost_why}")
-    a0 = min(s.lead_start for s in segments)
-    b0 = max(s.stop for s in segments)
-    for name, x in zip(names, data):
-        lost = lost_samples(name, x[a0:b0], fs, offset=a0)
-        if lost:
-            raise ValueError(f"{path}: {lost}, in the cycles to analyse (samples {a0}..{b0 - 1}, {a0 / fs:.2f}.."
-                             f"{b0 / fs:.2f} s), which the analysis needs whole; {LOST_SAMPLES_NOTE}")
-    finite = np.isfinite(data).all(axis=0)
-    if not finite.all():
-        # lost samples outside the cycles: the filters below run over the whole record and would
-        # carry them into the cycles, so the record is cut to the stretch around the cycles that
-        # holds none (as a file that ended there), and that is said
-        lost_where = "; ".join(t for t in (lost_samples(n, x, fs) for n, x in zip(names, data)) if t)
-        bad = np.flatnonzero(~finite)
-        s0 = int(bad[bad < a0].max()) + 1 if (bad < a0).any() else 0
-        s1 = int(bad[bad >= b0].min()) if (bad >= b0).any() else data.shape[1]
-        msg = (f"{lost_where}: outside the cycles, but the filters would spread them; analysed samples "
-               f"{s0}..{s1 - 1} ({s0 / fs:.2f}..{s1 / fs:.2f} s) only")
-        log.warning(msg)
-        warnings.append(msg)
-        data = data[:, s0:s1]
-        cmd, inst, pa = data
-        freq = dahl.command_frequency(cmd, fs)
-        segments = dahl.find_segments(cmd, fs, freq, settle_cycles=settle_cycles)
-        if not segments:
-            raise ValueError(f"{path}: samples {s0}..{s1 - 1}, the stretch of the sweep without lost samples, have no "
-                             f"run of at least {2 + settle_cycles} cycles at one amplitude; {lost_where} "
-                             f"({LOST_SAMPLES_NOTE})")
     # the torque band: the fundamental and its harmonics well into the loops' corners
     fc = min(12.5 * freq, 0.2 * fs)
+    finite = np.isfinite(data).all(axis=0)
+    if not finite.all():
+        # Lost samples (a dropped ADC frame): analysed around, never spliced over. The filters
+        # run over the whole record, so the lost stretch is bridged by a straight line for them
+        # alone, and every cycle within the filters' reach of it is left out (``_around_lost``).
+        lost_where = "; ".join(t for t in (lost_samples(n, x, fs) for n, x in zip(names, data)) if t)
+        margin = int(math.ceil(LOST_MARGIN_CORNER_PERIODS * fs / fc)) + LOST_MARGIN_SAMPLES
+        segments, left_out = _around_lost(segments, np.flatnonzero(~finite), margin, fs / freq)
+        if not segments:
+            raise ValueError(f"{path}: {lost_where}; no run of at least 2 whole cycles at one amplitude is "
+                             f"{margin} samples clear of them ({LOST_SAMPLES_NOTE})")
+        good = np.flatnonzero(finite)
+        data = np.array([np.interp(np.arange(data.shape[1]), good, x[good]) for x in data])
+        cmd, inst, pa = data
+        msg = (f"{lost_where}: analysed around ({', '.join(left_out)}; cycles within {margin} samples of a lost "
+               f"one are left out)")
+        log.warning(msg)
+        warnings.append(msg)
     ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD          # V per rad
     lag_meas: dahl.LagMeasurement | None = None
     if angle_lag_s is None:
@@ -316,6 +306,46 @@ def _half_width(parts: list[tuple[float, float]]) -> float:
     denom = sum(u ** 4 / dof for u, dof in parts if math.isfinite(dof) and dof > 0)
     nu = u2 * u2 / denom if denom > 0 else math.inf
     return float(scipy.stats.t.ppf(0.975, nu) if math.isfinite(nu) else scipy.stats.norm.ppf(0.975)) * math.sqrt(u2)
+
+
+#: how far (in periods of the torque band's corner, plus samples for the lag and derivatives) a
+#: lost sample reaches through the zero-phase filters: cycles nearer are left out
+LOST_MARGIN_CORNER_PERIODS = 2.0
+LOST_MARGIN_SAMPLES = 25
+
+
+def _around_lost(segments: list[dahl.Segment], lost: np.ndarray, margin: int,
+                 per: float) -> tuple[list[dahl.Segment], list[str]]:
+    """Each segment cut to its longest run of whole cycles none of which is within ``margin``
+    samples of a ``lost`` sample (at least 2 cycles, else the amplitude is left out); and what
+    was left out, in words."""
+    kept, said = [], []
+    for seg in segments:
+        per_seg = (seg.stop - seg.start) / seg.n_cycles
+        clean = []
+        for c in range(seg.n_cycles):
+            a, b = seg.start + c * per_seg - margin, seg.start + (c + 1) * per_seg + margin
+            clean.append(not np.any((lost >= a) & (lost < b)))
+        if all(clean):
+            kept.append(seg)
+            continue
+        best, run_start = (0, 0), None
+        for c, ok in enumerate([*clean, False]):
+            if ok and run_start is None:
+                run_start = c
+            elif not ok and run_start is not None:
+                best = max(best, (c - run_start, -run_start))
+                run_start = None
+        n, first = best[0], -best[1]
+        label = f"{seg.command_amplitude:.4g} V amplitude"
+        if n >= 2:
+            start = int(round(seg.start + first * per_seg))
+            kept.append(dahl.Segment(start, int(round(seg.start + (first + n) * per_seg)), seg.lead_start, n,
+                                     seg.command_amplitude))
+            said.append(f"{seg.n_cycles - n} of {seg.n_cycles} cycles at the {label}")
+        else:
+            said.append(f"every cycle at the {label}")
+    return kept, said
 
 
 @dataclass

@@ -180,12 +180,24 @@ def test_y_axis_file(tmp_path):
     ({}, "Y", r"no channel\(s\) cmd_y, ac_y_inst, pa_y"),
     ({"channels": ("cmd_x", "ac_x_inst")}, "X", r"no channel\(s\) pa_x"),
     ({"cycles": 2, "amplitudes_urad": (300,)}, "X", "no run of at least 3 cycles"),
-    ({"nan_at": 4000}, "X", "pa_x has 1 lost \\(NaN\\) samples"),
+    ({"nan_at": [1300 + 1000 * k for k in range(25)]}, "X", r"pa_x has 25 lost \(NaN\) samples.*no run of at least 2"),
 ])
 def test_analysis_errors_name_the_problem(tmp_path, kw, axis, match):
     path = write_sweep(tmp_path / "bad.h5", **kw)
     with pytest.raises(ValueError, match=match):
         analyze_file(path, axis)
+
+
+def test_a_lost_frame_inside_the_cycles_is_analysed_around(tmp_path):
+    """Issue 36 item 2: a dropped ADC frame (6 samples lost) inside the kept cycles lost the
+    whole sweep. Now the cycles within the filters' reach of it are left out, the rest
+    analysed: the same To and eta, and the warning says what was lost and left out."""
+    whole = analyze_file(write_sweep(tmp_path / "whole.h5", noise_Nm=2e-4), "X")
+    res = analyze_file(write_sweep(tmp_path / "lost.h5", noise_Nm=2e-4, nan_at=slice(4000, 4006)), "X")
+    assert res.To_Nm == pytest.approx(whole.To_Nm, rel=0.02) and res.To_Nm == pytest.approx(0.012, rel=0.02)
+    assert res.eta_per_Nm == pytest.approx(whole.eta_per_Nm, rel=0.05)
+    assert [lp.n_cycles for lp in res.loops] == [2, 4, 4, 4, 4]      # the frame was in the 500 urad cycles
+    assert any("pa_x has 6 lost (NaN) samples" in w and "2 of 4 cycles" in w for w in res.warnings), res.warnings
 
 
 def test_a_constant_command_is_not_a_sweep(tmp_path):
