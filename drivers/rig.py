@@ -38,7 +38,7 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from typing import Any
-from urllib.parse import parse_qsl, urlsplit
+from urllib.parse import parse_qsl, quote, urlsplit
 
 import can
 
@@ -368,6 +368,12 @@ def open_rig(url: str = "sim", *, operator: Operator | None = None,
         raise ValueError(f"rig URL {url!r}: unknown rig; use 'sim[?realtime=1&seed=N&warm=1&config=F.toml&table=manual]' "
                          f"or 'serial:///dev/ttyACM0?can=socketcan:can0' (schemes: {', '.join(schemes())})")
     return opener(url, params, operator, calibration)
+
+
+def with_param(url: str, key: str, value: object) -> str:
+    """``url`` with ``key=value`` added to its query, the value %-escaped: a path is data, never
+    URL text (a file named ``a.toml&warm=1`` must not add ``warm=1``)."""
+    return url + ("&" if "?" in url else "?") + f"{key}={quote(str(value), safe='/')}"
 
 
 def schemes() -> list[str]:

@@ -92,13 +92,15 @@ CAMPAIGN: list[tuple[str, str | None, tuple[str, ...]]] = [
 
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
                  progress: Callable[[str], None] | None = None) -> tuple[list[RunSummary], Path]:
-    from drivers.rig import open_rig
+    from drivers.rig import open_rig, with_param
     from fbs.progress import run_with_progress
     from fbs.runlog import RunLog
     from procedures.params import parse_params
 
     out.mkdir(parents=True, exist_ok=True)
-    url = f"sim?seed={seed}&watchdog=5" + (f"&config={cfg_path}" if cfg_path else "")
+    url = f"sim?seed={seed}&watchdog=5"
+    if cfg_path:
+        url = with_param(url, "config", cfg_path)
     prior: dict[str, dict] = {}
     summaries: list[RunSummary] = []
     t0 = time.monotonic()

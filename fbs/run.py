@@ -27,6 +27,7 @@ import socket
 import sys
 from pathlib import Path
 
+from drivers.rig import with_param
 from fbs.runlog import RunLog
 from fbs.usage import EXIT_CODES_HELP, version
 from procedures.calibrations import get, module_names
@@ -41,7 +42,7 @@ def rig_url(args: argparse.Namespace) -> str:
     if args.sim_config:
         if not (url == "sim" or url.startswith("sim?")):
             raise ValueError(f"--sim-config applies to the simulated rig only, not {url!r}")
-        url += ("&" if "?" in url else "?") + f"config={args.sim_config}"
+        url = with_param(url, "config", args.sim_config)
     return url
 
 

@@ -81,3 +81,17 @@ def test_a_defect_is_an_internal_error_with_exit_2_not_1(capsys, record, monkeyp
     code = main(["inspect", str(record)])
     err = capsys.readouterr().err
     assert code == 2 and "fbs inspect: internal error: RuntimeError: a defect" in err, err
+
+
+def test_a_sim_config_path_is_data_not_url_text(tmp_path):
+    """Item 3: with files ``inj.toml&warm=1`` and ``inj.toml`` both present, the run used
+    ``inj.toml`` and also started warm. The path is %-escaped into the URL and read back whole."""
+    import argparse
+    from urllib.parse import parse_qsl, urlsplit
+
+    from fbs.run import rig_url
+
+    odd = tmp_path / "inj.toml&warm=1#x?y"
+    url = rig_url(argparse.Namespace(rig="sim?seed=2", sim_config=str(odd)))
+    params = dict(parse_qsl(urlsplit(url).query))
+    assert params == {"seed": "2", "config": str(odd)}
