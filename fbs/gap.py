@@ -13,16 +13,26 @@ from __future__ import annotations
 
 import argparse
 import json
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
     from procedures.analysis.gap.workflow import GapResult
 
 
+#: what ``--report DIR`` writes, none of it replaced without ``--force``
+REPORT_FILES = ("model_before.h5", "model_after.h5", "refined.toml", "gap.md")
+
+
 def _analyse(args: argparse.Namespace) -> GapResult:
     from procedures.analysis.gap.workflow import GapOptions, analyse
 
     opt = GapOptions(sim_config=args.sim_config, seed=args.seed)
+    if args.report and not getattr(args, "force", False):
+        held = [name for name in REPORT_FILES if (Path(args.report) / name).exists()]
+        if held:
+            raise FileExistsError(f"--report {args.report} already holds {', '.join(held)} (an earlier report): "
+                                  f"give another folder, or --force to replace them")
     return analyse(args.file, axis=args.axis, options=opt, report_dir=args.report)
 
 
@@ -92,6 +102,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "unexplained, file; with --report also refined_config, the path of DIR/refined.toml")
     g.add_argument("--report", metavar="DIR", help="write model_before.h5, model_after.h5, plots, gap.md and "
                    "refined.toml (the refined model as a sim config for --sim-config) to DIR")
+    g.add_argument("--force", action="store_true", help="replace an earlier report in --report DIR")
     g.add_argument("--axis", help="platform axis X, Y or Z (default: the file's 'axis' attribute)")
     g.add_argument("--sim-config", help="TOML sim config the nominal model starts from (default: the data sheet)")
     g.add_argument("--seed", type=int, default=1, help="seed of the model simulations (default 1)")

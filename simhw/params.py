@@ -401,6 +401,9 @@ def load_config(path: str | Path | None) -> SimConfig:
     if path is None:
         return SimConfig()
     path = Path(path)
+    if path.exists() and not path.is_file():
+        # a FIFO or a device would block the read (or never end): refused, as the run-file reader does
+        raise ConfigError(f"sim config: {path} is not a regular file (a folder, FIFO or device); give a .toml file")
     try:
         with path.open("rb") as fh:
             data = tomllib.load(fh)

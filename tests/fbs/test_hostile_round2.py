@@ -95,3 +95,21 @@ def test_a_sim_config_path_is_data_not_url_text(tmp_path):
     url = rig_url(argparse.Namespace(rig="sim?seed=2", sim_config=str(odd)))
     params = dict(parse_qsl(urlsplit(url).query))
     assert params == {"seed": "2", "config": str(odd)}
+
+
+def test_a_fifo_as_sim_config_is_refused_not_waited_on(capsys, tmp_path):
+    """Item 10: ``fbs simulate --sim-config FIFO`` waited forever (nothing writes the FIFO)."""
+    import os
+
+    fifo = tmp_path / "cfg.toml"
+    os.mkfifo(fifo)
+    _fails(capsys, ["simulate", "--mode", "3", "--duration", "1", "--rate", "100", "--sim-config", str(fifo),
+                    "--out", str(tmp_path / "x.h5")], "not a regular file")
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_an_earlier_gap_report_is_not_replaced_without_force(capsys, record, tmp_path):
+    """Item 10: ``fbs gap --report DIR`` overwrote an existing ``model_before.h5``."""
+    (tmp_path / "model_before.h5").write_bytes(b"an earlier report's")
+    _fails(capsys, ["gap", str(record), "--report", str(tmp_path)], "already holds model_before.h5", "--force")
+    assert (tmp_path / "model_before.h5").read_bytes() == b"an earlier report's"
