@@ -198,18 +198,20 @@ def _run(plan: Plan, backend: batch_exec.Backend, results: batch_exec.ResultsFil
 
 
 def _batch(args: argparse.Namespace) -> int:
-    plan = plan_of(args)
-    todo = plan.todo
-    done = len(plan.files) - len(todo)
-    retried = sum(1 for f in todo if f in plan.latest)
-    # no more local processes than files to run
-    jobs = batch_exec.local_jobs(plan.jobs, plan.scheduler, len(todo))
-    backend = batch_exec.open_backend(jobs, plan.scheduler) if todo else None
+    # every argument and the --out checked before anything is opened
+    results = batch_exec.ResultsFile(plan_of(args).out)
     try:
-        results = batch_exec.ResultsFile(plan.out, plan.torn_tail)
+        # planned again with the results file held: what another batch wrote meanwhile counts
+        plan = plan_of(args)
+        results.cut(plan.torn_tail)
+        todo = plan.todo
+        done = len(plan.files) - len(todo)
+        retried = sum(1 for f in todo if f in plan.latest)
+        # no more local processes than files to run
+        jobs = batch_exec.local_jobs(plan.jobs, plan.scheduler, len(todo))
+        backend = batch_exec.open_backend(jobs, plan.scheduler) if todo else None
     except BaseException:
-        if backend:
-            backend.close()
+        results.close()
         raise
     try:
         if plan.torn_tail:

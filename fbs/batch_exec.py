@@ -20,6 +20,7 @@ result to its caller as it arrives; only starting, describing and stopping diffe
 
 from __future__ import annotations
 
+import fcntl
 import json
 import multiprocessing
 import os
@@ -233,13 +234,27 @@ def signals_held() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
-class ResultsFile:
-    """A JSON-lines results file, appended one whole line per result and synced to disk; an
-    unfinished last line (``torn_tail`` bytes, from ``read_results``) is cut off first."""
+class ResultsBusy(ValueError):
+    """Another batch holds the results file (a ``ValueError``: refused, exit 2)."""
 
-    def __init__(self, path: Path, torn_tail: int = 0) -> None:
+
+class ResultsFile:
+    """A JSON-lines results file, appended one whole line per result and synced to disk, held
+    by one batch at a time (an exclusive ``flock`` for as long as it is open: a second batch on
+    the same ``--out`` is refused, ``ResultsBusy``, instead of mixing its lines in)."""
+
+    def __init__(self, path: Path) -> None:
         self.path = path
         self._fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            os.close(self._fd)
+            raise ResultsBusy(f"--out {path} is being written by another `fbs batch` now: wait for it to end "
+                              f"(then run again to resume), or give another --out") from None
+
+    def cut(self, torn_tail: int) -> None:
+        """Cut off an unfinished last line (``torn_tail`` bytes, from ``read_results``)."""
         if torn_tail:
             os.ftruncate(self._fd, os.fstat(self._fd).st_size - torn_tail)
 

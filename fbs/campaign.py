@@ -647,7 +647,8 @@ def _campaign(args: argparse.Namespace) -> int:
         if c.replace:
             os.replace(c.runs_path, c.out / f"{RUNS_FILE}.old")
             _say(f"--force: the runs of another campaign in {c.out} moved to {RUNS_FILE}.old")
-        results = batch_exec.ResultsFile(c.runs_path, c.torn_tail)
+        results = batch_exec.ResultsFile(c.runs_path)
+        results.cut(c.torn_tail)
     except BaseException:
         if backend:
             backend.close()

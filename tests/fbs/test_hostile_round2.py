@@ -113,3 +113,20 @@ def test_an_earlier_gap_report_is_not_replaced_without_force(capsys, record, tmp
     (tmp_path / "model_before.h5").write_bytes(b"an earlier report's")
     _fails(capsys, ["gap", str(record), "--report", str(tmp_path)], "already holds model_before.h5", "--force")
     assert (tmp_path / "model_before.h5").read_bytes() == b"an earlier report's"
+
+
+def test_a_results_file_belongs_to_one_batch_at_a_time(capsys, record, tmp_path):
+    """Item 9: two ``fbs batch`` runs with different commands on one ``--out`` both exited 0 and
+    mixed their lines. While one holds the results file, another is refused and writes nothing."""
+    from fbs.batch_exec import ResultsFile
+
+    out = tmp_path / "results.jsonl"
+    holder = ResultsFile(out)                       # a batch at work on it
+    try:
+        _fails(capsys, ["batch", "inspect", str(record), "--jobs", "1", "--out", str(out)],
+               "being written by another `fbs batch`")
+        assert out.read_bytes() == b""
+    finally:
+        holder.close()
+    assert main(["batch", "inspect", str(record), "--jobs", "1", "--out", str(out)]) == 0
+    assert len(out.read_text().splitlines()) == 1
