@@ -136,14 +136,28 @@ def calibration_from_meta(data: Any) -> RigCalibration | None:
             kw["platform"] = {a: _make(PlatformConstants, v) for a, v in kw["platform"].items()}
         if "autocollimator" in kw:
             kw["autocollimator"] = {a: _make(AutocollimatorConstants, v) for a, v in kw["autocollimator"].items()}
-        return RigCalibration(**kw)
-    except (TypeError, AttributeError) as exc:
+        cal = RigCalibration(**kw)
+    except (TypeError, AttributeError, ValueError) as exc:
         raise ValueError(f"/meta/calibration is not a rig calibration ({exc})") from None
+    for where, group in (("platform", cal.platform), ("autocollimator", cal.autocollimator)):
+        for axis, consts in group.items():
+            for f in dataclasses.fields(consts):
+                v = getattr(consts, f.name)
+                ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                if not ok or v < 0 or (v == 0 and f.name != "damping_Nms"):
+                    raise ValueError(f"/meta/calibration: {where}.{axis}.{f.name} = {v!r} must be a finite positive "
+                                     "number")
+    return cal
 
 
 def _make(cls: type, value: Any) -> Any:
     names = {f.name for f in dataclasses.fields(cls)}
     return cls(**{k: v for k, v in dict(value).items() if k in names})
+
+
+#: beyond this a channel is no voltage a rig recorded (an ADC reads +-10 V; a writer's amplifier
+#: stage might reach tens): the arithmetic of the analysis would overflow on it
+MAX_PLAUSIBLE_V = 1e6
 
 
 def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration | None = None, *,
@@ -193,6 +207,11 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
                          f"constants for it (axes with both: "
                          f"{', '.join(sorted(set(calibration.platform) & set(calibration.autocollimator)))})")
     plat, ac = calibration.platform[a], calibration.autocollimator[a]
+    for name, x in zip(names, data):
+        peak = float(np.nanmax(np.abs(x))) if np.isfinite(x).any() else 0.0
+        if peak > MAX_PLAUSIBLE_V or np.isinf(x).any():
+            raise ValueError(f"{path}: {name} reaches {peak:.3g} V (or infinity): beyond the {MAX_PLAUSIBLE_V:g} V "
+                             "of any recorded voltage; the file is damaged or not a rig's record")
     cmd, inst, pa = data
     if len(cmd) < 16:
         raise ValueError(f"{path}: {len(cmd)} samples are too few for an analysis")

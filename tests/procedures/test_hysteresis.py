@@ -200,6 +200,27 @@ def test_a_lost_frame_inside_the_cycles_is_analysed_around(tmp_path):
     assert any("pa_x has 6 lost (NaN) samples" in w and "2 of 4 cycles" in w for w in res.warnings), res.warnings
 
 
+def test_hostile_content_in_a_valid_file_is_refused_by_name(tmp_path):
+    """Issue 36 item 7: a string inertia in /meta/calibration (TypeError deep in the fit) and a
+    channel scaled by 1e300 (OverflowError) crashed ``fbs analyze hysteresis``."""
+    import h5py
+
+    path = write_sweep(tmp_path / "string.h5", meta_cal=False)
+    odd = dataclasses.asdict(ODD_CAL)
+    odd["platform"]["X"]["inertia_kg_m2"] = "heavy"
+    with h5py.File(path, "a") as f:
+        f.require_group("meta").attrs["calibration"] = json.dumps(odd)
+    with pytest.raises(ValueError, match=r"platform.X.inertia_kg_m2 = 'heavy' must be a finite positive number"):
+        analyze_file(path, "X")
+    path = tmp_path / "huge.h5"
+    with RunWriter(path, rig="synthetic", mode=3, rate_hz=100.0,
+                   channels={"cmd_x": "V", "ac_x_inst": "V", "pa_x": "V"}) as wr:
+        x = np.sin(np.arange(4000) * 0.0251)
+        wr.append(np.column_stack([x, x, 1e300 * x]))
+    with pytest.raises(ValueError, match="pa_x reaches 1e.300 V"):
+        analyze_file(path, "X")
+
+
 def test_a_constant_command_is_not_a_sweep(tmp_path):
     path = tmp_path / "flat.h5"
     with RunWriter(path, rig="synthetic", mode=3, rate_hz=100.0,
