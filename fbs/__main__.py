@@ -2,6 +2,6 @@
 
 import sys
 
-from fbs.cli import main
+from fbs.entry import main
 
 sys.exit(main())

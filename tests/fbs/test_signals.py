@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -64,3 +65,23 @@ def test_a_signal_aborts_a_recording_to_the_safe_state(tmp_path, sig):
 def test_sighup_aborts_a_procedure_to_the_safe_state(tmp_path):
     _signalled(["run", "stopwatch", "--rig", "sim?warm=1", "--out", str(tmp_path)], tmp_path / "stopwatch.h5",
                signal.SIGHUP, events=1)
+
+
+def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path):
+    """Issue 36 item 11: Ctrl-C while ``fbs`` was still loading printed a KeyboardInterrupt
+    traceback; SIGTERM/SIGHUP there ended it with 143/129. The signal is sent once the child
+    has its start-up handler (its caught-signal mask has SIGTERM), while it is loading."""
+    import re as _re
+
+    proc = subprocess.Popen([sys.executable, "-m", "fbs", "simulate", "--mode", "3", "--duration", "1", "--rate",
+                             "100", "--out", str(tmp_path / "x.h5")], stderr=subprocess.PIPE, text=True)
+    status = Path(f"/proc/{proc.pid}/status")
+    t_end = time.monotonic() + 60                    # a hang guard
+    while proc.poll() is None and time.monotonic() < t_end:
+        m = _re.search(r"^SigCgt:\s*([0-9a-f]+)", status.read_text(), _re.M)
+        if m and int(m.group(1), 16) >> (signal.SIGTERM - 1) & 1:
+            break
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 2 and "Traceback" not in err, err
+    assert "SIGTERM while starting; nothing was done" in err or "interrupted" in err, err
