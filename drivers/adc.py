@@ -165,3 +165,11 @@ class AdcDecorator(Adc):
     def __getattr__(self, name: str):
         # driver-specific extras (a serial ADC's port, timeouts) stay reachable
         return getattr(self.inner, name)
+
+    def __setattr__(self, name: str, value: object) -> None:
+        # ... and settable: a driver's setting (``stall_timeout_s``) set on the decorator is the driver's
+        inner = self.__dict__.get("inner")
+        if inner is not None and name not in self.__dict__ and not hasattr(type(self), name) and hasattr(inner, name):
+            setattr(inner, name, value)
+        else:
+            object.__setattr__(self, name, value)

@@ -604,7 +604,8 @@ class SerialAdc(Adc):
         # A lost frame is only noticed when the next one arrives, so ask a virtual clock for a
         # frame more than needed, and for more still while nothing comes.
         ahead = cfg.frame_sets
-        self.clock.demand(self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz)
+        demanded = self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz
+        self.clock.demand(demanded)
         t_start = self._mono()
         with self._cond:
             while True:
@@ -623,9 +624,15 @@ class SerialAdc(Adc):
                                           f"check the device and the cable")
                     self._report_unlocked(fault, stream_lost=True)
                     raise fault
-                if not self._cond.wait(0.05) and self.clock.virtual:
+                # Ask a virtual clock for more only once the rig got as far as asked and the frames
+                # did not come (lost on the way): asking because the host merely waited (a busy
+                # machine) would run the physics further ahead, and a set-point sent next would land
+                # at a rig time that depends on the machine's load.
+                if (not self._cond.wait(0.05) and self.clock.virtual
+                        and self.clock.now() >= demanded - 0.5 / cfg.rate_hz):
                     ahead = min(2 * ahead, int(10 * cfg.rate_hz) + cfg.frame_sets)
-                    self.clock.demand(self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz)
+                    demanded = self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz
+                    self.clock.demand(demanded)
 
     def read_available(self) -> AdcBlock | None:
         with self._cond:

@@ -199,7 +199,9 @@ def _run(plan: Plan, backend: batch_exec.Backend, results: batch_exec.ResultsFil
 
 def _batch(args: argparse.Namespace) -> int:
     # every argument and the --out checked before anything is opened
-    results = batch_exec.ResultsFile(plan_of(args).out)
+    out = plan_of(args).out
+    created = not out.exists()
+    results = batch_exec.ResultsFile(out)
     try:
         # planned again with the results file held: what another batch wrote meanwhile counts
         plan = plan_of(args)
@@ -212,6 +214,8 @@ def _batch(args: argparse.Namespace) -> int:
         backend = batch_exec.open_backend(jobs, plan.scheduler) if todo else None
     except BaseException:
         results.close()
+        if created and out.stat().st_size == 0:   # refused (a backend that cannot start): no file left behind
+            out.unlink()
         raise
     try:
         if plan.torn_tail:
