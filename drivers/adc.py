@@ -117,8 +117,7 @@ class AdcDecorator(Adc):
     raises reaches the reader: a decorator that must never cost a sample catches its own."""
 
     def __init__(self, inner: Adc) -> None:
-        self.inner = inner
-        self.identity = inner.identity
+        self.inner = inner   # its ``identity`` and every other attribute read through (``__getattr__``)
 
     def _deliver(self, block: AdcBlock) -> None:
         """See a block on its way to the reader (nothing here)."""

@@ -362,6 +362,26 @@ def _at_bound(effect: catalogue.Effect, params: dict[str, float]) -> list[str]:
     return out
 
 
+def _final_fit(fitter: Fitter, effect: catalogue.Effect, cfg: SimConfig, evidence: Evidence, f: EffectFit,
+               base_nll: float, n_obs: int) -> EffectFit:
+    """``f`` refined again with its uncertainties (and the knee's envelope), scored against
+    ``base_nll``; ``f`` itself where the refinement finds nothing better."""
+    final = fitter.fit(effect, cfg, evidence, start=f.params)
+    if final is None or final.nll > f.nll + 1e-6:
+        return f
+    final.score = bic_score(final, base_nll, n_obs)
+    return fitter.held_envelope(effect, cfg, evidence, final)
+
+
+def _moved(S: np.ndarray, scales: dict[str, float], cur: NuisanceFit, base_ms: Any, tol_db: float) -> np.ndarray:
+    """The cells an effect's model ``S`` moves by more than ``tol_db``: against the model without
+    it at the same noise levels ``scales`` (a refitted noise level moves every band a little, and
+    is no effect's doing), with the unit's knee as fitted without it (``cur``: an effect that
+    sets the corner moves it)."""
+    same = scales | {k: cur.scales[k] for k in SHAPE_KEYS if k in cur.scales}
+    return np.abs(10.0 * np.log10(S / base_ms.total(same))) > tol_db
+
+
 def _pair_that_closes(fitter: Fitter, cfg: SimConfig, cur: NuisanceFit, fits: list[EffectFit], evidence: Evidence,
                       flags: np.ndarray, base_ms: Any, n_obs: int, opt: GapOptions, P: np.ndarray,
                       dof: np.ndarray) -> list[tuple[EffectFit, np.ndarray, float, float]]:
@@ -393,19 +413,16 @@ def _pair_that_closes(fitter: Fitter, cfg: SimConfig, cur: NuisanceFit, fits: li
                 fitter.hold = held
             if fb is None or bic_score(fb, a.nll, n_obs) < opt.min_score:
                 continue
-            same = fb.scales | {k: cur.scales[k] for k in SHAPE_KEYS if k in cur.scales}
-            moved = np.abs(10.0 * np.log10(fb.S / base_ms.total(same))) > opt.tol_db
+            moved = _moved(fb.S, fb.scales, cur, base_ms, opt.tol_db)
             where = _where_it_acts(flags, moved)
             g0, g_a, g2 = gap_db(P, cur.S, where, dof), gap_db(P, a.S, where, dof), gap_db(P, fb.S, where, dof)
             need = max(opt.min_closed_db, opt.min_closed_share * g0)
             log.info("pair %s + %s closes %.2f of %.2f dB where it acts (%d cells)", a.effect, b.effect,
                      g0 - g2, g0, int(where.sum()))
             if g0 - g2 >= need and (best is None or g2 < best[0]):
-                fa = fitter.fit(eff_a, cfg, evidence, start=a.params)
-                fa = a if fa is None or fa.nll > a.nll + 1e-6 else fitter.held_envelope(eff_a, cfg, evidence, fa)
-                fa.score = bic_score(fa, cur.nll, n_obs)
+                fa = _final_fit(fitter, eff_a, cfg, evidence, a, cur.nll, n_obs)
                 fb.score = bic_score(fb, fa.nll, n_obs)
-                moved_a = np.abs(10.0 * np.log10(fa.S / base_ms.total(same))) > opt.tol_db
+                moved_a = _moved(fa.S, fb.scales, cur, base_ms, opt.tol_db)
                 best = (g2, [(fa, moved_a, g0, g_a), (fb, moved, g_a, g2)])
     return [] if best is None else best[1]
 
@@ -636,15 +653,8 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
                 # data only at its extreme is no finding
                 continue
             # refined again, with its uncertainties, before it is judged
-            final = fitter.fit(catalogue.get(f.effect), cfg, evidence, start=f.params)
-            if final is not None and final.nll <= f.nll + 1e-6:
-                final.score = bic_score(final, cur.nll, n_obs)
-                f = fitter.held_envelope(catalogue.get(f.effect), cfg, evidence, final)
-            # the cells the effect itself moves: against the model without it at the same noise
-            # levels (a refitted noise level moves every band a little, and is no effect's doing)
-            # (the unit's knee as fitted without it: an effect that sets the corner moves it)
-            same = f.scales | {k: cur.scales[k] for k in SHAPE_KEYS if k in cur.scales}
-            moved = np.abs(10.0 * np.log10(f.S / base_ms.total(same))) > opt.tol_db
+            f = _final_fit(fitter, catalogue.get(f.effect), cfg, evidence, f, cur.nll, n_obs)
+            moved = _moved(f.S, f.scales, cur, base_ms, opt.tol_db)
             where = _where_it_acts(flags, moved)
             g0, g1 = gap_db(P, cur.S, where, grid.dof), gap_db(P, f.S, where, grid.dof)
             # steps seen in the time domain are a departure of their own: an effect that makes
