@@ -90,8 +90,10 @@ class ProgressReporter:
 def run_with_progress(proc: Procedure[Any], rig: Rig, out: Path, runlog: RunLog, *,
                       resume: Resumed | None = None) -> RunSummary:
     """``run_procedure`` as the command line runs it: ``runlog`` opened as ``<run>.log`` beside
-    the run file, progress on the status line and in plain lines."""
-    runlog.open(next_free(out, proc.name).with_suffix(".log"))
+    the run file (a complete run analysed again: its own log, appended to), progress on the
+    status line and in plain lines."""
+    run_file = resume.path if resume is not None and resume.complete else next_free(out, proc.name)
+    runlog.open(run_file.with_suffix(".log"))
     reporter = ProgressReporter(stderr_handler())
     try:
         summary = run_procedure(proc, rig, out, resume=resume, progress=reporter)

@@ -12,7 +12,10 @@ Earlier results: a procedure that needs another's result (stopwatch needs K_TO f
 earth-rate; survey and drift use K_g and K_TO) takes the newest completed summary of that
 procedure in ``--out`` (or the files given with ``--prior``); the report says which it used.
 SIGTERM and SIGHUP are treated like Ctrl-C (``fbs.signals``, for every command): the rig goes
-safe and the file is closed "aborted: interrupted".
+safe and the file is closed "aborted: interrupted". After a complete acquisition (during the
+analysis or the report) they make the verdict "aborted" (exit 2) and the summary says what was
+not written; ``--resume`` on a complete file runs its analysis again and rewrites its summary
+and report (beside it, whatever ``--out``), moving nothing on the rig.
 """
 
 from __future__ import annotations
@@ -58,13 +61,17 @@ def run_command(args: argparse.Namespace) -> int:
         out = Path(args.out)
         resume = None
         if args.resume:
-            resume = load_resume(args.resume, proc_cls.name)
+            resume = load_resume(args.resume, proc_cls.name, complete_ok=True)
             if args.param or args.axis:
                 raise ValueError("--resume continues with the interrupted run's parameters; do not give --param/--axis")
             params = proc_cls.params_from(resume.params)
         else:
             params = parse_params(proc_cls, args.param or [], args.axis)
-        proc = proc_cls(params, prior=find_prior(out, args.prior))
+        if resume is not None and resume.complete and not args.prior:
+            prior = resume.prior   # analysed again: with the earlier results it was made with
+        else:
+            prior = find_prior(out, args.prior)
+        proc = proc_cls(params, prior=prior)
         # Ctrl-C, SIGTERM and SIGHUP abort to the safe state (fbs.signals, set by the command line)
         try:
             with open_rig(rig_url(args)) as rig:
@@ -137,7 +144,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--out", default="out", help="directory for the run file, summary, report and log (default: out)")
     r.add_argument("--json", action="store_true", help="print the procedure's figures as one JSON object on stdout "
                    "(keys: its figures, each figure's K_ci95 and resolved, file)")
-    r.add_argument("--resume", metavar="FILE", help="continue an aborted run from its last completed step")
+    r.add_argument("--resume", metavar="FILE",
+                   help="continue an aborted run from its last completed step; "
+                        "a complete run: analyse it again (its summary and report rewritten)")
     r.add_argument("--param", action="append", metavar="NAME=VALUE",
                    help="a procedure parameter (repeatable; `fbs run PROCEDURE --help` lists them)")
     r.add_argument("--prior", action="append", metavar="SUMMARY.json",

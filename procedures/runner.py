@@ -22,6 +22,13 @@ state (``drivers.safety.SafeOnAbort``) while the file is still open, then the re
 closed "aborted: <why>"; the summary lists the steps done. ``resume`` starts a new run from an
 aborted file: its completed data steps are taken over (their results and spans re-recorded as
 ``step-done`` events marked ``resumed``), setup steps run again, the rest run normally.
+``resume`` of a complete file (``load_resume(..., complete_ok=True)``) moves nothing: its
+analysis runs again and its summary and report are written anew (an analysis or report that
+was interrupted or failed after a complete acquisition).
+
+Outputs: the report first, the JSON summary last (atomically), so a summary never claims a
+report that is not there. Ctrl-C (or SIGTERM/SIGHUP as ``KeyboardInterrupt``) during the
+analysis or the report makes the verdict "aborted" and the summary says what was not written.
 """
 
 from __future__ import annotations
@@ -31,9 +38,11 @@ import dataclasses
 import json
 import logging
 import math
+import signal
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
@@ -266,14 +275,24 @@ class Context:
     """What a step sees: the rig, the recording, earlier results, and helpers that keep the
     progress current and honour an abort request."""
 
-    def __init__(self, proc: Procedure[Any], rig: Rig, acq: Acquisition, *, progress: ProgressListener | None,
-                 abort: threading.Event) -> None:
-        self.proc, self.rig, self.acq = proc, rig, acq
+    #: the recording; not set when a complete run is analysed again from its file
+    acq: Acquisition
+
+    def __init__(self, proc: Procedure[Any], rig: Rig, acq: Acquisition | None, *,
+                 progress: ProgressListener | None, abort: threading.Event,
+                 path: Path | None = None) -> None:
+        self.proc, self.rig = proc, rig
+        self.path: Path
+        if acq is not None:
+            self.acq, self.path = acq, acq.result.path
+        elif path is not None:
+            self.path = Path(path)
+        else:
+            raise ValueError("a Context needs the recording or the finished run's path")
         self.params = proc.params
         self.results: dict[str, Any] = {}
         #: where each data step's samples are (resumed steps: in the earlier file), by step name
         self.spans: dict[str, Span] = {}
-        self.path = acq.result.path
         self._progress = progress
         self._abort = abort
         self.step: Step | None = None
@@ -416,10 +435,17 @@ class Resumed:
     results: dict[str, Any]
     #: where the completed data steps' samples are (in that file, or in one it resumed)
     spans: dict[str, Span] = field(default_factory=dict)
+    #: the run is complete: ``run_procedure`` analyses it again, the rig is not touched
+    complete: bool = False
+    #: the earlier results the run was made with (its /meta/prior), for analysing it again
+    prior: dict[str, Any] = field(default_factory=dict)
+    #: the steps that run itself took over from a run it resumed
+    taken_over: list[str] = field(default_factory=list)
 
 
-def load_resume(path: str | Path, procedure: str) -> Resumed:
-    """The completed steps of an aborted run of ``procedure`` (from its ``step-done`` events)."""
+def load_resume(path: str | Path, procedure: str, *, complete_ok: bool = False) -> Resumed:
+    """The completed steps of an aborted run of ``procedure`` (from its ``step-done`` events);
+    with ``complete_ok`` a complete run too (``Resumed.complete``: to be analysed again)."""
     path = Path(path)
     with RunFile(path) as rf:
         status = rf.status
@@ -430,10 +456,16 @@ def load_resume(path: str | Path, procedure: str) -> Resumed:
         raise ProcedureError(f"--resume {path}: not a procedure run (no /meta/procedure)")
     if info["name"] != procedure:
         raise ProcedureError(f"--resume {path}: that file is a {info['name']!r} run, not {procedure!r}")
-    if status == STATUS_COMPLETE:
+    if status == STATUS_COMPLETE and not complete_ok:
         raise ProcedureError(f"--resume {path}: that run is complete; nothing to resume")
     results, spans = steps_done(path, events)
-    return Resumed(path, procedure, dict(info.get("params", {})), results, spans)
+    prior = meta.get("prior")
+    # JSON (steps_done checked it)
+    done = [json.loads(e.text) for e in events if e.kind == EVENT_STEP_DONE]
+    return Resumed(path, procedure, dict(info.get("params", {})), results, spans,
+                   complete=status == STATUS_COMPLETE,
+                   prior=dict(prior) if isinstance(prior, dict) else {},
+                   taken_over=[d["step"] for d in done if "resumed" in d])
 
 
 def steps_done(path: Path, events: Iterable[Event]) -> tuple[dict[str, Any], dict[str, Span]]:
@@ -459,7 +491,10 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
                   progress: ProgressListener | None = None, abort: threading.Event | None = None,
                   report: bool = True) -> RunSummary:
     """Run ``proc`` on ``rig``, recording to a new file in ``out_dir``; never raises for an
-    abort or a failure of the procedure: the summary says what happened (exit code 2)."""
+    abort or a failure of the procedure: the summary says what happened (exit code 2). A
+    ``resume`` of a complete run analyses that run again (its summary and report beside it)."""
+    if resume is not None and resume.complete:
+        return _analyse_again(proc, rig, resume, abort or threading.Event(), report)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     path = next_free(out_dir, proc.name)
@@ -496,23 +531,51 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
                   summary.error, _safe_text(rig))
         _finish_report(proc, summary, None, out_dir, report)
         return summary
+    _analyse(proc, ctx, summary, out_dir, report)
+    return summary
+
+
+def _analyse_again(proc: Procedure[Any], rig: Rig, resume: Resumed, abort: threading.Event,
+                   report: bool) -> RunSummary:
+    """A complete run's analysis once more, from its file (its step results and spans); its
+    summary and report are rewritten beside it. The rig is only asked for its calibration."""
+    path = resume.path
+    log.info("%s: %s is complete: analysing it again", proc.name, path)
+    summary = RunSummary(proc.name, path, STATUS_COMPLETE, Verdict.ERROR,
+                         params=proc.params_json())
+    ctx = Context(proc, rig, None, progress=None, abort=abort, path=path)
+    ctx.steps = list(proc.plan())
+    ctx.results, ctx.spans = dict(resume.results), dict(resume.spans)
+    summary.steps_planned = [s.name for s in ctx.steps]
+    summary.steps_done = [s.name for s in ctx.steps if s.name in ctx.results]
+    summary.steps_resumed = [n for n in summary.steps_done if n in resume.taken_over]
+    summary.spans = ctx.spans
+    _analyse(proc, ctx, summary, path.parent, report)
+    return summary
+
+
+def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: Path,
+             report: bool) -> None:
+    """After a complete acquisition: the analysis, the verdict, the report and the summary."""
+    how_again = f"`--resume {summary.file}` analyses the complete run again"
     try:
         analysis = proc.analyze(ctx)
     except KeyboardInterrupt:
-        summary.verdict, summary.error = Verdict.ABORTED, "interrupted (Ctrl-C) during the analysis"
+        summary.verdict = Verdict.ABORTED
+        summary.error = (f"interrupted during the analysis (the acquisition is complete); "
+                         f"{how_again}")
         _finish_report(proc, summary, None, out_dir, report)
-        return summary
+        return
     except Exception as exc:
         log.exception("%s: analysis failed", proc.name)
         summary.verdict, summary.error = Verdict.ERROR, f"analysis failed: {type(exc).__name__}: {exc}"
         _finish_report(proc, summary, None, out_dir, report)
-        return summary
+        return
     summary.analysis = analysis
     summary.values = analysis.values
     summary.measurements = analysis.measurements
     summary.verdict = Verdict.FAIL if any(m.passed is False for m in analysis.measurements) else Verdict.PASS
     _finish_report(proc, summary, analysis, out_dir, report)
-    return summary
 
 
 def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
@@ -573,12 +636,54 @@ def _finish_report(proc: Procedure[Any], summary: RunSummary, analysis: Analysis
     from procedures.reports.textfile import write_text_atomic
 
     stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem
-    try:
-        write_text_atomic(out_dir / f"{stem}.json", json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n")
-        if report:
+    # the report first, the summary last: a summary never names a report that is not there
+    if report:
+        try:
             summary.report = write_report(proc, summary, analysis, out_dir / f"{stem}.md")
-    except Exception as exc:  # a report that cannot be written must not hide the run's outcome
-        log.error("%s: the summary/report could not be written: %s", proc.name, exc)
+        except KeyboardInterrupt:   # Ctrl-C, SIGTERM or SIGHUP (fbs.signals): said, not hidden
+            summary.report = None
+            if summary.verdict in (Verdict.PASS, Verdict.FAIL):
+                summary.verdict = Verdict.ABORTED
+                summary.error = (f"interrupted while the report was written (the acquisition "
+                                 f"and analysis are complete); no report; "
+                                 f"`--resume {summary.file}` analyses it again")
+            else:
+                why = "interrupted while the report was written: no report"
+                summary.error = "; ".join(filter(None, [summary.error, why]))
+            log.error("%s: %s", proc.name, summary.error)
+        except Exception as exc:  # a report that cannot be written must not hide the run's outcome
+            log.error("%s: the report could not be written: %s", proc.name, exc)
+    try:
+        with _signals_held():   # a few ms: the summary is written whole, a signal acts after it
+            write_text_atomic(out_dir / f"{stem}.json",
+                              json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n")
+    except Exception as exc:
+        log.error("%s: the summary could not be written: %s", proc.name, exc)
+
+
+@contextmanager
+def _signals_held() -> Iterator[None]:
+    """The abort signals' handlers held back in the block and run after it (its first such
+    signal), so that it is not cut short. Only the main thread runs handlers: elsewhere the
+    block just runs. (Blocking with ``pthread_sigmask`` would not do: another thread takes it.)"""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    held = [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in held}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            if handler is not None:   # None: not set from Python, nothing to put back
+                signal.signal(s, handler)
+        if caught:
+            handler = previous[caught[0]]
+            if callable(handler):
+                handler(caught[0], None)
+            elif handler == signal.SIG_DFL:
+                signal.raise_signal(caught[0])
 
 
 def _jsonable(obj: Any) -> Any:

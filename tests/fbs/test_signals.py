@@ -4,6 +4,7 @@ the process was started with SIGINT ignored, as a script's background job is."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
@@ -85,3 +86,70 @@ def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 2 and "Traceback" not in err, err
     assert "SIGTERM while starting; nothing was done" in err or "interrupted" in err, err
+
+
+#: stopwatch on one channel, one repetition, short holds: seconds on the sim rig
+SW_RIG = ["--rig", "sim?warm=1&seed=5&watchdog=5"]
+SHORT_STOPWATCH = [*SW_RIG, "--param", 'channels=["X"]', "--param", "repetitions=1",
+                   "--param", "min_caged_s=10", "--param", "hold_s=5", "--param", "null_s=5",
+                   "--param", "restore_s=10"]
+
+
+def _main_thread_waits(pid: int, quiet_s: float = 0.5) -> bool:
+    """The process's main thread sleeps in the kernel (a FIFO's open) and stays so ``quiet_s``."""
+    t_end = time.monotonic() + quiet_s
+    while time.monotonic() < t_end:
+        try:
+            if "wait_for_partner" in Path(f"/proc/{pid}/wchan").read_text():
+                return True                      # the kernel names it: blocked opening a FIFO
+        except OSError:
+            pass                                 # not shown here: the thread's state alone
+        try:
+            stat = Path(f"/proc/{pid}/task/{pid}/stat").read_text()
+            if stat.rsplit(")", 1)[1].split()[0] != "S":
+                return False
+        except OSError:
+            return False
+        time.sleep(0.05)
+    return True
+
+
+def test_sighup_while_the_report_is_written_then_resume_writes_it(tmp_path):
+    """Issue 36 item 11: SIGHUP while stopwatch wrote its report left exit 2, a summary saying
+    pass/complete, no report, and ``--resume`` refused the complete file. The report's temporary
+    name (``procedures.reports.textfile``: ``.stopwatch.md.PID.tmp``) is made a FIFO before the
+    run reaches it: the run, its acquisition and analysis done and its plot drawn, waits opening
+    it, in the report, until SIGHUP comes. Then exit 2 and a summary saying so; ``--resume``
+    analyses the complete file again, writing the report and a true summary."""
+    p = subprocess.Popen([*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_STOPWATCH],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    fifo = tmp_path / f".stopwatch.md.{p.pid}.tmp"
+    os.mkfifo(fifo)                              # before the child has even loaded (seconds)
+    try:
+        t_end = time.monotonic() + 300           # a hang guard
+        while not (list(tmp_path.glob("stopwatch-*.png")) and _main_thread_waits(p.pid)):
+            assert p.poll() is None and time.monotonic() < t_end, p.communicate()
+            time.sleep(0.1)
+        p.send_signal(signal.SIGHUP)
+        _, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    assert p.returncode == 2, stderr
+    assert not fifo.exists() and not (tmp_path / "stopwatch.md").exists(), stderr
+    summary = json.loads((tmp_path / "stopwatch.json").read_text())
+    assert summary["verdict"] == "aborted" and summary["report"] is None, summary
+    assert "interrupted while the report was written" in summary["error"]
+    assert "no report" in summary["error"]
+    with RunFile(tmp_path / "stopwatch.h5") as rf:
+        assert rf.status == "complete"
+    r = subprocess.run([*FBS, "run", "stopwatch", *SW_RIG, "--out", str(tmp_path),
+                        "--json", "--resume", str(tmp_path / "stopwatch.h5")],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["file"] == str(tmp_path / "stopwatch.h5")
+    summary = json.loads((tmp_path / "stopwatch.json").read_text())
+    assert summary["verdict"] == "pass" and summary["status"] == "complete"
+    assert summary["error"] is None and summary["report"] == str(tmp_path / "stopwatch.md")
+    assert "**pass**" in (tmp_path / "stopwatch.md").read_text()
+    assert [f.name for f in tmp_path.glob("*.h5")] == ["stopwatch.h5"]   # nothing recorded again
+    assert "analysing it again" in (tmp_path / "stopwatch.log").read_text()     # the run's own log

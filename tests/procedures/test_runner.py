@@ -5,7 +5,10 @@ abort) leaving the rig safe and the file "aborted: <why>", and resume."""
 from __future__ import annotations
 
 import json
+import os
+import signal
 import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,8 +16,19 @@ import pytest
 
 from daq.reader import RunFile
 from drivers.rig import open_rig
+from fbs.signals import aborting_on_signals
 from procedures.calibrations import catalogue
-from procedures.runner import Analysis, Measurement, Procedure, ProcedureError, Step, load_resume, next_free, run_procedure
+from procedures.runner import (
+    Analysis,
+    Figure,
+    Measurement,
+    Procedure,
+    ProcedureError,
+    Step,
+    load_resume,
+    next_free,
+    run_procedure,
+)
 
 pytestmark = pytest.mark.slow
 
@@ -233,6 +247,85 @@ def test_resume_refuses_complete_or_foreign_runs(rig, tmp_path):
         load_resume(s.file, "toy")
     with pytest.raises(ProcedureError, match="is a 'toy' run, not 'earth-rate'"):
         load_resume(s.file, "earth-rate")
+
+
+class _Interrupted(Toy):
+    """A Toy interrupted after its acquisition: in ``analyze``, or in its report, where a plot
+    is drawn (a ``KeyboardInterrupt``, as ``fbs.signals`` makes of SIGINT/SIGTERM/SIGHUP)."""
+
+    def __init__(self, stage: str) -> None:
+        super().__init__()
+        self.stage, self.summary_seen = stage, None
+
+    def analyze(self, ctx):
+        if self.stage == "analysis":
+            raise KeyboardInterrupt
+        a = super().analyze(ctx)
+        a.figures.append(Figure("plot", "a plot", self._draw))
+        return a
+
+    def _draw(self, png):
+        self.summary_seen = png.with_name("toy.json").exists()
+        raise KeyboardInterrupt
+
+
+@pytest.mark.parametrize("stage", ["analysis", "report"])
+def test_a_signal_after_the_acquisition_leaves_a_true_summary_and_resume_analyses_again(
+        rig, tmp_path, stage):
+    """Issue 36 item 11: SIGHUP while the report was written left exit 2, a summary saying
+    pass/complete and no report, and ``--resume`` refused the complete file. The summary is
+    now written after the report and says the run was interrupted; a resume of the complete
+    file analyses it again, moving nothing, and writes the report and a true summary."""
+    toy, md = _Interrupted(stage), tmp_path / "toy.md"
+    try:
+        s = run_procedure(toy, rig, tmp_path)
+    except KeyboardInterrupt:   # would end the session: a failure of this test instead
+        summary = (tmp_path / "toy.json").read_text()
+        pytest.fail(f"the interruption escaped the runner; its summary: {summary}")
+    assert s.verdict == "aborted" and s.exit_code == 2 and s.status == "complete"   # the file is
+    summary = json.loads((tmp_path / "toy.json").read_text())
+    assert summary["verdict"] == "aborted" and f"--resume {s.file}" in summary["error"]
+    if stage == "report":
+        assert toy.summary_seen is False                        # the summary is written after it
+        assert "interrupted while the report was written" in summary["error"]
+        assert "no report" in summary["error"]
+        assert s.report is None and summary["report"] is None and not md.exists()
+    else:   # a report of the aborted analysis, as of any aborted run
+        assert "interrupted during the analysis" in summary["error"]
+        assert summary["report"] == str(md) and "**aborted**" in md.read_text()
+    # the console's default: a complete run is refused
+    with pytest.raises(ProcedureError, match="complete; nothing to resume"):
+        load_resume(s.file, "toy")
+    again = load_resume(s.file, "toy", complete_ok=True)
+    assert again.complete and again.taken_over == []
+    toy = Toy(Toy.params_from(again.params), prior=again.prior)
+    s2 = run_procedure(toy, rig, tmp_path / "elsewhere", resume=again)
+    assert s2.verdict == "pass" and s2.exit_code == 0 and s2.error is None
+    assert s2.status == "complete" and s2.file == s.file and s2.report == md
+    assert "mean torquer X" in md.read_text()
+    # the rig not moved: no setup step ran; the analysis read the file's three data steps
+    assert toy.setup_runs == 0 and set(toy.analysed) == {"data 0", "data 1", "data 2"}
+    assert s2.steps_done == s2.steps_planned == ["setup", "data 0", "data 1", "data 2"]
+    summary = json.loads((tmp_path / "toy.json").read_text())
+    assert summary["verdict"] == "pass" and summary["report"] == str(tmp_path / "toy.md")
+    assert [p.name for p in tmp_path.glob("*.h5")] == ["toy.h5"]
+    assert not (tmp_path / "elsewhere").exists()   # beside the run file, whatever out_dir
+    with RunFile(s.file) as rf:
+        assert rf.status == "complete"
+
+
+def test_a_signal_while_the_summary_is_written_acts_after_it():
+    """The summary is written whole: SIGHUP (here sent to itself) is held until it is."""
+    from procedures.runner import _signals_held
+
+    reached = False
+    with aborting_on_signals(), pytest.raises(KeyboardInterrupt):
+        with _signals_held():
+            os.kill(os.getpid(), signal.SIGHUP)
+            time.sleep(0.05)      # an unheld signal raises here
+            reached = True
+        time.sleep(1.0)           # a hang guard: it has been raised before
+    assert reached
 
 
 def test_next_free_never_reuses_a_name(tmp_path):
