@@ -109,6 +109,12 @@ class Preallocator:
         if free < end - max(size, self.reserved):
             raise self._no_room(errno.ENOSPC, nbytes, f"{free} bytes free")
 
+    def truncated(self) -> None:
+        """The file's owner truncated it: blocks reserved past its new end went back to the
+        disk (HDF5 shrinks a file to its end of address space at some flushes), so they are
+        reserved no longer and the next ``reserve`` asks for them again."""
+        self.reserved = min(self.reserved, os.fstat(self.fd).st_size)
+
     def _no_room(self, err: int, nbytes: int, why: str) -> DiskFull:
         return DiskFull(err, f"no room for {nbytes + self.headroom} more bytes ({nbytes} to write, "
                              f"{self.headroom} kept to close the file): {why}")

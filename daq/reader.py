@@ -516,7 +516,8 @@ def open_hdf5(path: str | Path) -> tuple[h5py.File, bool]:
             raise UnreadableRunFile(
                 f"{path} is truncated: {m.group(1)} bytes on disk, its HDF5 superblock records {m.group(2)} (cut "
                 f"short by a copy or a download, or its writer failed while extending it, e.g. on a full disk; "
-                f"`fbs recover {path}` repairs the latter)") from exc
+                f"`fbs recover {path}` repairs the latter where the metadata reads, or says "
+                f"why it cannot)") from exc
         if "signature not found" in text:
             raise UnreadableRunFile(f"{path} is not an HDF5 file (no HDF5 signature in its "
                                     f"{_size(path)} bytes): a run file is an HDF5 file") from exc
@@ -527,6 +528,13 @@ def open_hdf5(path: str | Path) -> tuple[h5py.File, bool]:
     try:
         return open_swmr_read(path), True
     except (OSError, RuntimeError, ValueError, KeyError) as exc:
+        if "not already open for SWMR writing" in str(exc):
+            # marked open for writing, unlocked, never switched to SWMR: daq.runfile's writer
+            # died between creating the file and its first flush (its metadata is on disk)
+            raise UnreadableRunFile(
+                f"{path} was left open for writing before its first flush (by a writer that died, "
+                f"or one on another host): `fbs recover {path}` makes it readable when no writer "
+                f"has it, or says why it cannot") from exc
         raise UnreadableRunFile(f"cannot open {path} (held by a writer, or left by one that died): {exc}") from exc
 
 

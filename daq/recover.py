@@ -3,7 +3,10 @@
 An SWMR writer marks the HDF5 superblock "open for writing" and leaves the end-of-file
 address stale until it closes. A killed writer's file therefore opens only in SWMR-read
 mode; plain ``h5py.File(path)`` refuses it ("file is already open for write (may use
-<h5clear file> ...)"). ``recover`` does what ``h5clear -s --increment`` does, in place:
+<h5clear file> ...)"). A writer killed before its first flush (``daq.runfile``: the layout
+flushed, not yet SWMR) leaves the flags too, and a file that opens in no mode at all; it is
+repaired the same way, to its metadata and no samples. ``recover`` does what ``h5clear -s
+--increment`` does, in place:
 
 1. find the superblock (version 2 or 3, 8-byte addresses), check its checksum;
 2. clear the file-consistency flags, set the end-of-file address to the file's size and
@@ -305,18 +308,22 @@ _WRITER_PID = re.compile(r"pid (\d+) on ")
 
 
 def _holds_open(pid: int, path: Path) -> bool:
-    """Whether process ``pid`` has ``path`` open (Linux /proc; False where that cannot be seen)."""
-    target = path.resolve()
+    """Whether process ``pid`` has ``path`` open (Linux /proc; False where that cannot be seen).
+
+    Compared by device and inode, not by the name /proc shows: a writer opens its file under a
+    temporary name (``daq.runfile``), which /proc then shows as deleted."""
     try:
+        target = path.stat()
         fds = list(Path(f"/proc/{pid}/fd").iterdir())
     except OSError:
         return False
     for fd in fds:
         try:
-            if Path(os.readlink(fd)) == target:
-                return True
+            st = fd.stat()          # follows the link to the open file, renamed or not
         except OSError:
             continue
+        if (st.st_dev, st.st_ino) == (target.st_dev, target.st_ino):
+            return True
     return False
 
 

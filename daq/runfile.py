@@ -23,7 +23,14 @@ How the writer keeps data safe:
 * ``status`` is "recording" while the writer has the file; ``close`` sets "complete" or
   "aborted: <why>". A file still saying "recording" whose writer is gone was not closed:
   ``fbs recover`` (``daq.recover``) makes it open with plain ``h5py.File(path)`` again.
-* An existing file is never overwritten unless asked (``overwrite=True``).
+* The file never exists under its name without its metadata on disk: it is created under a
+  hidden name in the same folder (``.NAME.creating-HOST-PID-N``), laid out, flushed, given the
+  room to be closed in, and only then linked to its name (``os.link``: atomic, and it never
+  replaces a file that appeared meanwhile). A writer killed after that leaves a file that
+  ``fbs recover`` turns into an "aborted" one with its metadata and no samples; one killed
+  before leaves only the hidden file, removed by the next writer of that name on this host.
+  A ``set_meta`` after creation reaches the disk with the first flush.
+* An existing file is never overwritten unless asked (``overwrite=True``: ``os.replace``).
 * Chunked datasets go straight to disk (no chunk cache, and ``fill_time="never"``: with
   HDF5's default fill time every new chunk would be filled and staged through a temporary
   chunk buffer first, one extra copy of all the data). Whole chunks are written with
@@ -35,8 +42,11 @@ How the writer keeps data safe:
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import errno
 import importlib.metadata
+import itertools
 import json
 import logging
 import math
@@ -212,7 +222,6 @@ class RunWriter:
         self.flush_s = float(flush_s)
         self._clock = clock
         self._swmr = False
-        self._open(overwrite)
         n_ch = len(self.names)
         self._chunk = chunk_samples(self.rate_hz, self.flush_s)
         cap = max(1, int(buffer_bytes) // (8 * n_ch))
@@ -232,25 +241,96 @@ class RunWriter:
         self._failed: str | None = None
         self._closed = False
         self._last_flush = clock()
+        self._tmp: Path | None = None            # the file's name until it is published
+        self._open(overwrite)
         try:
             self._layout(rig, mode, channels, axis, procedure, meta or {})
-        except (OSError, ValueError, RuntimeError, TypeError) as exc:
-            self.f.close()
-            self.path.unlink(missing_ok=True)       # ours, just made, and holding nothing yet
-            raise RunFileError(f"cannot lay out run file {self.path} ({_write_hint(exc)}): {exc}") from exc
-        # disk reserved ahead: about 2 s of data, at least 1 MiB, at most two buffers
-        row = 8 * n_ch
-        self._space = Preallocator(self.f.id.get_vfd_handle(),
-                                   min(2 * self._cap * row, max(1 << 20, int(2 * self.rate_hz) * row)),
-                                   CLOSE_HEADROOM_BYTES)
+            self.f.flush()                          # the whole layout on disk before it has a name
+            # disk reserved ahead: about 2 s of data, at least 1 MiB, at most two buffers. The
+            # room to close the file in is reserved now, so a disk that fills before the first
+            # write still lets the file be closed with its status; after the flush, whose
+            # truncate to HDF5's end of file would return it
+            row = 8 * n_ch
+            step = min(2 * self._cap * row, max(1 << 20, int(2 * self.rate_hz) * row))
+            self._space = Preallocator(self.f.id.get_vfd_handle(), step, CLOSE_HEADROOM_BYTES)
+            self._space.reserve(0)
+        except BaseException as exc:                # Ctrl-C too: nothing is left behind
+            self._discard()
+            if isinstance(exc, DiskFull):
+                raise RunFileError(f"cannot create run file {self.path}: the disk is full "
+                                   f"({exc.strerror}); nothing was created. Free some space or "
+                                   f"record to another disk") from exc
+            if isinstance(exc, (OSError, ValueError, RuntimeError, TypeError)):
+                raise RunFileError(f"cannot lay out run file {self.path} ({_write_hint(exc)}): "
+                                   f"{exc}") from exc
+            raise
+        try:
+            self._publish(overwrite)
+        except BaseException:
+            self._discard()
+            raise
 
     # ------------------------------------------------------------------ creation
     def _open(self, overwrite: bool) -> None:
+        """Create the file under its hidden temporary name (``_publish`` gives it its own)."""
         check_new_path(self.path, overwrite)
+        _remove_dead_temps(self.path)
+        tmp = _temp_name(self.path)
+        # a file of this name is a dead writer's whose pid this process now has; once it is
+        # gone, whatever is there after a failed creation was made by it (a full disk)
         try:
-            self.f = h5py.File(self.path, "w" if overwrite else "w-", libver=LIBVER, rdcc_nbytes=0)
+            tmp.unlink(missing_ok=True)
+            self.f = h5py.File(tmp, "w-", libver=LIBVER, rdcc_nbytes=0)
         except (OSError, ValueError) as exc:
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+            hint = _write_hint(exc)
+            why = "" if hint.endswith("?") else f" ({hint}; nothing was created)"
+            raise RunFileError(f"cannot create run file {self.path}{why}: {exc}") from exc
+        self._tmp = tmp
+
+    def _publish(self, overwrite: bool) -> None:
+        """Give the laid-out file its name: a hard link, which fails rather than replace a file
+        made there since ``check_new_path`` (``os.replace`` where replacing was asked for)."""
+        tmp = self._tmp
+        assert tmp is not None
+        try:
+            if overwrite:
+                os.replace(tmp, self.path)
+            else:
+                try:
+                    os.link(tmp, self.path)
+                except FileExistsError:
+                    raise
+                except OSError as exc:
+                    # a filesystem without hard links (FAT, some network ones): a rename after
+                    # a look, which leaves a moment in which another file could be replaced
+                    if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOSYS,
+                                         errno.EMLINK):
+                        raise
+                    if os.path.lexists(self.path):
+                        raise FileExistsError(errno.EEXIST, "File exists") from None
+                    os.rename(tmp, self.path)
+                else:   # published; a second name left here is removed as a dead writer's
+                    with contextlib.suppress(OSError):
+                        tmp.unlink()
+        except FileExistsError:
+            raise RunFileError(f"{self.path} exists (it appeared while this recording was being "
+                               f"created); a recording is never overwritten: choose another file "
+                               f"name") from None
+        except OSError as exc:
             raise RunFileError(f"cannot create run file {self.path}: {exc}") from exc
+        self._tmp = None
+
+    def _discard(self) -> None:
+        """Close and remove the file not yet published: ours, and holding nothing yet."""
+        try:
+            self.f.close()
+        except (OSError, RuntimeError) as exc:
+            log.debug("closing the unpublished %s: %s", self._tmp, exc)
+        if self._tmp is not None:
+            with contextlib.suppress(OSError):
+                self._tmp.unlink(missing_ok=True)
 
     def _layout(self, rig: str, mode: int, channels: Mapping[str, str], axis: str | None,
                 procedure: str | None, meta: Mapping[str, Any]) -> None:
@@ -294,7 +374,7 @@ class RunWriter:
             self.meta.attrs[k] = json.dumps(v, default=str)
 
     def set_meta(self, name: str, value: Any) -> None:
-        """Store ``value`` as JSON in ``/meta`` (before the first flush)."""
+        """Store ``value`` as JSON in ``/meta`` (before the first flush, which writes it)."""
         if self._swmr:
             raise RuntimeError(f"{self.path}: a meta can only be added before the first sample or event "
                                "(SWMR files cannot grow new objects)")
@@ -399,6 +479,13 @@ class RunWriter:
         """On the write thread: append ``k`` samples at ``n0`` and the events; H5Fflush if
         ``flush``."""
         try:
+            if not self.f.swmr_mode:
+                # written in the room reserved at creation. The switch can shrink the file (the
+                # layout flush left HDF5's spare metadata block at its end), which returns the
+                # blocks reserved past it: the room to close in is taken back first
+                self.f.swmr_mode = True
+                self._space.truncated()
+                self._space.reserve(0)
             # every byte this write can need is the file's before HDF5 writes one: HDF5 cannot
             # survive a disk found full half-way through its metadata (daq.prealloc)
             self._space.reserve(k * buf.shape[0] * buf.itemsize + _METADATA_MARGIN
@@ -408,9 +495,12 @@ class RunWriter:
                             f"{n0}..{n0 + k} was written. Samples 0..{self.flushed} ({self.flushed / self.rate_hz:.3f} s)"
                             f" were flushed before and are kept. Free some space or record to another disk")
             raise RunFileError(self._failed) from exc
+        except (OSError, ValueError, RuntimeError) as exc:
+            done = f"0..{self.flushed} ({self.flushed / self.rate_hz:.3f} s)"
+            self._failed = (f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples "
+                            f"{done} were flushed before")
+            raise RunFileError(self._failed) from exc
         try:
-            if not self.f.swmr_mode:
-                self.f.swmr_mode = True
             if k:
                 for i, ds in enumerate(self.datasets):
                     self._write_channel(ds.id, buf[i, :k], n0)
@@ -506,8 +596,11 @@ class RunWriter:
         try:
             _set_status(self.path, status)
         except (OSError, RuntimeError) as exc:
-            log.error("could not set the status of %s to %r: %s; `fbs recover %s` can do it later",
-                      self.path, status, exc, self.path)
+            # the file still says "recording"; recover marks such a file aborted, where it can
+            log.error("could not set the status of %s to %r: %s. It still says %r; "
+                      "`fbs recover %s` marks it aborted, keeping its flushed samples, once "
+                      "its disk has room, or says why it cannot",
+                      self.path, status, exc, STATUS_RECORDING, self.path)
         try:
             release(self.path)
         except OSError as exc:
@@ -520,6 +613,50 @@ class RunWriter:
 
     def __exit__(self, et: type | None, ev: BaseException | None, tb: TracebackType | None) -> None:
         self.close(STATUS_COMPLETE if ev is None else abort_status(ev))
+
+
+_TEMP_MARK = ".creating-"
+_temp_serial = itertools.count()     # two writers of one process never share a temporary name
+
+
+def _temp_prefix(path: Path) -> str:
+    """``.NAME.creating-HOST-``: the temporary names of ``path`` made on this host. NAME is cut
+    to 100 bytes, leaving room for the rest within a file name's 255."""
+    stem = os.fsencode(path.name)[:100].decode("utf-8", "ignore")
+    return f".{stem}{_TEMP_MARK}{socket.gethostname()}-"
+
+
+def _temp_name(path: Path) -> Path:
+    """The hidden name ``path`` is created under: in its folder (a link cannot leave the
+    filesystem), saying whose it is, so that a dead writer's leftover can be told."""
+    return path.with_name(f"{_temp_prefix(path)}{os.getpid()}-{next(_temp_serial)}")
+
+
+def _remove_dead_temps(path: Path) -> None:
+    """Remove temporary files for ``path`` whose writer (on this host) is gone: a writer
+    killed while it created the file leaves one. Best effort: one look at the folder."""
+    prefix = _temp_prefix(path)
+    try:
+        names = [n for n in os.listdir(path.parent) if n.startswith(prefix)]
+    except OSError:
+        return
+    for name in names:
+        pid, _, serial = name[len(prefix):].partition("-")
+        if not (pid.isdigit() and serial.isdigit()) or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+            continue                 # alive (or another process got the number): not ours to judge
+        except ProcessLookupError:
+            pass
+        except OSError:
+            continue
+        try:
+            os.unlink(path.parent / name)
+            log.info("removed %s, left by a writer that died creating %s",
+                     path.parent / name, path)
+        except OSError as exc:
+            log.debug("could not remove %s: %s", path.parent / name, exc)
 
 
 def _set_status(path: Path, status: str) -> None:

@@ -8,6 +8,8 @@ checksum") and a recover that died on it; only the ``ulimit -f`` path recovered.
 from __future__ import annotations
 
 import hashlib
+import json
+import logging
 import shutil
 import signal
 import subprocess
@@ -71,6 +73,47 @@ def test_a_writer_stops_before_the_full_disk_reaches_hdf5_and_the_file_opens(sma
     before = _sha(p)
     rec = recover(p)                              # in place on the full disk: nothing to do
     assert not rec.was_open and _sha(p) == before
+
+
+_CHANNELS = {f"c{i}": "V" for i in range(N_CH)}
+
+
+@pytest.mark.parametrize("leave", [0, 100_000])
+def test_no_room_to_create_and_close_a_file_leaves_nothing_behind(small_disk, leave):
+    """Issue 36 item 8: a disk too full for the file and the room to close it refuses the
+    recording at once, rather than leaving a file that could not be closed (or recovered)."""
+    disk = small_disk(2 << 20)
+    disk.fill(leave_bytes=leave)
+    p = disk.path / "run.h5"
+    with pytest.raises(RunFileError, match=f"cannot create run file {p}.*the disk is full"):
+        RunWriter(p, rig="test", mode=3, rate_hz=RATE, channels=_CHANNELS)
+    assert sorted(q.name for q in disk.path.iterdir()) == ["ballast0"]
+
+
+def test_a_disk_full_before_the_first_flush_still_closes_the_file_with_status(small_disk, caplog):
+    """The room to close in is reserved when the file is created: a disk taken before the
+    first write still gets the status and every metadata written, and no "recover later"."""
+    disk = small_disk(2 << 20)
+    p = disk.path / "run.h5"
+    w = RunWriter(p, rig="test", mode=3, rate_hz=RATE, channels=_CHANNELS,
+                  meta={"config": {"gain": 2}}, clock=lambda: 0.0)
+    w.set_meta("acquisition", {"start_unix_s": 1.5})
+    disk.fill()                                   # all of it, before anything was written
+    with caplog.at_level(logging.WARNING, logger="daq.runfile"):
+        with pytest.raises(RunFileError, match="the disk is full") as err:
+            w.append(np.full((20 * BLOCK, N_CH), _value(0)))   # more than was reserved ahead
+            w.flush()
+        assert "Samples 0..0 (0.000 s) were flushed before" in str(err.value)
+        with pytest.raises(RunFileError):
+            w.close()
+    assert not caplog.records, [r.getMessage() for r in caplog.records]
+    with h5py.File(p, "r") as f:                  # plain h5py, no recovery needed
+        status = f.attrs["status"]
+        assert status.startswith("aborted: writing") and "the disk is full" in status
+        assert {len(f["channels"][c]) for c in f["channels"]} == {0}
+        assert json.loads(f["meta"].attrs["acquisition"]) == {"start_unix_s": 1.5}
+        assert json.loads(f["meta"].attrs["config"]) == {"gain": 2}
+    assert not recover(p).was_open
 
 
 _KILLED_WRITER = textwrap.dedent("""

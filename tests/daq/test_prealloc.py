@@ -40,6 +40,28 @@ def test_reserve_keeps_the_size_steps_ahead_and_release_returns_the_rest(tmp_pat
     assert st.st_size == 10_000 + 3 * MiB // 2 and st.st_blocks * 512 < st.st_size + 64 * 1024
 
 
+def test_after_the_owner_shrinks_the_file_what_it_returned_is_asked_for_again(tmp_path):
+    """HDF5 truncates a file to its end of address space at some flushes (the switch to SWMR
+    after the creation flush); a shrinking truncate returns the blocks reserved past it."""
+    p = tmp_path / "f.bin"
+    p.write_bytes(b"x" * 20_000)
+    fd = os.open(p, os.O_RDWR)
+    try:
+        pre = Preallocator(fd, MiB, headroom_bytes=4096)
+        pre.reserve(0)
+        if not pre.enabled:
+            pytest.skip("this filesystem cannot reserve space (fallocate)")
+        assert pre.reserved == MiB and _allocated(fd) >= MiB
+        os.ftruncate(fd, 10_000)
+        assert _allocated(fd) < 64 * 1024                 # what the reservation was counting on
+        pre.truncated()
+        assert pre.reserved == 10_000
+        pre.reserve(0)
+        assert pre.reserved == 10_000 + MiB and _allocated(fd) >= 10_000 + MiB
+    finally:
+        os.close(fd)
+
+
 def test_a_failing_fallocate_stops_reserving_and_says_why(tmp_path, caplog):
     p = tmp_path / "f.bin"
     p.write_bytes(b"x")

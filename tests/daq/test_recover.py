@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import logging
 import os
 import subprocess
 import sys
@@ -11,9 +13,11 @@ import h5py
 import numpy as np
 import pytest
 
+from daq import runfile
 from daq.reader import RunFile
 from daq.recover import clear_open_flags, lookup3, read_superblock, recover
 from daq.runfile import RunFileError, RunWriter
+from fbs.cli import main
 
 # The writer flushes 300 samples, buffers 50 more, and is killed: the 300 must survive.
 KILLED_WRITER = textwrap.dedent("""
@@ -186,3 +190,113 @@ def test_a_damaged_superblock_is_not_touched(tmp_path):
     q.write_bytes(os.urandom(4096))
     with pytest.raises(RunFileError, match="no HDF5 signature"):
         read_superblock(q)
+
+
+# Killed before its first flush (issue 36 item 8): right after creation, or after a set_meta.
+EARLY_KILLED_WRITER = textwrap.dedent("""
+    import os, signal, sys
+    from daq.runfile import RunWriter
+    w = RunWriter(sys.argv[1], rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "rad"},
+                  axis="X", procedure="survey", meta={"config": {"gain": 2}}, flush_s=1e6)
+    if sys.argv[2] == "meta":
+        w.set_meta("acquisition", {"start_unix_s": 1.5})
+    os.kill(os.getpid(), signal.SIGKILL)
+""")
+
+
+@pytest.mark.parametrize("last", ["created", "meta"])
+def test_a_writer_killed_before_its_first_flush_leaves_a_file_recover_mends(tmp_path, capsys,
+                                                                            last):
+    """It used to leave 48 bytes (a superblock, nothing else): neither inspect nor recover
+    could read it. Now the file has its name only once its layout is on disk."""
+    p = tmp_path / "early.h5"
+    _run(EARLY_KILLED_WRITER, p, last)
+    assert sorted(tmp_path.iterdir()) == [p]             # no temporary file left beside it
+    assert main(["inspect", str(p)]) == 2                # not readable as it is; says what is
+    err = capsys.readouterr().err
+    assert "left open for writing before its first flush" in err and f"`fbs recover {p}`" in err
+    assert main(["recover", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert "recovered; 0 samples per channel (0.000 s) kept" in out
+    with h5py.File(p, "r") as f:                         # plain h5py, the metadata all there
+        a = dict(f.attrs)
+        assert (a["format"], a["format_version"], a["rig"], a["mode"]) == ("fbs-run", 1, "test", 3)
+        assert (a["axis"], a["procedure"]) == ("X", "survey") and "created" in a
+        assert a["status"].startswith("aborted: not closed by its writer")
+        assert "0 samples" in a["status"]
+        got = {c: (len(ds), ds.attrs["units"], ds.attrs["sample_rate_hz"])
+               for c, ds in f["channels"].items()}
+        assert got == {"a": (0, "V", 100.0), "b": (0, "rad", 100.0)}
+        meta = {k: json.loads(v) for k, v in f["meta"].attrs.items()}
+        assert meta["config"] == {"gain": 2} and "fbs-hil" in meta["software_version"]
+        # a set_meta after creation reaches the disk with the first flush: lost here, or whole
+        assert meta.get("acquisition", {"start_unix_s": 1.5}) == {"start_unix_s": 1.5}
+        assert len(f["events"]) == 0
+    assert main(["inspect", str(p)]) == 2        # shown; a run with no samples breaks rule 7
+    out, err = capsys.readouterr()
+    assert "rig 'test'" in out and "status 'aborted: not closed by its writer" in out
+    assert "a  dataset float64 shape (0,); units 'V', sample_rate_hz 100.0" in out
+    assert "holds no samples" in err and "Traceback" not in err
+    assert not main(["recover", str(p)]) and "nothing to do" in capsys.readouterr().out
+
+
+# Killed between laying the file out and giving it its name.
+UNPUBLISHED_WRITER = textwrap.dedent("""
+    import os, signal, sys
+    from daq.runfile import RunWriter
+    RunWriter._publish = lambda self, overwrite: os.kill(os.getpid(), signal.SIGKILL)
+    RunWriter(sys.argv[1], rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, flush_s=1e6)
+""")
+
+
+def test_a_writer_killed_while_creating_leaves_no_file_and_its_leftover_is_removed(tmp_path):
+    p = tmp_path / "r.h5"
+    _run(UNPUBLISHED_WRITER, p)
+    assert not p.exists()
+    left = list(tmp_path.iterdir())
+    assert len(left) == 1 and left[0].name.startswith(".r.h5.creating-")   # hidden, and not *.h5
+    with RunWriter(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}) as w:
+        w.append(np.ones((3, 1)))
+    assert sorted(tmp_path.iterdir()) == [p]             # the dead writer's leftover is gone
+    with h5py.File(p, "r") as f:
+        assert f.attrs["status"] == "complete" and len(f["channels/a"]) == 3
+
+
+class _RaceLoser(RunWriter):
+    """Another program creates the file between the name check and the publishing."""
+
+    def _layout(self, *args) -> None:
+        self.path.write_bytes(b"precious")
+        super()._layout(*args)
+
+
+def test_a_file_that_appears_while_the_writer_creates_is_never_overwritten(tmp_path):
+    p = tmp_path / "r.h5"
+    with pytest.raises(RunFileError, match="exists .*never overwritten"):
+        _RaceLoser(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"})
+    assert p.read_bytes() == b"precious" and sorted(tmp_path.iterdir()) == [p]
+    with _RaceLoser(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"},
+                    overwrite=True) as w:
+        w.append(np.ones((2, 1)))                        # asked for: replaced whole
+    with h5py.File(p, "r") as f:
+        assert len(f["channels/a"]) == 2 and sorted(tmp_path.iterdir()) == [p]
+
+
+def test_when_the_status_cannot_be_set_the_message_promises_what_recover_does(tmp_path, caplog,
+                                                                             monkeypatch):
+    p = tmp_path / "r.h5"
+
+    def refuse(path, status):
+        raise OSError("no status today")
+
+    monkeypatch.setattr(runfile, "_set_status", refuse)
+    with caplog.at_level(logging.ERROR, logger="daq.runfile"):
+        with RunWriter(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}) as w:
+            w.append(np.ones((7, 1)))
+    msg = caplog.records[-1].getMessage()
+    assert f"could not set the status of {p} to 'complete': no status today" in msg
+    assert f"It still says 'recording'; `fbs recover {p}` marks it aborted, keeping" in msg
+    with h5py.File(p, "r") as f:
+        assert f.attrs["status"] == "recording"
+    rec = recover(p)                                     # and it does
+    assert rec.samples == 7 and rec.status.startswith("aborted: ") and "7 samples" in rec.status
