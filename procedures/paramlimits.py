@@ -39,6 +39,8 @@ import abc
 import dataclasses
 import math
 import numbers
+import os
+import stat
 import types
 import typing
 from collections.abc import Mapping
@@ -243,3 +245,45 @@ def describe_limits(params_cls: type) -> dict[str, str]:
     """Each limited field's limits as help shows them (``{"repetitions": "1..50"}``); the help of
     ``fbs run NAME --help`` and any parameter form read them from here."""
     return {name: " and ".join(v.describe() for v in vs) for name, vs in declared(params_cls).items()}
+
+
+#: the sample rates a procedure may ask of the recorder: below 1 Hz no procedure has the samples
+#: its settling and averaging need; above 20 kHz the ADC's aggregate rate (SIM-ADC16: 2 MHz over
+#: up to 16 channels, docs/protocol.md) and the run file's disk budget are the limit, and every
+#: procedure's band lies far below (its fastest line, 187 Hz, Ch. VI A)
+MAX_PROCEDURE_RATE_HZ = 20_000.0
+
+
+def sample_rate() -> Range:
+    """The limit of every procedure's ``rate_hz``: 1..20000 Hz, declared so that a rate the
+    ADC would refuse is refused before the rig or any output is opened."""
+    return Range(1.0, MAX_PROCEDURE_RATE_HZ, units="Hz",
+                 note="the recorder's rates a procedure may use; the ADC's own limit is checked again")
+
+
+def fraction(**kw: Any) -> Range:
+    """A fraction: ``0 < x <= 1`` (a tolerance of a nominal value, a share of samples)."""
+    return Range(0.0, 1.0, lo_open=True, **kw)
+
+
+@dataclass(frozen=True)
+class ExistingFile(Validator):
+    """The path of an existing regular file: a folder, a FIFO (a reader would wait forever on
+    it) or a device is refused before anything reads it."""
+
+    note: str = ""
+
+    def describe(self) -> str:
+        return "the path of an existing regular file"
+
+    def problem(self, value: Any, name: str) -> str:
+        if not isinstance(value, str) or not value:
+            return _with_note(f"{name} = {_shown(value)} must be {self.describe()}", self.note)
+        try:
+            st = os.stat(value)
+        except OSError as exc:
+            return f"{name} = {value!r} must be {self.describe()} ({exc.strerror or exc})"
+        if not stat.S_ISREG(st.st_mode):
+            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a FIFO or device?)"
+            return f"{name} = {value!r} must be {self.describe()}: it is {kind}"
+        return ""

@@ -9,7 +9,7 @@ the value and the rule, for every procedure alike, from the annotations alone:
 
 * ``int``: an integer (not a bool, not 1.5);
 * ``float``: a finite number (not a bool, not NaN or infinity); a duration (a name ending in
-  ``_s``) at most ``MAX_SECONDS``;
+  ``_s``) at most ``MAX_SECONDS``, and 0 or at least ``MIN_SECONDS``; a frequency (``_hz``) 0 or at least ``MIN_HZ``;
 * ``str``, ``bool``: that type;
 * ``list[T]``, ``dict[str, T]``: each element by the rule for ``T``;
 * ``X | None``: ``None`` or the rule for ``X``.
@@ -29,6 +29,10 @@ from typing import Any
 
 #: the longest duration any parameter may ask for (a year): beyond it a typo, not a plan
 MAX_SECONDS = 3.2e7
+#: the shortest non-zero duration (a millisecond) and frequency (11 days a cycle) a parameter
+#: may ask for: below them a slip (1e-320 is a denormal, whose reciprocal overflows), not a plan
+MIN_SECONDS = 1e-3
+MIN_HZ = 1e-6
 
 
 class ParamTypeError(ValueError):
@@ -84,6 +88,10 @@ def _mismatch(hint: Any, value: Any, name: str) -> str:
             return "must be a finite number"
         if name.endswith("_s") and abs(value) > MAX_SECONDS:
             return f"is beyond the longest duration a parameter may ask for ({MAX_SECONDS:g} s, a year)"
+        if name.endswith("_s") and 0 < abs(value) < MIN_SECONDS:
+            return f"must be 0 or at least {MIN_SECONDS:g} s (a millisecond) in size"
+        if name.endswith("_hz") and 0 < abs(value) < MIN_HZ:
+            return f"must be 0 or at least {MIN_HZ:g} Hz in size"
         return ""
     if hint is str:
         return "" if isinstance(value, str) else "must be a string"

@@ -43,7 +43,7 @@ from procedures.analysis.baseline import (
 )
 from procedures.analysis.intervals import Estimate, add_figure
 from procedures.analysis.transfer import TransferError, block_csd, sensor_filter
-from procedures.paramlimits import OneOf, above, at_least, check_limits
+from procedures.paramlimits import OneOf, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.baseline import markdown
@@ -66,7 +66,7 @@ STEP = "clamped record"
 @dataclass
 class BaselineParams:
     axis: Annotated[str, OneOf("X", "Y", note="Z has no primary autocollimator channel")] = "X"
-    rate_hz: Annotated[float, above(0)] = 1000.0
+    rate_hz: Annotated[float, sample_rate()] = 1000.0
     #: after clamping: the caging loops' response to the clamp's stop dies out in a few seconds
     settle_s: Annotated[float, at_least(0)] = 10.0
     record_s: Annotated[float, above(0)] = 480.0

@@ -44,7 +44,7 @@ from procedures.analysis.drift import (
     torq,
 )
 from procedures.analysis.intervals import add_figure
-from procedures.paramlimits import Range, above, check_limits
+from procedures.paramlimits import Range, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
 from procedures.reports.drift import hours, markdown, plot_allan, plot_null
 from procedures.rigsetup import bring_to_mode3, wait_settled
@@ -59,37 +59,37 @@ MIN_FIT_SAMPLES = 2.0
 class DriftParams:
     #: record length (rig seconds) after the settle
     duration_s: Annotated[float, above(0)] = 7200.0
-    rate_hz: Annotated[float, above(0)] = 10.0
+    rate_hz: Annotated[float, sample_rate()] = 10.0
     #: the record is split into this many data steps (each resumable)
     n_chunks: Annotated[int, Range(1, 1000)] = 10
     #: settle: the torquing rate changes by less than this over ``settle_window_s`` (urad/s)
-    settle_tol_urad_per_s: float = 0.02
-    settle_window_s: float = 40.0
-    settle_min_s: float = 120.0
-    settle_timeout_s: float = 900.0
+    settle_tol_urad_per_s: Annotated[float, above(0)] = 0.02
+    settle_window_s: Annotated[float, above(0)] = 40.0
+    settle_min_s: Annotated[float, at_least(0)] = 120.0
+    settle_timeout_s: Annotated[float, above(0)] = 900.0
     #: the shortest averaging time of the noise-model fit (s): the anti-alias filter shapes shorter ones
-    fit_tau_lo_s: float = 0.4
+    fit_tau_lo_s: Annotated[float, above(0)] = 0.4
     #: band (Hz) where G_p is measured, well above the loop's bandwidth: from loop_band_lo_hz to
     #: loop_band_hi_frac x the sample rate (both channels pass the same anti-alias filter)
     loop_band_lo_hz: Annotated[float, above(0)] = 0.2
     loop_band_hi_frac: Annotated[float, Range(0.0, 0.5, lo_open=True, note="of the sample rate: 0.5 is Nyquist")] = 0.2
     #: Allan points with fewer equivalent degrees of freedom (Greenhall's, for the term's own noise
     #: type) are not read for N or B (allan.term_estimate)
-    min_edf: float = 10.0
+    min_edf: Annotated[float, at_least(1)] = 10.0
     #: null stability: the means averaged over this long, and the span the estimate is for
     average_s: Annotated[float, above(0)] = 100.0
-    null_span_s: float = 86400.0
+    null_span_s: Annotated[float, above(0)] = 86400.0
     #: quality limits: the record must cover this much, and lose at most this fraction of samples
-    min_record_s: float = 300.0
-    max_lost_fraction: float = 0.01
+    min_record_s: Annotated[float, at_least(0)] = 300.0
+    max_lost_fraction: Annotated[float, Range(0.0, 1.0)] = 0.01
 
     def __post_init__(self) -> None:
         check_limits(self, "drift")
         # what no one field can declare: limits that tie fields together
         if self.fit_tau_lo_s * self.rate_hz < MIN_FIT_SAMPLES - 1e-9:
-            raise ValueError(f"drift: the noise-model fit starts at {self.fit_tau_lo_s:g} s = "
-                             f"{self.fit_tau_lo_s * self.rate_hz:g} samples at {self.rate_hz:g} Hz; it must start at "
-                             f">= {MIN_FIT_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
+            raise ValueError(f"drift: fit_tau_lo_s = {self.fit_tau_lo_s:g} s is "
+                             f"{self.fit_tau_lo_s * self.rate_hz:g} samples at rate_hz = {self.rate_hz:g} Hz; it must "
+                             f"be >= {MIN_FIT_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
         if not self.loop_band_lo_hz < self.loop_band_hi_frac * self.rate_hz:
             raise ValueError(f"drift: loop-gain band {self.loop_band_lo_hz:g} .. "
                              f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty: loop_band_lo_hz must be below "

@@ -35,7 +35,7 @@ import numpy as np
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis.earth_rate import G_AXES, fit_earth_rate
 from procedures.analysis.intervals import add_figure
-from procedures.paramlimits import Each, Range, above, check_limits
+from procedures.paramlimits import Each, Range, above, at_least, check_limits, fraction, sample_rate
 from procedures.params import prior_values
 from procedures.reports.earth_rate import markdown, plot_fits
 from procedures.rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
@@ -52,22 +52,22 @@ class EarthRateParams:
     #: spindle angles per tilt, equally spaced
     n_spindle: Annotated[int, Range(4, 36, note="the spindle angles per tilt")] = 8
     average_s: Annotated[float, above(0)] = 60.0
-    settle_tol_V: float = 3e-4
-    settle_window_s: float = 40.0
+    settle_tol_V: Annotated[float, above(0, units="V")] = 3e-4
+    settle_window_s: Annotated[float, above(0)] = 40.0
     #: the caging loops (omega_n 0.1 rad/s) and their coupling through the float's viscous
     #: coupling leave a slow tail of a few mV for a minute or two after a step of the table,
     #: below what the noisy trend test can see: never average sooner than this
-    settle_min_s: float = 120.0
-    settle_timeout_s: float = 900.0
-    rate_hz: Annotated[float, above(0)] = 50.0
+    settle_min_s: Annotated[float, at_least(0)] = 120.0
+    settle_timeout_s: Annotated[float, above(0)] = 900.0
+    rate_hz: Annotated[float, sample_rate()] = 50.0
     #: the gyros' bias instability (urad/s) from a data sheet, if known: the fixed drift's interval
     #: then carries a run's wander about the long-term fixed drift. An earlier drift run's figure
     #: (``--prior``, the same --out) is used before it. Without either, the interval is this
     #: run's bias and says so.
     bias_instability_urad_per_s: Annotated[float | None, Range(0.0, 10.0, hi_open=True, units="urad/s")] = None
     #: limits: K_TO within this fraction of the rig's nominal (data sheet) value, fit residual rms
-    kto_tolerance: float = 0.2
-    max_residual_V: float = 5e-3
+    kto_tolerance: Annotated[float, fraction(note="of the nominal K_TO")] = 0.2
+    max_residual_V: Annotated[float, above(0, units="V")] = 5e-3
 
     def __post_init__(self) -> None:
         check_limits(self, "earth-rate")

@@ -58,7 +58,7 @@ from procedures.analysis.transfer import (
     response,
     unbiased_coherence,
 )
-from procedures.paramlimits import OneOf, above, at_least, check_limits
+from procedures.paramlimits import MAX_PROCEDURE_RATE_HZ, OneOf, Range, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
 from procedures.reports.excitation import markdown, plot_response
 from procedures.reports.thesis import closed_loop_roots as thesis_roots
@@ -78,9 +78,9 @@ class ExcitationParams:
     axis: Annotated[str, OneOf("X", "Y", note="Z has no primary autocollimator channel")] = "X"
     #: 3 autocollimator stabilization; 4 and 5 gyro stabilization (entered from caged Mode 3)
     mode: Annotated[int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")] = 3
-    rate_hz: Annotated[float, above(0)] = 1000.0
+    rate_hz: Annotated[float, sample_rate()] = 1000.0
     #: V_Td updates per second (a DAC set-point between ADC blocks); rate_hz / update_hz whole
-    update_hz: Annotated[float, above(0)] = 250.0
+    update_hz: Annotated[float, Range(1.0, MAX_PROCEDURE_RATE_HZ, units="Hz")] = 250.0
     settle_s: Annotated[float, at_least(0)] = 20.0
     #: after the switch to Mode 4 or 5: the network's input steps from the control channel to
     #: the pickoff, and its slowest pole (w1, 0.15 rad/s: 6.7 s) and the caging loop through the
@@ -126,8 +126,8 @@ class ExcitationParams:
             raise ValueError(f"excitation: rate_hz / update_hz = {per:g} samples per V_Td update must be a whole "
                              f"number >= 1")
         if not self.band_lo_hz < self.band_hi_hz <= self.update_hz / 2:
-            raise ValueError(f"excitation: band {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must lie below half the "
-                             f"update rate ({self.update_hz / 2:g} Hz)")
+            raise ValueError(f"excitation: band_lo_hz..band_hi_hz = {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must "
+                             f"lie below half the update rate (update_hz / 2 = {self.update_hz / 2:g} Hz), low below high")
         if self.quiet_s < self.seg_s * self.n_blocks:
             raise ValueError(f"excitation: quiet_s = {self.quiet_s:g} s holds fewer than n_blocks = {self.n_blocks} "
                              f"segments of {self.seg_s:g} s")
@@ -139,10 +139,10 @@ class ExcitationParams:
                 raise ValueError(f"excitation: {name} = {self.period_s:g} s must be whole V_Td updates and samples")
         if not (self.fit_lo_hz < min(self.network_hi_hz, self.platform_hi_hz) <= self.rate_hz * 0.3
                 and self.roots_lo_hz < self.roots_hi_hz <= self.rate_hz * 0.3):
-            raise ValueError(f"excitation: fit bands from {self.fit_lo_hz:g} Hz to {self.network_hi_hz:g} / "
-                             f"{self.platform_hi_hz:g} Hz, and the roots' {self.roots_lo_hz:g}-{self.roots_hi_hz:g} Hz, "
-                             f"must lie below the anti-alias filter (0.3 fs = "
-                             f"{self.rate_hz * 0.3:g} Hz)")
+            raise ValueError(f"excitation: the fit bands fit_lo_hz..network_hi_hz / platform_hi_hz = "
+                             f"{self.fit_lo_hz:g}..{self.network_hi_hz:g} / {self.platform_hi_hz:g} Hz and "
+                             f"roots_lo_hz..roots_hi_hz = {self.roots_lo_hz:g}..{self.roots_hi_hz:g} Hz must lie below "
+                             f"the anti-alias filter (0.3 rate_hz = {self.rate_hz * 0.3:g} Hz), low below high")
 
 
 Params = ExcitationParams

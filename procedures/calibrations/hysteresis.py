@@ -21,7 +21,7 @@ from functools import partial
 from typing import Annotated
 
 from procedures.analysis.hysteresis import AC_AXES, analyze_file
-from procedures.paramlimits import Each, OneOf, above, at_least, check_limits
+from procedures.paramlimits import Each, OneOf, Range, above, at_least, check_limits, sample_rate
 from procedures.reports.hysteresis import markdown, plot_describing_function, plot_history, plot_loops, plot_scan
 from procedures.rigsetup import bring_to_mode3
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
@@ -34,7 +34,7 @@ JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "fil
 @dataclass
 class HysteresisParams:
     axis: Annotated[str, OneOf(*AC_AXES, note="the others have no instrumentation autocollimator channel")] = "X"
-    frequency_hz: Annotated[float, above(0)] = 0.4
+    frequency_hz: Annotated[float, Range(0.001, 100.0, units="Hz")] = 0.4
     #: the ladder, large to small (a large first loop wipes out the bearing's earlier state)
     amplitudes_urad: Annotated[list[float], Each(above(0, note="amplitudes are positive"), nonempty=True)] = field(
         default_factory=lambda: [500.0, 250.0, 100.0, 50.0, 25.0, 10.0, 5.0])
@@ -43,14 +43,14 @@ class HysteresisParams:
     settle_cycles: Annotated[int, at_least(0)] = 1
     #: bias DAC updates per cycle; rate_hz / (frequency_hz * updates_per_cycle) must be whole samples
     updates_per_cycle: Annotated[int, at_least(8, note="fewer is too coarse a sine")] = 100
-    rate_hz: Annotated[float, above(0)] = 400.0
+    rate_hz: Annotated[float, sample_rate()] = 400.0
     #: how far the instrumentation angle lags the power-amplifier input (its filters and the
     #: motor's L/R): None (the default) measures it on the record (``dahl.measure_lag``); a
     #: number overrides the measurement, for studies only
-    angle_lag_ms: float | None = None
+    angle_lag_ms: Annotated[float | None, Range(-1000.0, 1000.0, units="ms")] = None
     #: quality limits: fit residual rms / largest loop's torque half-range; relative standard errors
-    max_relative_residual: float = 0.1
-    max_relative_se: float = 0.1
+    max_relative_residual: Annotated[float, above(0)] = 0.1
+    max_relative_se: Annotated[float, above(0)] = 0.1
 
     def __post_init__(self) -> None:
         # normalized before the limits are checked: "y" is the Y axis, JSON 500 the number 500.0

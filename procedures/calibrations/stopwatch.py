@@ -61,7 +61,7 @@ import numpy as np
 from drivers.calibration import FLOAT_PARTNER, GYRO_CHANNELS
 from procedures.analysis.intervals import add_figure
 from procedures.analysis.stopwatch import NoCrossing, channel_result, crossing_times, restraint_fit, slope
-from procedures.paramlimits import Each, OneOf, Range, above, check_limits
+from procedures.paramlimits import Each, OneOf, Range, above, check_limits, fraction, sample_rate
 from procedures.params import prior_value
 from procedures.reports.stopwatch import markdown, plot_channel
 from procedures.rigsetup import bring_to_mode3, wait_settled
@@ -88,17 +88,17 @@ class StopwatchParams:
     null_tolerance_urad_per_s: Annotated[float, above(0)] = 0.1
     #: limit on the residual: a few % of the ramp rate (the down-up pairs cancel it; Z's random
     #: drift wanders by a few tenths of urad/s over minutes, so a tighter null does not hold)
-    max_null_rate_urad_per_s: float = 0.5
+    max_null_rate_urad_per_s: Annotated[float, above(0)] = 0.5
     smooth_s: Annotated[float, above(0)] = 1.0
     restore_s: Annotated[float, above(0)] = 100.0
     #: a channel's loop is opened only after every caging loop has been closed this long: the
     #: loops' transients (0.1 rad/s, and the float partner's through the viscous coupling) gone,
     #: so a step resumed just after mode 3 starts from the state an uninterrupted run gives it
     min_caged_s: Annotated[float, above(0)] = 300.0
-    rate_hz: Annotated[float, above(0)] = 200.0
+    rate_hz: Annotated[float, sample_rate()] = 200.0
     #: limits: K_g within this fraction of the data sheet's nominal; repetition spread
-    kg_tolerance: float = 0.25
-    max_spread: float = 0.02
+    kg_tolerance: Annotated[float, fraction(note="of the nominal K_g")] = 0.25
+    max_spread: Annotated[float, above(0)] = 0.02
 
     def __post_init__(self) -> None:
         # every check is a declared limit (procedures.paramlimits): none ties fields together

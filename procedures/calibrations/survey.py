@@ -63,7 +63,7 @@ from procedures.analysis.survey import (
 )
 from procedures.analysis.transfer import BlockCsd, TransferError, block_csd
 from procedures.calibrations.baseline import BaselineFileError, ClampedRecord, clamped_record
-from procedures.paramlimits import OneOf, above, at_least, check_limits
+from procedures.paramlimits import ExistingFile, OneOf, Range, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
@@ -78,9 +78,9 @@ class SurveyParams:
     #: 3 autocollimator stabilization (the thesis's survey, Ch. V E); 4 and 5 gyro stabilization
     mode: Annotated[int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")] = 3
     duration_s: Annotated[float, above(0)] = 300.0
-    rate_hz: Annotated[float, above(0)] = 1000.0
+    rate_hz: Annotated[float, sample_rate()] = 1000.0
     #: record in steps of this length (the unit an aborted run can be resumed by)
-    piece_s: Annotated[float, above(0)] = 60.0
+    piece_s: Annotated[float, at_least(1.0)] = 60.0
     #: wait after reaching mode 3 (a rig already caged in mode 3 waits at most 5 s)
     settle_s: Annotated[float, at_least(0)] = 30.0
     #: after the switch to Mode 4 or 5: the network's and the caging loop's transients (14 s)
@@ -89,20 +89,20 @@ class SurveyParams:
     seg_s: Annotated[float, above(0)] = 16.0
     #: band of the gyro-deduced platform rms (the thesis's method: 0.4-15 Hz)
     band_lo_hz: Annotated[float, above(0)] = 0.4
-    band_hi_hz: float = 15.0
+    band_hi_hz: Annotated[float, above(0)] = 15.0
     #: where to look for the control-channel dip, and the smoothing of the dB spectrum
     dip_lo_hz: Annotated[float, above(0)] = 0.5
-    dip_hi_hz: float = 30.0
+    dip_hi_hz: Annotated[float, above(0)] = 30.0
     dip_smooth_hz: Annotated[float, at_least(0)] = 0.5
     #: quality limits: the dip's prominence, the fraction of Welch segments usable (no lost samples)
-    min_dip_depth_db: float = 6.0
-    min_segments_used: float = 0.9
+    min_dip_depth_db: Annotated[float, at_least(0, units="dB")] = 6.0
+    min_segments_used: Annotated[float, Range(0.0, 1.0)] = 0.9
     #: the platform's own rms (gyro coherent with the autocollimator): Welch segment, jackknife blocks
     coherent_seg_s: Annotated[float, above(0)] = 8.0
     coherent_blocks: Annotated[int, at_least(3)] = 8
     #: a baseline run file (``fbs run baseline``) whose clamped pickoff spectrum is taken out of the
     #: gyro's (Ch. V B, Fig. 33); None: the prior baseline summary's file, if any
-    baseline_file: str | None = None
+    baseline_file: Annotated[str | None, ExistingFile()] = None
     #: jackknife blocks of the baseline's clamped record (its segments are ``coherent_seg_s``)
     baseline_blocks: Annotated[int, at_least(3)] = 8
 
@@ -113,16 +113,17 @@ class SurveyParams:
             usable_baseline(clamped_record(self.baseline_file, "survey: baseline_file"), self)
         # what no one field can declare: limits that tie fields together
         if self.coherent_seg_s * self.coherent_blocks > self.duration_s:
-            raise ValueError(f"survey: {self.coherent_blocks} blocks of {self.coherent_seg_s} s segments need more "
-                             f"than the record's {self.duration_s} s")
+            raise ValueError(f"survey: coherent_blocks = {self.coherent_blocks} segments of coherent_seg_s = "
+                             f"{self.coherent_seg_s:g} s must fit in duration_s = {self.duration_s:g} s")
         if self.seg_s > self.duration_s:
-            raise ValueError(f"survey: a Welch segment of {self.seg_s} s is longer than the record "
-                             f"({self.duration_s} s)")
+            raise ValueError(f"survey: seg_s = {self.seg_s:g} s must be at most duration_s = {self.duration_s:g} s")
         nyq = self.rate_hz / 2
         if not 0 < self.band_lo_hz < self.band_hi_hz <= nyq:
-            raise ValueError(f"survey: band {self.band_lo_hz}..{self.band_hi_hz} Hz must lie in 0..{nyq:g} Hz")
+            raise ValueError(f"survey: band_lo_hz..band_hi_hz = {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must "
+                             f"lie in 0..{nyq:g} Hz (rate_hz / 2), low below high")
         if not 0 < self.dip_lo_hz < self.dip_hi_hz <= nyq:
-            raise ValueError(f"survey: dip search {self.dip_lo_hz}..{self.dip_hi_hz} Hz must lie in 0..{nyq:g} Hz")
+            raise ValueError(f"survey: dip_lo_hz..dip_hi_hz = {self.dip_lo_hz:g}..{self.dip_hi_hz:g} Hz must lie in "
+                             f"0..{nyq:g} Hz (rate_hz / 2), low below high")
 
 
 def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]

@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from procedures.calibrations import catalogue
 from procedures.paramlimits import (
     Each,
+    ExistingFile,
     OneOf,
     ParamLimitError,
     Range,
@@ -214,6 +215,8 @@ def _outside(v: Validator, default: Any, integer: bool) -> list[Any]:
         return out
     if isinstance(v, OneOf):
         return ["no such choice"]
+    if isinstance(v, ExistingFile):
+        return ["/no/such/file.h5", "/", "/dev/null"]
     assert isinstance(v, Each), v
     out = [[]] if v.nonempty else []
     if isinstance(default, dict) or v.keys is not None:
@@ -232,10 +235,20 @@ CASES = [(proc_name, f.name, v, bad)
          for bad in _outside(v, proc.Params().__dict__[f.name], typing.get_type_hints(proc.Params)[f.name] is int)]
 
 
-def test_every_procedure_declares_limits_and_its_defaults_are_within_them():
+def test_every_parameter_of_every_procedure_declares_a_limit_and_its_defaults_are_within_them():
     for name, proc in catalogue().items():
-        assert declared(proc.Params), name
+        undeclared = [f.name for f in dataclasses.fields(proc.Params) if f.name not in declared(proc.Params)]
+        assert not undeclared, f"{name}: no declared limit on {undeclared}"
         check_limits(proc.Params(), name)
+
+
+@pytest.mark.parametrize("name", sorted(catalogue()))
+def test_a_rate_the_adc_would_refuse_is_refused_before_the_rig_opens(name):
+    proc = catalogue()[name]
+    with pytest.raises(ParamLimitError, match=r"rate_hz = 1000000.0 Hz must be 1\.\.20000 Hz"):
+        parse_params(proc, ["rate_hz=1e6"], None)
+    with pytest.raises(ParamLimitError, match=r"rate_hz = 0.5 Hz must be 1\.\.20000 Hz"):
+        parse_params(proc, ["rate_hz=0.5"], None)
 
 
 @pytest.mark.parametrize("proc_name, field_name, validator, bad", CASES,
