@@ -466,7 +466,8 @@ def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
     # to stderr (Textual draws on it).
     root = logging.getLogger()
     saved = root.handlers[:], root.level
-    out.mkdir(parents=True, exist_ok=True)
+    from daq.runfile import make_folder
+    make_folder(out)
     file_handler = logging.FileHandler(out / "console.log")
     file_handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
     root.handlers[:] = [file_handler]

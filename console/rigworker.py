@@ -475,8 +475,10 @@ class RigWorker:
             self._abort.clear()
             if self._stop.is_set():
                 raise Refused("the console is closing")
+            from daq.runfile import make_folder
             from procedures.runner import next_free
-            self.out_dir.mkdir(parents=True, exist_ok=True)
+
+            make_folder(self.out_dir)
             # the file run_procedure will pick (it takes the same next free name), shown while it runs
             self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))
             log.info("procedure %s %s (parameters %s)", proc.name,

@@ -140,6 +140,24 @@ def _write_hint(exc: BaseException) -> str:
     return "disk full, removed, or read-only?"
 
 
+def make_folder(path: str | Path, what: str = "output folder") -> Path:
+    """Make the folder ``path`` (and its parents) if missing; ``RunFileError`` says which part of
+    the path is in the way (a file where a folder must be) or what the system refused, rather
+    than "[Errno 17] File exists" about a name the user never typed."""
+    path = Path(path)
+    if path.is_dir():
+        return path
+    for part in (path, *path.parents):
+        if part.exists() and not part.is_dir():
+            where = "it" if part == path else f"{part}, on its path,"
+            raise RunFileError(f"cannot make {what} {path}: {where} is a file, not a folder; choose another --out")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunFileError(f"cannot make {what} {path}: {exc.strerror or exc}") from exc
+    return path
+
+
 def check_new_path(path: str | Path, overwrite: bool = False) -> None:
     """Raise ``RunFileError`` unless a run file can be created at ``path`` (its folder is
     made if missing). Call it before moving the rig, so a bad ``--out`` fails first."""
@@ -151,10 +169,7 @@ def check_new_path(path: str | Path, overwrite: bool = False) -> None:
         raise RunFileError(f"cannot create run file {path}: it is a directory")
     if path.exists() and not overwrite:
         raise RunFileError(f"{path} exists; a recording is never overwritten: choose another file name or remove it")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RunFileError(f"cannot create run file {path}: {exc}") from exc
+    make_folder(path.parent, "the run file's folder")
     if not os.access(path.parent, os.W_OK):
         raise RunFileError(f"cannot create run file {path}: folder {path.parent} is not writable")
 

@@ -53,7 +53,8 @@ def _analyse(args: argparse.Namespace) -> tuple[HysteresisResult, list[Path]]:
     written: list[Path] = []
     if args.out:
         out = Path(args.out)
-        out.mkdir(parents=True, exist_ok=True)
+        from daq.runfile import make_folder
+        make_folder(out)
         stem = f"{Path(args.file).stem}-{res.axis.lower()}"
         for name, draw in (("loops", plot_loops), ("describing-function", plot_describing_function),
                            ("history", plot_history), ("path-scan", plot_scan)):
@@ -210,7 +211,8 @@ def _transfer(args: argparse.Namespace) -> int:
     out, resp, fit = transfer_result(args)
     if args.out:
         d = Path(args.out)
-        d.mkdir(parents=True, exist_ok=True)
+        from daq.runfile import make_folder
+        make_folder(d)
         png = d / f"{Path(args.file).stem}-{args.source}-{args.target}.png"
         plot_response(png, resp=resp, fit=fit, design=None)
         out["plot"] = str(png)

@@ -24,7 +24,9 @@ import fcntl
 import json
 import multiprocessing
 import os
+import re
 import signal
+import socket
 from collections import deque
 from collections.abc import Callable, Hashable, Iterable, Iterator
 from concurrent.futures import FIRST_COMPLETED, CancelledError, Executor, Future, ProcessPoolExecutor, wait
@@ -48,6 +50,23 @@ class BackendError(ValueError):
 
 
 # ---------------------------------------------------------------------------- the executors
+#: a scheduler address: ``[tcp|tls://]host:port`` (an IPv6 host in brackets)
+_ADDRESS = re.compile(r"^(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9.-]+):(?P<port>\d{1,5})$")
+
+
+def check_scheduler_address(address: str) -> None:
+    """Refuse an address that names no scheduler (``BackendError`` with the form it must have),
+    and, over TCP, one where nothing answers within ``CONNECT_TIMEOUT_S``."""
+    m = _ADDRESS.match(address)
+    if m is None or not 1 <= int(m["port"]) <= 65535:
+        raise BackendError(f"--scheduler {address!r} must be a Dask scheduler address [tcp://]HOST:PORT, port "
+                           f"1..65535, e.g. tcp://127.0.0.1:8786")
+    host = m["host"].strip("[]")
+    try:
+        socket.create_connection((host, int(m["port"])), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        raise BackendError(f"--scheduler {address}: nothing answers there ({exc.strerror or exc})") from None
+
 def _init_local_worker() -> None:
     for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGHUP")):
         if s is not None:
@@ -106,6 +125,9 @@ class DaskCluster:
         except ImportError as exc:
             raise BackendError(f"--scheduler needs Dask's distributed, an optional dependency that is not installed "
                                f"here ({exc}): {CLUSTER_EXTRA}") from None
+        # A Client that fails in its constructor still closes itself when collected, waiting 60 s
+        # and printing a traceback at exit: an address that cannot work is refused before one is made.
+        check_scheduler_address(address)
         try:
             self._client = distributed.Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
         except (OSError, TimeoutError, ValueError, TypeError) as exc:

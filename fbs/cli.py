@@ -18,7 +18,7 @@ from fbs import analyze, batch, campaign, clamp, demo, inspect, record, run, sim
 from fbs import gap as gap_cli
 from fbs.logsetup import command_logging
 from fbs.signals import aborting_on_signals
-from fbs.usage import EXIT_CODES_HELP, EXIT_ERROR, Parser, version
+from fbs.usage import EXIT_CODES_HELP, EXIT_ERROR, Parser, one_line, version
 from procedures.runner import ProcedureError
 from simhw.params import ConfigError
 
@@ -76,14 +76,14 @@ def main(argv: list[str] | None = None) -> int:
             with nullcontext() if args.command == "console" else aborting_on_signals():
                 return args.func(args)
         except COMMAND_ERRORS as exc:
-            print(f"fbs {args.command}: error: {exc}", file=sys.stderr)
+            print(f"fbs {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
             return EXIT_ERROR
         except KeyboardInterrupt:
             print(f"fbs {args.command}: interrupted", file=sys.stderr)
             return EXIT_ERROR
         except Exception as exc:  # a defect of this program: said so, never "limits failed" (exit 1)
             log.exception("fbs %s: internal error", args.command)
-            print(f"fbs {args.command}: internal error: {type(exc).__name__}: {exc} (the traceback is above; "
+            print(f"fbs {args.command}: internal error: {type(exc).__name__}: {one_line(str(exc))} (the traceback is above; "
                   "please report it with the command line)", file=sys.stderr)
             return EXIT_ERROR
 

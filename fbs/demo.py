@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from daq.runfile import make_folder
 from procedures.calibrations import get
 from procedures.reports import thesis
 from procedures.reports.report import fmt
@@ -97,9 +98,12 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
     from fbs.runlog import RunLog
     from procedures.params import parse_params
 
-    out.mkdir(parents=True, exist_ok=True)
+    cfg = load_config(cfg_path)        # a bad config or seed is refused before anything is made
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
+        raise ValueError(f"--seed {seed!r} must be a whole number 0..{2 ** 63 - 1}")
+    make_folder(out)
     url = f"sim?seed={seed}&watchdog=5"
-    if cfg_path:
+    if cfg_path is not None:
         url = with_param(url, "config", cfg_path)
     prior: dict[str, dict] = {}
     summaries: list[RunSummary] = []
@@ -121,7 +125,7 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
                 prior[name] = dict(s.values) | ({"_file": str(s.file)} if s.file else {})
             if s.verdict == "aborted" and s.error and "interrupted" in s.error:
                 break
-    report = write_campaign_report(out, summaries, sim_values(load_config(cfg_path)), time.monotonic() - t0, seed)
+    report = write_campaign_report(out, summaries, sim_values(cfg), time.monotonic() - t0, seed)
     return summaries, report
 
 

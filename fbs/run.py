@@ -32,7 +32,7 @@ from pathlib import Path
 
 from drivers.rig import with_param
 from fbs.runlog import RunLog
-from fbs.usage import EXIT_CODES_HELP, version
+from fbs.usage import EXIT_CODES_HELP, one_line, version
 from procedures.calibrations import get, module_names
 from procedures.params import find_prior, parse_params
 from procedures.runner import ProcedureError, load_resume
@@ -42,7 +42,7 @@ log = logging.getLogger(__name__)
 
 def rig_url(args: argparse.Namespace) -> str:
     url = args.rig
-    if args.sim_config:
+    if args.sim_config is not None:
         if not (url == "sim" or url.startswith("sim?")):
             raise ValueError(f"--sim-config applies to the simulated rig only, not {url!r}")
         url = with_param(url, "config", args.sim_config)
@@ -50,6 +50,7 @@ def rig_url(args: argparse.Namespace) -> str:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    from daq.runfile import make_folder
     from drivers.rig import open_rig
     from fbs.progress import run_with_progress
 
@@ -59,6 +60,7 @@ def run_command(args: argparse.Namespace) -> int:
                  os.getpid(), socket.gethostname(), extra={"stderr": False})
         proc_cls = get(args.procedure)
         out = Path(args.out)
+        make_folder(out)   # a file in --out's way is refused before the rig opens
         resume = None
         if args.resume:
             resume = load_resume(args.resume, proc_cls.name, complete_ok=True)
@@ -91,9 +93,9 @@ def run_command(args: argparse.Namespace) -> int:
             err = f" ± {m.stderr:.3g}" if m.stderr is not None else ""
             print(f"  {m.name}: {m.value:.6g}{err} {m.units} {mark}" if m.value is not None else f"  {m.name}: -")
         if summary.error:
-            print(f"  error: {summary.error}")
+            print(f"  error: {one_line(summary.error)}")
     if summary.error:
-        print(f"fbs run {proc.name}: {summary.error}", file=sys.stderr)
+        print(f"fbs run {proc.name}: {one_line(summary.error)}", file=sys.stderr)
     return summary.exit_code
 
 

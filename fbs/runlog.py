@@ -52,7 +52,8 @@ class RunLog:
     def open(self, path: Path) -> Path:
         """Write the held records to ``path`` (appended to: an earlier log is never lost), then
         every record until the block ends."""
-        path.parent.mkdir(parents=True, exist_ok=True)
+        from daq.runfile import make_folder
+        make_folder(path.parent, "the log's folder")
         handler = logging.FileHandler(path, mode="a", encoding="utf-8", errors="backslashreplace")
         handler.setFormatter(formatter())
         root = logging.getLogger()

@@ -40,6 +40,8 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
     found: dict[str, tuple[float, dict]] = {}
     candidates = sorted(out_dir.glob("*.json")) if out_dir.is_dir() else []
     for path in candidates:
+        if not path.is_file():
+            continue   # a FIFO would block the read forever, a folder named *.json is not a summary
         try:
             data = json.loads(path.read_text())
         except (OSError, ValueError):
@@ -53,6 +55,8 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
     prior = {name: values for name, (_, values) in found.items()}
     for spec in extra or []:
         path = Path(spec)
+        if path.exists() and not path.is_file():
+            raise ValueError(f"--prior {path}: not a regular file (a folder, FIFO or device); give a summary .json")
         try:
             data = json.loads(path.read_text())
         except OSError as exc:

@@ -52,7 +52,7 @@ import numpy as np
 
 from daq.reader import Event, RunFile
 from daq.recorder import Acquisition
-from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status
+from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status, make_folder
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
 from procedures import paramtypes
@@ -496,7 +496,7 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
     if resume is not None and resume.complete:
         return _analyse_again(proc, rig, resume, abort or threading.Event(), report)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     path = next_free(out_dir, proc.name)
     abort = abort or threading.Event()
     summary = RunSummary(proc.name, path, "aborted: not started", Verdict.ERROR, params=proc.params_json())

@@ -400,6 +400,8 @@ def load_config(path: str | Path | None) -> SimConfig:
     """Read a TOML sim config; ``None`` gives the thesis rig."""
     if path is None:
         return SimConfig()
+    if not str(path).strip():
+        raise ConfigError(f"sim config: {str(path)!r} is an empty path; give a .toml file")
     path = Path(path)
     if path.exists() and not path.is_file():
         # a FIFO or a device would block the read (or never end): refused, as the run-file reader does

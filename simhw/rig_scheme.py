@@ -59,6 +59,11 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         raise ValueError(f"rig URL {url!r}: table={table!r} must be 'can' or 'manual'")
     try:
         seed = int(params.get("seed", "0"))
+    except ValueError:
+        seed = -1
+    if not 0 <= seed < 2 ** 63:
+        raise ValueError(f"rig URL {url!r}: seed={params['seed']!r} must be a whole number 0..{2 ** 63 - 1}")
+    try:
         speed = float(params.get("speed", "1"))
         # a wall-clock deadline on a rig whose time is virtual measures the host's load, not the
         # rig: the sim's heartbeat watchdogs and CAN reply deadline default to 5 s (a real rig's

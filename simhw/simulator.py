@@ -273,6 +273,9 @@ class Simulator:
         #: the outputs the kernel computes, in the order of the columns it returns
         self._outputs = self.channels + (TRUTH_CHANNELS if truth else ())
         self._keep: Kept | None = None if channels is None else kept(cfg, self._outputs)
+        # numpy's own refusal ("expected non-negative integer") names neither the value nor the limit
+        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
+            raise ValueError(f"seed {seed!r} must be a whole number 0..{2 ** 63 - 1}")
         self.seed = seed
         self.clock = clock or VirtualClock()
         self.truth = truth

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from daq.runfile import make_folder
+
 # The analysis stack (scipy, h5py, matplotlib: ~1.5 s to import) is imported when the command
 # runs, not when the `fbs` parser is built, so every other subcommand starts as fast as before.
 if TYPE_CHECKING:
@@ -78,11 +80,14 @@ def choose_nperseg(n_samples: int, fs: float, seg_s: float | None = None) -> int
     """
     if seg_s is not None:
         if not (math.isfinite(seg_s) and seg_s > 0):
-            raise ValueError(f"segment length {seg_s!r} s must be a positive number")
-        nperseg = round(seg_s * fs)
-        if nperseg < 2:
-            raise ValueError(f"a segment of {seg_s:g} s at {fs:g} Hz holds {nperseg} sample(s): too short")
-        return int(nperseg)
+            raise ValueError(f"segment length seg_s = {seg_s!r} s must be a positive number")
+        if seg_s * fs < 1.5:
+            raise ValueError(f"segment length seg_s = {seg_s:g} s at {fs:g} Hz holds {round(seg_s * fs)} sample(s): "
+                             f"it must hold at least 2 (>= {2 / fs:g} s)")
+        if seg_s * fs > n_samples:
+            raise ValueError(f"segment length seg_s = {seg_s:g} s is longer than the record ({n_samples} samples, "
+                             f"{n_samples / fs:g} s at {fs:g} Hz): use shorter segments")
+        return int(round(seg_s * fs))
     from daq.spectra import n_segments
 
     nperseg = 2 ** max(0, round(math.log2(TARGET_SEG_S * fs)))
@@ -134,7 +139,7 @@ def spectra_command(path: str | Path, channels: list[str], out_dir: str | Path, 
         nperseg = choose_nperseg(run.n_samples, run.rate_hz, seg_s)
         csd = run_csd_matrix(run, channels, nperseg=nperseg)
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    make_folder(out_dir)
     head = (f"{path.name}   fs {csd.fs:g} Hz, nperseg {csd.nperseg} ({csd.segment_s:g} s, Δf "
             f"{csd.resolution_hz:.3g} Hz), {csd.segments_used} segments averaged"
             + (f" ({csd.segments_skipped} skipped)" if csd.segments_skipped else "")

@@ -160,8 +160,9 @@ def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[s
     nperseg = int(round(seg_s * fs))
     total = sum(max(0, stop - start) for _, start, stop, _ in pieces)
     if total < nperseg * n_blocks:
-        raise TransferError(f"{total / fs:.1f} s of record holds fewer than {n_blocks} blocks of one {seg_s:g} s "
-                            f"segment: record longer or shorten the segment")
+        raise TransferError(f"{total / fs:.1f} s of record holds fewer than {n_blocks} blocks of one segment of "
+                            f"seg_s = {seg_s:g} s: record longer or shorten the segment (at most "
+                            f"{total / fs / n_blocks:.3g} s)")
     # about n_blocks blocks in all, each inside one span: a span gets its share of them
     bounds: list[tuple[Path, int, int]] = []
     for file, start, stop, _ in pieces:

@@ -128,7 +128,7 @@ def test_an_unwritable_output_fails_before_the_rig_moves(tmp_path):
     out = tmp_path / "afile" / "r.h5"
     p = subprocess.run(_fbs("record", "--mode", "1", "--duration", "1", "--rate", "100", "--out", str(out)),
                        capture_output=True, text=True, timeout=120)
-    assert p.returncode == 2 and f"cannot create run file {out}" in p.stderr
+    assert p.returncode == 2 and f"cannot make the run file's folder {out.parent}: it is a file" in p.stderr
     assert "mode" not in p.stdout
     existing = tmp_path / "old.h5"
     existing.write_bytes(b"precious")

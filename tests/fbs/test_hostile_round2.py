@@ -5,6 +5,7 @@ exits 2 (never 1, which says "limits failed"), opens no output and shows no trac
 from __future__ import annotations
 
 import json
+import os
 
 import pytest
 
@@ -130,3 +131,41 @@ def test_a_results_file_belongs_to_one_batch_at_a_time(capsys, record, tmp_path)
         holder.close()
     assert main(["batch", "inspect", str(record), "--jobs", "1", "--out", str(out)]) == 0
     assert len(out.read_text().splitlines()) == 1
+
+
+@pytest.mark.parametrize("argv, needle", [
+    (["simulate", "--mode", "3", "--duration", "1", "--rate", "100", "--seed", "-1"],
+     "seed -1 must be a whole number 0..9223372036854775807"),
+    (["record", "--rig", "sim?seed=-1", "--mode", "3", "--duration", "1", "--rate", "100"],
+     "rig URL 'sim?seed=-1': seed='-1' must be a whole number 0.."),
+    (["record", "--rig", "sim?seed=nan", "--mode", "3", "--duration", "1", "--rate", "100"],
+     "seed='nan' must be a whole number 0.."),
+])
+def test_a_seed_out_of_range_is_refused_by_value_and_limit(capsys, tmp_path, argv, needle):
+    """Item 12: ``--seed -1`` said "expected non-negative integer" (numpy's words)."""
+    _fails(capsys, [*argv, "--out", str(tmp_path / "s.h5")], needle)
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("command", [
+    ["run", "stopwatch"],
+    ["simulate", "--mode", "3", "--duration", "1", "--rate", "100"],
+    ["demo"],
+])
+def test_a_file_in_the_way_of_the_output_folder_is_named_before_the_rig_opens(capsys, tmp_path, command):
+    """Item 12: ``--out FILE`` said "[Errno 17] File exists", and `fbs run` said it only after the
+    rig had been opened and made safe."""
+    (tmp_path / "afile").write_text("mine")
+    out = str(tmp_path / "afile") if command[0] in ("run", "demo") else str(tmp_path / "afile" / "s.h5")
+    err = _fails(capsys, [*command, "--out", out], "afile", "is a file, not a folder")
+    assert "rig event" not in err and "safe state" not in err, err
+    assert (tmp_path / "afile").read_text() == "mine"
+
+
+def test_a_fifo_as_prior_or_among_the_summaries_is_refused_not_waited_on(capsys, tmp_path):
+    """A FIFO given as ``--prior`` (or named ``*.json`` in ``--out``) blocked the read forever."""
+    fifo = tmp_path / "p.json"
+    os.mkfifo(fifo)
+    assert find_prior(tmp_path) == {}
+    _fails(capsys, ["run", "stopwatch", "--prior", str(fifo), "--out", str(tmp_path / "o")],
+           f"--prior {fifo}: not a regular file")

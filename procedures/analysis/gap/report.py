@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from daq.plots import new_figure, save_figure
+from daq.runfile import make_folder
 from procedures.analysis.gap.workflow import GapResult
 from simhw.config_dump import dump_config
 
@@ -177,7 +178,7 @@ def _fmt(d: dict[str, float]) -> str:
 
 def write_report(res: GapResult, out: Path) -> list[Path]:
     """The plots, ``refined.toml`` (when the result has a refined model) and ``gap.md``."""
-    out.mkdir(parents=True, exist_ok=True)
+    make_folder(out)
     written = [plot_spectra(res, out / "spectra.png"), plot_ratio(res, out / "ratio.png")]
     refined, note = write_refined(res, out)
     md = out / "gap.md"

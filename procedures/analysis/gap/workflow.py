@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
-from daq.runfile import RunWriter
+from daq.runfile import RunWriter, make_folder
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
 from procedures.analysis.gap.grid import (
     GapInputError,
@@ -553,7 +553,7 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
     _, p_bins = bin_spectra(rec.data, grid)
     P = grid.band_mean(p_bins)
     quant = np.array([quantization_psd(q, rec.rate_hz) for q in rec.lsb_V])
-    cfg0 = catalogue.nominal(load_config(opt.sim_config) if opt.sim_config else None)
+    cfg0 = catalogue.nominal(load_config(opt.sim_config) if opt.sim_config is not None else None)
     cfg0 = found_pickoff_lines(cfg0, rec.axis, rec.channels, p_bins, grid)
     model = SpectralModel(grid, rec.channels, rec.mode, rec.axis, quant)
     # the channels' Whittle terms weighted by their coherent multiplicity (grid.channel_weights):
@@ -721,7 +721,7 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
     sim_gaps: tuple[float, float] | None = None
     if report_dir is not None:
         out = Path(report_dir)
-        out.mkdir(parents=True, exist_ok=True)
+        make_folder(out)
         sim_b = simulate_record(cfg_before, rec, opt.seed, out / "model_before.h5", "nominal model, noise levels fitted")
         sim_a = simulate_record(cfg_after, rec, opt.seed + 1, out / "model_after.h5",
                                 "refined model: " + (", ".join(f.effect for f in findings) or "nothing added"))
