@@ -210,6 +210,8 @@ class ProcedurePanel(Vertical, can_focus=True):
         left = f"about {duration(info.remaining_wall_s)} left" if info.remaining_wall_s is not None else (
             f"{duration(info.remaining_rig_s)} of rig time left")
         step = (f"step {info.index + 1}/{info.n_steps} {info.step} · {left}" if info.n_steps else info.step)
+        if info.phase != "steps":      # after the steps: the analysis, the report
+            step = f"{info.phase} (all {info.n_steps} steps done)"
         if info.aborting:
             step = "ABORTING (rig going safe) · " + step
         self.query_one("#proc-step", Static).update(Text(step, no_wrap=True, overflow="ellipsis"))

@@ -510,7 +510,8 @@ class RigWorker:
         cur = self.state.get().procedure
         self.state.update(procedure=ProcedureInfo(p.procedure, p.step, p.index, p.n_steps, p.fraction,
                                                   p.remaining_rig_s, p.remaining_wall_s,
-                                                  cur.file if cur else None, bool(cur and cur.aborting)))
+                                                  cur.file if cur else None, bool(cur and cur.aborting),
+                                                  p.phase))
 
     # ------------------------------------------------------------------ modes
     def _hold(self) -> str:

@@ -46,6 +46,8 @@ class ProcedureInfo:
     remaining_wall_s: float | None = None
     file: Path | None = None
     aborting: bool = False
+    #: the steps, or a phase after them ("analysing", ...): ``procedures.progress.Progress``
+    phase: str = "steps"
 
 
 class Phase(StrEnum):

@@ -3,9 +3,10 @@ lines at a modest rate everywhere else (a pipe, a file, the run's log).
 
 The runner reports progress after every few seconds of rig time, which on the simulated rig
 in virtual time is hundreds of times a second. The live line is redrawn at most
-``REDRAW_S`` apart (and at each new step); a plain line is written at each new step, each
-``PLAIN_STEP`` of the expected time, and at least every ``PLAIN_HEARTBEAT_S`` of wall time, so
-an overnight run's log stays readable and still shows it is alive.
+``REDRAW_S`` apart (and at each new step or phase); a plain line is written at each new step
+and phase (analysing, writing report, done), each ``PLAIN_STEP`` of the bar, and at least every
+``PLAIN_HEARTBEAT_S`` of wall time, so an overnight run's log stays readable and still shows it
+is alive. The fraction is the runner's (``procedures.progress``: monotone by construction).
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from typing import Any
 from drivers.rig import Rig
 from fbs.logsetup import StderrHandler, stderr_handler
 from fbs.runlog import RunLog
-from procedures.runner import Procedure, Progress, Resumed, RunSummary, next_free, run_procedure
+from procedures.progress import STEPS, Progress
+from procedures.runner import Procedure, Resumed, RunSummary, next_free, run_procedure
 
 log = logging.getLogger("fbs.progress")
 
@@ -42,7 +44,9 @@ def fmt_duration(seconds: float | None) -> str:
 
 
 def describe(p: Progress) -> str:
-    """What a progress report says, in one line."""
+    """What a progress report says, in one line: a step, or a phase after the steps."""
+    if p.phase != STEPS:
+        return f"{p.procedure}: {100 * p.fraction:3.0f} %, {p.phase}"
     return (f"{p.procedure}: {100 * p.fraction:3.0f} %, step {p.index + 1}/{p.n_steps} {p.step}; "
             f"left: rig {fmt_duration(p.remaining_rig_s)}, wall ~{fmt_duration(p.remaining_wall_s)}")
 

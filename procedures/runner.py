@@ -40,7 +40,6 @@ import logging
 import math
 import signal
 import threading
-import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -56,6 +55,9 @@ from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status,
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
 from procedures import paramtypes
+from procedures.progress import ANALYSING, ANALYSIS_SHARE, DONE, WRITING_REPORT, ProgressModel
+from procedures.progress import Progress as Progress  # re-exported: listeners import it here
+from procedures.progress import ProgressListener as ProgressListener
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -199,21 +201,6 @@ class Step:
     setup: bool = False
 
 
-@dataclass(frozen=True)
-class Progress:
-    procedure: str
-    step: str
-    index: int                    # 0-based index of the current step
-    n_steps: int
-    fraction: float               # 0..1 of the expected rig time
-    elapsed_rig_s: float
-    remaining_rig_s: float
-    remaining_wall_s: float | None  # from the rig-time speed seen so far (None until measurable)
-
-
-ProgressListener = Callable[[Progress], None]
-
-
 # ---------------------------------------------------------------------------- procedure
 #: a procedure's parameters: a dataclass, one per procedure
 P = TypeVar("P", bound="DataclassInstance")
@@ -246,6 +233,8 @@ class Procedure(abc.ABC, Generic[P]):
     axis: str | None = None
     #: ADC full-scale ranges (+-V) per channel; None: the largest
     ranges_V: dict[str, float] | None = None
+    #: the part of the progress bar kept for the analysis and report (``procedures.progress``)
+    analysis_share: float = ANALYSIS_SHARE
 
     @abc.abstractmethod
     def plan(self) -> Sequence[Step]:
@@ -298,10 +287,9 @@ class Context:
         self.step: Step | None = None
         self.index = 0
         self.steps: list[Step] = []
-        self._done_s = 0.0          # expected seconds of the finished steps
         self._step_t0 = 0.0         # file time the current step began
-        self._wall0 = time.monotonic()
-        self._rig0 = 0.0
+        #: the run's progress, its weights fixed from the plan when the steps start
+        self._model: ProgressModel | None = None
 
     # time and data
     @property
@@ -352,21 +340,13 @@ class Context:
 
     # progress
     def report(self) -> None:
-        if self._progress is None or self.step is None:
-            return
-        total = sum(s.expected_s for s in self.steps) or 1.0
-        in_step = min(self.time_s - self._step_t0, self.step.expected_s)
-        elapsed = self._done_s + in_step
-        remaining = max(0.0, total - elapsed)
-        wall = time.monotonic() - self._wall0
-        rig_run = self.time_s - self._rig0
-        speed = rig_run / wall if wall > 1.0 and rig_run > 0 else None
-        try:
-            self._progress(Progress(self.proc.name, self.step.name, self.index, len(self.steps),
-                                    min(1.0, elapsed / total), self.time_s, remaining,
-                                    remaining / speed if speed else None))
-        except Exception:  # a listener's trouble is not the procedure's
-            log.exception("progress listener failed")
+        if self._model is not None and self.step is not None:
+            self._model.in_step(self.index, self.time_s - self._step_t0, self.time_s)
+
+    def progress_phase(self, name: str) -> None:
+        """A phase after the steps (``procedures.progress``: analysing, writing report, done)."""
+        if self._model is not None:
+            self._model.phase(name, self.time_s)
 
 
 # ---------------------------------------------------------------------------- summary
@@ -558,6 +538,7 @@ def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: P
              report: bool) -> None:
     """After a complete acquisition: the analysis, the verdict, the report and the summary."""
     how_again = f"`--resume {summary.file}` analyses the complete run again"
+    ctx.progress_phase(ANALYSING)
     try:
         analysis = proc.analyze(ctx)
     except KeyboardInterrupt:
@@ -575,19 +556,26 @@ def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: P
     summary.values = analysis.values
     summary.measurements = analysis.measurements
     summary.verdict = Verdict.FAIL if any(m.passed is False for m in analysis.measurements) else Verdict.PASS
+    if report:
+        ctx.progress_phase(WRITING_REPORT)
     _finish_report(proc, summary, analysis, out_dir, report)
+    ctx.progress_phase(DONE)
 
 
 def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
     """The steps in order, each with its events; a data step's span recorded (or taken over)."""
     proc, acq = ctx.proc, ctx.acq
-    ctx._rig0, ctx._wall0 = acq.time_s, time.monotonic()
     ctx.steps = list(proc.plan())
+    if ctx._progress is not None:
+        ctx._model = ProgressModel(proc.name, [(s.name, s.expected_s) for s in ctx.steps],
+                                   ctx._progress, analysis_share=proc.analysis_share,
+                                   rig_t0_s=acq.time_s)
     summary.steps_planned = [s.name for s in ctx.steps]
     for i, step in enumerate(ctx.steps):
         ctx.index, ctx.step = i, step
         ctx._step_t0 = ctx.time_s
         ctx.check()
+        ctx.report()
         if resume is not None and not step.setup and step.name in resume.results:
             result = resume.results[step.name]
             source = Path(resume.path).resolve()
@@ -611,8 +599,8 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
             acq.note(EVENT_STEP_DONE, _step_done_text(done))
         ctx.results[step.name] = result
         summary.steps_done.append(step.name)
-        ctx._done_s += step.expected_s
-        ctx.report()
+        if ctx._model is not None:   # its whole weight, however long it took (or resumed)
+            ctx._model.step_done(i, ctx.time_s)
 
 
 def _step_done_text(done: Mapping[str, Any]) -> str:

@@ -112,9 +112,11 @@ def test_steps_events_measurements_and_verdict(rig, tmp_path):
         assert "calibration" in rf.meta
     assert kinds.count("step") == 4 and [d["step"] for d in done] == s.steps_done
     assert done[1]["result"]["i"] == 0
-    # progress: fractions rise to 1, with step names
-    assert seen and seen[-1].fraction == pytest.approx(1.0) and seen[-1].step == "data 2"
-    assert all(b.fraction >= a.fraction - 1e-12 for a, b in zip(seen, seen[1:]))
+    # progress: fractions rise with step names, then the analysis and report, 1 when done
+    assert seen and seen[-1].fraction == pytest.approx(1.0) and seen[-1].phase == "done"
+    assert [p.step for p in seen if p.phase == "steps"][-1] == "data 2"
+    assert [p.phase for p in seen][-3:] == ["analysing", "writing report", "done"]
+    assert all(b.fraction >= a.fraction for a, b in zip(seen, seen[1:]))
     # report and JSON summary beside the file
     assert s.report.exists() and "mean torquer X" in s.report.read_text()
     assert json.loads(s.file.with_suffix(".json").read_text())["verdict"] == "pass"
