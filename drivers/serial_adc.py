@@ -625,14 +625,28 @@ class SerialAdc(Adc):
                     self._report_unlocked(fault, stream_lost=True)
                     raise fault
                 # Ask a virtual clock for more only once the rig got as far as asked and the frames
-                # did not come (lost on the way): asking because the host merely waited (a busy
-                # machine) would run the physics further ahead, and a set-point sent next would land
-                # at a rig time that depends on the machine's load.
+                # were lost on the way: asking because the host merely waited (a busy machine, a
+                # slow pty) would run the physics further ahead, and a set-point sent next would
+                # land at a rig time that depends on the machine's load.
                 if (not self._cond.wait(0.05) and self.clock.virtual
-                        and self.clock.now() >= demanded - 0.5 / cfg.rate_hz):
+                        and self.clock.now() >= demanded - 0.5 / cfg.rate_hz and self._lost_in_flight(n)):
                     ahead = min(2 * ahead, int(10 * cfg.rate_hz) + cfg.frame_sets)
                     demanded = self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz
                     self.clock.demand(demanded)
+
+    def _lost_in_flight(self, n: int) -> bool:
+        """Whether the ``n`` sets a read waits for were lost rather than slow (caller holds
+        _cond). ``STAT?``'s reply leaves the device behind every frame it queued before (one
+        FIFO, docs/protocol.md 1.6), and the reader hands frames over in the order they came:
+        once the reply is here, whatever is still missing will not come without more rig time.
+        It is an in-band marker, so the answer is the same however slow the host or the pty."""
+        self._cond.release()    # the reader needs _cond to hand over the frames ahead of the reply
+        try:
+            self.status()
+        finally:
+            self._cond.acquire()
+        avail, blocked = self._contiguous()
+        return avail < n and not blocked and self._rx_streaming
 
     def read_available(self) -> AdcBlock | None:
         with self._cond:
