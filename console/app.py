@@ -50,15 +50,13 @@ from console.state import (
 )
 from console.statusbar import StatusBar
 from drivers.calibration import RigCalibration
+from drivers.logrule import PROJECT_PACKAGES, ruled, set_levels
 from drivers.setpoints import SetpointLimits
 
 if TYPE_CHECKING:
     from procedures.runner import Procedure, RunSummary
 
 log = logging.getLogger(__name__)
-
-#: the packages whose INFO records the live log shows
-_PACKAGES = ("drivers", "simhw", "daq", "procedures", "console")
 
 DEFAULT_RIG = "sim?realtime=1"
 #: (id, tab title, key); the tab titles carry their keys, for an operator without a footer
@@ -146,7 +144,7 @@ class ConsoleApp(App[int]):
         logging.getLogger().addHandler(self._handler)
         # the live log shows the procedures' INFO records, whatever the host program configured
         self._saved_levels = {}
-        for name in _PACKAGES:
+        for name in PROJECT_PACKAGES:
             pkg = logging.getLogger(name)
             self._saved_levels[name] = pkg.level
             if pkg.getEffectiveLevel() > logging.INFO:
@@ -465,13 +463,13 @@ def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
     # The terminal belongs to the console: log records go to a file and the live log, never
     # to stderr (Textual draws on it).
     root = logging.getLogger()
-    saved = root.handlers[:], root.level
+    saved = root.handlers[:]
     from daq.runfile import make_folder
     make_folder(out)
-    file_handler = logging.FileHandler(out / "console.log")
-    file_handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    # this program's records from INFO, other libraries' from WARNING (drivers.logrule)
+    file_handler = ruled(logging.FileHandler(out / "console.log"))
     root.handlers[:] = [file_handler]
-    root.setLevel(logging.INFO)
+    restore_levels = set_levels()
     app = ConsoleApp(rig_url, out_dir=out)
     # SIGHUP (the SSH session or tmux window went), SIGTERM, a hung-up terminal: leave, screen or not
     guard = ExitGuard(app.stop_from_outside, app.worker_.shutdown).install()
@@ -480,8 +478,8 @@ def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
     finally:
         guard.done()
         app.worker_.shutdown("the console exited")  # already done by on_unmount; a no-op then
-        root.handlers[:] = saved[0]
-        root.setLevel(saved[1])
+        root.handlers[:] = saved
+        restore_levels()
         file_handler.close()
     if app.stopped is not None:
         print(exit_line(app.stopped))

@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 
 from console.feeds import Feed
+from drivers.logrule import ProjectFilter
 
 
 class FeedHandler(logging.Handler):
@@ -13,6 +14,7 @@ class FeedHandler(logging.Handler):
         super().__init__(level)
         self.feed = feed
         self.setFormatter(logging.Formatter("%(levelname).1s %(name)s: %(message)s"))
+        self.addFilter(ProjectFilter())   # other libraries' from WARNING (drivers.logrule)
 
     def emit(self, record: logging.LogRecord) -> None:
         try:

@@ -1,10 +1,12 @@
 """Logging for the ``fbs`` commands: timestamped lines on stderr, a live status line on a
 terminal, and ``-v`` for this project's loggers only.
 
-Records of this project's packages (``PROJECT_LOGGERS``) are shown from INFO, or DEBUG with
-``-v``; every other library's (matplotlib's font manager logs 70 lines at DEBUG) only from
-WARNING, so ``-v`` says what the rig and the procedure do. Python's warnings become log records
-(``py.warnings``): they are timestamped, land in a run's log, and do not break the status line.
+Records of this project's packages are shown from INFO, or DEBUG with ``-v``; every other
+library's (matplotlib's font manager logs 70 lines at DEBUG, canopen each SDO transfer at INFO)
+only from WARNING, so ``-v`` says what the rig and the procedure do: the rule and the line
+format (timestamps with their UTC offset) are ``drivers.logrule``'s, the console's too.
+Python's warnings become log records (``py.warnings``): they are timestamped, land in a run's
+log, and do not break the status line.
 
 Two attributes a record may carry (``extra=``) steer it:
 
@@ -23,16 +25,14 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import TextIO
 
-#: the packages of this project (``-v`` turns these to DEBUG, and only these)
-PROJECT_LOGGERS = ("fbs", "drivers", "simhw", "daq", "procedures", "console")
-LINE_FORMAT = "%(asctime)s.%(msecs)03d %(levelname)s %(name)s: %(message)s"
-TIME_FORMAT = "%Y-%m-%d %H:%M:%S"
+from drivers.logrule import Formatter, ProjectFilter, set_levels
+
 #: erase from the cursor to the end of the line (ANSI/VT100 "EL")
 _ERASE_LINE = "\x1b[K"
 
 
 def formatter() -> logging.Formatter:
-    return logging.Formatter(LINE_FORMAT, TIME_FORMAT)
+    return Formatter()
 
 
 class StderrHandler(logging.Handler):
@@ -43,6 +43,7 @@ class StderrHandler(logging.Handler):
     def __init__(self) -> None:
         super().__init__()
         self.setFormatter(formatter())
+        self.addFilter(ProjectFilter())
         self.addFilter(self._shown)
         self._status = ""
 
@@ -135,11 +136,7 @@ def command_logging(verbose: bool) -> Iterator[StderrHandler]:
     than once in a process, as the tests and ``fbs batch`` do)."""
     root = logging.getLogger()
     handler = StderrHandler()
-    saved_root = root.level
-    saved = {name: logging.getLogger(name).level for name in PROJECT_LOGGERS}
-    root.setLevel(logging.WARNING)
-    for name in PROJECT_LOGGERS:
-        logging.getLogger(name).setLevel(logging.DEBUG if verbose else logging.INFO)
+    restore_levels = set_levels(verbose)
     root.addHandler(handler)
     logging.captureWarnings(True)
     try:
@@ -148,6 +145,4 @@ def command_logging(verbose: bool) -> Iterator[StderrHandler]:
         logging.captureWarnings(False)
         handler.clear_status()
         root.removeHandler(handler)
-        root.setLevel(saved_root)
-        for name, level in saved.items():
-            logging.getLogger(name).setLevel(level)
+        restore_levels()

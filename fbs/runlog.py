@@ -16,6 +16,7 @@ import os
 from pathlib import Path
 from types import TracebackType
 
+from drivers.logrule import ProjectFilter
 from fbs.logsetup import formatter
 
 log = logging.getLogger(__name__)
@@ -56,6 +57,7 @@ class RunLog:
         make_folder(path.parent, "the log's folder")
         handler = logging.FileHandler(path, mode="a", encoding="utf-8", errors="backslashreplace")
         handler.setFormatter(formatter())
+        handler.addFilter(ProjectFilter())
         root = logging.getLogger()
         if self._held is not None:
             root.removeHandler(self._held)

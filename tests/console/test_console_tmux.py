@@ -8,6 +8,7 @@ time-out on a loaded machine rather than the 3 s, which is a figure to report, n
 
 from __future__ import annotations
 
+import re
 import shutil
 import subprocess
 import sys
@@ -16,6 +17,8 @@ import uuid
 from pathlib import Path
 
 import pytest
+
+from drivers.logrule import PROJECT_PACKAGES as PROJECT
 
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(shutil.which("tmux") is None, reason="tmux is not installed: acceptance B "
@@ -137,3 +140,42 @@ def test_killing_the_tmux_session_while_recording_ends_the_console_safely(tmp_pa
         assert rf.status.startswith("aborted: ") and ("SIGHUP" in rf.status or "terminal" in rf.status), rf.status
     log = (out / "console.log").read_text()
     assert "safe state reached" in log or "safe state: yes (read back)" in log, log[-2000:]
+
+
+def test_sighup_ends_the_console_with_exit_2_and_its_log_is_this_programs(tmp_path):
+    """Issue 37 items 5 and 10: the console exited 0 after SIGHUP (it must say "aborted": 2),
+    and its log was 98 % the CANopen stack's INFO lines. The console runs under a small parent
+    that records its exit code; SIGHUP goes to the console alone, once its meters show readings."""
+    session = f"fbs-console-{uuid.uuid4().hex[:8]}"
+    out, rc = tmp_path / "out", tmp_path / "rc"
+    parent = (f"import subprocess; r = subprocess.call([{str(FBS)!r}, 'console', '--out', "
+              f"{str(out)!r}]); open({str(rc)!r}, 'w').write(str(r))")
+    tmux("new-session", "-d", "-s", session, "-x", "80", "-y", "24",
+         f"cd {tmp_path} && exec {sys.executable} -c \"{parent}\"")
+    try:
+        pane_pid = int(tmux("display-message", "-p", "-t", session, "#{pane_pid}").strip())
+        t_end = time.monotonic() + HANG_S
+        while "torq_xrd" not in capture(session) and time.monotonic() < t_end:
+            time.sleep(0.1)
+        # readings (digits, not dashes): the rig's nodes answered, canopen has logged
+        while ("—" in capture(session).split("torq_x ", 1)[-1].split("\n", 1)[0]
+               and time.monotonic() < t_end):
+            time.sleep(0.1)
+        # the console, not its parent (whose code mentions 'console' inside one argument)
+        console = [p for p in descendants(pane_pid)
+                   if b"console" in Path(f"/proc/{p}/cmdline").read_bytes().split(b"\0")]
+        assert console, f"no console process:\n{capture(session)}"
+        subprocess.run(["kill", "-HUP", str(console[0])], check=True)
+        while not rc.exists() and time.monotonic() < t_end:
+            time.sleep(0.1)
+        assert rc.exists(), f"the console did not end after SIGHUP:\n{capture(session)}"
+    finally:
+        subprocess.run(["tmux", "kill-session", "-t", session], capture_output=True)
+    assert rc.read_text() == "2"
+    lines = (out / "console.log").read_text().splitlines()
+    assert any(" INFO drivers.rig: " in ln for ln in lines), lines[:20]     # this program's INFO
+    records = [m for m in (re.match(r"\S+ \S+ (INFO|DEBUG) ([\w.]+): ", ln) for ln in lines) if m]
+    others = {m.group(2) for m in records if m.group(2).split(".")[0] not in PROJECT}
+    assert not others, others                          # no other library's INFO (canopen's)
+    stamp = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}[+-]\d{4} "     # with its UTC offset
+    assert re.match(stamp, lines[0]), lines[0]
