@@ -106,15 +106,15 @@ def record(path: str, command: str, extra: list[str], exit_code: int, result: An
 
 def guarded(fn: Callable[..., Any], *args: Any) -> tuple[int, Any, str | None, float]:
     """``fn(*args)`` ended as a single command ends: ``(exit, result, error, seconds)``, with exit
-    0 and the result; 2 and the message for ``fbs.cli.COMMAND_ERRORS`` (what ``fbs CMD`` reports
+    0 and the result; 2 and the message for ``fbs.cli.command_errors()`` (what ``fbs CMD`` reports
     as ``error: ...``); 1 and the traceback for anything else (a bug). It never raises for the
     task's sake (``KeyboardInterrupt`` and ``SystemExit`` go on up)."""
-    from fbs.cli import COMMAND_ERRORS
+    from fbs.cli import command_errors
 
     t0 = time.perf_counter()
     try:
         result = fn(*args)
-    except COMMAND_ERRORS as exc:
+    except command_errors() as exc:
         return 2, None, str(exc), time.perf_counter() - t0
     except Exception as exc:      # a bug: the single command ends with this traceback, exit 1
         return 1, None, "".join(traceback.format_exception(exc)).rstrip(), time.perf_counter() - t0
@@ -130,8 +130,10 @@ def _json_of(command: str, path: str, extra: list[str]) -> Any:
 def run_file(command: str, extra: list[str], path: str) -> dict[str, Any]:
     """``fbs <command> path --json <extra>`` in this process, as a result line."""
     prepare_process()
-    # the first file of a process loads the numerics here, not counted in its elapsed_s
-    import fbs.cli  # noqa: F401
+    # the first file of a process loads the command's numerics here, not counted in its elapsed_s
+    from fbs.cli import load
+
+    load(COMMANDS[command][0])
 
     limit_loaded_blas()
     code, result, error, elapsed = guarded(_json_of, command, path, extra)

@@ -82,7 +82,9 @@ def run(effect: str, grid: str | None, params: dict[str, float], seed: int, dura
     it did not name); ``exit`` and ``error`` as ``fbs gap`` would end (0 and null; 2 and the
     message; 1 and the traceback)."""
     batch_task.prepare_process()
-    import fbs.cli  # noqa: F401  (the numerics load here, not in the run's elapsed_s)
+    from fbs.cli import load
+
+    load("simulate", "gap")   # the numerics load here, not in the run's elapsed_s
 
     batch_task.limit_loaded_blas()
     code, out, error, elapsed = batch_task.guarded(_simulate_and_analyse, effect, params, seed, duration_s)

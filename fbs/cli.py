@@ -4,33 +4,90 @@ Exit codes (``fbs.usage``): 0 pass, 1 limits failed, 2 aborted or error (bad val
 included), 64 usage error (argparse's own: unknown flag, missing argument, wrong type or
 choice). Logging (``fbs.logsetup``): timestamped lines on stderr, this project's loggers at
 INFO (DEBUG with ``-v``), other libraries' at WARNING.
+
+Start-up: ``COMMANDS`` names each command's module. A module defines the command's options
+(``add_parser``) and imports its implementation - the rig, the simulator, numpy, scipy,
+numba, h5py, Textual - inside the functions that run it, so building the parser costs no
+more than argparse: ``fbs --version``, ``--help`` and a usage error load none of it, and a
+command loads only its own (``bench/cli_start.py`` times both; a test guards the first).
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
+import os
+import pkgutil
+import select
 import sys
 from contextlib import nullcontext
+from dataclasses import dataclass
 
 from drivers.errors import DriverError
-from fbs import analyze, batch, campaign, clamp, demo, inspect, record, run, simulate, spectra
-from fbs import gap as gap_cli
 from fbs.logsetup import command_logging
 from fbs.signals import aborting_on_signals
 from fbs.usage import EXIT_CODES_HELP, EXIT_ERROR, Parser, one_line, version
-from procedures.runner import ProcedureError
-from simhw.params import ConfigError
 
 log = logging.getLogger("fbs")
-#: what a command reports as ``fbs CMD: error: ...`` and exit 2 (``fbs batch`` records the same per file)
-COMMAND_ERRORS = (ConfigError, ValueError, OSError, DriverError, ProcedureError)
 
 
-def _console(args: argparse.Namespace) -> int:
-    from console.app import run_console  # Textual is imported only for the console
+@dataclass(frozen=True)
+class Command:
+    """``module`` defines the command's options (``add_parser``; imported by every ``fbs``
+    start, so it imports nothing heavy at its top); ``loads`` are the modules its work imports
+    when it runs (a name ending in ``.*``: every module of that package). ``loads`` is what
+    the bench times and a batch worker loads before it times its first file."""
+    module: str
+    loads: tuple[str, ...] = ()
 
-    return run_console(args.rig, args.out)
+
+#: every command, in ``fbs --help``'s order (``recover`` is defined by ``fbs.inspect``)
+COMMANDS: dict[str, Command] = {
+    "simulate": Command("fbs.simulate",
+                        ("simhw.simulator", "simhw.effects", "daq.runfile", "daq.reader")),
+    "record": Command("fbs.record", ("drivers.rig", "daq.recorder", "daq.reader")),
+    "clamp": Command("fbs.clamp", ("drivers.rig",)),
+    "console": Command("fbs.console", ("console.app",)),
+    "inspect": Command("fbs.inspect", ("daq.reader", "daq.recover")),
+    "recover": Command("fbs.inspect", ("daq.recover",)),
+    "spectra": Command("fbs.spectra", ("procedures.analysis.spectra", "daq.plots")),
+    "run": Command("fbs.run", ("drivers.rig", "procedures.params", "procedures.calibrations.*",
+                               "fbs.progress")),
+    "demo": Command("fbs.demo", ("drivers.rig", "procedures.params", "procedures.calibrations.*",
+                                 "fbs.progress", "simhw.plant")),
+    "analyze": Command("fbs.analyze",
+                       ("procedures.analysis.hysteresis", "procedures.analysis.transfer",
+                        "procedures.reports.hysteresis", "procedures.reports.excitation")),
+    "gap": Command("fbs.gap",
+                   ("procedures.analysis.gap.workflow", "procedures.analysis.gap.report")),
+    "batch": Command("fbs.batch"),
+    "campaign": Command("fbs.campaign",
+                        ("simhw.effects", "procedures.analysis.gap.grid", "daq.plots")),
+}
+
+
+def load(*commands: str) -> None:
+    """Import what ``commands`` need when they run (``COMMANDS[...].loads``), now."""
+    for name in (m for c in commands for m in COMMANDS[c].loads):
+        if name.endswith(".*"):
+            package = importlib.import_module(name[:-2])
+            for info in pkgutil.iter_modules(package.__path__):
+                importlib.import_module(f"{package.__name__}.{info.name}")
+        else:
+            importlib.import_module(name)
+
+
+def command_errors() -> tuple[type[Exception], ...]:
+    """What a command reports as ``fbs CMD: error: ...`` and exit 2 (``fbs batch`` records the
+    same per file): bad input, a file or a device. ``procedures.runner.ProcedureError`` is one
+    once the runner is loaded; before, none can have been raised, and this loads nothing."""
+    # simhw.params.ConfigError is a ValueError
+    errors: list[type[Exception]] = [ValueError, OSError, DriverError]
+    runner = sys.modules.get("procedures.runner")
+    if runner is not None:
+        errors.append(runner.ProcedureError)
+    return tuple(errors)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -44,29 +101,47 @@ def build_parser() -> argparse.ArgumentParser:
     # subparsers are made of the parser's own class: a usage error in any command exits 64
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
-    simulate.add_parser(sub)
-    record.add_parser(sub)
-    clamp.add_parser(sub)
-    c = sub.add_parser("console", help="the operator console (Textual): meters, modes, set-points, recording, "
-                                       "procedures, spectra")
-    c.add_argument("--rig", default="sim?realtime=1",
-                   help="rig URL (default: the simulated rig paced to the wall clock, 'sim?realtime=1')")
-    c.add_argument("--out", default="out", help="directory for recordings, procedure runs and console.log "
-                                                "(default: out)")
-    c.set_defaults(func=_console)
-
-    inspect.add_parser(sub)
-    spectra.add_parser(sub)
-    run.add_parser(sub)
-    demo.add_parser(sub)
-    analyze.add_parser(sub)
-    gap_cli.add_parser(sub)
-    batch.add_parser(sub)
-    campaign.add_parser(sub)
+    for module in dict.fromkeys(c.module for c in COMMANDS.values()):
+        importlib.import_module(module).add_parser(sub)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run one ``fbs`` command; its exit code. A reader that leaves early (``fbs ... | head``)
+    ends it quietly with ``EXIT_ERROR``: the output was not all written, and a traceback about
+    the pipe would only hide the lines that were."""
+    try:
+        try:
+            return _main(argv)
+        finally:
+            sys.stdout.flush()     # a closed pipe shows here, not at Python's exit ("ignored")
+    except BrokenPipeError:
+        _stdout_to_devnull()
+        return EXIT_ERROR
+
+
+def _stdout_to_devnull() -> None:
+    """Python's recipe (the ``signal`` module's docs, "Note on SIGPIPE"): what is still buffered
+    goes nowhere, so the flush at exit does not fail again."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (AttributeError, OSError, ValueError):   # not a real file (a test's capture)
+        pass
+
+
+def _stdout_gone() -> bool:
+    """stdout is a pipe whose reader has left (a broken pipe may be a socket's, a real error)."""
+    try:
+        poller = select.poll()
+        poller.register(sys.stdout.fileno(), select.POLLERR)
+        return bool(poller.poll(0))
+    except (AttributeError, OSError, ValueError):   # no poll (Windows), no fd (a test's capture)
+        return False
+
+
+def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)   # a usage error exits 64 here
     args.argv = argv
@@ -75,17 +150,32 @@ def main(argv: list[str] | None = None) -> int:
             # the console owns its terminal and its signals (Textual); every other command aborts alike
             with nullcontext() if args.command == "console" else aborting_on_signals():
                 return args.func(args)
-        except COMMAND_ERRORS as exc:
+        except command_errors() as exc:
+            if isinstance(exc, BrokenPipeError) and _stdout_gone():
+                raise              # stdout's reader left: main ends it quietly
             print(f"fbs {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
             return EXIT_ERROR
-        except KeyboardInterrupt:
-            print(f"fbs {args.command}: interrupted", file=sys.stderr)
+        except KeyboardInterrupt as exc:   # fbs.signals names the signal; Python's Ctrl-C: none
+            why = one_line(str(exc)) or "Ctrl-C"
+            print(f"fbs {args.command}: interrupted ({why})", file=sys.stderr)
             return EXIT_ERROR
         except Exception as exc:  # a defect of this program: said so, never "limits failed" (exit 1)
-            log.exception("fbs %s: internal error", args.command)
-            print(f"fbs {args.command}: internal error: {type(exc).__name__}: {one_line(str(exc))} (the traceback is above; "
-                  "please report it with the command line)", file=sys.stderr)
+            print(internal_error(args, exc), file=sys.stderr)
             return EXIT_ERROR
+
+
+def internal_error(args: argparse.Namespace, exc: Exception) -> str:
+    """The line that reports a defect, after its traceback: on stderr with ``-v``, else where
+    it was kept (a run's log, ``fbs.runlog``: its path is one of the exception's notes) or how
+    to see it. A user reads one line; whoever fixes it gets the traceback."""
+    notes = [one_line(str(n)) for n in getattr(exc, "__notes__", ())]
+    if args.verbose:
+        log.error("fbs %s: internal error", args.command, exc_info=exc)
+        where = "its traceback is above"
+    else:
+        where = "; ".join(notes) or f"`fbs -v {args.command} ...` shows its traceback"
+    return (f"fbs {args.command}: internal error: {type(exc).__name__}: {one_line(str(exc))} "
+            f"(a defect of fbs, please report it with the command line; {where})")
 
 
 if __name__ == "__main__":

@@ -20,19 +20,25 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from daq.runfile import make_folder
-from procedures.calibrations import get
 from procedures.reports import thesis
-from procedures.reports.report import fmt
-from procedures.runner import RunSummary
-from simhw.params import SimConfig, load_config
-from simhw.plant import linearized_poles
+
+if TYPE_CHECKING:   # the rig, the simulator and the procedures load when the demo runs
+    from procedures.runner import RunSummary
+    from simhw.params import SimConfig
 
 log = logging.getLogger(__name__)
 
 THESIS = thesis.FIGURES
+
+
+def fmt(value: object) -> str:
+    """``procedures.reports.report.fmt``, imported on use: the report writer is no part of
+    the parser (``fbs --version`` imports this module)."""
+    from procedures.reports.report import fmt as report_fmt
+
+    return report_fmt(value)
 
 
 @dataclass
@@ -47,6 +53,8 @@ class Row:
 
 def sim_values(cfg: SimConfig) -> dict[str, Any]:
     """The simulated rig's own values of what the campaign measures (for the report only)."""
+    from simhw.plant import linearized_poles
+
     stiff = {a: cfg.bearing[a].eta_per_Nm * cfg.bearing[a].To_Nm ** 2 for a in ("X", "Y")}
     return {
         "K_TO_urad_per_s_per_V": {c: g.torquer_scale_urad_per_s_per_V for c, g in cfg.gyro.items()},
@@ -93,10 +101,13 @@ CAMPAIGN: list[tuple[str, str | None, tuple[str, ...]]] = [
 
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
                  progress: Callable[[str], None] | None = None) -> tuple[list[RunSummary], Path]:
+    from daq.runfile import make_folder
     from drivers.rig import open_rig, with_param
     from fbs.progress import run_with_progress
     from fbs.runlog import RunLog
+    from procedures.calibrations import get
     from procedures.params import parse_params
+    from simhw.params import load_config
 
     cfg = load_config(cfg_path)        # a bad config or seed is refused before anything is made
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:

@@ -1,10 +1,10 @@
 """The ``fbs`` console script and ``python -m fbs``: the abort signals first, then the program.
 
-Loading the command line takes a second or two (numpy, scipy, h5py, numba); a Ctrl-C, SIGTERM
-or SIGHUP in that time printed a KeyboardInterrupt traceback, or ended the process as the
-signal's (exit 130/143/129). Nothing has been done yet then, so the handler says so and
-exits 2, as every other abort does (``fbs.usage``). ``fbs.cli.main`` puts the commands' own
-handlers (``fbs.signals``) in place once it runs.
+A Ctrl-C, SIGTERM or SIGHUP while the command line loads printed a KeyboardInterrupt
+traceback, or ended the process as the signal's (exit 130/143/129). Nothing has been done yet
+then, so the handler says so and exits 2, as every other abort does (``fbs.usage``).
+``fbs.cli.main`` puts the commands' own handlers (``fbs.signals``) in place once it runs; a
+command's numerics (numpy, scipy, h5py, numba: a second or two) load under those.
 """
 
 from __future__ import annotations

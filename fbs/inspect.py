@@ -19,14 +19,12 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import h5py
-import numpy as np
+if TYPE_CHECKING:   # h5py, numpy and the reader load when the command runs, not with the parser
+    import h5py
 
-from daq.reader import ContractError, RunFile, as_text, open_hdf5
-from daq.recover import Recovery, recover
-from daq.runfile import STATUS_RECORDING
+    from daq.recover import Recovery
 
 MAX_EVENTS = 200
 #: members of /channels (and root attributes) a broken file's description lists
@@ -35,6 +33,9 @@ MAX_LISTED = 64
 
 def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
     """The lines ``fbs inspect`` prints."""
+    from daq.reader import RunFile
+    from daq.runfile import STATUS_RECORDING
+
     with RunFile(path) as run:
         a = run.attrs
         lines = [f"{run.path}: {a.get('format')} version {a.get('format_version')}, created {a.get('created', '?')}"]
@@ -69,6 +70,8 @@ def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
 
 
 def _value(v: Any) -> str:
+    from daq.reader import as_text
+
     if isinstance(v, (bytes, str)):
         v = as_text(v)
     text = repr(v) if isinstance(v, str) else str(v).replace("\n", " ")
@@ -86,6 +89,8 @@ def _attrs(obj: Any, names: tuple[str, ...] | None = None) -> str:
 
 
 def _member_line(g: h5py.Group, name: str) -> str:
+    import h5py
+
     link = g.get(name, getlink=True)
     if isinstance(link, (h5py.ExternalLink, h5py.SoftLink)):
         target = f"{link.filename}:{link.path}" if isinstance(link, h5py.ExternalLink) else link.path
@@ -110,6 +115,10 @@ def _member_line(g: h5py.Group, name: str) -> str:
 def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
     """The lines ``fbs inspect`` prints for a file that breaks the layout contract: what HDF5
     reads of it, then each rule broken."""
+    import h5py
+
+    from daq.reader import as_text, open_hdf5
+
     lines = [f"{path}: HDF5, but not a valid fbs-run version 1 file (the rules it breaks are listed below)"]
     try:
         f, _swmr = open_hdf5(path)
@@ -145,6 +154,10 @@ def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
 
 def _plain(v: Any) -> Any:
     """An attribute value as JSON: text decoded, numpy scalars and arrays as Python's."""
+    import numpy as np
+
+    from daq.reader import as_text
+
     if isinstance(v, (bytes, str)):
         return as_text(v)
     if isinstance(v, np.generic):
@@ -164,6 +177,8 @@ def summary(path: str | Path, max_events: int = MAX_EVENTS) -> dict[str, Any]:
     ``n_samples``, ``duration_s``, ``channels`` {name: {``units``, ``samples``}}, the first
     ``max_events`` ``events`` [{``time_s``, ``kind``, ``text``}] of ``events_total``, and the
     names of its ``meta`` entries. A file that breaks the layout contract raises ``ContractError``."""
+    from daq.reader import RunFile
+
     with RunFile(path) as run:
         lengths = run.lengths
         events = run.events
@@ -194,6 +209,8 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _inspect(args: argparse.Namespace) -> int:
+    from daq.reader import ContractError
+
     if args.json:          # a broken file is only the error (exit 2), stdout stays empty
         print(json.dumps(json_result(args)))
         return 0
@@ -216,10 +233,14 @@ def recovery_json(r: Recovery) -> dict[str, Any]:
 
 def recover_json_result(args: argparse.Namespace) -> dict[str, Any]:
     """Recover the file; the object ``--json`` prints."""
+    from daq.recover import recover
+
     return recovery_json(recover(args.file, force=args.force))
 
 
 def _recover(args: argparse.Namespace) -> int:
+    from daq.recover import recover
+
     r = recover(args.file, force=args.force)
     print(json.dumps(recovery_json(r)) if args.json else r.summary())
     return 0

@@ -30,17 +30,16 @@ import socket
 import sys
 from pathlib import Path
 
-from drivers.rig import with_param
 from fbs.runlog import RunLog
 from fbs.usage import EXIT_CODES_HELP, one_line, version
-from procedures.calibrations import get, module_names
-from procedures.params import find_prior, parse_params
-from procedures.runner import ProcedureError, load_resume
+from procedures.calibrations import module_names
 
 log = logging.getLogger(__name__)
 
 
 def rig_url(args: argparse.Namespace) -> str:
+    from drivers.rig import with_param
+
     url = args.rig
     if args.sim_config is not None:
         if not (url == "sim" or url.startswith("sim?")):
@@ -50,9 +49,13 @@ def rig_url(args: argparse.Namespace) -> str:
 
 
 def run_command(args: argparse.Namespace) -> int:
+    # the rig, the procedures and the numerics load here: the parser (`fbs --version`) needs none
     from daq.runfile import make_folder
     from drivers.rig import open_rig
     from fbs.progress import run_with_progress
+    from procedures.calibrations import get
+    from procedures.params import find_prior, parse_params
+    from procedures.runner import ProcedureError, load_resume
 
     with RunLog() as runlog:
         # the log's first line (held until the log is named; never on stderr)
@@ -97,6 +100,15 @@ def run_command(args: argparse.Namespace) -> int:
     if summary.error:
         print(f"fbs run {proc.name}: {one_line(summary.error)}", file=sys.stderr)
     return summary.exit_code
+
+
+def param_text(text: str) -> str:
+    """``--param``'s ``NAME=VALUE`` form, else a usage error (64: the command line is wrong, not
+    a value). The value is checked against the procedure's limits later (exit 2)."""
+    name, sep, _ = text.partition("=")
+    if not sep or not name.strip():
+        raise argparse.ArgumentTypeError(f"{text!r}: use NAME=VALUE, e.g. repetitions=4")
+    return text
 
 
 def procedure_name(text: str) -> str:
@@ -149,7 +161,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--resume", metavar="FILE",
                    help="continue an aborted run from its last completed step; "
                         "a complete run: analyse it again (its summary and report rewritten)")
-    r.add_argument("--param", action="append", metavar="NAME=VALUE",
+    r.add_argument("--param", action="append", metavar="NAME=VALUE", type=param_text,
                    help="a procedure parameter (repeatable; `fbs run PROCEDURE --help` lists them)")
     r.add_argument("--prior", action="append", metavar="SUMMARY.json",
                    help="an earlier procedure's summary to use (default: the newest in --out)")

@@ -6,7 +6,9 @@ The file's name is only known once the run's arguments have been checked and the
 part of the story. ``RunLog`` therefore holds the command's records in memory from its start
 and writes them out when ``open`` names the file; from then on records go straight to it.
 The levels are the command's (``fbs.logsetup``): the project's INFO (DEBUG with ``-v``) and
-other libraries' warnings, plus the plain progress lines.
+other libraries' warnings, plus the plain progress lines. An exception that ends the block
+leaves its traceback here (not on stderr) and a note on the exception naming the file, which
+``fbs.cli`` reports an internal error with.
 """
 
 from __future__ import annotations
@@ -84,6 +86,12 @@ class RunLog:
 
     def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
                  tb: TracebackType | None) -> None:
+        if isinstance(exc, Exception) and self._file is not None:
+            # the traceback of what ended the run belongs with the run; stderr gets it only
+            # with -v, so the command line's one line says where it is (fbs.cli)
+            log.error("the run ended by %s", type(exc).__name__, exc_info=exc,
+                      extra={"stderr": False})
+            exc.add_note(f"its traceback is in {self.path}")
         root = logging.getLogger()
         if self._held is not None:
             root.removeHandler(self._held)

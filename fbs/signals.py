@@ -1,6 +1,7 @@
 """One abort path for every command: SIGINT, SIGTERM and SIGHUP each raise ``KeyboardInterrupt``
-in the main thread, so whatever is running unwinds through its own guards (the rig to the
-safe state and read back, the run file closed "aborted: interrupted") and the command exits 2.
+(``Signalled``, naming the signal) in the main thread, so whatever is running unwinds through
+its own guards (the rig to the safe state and read back, the run file closed "aborted:
+interrupted") and the command exits 2, its message naming the signal.
 
 SIGINT is set too, not left as inherited: a command started from a script or as a background
 job of a non-interactive shell inherits SIGINT *ignored*, and ``kill -INT`` then did nothing
@@ -20,8 +21,14 @@ from types import FrameType
 ABORT_SIGNALS = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None)
 
 
+class Signalled(KeyboardInterrupt):
+    """The ``KeyboardInterrupt`` an abort signal raises; its text is the signal's name
+    ("SIGTERM"), so what reports the abort names the signal that came (Python's own Ctrl-C
+    is a bare ``KeyboardInterrupt``: no text)."""
+
+
 def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
+    raise Signalled(signal.Signals(signum).name)
 
 
 @contextmanager

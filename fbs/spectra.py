@@ -8,12 +8,16 @@ from __future__ import annotations
 import argparse
 import json
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from procedures.analysis.spectra import SpectraResult, default_out_dir, spectra_command
+if TYPE_CHECKING:
+    from procedures.analysis.spectra import SpectraResult
 
 
 def _compute(args: argparse.Namespace) -> SpectraResult:
+    # the numerics load when the command runs, not with the parser (`fbs --version`)
+    from procedures.analysis.spectra import default_out_dir, spectra_command
+
     channels = [c for c in args.channels.split(",") if c.strip()]
     out = Path(args.out) if args.out else default_out_dir(args.file)
     return spectra_command(args.file, channels, out, seg_s=args.seg_s)

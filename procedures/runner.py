@@ -506,7 +506,9 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
     except BaseException as exc:  # noqa: B036 - Ctrl-C included: the summary must say what was done
         summary.status = acq.result.status if acq.result.status.startswith("aborted") else abort_status(exc)
         summary.verdict = Verdict.ABORTED
-        summary.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, KeyboardInterrupt) else "interrupted (Ctrl-C)"
+        # a signal's KeyboardInterrupt carries its name (fbs.signals); Python's own Ctrl-C none
+        summary.error = (f"interrupted ({str(exc) or 'Ctrl-C'})"
+                         if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}")
         log.error("%s aborted in step %r: %s; rig safe: %s", proc.name, ctx.step.name if ctx.step else "-",
                   summary.error, _safe_text(rig))
         _finish_report(proc, summary, None, out_dir, report)

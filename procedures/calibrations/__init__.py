@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
+from typing import TYPE_CHECKING
 
-from procedures.runner import Procedure
+if TYPE_CHECKING:   # module_names() must not load the runner (numpy, h5py): fbs's parser calls it
+    from procedures.runner import Procedure
 
 
 def catalogue() -> dict[str, type[Procedure]]:

@@ -59,13 +59,19 @@ def _signalled(args: list[str], path, sig: signal.Signals, events: int = 0) -> s
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
 def test_a_signal_aborts_a_recording_to_the_safe_state(tmp_path, sig):
     path = tmp_path / "r.h5"
-    _signalled(["record", "--rig", "sim", "--mode", "3", "--duration", "100000", "--rate", "100", "--out", str(path)],
-               path, sig)
+    err = _signalled(["record", "--rig", "sim", "--mode", "3", "--duration", "100000", "--rate", "100",
+                      "--out", str(path)], path, sig)
+    assert f"fbs record: interrupted ({sig.name})" in err, err   # the signal that came (issue 37)
 
 
-def test_sighup_aborts_a_procedure_to_the_safe_state(tmp_path):
-    _signalled(["run", "stopwatch", "--rig", "sim?warm=1", "--out", str(tmp_path)], tmp_path / "stopwatch.h5",
-               signal.SIGHUP, events=1)
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
+def test_a_signal_aborts_a_procedure_to_the_safe_state_naming_it(tmp_path, sig):
+    """Issue 37 item 10: after SIGTERM ``fbs run`` said "interrupted (Ctrl-C)"."""
+    err = _signalled(["run", "stopwatch", "--rig", "sim?warm=1", "--out", str(tmp_path)],
+                     tmp_path / "stopwatch.h5", sig, events=1)
+    assert f"fbs run stopwatch: interrupted ({sig.name})" in err and "Ctrl-C" not in err, err
+    summary = json.loads((tmp_path / "stopwatch.json").read_text())
+    assert summary["error"] == f"interrupted ({sig.name})", summary
 
 
 def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path):
