@@ -168,12 +168,13 @@ def _rows(summaries: list[RunSummary], sim: dict[str, Any]) -> list[Row]:
         axis = s.params.get("axis", "X")
         for key, label, units in (("To_Nm", "To", "N m"), ("eta_per_Nm", "eta", "1/(N m)"),
                                   ("stiffness_Nm_per_rad", "stiffness eta To^2", "N m/rad")):
-            iv = s.values.get(f"{key}_ci95")
+            # per axis, as every figure (issue 37)
+            iv = (s.values.get(f"{key}_ci95") or {}).get(axis)
             note = "" if not iv or iv[0] is None else f"95 % [{fmt(iv[0])}, {fmt(iv[1])}]"
             if ((s.values.get("resolved") or {}).get(key) or {}).get(axis) is False:
                 note = "not resolved" + (f": {note}" if note else "")
-            rows.append(Row(f"{label} {axis}", units, s.values.get(key), THESIS[key].get(axis), sim[key].get(axis),
-                            note))
+            rows.append(Row(f"{label} {axis}", units, (s.values.get(key) or {}).get(axis),
+                            THESIS[key].get(axis), sim[key].get(axis), note))
     for s in by_name.get("survey", []):
         for ch, v in (s.values.get("dip_hz") or {}).items():
             rows.append(Row(f"closed-loop dip {ch}", "Hz", v, THESIS["dip_hz"].get(ch), sim["dip_hz"].get(ch),

@@ -23,16 +23,21 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import os
 import shlex
 import shutil
 import socket
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fbs.runlog import RunLog
 from fbs.usage import EXIT_CODES_HELP, one_line, version
 from procedures.calibrations import module_names
+
+if TYPE_CHECKING:
+    from procedures.runner import Measurement
 
 log = logging.getLogger(__name__)
 
@@ -87,19 +92,34 @@ def run_command(args: argparse.Namespace) -> int:
         log.info("fbs run %s: %s (%s); file %s; report %s", proc.name, summary.verdict, summary.status,
                  summary.file, summary.report, extra={"progress": True})
     if args.json:
-        print(json.dumps(summary.json_values(proc_cls.json_keys)))
+        print(json.dumps(summary.json_result(proc)))
     else:
-        print(f"fbs run {proc.name}: {summary.verdict} ({summary.status}); file {summary.file}; "
-              f"report {summary.report}; log {runlog.path}")
+        made = summary.provenance
+        sim = "simulated" if made.get("simulated") else "hardware"
+        print(f"fbs run {proc.name}: {summary.verdict} ({summary.status}) on rig "
+              f"{made.get('rig')} ({sim}); file {summary.file}; report {summary.report}; "
+              f"log {runlog.path}")
         for m in summary.measurements:
-            mark = {True: "pass", False: "FAIL", None: ""}[m.passed]
-            err = f" ± {m.stderr:.3g}" if m.stderr is not None else ""
-            print(f"  {m.name}: {m.value:.6g}{err} {m.units} {mark}" if m.value is not None else f"  {m.name}: -")
+            print(f"  {measurement_line(m)}")
         if summary.error:
             print(f"  error: {one_line(summary.error)}")
     if summary.error:
         print(f"fbs run {proc.name}: {one_line(summary.error)}", file=sys.stderr)
     return summary.exit_code
+
+
+def measurement_line(m: Measurement) -> str:
+    """One measurement as the text summary prints it; a NaN standard error (one repetition)
+    reads "not resolved", never "± nan"; a failed one says why."""
+    if m.value is None:
+        return f"{m.name}: -"
+    mark = {True: "pass", False: "FAIL", None: ""}[m.passed]
+    if m.stderr is None:
+        err = ""
+    else:
+        err = f" ± {m.stderr:.3g}" if math.isfinite(m.stderr) else " (not resolved)"
+    why = f" ({m.note})" if m.passed is False and m.note else ""
+    return f"{m.name}: {m.value:.6g}{err} {m.units} {mark}{why}"
 
 
 def param_text(text: str) -> str:
@@ -156,8 +176,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--sim-config", help="TOML sim config for the simulated rig")
     r.add_argument("--axis", help="the axis or gyro channel to measure (procedure-dependent)")
     r.add_argument("--out", default="out", help="directory for the run file, summary, report and log (default: out)")
-    r.add_argument("--json", action="store_true", help="print the procedure's figures as one JSON object on stdout "
-                   "(keys: its figures, each figure's K_ci95 and resolved, file)")
+    r.add_argument("--json", action="store_true",
+                   help="print the result as one JSON object on stdout (procedure, status, verdict, "
+                   "rig, simulated, sim_config, software, time; its figures per channel with "
+                   "K_ci95 and resolved; file): docs/schema/run-summary.schema.json")
     r.add_argument("--resume", metavar="FILE",
                    help="continue an aborted run from its last completed step; "
                         "a complete run: analyse it again (its summary and report rewritten)")

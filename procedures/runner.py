@@ -49,12 +49,14 @@ from typing import TYPE_CHECKING, Any, ClassVar, Generic, Literal, TypeVar, over
 
 import numpy as np
 
+from daq import provenance
 from daq.reader import Event, RunFile
 from daq.recorder import Acquisition
 from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status, make_folder
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
 from procedures import paramtypes
+from procedures.analysis.intervals import finite_json
 from procedures.progress import ANALYSING, ANALYSIS_SHARE, DONE, WRITING_REPORT, ProgressModel
 from procedures.progress import Progress as Progress  # re-exported: listeners import it here
 from procedures.progress import ProgressListener as ProgressListener
@@ -122,7 +124,7 @@ class Measurement:
         return ""
 
     def to_json(self) -> dict[str, Any]:
-        return dataclasses.asdict(self) | {"passed": self.passed}
+        return finite_json(dataclasses.asdict(self) | {"passed": self.passed})
 
 
 @dataclass
@@ -246,6 +248,13 @@ class Procedure(abc.ABC, Generic[P]):
         """After the steps: measurements from ``ctx.results`` and the data steps' samples
         (``ctx.spans``, ``ctx.data_spans``)."""
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures (keys of ``json_keys``, bookkeeping and ``file`` left out) and
+        the channels each is reported for, known from the parameters before the run: the
+        ``--json`` keeps this shape on every path, an abort included, and a run with none of
+        them measured is no pass (``headline_measurement``). Empty: no such rule."""
+        return {}
+
     def params_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self.params)
 
@@ -367,29 +376,53 @@ class RunSummary:
     error: str | None = None
     report: Path | None = None
     analysis: Analysis | None = None
+    #: the rig, simulated or not, software and time (``daq.provenance``)
+    provenance: dict[str, Any] = field(default_factory=dict)
 
     @property
     def exit_code(self) -> int:
         """DESIGN.md section 7: 0 pass, 1 limits failed, 2 aborted or error."""
         return self.verdict.exit_code
 
-    def json_values(self, keys: tuple[str, ...]) -> dict[str, Any]:
+    def json_values(self, keys: tuple[str, ...],
+                    headline: Mapping[str, Sequence[str]] | None = None) -> dict[str, Any]:
         """The keys of DESIGN.md section 7 (None where not measured), with each figure's
         ``K_ci95`` and the ``resolved`` map where the analysis gives them
-        (``procedures.analysis.intervals.add_figure``)."""
-        out = {k: self.values.get(k) for k in keys}
+        (``procedures.analysis.intervals.add_figure``). A ``headline`` figure has one shape
+        on every path: ``{channel: value | None}``, ``K_ci95`` ``{channel: [lo, hi] | None}``
+        and ``resolved[K]`` ``{channel: bool}`` (an abort: every channel None and False; a
+        figure the analysis gives no interval: ``K_ci95`` None, resolved where measured)."""
+        headline = {k: v for k, v in (headline or {}).items() if k in keys}
+        given = self.values.get("resolved") or {}
+        out: dict[str, Any] = {k: self.values.get(k) for k in keys}
         out |= {f"{k}_ci95": self.values[f"{k}_ci95"] for k in keys if f"{k}_ci95" in self.values}
         # the verdicts of the keys printed: a figure kept out of the JSON keeps its verdict out too
-        resolved = {k: v for k, v in (self.values.get("resolved") or {}).items() if k in keys}
+        resolved = {k: v for k, v in given.items() if k in keys}
+        for k, channels in headline.items():
+            got, ci, ok = (v if isinstance(v, dict) else {}
+                           for v in (out[k], out.get(f"{k}_ci95"), given.get(k)))
+            chans = list(dict.fromkeys([*channels, *got]))
+            out[k] = {c: got.get(c) for c in chans}
+            out[f"{k}_ci95"] = {c: ci.get(c) for c in chans}
+            # resolved only with a value: a null figure is never "resolved"
+            resolved[k] = {c: got.get(c) is not None and bool(ok.get(c, True)) for c in chans}
         if resolved:
             out["resolved"] = resolved
         if "file" in keys:
             out["file"] = str(self.file) if self.file else None
-        return out
+        return finite_json(out)
+
+    def json_result(self, proc: Procedure[Any]) -> dict[str, Any]:
+        """What ``fbs run --json`` prints: the procedure, its status and verdict, where the
+        result came from (``daq.provenance``), then ``json_values`` (docs/schema/)."""
+        return {"procedure": self.procedure, "status": self.status, "verdict": str(self.verdict),
+                **{k: self.provenance.get(k) for k in provenance.KEYS},
+                **self.json_values(proc.json_keys, proc.headline())}
 
     def to_json(self) -> dict[str, Any]:
         return {"procedure": self.procedure, "file": str(self.file) if self.file else None, "status": self.status,
-                "verdict": self.verdict, "values": self.values,
+                "verdict": self.verdict, **{k: self.provenance.get(k) for k in provenance.KEYS},
+                "values": self.values,
                 "measurements": [m.to_json() for m in self.measurements], "steps_done": self.steps_done,
                 "steps_resumed": self.steps_resumed, "steps_planned": self.steps_planned,
                 "spans": {name: s.to_json() for name, s in self.spans.items()}, "params": self.params, "error": self.error,
@@ -479,7 +512,8 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
     make_folder(out_dir)
     path = next_free(out_dir, proc.name)
     abort = abort or threading.Event()
-    summary = RunSummary(proc.name, path, "aborted: not started", Verdict.ERROR, params=proc.params_json())
+    summary = RunSummary(proc.name, path, "aborted: not started", Verdict.ERROR,
+                         params=proc.params_json(), provenance=provenance.of_rig(rig))
     meta = {"procedure": {"name": proc.name, "title": proc.title, "params": proc.params_json(),
                           "resumed_from": str(resume.path) if resume else None},
             "calibration": dataclasses.asdict(rig.calibration),
@@ -523,8 +557,10 @@ def _analyse_again(proc: Procedure[Any], rig: Rig, resume: Resumed, abort: threa
     summary and report are rewritten beside it. The rig is only asked for its calibration."""
     path = resume.path
     log.info("%s: %s is complete: analysing it again", proc.name, path)
+    with RunFile(path) as rf:   # the data's rig, not the one asked for its calibration now
+        made = provenance.of_file(rf)
     summary = RunSummary(proc.name, path, STATUS_COMPLETE, Verdict.ERROR,
-                         params=proc.params_json())
+                         params=proc.params_json(), provenance=made)
     ctx = Context(proc, rig, None, progress=None, abort=abort, path=path)
     ctx.steps = list(proc.plan())
     ctx.results, ctx.spans = dict(resume.results), dict(resume.spans)
@@ -556,6 +592,9 @@ def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: P
         return
     summary.analysis = analysis
     summary.values = analysis.values
+    unmeasured = headline_measurement(proc, analysis.values)
+    if unmeasured is not None:
+        analysis.measurements.append(unmeasured)
     summary.measurements = analysis.measurements
     summary.verdict = Verdict.FAIL if any(m.passed is False for m in analysis.measurements) else Verdict.PASS
     if report:
@@ -605,6 +644,22 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
             ctx._model.step_done(i, ctx.time_s)
 
 
+def headline_measurement(proc: Procedure[Any], values: Mapping[str, Any]) -> Measurement | None:
+    """The verdict rule (README, exit codes): a run none of whose headline figures is measured
+    on any channel (each None: unresolved or not made) is no pass. Then a failing measurement
+    that says so (the verdict "fail", exit 1, in the text, the JSON and the report alike);
+    else None."""
+    headline = proc.headline()
+    if not headline:
+        return None
+    measured = [v for k in headline if isinstance(values.get(k), dict) for v in values[k].values()
+                if isinstance(v, int | float) and math.isfinite(v)]   # NaN prints as null: none
+    if measured:
+        return None
+    return Measurement("headline figures measured", 0.0, "", lo=1.0,
+                       note=f"none of {', '.join(headline)} resolved on any channel: not a pass")
+
+
 def _step_done_text(done: Mapping[str, Any]) -> str:
     text = json.dumps(done, default=_jsonable, separators=(",", ":"))
     if len(text.encode()) > TEXT_BYTES:  # a cut result could not be resumed from: a bug in the procedure
@@ -626,6 +681,7 @@ def _finish_report(proc: Procedure[Any], summary: RunSummary, analysis: Analysis
     from procedures.reports.textfile import write_text_atomic
 
     stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem
+    summary.provenance["time"] = provenance.utc_now()   # the result's time: now it is made
     # the report first, the summary last: a summary never names a report that is not there
     if report:
         try:

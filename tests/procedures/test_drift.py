@@ -18,6 +18,7 @@ from procedures.analysis.drift import analyze_channels, coupling_terms, reconstr
 from procedures.calibrations import catalogue
 from procedures.calibrations.drift import Drift, Params
 from procedures.runner import load_resume, merge_spans, run_procedure, steps_done
+from tests.result_schema import assert_valid_result
 
 from .conftest import assert_spans_are_the_record_steps
 
@@ -33,7 +34,7 @@ def test_catalogued_with_the_design_keys():
 
 
 def test_params_are_checked():
-    with pytest.raises(ValueError, match="must start at >= 2 samples"):
+    with pytest.raises(ValueError, match=r"fit_tau_lo_s = .* must be >= 2 samples"):
         Params(rate_hz=2.0, fit_tau_lo_s=0.5)
     with pytest.raises(ValueError, match="is empty"):
         Params(loop_band_lo_hz=3.0)
@@ -223,6 +224,7 @@ def test_default_rig(tmp_path):
     s = _run(tmp_path, "sim?warm=1&watchdog=5&seed=3", duration_s=2400.0, n_chunks=4)
     assert s.exit_code == 0, (s.error, [m for m in s.measurements if m.passed is False])
     assert set(s.json_values(Drift.json_keys)) >= set(Drift.json_keys) | {"resolved"}
+    assert_valid_result(s.json_result(Drift()))   # what `fbs run --json` prints (issue 37)
     n_true, b_true = _sim_gyro("arw_urad_per_sqrt_s"), _sim_gyro("bias_instability_urad_per_s")
     arw, bi = _figure(s, "arw_urad_per_sqrt_s"), _figure(s, "bias_instability_urad_per_s")
     for ch in CHANNELS:
@@ -321,7 +323,10 @@ def test_abort_and_resume_continue_the_record(tmp_path):
         assert first.steps_done == ["mode 3", "settle", "record 1/4", "record 2/4"]
         resumed = load_resume(first.file, "drift")
         second = run_procedure(Drift(Drift.Params(**resumed.params)), rig, tmp_path, resume=resumed)
-    assert second.exit_code == 0, second.error
+    # 600 s resolves neither figure on any channel: complete, but no pass (issue 37, item 2)
+    assert second.status == "complete" and second.error is None, second.error
+    assert [m.name for m in second.measurements if m.passed is False] == ["headline figures measured"]
+    assert second.exit_code == 1
     assert second.steps_resumed == ["record 1/4", "record 2/4"]
     assert second.file != first.file
     length = next(m for m in second.measurements if m.name == "record length")

@@ -159,10 +159,12 @@ def test_the_1_over_f_bank_is_the_one_it_always_was():
     # their meaning; the default knee and slope, with any corner, take the same path.
     for kw in ({}, {"corner_hz": 4.0, "knee": 1.0, "slope": 1.0}):
         x = FlickerNoise(np.random.default_rng(2024), 2.0, 1e-3, 50.0, 1 / 200, **kw).take(10000)
-        np.testing.assert_array_equal(x[[0, 1, 4095, 4096, 9999]],
-                                      [4.160731585630371, 1.5020410645385502, -5.8879345619245615,
-                                       -2.1265285783348706, 1.0773457191192592])
-        assert float(np.sum(x)) == -3610.1439824436297
+        # to rounding: the filters' last bits move with the numpy/scipy build (a fresh venv read
+        # 1.5020410645385511 for ...502); another path or seed differs in the first digit
+        np.testing.assert_allclose(x[[0, 1, 4095, 4096, 9999]],
+                                   [4.160731585630371, 1.5020410645385502, -5.8879345619245615,
+                                    -2.1265285783348706, 1.0773457191192592], rtol=1e-12, atol=0)
+        assert float(np.sum(x)) == pytest.approx(-3610.1439824436297, rel=1e-12)
 
 
 @pytest.mark.parametrize("knee", [0.0, 0.3, 1.0])
