@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from daq import provenance
 from daq.runfile import STATUS_COMPLETE, STATUS_RECORDING, RunFileError, RunWriter, abort_status
 from drivers.adc import AdcBlock
 from drivers.errors import DriverError, SampleGap
@@ -72,6 +73,8 @@ class Acquisition:
         self.mode = rig.relays.status().mode if mode is None else mode
         meta = dict(meta or {}) | {"adc": {"channels": list(self.cfg.channels), "rate_hz": self.rate_hz,
                                            "ranges_V": self.cfg.ranges_V, "identity": rig.adc.identity.__dict__}}
+        # which rig, simulated or not, which software: every file says (daq.provenance)
+        meta.setdefault("provenance", provenance.of_rig(rig))
         self.writer = RunWriter(path, rig=rig.url, mode=self.mode, rate_hz=self.rate_hz,
                                 channels=dict.fromkeys(self.channels, "V"), procedure=procedure, axis=axis,
                                 meta=meta, overwrite=overwrite, flush_s=flush_s)

@@ -80,8 +80,14 @@ class Rig:
     def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
                  caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
                  link: CanLink | None = None, safe_nodes: Sequence[CanopenClient] = (),
-                 closers: Sequence[Callable[[], None]] = (), emulator: Any = None) -> None:
+                 closers: Sequence[Callable[[], None]] = (), emulator: Any = None,
+                 simulated: bool = False, sim_config: Mapping[str, str] | None = None) -> None:
         self.url = url
+        #: what the rig states about itself, for every result's provenance: a simulated rig
+        #: says so (its scheme sets it), never guessed from the URL's text; its config file
+        #: as {"path", "sha256"} (None: the built-in one, or hardware)
+        self.simulated = simulated
+        self.sim_config = dict(sim_config) if sim_config is not None else None
         #: the rig's data sheet (instrument constants, set-point limits)
         self.calibration = torquers.limits.calibration
         #: watches the gyro modes while they are in force (every block read passes it)
@@ -442,11 +448,13 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
               calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
               reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None,
               monotonic: Callable[[], float] = time.monotonic, connect_s: float = CONNECT_WINDOW_S,
-              listen_s: float = 0.0) -> Rig:
+              listen_s: float = 0.0, simulated: bool = False,
+              sim_config: Mapping[str, str] | None = None) -> Rig:
     """The rig from its ADC port and CAN bus. ``monotonic``: the drivers' deadline clock (the
     wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s).
     ``connect_s``: how long the nodes have to answer; ``listen_s``: how long to listen for
-    another host first (``CanLink``). ``closers`` run when the rig closes."""
+    another host first (``CanLink``). ``closers`` run when the rig closes. ``simulated`` and
+    ``sim_config``: what the rig states about itself (``Rig.simulated``)."""
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
@@ -479,7 +487,8 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         rig = Rig(url=url, adc=adc, relays=relays, torquers=torquers,
                   commands=commands, caging=caging, table=tab,
                   clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
-                  closers=[link.close, *(closers or [])], emulator=emulator)
+                  closers=[link.close, *(closers or [])], emulator=emulator, simulated=simulated,
+                  sim_config=sim_config)
     except BaseException:
         if adc is not None:
             adc.close()

@@ -11,6 +11,14 @@ and taken out) and ``file`` as one JSON object on stdout;
 ``--out DIR`` writes the plots and a Markdown summary there. A file that cannot be analysed
 is a ValueError naming the problem (exit 2).
 
+Both ``--json`` objects start as ``fbs run``'s do (``docs/schema/run-summary.schema.json``):
+``analysis``, ``procedure`` (the analysed run's, None for a plain recording), ``status``,
+``verdict`` and where the data came from (``daq.provenance``: the file's rig and whether it
+was simulated; this software and the time now). The verdict follows ``fbs run``'s rule: no
+headline figure resolved (hysteresis: To, eta, stiffness; transfer: any of the fit's, when a
+fit is made) is "fail", exit 1. Ctrl-C (SIGTERM, SIGHUP) during the analysis prints the same
+object "aborted", every figure None, and exits 2.
+
 ``fbs analyze transfer FILE.h5 --from A --to B [--via R] [--fit network|platform]
 [--period S] [--start S] [--stop S] [--json] [--out DIR]``: the frequency response from channel A
 to channel B (H1 = S_AB / S_AA, or S_RB / S_RA through an injected signal R inside a closed loop)
@@ -28,6 +36,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -65,20 +74,74 @@ def _analyse(args: argparse.Namespace) -> tuple[HysteresisResult, list[Path]]:
     return res, written
 
 
+#: exit code of each verdict (README: 0 pass, 1 no headline figure resolved, 2 aborted)
+EXIT = {"pass": 0, "fail": 1, "aborted": 2}
+
+
+def header(analysis: str, file: str | Path, verdict: str,
+           status: str = "complete") -> dict[str, Any]:
+    """What every analysis's ``--json`` starts with: what ran, how it ended, on whose data."""
+    from daq import provenance
+    from daq.reader import RunFile
+
+    with RunFile(file) as rf:
+        made = provenance.of_file(rf)
+        procedure = rf.attrs.get("procedure")
+    return {"analysis": analysis, "procedure": str(procedure) if procedure is not None else None,
+            "status": status, "verdict": verdict, **made}
+
+
+def verdict_of(resolved: Any) -> str:
+    """The verdict rule of ``fbs run``: "fail" when no headline figure is resolved anywhere
+    (``resolved`` nested dicts of bools; None: no figure asked for, "pass")."""
+    def any_true(v: Any) -> bool:
+        return any(any_true(x) for x in v.values()) if isinstance(v, dict) else v is True
+    return "pass" if resolved is None or any_true(resolved) else "fail"
+
+
+def _aborted(args: argparse.Namespace, analysis: str, empty: dict[str, Any]) -> int:
+    """Ctrl-C during an analysis with ``--json``: the object says so (exit 2)."""
+    print(json.dumps(header(analysis, args.file, "aborted", "aborted: interrupted") | empty))
+    print(f"fbs analyze {analysis}: interrupted", file=sys.stderr)
+    return EXIT["aborted"]
+
+
 def json_result(args: argparse.Namespace) -> dict[str, Any]:
     """The object ``--json`` prints (``fbs batch analyze-hysteresis`` collects the same)."""
-    return _analyse(args)[0].values()
+    from procedures.analysis.intervals import finite_json
+
+    values = _analyse(args)[0].values()
+    return finite_json(header("hysteresis", args.file, verdict_of(values["resolved"])) | values)
+
+
+def _hysteresis_aborted(args: argparse.Namespace) -> dict[str, Any]:
+    """The figures of an interrupted analysis: the shape of ``HysteresisResult.values``."""
+    from procedures.analysis.hysteresis import FIGURES
+
+    axis = str(args.axis).upper()
+    out: dict[str, Any] = {k: {axis: None} for k in FIGURES}
+    out |= {f"{k}_ci95": {axis: None} for k in FIGURES}
+    return out | {"resolved": {k: {axis: False} for k in FIGURES}, "angle_lag_ms": None,
+                  "file": str(args.file)}
 
 
 def _hysteresis(args: argparse.Namespace) -> int:
     from procedures.reports.hysteresis import CAL_SOURCES
 
     if args.json:
-        print(json.dumps(json_result(args)))
-        return 0
+        try:
+            out = json_result(args)
+        except KeyboardInterrupt:
+            return _aborted(args, "hysteresis", _hysteresis_aborted(args))
+        print(json.dumps(out))
+        return EXIT[out["verdict"]]
     res, written = _analyse(args)
-    print(f"fbs analyze hysteresis {res.file}: axis {res.axis}, {len(res.loops)} amplitudes at "
-          f"{res.frequency_hz:.4g} Hz; instrument constants: {CAL_SOURCES[res.calibration_source]}")
+    verdict = verdict_of(res.values()["resolved"])
+    made = header("hysteresis", args.file, verdict)
+    print(f"fbs analyze hysteresis {res.file}: {verdict}; axis {res.axis}, {len(res.loops)} "
+          f"amplitudes at {res.frequency_hz:.4g} Hz; instrument constants: "
+          f"{CAL_SOURCES[res.calibration_source]}; rig {made['rig']} "
+          f"({_simulated_text(made['simulated'])})")
     for key, label, unit in (("To_Nm", "To                ", "N m"), ("eta_per_Nm", "eta               ", "1/(N m)"),
                              ("stiffness_Nm_per_rad", "stiffness eta To^2", "N m/rad")):
         e = res.estimates[key]
@@ -97,7 +160,13 @@ def _hysteresis(args: argparse.Namespace) -> int:
         print(f"  warning: {w}")
     for p in written:
         print(f"  wrote {p}")
-    return 0
+    return EXIT[verdict]
+
+
+def _simulated_text(simulated: bool | None) -> str:
+    if simulated is None:
+        return "simulated or not: the file does not say"
+    return "simulated" if simulated else "hardware"
 
 
 def _transfer_model(args: argparse.Namespace) -> str | None:
@@ -140,6 +209,7 @@ def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]
     from drivers.calibration import RigCalibration
     from procedures.analysis import transfer as tf
     from procedures.analysis.hysteresis import calibration_from_meta
+    from procedures.analysis.intervals import finite_json
 
     names = [c for c in (args.via, args.source, args.target) if c]
     _check_transfer_options(args)
@@ -166,6 +236,7 @@ def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]
                            "measured": _measured_table(resp)}
     model = _transfer_model(args)
     fit = None
+    out = header("transfer", args.file, "pass") | out
     lo = max(args.lo_hz, blocks.lowest_fit_hz)
     if model == "network":
         fit = tf.fit_network(resp, lo, args.hi_hz or 100.0)
@@ -177,7 +248,8 @@ def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]
         fit = tf.fit_platform(resp, cal.platform[axis], cal.autocollimator[axis], lo, args.hi_hz or 50.0)
     out["model"] = model
     out["fit"] = fit.values() if fit is not None else None
-    return out, resp, fit
+    out["verdict"] = verdict_of(out["fit"]["resolved"] if out["fit"] is not None else None)
+    return finite_json(out), resp, fit
 
 
 def _r4(v: Any) -> float | None:
@@ -208,7 +280,14 @@ def _measured_table(resp: Any) -> dict[str, list[Any]]:
 def _transfer(args: argparse.Namespace) -> int:
     from procedures.reports.excitation import plot_response
 
-    out, resp, fit = transfer_result(args)
+    try:
+        out, resp, fit = transfer_result(args)
+    except KeyboardInterrupt:
+        if not args.json:
+            raise
+        empty = {"file": str(args.file), "from": args.source, "to": args.target, "via": args.via,
+                 "measured": None, "model": None, "fit": None}
+        return _aborted(args, "transfer", empty)
     if args.out:
         d = Path(args.out)
         from daq.runfile import make_folder
@@ -218,10 +297,11 @@ def _transfer(args: argparse.Namespace) -> int:
         out["plot"] = str(png)
     if args.json:
         print(json.dumps(out))
-        return 0
+        return EXIT[out["verdict"]]
     via = f" via {args.via}" if args.via else ""
-    print(f"fbs analyze transfer {args.file}: {args.source} -> {args.target}{via}, {out['blocks']} blocks, "
-          f"{out['seconds']:g} s")
+    print(f"fbs analyze transfer {args.file}: {out['verdict']}; {args.source} -> {args.target}"
+          f"{via}, {out['blocks']} blocks, {out['seconds']:g} s; rig {out['rig']} "
+          f"({_simulated_text(out['simulated'])})")
     m = out["measured"]
     print("    f (Hz)   gain (dB) [95 %]          phase (deg) [95 %]        coherence")
     for k, f in enumerate(m["f_hz"]):
@@ -236,7 +316,7 @@ def _transfer(args: argparse.Namespace) -> int:
                   + ("" if e.resolved else f" (not resolved: {e.why})"))
     if args.out:
         print(f"  wrote {out['plot']}")
-    return 0
+    return EXIT[out["verdict"]]
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

@@ -26,12 +26,15 @@ MAX_RATE_HZ = 100_000.0
 
 def simulate_to_file(cfg: SimConfig, out: str | Path, *, mode: int, duration_s: float, rate_hz: float,
                      seed: int = 0, truth: bool = False, effects: list[str] | None = None,
-                     block_s: float = 10.0, overwrite: bool = False) -> Path:
+                     block_s: float = 10.0, overwrite: bool = False,
+                     config_path: str | None = None) -> Path:
     """Simulate ``duration_s`` seconds and write an "fbs-run" file; returns its path. The request
     is checked first (``daq.runfile.check_request``): an existing ``out`` is replaced only with
-    ``overwrite``."""
+    ``overwrite``. ``config_path``: the sim config ``cfg`` was read from (the file's
+    provenance)."""
+    from daq import provenance
     from daq.runfile import RunWriter, check_request
-    from simhw.params import to_dict
+    from simhw.params import config_stamp, to_dict
     from simhw.plant import CHANNELS, TRUTH_CHANNELS
     from simhw.simulator import Simulator
 
@@ -40,7 +43,8 @@ def simulate_to_file(cfg: SimConfig, out: str | Path, *, mode: int, duration_s: 
     sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=mode, truth=truth)
     units = {c: "V" for c in CHANNELS} | ({t: "rad" for t in TRUTH_CHANNELS} if truth else {})
     meta = {"configuration": to_dict(cfg), "seed": seed, "effects": effects or [],
-            "calibration": {}, "source": "fbs simulate (virtual time, no drivers)"}
+            "calibration": {}, "source": "fbs simulate (virtual time, no drivers)",
+            "provenance": provenance.offline("sim-offline", config_stamp(config_path))}
     with RunWriter(out, rig="sim-offline", mode=mode, rate_hz=rate_hz, channels=units, meta=meta,
                    overwrite=overwrite) as w:
         w.event(0.0, "mode", f"mode {mode}")
@@ -72,7 +76,8 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
         cfg = effect.inject(cfg, axis, **values)
         applied.append(spec)
     path = simulate_to_file(cfg, args.out, mode=args.mode, duration_s=args.duration, rate_hz=args.rate,
-                            seed=args.seed, truth=args.truth, effects=applied, overwrite=args.force)
+                            seed=args.seed, truth=args.truth, effects=applied,
+                            overwrite=args.force, config_path=args.sim_config)
     with RunFile(path) as run:
         return {"file": str(path), "mode": args.mode, "rate_hz": run.rate_hz, "n_samples": run.n_samples,
                 "duration_s": run.duration_s, "status": run.status, "channels": dict(run.units),

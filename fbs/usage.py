@@ -22,7 +22,8 @@ EXIT_USAGE = 64
 EXIT_CODES_HELP = f"""\
 exit codes:
   {EXIT_PASS:<3} pass: the command did what was asked (a procedure's limits all met)
-  {EXIT_LIMITS_FAILED:<3} a procedure ran to the end but a measurement is outside its limits
+  {EXIT_LIMITS_FAILED:<3} a procedure ran to the end but a measurement is outside its limits, or
+      none of its headline figures was measured (each unresolved): no pass
   {EXIT_ERROR:<3} aborted or error: a bad value (e.g. --duration nan), a file or device problem,
       Ctrl-C, SIGTERM or SIGHUP (the rig is left safe), or an internal error (reported as such)
   {EXIT_USAGE:<3} usage error: unknown command or option, missing argument, an argument of the

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -394,6 +395,16 @@ def from_dict(data: dict[str, Any], base: SimConfig | None = None) -> SimConfig:
             raise ConfigError(f"sim config: unknown key '{section}' (known sections: {', '.join(known)})")
     validate(cfg)
     return cfg
+
+
+def config_stamp(path: str | Path | None) -> dict[str, str] | None:
+    """A sim config as every result names it (``daq.provenance``): its path and the SHA-256 of
+    its content (the path alone does not say which model ran: the file may change between
+    runs). None: the built-in thesis rig."""
+    if path is None:
+        return None
+    digest = hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return {"path": str(Path(path).resolve()), "sha256": digest}
 
 
 def load_config(path: str | Path | None) -> SimConfig:

@@ -24,7 +24,7 @@ from drivers.rig import Rig, assemble, check_keys, flag
 from drivers.runclock import RunningClock
 from drivers.table import Operator, TablePosition, terminal_operator
 from simhw.datasheet import rig_calibration
-from simhw.params import load_config
+from simhw.params import config_stamp, load_config
 from simhw.rig_server import SimRigServer
 
 #: the simulated rig's default heartbeat and reply deadline (s, on a clock that leaves out the
@@ -74,6 +74,7 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     channel, external = sim_can(url, params)
     cfg = load_config(params.get("config"))
+    stamp = config_stamp(params.get("config"))   # read after the parse: a regular file
     if calibration is None:
         calibration = rig_calibration(cfg)   # the data sheet the simulated rig ships with
     # the devices run in this process: their deadlines, and the drivers', leave out the time the
@@ -96,7 +97,8 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
             tab = ("can",)
         return assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
                         node_timeout_s=watchdog, reply_timeout_s=max(0.5, watchdog),
-                        closers=[server.stop, running.close], emulator=server, monotonic=running)
+                        closers=[server.stop, running.close], emulator=server, monotonic=running,
+                        simulated=True, sim_config=stamp)
     except BaseException:
         server.stop()
         running.close()

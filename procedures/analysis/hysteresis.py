@@ -103,18 +103,20 @@ class HysteresisResult:
     dof: int = 0
 
     def values(self) -> dict[str, Any]:
-        """The summary keys of DESIGN.md section 7: each figure plain (None if unresolved), its
-        ``K_ci95`` [lo, hi] and ``resolved`` {K: {axis: bool}}."""
+        """The summary keys of DESIGN.md section 7, per axis as every procedure's figures
+        (issue 37; the excitation's stiffness too): ``K`` {axis: value, None if unresolved},
+        ``K_ci95`` {axis: [lo, hi]} and ``resolved`` {K: {axis: bool}}."""
         out: dict[str, Any] = {}
+        resolved: dict[str, dict[str, bool]] = {}
         for key in FIGURES:
             e = self.estimates.get(key)
-            out[key] = (e.value if e.resolved else None) if e is not None else getattr(self, key)
+            value = getattr(self, key) if e is None else e.value if e.resolved else None
+            out[key] = {self.axis: value}
+            resolved[key] = {self.axis: value is not None and math.isfinite(value)}
         for key in FIGURES:
             e = self.estimates.get(key)
-            if e is not None:
-                out[f"{key}_ci95"] = [e.lo, e.hi]
-        if self.estimates:
-            out["resolved"] = {key: {self.axis: e.resolved} for key, e in self.estimates.items()}
+            out[f"{key}_ci95"] = {self.axis: [e.lo, e.hi] if e is not None else None}
+        out["resolved"] = resolved
         out["angle_lag_ms"] = self.angle_lag_s * 1e3
         out["file"] = self.file
         return out

@@ -19,6 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import scipy.stats
 
 #: beyond this |correlation| with another estimate of the same fit a figure is not resolved
@@ -63,6 +64,18 @@ def from_stderr(value: float, se: float, *, dof: float | None = None, correlatio
     (the normal's without), then ``judged``."""
     q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof)) if dof else float(scipy.stats.norm.ppf(0.5 + LEVEL / 2))
     return judged(value, value - q * se, value + q * se, correlation=correlation, with_=with_)
+
+
+def finite_json(obj: Any) -> Any:
+    """``obj`` with every NaN or infinity None: strict JSON, where NaN is no number (a
+    "± nan" read as a result)."""
+    if isinstance(obj, float | np.floating):
+        return float(obj) if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: finite_json(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [finite_json(v) for v in obj]
+    return obj
 
 
 def add_figure(values: dict[str, Any], key: str, per_channel: Mapping[str, Estimate], digits: int = 6) -> None:

@@ -120,6 +120,12 @@ class Baseline(Procedure[BaselineParams]):
     def channels(self) -> tuple[str, ...]:
         return CHANNELS
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``)."""
+        sensors = ("ctl", "inst")
+        return {"nea_urad": (*sensors, "z"), "white_urad_per_rtHz": sensors,
+                "flicker_corner_hz": sensors, "pickoff_rms_urad": tuple(PICKOFF_BANDS_HZ)}
+
     def names(self) -> dict[str, str]:
         a = self.params.axis.lower()
         return {"ctl": f"ac_{a}_ctl", "inst": f"ac_{a}_inst", "z": "ac_z", "gyro": f"gyro_{a}"}

@@ -118,6 +118,10 @@ class Drift(Procedure[DriftParams]):
         # the pickoffs ride along as the check that the loops held them at null
         return tuple(torq(c) for c in GYRO_CHANNELS) + tuple(pickoff(c) for c in GYRO_CHANNELS)
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``)."""
+        return dict.fromkeys((k for k in self.json_keys if k != "file"), GYRO_CHANNELS)
+
     def chunk_names(self) -> list[str]:
         n = int(self.params.n_chunks)
         return [f"record {i + 1}/{n}" for i in range(n)]

@@ -104,6 +104,10 @@ class EarthRate(Procedure[EarthRateParams]):
     def channels(self) -> tuple[str, ...]:
         return tuple(_channel_column(c) for c in GYRO_CHANNELS) + tuple(f"gyro_{c.lower()}" for c in GYRO_CHANNELS)
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``)."""
+        return dict.fromkeys((k for k in self.json_keys if k != "file"), GYRO_CHANNELS)
+
     def stations(self) -> list[tuple[str, float, float, float]]:
         """(name, tilt, spindle, averaging time) in the order visited: every spindle angle at
         each tilt, the spindle turning back at every other tilt."""

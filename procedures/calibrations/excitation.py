@@ -208,6 +208,12 @@ class Excitation(Procedure[ExcitationParams]):
     def channels(self) -> tuple[str, ...]:
         return tuple(self.names.values())
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``): the platform's;
+        ``network`` and ``closed_loop`` are fits of their own shape."""
+        figures = ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad")
+        return dict.fromkeys(figures, (self.params.axis,))
+
     def plan(self) -> list[Step]:
         p = self.params
         steps = [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Annotated
 
-from procedures.analysis.hysteresis import AC_AXES, analyze_file
+from procedures.analysis.hysteresis import AC_AXES, FIGURES, analyze_file
 from procedures.paramlimits import Each, OneOf, Range, above, at_least, check_limits, sample_rate
 from procedures.reports.hysteresis import markdown, plot_describing_function, plot_history, plot_loops, plot_scan
 from procedures.rigsetup import bring_to_mode3
@@ -91,6 +91,11 @@ class Hysteresis(Procedure[HysteresisParams]):
     def channels(self) -> tuple[str, ...]:
         a = self.params.axis.lower()
         return (f"cmd_{a}", f"ac_{a}_inst", f"pa_{a}", f"ac_{a}_ctl")
+
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``): per axis, as
+        ``resolved``; ``angle_lag_ms`` is bookkeeping."""
+        return dict.fromkeys(FIGURES, (self.params.axis,))
 
     def plan(self) -> list[Step]:
         p = self.params

@@ -126,6 +126,11 @@ class Stopwatch(Procedure[StopwatchParams]):
     def channels(self) -> tuple[str, ...]:
         return tuple(f"gyro_{c.lower()}" for c in GYRO_CHANNELS) + tuple(f"torq_{c.lower()}" for c in GYRO_CHANNELS)
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``)."""
+        channels = tuple(self.params.channels)
+        return dict.fromkeys((k for k in self.json_keys if k != "file"), channels)
+
     def kto(self, ctx: Context, ch: str) -> tuple[float, str]:
         if ch in self.params.kto_urad_per_s_per_V:
             return float(self.params.kto_urad_per_s_per_V[ch]), "given"

@@ -200,6 +200,11 @@ class Survey(Procedure[SurveyParams]):
     def channels(self) -> tuple[str, ...]:
         return CHANNELS
 
+    def headline(self) -> dict[str, tuple[str, ...]]:
+        """The headline figures and their channels (``Procedure.headline``); the platform rms
+        and the dip carry no interval (``K_ci95`` None)."""
+        return dict.fromkeys((k for k in self.json_keys if k != "file"), AXES)
+
     def pieces(self) -> list[tuple[str, float]]:
         """(step name, seconds) of the record pieces."""
         p = self.params

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import logging
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from daq.provenance import header_lines
 from procedures.reports.textfile import write_text_atomic
 
 if TYPE_CHECKING:
@@ -24,13 +26,21 @@ def fmt(value: object, digits: int = 5) -> str:
     return str(value)
 
 
+def stderr_text(se: float | None) -> str:
+    """A standard error as printed: a NaN one (a single repetition, no spread) is no number."""
+    if se is not None and not math.isfinite(se):
+        return "not resolved"
+    return fmt(se, 3)
+
+
 def write_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None, path: Path) -> Path:
     stem = path.stem
     lines = [f"# {proc.title}", "",
              f"- procedure: `{proc.name}`",
              f"- file: `{summary.file.name if summary.file else '-'}`",
              f"- status: {summary.status}",
-             f"- verdict: **{summary.verdict}**"]
+             f"- verdict: **{summary.verdict}**",
+             *header_lines(summary.provenance)]
     if summary.error:
         lines.append(f"- error: {summary.error}")
     lines += [f"- steps done: {len(summary.steps_done)} of {len(summary.steps_planned)}"
@@ -47,8 +57,8 @@ def write_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None
                   "|---|---|---|---|---|---|"]
         for m in summary.measurements:
             verdict = {True: "pass", False: "**FAIL**", None: ""}[m.passed]
-            lines.append(f"| {m.name} | {fmt(m.value, 6)} | {fmt(m.stderr, 3)} | {m.units} | {m.limits_text()} | "
-                         f"{verdict} |")
+            lines.append(f"| {m.name} | {fmt(m.value, 6)} | {stderr_text(m.stderr)} | {m.units} | "
+                         f"{m.limits_text()} | {verdict} |")
         lines.append("")
     if analysis is not None:
         if analysis.markdown:

@@ -4,6 +4,7 @@ readings (``ChannelResult``) are ``procedures.analysis.stopwatch``."""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +16,9 @@ from procedures.analysis.stopwatch import ChannelResult
 
 
 def _interval(e: Estimate, fmt: str) -> str:
-    span = f"[{e.lo:{fmt}}, {e.hi:{fmt}}]"
+    # no interval (one repetition: no spread) is said so, never "[nan, nan]"
+    nan = math.isnan(e.lo) or math.isnan(e.hi)
+    span = "(no interval)" if nan else f"[{e.lo:{fmt}}, {e.hi:{fmt}}]"
     return f"{e.value:{fmt}} {span}" if e.resolved else f"not resolved {span}"
 
 

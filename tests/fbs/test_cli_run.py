@@ -19,11 +19,14 @@ from drivers.rig import open_rig
 from procedures.calibrations import catalogue
 from procedures.params import parse_params
 from procedures.runner import run_procedure
+from tests.result_schema import assert_valid_result
 
 FBS = [sys.executable, "-m", "fbs.cli"]
 RIG = "sim?warm=1&seed=5&watchdog=5"
 KTO = {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0}
 KG = {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74}
+#: what every --json result starts with (issue 37: what ran, how it ended, on which rig)
+HEAD = ["procedure", "status", "verdict", "rig", "simulated", "sim_config", "software", "time"]
 
 
 def fbs(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
@@ -50,7 +53,10 @@ def test_limits_failed_exits_1_with_the_json_keys(tmp_path):
     out = json.loads(r.stdout)
     figures = ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g", "g_drift_y_urad_per_s_per_g",
                "g_drift_z_urad_per_s_per_g"]
-    assert list(out) == [*figures, "file", *(f"{k}_ci95" for k in figures), "resolved"]
+    assert list(out) == [*HEAD, *figures, "file", *(f"{k}_ci95" for k in figures), "resolved"]
+    assert (out["procedure"], out["verdict"], out["status"]) == ("earth-rate", "fail", "complete")
+    assert out["rig"] == RIG and out["simulated"] is True
+    assert_valid_result(out)
     for k in figures:
         assert set(out[f"{k}_ci95"]) == set(out[k]) == set(out["resolved"][k]) == {"X", "Y", "Z", "XRD"}
         for ch, v in out[k].items():
@@ -82,7 +88,14 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     assert p.returncode == 2, stderr
     figures = ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g", "g_drift_y_urad_per_s_per_g",
                "g_drift_z_urad_per_s_per_g"]
-    assert json.loads(stdout) == {**dict.fromkeys(figures), "file": str(path)}
+    # an abort keeps every figure's shape: per channel, each None, unresolved (issue 37)
+    out = json.loads(stdout)
+    assert_valid_result(out)
+    assert (out["verdict"], out["status"]) == ("aborted", "aborted: interrupted")
+    assert out["file"] == str(path)
+    for k in figures:
+        assert out[k] == dict.fromkeys(KTO) and out[f"{k}_ci95"] == dict.fromkeys(KTO)
+        assert out["resolved"][k] == dict.fromkeys(KTO, False)
     with RunFile(path) as rf:
         assert rf.status == "aborted: interrupted"
         safe = [e for e in rf.events if e.kind == "safe"]
@@ -94,7 +107,9 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--resume", str(path))
     assert r.returncode == 0, r.stderr
     er = json.loads(r.stdout)
-    assert list(er)[:len(figures) + 1] == [*figures, "file"] and er["file"].endswith("earth-rate-2.h5")
+    assert_valid_result(er)
+    assert list(er)[:len(HEAD) + len(figures) + 1] == [*HEAD, *figures, "file"]
+    assert er["file"].endswith("earth-rate-2.h5")
     resumed = json.loads((tmp_path / "earth-rate-2.json").read_text())
     assert len(resumed["steps_resumed"]) == n_done - 1   # every data step done before the abort
     for ch, kto in KTO.items():
@@ -103,7 +118,8 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     r = fbs("run", "stopwatch", "--rig", RIG, "--out", str(tmp_path), "--json")
     assert r.returncode == 0, r.stderr
     sw = json.loads(r.stdout)
-    assert list(sw)[:3] == ["K_g_mV_per_urad", "h_over_k_s", "file"]
+    assert list(sw)[len(HEAD):len(HEAD) + 3] == ["K_g_mV_per_urad", "h_over_k_s", "file"]
+    assert_valid_result(sw)
     for ch, kg in KG.items():
         assert sw["K_g_mV_per_urad"][ch] == pytest.approx(kg, rel=2e-2)
         assert sw["K_g_mV_per_urad_ci95"][ch][0] <= kg <= sw["K_g_mV_per_urad_ci95"][ch][1]
@@ -131,6 +147,11 @@ def test_every_procedure_aborts_to_the_safe_state(tmp_path, name, how):
 
         s = run_procedure(proc, rig, tmp_path, progress=interrupt)
         assert s.exit_code == 2 and s.verdict == "aborted"
+        # what `fbs run --json` prints: every figure in its shape, {channel: None} (issue 37)
+        out = s.json_result(proc)
+        assert_valid_result(out)
+        assert out["simulated"] is True and out["rig"] == RIG and out["procedure"] == name
+        assert all(v is None for k in proc.headline() for v in out[k].values())
         assert rig.is_safe() and rig.emulator.nodes.nodes["relay"].mode == 1
         assert s.status == ("aborted: interrupted" if how == "ctrl-c" else s.status)
         assert s.status.startswith("aborted: ") and (how == "ctrl-c" or "DeviceLost" in s.status)

@@ -19,7 +19,8 @@ def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
     cfg = SimConfig()
     cfg.gyro["X"].torquer_scale_urad_per_s_per_V = 30.0
     runs = [_summary("earth-rate", {"K_TO_urad_per_s_per_V": {"X": 30.3}, "drift_urad_per_s": {"X": 0.3}}),
-            _summary("hysteresis", {"To_Nm": 0.0158, "eta_per_Nm": 1.7e6, "stiffness_Nm_per_rad": 424.0}, axis="Y"),
+            _summary("hysteresis", {"To_Nm": {"Y": 0.0158}, "eta_per_Nm": {"Y": 1.7e6},
+                                    "stiffness_Nm_per_rad": {"Y": 424.0}}, axis="Y"),
             _summary("survey", {"platform_rms_urad": {"X": 1.3}, "dip_hz": {"X": 3.84}})]
     text = write_campaign_report(tmp_path, runs, sim_values(cfg), 100.0, 0).read_text()
     assert "| K_TO X | urad/s/V | 30.3 | 31.6 | 30 | +1.00 % |" in text

@@ -29,6 +29,7 @@ from procedures.calibrations.baseline import Baseline, Params
 from procedures.runner import Verdict, run_procedure
 from simhw.params import load_config
 from simhw.simulator import Simulator
+from tests.result_schema import assert_valid_result
 
 #: shorter than the defaults (a lab's), long enough for the tolerances
 FAST = {"settle_s": 5.0, "record_s": 320.0}
@@ -87,6 +88,8 @@ def test_baseline_measures_the_drawn_noise_and_releases_the_clamp(tmp_path):
             s = run_procedure(Baseline(Params(axis=axis, **FAST)), rig, tmp_path / str(k) / "out", report=False)
             st = rig.relays.status()
             assert s.verdict is Verdict.PASS, s.error
+            # what `fbs run --json` prints (issue 37)
+            assert_valid_result(s.json_result(Baseline(Params(axis=axis))))
             assert not st.clamped and st.mode == 3        # released; left in mode 3 as its last step left it
         v = s.values
         a = axis.lower()

@@ -24,6 +24,7 @@ from procedures.runner import run_procedure
 from simhw.params import load_config
 from simhw.plant import linearized_poles
 from tests.procedures.excitation_rigs import FAST, assert_roots_near_the_linearized, drawn_config
+from tests.result_schema import assert_valid_result
 
 
 def _truth_network(corners):
@@ -71,6 +72,9 @@ def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, 
     with open_rig(f"sim?warm=1&seed={30 + k}&config={cfg}") as rig:
         s = run_procedure(Excitation(Params(axis=axis, **FAST)), rig, tmp_path / "out")
     assert s.exit_code == 0, s.error
+    printed = s.json_result(Excitation(Params(axis=axis, **FAST)))   # `fbs run --json` (issue 37)
+    assert_valid_result(printed)
+    assert printed["simulated"] is True and printed["sim_config"]["path"] == str(cfg.resolve())
     v = s.values
     # the network: its tabulated response against the simulated one, 0.3-50 Hz
     table = v["network"]["response"]

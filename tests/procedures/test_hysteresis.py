@@ -33,6 +33,7 @@ from procedures.analysis.hysteresis import analyze_file, calibration_from_meta
 from procedures.calibrations import catalogue
 from procedures.calibrations.hysteresis import Hysteresis, Params
 from procedures.reports.hysteresis import plot_describing_function, plot_history, plot_loops, plot_scan
+from tests.result_schema import assert_valid_result
 
 TO_TOL, ETA_TOL, K_TOL = 0.10, 0.25, 0.10
 #: issue 18 acceptance B: eta and the stiffness within 1 % at the thesis's defaults, the lag measured
@@ -130,7 +131,7 @@ def test_the_lag_is_measured_not_assumed(tmp_path):
     smooth = analyze_file(write_sweep(tmp_path / "smooth.h5", updates=0), "X")
     assert smooth.lag_source == "none" and any("could not be measured" in w for w in smooth.warnings)
     v = smooth.values()
-    assert v["To_Nm"] is None and v["resolved"]["To_Nm"] == {"X": False}
+    assert v["To_Nm"] == {"X": None} and v["resolved"]["To_Nm"] == {"X": False}
 
 
 def test_analysis_uses_the_calibration_it_is_given_over_the_files(tmp_path):
@@ -264,13 +265,20 @@ def test_cli_json_prints_the_figures_their_intervals_and_the_lag(tmp_path, capsy
     assert cli(["analyze", "hysteresis", str(path), "--axis", "X", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     keys = ["To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad"]
-    assert list(out) == [*keys, *(f"{k}_ci95" for k in keys), "resolved", "angle_lag_ms", "file"]
-    assert out["file"] == str(path) and out["To_Nm"] == pytest.approx(0.012, rel=0.01)
-    assert out["stiffness_Nm_per_rad"] == pytest.approx(out["eta_per_Nm"] * out["To_Nm"] ** 2)
+    head = ["analysis", "procedure", "status", "verdict", "rig", "simulated", "sim_config", "software",
+            "time"]
+    assert list(out) == [*head, *keys, *(f"{k}_ci95" for k in keys), "resolved", "angle_lag_ms",
+                         "file"]
+    assert_valid_result(out)
+    # a file written without a rig's provenance: its rig attribute, simulated not stated
+    assert out["verdict"] == "pass" and out["procedure"] is None and out["simulated"] is None
+    To, eta, stiff = (out[key]["X"] for key in keys)      # per axis, as resolved (issue 37)
+    assert out["file"] == str(path) and To == pytest.approx(0.012, rel=0.01)
+    assert stiff == pytest.approx(eta * To ** 2)
     assert out["resolved"] == {k: {"X": True} for k in keys}
     for k in keys:
-        lo, hi = out[f"{k}_ci95"]
-        assert lo < out[k] < hi
+        lo, hi = out[f"{k}_ci95"]["X"]
+        assert lo < out[k]["X"] < hi
     assert out["angle_lag_ms"] == pytest.approx(LAG_S * 1e3, abs=0.05)
 
 
@@ -340,10 +348,10 @@ def run_on_sim(tmp_path, config_text: str | None = None, axis="X", seed=3):
     return s, rig_s, wall
 
 
-def check(values, To, eta):
-    assert values["To_Nm"] == pytest.approx(To, rel=TO_TOL)
-    assert values["eta_per_Nm"] == pytest.approx(eta, rel=ETA_TOL)
-    assert values["stiffness_Nm_per_rad"] == pytest.approx(eta * To * To, rel=K_TOL)
+def check(values, To, eta, axis="X"):
+    assert values["To_Nm"][axis] == pytest.approx(To, rel=TO_TOL)
+    assert values["eta_per_Nm"][axis] == pytest.approx(eta, rel=ETA_TOL)
+    assert values["stiffness_Nm_per_rad"][axis] == pytest.approx(eta * To * To, rel=K_TOL)
 
 
 def sim_lag_s(axis: str, freq_hz: float = 40.0) -> float:
@@ -367,13 +375,18 @@ def test_default_rig_acceptance_a(tmp_path, capsys):
     assert s.status == "complete" and s.exit_code == 0, s.error
     check(s.values, 0.016, 1.6e6)
     # issue 18 acceptance B: with the lag measured by the procedure, eta and the stiffness within 1 %
-    assert s.values["eta_per_Nm"] == pytest.approx(1.6e6, rel=THESIS_TOL)
-    assert s.values["stiffness_Nm_per_rad"] == pytest.approx(1.6e6 * 0.016 ** 2, rel=THESIS_TOL)
+    assert s.values["eta_per_Nm"]["X"] == pytest.approx(1.6e6, rel=THESIS_TOL)
+    assert s.values["stiffness_Nm_per_rad"]["X"] == pytest.approx(1.6e6 * 0.016 ** 2,
+                                                                  rel=THESIS_TOL)
     assert s.values["angle_lag_ms"] == pytest.approx(sim_lag_s("X") * 1e3, abs=0.4)
     for key in ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad"):
         assert s.values["resolved"][key] == {"X": True}
-        lo, hi = s.values[f"{key}_ci95"]
-        assert lo < s.values[key] < hi and hi - lo < 0.1 * s.values[key]
+        lo, hi = s.values[f"{key}_ci95"]["X"]
+        assert lo < s.values[key]["X"] < hi and hi - lo < 0.1 * s.values[key]["X"]
+    # what `fbs run --json` prints (issue 37, acceptance A)
+    printed = s.json_result(Hysteresis(Params(axis="X")))
+    assert_valid_result(printed)
+    assert printed["verdict"] == "pass" and printed["simulated"] is True
     assert rig_s < 300
     assert [m.passed for m in s.measurements if m.passed is not None] == [True] * 8
     assert any(m.name.startswith("angle lag") and m.value == pytest.approx(s.values["angle_lag_ms"])
@@ -389,8 +402,11 @@ def test_default_rig_acceptance_a(tmp_path, capsys):
     capsys.readouterr()
     assert cli(["analyze", "hysteresis", str(s.file), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["To_Nm"] == pytest.approx(s.values["To_Nm"], rel=1e-9)
-    assert out["eta_per_Nm_ci95"] == pytest.approx(s.values["eta_per_Nm_ci95"], rel=1e-9)
+    assert_valid_result(out)
+    assert out["procedure"] == "hysteresis" and out["simulated"] is True
+    assert out["rig"] == printed["rig"]
+    assert out["To_Nm"]["X"] == pytest.approx(s.values["To_Nm"]["X"], rel=1e-9)
+    assert out["eta_per_Nm_ci95"]["X"] == pytest.approx(s.values["eta_per_Nm_ci95"]["X"], rel=1e-9)
     with capsys.disabled():
         print(f"hysteresis X (default rig): {s.values} in {rig_s:.0f} s of rig time, {wall:.1f} s wall")
 
@@ -408,7 +424,7 @@ def _random_configs(n: int, seed: int) -> list[tuple[str, float, float]]:
 def test_random_bearings_acceptance_b(tmp_path, axis, To, eta):
     s, _, _ = run_on_sim(tmp_path, f"[bearing.{axis}]\nTo_Nm = {To!r}\neta_per_Nm = {eta!r}\n", axis=axis, seed=7)
     assert s.status == "complete", s.error
-    check(s.values, To, eta)
+    check(s.values, To, eta, axis)
 
 
 @pytest.mark.slow
@@ -435,7 +451,7 @@ def test_abort_and_resume_runs_the_whole_ladder_again(tmp_path):
         s2 = run_procedure(Hysteresis(Hysteresis.params_from(resume.params)), rig, tmp_path, resume=resume)
     assert s2.status == "complete" and s2.steps_resumed == []
     assert s2.steps_done == ["mode 3", "400 urad", "40 urad", "8 urad", "bias off"]
-    assert s2.values["To_Nm"] == pytest.approx(0.016, rel=TO_TOL)
+    assert s2.values["To_Nm"]["X"] == pytest.approx(0.016, rel=TO_TOL)
 
 
 def test_the_half_width_is_t_at_the_welch_satterthwaite_dof():

@@ -24,6 +24,7 @@ from procedures.calibrations.survey import Params, Survey, pickoff_scales
 from procedures.runner import load_resume, run_procedure
 from simhw.params import SimConfig, load_config, nominal_pickoff_lines
 from simhw.simulator import Simulator, pickoff_white_psd
+from tests.result_schema import assert_valid_result
 
 from .conftest import assert_spans_are_the_record_steps
 
@@ -111,6 +112,7 @@ def expected_values(cfg: SimConfig, params: Params, seed: int = 11) -> dict:
 def check(summary, expected, label=""):
     assert summary.exit_code == 0, (summary.error, [m.to_json() for m in summary.measurements])
     v = summary.json_values(Survey.json_keys)
+    assert_valid_result(summary.json_result(Survey()))   # what `fbs run --json` prints (issue 37)
     # without a baseline the net-of-baseline figure is printed unresolved, with why in the summary
     assert set(v) == {"platform_rms_urad", "platform_rms_baseline_net_urad", "platform_rms_baseline_net_urad_ci95",
                       "resolved", "dip_hz", "file"}

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from daq import provenance
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunWriter, make_folder
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
@@ -502,7 +503,8 @@ def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = N
     writer = None
     if out is not None:
         meta = {"configuration": to_dict(cfg), "seed": seed, "source": f"fbs gap: {note}",
-                "measured_file": str(rec.path), "calibration": {}}
+                "measured_file": str(rec.path), "calibration": {},
+                "provenance": provenance.offline("fbs-gap-model", None)}
         writer = RunWriter(out, rig="fbs-gap-model", mode=rec.mode, rate_hz=rec.rate_hz,
                            channels={c: "V" for c in rec.channels}, axis=rec.axis, meta=meta, overwrite=True)
     try:
