@@ -4,9 +4,9 @@
 ``fbs`` parser itself and calls the function the command's ``--json`` prints
 (``json_result``, set on its subparser), so a batch result is exactly what the single command
 prints. It never raises for the file's sake: the command's errors become the record's
-``exit`` 2 and ``error``, as ``fbs.cli.main`` reports them; anything else (a bug) is exit 1
-with its traceback, as Python ends the single command (``guarded``, which ``fbs.campaign_task``
-ends its runs with too).
+``exit`` 2 and ``error``, as ``fbs.cli.main`` reports them; anything else (a bug) is exit 2
+with "internal error" and its traceback, as the single command ends (``guarded``, which
+``fbs.campaign_task`` ends its runs with too); a result whose verdict is "fail" is exit 1.
 
 A worker runs with one BLAS thread (``OMP_NUM_THREADS``, ``OPENBLAS_NUM_THREADS``,
 ``MKL_NUM_THREADS`` = 1, and threadpoolctl where installed) and numba's cache in a directory of
@@ -116,9 +116,17 @@ def guarded(fn: Callable[..., Any], *args: Any) -> tuple[int, Any, str | None, f
         result = fn(*args)
     except command_errors() as exc:
         return 2, None, str(exc), time.perf_counter() - t0
-    except Exception as exc:      # a bug: the single command ends with this traceback, exit 1
-        return 1, None, "".join(traceback.format_exception(exc)).rstrip(), time.perf_counter() - t0
-    return 0, result, None, time.perf_counter() - t0
+    except Exception as exc:      # a bug: the single command says "internal error", exit 2
+        text = "".join(traceback.format_exception(exc)).rstrip()
+        return 2, None, f"internal error: {type(exc).__name__}: {exc}\n{text}", time.perf_counter() - t0
+    return verdict_exit(result), result, None, time.perf_counter() - t0
+
+
+def verdict_exit(result: Any) -> int:
+    """The exit code the single command gives a result: 1 for a verdict "fail" (limits failed,
+    or no headline figure measured), 2 for "aborted"/"error", else 0."""
+    verdict = result.get("verdict") if isinstance(result, dict) else None
+    return {"fail": 1, "aborted": 2, "error": 2}.get(verdict, 0) if isinstance(verdict, str) else 0
 
 
 def _json_of(command: str, path: str, extra: list[str]) -> Any:

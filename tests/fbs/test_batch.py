@@ -263,3 +263,16 @@ def test_c_a_worker_killed_mid_batch_loses_nothing(runs, local, cluster, tmp_pat
     assert out.read_bytes().startswith(kept[:kept.rindex(b"\n") + 1])
     assert by_file(lines_of(out)) == by_file(lines_of(local[1]))         # each file once, the same results
     assert cluster.n_workers() == 1
+
+
+def test_a_record_exits_as_the_single_command_would():
+    """A result whose verdict is "fail" exits 1 as `fbs analyze` does (it said 0); a bug is an
+    "internal error", exit 2, as ``fbs.cli.main`` ends it (it said 1, "limits failed")."""
+    from fbs.batch_task import guarded
+
+    assert guarded(lambda: {"verdict": "fail"})[0] == 1
+    assert guarded(lambda: {"verdict": "pass"})[0] == 0
+    assert guarded(lambda: {"verdict": "aborted"})[0] == 2
+    assert guarded(lambda: {"effects": []})[0] == 0
+    code, result, error, _ = guarded(lambda: 1 / 0)
+    assert code == 2 and result is None and error.startswith("internal error: ZeroDivisionError")
