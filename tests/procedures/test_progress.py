@@ -155,7 +155,8 @@ def _run_synthetic(name: str, factors: list[float], tmp_path: Path, caplog, *,
     resume = (Resumed(tmp_path / "earlier.h5", name, {}, {n: {} for n in taken_over})
               if taken_over else None)
     seen: list[Progress] = []
-    rig = SimpleNamespace(calibration=RigCalibration(), check=lambda: None)
+    rig = SimpleNamespace(calibration=RigCalibration(), check=lambda: None, url="stand-in", simulated=True,
+                          sim_config=None)
     caplog.clear()
     with caplog.at_level(logging.WARNING, "procedures.progress"):
         s = run_procedure(proc, rig, tmp_path, progress=seen.append, resume=resume, report=False)
