@@ -629,24 +629,45 @@ class SerialAdc(Adc):
                 # slow pty) would run the physics further ahead, and a set-point sent next would
                 # land at a rig time that depends on the machine's load.
                 if (not self._cond.wait(0.05) and self.clock.virtual
-                        and self.clock.now() >= demanded - 0.5 / cfg.rate_hz and self._lost_in_flight(n)):
+                        and self.clock.now() >= demanded - 0.5 / cfg.rate_hz and self._lost_in_flight(n, t_start)):
                     ahead = min(2 * ahead, int(10 * cfg.rate_hz) + cfg.frame_sets)
                     demanded = self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz
                     self.clock.demand(demanded)
 
-    def _lost_in_flight(self, n: int) -> bool:
+    def _lost_in_flight(self, n: int, t_start: float) -> bool:
         """Whether the ``n`` sets a read waits for were lost rather than slow (caller holds
         _cond). ``STAT?``'s reply leaves the device behind every frame it queued before (one
         FIFO, docs/protocol.md 1.6), and the reader hands frames over in the order they came:
         once the reply is here, whatever is still missing will not come without more rig time.
-        It is an in-band marker, so the answer is the same however slow the host or the pty."""
+        It is an in-band marker, so the answer is the same however slow the host or the pty.
+        No reply (a stalled or silent device) is not a loss: the read's own rules decide."""
         self._cond.release()    # the reader needs _cond to hand over the frames ahead of the reply
         try:
-            self.status()
+            answered = self._marker(t_start)
         finally:
             self._cond.acquire()
         avail, blocked = self._contiguous()
-        return avail < n and not blocked and self._rx_streaming
+        return answered and avail < n and not blocked and self._rx_streaming
+
+    def _marker(self, t_start: float) -> bool:
+        """Send ``STAT?`` and wait for its reply: True once it is in; False when the device
+        sends nothing for the stall timeout (counted as a read counts it) or gives no reply
+        within ``reply_timeout_s``. Not ``_command``: a missing answer here is no fault of its
+        own; the read that asked reports the stall, with the read's words."""
+        with self._cmd_lock:
+            while not self._replies.empty():
+                log.warning("ADC on %s: stale reply dropped: %s", self.port, self._replies.get_nowait())
+            self._send(encode_command("STAT?"), "STAT?")
+            deadline = self._mono() + self.reply_timeout_s
+            while True:
+                try:
+                    item = self._replies.get(timeout=0.05)
+                except queue.Empty:
+                    now = self._mono()
+                    if now > deadline or now - max(self._last_rx, t_start) > self.stall_timeout_s:
+                        return False
+                    continue
+                return isinstance(item, Reply) and item.ok and item.verb == "STAT"
 
     def read_available(self) -> AdcBlock | None:
         with self._cond:

@@ -277,8 +277,10 @@ class AdcDevice:
                 line, _, rest = bytes(buf).partition(b"\n")
                 buf = bytearray(rest)
                 self._line_received()
-                while self._stalled():
+                while self._stalled() and not self._stop.is_set():
                     self._stop.wait(0.01)
+                if self._stop.is_set():
+                    return      # stopped while stalled for good: the wait above would spin for ever
                 try:
                     self._handle(decode_command(line))
                 except ProtocolError as exc:

@@ -320,3 +320,23 @@ def test_frames_that_are_slow_not_lost_leave_the_rig_time_of_a_set_point_alone()
     quick, held = _record_with_a_set_point(hold=False), _record_with_a_set_point(hold=True)
     assert np.array_equal(quick, held)
     assert np.ptp(quick[400:, 0]) > 0.4     # the set-point is in the record
+
+
+def test_a_device_stalled_for_good_ends_its_threads_when_the_rig_closes():
+    """A command line that arrived while the ADC was stalled for good kept its command thread
+    waiting in a loop that, once the rig had stopped, spun without a pause: every later test
+    in that process ran at a fraction of the machine (an excitation test took 30 min)."""
+    rig = open_rig(URL + "&watchdog=1")
+    device = rig.emulator.adc
+    try:
+        stream(rig)
+        rig.adc.stall_timeout_s = 0.5
+        device.inject("stall")
+        with pytest.raises(DeviceTimeout, match="stalled"):
+            for _ in range(1000):
+                rig.adc.read(100)
+    finally:
+        rig.close()
+    for t in device._threads:
+        t.join(timeout=2.0)
+    assert not any(t.is_alive() for t in device._threads)
