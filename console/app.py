@@ -34,7 +34,7 @@ from console.operator import ConsoleOperator, OperatorQuestion
 from console.operatorscreen import OperatorScreen
 from console.procedures import ProcedurePanel, parse_run_text
 from console.quitscreen import QuitScreen, what_quit_closes
-from console.recording import RecordingPanel, default_path
+from console.recording import RecordingPanel, default_path, recording_path
 from console.rigworker import RigWorker
 from console.setpoints import SetpointPanel
 from console.spectra import SpectraPanel
@@ -330,9 +330,12 @@ class ConsoleApp(App[int]):
         self.worker_.events.put(RigEventItem(self.worker_.state.get().rig_time_s, kind, text))
 
     def refuse(self, what: str, text: str, severity: SeverityLevel = "error", timeout: float = 8) -> None:
-        """A refused entry or command: a notification, and a line in the event log."""
+        """A refused entry or command: a notification, and a line in the event log. ``text``
+        is in the operator's words (``console.refusals``), never the protocol's; plain text, as
+        a refusal may quote brackets (``channels=["X"]``) that are no markup."""
         self.note("refused", f"{what}: {text}")
-        self.notify(text, title=f"{what} refused", severity=severity, timeout=timeout)
+        self.notify(text, title=f"{what} refused", severity=severity, timeout=timeout,
+                    markup=False)
 
     # ------------------------------------------------------------------ the refresh timer
     def refresh_live(self) -> None:
@@ -419,8 +422,7 @@ class ConsoleApp(App[int]):
         if why:
             self.refuse("recording", why, timeout=10)
             return
-        path = Path(msg.path.strip()) if msg.path.strip() else default_path(self.out_dir)
-        self.worker_.start_recording(path, rate, channels)
+        self.worker_.start_recording(recording_path(msg.path, self.out_dir), rate, channels)
 
     def on_recording_panel_stop(self, msg: RecordingPanel.Stop) -> None:
         self.worker_.stop_recording()

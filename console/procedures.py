@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import shlex
 from pathlib import Path
 from typing import TYPE_CHECKING, ClassVar
@@ -25,10 +26,12 @@ from console.state import ProcedureInfo
 from console.timefmt import duration
 
 if TYPE_CHECKING:
-    from procedures.runner import Procedure, RunSummary
+    from procedures.runner import Measurement, Procedure, RunSummary
 
 
 RESUME = "--resume"
+#: the procedure list's value until the catalogue is loaded: no procedure's name
+LOADING = ""
 
 
 def defaults_text(proc_cls: type[Procedure]) -> str:
@@ -69,6 +72,30 @@ def can_resume(summary: RunSummary) -> bool:
     return summary.status != "complete" and summary.file is not None and summary.file.exists()
 
 
+#: the interval the procedures write into a measurement's note ("95 % [1.2, 3.4]")
+_INTERVAL = re.compile(r"95 % \[[^\]]*\]")
+
+
+def value_text(m: Measurement) -> Text:
+    """A measurement's value, error and units; a figure the procedure could not resolve says
+    so (its note: "not resolved: ..."), with the interval where the note gives one, rather
+    than a bare "-": an unresolved figure is a result, not a missing row."""
+    unresolved = "not resolved" in m.note
+    interval = _INTERVAL.search(m.note) if unresolved else None
+    t = Text()
+    if m.value is None and unresolved:
+        t.append("not resolved", style="bold yellow")
+        if interval:
+            t.append(f" {interval[0]} {m.units}".rstrip())
+        return t
+    val = f"{m.value:.6g}" if m.value is not None else "-"
+    err = f" ± {m.stderr:.3g}" if m.stderr is not None and math.isfinite(m.stderr) else ""
+    t.append(f"{val}{err} {m.units}".rstrip())
+    if unresolved:   # a value given, but its interval too wide to call it measured
+        t.append(" (not resolved)", style="bold yellow")
+    return t
+
+
 def result_text(summary: RunSummary, plots: tuple[Path, ...] = ()) -> Text:
     """The whole summary: verdict and status, every measurement (value, error, limits, pass or
     FAIL), the files written, the error, and how to resume an unfinished run."""
@@ -84,9 +111,8 @@ def result_text(summary: RunSummary, plots: tuple[Path, ...] = ()) -> Text:
     if summary.measurements:
         t.append(f"{len(summary.measurements)} measurement(s):\n", style="bold")
     for m in summary.measurements:
-        val = f"{m.value:.6g}" if m.value is not None else "-"
-        err = f" ± {m.stderr:.3g}" if m.stderr is not None and math.isfinite(m.stderr) else ""
-        t.append(f"  {m.name}: {val}{err} {m.units}".rstrip())
+        t.append(f"  {m.name}: ")
+        t.append_text(value_text(m))
         if m.limits_text():
             t.append(f"  limits {m.limits_text()}", style="dim")
         if m.passed is not None:
@@ -135,7 +161,10 @@ class ProcedurePanel(Vertical, can_focus=True):
 
     def compose(self) -> ComposeResult:
         with Horizontal(classes="proc-row"):
-            yield Select([], prompt="loading…", id="proc-name", compact=True)
+            # no blank entry ever: a blank's prompt could be chosen, and named no procedure
+            # ("Select.NULL"); until the catalogue is in, one disabled "loading…" entry
+            yield Select([("loading…", LOADING)], allow_blank=False, value=LOADING,
+                         disabled=True, id="proc-name", compact=True)
             yield Input(placeholder="parameters: name=value ... (f7 run, f8 abort)", id="proc-params", compact=True)
         with VerticalScroll(id="proc-about"):
             yield Static(id="proc-defaults")
@@ -151,9 +180,11 @@ class ProcedurePanel(Vertical, can_focus=True):
         """The procedures (imported off the UI thread: the analysis stack takes seconds)."""
         self.catalogue = catalogue
         select = self.query_one("#proc-name", Select)
-        select.set_options([(n, n) for n in catalogue])
-        if catalogue:
-            select.value = next(iter(catalogue))
+        if catalogue:   # the placeholder goes: the first procedure is chosen
+            select.set_options([(n, n) for n in catalogue])
+            select.disabled = False
+        else:
+            select.set_options([("no procedures", LOADING)])
         self._show_defaults()
 
     def on_select_changed(self, event: Select.Changed) -> None:

@@ -20,8 +20,9 @@ from console.state import RecordingInfo, RigEventItem, Snapshot
 
 class RecordingPanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
-        ("F7", "start a recording: the file (blank: the next free recording.h5, named in the box), rate, "
-               "channels (all, or names as gyro_x,torq_x)"),
+        ("F7", "start a recording: the file (blank: the next free recording.h5, named in "
+               "the box; a name goes into --out, an absolute path as typed), rate, channels "
+               "(all, or names as gyro_x,torq_x)"),
         ("F8", "stop it: the file is closed \"complete\""),
         ("Tab / shift+Tab", "the next / previous box"),
         ("Enter", "in a box: start the recording"),
@@ -121,6 +122,18 @@ def _ended(r: RecordingInfo) -> Text:
     t.append(r.status, style="green" if r.status == "complete" else "bold red")
     t.append(f"\n {_hms(r.elapsed_s)}, {r.samples} samples, {r.gaps} gap(s)   (f7 record again)")
     return t
+
+
+def recording_path(typed: str, out_dir: Path) -> Path:
+    """The file a recording goes to: blank is ``default_path``; a name or a relative path
+    typed goes into the console's ``--out`` folder, as every other file the console writes
+    (the shell's working directory is no place the operator can see); an absolute path (or
+    ``~``) is taken as typed."""
+    typed = typed.strip()
+    if not typed:
+        return default_path(out_dir)
+    path = Path(typed).expanduser()
+    return path if path.is_absolute() else out_dir / path
 
 
 def default_path(out_dir: Path) -> Path:

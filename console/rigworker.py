@@ -48,6 +48,7 @@ from console.adctap import TappedAdc
 from console.feeds import Feed
 from console.meterdata import MeterStore
 from console.operator import ConsoleOperator
+from console.refusals import operator_words
 from console.reportfiles import report_plots
 from console.slew import Slew
 from console.spinup import SpinUpEstimate
@@ -65,6 +66,7 @@ from console.state import (
     RigReady,
     WorkerStopped,
 )
+from drivers.canopen_client import ABORT_NOT_HELD
 from drivers.errors import DriverError, InterlockError, SampleGap, SetpointRangeError
 from drivers.relay import MODES, interlock_reason
 from drivers.rig import Rig, open_rig
@@ -133,6 +135,7 @@ class RigWorker:
         self._next_readback_rig = 0.0
         self._quiet_setpoints = False          # a slew's steps: one line in the event log, not one a step
         self._fault_handled = False
+        self._alarm_not_held = False           # the lamp is lit by a selection without hold
         self._spin = SpinUpEstimate()
         #: the files the shutdown closed, "path (status)", for the console's exit line
         self.closed_on_stop: list[str] = []
@@ -312,14 +315,14 @@ class RigWorker:
             text = cmd.run()
         except Refused as exc:
             self._post(CommandOutcome(cmd.what, False, str(exc)))
-        except REFUSALS as exc:
+        except REFUSALS as exc:   # the raw text here, the operator's words on the screen
             log.info("%s refused: %s", cmd.what, exc)
-            self._post(CommandOutcome(cmd.what, False, str(exc)))
+            self._post(CommandOutcome(cmd.what, False, operator_words(cmd.what, exc)))
             if isinstance(exc, DriverError):
                 self._check_fault()
         except DriverError as exc:
             log.error("%s failed: %s", cmd.what, exc)
-            self._post(CommandOutcome(cmd.what, False, str(exc)))
+            self._post(CommandOutcome(cmd.what, False, operator_words(cmd.what, exc)))
             self._check_fault()
         else:
             self._post(CommandOutcome(cmd.what, True, text))
@@ -516,21 +519,33 @@ class RigWorker:
     # ------------------------------------------------------------------ modes
     def _hold(self) -> str:
         self._rig.relays.hold()
+        if self._alarm_not_held:   # its cause is gone: the switches are held now
+            self._alarm(None)
         self._poll(force=True)
         return "mode switches held: select a mode (1-6), then release"
+
+    def _alarm(self, text: str | None, *, not_held: bool = False) -> None:
+        """Light the alarm lamp with ``text`` (in the operator's words), or put it out."""
+        self._alarm_not_held = not_held and text is not None
+        self.state.update(alarm=text)
+        if text is not None:
+            self._rig.event("alarm", text)
 
     def _select(self, mode: int) -> str:
         relays = self._rig.relays
         try:
             relays.select(mode)
         except InterlockError as exc:
-            # a disallowed mode (0, 7) lights the alarm; selecting without hold is refused
+            # a disallowed mode (0, 7) lights the alarm, and so does a selection without hold:
+            # an operator's slip, said in words with what to do
             if mode not in MODES:
-                self.state.update(alarm=str(exc))
-                self._rig.event("alarm", str(exc))
+                self._alarm(str(exc))
+            else:
+                self._alarm(operator_words(f"select mode {mode}", exc),
+                            not_held=exc.detail == ABORT_NOT_HELD)
             raise
         relays.alarm = None
-        self.state.update(alarm=None)
+        self._alarm(None)
         self._poll(force=True)
         return f"mode {mode} ({MODES[mode]}) selected: release to switch"
 
@@ -541,15 +556,16 @@ class RigWorker:
         try:
             now = relays.release()
         except InterlockError as exc:
-            text = why or str(exc)
-            if status.held:  # a refused mode change lights the alarm with its reason
+            # a refused mode change lights the alarm with its reason; so does a release unheld
+            text = why or operator_words("release", exc)
+            if status.held:
                 relays.alarm = text
-                self.state.update(alarm=text)
-                self._rig.event("alarm", text)
+            self._alarm(text, not_held=not status.held)
             self._poll(force=True)
+            log.info("release refused: %s", exc)   # the node's raw refusal, for the log
             raise InterlockError(text) from None
         relays.alarm = None
-        self.state.update(alarm=None)
+        self._alarm(None)
         self._rig.event("mode", f"mode {now}")
         self._poll(force=True)
         return f"mode {now} ({MODES.get(now, '?')}) in force"
