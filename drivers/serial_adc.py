@@ -419,15 +419,18 @@ class SerialAdc(Adc):
                 if self._mono() > deadline:
                     return None
 
+    def _drop_stale_replies(self) -> None:
+        """Replies nobody waits for any more (to a command that timed out): not this one's."""
+        while not self._replies.empty():
+            log.warning("ADC on %s: stale reply dropped: %s", self.port, self._replies.get_nowait())
+
     def _command(self, verb: str, *args: object, what: str | None = None) -> Reply:
         self.faults.check()
         if self._closed:
             raise DeviceLost(f"ADC on {self.port} is closed")
         what = what or " ".join([verb, *map(str, args)])
         with self._cmd_lock:
-            while not self._replies.empty():
-                stale = self._replies.get_nowait()
-                log.warning("ADC on %s: stale reply dropped: %s", self.port, stale)
+            self._drop_stale_replies()
             self._send(encode_command(verb, *args), what)
             reply = self._await_reply()
             if reply is None:
@@ -655,8 +658,7 @@ class SerialAdc(Adc):
         within ``reply_timeout_s``. Not ``_command``: a missing answer here is no fault of its
         own; the read that asked reports the stall, with the read's words."""
         with self._cmd_lock:
-            while not self._replies.empty():
-                log.warning("ADC on %s: stale reply dropped: %s", self.port, self._replies.get_nowait())
+            self._drop_stale_replies()
             self._send(encode_command("STAT?"), "STAT?")
             deadline = self._mono() + self.reply_timeout_s
             while True:

@@ -108,10 +108,10 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
     from procedures.calibrations import get
     from procedures.params import parse_params
     from simhw.params import load_config
+    from simhw.simulator import check_seed
 
     cfg = load_config(cfg_path)        # a bad config or seed is refused before anything is made
-    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
-        raise ValueError(f"--seed {seed!r} must be a whole number 0..{2 ** 63 - 1}")
+    check_seed(seed, f"--seed {seed!r}")
     make_folder(out)
     url = f"sim?seed={seed}&watchdog=5"
     if cfg_path is not None:

@@ -26,6 +26,7 @@ from drivers.table import Operator, TablePosition, terminal_operator
 from simhw.datasheet import rig_calibration
 from simhw.params import config_stamp, load_config
 from simhw.rig_server import SimRigServer
+from simhw.simulator import check_seed
 
 #: the simulated rig's default heartbeat and reply deadline (s, on a clock that leaves out the
 #: host's pauses: ``drivers.runclock``)
@@ -61,8 +62,7 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         seed = int(params.get("seed", "0"))
     except ValueError:
         seed = -1
-    if not 0 <= seed < 2 ** 63:
-        raise ValueError(f"rig URL {url!r}: seed={params['seed']!r} must be a whole number 0..{2 ** 63 - 1}")
+    check_seed(seed, f"rig URL {url!r}: seed={params.get('seed', '0')!r}")
     try:
         speed = float(params.get("speed", "1"))
         # a wall-clock deadline on a rig whose time is virtual measures the host's load, not the

@@ -105,6 +105,18 @@ def pickoff_white_psd(rms_urad: float, lines: list) -> float:
     return max(var, 0.0) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
 
 
+#: the largest seed (numpy takes any non-negative integer; this is a sane bound on a typo)
+MAX_SEED = 2 ** 63 - 1
+
+
+def check_seed(seed: object, what: str | None = None) -> None:
+    """Refuse a seed that is not a whole number 0..MAX_SEED, saying ``what`` was given (default
+    ``seed <value>``) and the limit (numpy's own refusal, "expected non-negative integer", says
+    neither)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
+        raise ValueError(f"{what or f'seed {seed!r}'} must be a whole number 0..{MAX_SEED}")
+
+
 class Sources:
     """All random inputs of the plant, one independent stream each."""
 
@@ -274,8 +286,7 @@ class Simulator:
         self._outputs = self.channels + (TRUTH_CHANNELS if truth else ())
         self._keep: Kept | None = None if channels is None else kept(cfg, self._outputs)
         # numpy's own refusal ("expected non-negative integer") names neither the value nor the limit
-        if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2 ** 63:
-            raise ValueError(f"seed {seed!r} must be a whole number 0..{2 ** 63 - 1}")
+        check_seed(seed)
         self.seed = seed
         self.clock = clock or VirtualClock()
         self.truth = truth
