@@ -26,7 +26,8 @@ from matplotlib.figure import Figure
 from daq.octave import OctaveBands, band_average_dof, octave_bands
 from daq.spectra import psd_confidence
 
-__all__ = ["coherence_significance", "new_figure", "plot_coherence", "plot_psd", "psd_units_label", "save_figure"]
+__all__ = ["coherence_significance", "narrow_lines", "new_figure", "plot_coherence", "plot_psd", "psd_units_label",
+           "save_figure"]
 
 log = logging.getLogger(__name__)
 
@@ -62,6 +63,34 @@ def _strongest_distinct(f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float
             out.append((float(f[i]), float(p[i])))
             if len(out) == n:
                 break
+    return out
+
+
+#: a kept point is a line when it stands this many times above the median of its neighbours
+LINE_FACTOR = 10.0
+
+
+def narrow_lines(f, p, candidates, *, factor: float = LINE_FACTOR, guard_bins: int = 3) -> np.ndarray:
+    """Which of the ``candidates`` (frequencies of the spectrum ``p(f)``, e.g. the App. A.8 points
+    kept above 3 times their band's average) are narrow lines: points more than ``factor`` times
+    the median of their neighbours between ``max(guard_bins bins, 5 % of f)`` and ``max(4
+    guard_bins bins, 20 % of f)`` away on either side. A filter's roll-off (where the octave
+    rule keeps a band's lowest bins, ``daq.octave``) and a damped resonance's peak are as high
+    as their neighbours there, so they are kept points but no lines."""
+    f = np.asarray(f, dtype=float)
+    p = np.asarray(p, dtype=float)
+    out = np.zeros(len(candidates), dtype=bool)
+    if len(f) < 3:
+        return out
+    df = float(np.median(np.diff(f)))
+    for j, fk in enumerate(np.asarray(candidates, dtype=float)):
+        i = int(np.argmin(np.abs(f - fk)))
+        d = np.abs(f - f[i])
+        near = max(guard_bins * df, 0.05 * f[i])
+        far = max(4 * guard_bins * df, 0.2 * f[i])
+        sel = (d >= near) & (d <= far) & np.isfinite(p)
+        if sel.any():
+            out[j] = bool(p[i] > factor * np.median(p[sel]))
     return out
 
 
@@ -126,9 +155,17 @@ def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, win
         ax.loglog(b.f_center[ok], b.average[ok], "o-", color="C0", markersize=4,
                   label="octave-band average (bands double in width)")
         kept = b.kept_p > 0
-        ax.loglog(b.kept_f[kept], b.kept_p[kept], "^", color="C3", markersize=5, linestyle="none",
-                  label=f"points > {factor:g} × band average ({int(kept.sum())})")
-        for fk, pk in _strongest_distinct(b.kept_f[kept], b.kept_p[kept]):
+        # App. A.8 keeps every point above 3 times its band's average; only the narrow ones are
+        # lines: a filter's roll-off or a resonance's peak is kept too, and is marked apart
+        line = narrow_lines(f, p, b.kept_f[kept])
+        kf, kp = b.kept_f[kept], b.kept_p[kept]
+        ax.loglog(kf[~line], kp[~line], "v", color="0.45", markersize=4, linestyle="none",
+                  label=f"points > {factor:g} × band average, broad (roll-off, resonance): no line "
+                        f"({int((~line).sum())})")
+        ax.loglog(kf[line], kp[line], "^", color="C3", markersize=5, linestyle="none",
+                  label=f"narrow lines: > {factor:g} × band average and > {LINE_FACTOR:g} × their neighbours "
+                        f"({int(line.sum())})")
+        for fk, pk in _strongest_distinct(kf[line], kp[line]):
             ax.annotate(f"{fk:.4g} Hz", (fk, pk), textcoords="offset points", xytext=(4, 4), fontsize=8,
                         color="C3")
         ax.legend(loc="best", fontsize=8)
