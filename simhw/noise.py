@@ -6,11 +6,15 @@ strictly sequentially, so the samples do not depend on how a run is cut into blo
 Flicker (1/f) noise follows the thesis's reference [T1] (Ch. V B.5): a sum of first-order
 lags driven by independent white noises, with time constants spread evenly in log frequency.
 With lags at corner frequencies f_i spaced by d = ln(f_{i+1}/f_i) and white intensities
-q_i = 4 pi d A f_i (two-sided), the sum has one-sided PSD A/f between the extreme corners
-(integrate q(fc)/(4 pi^2 (fc^2 + f^2)) over ln fc). Slow lags run at a decimated rate and are
-held, so a bank spanning 1e-5..50 Hz costs little per sample. Any other spectrum (the
-autocollimator's knee of any form and slope, docs/simhw.md section 4) takes non-negative lag
-weights fitted to it, and its sharp corner a low-pass on some of the lags (``_fitted_bank``).
+q_i = 4 pi d A f_i (two-sided), the sum has one-sided PSD A/f well inside the extreme corners
+(integrate q(fc)/(4 pi^2 (fc^2 + f^2)) over ln fc: (2/pi) (A/f) [atan(f_top/f) - atan(f_bot/f)],
+so only 64 % of A/f at either corner, 77 % at 0.6 f_top; issue 38). The bank therefore reaches
+three times beyond the band it claims on either side and its weights are fitted so that its
+exact spectrum is A/f across the band (``_one_over_f_bank``: within 0.1 % up to a tenth of the
+step rate, 1 % up to a quarter, see ``FlickerNoise``). Slow lags run at a decimated rate and
+are held, so a bank spanning 1e-5..50 Hz costs little per sample. Any other spectrum (the autocollimator's knee of
+any form and slope, docs/simhw.md section 4) takes non-negative lag weights fitted to it, and
+its sharp corner a low-pass on some of the lags (``_fitted_bank``).
 """
 
 from __future__ import annotations
@@ -179,13 +183,52 @@ def _fitted_bank(f_lo: float, f_top: float, dt: float, corner_hz: float, knee: f
             np.concatenate(filtered)[keep], sos)
 
 
+#: how far beyond its band (a factor, each side) a 1/f bank's lags reach (``_one_over_f_bank``)
+ONE_OVER_F_REACH = 3.0
+#: the highest frequency a 1/f bank's fit holds, as a fraction of the step rate 1/dt: towards
+#: Nyquist the held steps' own spectrum bends it (2 % at 0.4/dt)
+ONE_OVER_F_TOP = 0.25
+
+
+@functools.lru_cache(maxsize=64)
+def _one_over_f_bank(f_lo: float, f_hi: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Corners and white intensities of lags whose summed one-sided PSD is 1/f (level 1) from
+    ``f_lo`` to ``min(f_hi, ONE_OVER_F_TOP / dt)``.
+
+    The closed form (module docstring) falls to 2/pi of 1/f at its extreme corners, so the lags
+    (``FlickerNoise.PER_DECADE`` a decade) run from f_lo / ``ONE_OVER_F_REACH`` to ``ONE_OVER_F_REACH``
+    f_hi (at most 0.2 / dt), start at the closed form's intensities q_i = 4 pi d f_i, and take
+    non-negative weights minimizing the largest relative error from 1/f on a log grid of the band
+    (``_minimax_nonneg``), each lag's spectrum as the bank makes it (``_lag_psd``, decimated at
+    ``_fit_margin(1)`` = 1000 x its corner). The error is under 0.1 % for a band up to 0.1 / dt
+    (the rig's banks: 1e-4..50 Hz and 1e-4..200 Hz at 2 kHz, 1e-5..1 Hz) and under 1 % up to
+    0.25 / dt (``tests/simhw/test_noise.py``)."""
+    f_band = min(f_hi, ONE_OVER_F_TOP / dt)
+    top = min(ONE_OVER_F_REACH * f_band, 0.2 / dt)
+    bot = f_lo / ONE_OVER_F_REACH
+    n = max(2, int(math.ceil(math.log10(top / bot) * FlickerNoise.PER_DECADE)) + 1)
+    fc = np.geomspace(bot, top, n)
+    q1 = 4 * math.pi * math.log(fc[1] / fc[0]) * fc
+    f = np.geomspace(f_lo, f_band, max(60, int(30 * math.log10(f_band / f_lo))))
+    g = _minimax_nonneg(_lag_psd(fc, q1, dt, f, _fit_margin(1.0)) * f[:, None], np.ones(len(f)))
+    keep = g > 1e-9
+    return fc[keep], (q1 * g)[keep]
+
+
 class FlickerNoise:
-    """One-sided PSD ``level / f`` between ``f_lo`` and ``f_hi`` (units^2/Hz at 1 Hz = level).
+    """One-sided PSD ``level / f`` between ``f_lo`` and ``f_hi`` (units^2/Hz at 1 Hz = level),
+    within 0.1 % of it from ``f_lo`` to ``min(f_hi, 0.1 / dt)`` and 1 % to ``min(f_hi, 0.25 / dt)``
+    (the bank's exact spectrum,
+    ``spectrum``; a generated record's Welch PSD matches it to its own scatter,
+    ``tests/simhw/test_noise.py``). Beyond the band it bends away: it keeps near 1/f for about
+    a factor of three, then falls as 1/f^3 (first-order lags above their corners) above, and
+    flattens below (issue 38: the bank of 2.5 lags a decade ending at f_hi gave 64-77 % of
+    ``level / f`` in the band's top half).
 
     With a knee (``corner_hz``, ``knee``, ``slope``; docs/simhw.md section 4) the PSD is
     ``level / corner_hz * (K(f) - 1)``, K the autocollimator's knee (``knee_excess``): at
-    knee = slope = 1 that is ``level / f`` again, made exactly as before (the closed form of
-    the module docstring); any other knee or slope is fitted (``_fitted_bank``).
+    knee = slope = 1 that is ``level / f`` again (``_one_over_f_bank``); any other knee or slope
+    is fitted to the knee (``_fitted_bank``).
     """
 
     PER_DECADE = 2.5
@@ -231,13 +274,12 @@ class FlickerNoise:
             fc, q, through, _ = _fitted_bank(self.f_lo, f_hi, dt, self.corner_hz, self.knee, self.slope)
             q = q * (self.level / self.corner_hz)
         else:
-            n = max(2, int(math.ceil(math.log10(f_hi / self.f_lo) * self.PER_DECADE)) + 1)
-            fc = np.geomspace(self.f_lo, f_hi, n)
-            d = math.log(fc[1] / fc[0])
-            q = 4 * math.pi * d * self.level * fc
-            through = np.zeros(n, bool)
-        # Group lags by decimation (power of two) so each runs at >= 40 x its corner.
-        decim = _decimation(fc, dt, _fit_margin(self.slope) if self.fitted else 40.0)
+            fc, q = _one_over_f_bank(self.f_lo, self.f_hi, dt)
+            q = q * self.level
+            through = np.zeros(len(fc), bool)
+        # Group lags by decimation (power of two) so each runs fast enough for its fit
+        # (``_fit_margin``: 1000 x its corner for 1/f).
+        decim = _decimation(fc, dt, _fit_margin(self.slope if self.fitted else 1.0))
         out = []
         for lp in (False, True):
             for dec in sorted(set(decim[through == lp].tolist())):

@@ -156,8 +156,9 @@ class Sources:
                                                knee=ac.flicker_knee, slope=ac.flicker_slope)
             frac = ac.common_noise_fraction
             # The unit's own 1/f, W (K - 1) (``ac_knee``); the bank reaches 10 x the corner (for
-            # a high corner, the flicker_noise effect's) and at least the 50 Hz it always had.
-            f_top = max(50.0, 10.0 * fc)
+            # a high corner, the flicker_noise effect's) and at least the NEA band's top, over
+            # which the white level W is set (``ac_white_psd``; issue 38: it stopped at 50 Hz).
+            f_top = max(NEA_BAND_HZ[1], 10.0 * fc)
             self.parts[f"nac_{a}"] = [
                 WhiteNoise(sub(f"nac_{a}"), white * (1.0 - frac), dt),
                 FlickerNoise(sub(f"nac_{a}"), white * fc, 1e-4, f_top, dt, corner_hz=fc, knee=ac.flicker_knee,
