@@ -5,7 +5,8 @@ Every figure key ``K`` of a procedure's JSON may carry ``K_ci95`` (same shape, `
 ``resolved: false`` with its interval, and its value is ``None``: never a bare number. The rule
 (issue 18): a figure is unresolved when its 95 % interval is wider than its magnitude, or when
 its estimate correlates with another of the same fit by more than ``MAX_CORRELATION`` (the
-design cannot tell the two apart, so each is only known together with the other).
+design cannot tell the two apart, so each is only known together with the other), or when the
+interval is degenerate: zero width, or the value not strictly inside it (issue 38).
 
 The procedures decide *how* an interval is made (generalised least squares, repeated
 determinations, a block bootstrap, a profile); this module only carries it and applies the
@@ -46,11 +47,19 @@ class Estimate:
 
 
 def judged(value: float, lo: float, hi: float, *, correlation: float = 0.0, with_: str = "") -> Estimate:
-    """An estimate with its interval, resolved unless the interval is wider than the value's
-    magnitude or ``|correlation|`` (with the estimate named ``with_``) exceeds ``MAX_CORRELATION``."""
+    """An estimate with its interval, resolved unless the interval is degenerate (not finite, of
+    zero width, or not holding the value strictly inside), wider than the value's magnitude, or
+    ``|correlation|`` (with the estimate named ``with_``) exceeds ``MAX_CORRELATION``."""
     lo, hi = min(lo, hi), max(lo, hi)
     if not all(math.isfinite(v) for v in (value, lo, hi)):
         return Estimate(value, lo, hi, False, "no finite interval")
+    # a degenerate interval is no measured error (issue 38 item 1: a fit pinned to the edge of
+    # its search gave [v, v], "relative standard error 0 ... pass")
+    if not hi > lo:
+        return Estimate(value, lo, hi, False, "its 95 % interval has zero width: no error was measured")
+    if not lo < value < hi:
+        where = "on" if value in (lo, hi) else "outside"
+        return Estimate(value, lo, hi, False, f"the value lies {where} the edge of its 95 % interval [{lo:.4g}, {hi:.4g}]")
     if abs(correlation) > MAX_CORRELATION:
         return Estimate(value, lo, hi, False, f"correlates {correlation:+.3f} with {with_ or 'another figure'}")
     if hi - lo > abs(value):
