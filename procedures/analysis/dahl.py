@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 
 import numba
 import numpy as np
+import scipy.fft
 import scipy.optimize
 import scipy.signal
 
@@ -327,6 +328,13 @@ class DahlFit:
     #: knows of each, c^T J_s^T J_s c / c^T J^T J c with c = (J^T J)^-1 g (g the figure's
     #: gradient; the offsets projected out). Each figure's shares add up to 1.
     leverage: list[tuple[float, float, float]] = field(default_factory=list)
+    #: the angle's further advance fitted with To and eta (``fit_dahl``'s ``lag_term_Nm``), its
+    #: standard error (cluster-robust), and whether it was fitted at all
+    lag_s: float = 0.0
+    lag_se_s: float = math.nan
+    lag_fitted: bool = False
+    #: the parameters that ended on the edge of the search: no estimate (``fit_dahl``)
+    at_edge: list[str] = field(default_factory=list)
 
 
 def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]) -> tuple[float, float]:
@@ -344,7 +352,8 @@ def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]
 
 def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
              smooth_hz: float | None = None, step: int = 1, independent_every: int = 1,
-             start: tuple[float, float] | None = None, drop_cycle: int | None = None) -> DahlFit:
+             start: tuple[float, ...] | None = None, drop_cycle: int | None = None,
+             lag_term_Nm: np.ndarray | None = None, max_lag_s: float = 0.0) -> DahlFit:
     """Least-squares To and eta of eq. 5.2 integrated along ``path_rad`` (the angle the bearing
     is taken to follow) against ``torque_Nm`` (the measured bearing torque, ``bearing_torque``).
 
@@ -356,12 +365,20 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     power amplifier's offset, slow disturbances). With ``smooth_hz`` the model torque gets the
     zero-phase low-pass the measured torque had.
 
+    With ``lag_term_Nm`` (the part of ``torque_Nm`` formed from the angle, -D thetadot -
+    I thetaddot of ``bearing_torque``) the angle's lag behind the drive is fitted too, as a
+    third parameter ``lag_s`` within +-``max_lag_s``: the angle (the path and that part of the
+    torque) advanced by ``lag_s`` more (``advance``). It is told from eta by the ladder: a lag
+    turns every loop by the same phase w lag, Dahl's hysteresis by a phase that grows with the
+    loop's amplitude (eq. 5.12; 8 eta To theta_o / (3 pi) in the spring regime).
+
     Standard errors are cluster-robust over the analysed cycles (the covariance of (ln To,
     ln eta) from the spread of the cycles' scores, ``cov_ln``, with ``dof`` degrees of freedom
-    for Student's t); they are statistical only. The stiffness eta To^2 gets the delta method.
-    ``independent_every`` only sets ``n_independent`` (a residual sample per that many is
-    counted as independent), kept for the report. ``drop_cycle``: leave the kept cycle of that
-    index out of every segment's residual (the model still runs along the whole path)."""
+    for Student's t; the fitted lag's error is in it); they are statistical only. The stiffness
+    eta To^2 gets the delta method. ``independent_every`` only sets ``n_independent`` (a residual
+    sample per that many is counted as independent), kept for the report. ``drop_cycle``: leave
+    the kept cycle of that index out of every segment's residual (the model still runs along the
+    whole path). ``start``: (To, eta) or (To, eta, lag) to start from."""
     if not segments:
         raise ValueError("no cycles of constant amplitude to fit")
     theta = np.asarray(path_rad, dtype=float)
@@ -376,52 +393,90 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     if drop_cycle is not None:          # a jackknife replicate: the drop_cycle-th kept cycle of every segment out
         idx = [i[_cycle_labels(s, i + a0, 0) != drop_cycle] for s, i in zip(segments, idx)]
     meas = [torque[a0 + i] for i in idx]
-    To0, eta0 = start if start is not None else _initial_guess(th, meas, idx)
+    To0, eta0 = start[:2] if start is not None else _initial_guess(th, meas, idx)
+    fit_lag = lag_term_Nm is not None and max_lag_s > 0
     evals = 0
+    if fit_lag:
+        assert lag_term_Nm is not None
+        # the advance is exact for band-limited records (a phase ramp on the spectrum); the
+        # window is taken with a margin either side, so its wrap-around stays out of the cycles
+        margin = int(math.ceil(max_lag_s * fs_hz)) + 64
+        lo_w, hi_w = max(0, a0 - margin), min(len(theta), b0 + margin)
+        path_adv = Advance(theta[lo_w:hi_w], fs_hz)
+        term = np.asarray(lag_term_Nm, dtype=float)
+        term_adv = Advance(term[lo_w:hi_w], fs_hz)
+        sel = np.concatenate(idx) + (a0 - lo_w)
+        base = np.concatenate(meas) - term[lo_w:hi_w][sel]
+        bounds_i = np.cumsum([0] + [len(i) for i in idx])
+    lag0 = float(start[2]) if start is not None and len(start) > 2 and fit_lag else 0.0
 
-    def model(p: np.ndarray) -> np.ndarray:
-        T = _dahl_path(th, math.exp(p[0]), math.exp(p[1]), 0.0)
+    def data(p: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+        """The path (a0..b0) and the measured torque on each segment's residual samples."""
+        if not fit_lag:
+            return th, meas
+        lag = p[2] * LAG_UNIT_S
+        path = path_adv(lag)[a0 - lo_w:b0 - lo_w]
+        tq = base + term_adv(lag)[sel]
+        return np.ascontiguousarray(path), [tq[x:y] for x, y in zip(bounds_i[:-1], bounds_i[1:])]
+
+    def model(p: np.ndarray, path: np.ndarray) -> np.ndarray:
+        T = _dahl_path(path, math.exp(p[0]), math.exp(p[1]), 0.0)
         return lowpass(T, fs_hz, smooth_hz) if smooth_hz is not None else T
 
     def residuals(p: np.ndarray) -> np.ndarray:
         nonlocal evals
         evals += 1
-        T = model(p)
+        path, m_seg = data(p)
+        T = model(p, path)
         out = []
-        for i, m in zip(idx, meas):
+        for i, m in zip(idx, m_seg):
             r = T[i] - m
             out.append(r - r.mean())     # the segment's offset, solved exactly
         return np.concatenate(out)
 
-    p0 = np.array([math.log(To0), math.log(eta0)])
     span = math.log(1e3)
-    sol = scipy.optimize.least_squares(residuals, p0, method="trf", bounds=(p0 - span, p0 + span),
-                                       diff_step=1e-4, x_scale=np.array([0.1, 0.1]), max_nfev=200)
+    p0 = np.array([math.log(To0), math.log(eta0)] + ([lag0 / LAG_UNIT_S] if fit_lag else []))
+    lo_b = np.concatenate([p0[:2] - span, [-max_lag_s / LAG_UNIT_S] if fit_lag else []])
+    hi_b = np.concatenate([p0[:2] + span, [max_lag_s / LAG_UNIT_S] if fit_lag else []])
+    p0 = np.clip(p0, lo_b, hi_b)
+    sol = scipy.optimize.least_squares(residuals, p0, method="trf", bounds=(lo_b, hi_b),
+                                       diff_step=1e-4, x_scale=np.full(len(p0), 0.1), max_nfev=200)
     if not np.all(np.isfinite(sol.x)) or not np.all(np.isfinite(sol.fun)):
         raise ValueError("the Dahl fit did not converge (non-finite parameters or residuals)")
     To, eta = math.exp(sol.x[0]), math.exp(sol.x[1])
+    # a parameter on the edge of the search (ln 1e3 either side of the start) is no estimate:
+    # the torque does not follow eq. 5.2 there (no friction at all, or a spring that never slips)
+    edge = [name for name, x, lo_x, hi_x in zip(("To", "eta", "lag"), sol.x, lo_b, hi_b)
+            if min(x - lo_x, hi_x - x) < 1e-3 * max(1.0, hi_x - lo_x)]
     r = sol.fun
     n_ind = max(3, int(len(r) * step / max(1, independent_every)))
     # Cluster-robust ("sandwich") covariance with one cluster per analysed cycle: the residual
     # is correlated within a cycle (the low-pass, the platform's jitter, the bearing's memory of
     # it) but its score J_c^T r_c is nearly independent from cycle to cycle, so the spread of the
     # cycles' scores measures the estimate's error whatever the correlation inside a cycle.
-    labels = np.concatenate([_cycle_labels(s, i + a0, base) for s, i, base in
+    labels = np.concatenate([_cycle_labels(s, i + a0, base_c) for s, i, base_c in
                              zip(segments, idx, np.cumsum([0] + [s.n_cycles for s in segments[:-1]]))])
     n_cl = int(labels.max()) + 1
-    dof = max(1, n_cl - len(segments) - 2)     # each segment's offset and the two parameters
+    n_par = len(p0)
+    dof = max(1, n_cl - len(segments) - n_par)     # each segment's offset and the parameters
     J = sol.jac
+    # the figures' gradients in the parameters: ln To, ln eta, ln k = 2 ln To + ln eta (the lag none)
+    grad = np.zeros((n_par, 3))
+    grad[:2] = [[1.0, 0.0, 2.0], [0.0, 1.0, 1.0]]
     try:
         bread = np.linalg.inv(J.T @ J)
-        scores = np.zeros((n_cl, 2))
+        scores = np.zeros((n_cl, n_par))
         np.add.at(scores, labels, J * r[:, None])
-        cov = bread @ (scores.T @ scores) @ bread * (n_cl / dof)
+        cov_full = bread @ (scores.T @ scores) @ bread * (n_cl / dof)
     except np.linalg.LinAlgError:
-        bread = cov = np.full((2, 2), np.nan)
-    proj = J @ bread @ np.array([[1.0, 0.0, 2.0], [0.0, 1.0, 1.0]])   # J c for ln To, ln eta, ln k
+        bread = cov_full = np.full((n_par, n_par), np.nan)
+    cov = cov_full[:2, :2]
+    proj = J @ bread @ grad   # J c for ln To, ln eta, ln k
     bounds = np.cumsum([0] + [len(i) for i in idx])
     info = np.array([np.sum(proj[a:b] ** 2, axis=0) for a, b in zip(bounds[:-1], bounds[1:])])
-    leverage = [(float(x), float(y), float(z)) for x, y, z in info / info.sum(axis=0)]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        shares = info / info.sum(axis=0)
+    leverage = [(float(x), float(y), float(z)) for x, y, z in shares]
     var = np.diag(cov)
     se_ln = np.sqrt(np.where(var >= 0, var, np.nan))
     g = np.array([2.0, 1.0])                    # ln k = 2 ln To + ln eta
@@ -429,17 +484,47 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     se_lnk = float(np.sqrt(max(float(g @ cov @ g), 0.0))) if np.all(np.isfinite(cov)) else math.nan
     corr = float(cov[0, 1] / math.sqrt(var[0] * var[1])) if np.all(np.isfinite(cov)) and var[0] > 0 and var[1] > 0 \
         else math.nan
-    T = model(sol.x)
+    path, m_seg = data(sol.x)
+    T = model(sol.x, path)
     offsets, rms = [], []
-    for i, m in zip(idx, meas):
+    for i, m in zip(idx, m_seg):
         d = m - T[i]
         offsets.append(float(d.mean()))
         rms.append(float(np.sqrt(np.mean((d - d.mean()) ** 2))))
     full = T.copy()
     for s, off in zip(segments, offsets):
         full[s.lead_start - a0:s.stop - a0] += off
+    lag_s = float(sol.x[2] * LAG_UNIT_S) if fit_lag else 0.0
+    lag_se = float(math.sqrt(cov_full[2, 2]) * LAG_UNIT_S) if fit_lag and cov_full[2, 2] >= 0 else math.nan
     return DahlFit(To, eta, To * float(se_ln[0]), eta * float(se_ln[1]), k, k * se_lnk, corr, offsets, rms,
-                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals, cov, dof, n_cl, leverage)
+                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals, cov, dof, n_cl, leverage,
+                   lag_s, lag_se, fit_lag, edge)
+
+
+#: the fitted lag's unit inside the least squares (its steps and scale are then like ln To's)
+LAG_UNIT_S = 1e-3
+
+
+class Advance:
+    """``x(t + a)`` for any advance ``a`` (s) of a record: exact for a band-limited one (a
+    phase ramp e^{j w a} on its spectrum). The straight line through the record's ends is
+    taken out first and advanced exactly, so the record's ends meet the zero padding without
+    a jump (no ringing); within ``a`` of the ends the result is not the record's."""
+
+    def __init__(self, x: np.ndarray, fs_hz: float) -> None:
+        x = np.asarray(x, dtype=float)
+        self.n = len(x)
+        self.fs = fs_hz
+        self.x0 = float(x[0])
+        self.slope = float(x[-1] - x[0]) / max(1, self.n - 1)
+        self.k = np.arange(self.n, dtype=float)
+        self.nfft = scipy.fft.next_fast_len(2 * self.n, real=True)
+        self.spec = scipy.fft.rfft(x - self.x0 - self.slope * self.k, self.nfft)
+        self.w = 2 * math.pi * scipy.fft.rfftfreq(self.nfft, 1.0 / fs_hz)
+
+    def __call__(self, advance_s: float) -> np.ndarray:
+        y = scipy.fft.irfft(self.spec * np.exp(1j * self.w * advance_s), self.nfft)[:self.n]
+        return y + self.x0 + self.slope * (self.k + advance_s * self.fs)
 
 
 def _cycle_labels(seg: Segment, samples: np.ndarray, base: int) -> np.ndarray:
@@ -485,7 +570,8 @@ class PathScan:
 def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
                   smooth_hz: float, cutoffs_hz: list[float], step: int = 1,
                   independent_every: int = 1, drop_cycle: int | None = None,
-                  start: tuple[float, float] | None = None) -> tuple[DahlFit, PathScan]:
+                  start: tuple[float, ...] | None = None, lag_term_Nm: np.ndarray | None = None,
+                  max_lag_s: float = 0.0) -> tuple[DahlFit, PathScan]:
     """``fit_dahl`` along the measured angle low-passed at each of ``cutoffs_hz``; the fit that
     explains the torque best (least residual) is returned, with the scan.
 
@@ -494,7 +580,8 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
     the steps of the command DAC), and the bearing follows those small reversals; above it the
     instrumentation channel shows mostly its own noise, which is no motion at all. Too low a
     cutoff drops real reversals, too high a one adds false ones; both spoil the fit, so the
-    residual finds the band the data support."""
+    residual finds the band the data support. ``lag_term_Nm``, ``max_lag_s``: the angle's lag
+    is fitted at every bandwidth too (``fit_dahl``)."""
     if not cutoffs_hz:
         raise ValueError("no trial cutoffs for the angle path")
     cutoffs_hz = sorted(float(c) for c in cutoffs_hz)
@@ -503,10 +590,11 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
     for fc in cutoffs_hz:
         path = lowpass(theta_rad, fs_hz, fc)
         fit = fit_dahl(path, torque_Nm, segments, fs_hz, smooth_hz=smooth_hz, step=step,
-                       independent_every=independent_every, start=guess, drop_cycle=drop_cycle)
+                       independent_every=independent_every, start=guess, drop_cycle=drop_cycle,
+                       lag_term_Nm=lag_term_Nm, max_lag_s=max_lag_s)
         fit.path_cutoff_hz = float(fc)
         fits.append(fit)
-        guess = (fit.To_Nm, fit.eta_per_Nm)
+        guess = (fit.To_Nm, fit.eta_per_Nm, fit.lag_s)
     best = int(np.argmin([f.residual_rms_total_Nm for f in fits]))
     if 0 < best < len(fits) - 1:
         # refine: the least residual between the best's neighbours (Brent's bounded search in
@@ -516,7 +604,8 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
         def resid(x: float) -> float:
             fit = fit_dahl(lowpass(theta_rad, fs_hz, math.exp(x)), torque_Nm, segments, fs_hz, smooth_hz=smooth_hz,
                            step=step, independent_every=independent_every,
-                           start=(fits[best].To_Nm, fits[best].eta_per_Nm), drop_cycle=drop_cycle)
+                           start=(fits[best].To_Nm, fits[best].eta_per_Nm, fits[best].lag_s), drop_cycle=drop_cycle,
+                           lag_term_Nm=lag_term_Nm, max_lag_s=max_lag_s)
             fit.path_cutoff_hz = math.exp(x)
             tried[x] = fit
             return fit.residual_rms_total_Nm
@@ -541,6 +630,8 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
 # ---------------------------------------------------------------------------- the angle's lag
 #: a command line used to measure the lag is at least this fraction of the fundamental's amplitude
 LINE_MIN = 1e-5
+#: ... and at least this many times the command's power in the bins around it (an isolated line)
+LINE_ISOLATION = 100.0
 
 @dataclass
 class LagMeasurement:
@@ -601,14 +692,23 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     hann = (0.5 - 0.5 * np.cos(2 * math.pi * np.arange(n_per) / n_per))[:, None]
     C = c_hp[blocks] @ E
     Ch, A, D = c_hp[blocks] @ (hann * E), a_hp[blocks] @ (hann * E), d_hp[blocks] @ (hann * E)
-    # the lines the command really carries: the strongest, well above its floor and above
-    # LINE_MIN of its fundamental (a smooth command's numerical dust is no excitation)
+    # the lines the command really carries: the strongest, well above its floor, above
+    # LINE_MIN of its fundamental (a smooth command's numerical dust is no excitation), and
+    # isolated: LINE_ISOLATION times the median of the bins 3-10 away on either side. A smooth
+    # sinusoid's leakage (its amplitude steps, the high-pass's transients) is a continuum
+    # falling with frequency, whose bins just above min_hz pass any plain threshold; the
+    # bearing's harmonics of the fundamental ride in the same bins, so the "line" would
+    # measure the nonlinearity, not the lag (issue 38 item 7: 8.9 ms read for 3.5 ms).
     power = np.mean(np.abs(C) ** 2, axis=0)
     order = np.argsort(power)[::-1]
     floor = float(np.median(power))
     x = np.asarray(cmd, dtype=float)[blocks]
     fund = float(np.mean(np.abs(x @ np.exp(-2j * math.pi * np.arange(n_per) / n_per)) ** 2))
-    strong = [int(i) for i in order[:max_lines] if power[i] > max(100.0 * floor, LINE_MIN ** 2 * fund)]
+    near = np.concatenate([np.arange(-10, -2), np.arange(3, 11)])
+    around = np.mean(np.abs(np.fft.rfft(c_hp[blocks], axis=1)) ** 2, axis=0)    # every bin of the window
+    local = np.array([float(np.median(around[np.clip(k + near, 1, len(around) - 1)])) for k in harm])
+    strong = [int(i) for i in order[:max_lines]
+              if power[i] > max(100.0 * floor, LINE_MIN ** 2 * fund, LINE_ISOLATION * local[i])]
     if lines_hz is not None:
         strong = [int(np.argmin(np.abs(harm * f_bin - f))) for f in lines_hz]
         max_se_rad = math.inf

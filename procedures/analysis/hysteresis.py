@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.signal
 import scipy.stats
 
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
@@ -93,7 +94,8 @@ class HysteresisResult:
     history: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     #: the angle's lag behind the power-amplifier input that was taken out, its standard error,
-    #: and where it came from: "measured" (``dahl.measure_lag``), "given", or "none" (unmeasured)
+    #: and where it came from: "measured" at the command's lines (``dahl.measure_lag``),
+    #: "fitted" with To and eta (a smooth command: ``dahl.fit_dahl``), or "given"
     angle_lag_s: float = 0.0
     angle_lag_se_s: float = math.nan
     lag_source: str = "none"
@@ -170,9 +172,12 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     left out). ``calibration`` defaults to the file's ``/meta/calibration``, else the data
     sheet's defaults (with a warning). The recorded angle is advanced by its lag behind the
     power-amplifier input (the instrumentation channel's filters, eq. 3.22, and the motor's
-    La/Ra), measured on the record at the command's DAC lines (``dahl.measure_lag``); a number
-    ``angle_lag_s`` overrides the measurement (for studies; its error is then taken as 0).
-    Raises ValueError naming what is wrong."""
+    La/Ra), measured on the record at the command's DAC lines (``dahl.measure_lag``), or, where
+    the command carries none (a smooth sinusoid, as another lab's recorder drives it), fitted
+    with To and eta along the whole record (``dahl.fit_dahl``); a number ``angle_lag_s``
+    overrides both (for studies; its error is then taken as 0). A record sampled faster than
+    the fit needs is decimated for it (``ANALYSIS_RATE_PER_FC``). Raises ValueError naming what
+    is wrong."""
     path = Path(path)
     a = str(axis).upper()
     if a not in AXES:
@@ -250,36 +255,47 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         warnings.append(msg)
     ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD          # V per rad
     lag_meas: dahl.LagMeasurement | None = None
+    kt, dv, inertia = plat.torque_per_pa_V, plat.viscous_Nms, plat.inertia_kg_m2
+
+    def rigid(w: np.ndarray) -> np.ndarray:
+        # angle per volt of drive of the platform as a rigid body (eq. 3.23-3.27): the
+        # bearing's small-motion stiffness is far below I w^2 at the lines used
+        return kt / (-inertia * w * w + 1j * dv * w)
+
     if angle_lag_s is None:
-        kt, dv, inertia = plat.torque_per_pa_V, plat.viscous_Nms, plat.inertia_kg_m2
-
-        def rigid(w: np.ndarray) -> np.ndarray:
-            # angle per volt of drive of the platform as a rigid body (eq. 3.23-3.27): the
-            # bearing's small-motion stiffness is far below I w^2 at the lines used
-            return kt / (-inertia * w * w + 1j * dv * w)
-
         try:
             lag_meas = dahl.measure_lag(cmd, inst / ac_scale, pa, fs, freq, segments, rigid,
                                         min_hz=LAG_MIN_FC * fc, max_hz=LAG_MAX_FS * fs)
             lag_s, lag_se, lag_source = lag_meas.lag_s, lag_meas.se_s, "measured"
         except ValueError as exc:
-            msg = f"the angle's lag behind the power-amplifier input could not be measured ({exc}): none taken out"
-            log.warning(msg)
-            warnings.append(msg)
-            lag_s, lag_se, lag_source = 0.0, math.nan, "none"
+            # no line to measure it at (a smooth command): the lag is fitted with To and eta
+            # (``dahl.fit_dahl``), from the data sheet's filters and La/Ra as a start only
+            msg = (f"the angle's lag behind the power-amplifier input could not be measured at the command's lines "
+                   f"({exc}): it is fitted with To and eta")
+            log.info(msg)
+            lag_s, lag_se, lag_source = datasheet_lag_s(plat, ac), math.nan, "fitted"
     else:
         lag_s, lag_se, lag_source = float(angle_lag_s), 0.0, "given"
     if not (math.isfinite(lag_s) and abs(lag_s) * fs < 20):
         raise ValueError(f"angle lag {lag_s * 1e3:g} ms must be finite and under 20 samples")
-    theta = dahl.shift(inst / ac_scale, fs, lag_s)
-    theta_f = dahl.lowpass(theta, fs, fc)
-    torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
-                                 viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
-    top = min(10.0 * fc, 0.35 * fs)
+    # The fit needs the record up to the angle path's bandwidths (tens of Hz), not a fast
+    # recorder's every sample: the channels are decimated alike (zero phase, so no lag between
+    # them) to about ANALYSIS_RATE_PER_FC torque bandwidths, and the fit's cost no longer grows
+    # with the sample rate (issue 38 item 7: 2.5 min on a fast record).
+    q = max(1, int(fs // (ANALYSIS_RATE_PER_FC * fc)))
+    fs_a = fs / q
+    angle_rad, pa_a, cmd_a = (_decimate(x, q) for x in (inst / ac_scale, pa, cmd))
+    seg_a = [dahl.Segment(int(round(sg.start / q)), int(round(sg.stop / q)), int(round(sg.lead_start / q)),
+                          sg.n_cycles, sg.command_amplitude) for sg in segments] if q > 1 else segments
+    fit_lag = lag_source == "fitted"
+    max_fit_lag = min(FIT_LAG_RANGE_S, 15.0 / fs) if fit_lag else 0.0
+    theta, theta_f, torque, lag_term = _torque(angle_rad, pa_a, fs_a, fc, plat, lag_s)
+    top = min(10.0 * fc, 0.35 * fs_a)
     cutoffs = [c for c in 1.25 * fc * 1.25 ** np.arange(20) if c <= top] or [fc]
-    step = max(1, int(fs / (8.0 * fc)))
-    fit, scan = dahl.fit_dahl_path(theta, torque, segments, fs, smooth_hz=fc, cutoffs_hz=cutoffs, step=step,
-                                   independent_every=max(1, int(fs / (2.0 * fc))))
+    step = max(1, int(fs_a / (8.0 * fc)))
+    fit, scan = dahl.fit_dahl_path(theta, torque, seg_a, fs_a, smooth_hz=fc, cutoffs_hz=cutoffs, step=step,
+                                   independent_every=max(1, int(fs_a / (2.0 * fc))),
+                                   lag_term_Nm=lag_term if fit_lag else None, max_lag_s=max_fit_lag)
     path_cutoff_hz = fit.path_cutoff_hz
     assert path_cutoff_hz is not None  # fit_dahl_path sets it on the fit it returns
     if fit.path_cutoff_hz in (cutoffs[0], cutoffs[-1]) and len(cutoffs) > 1:
@@ -287,36 +303,158 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
                f"range tried ({cutoffs[0]:.3g}..{cutoffs[-1]:.3g} Hz)")
         log.warning(msg)
         warnings.append(msg)
-    model = np.full(len(theta), np.nan)
-    model[fit.start:fit.stop] = fit.model_Nm
+    base_lag = lag_s
+    if fit_lag:
+        # the fitted lag taken out: the angle, its low-passed copy and the torque formed again
+        lag_s = base_lag + fit.lag_s
+        theta, theta_f, torque, _ = _torque(angle_rad, pa_a, fs_a, fc, plat, lag_s)
     chain = _Chain(inst / ac_scale, pa, cmd, fs, freq, fc, segments, plat, step, cutoffs,
                    rigid if lag_source == "measured" else None, lag_s,
-                   lag_meas.frequencies_hz if lag_meas is not None else None)
-    estimates, ses, dof = _jackknife(fit, chain, lag_source, scan.envelope(PATH_TOLERANCE))
+                   lag_meas.frequencies_hz if lag_meas is not None else None,
+                   angle_rad, pa_a, fs_a, seg_a, base_lag, max_fit_lag)
+    lag_choice = (np.zeros(3), np.zeros(3))
+    if fit_lag:
+        # The fitted lag takes up whatever of the model's error looks like a lag (the platform's
+        # jitter the path lacks, a simulator's held friction torque): over the rigs of
+        # tests/procedures/test_hysteresis.py it lay 0.4-0.8 ms beyond the instruments' own lag.
+        # The data sheet's lag (its filters and La/Ra) is the other plausible choice: the
+        # figures at it bound the lag's error (a rectangular bound, as the path's bandwidth)
+        theta0, _, torque0, _ = _torque(angle_rad, pa_a, fs_a, fc, plat, base_lag)
+        at_sheet = dahl.fit_dahl(dahl.lowpass(theta0, fs_a, path_cutoff_hz), torque0, seg_a, fs_a, smooth_hz=fc,
+                                 step=step, start=(fit.To_Nm, fit.eta_per_Nm))
+        d = np.log([at_sheet.To_Nm / fit.To_Nm, at_sheet.eta_per_Nm / fit.eta_per_Nm,
+                    at_sheet.stiffness_Nm_per_rad / fit.stiffness_Nm_per_rad])
+        lag_choice = (np.maximum(-d, 0.0), np.maximum(d, 0.0))
+    estimates, ses, dof, lags = _jackknife(fit, chain, lag_source, scan.envelope(PATH_TOLERANCE), lag_choice)
+    if fit_lag:
+        G = len(lags)
+        lag_se = float(np.sqrt((G - 1) / G * np.sum((lags - lags.mean()) ** 2))) if G >= 2 else math.nan
+    model = np.full(len(theta), np.nan)
+    model[fit.start:fit.stop] = fit.model_Nm
     loops: list[Loop] = []
     k = fit.stiffness_Nm_per_rad
-    for seg, off, rms in zip(segments, fit.offsets_Nm, fit.residual_rms_Nm):
-        th_c = dahl.synchronous_average(theta_f, fs, freq, seg.start, seg.stop, bins)
-        tq_c = dahl.synchronous_average(torque, fs, freq, seg.start, seg.stop, bins) - off
-        md_c = dahl.synchronous_average(model, fs, freq, seg.start, seg.stop, bins) - off
+    for seg, off, rms in zip(seg_a, fit.offsets_Nm, fit.residual_rms_Nm):
+        th_c = dahl.synchronous_average(theta_f, fs_a, freq, seg.start, seg.stop, bins)
+        tq_c = dahl.synchronous_average(torque, fs_a, freq, seg.start, seg.stop, bins) - off
+        md_c = dahl.synchronous_average(model, fs_a, freq, seg.start, seg.stop, bins) - off
         a1 = dahl.first_harmonic(th_c)
         n_meas = dahl.first_harmonic(tq_c) / a1
         amp = abs(a1)
         n_model = complex(dahl.describing_function(fit.eta_per_Nm * fit.To_Nm * amp)) * k
-        loops.append(Loop(amp / URAD, seg.command_amplitude, seg.n_cycles, seg.start / fs, seg.stop / fs,
+        loops.append(Loop(amp / URAD, seg.command_amplitude, seg.n_cycles, seg.start / fs_a, seg.stop / fs_a,
                           th_c / URAD, tq_c, md_c, n_meas, n_model, rms, off))
     big = max(range(len(loops)), key=lambda i: loops[i].amplitude_urad)
     half_range = 0.5 * float(np.ptp(loops[big].torque_Nm))
     relative = fit.residual_rms_total_Nm / half_range if half_range > 0 else math.inf
-    s = segments[big]
-    n_hist = min(s.stop - s.start, int(round(1.5 * fs / freq)))
+    linear = linear_bearing_fit(dahl.lowpass(theta, fs_a, path_cutoff_hz), torque, seg_a, fs_a, fc, step)
+    estimates = _applicable(estimates, fit, loops, linear)
+    s = seg_a[big]
+    n_hist = min(s.stop - s.start, int(round(1.5 * fs_a / freq)))
     sl = slice(s.start, s.start + n_hist)
-    history = {"t_s": np.arange(sl.start, sl.stop) / fs, "theta_urad": theta_f[sl] / URAD,
+    history = {"t_s": np.arange(sl.start, sl.stop) / fs_a, "theta_urad": theta_f[sl] / URAD,
                "torque_Nm": torque[sl] - fit.offsets_Nm[big], "model_Nm": model[sl] - fit.offsets_Nm[big]}
     return HysteresisResult(str(path), a, freq, fit.To_Nm, fit.eta_per_Nm, k, ses[0] * fit.To_Nm,
                             ses[1] * fit.eta_per_Nm, ses[2] * k, fit.correlation, fc, float(path_cutoff_hz), scan,
                             loops, fit.residual_rms_total_Nm, relative, source, fs, history, warnings, lag_s, lag_se,
                             lag_source, lag_meas, estimates, dof)
+
+
+#: the fit runs at about this many torque bandwidths' worth of sample rate (400 Hz for a 0.4 Hz
+#: drive, whose torque band is 5 Hz and whose angle paths reach 50 Hz); a faster record is
+#: decimated to it
+ANALYSIS_RATE_PER_FC = 80.0
+#: a fitted lag is sought within this of the data sheet's (and within 15 samples)
+FIT_LAG_RANGE_S = 0.01
+
+
+def datasheet_lag_s(plat: PlatformConstants, ac: AutocollimatorConstants) -> float:
+    """The angle's lag behind the power-amplifier input by the data sheet, at low frequency:
+    the group delays of the instrumentation channel's filters (eq. 3.22: 1/w1 for the first
+    order, 2 zeta/w2 for the second) and of the motor's armature, La/Ra (eq. 3.25). Only the
+    fitted lag's starting point: the record decides."""
+    return (1.0 / ac.inst_filter1_rad_per_s + 2.0 * ac.inst_filter2_zeta / ac.inst_filter2_rad_per_s
+            + plat.armature_H / plat.armature_ohm)
+
+
+def _decimate(x: np.ndarray, q: int) -> np.ndarray:
+    """Every ``q``-th sample of ``x`` after a zero-phase anti-alias low-pass (the same for every
+    channel, so none lags another)."""
+    if q <= 1:
+        return np.asarray(x, dtype=float)
+    return np.asarray(scipy.signal.decimate(np.asarray(x, dtype=float), q, ftype="fir", zero_phase=True))
+
+
+def _torque(angle_rad: np.ndarray, pa: np.ndarray, fs: float, fc: float, plat: PlatformConstants,
+            lag_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The angle advanced by ``lag_s``, its copy low-passed at ``fc``, the bearing torque
+    (``dahl.bearing_torque``, eq. 3.23-3.27) and that torque's part formed from the angle
+    (-D thetadot - I thetaddot, which a further lag would move)."""
+    theta = dahl.shift(angle_rad, fs, lag_s)
+    theta_f = dahl.lowpass(theta, fs, fc)
+    drive = plat.torque_per_pa_V * dahl.lowpass(pa, fs, fc)
+    torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
+                                 viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
+    return theta, theta_f, torque, torque - drive
+
+
+#: Dahl's To shows in the loops only where the bearing slips: the largest loop must reach this
+#: normalized amplitude eta To theta_o (eq. 5.6b; its peak torque is then 0.62 To, eq. 5.9),
+#: else To and eta are not determined apart (only the stiffness eta To^2 is)
+MIN_COULOMB_X = 1.0
+#: Dahl's friction must explain the torque better than a linear bearing (a spring and a damper,
+#: T = k theta + c thetadot) does: its residual rms at most this fraction of the linear one's.
+#: A Dahl bearing's loops leave a linear fit 10-40 times the residual; no friction, a viscous
+#: bearing or a spring leave both alike (issue 38 item 1)
+MAX_RESIDUAL_VS_LINEAR = 0.5
+
+
+def linear_bearing_fit(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[dahl.Segment], fs: float,
+                       smooth_hz: float, step: int) -> tuple[float, float, float]:
+    """(k, c, residual rms) of the linear bearing T = k theta + c thetadot (a spring and a
+    damper, Ch. III G) fitted like ``dahl.fit_dahl`` (the same samples, one offset per
+    segment, the model low-passed alike): the alternative Dahl's model must beat."""
+    cols = [dahl.lowpass(path_rad, fs, smooth_hz), dahl.lowpass(np.gradient(path_rad) * fs, fs, smooth_hz)]
+    rows, ys = [], []
+    for sg in segments:
+        i = np.arange(sg.start, sg.stop, max(1, step))
+        X = np.column_stack([c[i] for c in cols])
+        rows.append(X - X.mean(axis=0))
+        ys.append(torque_Nm[i] - torque_Nm[i].mean())
+    X, y = np.concatenate(rows), np.concatenate(ys)
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    return float(coef[0]), float(coef[1]), float(np.sqrt(np.mean((y - X @ coef) ** 2)))
+
+
+def _applicable(estimates: dict[str, Estimate], fit: dahl.DahlFit, loops: list[Loop],
+                linear: tuple[float, float, float]) -> dict[str, Estimate]:
+    """The estimates, with those whose model does not apply to the record unresolved and the
+    reason stated (issue 38 item 1). Dahl's figures mean something only where the torque
+    follows eq. 5.2: where the fit ends on the edge of its search, or explains the torque no
+    better than a linear spring and damper (``linear``: k, c and its residual rms;
+    ``MAX_RESIDUAL_VS_LINEAR``) - no friction, a viscous bearing, a spring - none of To, eta
+    and eta To^2 is resolved; where the largest loop stays below ``MIN_COULOMB_X`` (the
+    bearing never slips) To and eta are not determined apart. Their intervals are then
+    [0, inf]: the data bound nothing the model can name."""
+    k_lin, c_lin, r_lin = linear
+    why_all = ""
+    if fit.at_edge:
+        why_all = (f"the fit ran to the edge of its search ({', '.join(fit.at_edge)}): the torque does not follow "
+                   f"Dahl's model (eq. 5.2), no bearing friction it describes")
+    elif not fit.residual_rms_total_Nm <= MAX_RESIDUAL_VS_LINEAR * r_lin:
+        why_all = (f"Dahl's model (eq. 5.2) explains the torque no better than a linear bearing (spring {k_lin:.3g} "
+                   f"N m/rad, damper {c_lin:.3g} N m s: residual {r_lin * 1e3:.3g} mN m against Dahl's "
+                   f"{fit.residual_rms_total_Nm * 1e3:.3g}): no friction of eq. 5.2 in the record (none, viscous, "
+                   f"or a spring)")
+    x_max = max((fit.eta_per_Nm * fit.To_Nm * lp.amplitude_urad * URAD for lp in loops), default=0.0)
+    out: dict[str, Estimate] = {}
+    for key, e in estimates.items():
+        why = why_all
+        if not why and key != "stiffness_Nm_per_rad" and not x_max >= MIN_COULOMB_X:
+            why = (f"the largest loop reaches eta To theta_o = {x_max:.3g}, under {MIN_COULOMB_X:g}: the bearing never "
+                   f"slips (friction beyond the torques applied), so To and eta are not determined apart (eq. 5.9), "
+                   f"only eta To^2")
+        out[key] = Estimate(e.value, 0.0, math.inf, False, why) if why else e
+    return out
 
 
 def _half_width(parts: list[tuple[float, float]]) -> float:
@@ -373,7 +511,7 @@ def _around_lost(segments: list[dahl.Segment], lost: np.ndarray, margin: int,
 class _Chain:
     """The whole determination (lag, torque, path scan, fit) again, for a jackknife replicate."""
 
-    angle_rad: np.ndarray
+    angle_rad: np.ndarray          # the record at its own rate: the lag's lines are measured on it
     pa: np.ndarray
     cmd: np.ndarray
     fs: float
@@ -383,9 +521,15 @@ class _Chain:
     plat: PlatformConstants
     step: int
     cutoffs: list[float]
-    rigid: Callable[[np.ndarray], np.ndarray] | None     # None: the lag is not measured but held
+    rigid: Callable[[np.ndarray], np.ndarray] | None     # None: the lag is not measured at lines
     lag_s: float
     lines_hz: list[float] | None                         # the lines the full record's lag was measured at
+    angle_a: np.ndarray            # the record at the analysis rate (``ANALYSIS_RATE_PER_FC``): the fit's
+    pa_a: np.ndarray
+    fs_a: float
+    seg_a: list[dahl.Segment]
+    base_lag_s: float              # a fitted lag: where its search starts (the data sheet's)
+    max_fit_lag_s: float           # > 0: the lag is fitted with To and eta
 
     def __call__(self, drop: int, fit: dahl.DahlFit) -> tuple[float, float, float]:
         """(lag, ln To, ln eta) with the ``drop``-th kept cycle of every segment left out."""
@@ -394,35 +538,39 @@ class _Chain:
             lag = dahl.measure_lag(self.cmd, self.angle_rad, self.pa, self.fs, self.freq, self.segments, self.rigid,
                                    min_hz=LAG_MIN_FC * self.fc, max_hz=LAG_MAX_FS * self.fs, drop_cycle=drop,
                                    lines_hz=self.lines_hz).lag_s
-        theta = dahl.shift(self.angle_rad, self.fs, lag)
-        theta_f = dahl.lowpass(theta, self.fs, self.fc)
-        torque = dahl.bearing_torque(dahl.lowpass(self.pa, self.fs, self.fc), theta_f, self.fs,
-                                     torque_per_pa_Nm_per_V=self.plat.torque_per_pa_V,
-                                     viscous_Nms=self.plat.viscous_Nms, inertia_kg_m2=self.plat.inertia_kg_m2)
+        fitted = self.max_fit_lag_s > 0
+        theta, _, torque, term = _torque(self.angle_a, self.pa_a, self.fs_a, self.fc, self.plat,
+                                         self.base_lag_s if fitted else lag)
         assert fit.path_cutoff_hz is not None
         # the path's bandwidth is chosen again, near the full record's choice
         near = sorted({*(c for c in self.cutoffs if fit.path_cutoff_hz / 1.6 <= c <= fit.path_cutoff_hz * 1.6),
                        fit.path_cutoff_hz})
-        f, _ = dahl.fit_dahl_path(theta, torque, self.segments, self.fs, smooth_hz=self.fc, cutoffs_hz=near,
-                                  step=self.step, drop_cycle=drop, start=(fit.To_Nm, fit.eta_per_Nm))
+        f, _ = dahl.fit_dahl_path(theta, torque, self.seg_a, self.fs_a, smooth_hz=self.fc, cutoffs_hz=near,
+                                  step=self.step, drop_cycle=drop, start=(fit.To_Nm, fit.eta_per_Nm, fit.lag_s),
+                                  lag_term_Nm=term if fitted else None, max_lag_s=self.max_fit_lag_s)
+        if fitted:
+            lag = self.base_lag_s + f.lag_s
         return lag, math.log(f.To_Nm), math.log(f.eta_per_Nm)
 
     def without_amplitude(self, j: int, fit: dahl.DahlFit) -> tuple[float, float]:
         """(ln To, ln eta) fitted with the ``j``-th amplitude's cycles left out (the full
-        record's lag and angle-path bandwidth; the model still runs along the whole path)."""
-        theta = dahl.shift(self.angle_rad, self.fs, self.lag_s)
-        torque = dahl.bearing_torque(dahl.lowpass(self.pa, self.fs, self.fc), dahl.lowpass(theta, self.fs, self.fc),
-                                     self.fs, torque_per_pa_Nm_per_V=self.plat.torque_per_pa_V,
-                                     viscous_Nms=self.plat.viscous_Nms, inertia_kg_m2=self.plat.inertia_kg_m2)
+        record's angle-path bandwidth, and its lag unless the lag is fitted; the model still
+        runs along the whole path)."""
+        fitted = self.max_fit_lag_s > 0
+        theta, _, torque, term = _torque(self.angle_a, self.pa_a, self.fs_a, self.fc, self.plat,
+                                         self.base_lag_s if fitted else self.lag_s)
         assert fit.path_cutoff_hz is not None
-        f = dahl.fit_dahl(dahl.lowpass(theta, self.fs, fit.path_cutoff_hz), torque,
-                          [s for i, s in enumerate(self.segments) if i != j], self.fs, smooth_hz=self.fc,
-                          step=self.step, start=(fit.To_Nm, fit.eta_per_Nm))
+        f = dahl.fit_dahl(dahl.lowpass(theta, self.fs_a, fit.path_cutoff_hz), torque,
+                          [s for i, s in enumerate(self.seg_a) if i != j], self.fs_a, smooth_hz=self.fc,
+                          step=self.step, start=(fit.To_Nm, fit.eta_per_Nm, fit.lag_s),
+                          lag_term_Nm=term if fitted else None, max_lag_s=self.max_fit_lag_s)
         return math.log(f.To_Nm), math.log(f.eta_per_Nm)
 
 
 def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
-               path_choice: tuple[np.ndarray, np.ndarray]) -> tuple[dict[str, Estimate], list[float], int]:
+               path_choice: tuple[np.ndarray, np.ndarray],
+               lag_choice: tuple[np.ndarray, np.ndarray] | None = None,
+               ) -> tuple[dict[str, Estimate], list[float], int, np.ndarray]:
     """To, eta and eta To^2 with 95 % intervals from three standard uncertainties (in ln):
 
     * within amplitudes: the whole chain (the lag measured, the torque formed, the path's
@@ -443,7 +591,9 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
       (theta_(j) - theta)^2. With equal shares it is the plain jackknife's (M - 1) / M;
     * the angle path's bandwidth: ``path_choice`` (down, up) in ln, how far the estimates move
       over the bandwidths the residual cannot tell from the best (``PATH_TOLERANCE``): a bound,
-      taken as a rectangular distribution, a / sqrt(3) (GUM 4.3.7), on each side.
+      taken as a rectangular distribution, a / sqrt(3) (GUM 4.3.7), on each side;
+    * a fitted lag's choice: ``lag_choice`` (down, up) in ln, how far the estimates move from
+      the fitted lag to the data sheet's (``analyze_file``), likewise a rectangular bound.
 
     The spread between amplitudes holds the cycles' noise as well as the model's departure
     (each amplitude's cycles are noisy), so the two first terms are not added: the larger is
@@ -453,13 +603,14 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
     (GUM G.4) times their sum. Over 180 rigs of ``bench/hysteresis_coverage.py`` this covered
     To 175 and eta 169 times (docs/procedures/hysteresis.md); three 95 % half-widths added in
     quadrature, with the plain jackknife, had covered To 100 of the first 100.
-    Also returned: the relative standard errors (To, eta, stiffness; the cycles') and the
-    cycles' degrees of freedom."""
+    A fitted lag (``lag_source`` "fitted") is fitted again in every replicate, so its error
+    is in both terms. Also returned: the relative standard errors (To, eta, stiffness; the
+    cycles'), the cycles' degrees of freedom and the replicates' lags."""
     values = {"To_Nm": fit.To_Nm, "eta_per_Nm": fit.eta_per_Nm, "stiffness_Nm_per_rad": fit.stiffness_Nm_per_rad}
     G = min(s.n_cycles for s in chain.segments)
     if G < 2:
         return ({k: Estimate(v, math.nan, math.nan, False, f"{G} cycle per amplitude is too few for an interval")
-                 for k, v in values.items()}, [math.nan] * 3, max(0, G - 1))
+                 for k, v in values.items()}, [math.nan] * 3, max(0, G - 1), np.array([chain.lag_s]))
 
     def with_stiffness(ln: np.ndarray) -> np.ndarray:
         return np.column_stack([ln[:, 0], ln[:, 1], 2 * ln[:, 0] + ln[:, 1]])    # ln k = 2 ln To + ln eta
@@ -467,7 +618,7 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
     reps = np.array([chain(j, fit) for j in range(G)])            # G x (lag, ln To, ln eta)
     lnc = with_stiffness(reps[:, 1:])
     se = np.sqrt((G - 1) / G * np.sum((lnc - lnc.mean(axis=0)) ** 2, axis=0))
-    M = len(chain.segments)
+    M = len(chain.seg_a)
     if M >= 3:
         ln_full = with_stiffness(np.log([[fit.To_Nm, fit.eta_per_Nm]]))[0]
         lna = with_stiffness(np.array([chain.without_amplitude(j, fit) for j in range(M)]))
@@ -478,16 +629,16 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
         log.warning("%d amplitude(s): too few to judge the model by; the intervals hold the cycles' noise only", M)
         se_amp = np.zeros(3)
     down, up = path_choice
+    lag_down, lag_up = lag_choice if lag_choice is not None else (np.zeros(3), np.zeros(3))
     out: dict[str, Estimate] = {}
     for i, (key, v) in enumerate(values.items()):
         # the amplitudes' spread holds their noise too: the larger of the two, not their sum
         noise = (float(se[i]), G - 1) if se[i] >= se_amp[i] else (float(se_amp[i]), M - 1)
-        lo, hi = (v * math.exp(s * _half_width([noise, (a[i] / math.sqrt(3), math.inf)])) for s, a in ((-1, down), (1, up)))
-        if lag_source == "none":
-            out[key] = Estimate(v, lo, hi, False, "the angle's lag was not measured: the interval lacks its bias")
-        else:
-            # To and eta are told apart by the ladder reaching both regimes (the procedure's limits
-            # on eta To theta_o), not by their correlation: each is judged by its own interval
-            out[key] = judged(v, lo, hi)
+        lo, hi = (v * math.exp(s * _half_width([noise, (a[i] / math.sqrt(3), math.inf), (b[i] / math.sqrt(3), math.inf)]))
+                  for s, a, b in ((-1, down, lag_down), (1, up, lag_up)))
+        # To and eta are told apart by the ladder reaching both regimes (the procedure's limits
+        # on eta To theta_o, and ``_applicable``), not by their correlation: each is judged by
+        # its own interval
+        out[key] = judged(v, lo, hi)
     log.info("jackknife over %d cycle groups: lags %s ms", G, np.round(reps[:, 0] * 1e3, 3))
-    return out, [float(x) for x in se], G - 1
+    return out, [float(x) for x in se], G - 1, reps[:, 0]

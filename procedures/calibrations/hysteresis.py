@@ -145,7 +145,9 @@ class Hysteresis(Procedure[HysteresisParams]):
             lag_note = (f"measured at the command's lines ({', '.join(f'{f:.4g}' for f in res.lag.frequencies_hz)} Hz, "
                         f"{res.lag.n_cycles} cycles), taken out")
         else:
-            lag_note = "given, taken out" if res.lag_source == "given" else "not measured: the angle used as recorded"
+            lag_note = {"given": "given, taken out",
+                        "fitted": "fitted with To and eta (no line in the command), taken out"}.get(
+                res.lag_source, "not measured: the angle used as recorded")
         ms.append(Measurement("angle lag behind the power-amplifier input", res.angle_lag_s * 1e3, "ms",
                               stderr=res.angle_lag_se_s * 1e3 if math.isfinite(res.angle_lag_se_s) else None,
                               note=lag_note))

@@ -118,6 +118,9 @@ def _lag_text(res: HysteresisResult) -> str:
                           for f, x, e in zip(res.lag.frequencies_hz, res.lag.lags_s, res.lag.lag_se_s))
         return (f"angle lag behind the power-amplifier input {res.angle_lag_s * 1e3:.3g} ± "
                 f"{res.angle_lag_se_s * 1e3:.2g} ms, measured at the command's DAC lines ({lines}) and taken out")
+    if res.lag_source == "fitted":
+        return (f"angle lag behind the power-amplifier input {res.angle_lag_s * 1e3:.3g} ± "
+                f"{res.angle_lag_se_s * 1e3:.2g} ms, fitted with To and eta (the command carries no line) and taken out")
     if res.lag_source == "given":
         return f"angle lag {res.angle_lag_s * 1e3:.3g} ms, given (not measured), taken out"
     return "angle lag not measured: the angle is used as recorded (its lag biases eta and the stiffness high)"

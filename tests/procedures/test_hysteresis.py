@@ -119,8 +119,8 @@ def test_analysis_recovers_the_model_with_the_files_own_calibration(tmp_path):
 def test_the_lag_is_measured_not_assumed(tmp_path):
     """The instrumentation lag (not in the data sheet) is measured on the record and taken
     out: files lagging by 1 and 4 ms give the same To and eta. Left in (a given lag of 0), a
-    4 ms lag biases eta high; a smooth command (no DAC lines) leaves it unmeasured, and the
-    figures are reported unresolved, never as bare numbers."""
+    4 ms lag biases eta high. A smooth command (no DAC lines) has the lag fitted with To and
+    eta (issue 38 item 7; it had been left unmeasured and every figure unresolved)."""
     res = {lag: analyze_file(write_sweep(tmp_path / f"l{lag}.h5", lag_s=lag, noise_Nm=1e-4), "X")
            for lag in (1e-3, 4e-3)}
     for lag, r in res.items():
@@ -128,10 +128,11 @@ def test_the_lag_is_measured_not_assumed(tmp_path):
         assert r.eta_per_Nm == pytest.approx(2.2e6, rel=THESIS_TOL)
     raw = analyze_file(tmp_path / "l0.004.h5", "X", angle_lag_s=0.0)
     assert raw.lag_source == "given" and raw.eta_per_Nm > 1.02 * res[4e-3].eta_per_Nm
-    smooth = analyze_file(write_sweep(tmp_path / "smooth.h5", updates=0), "X")
-    assert smooth.lag_source == "none" and any("could not be measured" in w for w in smooth.warnings)
+    smooth = analyze_file(write_sweep(tmp_path / "smooth.h5", updates=0, noise_Nm=1e-4), "X")
+    assert smooth.lag_source == "fitted" and smooth.angle_lag_s == pytest.approx(LAG_S, abs=0.3e-3)
+    assert smooth.eta_per_Nm == pytest.approx(2.2e6, rel=0.02)
     v = smooth.values()
-    assert v["To_Nm"] == {"X": None} and v["resolved"]["To_Nm"] == {"X": False}
+    assert v["resolved"] == {k: {"X": True} for k in ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad")}
 
 
 def test_analysis_uses_the_calibration_it_is_given_over_the_files(tmp_path):
