@@ -8,9 +8,15 @@ With the platform clamped and the loops open, what each sensor records is its ow
   part's, so the Welch segment must reach 0.1 Hz with four bins to spare
   (``BlockCsd.lowest_fit_hz``); the interval is a delete-one jackknife over blocks of the
   record (Student's t, blocks - 1 degrees of freedom), which sees the 1/f bins' scatter as it is.
-* **White level and 1/f corner** (Fig. 32): the angle noise's PSD, the channel's filter
-  divided out (eqs. 3.21-3.22), fitted as S_w (1 + f_c / f) by least squares weighted by the
-  model's own level (a Welch PSD's scatter is proportional to it); jackknife intervals.
+* **White level and 1/f corner** (Fig. 32): the angle noise's PSD, the channel's filter and
+  the recorder's anti-alias filter divided out (eqs. 3.21-3.22, App. A.5), fitted as
+  S_w (1 + f_c / f) by least squares weighted by the model's own level (a Welch PSD's scatter
+  is proportional to it); jackknife intervals.
+* **Physical rms** (the NEA, the pickoff's band rms): the recorder's 3-pole anti-alias
+  low-pass at 0.3 fs (DESIGN.md section 5, App. A.5; ``anti_alias_gain2``) divided out of the
+  PSD before its area is taken (issue 38: the pickoff's 0.1-200 Hz rms read 0.01-0.41 % low, its
+  lines at 187 Hz cut by 3 %), with the filter's corner known to +-``ANTI_ALIAS_CORNER_TOL``
+  in the interval.
 * **Gyro pickoff** (Fig. 33): the rms in bands, and its discrete lines: peaks standing far above
   the running median of the averaged PSD, each measured on the whole record
   (``procedures.analysis.lines.refine_line``: frequency, its 1-sigma, amplitude).
@@ -20,16 +26,17 @@ With the platform clamped and the loops open, what each sensor records is its ow
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.ndimage
 
 from daq.spectra import n_segments, welch_csd_matrix
-from procedures.analysis.intervals import Estimate, from_stderr
+from drivers.calibration import AutocollimatorConstants
+from procedures.analysis.intervals import Estimate, from_stderr, judged
 from procedures.analysis.lines import refine_line
-from procedures.analysis.transfer import BlockCsd, jackknife_se
+from procedures.analysis.transfer import BlockCsd, jackknife_se, sensor_filter
 
 #: Table 1 quotes the NEA in this band
 NEA_BAND_HZ = (0.1, 100.0)
@@ -42,6 +49,20 @@ LINE_MIN_RATIO = 20.0
 #: the running median's width, and the least spacing of two lines (the 71 Hz pair is ~0.8 Hz apart)
 LINE_MEDIAN_HZ = 2.0
 LINE_MIN_SEPARATION_HZ = 0.35
+#: the recorder's anti-alias filter (DESIGN.md section 5; App. A.5 "three-pole active low-pass
+#: filters ... approximately 30 percent of the sampling frequency"): poles, corner / fs
+ANTI_ALIAS_POLES, ANTI_ALIAS_FRACTION = 3, 0.3
+#: how well its corner is known (95 %): an active filter of 5 % parts, and an analogue filter
+#: realised digitally (bilinear, corner prewarped) sits 5 % off at 0.19 fs with 2x oversampling
+ANTI_ALIAS_CORNER_TOL = 0.10
+
+
+def anti_alias_gain2(f: np.ndarray, fs: float, corner_scale: float = 1.0) -> np.ndarray:
+    """|H(f)|^2 of the recorder's anti-alias filter, a ``ANTI_ALIAS_POLES``-pole Butterworth at
+    ``ANTI_ALIAS_FRACTION`` fs (its corner times ``corner_scale``): 1 / (1 + (f / f_c)^(2 n))
+    (the Butterworth magnitude; App. A.5, DESIGN.md section 5)."""
+    fc = ANTI_ALIAS_FRACTION * fs * corner_scale
+    return 1.0 / (1.0 + (np.asarray(f, float) / fc) ** (2 * ANTI_ALIAS_POLES))
 
 
 def _band(f: np.ndarray, lo: float, hi: float) -> np.ndarray:
@@ -63,9 +84,13 @@ def _unreachable(blocks: BlockCsd, lo: float) -> Estimate | None:
     return None
 
 
-def band_rms(blocks: BlockCsd, channel: str, scale_V_per_urad: float, lo_hz: float, hi_hz: float) -> Estimate:
+def band_rms(blocks: BlockCsd, channel: str, scale_V_per_urad: float, lo_hz: float, hi_hz: float, *,
+             anti_alias: bool = True) -> Estimate:
     """rms (urad) of ``channel`` in ``lo..hi`` Hz: sqrt of the PSD's sum over the band's bins
-    times the bin width, over the channel's scale; jackknife interval over the blocks."""
+    times the bin width, over the channel's scale; with ``anti_alias`` the recorder's filter
+    (``anti_alias_gain2``) divided out of each bin first, so the figure is the sensor's rms.
+    The interval: the jackknife's over the blocks (Student's t), its half-width combined in
+    quadrature with the change the filter's corner tolerance (``ANTI_ALIAS_CORNER_TOL``) makes."""
     if (bad := _unreachable(blocks, lo_hz)) is not None:
         return bad
     if hi_hz > blocks.fs / 2:
@@ -75,12 +100,22 @@ def band_rms(blocks: BlockCsd, channel: str, scale_V_per_urad: float, lo_hz: flo
     i = blocks.index(channel)
     band = _band(blocks.f, lo_hz, hi_hz)
     df = float(blocks.f[1] - blocks.f[0])
+    fb = blocks.f[band]
 
-    def rms(leave_out: int | None) -> float:
-        p = blocks.mean(leave_out)[:, i, i].real
-        return math.sqrt(float(np.sum(p[band])) * df) / scale_V_per_urad
+    def gain(scale: float) -> np.ndarray:
+        return anti_alias_gain2(fb, blocks.fs, scale) if anti_alias else np.ones(len(fb))
 
-    return _jackknifed(blocks, rms)
+    def rms(leave_out: int | None, g2: np.ndarray | None = None) -> float:
+        p = blocks.mean(leave_out)[band, i, i].real
+        return math.sqrt(float(np.sum(p / (gain(1.0) if g2 is None else g2))) * df) / scale_V_per_urad
+
+    stat = _jackknifed(blocks, rms)
+    if not anti_alias or not math.isfinite(stat.value):
+        return stat
+    tol = ANTI_ALIAS_CORNER_TOL
+    aa = 0.5 * abs(rms(None, gain(1.0 + tol)) - rms(None, gain(1.0 - tol)))
+    half = math.hypot(stat.half_width, aa)
+    return judged(stat.value, stat.value - half, stat.value + half)
 
 
 @dataclass(frozen=True)
@@ -107,15 +142,17 @@ def fit_white_flicker(f: np.ndarray, p: np.ndarray) -> tuple[float, float]:
 def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filter_gain2: np.ndarray,
                   lo_hz: float, hi_hz: float) -> WhiteFlicker:
     """Fit the angle noise of an autocollimator channel (``filter_gain2`` its filter's |H|^2 at
-    ``blocks.f``) over ``lo..hi`` Hz (the band where the filter passes, above the quantization
-    floor: the thesis's white band reaches 35 Hz on the control channel, 80 Hz on the
-    instrumentation channel, Ch. V B.3)."""
+    ``blocks.f``; the recorder's anti-alias filter, ``anti_alias_gain2``, is divided out here
+    too) over ``lo..hi`` Hz (the band where the filter passes, above the quantization floor:
+    the thesis's white band reaches 35 Hz on the control channel, 80 Hz on the instrumentation
+    channel, Ch. V B.3)."""
     i = blocks.index(channel)
     band = _band(blocks.f, max(lo_hz, blocks.lowest_fit_hz), hi_hz) & (blocks.f > 0)
     f = blocks.f[band]
+    gain2 = filter_gain2[band] * anti_alias_gain2(f, blocks.fs)
 
     def fit(leave_out: int | None) -> tuple[float, float]:
-        p = blocks.mean(leave_out)[band, i, i].real / (scale_V_per_urad ** 2 * filter_gain2[band])
+        p = blocks.mean(leave_out)[band, i, i].real / (scale_V_per_urad ** 2 * gain2)
         return fit_white_flicker(f, p)
 
     a, b = fit(None)
@@ -217,3 +254,28 @@ def nea_truth(f: np.ndarray, angle_psd: np.ndarray, filter_gain2: np.ndarray,
     ``angle_psd`` seen through a filter |H|^2 over ``band``: the NEA a model predicts."""
     sel = _band(f, band[0], band[1])
     return math.sqrt(float(np.trapezoid((angle_psd * filter_gain2)[sel], f[sel])))
+
+
+#: the white band of each autocollimator channel's fit (Ch. V B.3: 3-35 Hz control, 3-80 Hz
+#: instrumentation; the fit starts at 0.1 Hz so the 1/f part is in it)
+WHITE_HI_HZ = {"ctl": 35.0, "inst": 80.0}
+
+
+def baseline_figures(blocks: BlockCsd, ac: AutocollimatorConstants, names: Mapping[str, str],
+                     scales_V_per_urad: Mapping[str, float]) -> dict[str, Estimate]:
+    """The baseline's figures of a clamped record's blocks, keyed ``figure.key``: the NEA of the
+    control, instrumentation and azimuth channels (``names`` "ctl", "inst", "z"), the white level
+    and 1/f corner of the first two (``ac``'s filters), the pickoff's (``names["gyro"]``) rms in
+    ``PICKOFF_BANDS_HZ``; ``scales_V_per_urad`` per key."""
+    f = blocks.f
+    out: dict[str, Estimate] = {}
+    for k in ("ctl", "inst", "z"):
+        out[f"nea_urad.{k}"] = band_rms(blocks, names[k], scales_V_per_urad[k], *NEA_BAND_HZ)
+    for k in ("ctl", "inst"):
+        fit = white_flicker(blocks, names[k], scales_V_per_urad[k], np.abs(sensor_filter(f, ac, names[k])) ** 2,
+                            NEA_BAND_HZ[0], WHITE_HI_HZ[k])
+        out[f"white_urad_per_rtHz.{k}"] = fit.white_urad_per_rtHz
+        out[f"flicker_corner_hz.{k}"] = fit.corner_hz
+    for band, (lo, hi) in PICKOFF_BANDS_HZ.items():
+        out[f"pickoff_rms_urad.{band}"] = band_rms(blocks, names["gyro"], scales_V_per_urad["gyro"], lo, hi)
+    return out

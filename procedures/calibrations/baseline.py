@@ -36,13 +36,13 @@ from procedures.analysis.baseline import (
     NEA_BAND_HZ,
     PICKOFF_BANDS_HZ,
     Line,
-    band_rms,
+    WhiteFlicker,
+    baseline_figures,
     pickoff_lines,
     psd_of,
-    white_flicker,
 )
 from procedures.analysis.intervals import Estimate, add_figure
-from procedures.analysis.transfer import TransferError, block_csd, sensor_filter
+from procedures.analysis.transfer import TransferError, block_csd
 from procedures.paramlimits import OneOf, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
 from procedures.reports import thesis
@@ -57,9 +57,6 @@ CHANNELS = ("ac_x_ctl", "ac_y_ctl", "ac_x_inst", "ac_y_inst", "ac_z", "gyro_x", 
 #: ADC ranges (V): the autocollimators read millivolts of noise about a null; the pickoffs tens
 #: of millivolts about their caged offsets (XRD's proportional loop stands at ~0.34 V)
 RANGES_V = {"ac": 1.0, "gyro": 2.0}
-#: the white band of each channel's fit (Ch. V B.3: 3-35 Hz control, 3-80 Hz instrumentation;
-#: the fit starts at 0.1 Hz so the 1/f part is in it)
-WHITE_HI_HZ = {"ctl": 35.0, "inst": 80.0}
 STEP = "clamped record"
 
 
@@ -189,10 +186,10 @@ class Baseline(Procedure[BaselineParams]):
             raise ProcedureError(f"baseline: {exc}") from None
         f = blocks.f
 
-        nea = {k: band_rms(blocks, n[k], scale[k], *NEA_BAND_HZ) for k in ("ctl", "inst", "z")}
-        fits = {k: white_flicker(blocks, n[k], scale[k], np.abs(sensor_filter(f, ac, n[k])) ** 2,
-                                 NEA_BAND_HZ[0], WHITE_HI_HZ[k]) for k in ("ctl", "inst")}
-        pick = {band: band_rms(blocks, n["gyro"], kg, lo, hi) for band, (lo, hi) in PICKOFF_BANDS_HZ.items()}
+        figs = baseline_figures(blocks, ac, n, {**scale, "gyro": kg})
+        nea = {k: figs[f"nea_urad.{k}"] for k in ("ctl", "inst", "z")}
+        fits = {k: WhiteFlicker(figs[f"white_urad_per_rtHz.{k}"], figs[f"flicker_corner_hz.{k}"]) for k in ("ctl", "inst")}
+        pick = {band: figs[f"pickoff_rms_urad.{band}"] for band in PICKOFF_BANDS_HZ}
         with RunFile(file) as rf:
             x = rf.read([n["gyro"]], start, stop)[0]
         lines = pickoff_lines(x, blocks.fs, f, psd_of(blocks, n["gyro"]), kg, 1.0, 0.4 * blocks.fs,

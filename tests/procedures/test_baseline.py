@@ -5,8 +5,8 @@ acceptance B): the autocollimator NEA within 10 % of the simulated, its interval
 the lines found where the rig has them; the clamp released on every way out.
 
 The simulated NEA is what the sim rig's noise sources really make in 0.1-100 Hz through the
-channel's filter (``Sources.spectrum``: its 1/f bank rolls off above 50 Hz, 1 % below the
-nominal ``nea_urad``, which Table 1's definition sets). The analysis alone is tested on
+channel's filter (``Sources.spectrum``; since issue 38 the 1/f bank follows 1/f to 100 Hz, so
+this is the nominal ``nea_urad``, which Table 1's definition sets, to rounding). The analysis alone is tested on
 independently generated data in ``tests/procedures/analysis/test_baseline.py``.
 """
 
