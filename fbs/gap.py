@@ -5,14 +5,20 @@
 ``uncertainties`` and ``effects`` (every effect named, in the order found). ``--report DIR``
 writes ``model_before.h5``, ``model_after.h5``, the spectra plots, ``gap.md`` and
 ``refined.toml`` (the refined model as a sim config for ``fbs simulate --sim-config``); with
-``--report`` the JSON adds ``refined_config``, that file's path (null if none was written). A
-file that cannot be analysed is an error naming the problem (exit 2).
+``--report`` the JSON adds ``refined_config``, that file's path (null if none was written). Like
+every ``--json`` result it starts with what ran and on whose data (``analysis`` "gap", the
+file's ``rig``, ``simulated``, this software, ``status``, ``verdict``: ``fbs.analyze.header``;
+schema ``docs/schema/run-summary.schema.json``). The verdict is "pass" when the workflow ran to
+its end - what it found is its result, not a limit - and "aborted" (exit 2) when interrupted,
+the object then holding every key with nothing found. A file that cannot be analysed is an
+error naming the problem (exit 2).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -46,17 +52,35 @@ def _refined_config(res: GapResult, report: str) -> str | None:
 def json_result(args: argparse.Namespace) -> dict[str, Any]:
     """The object ``--json`` prints (``fbs batch gap`` collects the same); with ``--report``
     also ``refined_config``, the path of the refined model's sim config (``DIR/refined.toml``)."""
+    from fbs.analyze import header
+
     res = _analyse(args)
-    out = res.to_json()
+    out = header("gap", args.file, "pass") | res.to_json()
     if getattr(args, "report", None):
         out["refined_config"] = _refined_config(res, args.report)
     return out
 
 
+#: an interrupted workflow's keys: nothing found, nothing explained
+NOTHING_FOUND: dict[str, Any] = {
+    "effect": None, "parameters": {}, "uncertainties": {}, "parameters_ci95": {}, "significant": None,
+    "gap_before_db": None, "gap_after_db": None, "candidates": [], "effects": [], "explained": None,
+    "unexplained": [], "partial": []}
+
+
 def _gap(args: argparse.Namespace) -> int:
     if args.json:
-        print(json.dumps(json_result(args)))
-        return 0
+        from fbs.analyze import EXIT, header
+
+        try:
+            out = json_result(args)
+        except KeyboardInterrupt:
+            print(json.dumps(header("gap", args.file, "aborted", "aborted: interrupted") | NOTHING_FOUND
+                             | {"file": str(args.file)}))
+            print("fbs gap: interrupted", file=sys.stderr)
+            return EXIT["aborted"]
+        print(json.dumps(out))
+        return EXIT[out["verdict"]]
     res = _analyse(args)
     print(f"fbs gap {res.file}: axis {res.axis}, mode {res.mode}, {res.duration_s:.0f} s at {res.rate_hz:g} Hz, "
           f"channels {', '.join(res.channels)} ({res.elapsed_s:.1f} s)")

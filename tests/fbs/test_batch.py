@@ -29,6 +29,7 @@ from pathlib import Path
 import pytest
 
 from fbs.cli import main
+from tests.result_schema import assert_valid_result
 
 pytestmark = pytest.mark.slow
 FBS = [sys.executable, "-m", "fbs.cli"]
@@ -108,10 +109,35 @@ def test_batch_gap_gives_what_serial_runs_give(local, serial, runs):
         code, stdout = serial[rec["file"]]
         assert code == 0 and rec["exit"] == 0 and rec["error"] is None
         assert rec["command"] == "gap" and rec["args"] == GAP_ARGS
-        assert json.dumps(rec["result"]) == stdout                             # byte for byte
+        # byte for byte, but for when each was made (every result names its time)
+        serial_rec, batch_rec = json.loads(stdout), dict(rec["result"])
+        assert serial_rec.pop("time") and batch_rec.pop("time")
+        assert json.dumps(batch_rec) == json.dumps(serial_rec)
         assert rec["result"]["file"] == rec["file"]
         assert isinstance(rec["elapsed_s"], float) and rec["elapsed_s"] >= 0
     assert "0 already done" in r.stderr and f"[{N_FILES}/{N_FILES}]" in r.stderr and "exit 0" in r.stderr
+
+
+def test_gap_json_says_what_ran_on_whose_data_and_an_interrupt_says_aborted(runs, serial, monkeypatch, capsys):
+    """Issue 37 acceptance A for ``fbs gap --json``: the schema's header (rig, simulated,
+    software, verdict) and the workflow's keys, normally (exit 0, "pass") and interrupted (exit
+    2, "aborted", every key present with nothing found)."""
+    code, stdout = serial[str(runs[0])]
+    out = json.loads(stdout)
+    assert_valid_result(out)
+    assert (code, out["analysis"], out["verdict"], out["status"]) == (0, "gap", "pass", "complete")
+    assert out["simulated"] is True and out["software"]["name"] == "fbs-hil"
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("procedures.analysis.gap.workflow.analyse", interrupted)
+    capsys.readouterr()
+    assert main(["gap", str(runs[0]), "--json", *GAP_ARGS]) == 2
+    got = json.loads(capsys.readouterr().out)
+    assert_valid_result(got)
+    assert (got["verdict"], got["status"], got["effect"], got["explained"]) == (
+        "aborted", "aborted: interrupted", None, None)
 
 
 @pytest.mark.parametrize("command, args", [("inspect", []), ("spectra", ["--channels", "ac_x_ctl,gyro_x"]),
