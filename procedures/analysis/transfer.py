@@ -379,6 +379,8 @@ class ModelFit:
     #: the fitted parameters, and the same fit to each leave-one-out block (the jackknife's)
     params: dict[str, float] = field(default_factory=dict)
     replicates: list[dict[str, float]] = field(default_factory=list)
+    #: the platform fit's damping band by band (``local_damping``)
+    local_damping: LocalDamping | None = None
 
     def values(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -568,6 +570,14 @@ def _solve_jdk_irls(f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, iterations
     return x
 
 
+def fit_impedance(f_hz: np.ndarray, Z: np.ndarray, rel_se: np.ndarray | None = None) -> tuple[float, float, float]:
+    """(J, D, k) of Z = J s^2 + D s + k fitted to ``Z`` at ``f_hz`` as ``fit_platform`` fits the
+    measured one (each bin weighted by the model's |Z| times ``rel_se``, uniform when None)."""
+    f = np.asarray(f_hz, float)
+    x = _solve_jdk_irls(f, np.asarray(Z), np.ones(f.size) if rel_se is None else np.asarray(rel_se, float))
+    return float(x[0]), float(x[1]), float(x[2])
+
+
 def smoothed(x: np.ndarray, half_width: int = 4) -> np.ndarray:
     """Running median over 2 half_width + 1 bins: a bin's weight should not be its own error."""
     if x.size <= 2 * half_width:
@@ -596,6 +606,7 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
                                              resp.log_se[ok], resp.phase_se_rad[ok])
     # a fit worse than its bins' errors allow (the model misses something): widen by the Birge ratio
     se = jackknife_se(xb) * max(1.0, normalized)
+    groups = local_damping(f, Z, np.abs(platform_z(f, J, D, kk)) * rel * max(1.0, normalized))
     corr = np.corrcoef(xb.T)
     names = ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad")
     est: dict[str, Estimate] = {}
@@ -608,6 +619,82 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
         est[name] = from_stderr(float(x[k]), float(se[k]), dof=resp.dof)
     notes = [f"viscous damping D includes the bearing's and the gyro gimbals'; the motor's back-EMF "
              f"({pc.motor_Nm_per_A * pc.back_emf_V_s / pc.armature_ohm:.3g} N m s) is taken out"]
+    dependent = groups.frequency_dependent()
+    if dependent:
+        # no single viscous D: reported unresolved, its interval the range the local dampings span
+        e = est["damping_Nms"]
+        q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, resp.dof))
+        lo = min(e.lo, *(d - q * s for d, s in zip(groups.D, groups.se)))
+        hi = max(e.hi, *(d + q * s for d, s in zip(groups.D, groups.se)))
+        est["damping_Nms"] = Estimate(e.value, lo, hi, False, dependent)
+        notes.append(dependent)
     return ModelFit("platform", est, (lo_hz, hi_hz), int(ok.sum()), res_db, res_deg, normalized, correlations, notes,
                     curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target),
-                    params=dict(zip(names, (J, D, kk))), replicates=[dict(zip(names, map(float, v))) for v in xb])
+                    params=dict(zip(names, (J, D, kk))), replicates=[dict(zip(names, map(float, v))) for v in xb],
+                    local_damping=groups)
+
+
+def platform_z(f_hz: np.ndarray, J: float, D: float, k: float) -> np.ndarray:
+    """Z = J s^2 + D s + k at ``f_hz`` (eqs. 3.23-3.27, the platform's mechanical impedance)."""
+    s = 2j * np.pi * np.asarray(f_hz, float)
+    return J * s * s + D * s + k
+
+
+#: the damping's bins are cut into DAMPING_GROUPS consecutive groups of equal weight; local
+#: dampings that disagree beyond chance (p < DEPENDENCE_P) and by more than DEPENDENCE_SPREAD
+#: of their mean are a damping that depends on frequency: no viscous D describes the axis
+DAMPING_GROUPS = 3
+DEPENDENCE_P = 1e-3
+DEPENDENCE_SPREAD = 0.25
+
+
+@dataclass(frozen=True)
+class LocalDamping:
+    """The damping seen in consecutive bands of the fit (``local_damping``)."""
+
+    bands_hz: list[tuple[float, float]]
+    D: list[float]
+    se: list[float]
+    chi2: float
+    p: float
+
+    def frequency_dependent(self) -> str:
+        """Why the damping is not one number, or "" when the bands agree."""
+        if len(self.D) < 2 or not self.p < DEPENDENCE_P:
+            return ""
+        mean = float(np.average(self.D, weights=1.0 / np.square(self.se)))
+        if not (max(self.D) - min(self.D)) > DEPENDENCE_SPREAD * abs(mean):
+            return ""
+        parts = ", ".join(f"{d:.3g} at {a:.3g}-{b:.3g} Hz" for (a, b), d in zip(self.bands_hz, self.D))
+        return (f"depends on frequency ({parts}; chi2 {self.chi2:.3g} on {len(self.D) - 1} dof): the axis is not the "
+                f"linear one of eqs. 3.23-3.27 at this amplitude (hysteretic friction, eq. 5.2, dissipates per "
+                f"cycle, not in proportion to speed), so no single viscous damping describes it")
+
+    def values(self) -> dict[str, Any]:
+        return {"bands_hz": [list(b) for b in self.bands_hz], "damping_Nms": [float(f"{d:.5g}") for d in self.D],
+                "se": [float(f"{s:.3g}") for s in self.se], "chi2": round(self.chi2, 3), "p": float(f"{self.p:.3g}")}
+
+
+def local_damping(f_hz: np.ndarray, Z: np.ndarray, sig: np.ndarray, groups: int = DAMPING_GROUPS) -> LocalDamping:
+    """The damping in consecutive bands. In the model Im Z = D w exactly (eqs. 3.23-3.27:
+    the inertia and the stiffness are in Re Z), so each bin's Im Z / w is a local damping with
+    standard error ``sig`` / w, whatever J and k are; the bins are cut into ``groups`` bands of
+    equal weight (w / sig)^2, each band's weighted mean taken, and their agreement tested
+    (chi^2 on groups - 1 degrees of freedom). A viscous axis gives one D in every band; Dahl's
+    hysteresis (eq. 5.2) gives a loss per cycle (D ~ 1 / w) and a D that falls with frequency."""
+    w = 2 * np.pi * np.asarray(f_hz, float)
+    info = (w / sig) ** 2
+    local = Z.imag / w
+    edges = np.searchsorted(np.cumsum(info) / np.sum(info), np.arange(1, groups) / groups)
+    bands, D, se = [], [], []
+    for idx in np.split(np.arange(w.size), edges):
+        if idx.size == 0:
+            continue
+        bands.append((float(f_hz[idx[0]]), float(f_hz[idx[-1]])))
+        D.append(float(np.sum(info[idx] * local[idx]) / np.sum(info[idx])))
+        se.append(float(1.0 / math.sqrt(np.sum(info[idx]))))
+    d, s = np.array(D), np.array(se)
+    mean = float(np.sum(d / s ** 2) / np.sum(1 / s ** 2))
+    chi2 = float(np.sum(((d - mean) / s) ** 2))
+    p = float(scipy.stats.chi2.sf(chi2, len(D) - 1)) if len(D) > 1 else 1.0
+    return LocalDamping(bands, D, se, chi2, p)
