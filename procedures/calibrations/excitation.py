@@ -3,9 +3,13 @@ Figs. 35-41 and 52).
 
 In Mode 3 (autocollimator stabilization) the procedure records
 
-1. a quiet piece, nothing injected: the compensation network from its recorded input (the
-   control channel ``ac_<a>_ctl``) and output (the amplifier input ``pa_<a>``), exactly as the
-   thesis did for Fig. 40: no excitation, the network driven by the loop's own noise (H1);
+1. a quiet piece, nothing injected: the compensation network's H1 from its recorded input (the
+   control channel ``ac_<a>_ctl``) and output (the amplifier input ``pa_<a>``), as the thesis
+   did for Fig. 40: the network driven by the loop's own noise. It is plotted, and starts the
+   network's fit; the corners reported are fitted inside the excited loop (3.), whose lines are
+   in steady state: with 8 s Welch segments the network's 6.7 s pole leaves output of input
+   from before each segment, which read w1 +46 % with an interval wholly above the truth, and
+   w3 and w4 0.3-0.6 % off with intervals a tenth of that wide (issue 38);
 2. a short probe with band-limited noise as V_Td at a small level, from which the level that
    moves the platform by ``target_urad`` rms is found (the loop's response is linear in V_Td;
    the level is then cut so that no channel exceeds ``max_range_fraction`` of its ADC range and
@@ -17,9 +21,13 @@ In Mode 3 (autocollimator stabilization) the procedure records
    lines have no leakage (``transfer.periodic_blocks``).
 
 The analysis (``procedures.analysis.transfer``, whose docstring says how) gives the network's
-corners (eq. 3.28) and the platform's inertia, damping and bearing stiffness (eqs. 3.23-3.27)
-from the response of the autocollimator to the amplifier input measured through V_Td; each
-with a jackknife 95 % interval. Neither uses the data sheet's inertia or the design corners:
+corners (eq. 3.28, from v_c = pa - K_d V_Td per its input through V_Td) and the platform's
+inertia, damping and bearing stiffness (eqs. 3.23-3.27) from the response of the
+autocollimator to the amplifier input measured through V_Td; each with a jackknife 95 %
+interval. Stiffness and damping carry the excited motion's rms (``excitation_amplitude_urad``)
+and whether the data show they depend on it (``amplitude_dependent``): on a Dahl bearing they
+are its describing function at that motion, and the damping, which then depends on frequency,
+is not resolved. Neither uses the data sheet's inertia or the design corners:
 those appear in the report only, beside the measured values. The amplifier, motor and sensor
 constants are the data sheet's (``rig.calibration``).
 
@@ -39,7 +47,7 @@ from typing import Annotated, Any
 import numpy as np
 
 from daq.spectra import coherence, equivalent_dof, n_segments, welch_csd_matrix
-from drivers.calibration import RigCalibration
+from drivers.calibration import AutocollimatorConstants, RigCalibration
 from procedures.analysis.intervals import add_figure
 from procedures.analysis.roots import ClosedLoop, GyroCaging, LoopParts, close_loop, sensor_gain
 from procedures.analysis.transfer import (
@@ -56,6 +64,8 @@ from procedures.analysis.transfer import (
     network_response,
     periodic_blocks,
     response,
+    sensor_filter,
+    sensor_scale_V_per_rad,
     unbiased_coherence,
 )
 from procedures.paramlimits import MAX_PROCEDURE_RATE_HZ, OneOf, Range, above, at_least, check_limits, sample_rate
@@ -151,6 +161,9 @@ Params = ExcitationParams
 #: a probe that moves the platform less than PROBE_ENOUGH x the target is repeated PROBE_GROWTH
 #: times as strong, at most PROBE_TRIES probes in all
 PROBE_ENOUGH, PROBE_GROWTH, PROBE_TRIES = 0.2, 4.0, 4
+#: a platform fit that misses its bins by more than this many standard errors rms is an axis not
+#: linear at the test amplitude (a linear one leaves 1.1-1.5, Dahl bearings 2.7-5.5)
+NONLINEAR_RESIDUAL = 3.0
 #: peak / rms of a channel's excited part (a random-phase multisine is near Gaussian: 4.5 sigma is
 #: reached about once in the 2.5e5 samples of an excitation)
 CREST = 4.5
@@ -185,7 +198,8 @@ class Excitation(Procedure[ExcitationParams]):
     name = "excitation"
     title = ("Coherent excitation through V_Td in Mode 3, 4 or 5: network, inertia, stiffness, closed-loop roots "
              "(Ch. V C-D, Tables 5-6)")
-    json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "closed_loop", "file")
+    json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "excitation_amplitude_urad",
+                 "amplitude_dependent", "closed_loop", "file")
     Params = ExcitationParams
     mode = 3
 
@@ -340,14 +354,17 @@ class Excitation(Procedure[ExcitationParams]):
                                       [n["cmd"], n["pa"], n["ac_ctl"], n["ac_inst"], n["gyro"]], p.period_s,
                                       p.n_blocks)
             net_resp = response(quiet, self.network_input, n["pa"])
-            net = fit_network(net_resp, max(p.fit_lo_hz, quiet.lowest_fit_hz), p.network_hi_hz)
+            quiet_net = fit_network(net_resp, max(p.fit_lo_hz, quiet.lowest_fit_hz), p.network_hi_hz)
             plat_resp = response(excited, n["pa"], n["ac_inst"], via=n["cmd"])
             plat = fit_platform(plat_resp, cal.platform[p.axis], cal.autocollimator[p.axis],
                                 max(p.fit_lo_hz, excited.lowest_fit_hz), p.platform_hi_hz)
-            roots, loop_resp = closed_loop(excited, net, plat, cal, n, self.network_input, p)
+            roots, loop_resp, net = closed_loop(excited, quiet_net, plat, cal, n, self.network_input, p)
         except TransferError as exc:
             raise ProcedureError(f"excitation: {exc}") from None
         values = analysis_values(net, plat, p.axis, cal.platform[p.axis].inertia_kg_m2)
+        amplitude = excited_amplitude_urad(excited, n["cmd"], n["ac_inst"], cal.autocollimator[p.axis],
+                                           (p.band_lo_hz, p.band_hi_hz))
+        values |= amplitude_labels(plat, p.axis, amplitude)
         values["level_V_rms"] = ctx.results["probe"]["level_V_rms"]
         values["level_limited_by"] = ctx.results["probe"]["limited_by"]
         values["mode"] = p.mode
@@ -366,8 +383,8 @@ class Excitation(Procedure[ExcitationParams]):
             values["pickoff_noise_band_hz"] = [1.0, 50.0]
             values["pickoff_scale_source"] = kg_src
         ms = measurements(net, plat, values, p) + root_measurements(roots, p)
-        figures = [Figure("network", "Compensation network, control channel to amplifier input: measured H1 with "
-                          "95 % intervals, the fit and the design (cf. Fig. 40)",
+        figures = [Figure("network", "Compensation network, control channel to amplifier input: the quiet record's "
+                          "H1 with 95 % intervals (cf. Fig. 40), the fit inside the excited loop and the design",
                           partial(plot_response, resp=net_resp, fit=net,
                                   design=lambda f: network_response(f, DESIGN_NETWORK))),
                    Figure("platform", "Platform, amplifier input to instrumentation angle through V_Td: measured "
@@ -381,9 +398,10 @@ class Excitation(Procedure[ExcitationParams]):
 
 
 def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibration, n: Mapping[str, str],
-                network_input: str, p: ExcitationParams) -> tuple[ClosedLoop, Response]:
+                network_input: str, p: ExcitationParams) -> tuple[ClosedLoop, Response, ModelFit]:
     """The loop closed over the identified network, platform and sensor (``analysis.roots``),
-    and the measured sensitivity pa / V_Td it is checked against."""
+    the measured sensitivity pa / V_Td it is checked against, and the network fitted inside the
+    excited loop (``net``, the quiet record's fit, is only its start)."""
     kind = "ctl" if p.mode == 3 else "gyro"
     pc, ac = cal.platform[p.axis], cal.autocollimator[p.axis]
     lo = max(p.roots_lo_hz, excited.lowest_fit_hz)
@@ -403,7 +421,43 @@ def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibr
     reps = [parts(a, b, g) for a, b, g in zip(in_loop.replicates, plat.replicates, gain_reps)]
     sens = response(excited, n["cmd"], n["pa"])
     return close_loop(p.mode, parts(in_loop.params, plat.params, gain), reps, pc, ac, sens, (lo, p.roots_hi_hz),
-                      len(reps) - 1, gain_reps), sens
+                      len(reps) - 1, gain_reps), sens, in_loop
+
+
+def excited_amplitude_urad(excited: BlockCsd, cmd: str, angle: str, ac: AutocollimatorConstants,
+                           band_hz: tuple[float, float]) -> float:
+    """The platform's excited motion, urad rms: the part of the instrumentation channel
+    coherent with V_Td (gamma^2 S, Ch. V C; gamma^2 freed of its bias over the periods) over the
+    excitation's band, with the channel's scale and filter (eq. 3.22) divided out. It is the
+    amplitude at which a nonlinear bearing's describing function (eq. 5.12) is measured."""
+    S = excited.mean()
+    r, i = excited.index(cmd), excited.index(angle)
+    f = excited.f
+    band = (f >= band_hz[0]) & (f <= band_hz[1])
+    g = unbiased_coherence(coherence(S)[:, r, i], excited.averages())
+    filt = np.abs(sensor_filter(f[band], ac, angle)) ** 2
+    power = np.sum((g * S[:, i, i].real)[band] / filt) * (f[1] - f[0])
+    return float(np.sqrt(power)) / sensor_scale_V_per_rad(ac, angle) / URAD
+
+
+def amplitude_labels(plat: ModelFit, axis: str, amplitude_urad: float) -> dict[str, Any]:
+    """The amplitude the platform's figures hold at, and which of them depend on it.
+
+    A linear axis (eqs. 3.23-3.27) has one k and one D at every amplitude. A Dahl bearing
+    (eq. 5.2) has none: what the fit gives is its describing function (eq. 5.12) at this motion,
+    the stiffness falling and the dissipation growing with the amplitude. The data say which:
+    a damping that depends on frequency (``transfer.local_damping``), or a fit that misses its
+    bins by more than 3 standard errors, is an axis that is not linear at this amplitude; then
+    ``amplitude_dependent`` is true for k and D (the inertia is a mass: never)."""
+    nonlinear = bool(plat.local_damping is not None and plat.local_damping.frequency_dependent()) \
+        or plat.residual_normalized > NONLINEAR_RESIDUAL
+    out: dict[str, Any] = {
+        "excitation_amplitude_urad": {axis: round(amplitude_urad, 4)},
+        "amplitude_dependent": {"inertia_kg_m2": {axis: False}, "damping_Nms": {axis: nonlinear},
+                                "stiffness_Nm_per_rad": {axis: nonlinear}}}
+    if plat.local_damping is not None:
+        out["platform_fit_local_damping"] = plat.local_damping.values()
+    return out
 
 
 def root_measurements(roots: ClosedLoop, p: ExcitationParams) -> list[Measurement]:
@@ -430,6 +484,9 @@ def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia:
     values["network_vs_design_max_deg"] = float(np.max(np.abs(np.degrees(np.angle(d)))))
     for key in ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad"):
         add_figure(values, key, {axis: plat.estimates[key]})
+    why = {k: e.why for k, e in plat.estimates.items() if not e.resolved}
+    if why:
+        values["platform_why_unresolved"] = why
     values["platform_fit"] = {k: v for k, v in plat.values().items()
                               if k in ("band_hz", "bins", "residual_db_rms", "residual_deg_rms", "residual_normalized",
                                        "notes")}
@@ -476,10 +533,15 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams,
 
 def measurements(net: ModelFit, plat: ModelFit, values: Mapping[str, Any], p: ExcitationParams) -> list[Measurement]:
     ms = []
+    amp = values["excitation_amplitude_urad"][p.axis]
     for key, unit in (("inertia_kg_m2", "kg m^2"), ("damping_Nms", "N m s"), ("stiffness_Nm_per_rad", "N m/rad")):
         e = plat.estimates[key]
-        ms.append(Measurement(f"{key} ({p.axis})", e.value if e.resolved else None, unit,
-                              note=(f"95 % [{e.lo:.4g}, {e.hi:.4g}]" if e.resolved else f"not resolved: {e.why}")))
+        label = f" (describing function at {amp:.3g} urad rms)" if values["amplitude_dependent"][key][p.axis] else ""
+        ms.append(Measurement(f"{key} ({p.axis}){label}", e.value if e.resolved else None, unit,
+                              note=(f"95 % [{e.lo:.4g}, {e.hi:.4g}]" if e.resolved
+                                    else f"not resolved, 95 % [{e.lo:.4g}, {e.hi:.4g}]: {e.why}")))
+    ms.append(Measurement(f"platform motion excited ({p.axis}), coherent with V_Td", amp, "urad rms",
+                          note=f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, the amplitude k and D are measured at"))
     # residuals in units of each bin's own standard error: about 1 when the model fits. The
     # platform's is no limit: a Dahl bearing is not linear, and the intervals are widened by it
     ms.append(Measurement("platform fit residual / standard error", plat.residual_normalized, "rms",

@@ -60,7 +60,7 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
     design = values["network_design"]
     lines = [f"Excitation through V_Td, {title}. Level {values['level_V_rms']:.4g} V rms (limited by "
              f"{values['level_limited_by']}).", "",
-             "## Compensation network (eq. 3.28), from the quiet record (cf. Fig. 40)", "",
+             "## Compensation network (eq. 3.28), inside the excited loop through V_Td (cf. Fig. 40)", "",
              "| figure | measured | 95 % interval | design (Ch. III G) | resolved |", "|---|---|---|---|---|"]
     for k in ("gain", *NETWORK_CORNERS):
         ci = net.get(f"{k}_ci95") or [None, None]
@@ -71,11 +71,22 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
     lines += ["", f"The fitted network differs from the design by at most {values['network_vs_design_max_db']:.3g} dB "
               f"and {values['network_vs_design_max_deg']:.3g} deg over 0.3-50 Hz.", "",
               "## Platform axis (eqs. 3.23-3.27), from the excited record (cf. Fig. 52)", "",
-              "| figure | measured | 95 % interval | data sheet |", "|---|---|---|---|"]
+              f"The excited motion: {values['excitation_amplitude_urad'][a]:.3g} urad rms (the angle's part coherent "
+              f"with V_Td).", "",
+              "| figure | measured | 95 % interval | data sheet | resolved |", "|---|---|---|---|---|"]
+    amp = values["excitation_amplitude_urad"][a]
     for k, sheet in (("inertia_kg_m2", values.get("datasheet_inertia_kg_m2")), ("damping_Nms", None),
                      ("stiffness_Nm_per_rad", None)):
         ci = values[f"{k}_ci95"][a]
-        lines.append(f"| {k} | {_fmt(values[k][a])} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {_fmt(sheet)} |")
+        label = f" (describing function at {amp:.3g} urad rms)" if values["amplitude_dependent"][k][a] else ""
+        lines.append(f"| {k}{label} | {_fmt(values[k][a])} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {_fmt(sheet)} | "
+                     f"{values['resolved'][k][a]} |")
+    for k, why in (values.get("platform_why_unresolved") or {}).items():
+        lines.append(f"\n* {k}: {why}")
+    if any(values["amplitude_dependent"][k][a] for k in ("damping_Nms", "stiffness_Nm_per_rad")):
+        lines.append(f"\nThe axis is not linear at this amplitude (a bearing with solid friction, eq. 5.2): k and D "
+                     f"are its describing function (eq. 5.12) at {amp:.3g} urad rms, not constants; the small-motion "
+                     f"stiffness eta To^2 and the friction level To are the `hysteresis` procedure's.")
     lines += _roots_lines(values)
     lines += ["", "## Coherent and incoherent parts, 1-50 Hz (Ch. V C)", "",
               "| channel | coherent with V_Td (V rms) | incoherent (V rms) | incoherent (urad rms) | "

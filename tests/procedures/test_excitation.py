@@ -106,18 +106,55 @@ def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, 
 
 
 @pytest.mark.slow
-def test_excitation_on_dahl_bearings_reads_near_the_small_motion_stiffness(tmp_path):
-    """The thesis rig's Dahl bearings: at the default 2 urad rms the describing function is
-    within 10 % of eta To^2 (it read 394.5 for 410; at 10 urad it read 296), the inertia within
-    5 % and inside its interval; the fit says the axis is not quite linear."""
+def test_excitation_on_dahl_bearings_says_k_and_d_are_describing_functions_at_its_amplitude(tmp_path):
+    """The thesis rig's Dahl bearings (issue 38 items 2 and 3). k and D are the bearing's
+    describing function at the excited motion: the JSON carries that motion's rms and says
+    which figures depend on it, the summary and the report say "describing function at X urad
+    rms". The damping of a hysteresis depends on frequency (it was printed resolved, 2.41 [2.20,
+    2.62] against a viscous 1.17): unresolved, its interval holding the describing function's
+    (eq. 5.12) and the offline equivalent-linear value. The stiffness's interval covers what
+    the bearing is under this very excitation (``fbs.demo_truth.dahl_equivalent_linear``: its
+    torque along the true angle of an offline run, 392.4 for 392.3 measured; the sinusoidal
+    describing function at the same rms, 406.6, is 3.7 % above: the loop's noise dithers the
+    friction). The network's corners come from inside the excited loop: w1 read +46 % with an
+    interval wholly above the truth from the quiet record's H1; each corner's interval now covers
+    the design value, or the corner is unresolved."""
+    from fbs.demo_truth import dahl_at_amplitude, dahl_equivalent_linear
+    from simhw.params import SimConfig
+
     with open_rig("sim?warm=1&seed=41") as rig:
         s = run_procedure(Excitation(Params(**FAST)), rig, tmp_path)
     assert s.exit_code == 0, s.error
-    v = s.values
-    J, J_ci = v["inertia_kg_m2"]["X"], v["inertia_kg_m2_ci95"]["X"]
-    assert abs(J / 0.70 - 1) < 0.05 and J_ci[0] <= 0.70 <= J_ci[1]
-    assert abs(v["stiffness_Nm_per_rad"]["X"] / 410.0 - 1) < 0.10
-    assert v["damping_Nms"]["X"] > 1.5          # Dahl's hysteresis dissipates: more than the 1.02 viscous
+    printed = s.json_result(Excitation(Params(**FAST)))
+    assert_valid_result(printed)
+    amp = printed["excitation_amplitude_urad"]["X"]
+    assert 1.0 < amp < 4.0, amp
+    dep = printed["amplitude_dependent"]
+    assert dep["stiffness_Nm_per_rad"]["X"] and dep["damping_Nms"]["X"] and not dep["inertia_kg_m2"]["X"]
+    cfg = SimConfig()
+    eq = dahl_equivalent_linear(cfg, "X", float(s.values["level_V_rms"]))
+    k_df, d_df, _ = dahl_at_amplitude(cfg, "X", amp, (eq.stiffness_Nm_per_rad / 0.70) ** 0.5)
+    d_df += cfg.platform["X"].gyro_damping_Nms
+    k, k_ci = printed["stiffness_Nm_per_rad"]["X"], printed["stiffness_Nm_per_rad_ci95"]["X"]
+    d_ci = printed["damping_Nms_ci95"]["X"]
+    print(f"amplitude {amp} urad rms; k {k} {k_ci}, equivalent linear {eq.stiffness_Nm_per_rad:.1f}, describing "
+          f"function {k_df:.1f}; D {d_ci}, equivalent linear {eq.damping_Nms:.3f}, describing function {d_df:.3f}")
+    assert printed["resolved"]["stiffness_Nm_per_rad"]["X"] and k_ci[0] <= eq.stiffness_Nm_per_rad <= k_ci[1]
+    assert printed["damping_Nms"]["X"] is None and not printed["resolved"]["damping_Nms"]["X"]
+    assert d_ci[0] <= d_df <= d_ci[1] and d_ci[0] <= eq.damping_Nms <= d_ci[1], (d_ci, d_df, eq)
+    assert "depends on frequency" in s.values["platform_why_unresolved"]["damping_Nms"]
+    J_ci = printed["inertia_kg_m2_ci95"]["X"]
+    assert printed["resolved"]["inertia_kg_m2"]["X"] and J_ci[0] <= 0.70 <= J_ci[1]
+    label = f"describing function at {amp:.3g} urad rms"
+    assert any(label in m.name for m in s.measurements if m.name.startswith("stiffness_Nm_per_rad"))
+    assert label in (tmp_path / "excitation.md").read_text()
+    net = printed["network"]
+    for corner, truth in (("w1_rad_per_s", 0.15), ("w2_rad_per_s", 10.0), ("w3_rad_per_s", 30.0),
+                          ("w4_rad_per_s", 200.0)):
+        lo, hi = net[f"{corner}_ci95"]
+        print(corner, net[corner], [lo, hi], net["resolved"][corner])
+        assert not net["resolved"][corner] or lo <= truth <= hi, (corner, net[corner], lo, hi)
+    assert net["resolved"]["w1_rad_per_s"]
 
 
 @pytest.mark.slow
