@@ -157,9 +157,9 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
     from daq.runfile import make_folder
     from drivers.rig import open_rig, with_param
     from fbs.progress import run_with_progress
-    from fbs.runlog import RunLog
     from procedures.calibrations import get
     from procedures.params import parse_params
+    from procedures.runlog import RunLog
     from simhw.params import load_config
     from simhw.simulator import check_seed
 
@@ -287,19 +287,26 @@ def _survey_rows(rows: list[Row], s: RunSummary, sim: SimTruth) -> None:
 def _excitation_rows(rows: list[Row], s: RunSummary, sim: SimTruth) -> None:
     """The excitation (Ch. V C-D): the bearing's stiffness at the test amplitude, the network,
     the closed-loop roots and the sensor's noise incoherent with V_Td."""
-    from fbs.demo_truth import dahl_at_amplitude
+    from fbs.demo_truth import dahl_equivalent_linear
 
     v = s.values
     axis, mode = s.params.get("axis", "X"), int(v.get("mode", s.params.get("mode", 3)))
     rms = float(s.params.get("target_urad", 2.0))
-    if (v.get("stiffness_Nm_per_rad") or {}).get(axis) is not None or "stiffness_Nm_per_rad" in v:
-        w = math.sqrt(max(sim.static["stiffness_Nm_per_rad"].get(axis, 0.0), 1e-9)
-                      / sim.cfg.platform[axis].inertia_kg_m2)
-        k, _, how = dahl_at_amplitude(sim.cfg, axis, rms, w)
-        rows.append(_figure(s, "stiffness_Nm_per_rad", axis, f"bearing stiffness at {fmt(rms)} urad rms {axis}"
-                            f"{_in_mode(s)}", "N m/rad", None, Truth(k, "describing function", how),
-                            "Dahl's describing function at the test amplitude (eta To^2 only for small motion); "
-                            "the truth is approximate: a broadband motion has no single stiffness"))
+    moved = (v.get("excitation_amplitude_urad") or {}).get(axis)
+    level = v.get("level_V_rms")
+    if "stiffness_Nm_per_rad" in v:
+        if sim.cfg.bearing[axis].model == "dahl" and mode == 3 and level:
+            # what the run's own fit measures on this bearing at the run's own excitation level
+            eq = dahl_equivalent_linear(sim.cfg, axis, float(level))
+            truth = Truth(eq.stiffness_Nm_per_rad, "offline", eq.how)
+        else:
+            truth = Truth(sim.static["stiffness_Nm_per_rad"].get(axis), "describing function",
+                          "the bearing's small-motion stiffness (no Dahl bearing, or not Mode 3)")
+        at = f" at {fmt(moved)} urad rms" if moved is not None else f" at about {fmt(rms)} urad rms"
+        rows.append(_figure(s, "stiffness_Nm_per_rad", axis, f"bearing stiffness{at} {axis}{_in_mode(s)}",
+                            "N m/rad", None, truth,
+                            "a Dahl bearing's equivalent stiffness under this excitation (eta To^2 only for "
+                            "small motion): amplitude-dependent, measured at the run's own level"))
     rows.append(Row(f"compensation network vs design {axis}{_in_mode(s)}, worst 0.3-50 Hz", "dB",
                     v.get("network_vs_design_max_db"), None, None,
                     f"{fmt(v.get('network_vs_design_max_deg'))} deg (eq. 3.28, Fig. 40)"))
