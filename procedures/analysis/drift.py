@@ -29,7 +29,7 @@ Per channel (``analyze_channels``):
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -110,12 +110,38 @@ class ChannelDrift:
     problems: list[str]
     loop: LoopGain | None = None
     adev_torquer: allan.AllanResult | None = None   # of -K_TO V_T alone (the loop's output)
+    #: how far the K_TO and K_g used may lie from the unit's (relative, 95 %): 0 for a measured
+    #: scale (earth-rate, stopwatch), the data sheet's tolerance for a nominal one
+    scale_tol: tuple[float, float] = (0.0, 0.0)
+
+    def figure_tolerance(self, term: str) -> float:
+        """The relative error of figure ``term`` the scales' tolerance allows: the reconstructed rate
+        is r + sigma' + sigma / (h/k) with r proportional to K_TO and sigma to 1 / K_g, so a figure
+        read where r carries the input rate (B, at taus beyond the caging loop's time constant)
+        scales as K_TO, and N, read where either may carry it, by a blend of the two scale errors,
+        which lies between them."""
+        kto, kg = self.scale_tol
+        return kto if term == "bias" else max(kto, kg)
 
     def estimate(self, term: str) -> Estimate:
         """The figure ``term`` ("arw" or "bias") as a reported estimate: resolved by the
         intervals rule (``procedures.analysis.intervals.judged``) when the data show it and it
         dominates where it is read (``MIN_SHARE_TO_RESOLVE``), else unresolved with its interval
-        (0 .. the bound the data support where the model has none of it)."""
+        (0 .. the bound the data support where the model has none of it). Where the scales used
+        are nominal (``scale_tol``), the interval is widened by their tolerance: the truth is the
+        figure times K_unit / K_used (``figure_tolerance``), so lo (1 - t) .. hi (1 + t)."""
+        e = self._estimate(term)
+        t = self.figure_tolerance(term)
+        if t <= 0 or not (math.isfinite(e.lo) and math.isfinite(e.hi)):
+            return e
+        lo, hi = e.lo * (1.0 - t), e.hi * (1.0 + t)
+        if not e.resolved:
+            return Estimate(e.value, lo, hi, False, e.why)
+        w = judged(e.value, lo, hi)
+        # widened past resolving: unresolved as ``_estimate`` makes it, 0 .. the upper limit
+        return w if w.resolved else Estimate(e.value, 0.0, hi, False, w.why)
+
+    def _estimate(self, term: str) -> Estimate:
         t = self.arw if term == "arw" else self.bi
         if t is None:
             return Estimate(math.nan, math.nan, math.nan, False, "; ".join(self.problems) or "not measured")
@@ -126,7 +152,14 @@ class ChannelDrift:
             return Estimate(t.value, 0.0, max(t.bound, t.hi), False,
                             f"it holds only {100 * t.share:.0f} % of the modelled Allan variance where it is read "
                             f"(tau {t.tau_s:g} s): the model's shapes, not the data, apportion it")
-        return judged(t.value, t.lo, t.hi)
+        e = judged(t.value, t.lo, t.hi)
+        if not e.resolved:
+            # unresolved: only the upper limit is the data's; the lower one is the measured variance
+            # less the other terms' modelled share, and where the term does not stand clear of them
+            # the model's split decides it (issue 38: B [0.025, 0.081] for a true 0.019 under a large
+            # N, whose white rate the fit had given B at the long taus)
+            return Estimate(t.value, 0.0, t.hi, False, e.why)
+        return e
 
 
 @dataclass
@@ -221,12 +254,14 @@ def coupling_terms(channel: str, h_over_c: dict[str, float] | None) -> tuple[str
 
 def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: dict[str, float],
                      p: DriftSettings, kg_mV_per_urad: dict[str, float], restraint_s: dict[str, float],
-                     h_over_c: dict[str, float] | None = None) -> dict[str, ChannelDrift]:
+                     h_over_c: dict[str, float] | None = None, *,
+                     scale_tol: Mapping[str, tuple[float, float]] | None = None) -> dict[str, ChannelDrift]:
     """Per channel: the input rate reconstructed from the torquer and pickoff outputs
     (``reconstruct_rate``) split at gaps, its Allan deviation, the IEEE 952 noise model fitted to
     it and the terms read with their intervals (``allan.term_estimate``), the null stability,
     and the caging loop's gain (a diagnostic: the loop's white rate, which the torquer output
-    alone would show)."""
+    alone would show). ``scale_tol``: per channel the relative tolerance (95 %) of the K_TO and
+    K_g given, where they are nominal (``ChannelDrift.scale_tol``)."""
     out = {}
     band = (p.loop_band_lo_hz, p.loop_band_hi_frac * rate_hz)
     for ch in GYRO_CHANNELS:
@@ -271,7 +306,8 @@ def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: d
                                         min_edf=p.min_edf)
         except ValueError as exc:
             problems.append(f"null stability: {exc}")
-        out[ch] = ChannelDrift(ch, kto[ch], mean, res, model, arw, bi, null, problems, loop, torq_res)
+        out[ch] = ChannelDrift(ch, kto[ch], mean, res, model, arw, bi, null, problems, loop, torq_res,
+                               (scale_tol or {}).get(ch, (0.0, 0.0)))
     return out
 
 

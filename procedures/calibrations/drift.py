@@ -82,6 +82,12 @@ class DriftParams:
     #: quality limits: the record must cover this much, and lose at most this fraction of samples
     min_record_s: Annotated[float, at_least(0)] = 300.0
     max_lost_fraction: Annotated[float, Range(0.0, 1.0)] = 0.01
+    #: how far a unit's K_TO and K_g may lie from the data sheet (relative, 95 %): where the
+    #: procedure has no earth-rate or stopwatch result it uses the data sheet's, and the N and B
+    #: intervals are widened by this much (``ChannelDrift.figure_tolerance``; issue 38: rigs drawn
+    #: with K_TO x0.85-1.15 and K_g x0.8-1.2 put intervals of nominal-scale runs off the truth)
+    nominal_kto_tol: Annotated[float, Range(0.0, 0.9)] = 0.15
+    nominal_kg_tol: Annotated[float, Range(0.0, 0.9)] = 0.20
 
     def __post_init__(self) -> None:
         check_limits(self, "drift")
@@ -135,10 +141,14 @@ class Drift(Procedure[DriftParams]):
                   for name in self.chunk_names())]
 
     # ------------------------------------------------------------------ steps
+    def kto_sources(self, ctx: Context) -> tuple[dict[str, float], dict[str, str]]:
+        """K_TO per channel (urad/s/V) and, per channel, where it came from ("nominal" or the prior's)."""
+        nominal = ctx.rig.calibration.torquer_scale_urad_per_s_per_V
+        return prior_values(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", GYRO_CHANNELS, nominal)
+
     def kto(self, ctx: Context) -> tuple[dict[str, float], str]:
         """K_TO per channel (urad/s/V) and where it came from."""
-        nominal = ctx.rig.calibration.torquer_scale_urad_per_s_per_V
-        out, sources = prior_values(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", GYRO_CHANNELS, nominal)
+        out, sources = self.kto_sources(ctx)
         used_nominal = [ch for ch, src in sources.items() if src == "nominal"]
         if not used_nominal:
             source = "earth-rate result (prior run)"
@@ -180,8 +190,12 @@ class Drift(Procedure[DriftParams]):
         # the float's restraint and viscous coupling are data-sheet constants (Table 3); the
         # coupling only where the rig's calibration carries it
         h_over_c = getattr(cal, "viscous_coupling_h_over_c", None)
+        _, kto_sources = self.kto_sources(ctx)
+        tol = {ch: (p.nominal_kto_tol if kto_sources[ch] == "nominal" else 0.0,
+                    p.nominal_kg_tol if kg_sources[ch] == "nominal" else 0.0) for ch in GYRO_CHANNELS}
         try:
-            res = analyze_channels(chunks, rate, kto, p, kg, dict(cal.restraint_time_constant_s), h_over_c)
+            res = analyze_channels(chunks, rate, kto, p, kg, dict(cal.restraint_time_constant_s), h_over_c,
+                                   scale_tol=tol)
         except DriftDataError as exc:
             raise ProcedureError(str(exc)) from None
         ms: list[Measurement] = [

@@ -47,7 +47,8 @@ def markdown(res: dict[str, ChannelDrift], p: ReportSettings, kto: dict[str, flo
              coupled: bool = False) -> str:
     nominal_note = ("" if "NOMINAL" not in kto_source else
                     "\n**K_TO: the rig's nominal data-sheet values were used** (no earth-rate result was given); "
-                    "K_TO only scales the rates here, so every rate below scales with it.\n")
+                    "K_TO only scales the rates here, so every rate below scales with it, and the 95 % intervals "
+                    "are widened by the data sheet's tolerance (a unit's K_TO may be that far off).\n")
     lines = ["## Drift stability", "",
              f"Record: {hours(record_s)} of the torquer and pickoff outputs in Mode 3 at {p.rate_hz:g} Hz "
              f"({lost} of {total} samples lost); torquing rate r = -K_TO V_T, K_TO from the {kto_source}: "

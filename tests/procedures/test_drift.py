@@ -188,11 +188,16 @@ def _figure(s, key: str) -> dict[str, tuple[float | None, float, float, bool]]:
     return {ch: (v[ch], ci[ch][0], ci[ch][1], ok[ch]) for ch in CHANNELS}
 
 
-def _run(tmp_path: Path, url: str, **params) -> object:
+def _run(tmp_path: Path, url: str, prior: dict | None = None, **params) -> object:
     from drivers.rig import open_rig
 
     with open_rig(url) as rig:
-        return run_procedure(Drift(Drift.Params(**params)), rig, tmp_path)
+        return run_procedure(Drift(Drift.Params(**params), prior=prior or {}), rig, tmp_path)
+
+
+def _measured_scales(kto: dict[str, float], kg: dict[str, float]) -> dict:
+    """A prior as earth-rate and stopwatch results give it (measured K_TO, K_g: no nominal tolerance)."""
+    return {"earth-rate": {"K_TO_urad_per_s_per_V": kto}, "stopwatch": {"K_g_mV_per_urad": kg}}
 
 
 @dataclass
@@ -220,8 +225,12 @@ def test_default_rig(tmp_path):
     loop's noise. The gyro's N = 0.005 urad/sqrt(s) lies under the differentiated pickoff noise
     and the flicker floor at every tau, so it is reported unresolved, with an interval 0 .. bound
     that holds it; B (sim 0.02) is read with an interval that holds it (on at least three of four
-    channels: 95 % intervals), and K_TO and K_g only scale."""
-    s = _run(tmp_path, "sim?warm=1&watchdog=5&seed=3", duration_s=2400.0, n_chunks=4)
+    channels: 95 % intervals), and K_TO and K_g only scale. The scales are given as measured (the
+    sim's, as earth-rate and stopwatch results); the data sheet's widen every interval by their
+    tolerance (issue 38 item 6)."""
+    cal = RigCalibration()
+    measured = _measured_scales(dict(cal.torquer_scale_urad_per_s_per_V), dict(cal.pickoff_scale_mV_per_urad))
+    s = _run(tmp_path, "sim?warm=1&watchdog=5&seed=3", prior=measured, duration_s=2400.0, n_chunks=4)
     assert s.exit_code == 0, (s.error, [m for m in s.measurements if m.passed is False])
     assert set(s.json_values(Drift.json_keys)) >= set(Drift.json_keys) | {"resolved"}
     assert_valid_result(s.json_result(Drift()))   # what `fbs run --json` prints (issue 37)
@@ -242,18 +251,24 @@ def test_default_rig(tmp_path):
         value, lo, hi, resolved = bi[ch]
         assert resolved and 0.6 * b_true[ch] < value < 1.6 * b_true[ch], (ch, bi[ch])
     report = s.report.read_text()
-    assert "nominal data-sheet values were used" in report and "not resolved" in report
+    assert "not resolved" in report and "NOMINAL" not in report
     assert (tmp_path / "drift-allan.png").stat().st_size > 10_000
     assert (tmp_path / "drift-null.png").exists()
     assert "24 h p-p" in report and "estimate" in report
+    # the data sheet's scales (no prior): the same record, each interval widened by the tolerance
+    nominal = Drift(Drift.Params(duration_s=2400.0, n_chunks=4)).analyze(_reanalysis_ctx(s.file))
+    assert "nominal data-sheet values were used" in nominal.markdown
+    for key, t in (("bias_instability_urad_per_s", 0.15), ("arw_urad_per_sqrt_s", 0.20)):
+        for ch in CHANNELS:
+            lo, hi = nominal.values[f"{key}_ci95"][ch]
+            assert hi == pytest.approx((1 + t) * s.values[f"{key}_ci95"][ch][1], rel=1e-4), (key, ch)
+            assert lo == pytest.approx((1 - t) * s.values[f"{key}_ci95"][ch][0], rel=1e-4) or lo == 0.0, (key, ch)
     # K_TO and K_g are scales: an earth-rate K_TO of twice the nominal and a stopwatch K_g of half
     # doubles the torquing rate and the pickoff angle, so the reconstructed rate and every figure
-    cal = RigCalibration()
     twice = {c: 2 * v for c, v in cal.torquer_scale_urad_per_s_per_V.items()}
     half_kg = {c: v / 2 for c, v in cal.pickoff_scale_mV_per_urad.items()}
     again = Drift(Drift.Params(duration_s=2400.0, n_chunks=4),
-                  prior={"earth-rate": {"K_TO_urad_per_s_per_V": twice},
-                         "stopwatch": {"K_g_mV_per_urad": half_kg}}).analyze(_reanalysis_ctx(s.file))
+                  prior=_measured_scales(twice, half_kg)).analyze(_reanalysis_ctx(s.file))
     for key in ("arw_urad_per_sqrt_s", "bias_instability_urad_per_s"):
         for ch in CHANNELS:
             got, was = again.values[f"{key}_ci95"][ch], s.values[f"{key}_ci95"][ch]
@@ -355,3 +370,45 @@ def test_a_term_the_model_apportions_is_not_resolved():
     assert low.covers(0.005)
     high = drift_with(max(0.9, MIN_SHARE_TO_RESOLVE)).estimate("arw")
     assert high.resolved and (high.lo, high.hi) == (0.069, 0.147)
+
+
+def test_an_unresolved_term_keeps_only_its_upper_limit():
+    """Issue 38 item 6: a term read where it dominates but whose interval is wider than its value
+    (B under a large N: the fit gave B the white rate's variance at the long taus) is unresolved
+    with 0 .. its upper limit, not the model-split [lo, hi] that missed the truth (rig 9 of
+    bench/drift_coverage.py: B 0.0357 [0.0222, 0.0583] for a true 0.0101)."""
+    from procedures.analysis.allan import TermEstimate
+    from procedures.analysis.drift import ChannelDrift
+
+    bi = TermEstimate("bias", 0.0357, 0.0222, 0.0583, 819.2, 0.56, 0.0703)
+    e = ChannelDrift("X", 31.6, 0.0, None, None, None, bi, None, []).estimate("bias")
+    assert not e.resolved and (e.lo, e.hi) == (0.0, 0.0583) and e.covers(0.0101)
+
+
+def test_nominal_scales_widen_the_intervals_by_their_tolerance():
+    """Issue 38 item 6: with the data sheet's K_TO and K_g (no earth-rate or stopwatch result) the
+    figures are off by K_unit / K_used, up to the tolerance: B's interval widens by K_TO's, N's by
+    the larger of the two; a figure so widened past its value is unresolved (0 .. upper limit).
+    On the same record analysed with K_TO 12 % below the unit's (synthetic caged float, B 0.02),
+    the widened B interval holds the truth."""
+    from procedures.analysis.allan import TermEstimate
+    from procedures.analysis.drift import ChannelDrift
+
+    arw = TermEstimate("arw", 0.30, 0.25, 0.36, 12.8, 0.9, 0.5)
+    bi = TermEstimate("bias", 0.020, 0.016, 0.025, 409.6, 0.9, 0.04)
+    d = ChannelDrift("X", 31.6, 0.0, None, None, arw, bi, None, [], scale_tol=(0.15, 0.20))
+    b, n = d.estimate("bias"), d.estimate("arw")
+    assert b.resolved and (b.lo, b.hi) == pytest.approx((0.016 * 0.85, 0.025 * 1.15))
+    assert n.resolved and (n.lo, n.hi) == pytest.approx((0.25 * 0.80, 0.36 * 1.20))
+    wide = ChannelDrift("X", 31.6, 0.0, None, None, TermEstimate("arw", 0.3, 0.2, 0.45, 12.8, 0.9, 0.6), None,
+                        None, [], scale_tol=(0.15, 0.20)).estimate("arw")
+    assert not wide.resolved and (wide.lo, wide.hi) == pytest.approx((0.0, 0.54))
+    # through analyze_channels: the unit's K_TO is 1.12 x what the analysis is given
+    chunks = _synthetic_chunks(4, 36000, {c: 1.12 * v for c, v in KTO.items()}, KG, HK)
+    plain = analyze_channels(chunks, 10.0, KTO, Params(), KG, HK)
+    tol = analyze_channels(chunks, 10.0, KTO, Params(), KG, HK, scale_tol={c: (0.15, 0.20) for c in CHANNELS})
+    for ch in CHANNELS:
+        p, t = plain[ch].estimate("bias"), tol[ch].estimate("bias")
+        assert t.lo == pytest.approx(0.85 * p.lo) and t.hi == pytest.approx(1.15 * p.hi), ch
+    assert sum(tol[ch].estimate("bias").covers(0.02) for ch in CHANNELS) >= sum(
+        plain[ch].estimate("bias").covers(0.02) for ch in CHANNELS)
