@@ -36,7 +36,7 @@ from console.procedures import ProcedurePanel, parse_run_text
 from console.quitscreen import QuitScreen, what_quit_closes
 from console.recording import RecordingPanel, default_path, recording_path
 from console.rigworker import RigWorker
-from console.setpoints import SetpointPanel
+from console.setpoints import SetpointPanel, state_key
 from console.spectra import SpectraPanel
 from console.state import (
     CommandOutcome,
@@ -300,10 +300,12 @@ class ConsoleApp(App[int]):
 
     def _outcome(self, o: CommandOutcome) -> None:
         if o.what in ("hold", "release", "safe state") or o.what.startswith("select"):
-            same = not o.ok and o.text == self.worker_.state.get().alarm   # said once, by the lamp
-            self.w_modes.last(f"{o.what} refused: the alarm above says why" if same else o.text, o.ok)
+            snap = self.worker_.state.get()
+            same = not o.ok and o.text == snap.alarm   # said once, by the lamp
+            self.w_modes.last(f"{o.what} refused: the alarm above says why" if same else o.text, o.ok, snap)
         elif o.what.startswith(("torquer", "command", "autocollimator", "caging")):
-            self.w_setpoints.message(o.text if o.ok else f"refused: {o.text}", o.ok)
+            self.w_setpoints.message(o.text if o.ok else f"refused: {o.text}", o.ok,
+                                     state_key(self.worker_.state.get()))
         elif o.what.startswith("procedure ") and not o.ok:
             self.w_procedures.refused(o.text)
         elif o.what == "start recording" and o.ok:

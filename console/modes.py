@@ -66,12 +66,19 @@ class ModePanel(Vertical, can_focus=True):
     def action_safe(self) -> None:
         self.post_message(self.Command("safe"))
 
-    def last(self, text: str, ok: bool) -> None:
+    _shown: tuple = ()
+    _last_state: tuple | None = None
+
+    def last(self, text: str, ok: bool, snap: Snapshot | None = None) -> None:
+        """The last mode command's outcome; with ``snap`` (the state just after it) the line
+        goes once the mode, the switches or the alarm move on (a procedure's safe state, an
+        abort, a fault): it must never say "mode 3 in force" under a header saying MODE 1."""
+        self._last_state = None if snap is None else mode_state(snap)
         self.query_one("#mode-last", Static).update(Text(text, style="green" if ok else "bold red"))
 
-    _shown: tuple = ()
-
     def show(self, snap: Snapshot) -> None:
+        if self._last_state is not None and self._last_state != mode_state(snap):
+            self.last("", True)
         key = (snap.relay, snap.alarm, snap.fault, snap.caging,
                None if snap.spin_left_s is None else duration(snap.spin_left_s))
         if key == self._shown:
@@ -105,6 +112,12 @@ class ModePanel(Vertical, can_focus=True):
         self.query_one("#mode-alarm", Static).update(alarm)
         self.query_one("#mode-gyros", Static).update(gyro_words(st, snap.caging, snap.spin_left_s))
         self.query_one("#mode-interlocks", Static).update(interlock_words(st, snap.alarm))
+
+
+def mode_state(snap: Snapshot) -> tuple:
+    """The part of the state a mode command's outcome describes."""
+    st = snap.relay
+    return (snap.phase, snap.alarm, snap.fault) + ((st.mode, st.held, st.selected) if st else ())
 
 
 def _names(flags: dict[str, bool], want: bool) -> list[str]:

@@ -8,6 +8,7 @@ from textual.containers import Vertical
 from textual.screen import ModalScreen
 from textual.widgets import Input, Static
 
+from console.keyorder import OrderedInput
 from console.operator import OperatorQuestion
 
 
@@ -28,7 +29,7 @@ class OperatorScreen(ModalScreen[str]):
         with Vertical():
             yield Static("[b]The operator is asked[/b]")
             yield Static(self.question.prompt)
-            yield Input(placeholder="Enter when done, or the angle set, or 'abort'", id="operator-answer")
+            yield OrderedInput(placeholder="Enter when done, or the angle set, or 'abort'", id="operator-answer")
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.dismiss(event.value)

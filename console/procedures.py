@@ -22,6 +22,7 @@ from textual.widgets import Input, ProgressBar, Select, Static
 
 from console.eventlog import EventLog
 from console.keyhelp import PanelHelp
+from console.keyorder import OrderedInput
 from console.state import ProcedureInfo
 from console.timefmt import duration
 
@@ -165,7 +166,7 @@ class ProcedurePanel(Vertical, can_focus=True):
             # ("Select.NULL"); until the catalogue is in, one disabled "loading…" entry
             yield Select([("loading…", LOADING)], allow_blank=False, value=LOADING,
                          disabled=True, id="proc-name", compact=True)
-            yield Input(placeholder="parameters: name=value ... (f7 run, f8 abort)", id="proc-params", compact=True)
+            yield OrderedInput(placeholder="parameters: name=value ... (f7 run, f8 abort)", id="proc-params", compact=True)
         with VerticalScroll(id="proc-about"):
             yield Static(id="proc-defaults")
         with Horizontal(classes="proc-row"):

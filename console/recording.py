@@ -15,6 +15,7 @@ from textual.widgets import Input, Static
 
 from console.eventlog import EventLog
 from console.keyhelp import PanelHelp
+from console.keyorder import OrderedInput
 from console.state import RecordingInfo, RigEventItem, Snapshot
 
 
@@ -40,12 +41,12 @@ class RecordingPanel(Vertical, can_focus=True):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="rec-row"):
             yield Static("file", classes="rec-label")
-            yield Input(placeholder="blank: the next free recording.h5", id="rec-path", compact=True)
+            yield OrderedInput(placeholder="blank: the next free recording.h5", id="rec-path", compact=True)
         with Horizontal(classes="rec-row"):
             yield Static("rate Hz", classes="rec-label")
-            yield Input("1000", id="rec-rate", compact=True, classes="rec-short")
+            yield OrderedInput("1000", id="rec-rate", compact=True, classes="rec-short")
             yield Static(" channels", classes="rec-label")
-            yield Input(placeholder="all, or names: gyro_x,torq_x,...", id="rec-channels", compact=True)
+            yield OrderedInput(placeholder="all, or names: gyro_x,torq_x,...", id="rec-channels", compact=True)
         yield Static("not recording   (f7 record, f8 stop)", id="rec-status")
         yield Static("event log", classes="section")
         # wrapped, so no horizontal scroll bar hides the newest line; it follows the newest entry

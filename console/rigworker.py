@@ -68,7 +68,7 @@ from console.state import (
 )
 from drivers.canopen_client import ABORT_NOT_HELD
 from drivers.errors import DriverError, InterlockError, SampleGap, SetpointRangeError
-from drivers.relay import MODES, interlock_reason
+from drivers.relay import MODES, RelayStatus, interlock_reason
 from drivers.rig import Rig, open_rig
 from drivers.safety import SafeOnAbort, go_safe
 from drivers.setpoints import SetpointKind
@@ -136,6 +136,7 @@ class RigWorker:
         self._quiet_setpoints = False          # a slew's steps: one line in the event log, not one a step
         self._fault_handled = False
         self._alarm_not_held = False           # the lamp is lit by a selection without hold
+        self._alarm_mode: int | None = None    # the lamp is lit by this mode's refused release
         self._spin = SpinUpEstimate()
         #: the files the shutdown closed, "path (status)", for the console's exit line
         self.closed_on_stop: list[str] = []
@@ -479,25 +480,33 @@ class RigWorker:
             if self._stop.is_set():
                 raise Refused("the console is closing")
             from daq.runfile import make_folder
-            from procedures.runner import next_free
+            from procedures.runlog import RunLog
+            from procedures.runner import run_file_for
 
             make_folder(self.out_dir)
             # the file run_procedure will pick (it takes the same next free name), shown while it runs
-            self.state.update(procedure=ProcedureInfo(proc.name, file=next_free(self.out_dir, proc.name)))
-            log.info("procedure %s %s (parameters %s)", proc.name,
-                     f"resuming {resume.path}" if resume else "starting", proc.params_json())
+            run_file = run_file_for(self.out_dir, proc.name, resume)
+            self.state.update(procedure=ProcedureInfo(proc.name, file=run_file))
             now = self._rig.now()
             self._next_status_rig = self._next_readback_rig = now
             self._sharing = True
             try:
-                summary = run_procedure(proc, self._rig, self.out_dir, resume=resume, progress=self._on_progress,
-                                        abort=self._abort)
+                # its log beside its file, as ``fbs run`` writes it
+                with RunLog() as runlog:
+                    runlog.open(run_file.with_suffix(".log"))
+                    log.info("procedure %s %s (parameters %s) from the console on rig %s", proc.name,
+                             f"resuming {resume.path}" if resume else "starting", proc.params_json(), self.url)
+                    summary = run_procedure(proc, self._rig, self.out_dir, resume=resume,
+                                            progress=self._on_progress, abort=self._abort)
+                    runlog.follow(summary.file)
             finally:
                 self._sharing = False
         except BaseException:
             self.state.update(phase=prev if prev in (Phase.READY, Phase.RECORDING) else Phase.READY, procedure=None)
             if not self._stop.is_set() and self._acq is None and not self._streaming:
                 self._guard(self._start_meter_stream)
+            if not self._stop.is_set() and not self._check_fault():
+                self._guard(lambda: self._poll(force=True))   # the panels show the safe state at once
             raise
         self.state.update(phase=Phase.READY, procedure=None, last_file=summary.file)
         if self._stop.is_set() and summary.file is not None:
@@ -527,6 +536,7 @@ class RigWorker:
     def _alarm(self, text: str | None, *, not_held: bool = False) -> None:
         """Light the alarm lamp with ``text`` (in the operator's words), or put it out."""
         self._alarm_not_held = not_held and text is not None
+        self._alarm_mode = None
         self.state.update(alarm=text)
         if text is not None:
             self._rig.event("alarm", text)
@@ -561,6 +571,8 @@ class RigWorker:
             if status.held:
                 relays.alarm = text
             self._alarm(text, not_held=not status.held)
+            if why is not None:
+                self._alarm_mode = status.selected   # its words follow the rig (``_refused_alarm``)
             self._poll(force=True)
             log.info("release refused: %s", exc)   # the node's raw refusal, for the log
             raise InterlockError(text) from None
@@ -573,6 +585,7 @@ class RigWorker:
     def _go_safe(self) -> str:
         self._slews.clear()
         report = go_safe(self._rig, "the operator asked for the safe state")
+        self._alarm_mode = None
         self.state.update(alarm=None, slewing={})
         self._poll(force=True)
         if not report.ok:
@@ -656,6 +669,8 @@ class RigWorker:
             changes["relay"] = st
             # the wheels run in every mode but 1: how long until they are at speed
             changes["spin_left_s"] = self._spin.observe(rig.now(), st.spin_fraction, st.mode >= 2)
+            if self._alarm_mode is not None:
+                changes["alarm"] = self._refused_alarm(self._alarm_mode, st)
         if readback:
             back = {f"torq {c}": rig.torquers.bias_V(c) for c in rig.torquers.channels}
             for a in rig.commands.axes:
@@ -666,6 +681,21 @@ class RigWorker:
         if changes:
             changes["rig_time_s"] = rig.now()
             self.state.update(**changes)
+
+    def _refused_alarm(self, mode: int, st: RelayStatus) -> str | None:
+        """The lamp of a refused release, in words of the state now, not of the moment it was
+        refused: "wheels at 21 %" must not stand beside "wheels 99 %". It goes out when its
+        cause is gone - the interlock is met, or the mode is in force (the event log says so)
+        - or, as every alarm, with the next mode command or the safe state."""
+        reason = None if st.mode == mode else interlock_reason(mode, st)
+        if reason is None:
+            self._alarm_mode = None
+            self._rig.relays.alarm = None
+            self._note("alarm", f"alarm out: mode {mode}'s interlocks are met now (h {mode} r enters it)"
+                       if st.mode != mode else f"alarm out: mode {mode} is in force")
+            return None
+        self._rig.relays.alarm = reason
+        return reason
 
     # ------------------------------------------------------------------ faults and the end
     def _check_fault(self) -> bool:

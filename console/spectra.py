@@ -25,6 +25,7 @@ from textual_plotext import PlotextPlot
 
 from console.channels import unknown_channels
 from console.keyhelp import PanelHelp
+from console.keyorder import OrderedInput
 
 #: display points per curve: the Welch bins averaged over log-spaced bands (a terminal's
 #: braille cells resolve a few hundred columns at most)
@@ -153,10 +154,10 @@ class SpectraPanel(Vertical, can_focus=True):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="spec-row"):
             yield Static("file", classes="rec-label")
-            yield Input(placeholder="blank: the newest run file (none yet)", id="spec-path", compact=True)
+            yield OrderedInput(placeholder="blank: the newest run file (none yet)", id="spec-path", compact=True)
         with Horizontal(classes="spec-row"):
             yield Static("channels", classes="rec-label")
-            yield Input("gyro_x,gyro_y", id="spec-channels", compact=True)
+            yield OrderedInput("gyro_x,gyro_y", id="spec-channels", compact=True)
         yield Static("f7: PSD and coherence (record one first, f4, or type a file)", id="spec-info")
         yield Static("", id="spec-t0", classes="sp-title")
         yield PlotextPlot(id="spec-psd")

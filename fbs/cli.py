@@ -166,7 +166,7 @@ def _main(argv: list[str] | None) -> int:
 
 def internal_error(args: argparse.Namespace, exc: Exception) -> str:
     """The line that reports a defect, after its traceback: on stderr with ``-v``, else where
-    it was kept (a run's log, ``fbs.runlog``: its path is one of the exception's notes) or how
+    it was kept (a run's log, ``procedures.runlog``: its path is one of the exception's notes) or how
     to see it. A user reads one line; whoever fixes it gets the traceback."""
     notes = [one_line(str(n)) for n in getattr(exc, "__notes__", ())]
     if args.verbose:

@@ -10,7 +10,7 @@ log, and do not break the status line.
 
 Two attributes a record may carry (``extra=``) steer it:
 
-* ``stderr=False``: for the run's log file only (``fbs.runlog``), e.g. its header line;
+* ``stderr=False``: for the run's log file only (``procedures.runlog``), e.g. its header line;
 * ``progress=True``: progress text that the live status line shows on a terminal, so it is not
   printed there again; on a pipe or file it is printed as a plain line.
 """

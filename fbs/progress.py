@@ -19,9 +19,9 @@ from typing import Any
 
 from drivers.rig import Rig
 from fbs.logsetup import StderrHandler, stderr_handler
-from fbs.runlog import RunLog
 from procedures.progress import STEPS, Progress
-from procedures.runner import Procedure, Resumed, RunSummary, next_free, run_procedure
+from procedures.runlog import RunLog
+from procedures.runner import Procedure, Resumed, RunSummary, run_file_for, run_procedure
 
 log = logging.getLogger("fbs.progress")
 
@@ -96,8 +96,7 @@ def run_with_progress(proc: Procedure[Any], rig: Rig, out: Path, runlog: RunLog,
     """``run_procedure`` as the command line runs it: ``runlog`` opened as ``<run>.log`` beside
     the run file (a complete run analysed again: its own log, appended to), progress on the
     status line and in plain lines."""
-    run_file = resume.path if resume is not None and resume.complete else next_free(out, proc.name)
-    runlog.open(run_file.with_suffix(".log"))
+    runlog.open(run_file_for(out, proc.name, resume).with_suffix(".log"))
     reporter = ProgressReporter(stderr_handler())
     try:
         summary = run_procedure(proc, rig, out, resume=resume, progress=reporter)

@@ -3,7 +3,7 @@
 Exit codes: 0 pass, 1 limits failed, 2 aborted or error (``fbs.usage``). ``--json`` prints
 exactly the summary keys of DESIGN.md section 7 as one JSON object on stdout (logs go to
 stderr). The HDF5 file, a JSON summary, a Markdown report with PNG plots and the run's log
-(``<run>.log``, ``fbs.runlog``) land in ``--out``. On a terminal one status line shows the
+(``<run>.log``, ``procedures.runlog``) land in ``--out``. On a terminal one status line shows the
 step, the fraction done and the rig and wall time left; elsewhere plain timestamped progress
 lines are logged at a modest rate (``fbs.progress``). ``fbs run NAME --help`` lists the
 procedure's parameters (``fbs.procedure_help``), importing that procedure only then.
@@ -32,9 +32,9 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from fbs.runlog import RunLog
 from fbs.usage import EXIT_CODES_HELP, one_line, version
 from procedures.calibrations import module_names
+from procedures.runlog import RunLog
 
 if TYPE_CHECKING:
     from procedures.runner import Measurement

@@ -1,11 +1,11 @@
 """``<run>.log`` beside each run file: every log record of the run, timestamped, whatever the
-terminal showed.
+terminal showed - for ``fbs run``, ``fbs demo`` and a procedure run from the console alike.
 
 The file's name is only known once the run's arguments have been checked and the rig opened
 (bad input must fail before any output is created), yet the header and the rig's opening are
 part of the story. ``RunLog`` therefore holds the command's records in memory from its start
 and writes them out when ``open`` names the file; from then on records go straight to it.
-The levels are the command's (``fbs.logsetup``): the project's INFO (DEBUG with ``-v``) and
+The levels are the process's (``drivers.logrule``): the project's INFO (DEBUG with ``-v``) and
 other libraries' warnings, plus the plain progress lines. An exception that ends the block
 leaves its traceback here (not on stderr) and a note on the exception naming the file, which
 ``fbs.cli`` reports an internal error with.
@@ -18,8 +18,7 @@ import os
 from pathlib import Path
 from types import TracebackType
 
-from drivers.logrule import ProjectFilter
-from fbs.logsetup import formatter
+from drivers.logrule import Formatter, ProjectFilter
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +57,7 @@ class RunLog:
         from daq.runfile import make_folder
         make_folder(path.parent, "the log's folder")
         handler = logging.FileHandler(path, mode="a", encoding="utf-8", errors="backslashreplace")
-        handler.setFormatter(formatter())
+        handler.setFormatter(Formatter())
         handler.addFilter(ProjectFilter())
         root = logging.getLogger()
         if self._held is not None:

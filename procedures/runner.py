@@ -439,6 +439,12 @@ def next_free(out_dir: Path, stem: str, suffix: str = ".h5") -> Path:
     return path
 
 
+def run_file_for(out_dir: Path, stem: str, resume: Resumed | None = None) -> Path:
+    """The file ``run_procedure`` will write: a complete run analysed again keeps its own;
+    otherwise (a new run, or an aborted one resumed) the next free name."""
+    return resume.path if resume is not None and resume.complete else next_free(out_dir, stem)
+
+
 # ---------------------------------------------------------------------------- resume
 @dataclass
 class Resumed:

@@ -261,7 +261,7 @@ async def test_the_event_log_records_refusals_follows_and_collapses_slews(out_di
         box.focus()
         await pilot.press(*"20", "enter")                   # refused here: out of range
         box.value = ""
-        await pilot.press(*"0.5", "enter")                  # a ramp of 1 s, a step a tick
+        await pilot.press(*"0.5", "enter", "enter")         # a ramp of 1 s, a step a tick
         state = app.worker_.state
         await wait_for(pilot, lambda: outcome(app, "torquer bias X") is not None and not state.get().slewing
                        and abs(state.get().readback["torq X"] - 0.5) < 1e-3, what="the ramp")

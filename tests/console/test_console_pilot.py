@@ -81,8 +81,13 @@ async def test_torquer_bias_slews_to_the_read_back_and_bad_entries_are_refused(o
         app.query_one("#slew", Input).value = "2"
         box = app.query_one("#torq-X", Input)
         box.focus()
-        await pilot.press(*"0.25", "enter")
+        await pilot.press(*"0.25", "enter")                 # checked and echoed, not sent
+        await pilot.pause(0.2)
+        assert box.value == "+0.25" and outcome(app, "torquer bias X") is None
+        assert "Enter again to send" in text_of(app, "#sp-message")
+        await pilot.press("enter")                           # Enter on the echo sends it
         await wait_for(pilot, lambda: outcome(app, "torquer bias X") is not None, what="the bias command")
+        assert box.value == ""                               # the row shows the read-back only
         assert "slewing +0.0000 -> +0.2500 V at 2 V/s" in outcome(app, "torquer bias X").text
         # the ramp: the bias passes through intermediate values, then the read-back shows the target
         await wait_for(pilot, lambda: abs(app.worker_.state.get().readback.get("torq X", 0) - 0.25) < 1e-3
