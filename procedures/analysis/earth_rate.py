@@ -97,6 +97,7 @@ class ChannelFit:
     dof: int
     restraint_correction: float      # relative change of K_TO made by the standing-pickoff term
     figures: dict[str, Estimate] = field(default_factory=dict)
+    psi0_sd_deg: float | None = None  # psi0's standard uncertainty (horizontal channels)
 
     @property
     def kto_urad_per_s_per_V(self) -> float:
@@ -235,7 +236,8 @@ def operating_instability(rate_resid: np.ndarray) -> float:
 
 def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
                 restraint_s: float | None = None, pickoff_mV_per_urad: float | None = None,
-                offset_deg: float | None = None, instability_urad_per_s: float = 0.0) -> ChannelFit:
+                offset_deg: float | None = None, offset_sd_deg: float = 0.0,
+                instability_urad_per_s: float = 0.0) -> ChannelFit:
     """One channel's multi-position fit from the stations (``"tilt"``, ``"spindle"`` deg, the
     settled torquer means ``"V"`` and, for the restraint term, the pickoff means ``"pickoff_V"``,
     per channel, in visiting order).
@@ -245,7 +247,8 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     left at the current K_TO and re-fitted once): with the base at offset o, b_P = -cos(o)/K_TO,
     b_Q = -sin(o)/K_TO, b_1 = -d/K_TO, b_k = -(g_k + Omega sin(lat) [k = input axis])/K_TO.
     A channel whose input axis the spindle does not turn (Z: no Q column) takes ``offset_deg``
-    (the horizontal channels'): K_TO = -cos(o)/b_P.
+    (the horizontal channels'): K_TO = -cos(o)/b_P, and the offset's standard uncertainty
+    ``offset_sd_deg`` enters its variance through dK_TO/do = -K_TO tan(o).
 
     ``instability_urad_per_s``: the gyro's bias instability where known (an earlier drift run,
     a data sheet): the fixed drift's interval then carries the run-to-run wander of a run's
@@ -322,6 +325,12 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     # the restraint term is good to +-RESTRAINT_UNCERTAINTY of itself: a bound, so a rectangular
     # distribution's standard uncertainty, a / sqrt(3) (GUM 4.3.7)
     C[keys.index("K_TO"), keys.index("K_TO")] += (RESTRAINT_UNCERTAINTY / math.sqrt(3.0) * correction * vals["K_TO"]) ** 2
+    if not has_q:
+        # the base's azimuth offset is the horizontal channels' (Ch. II C.4.b: Z's input axis
+        # leans toward the base's north by the tilt, so its earth rate is Omega (sin(lat) cos t
+        # + cos(lat) cos(o) sin t)): K_TO = -cos(o)/b_P carries o's uncertainty as tan(o) d o
+        o = math.radians(offset_deg or 0.0)
+        C[keys.index("K_TO"), keys.index("K_TO")] += (vals["K_TO"] * math.tan(o) * math.radians(offset_sd_deg)) ** 2
     sd = np.sqrt(np.maximum(np.diag(C), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):  # exact data: zero variances
         R = np.nan_to_num(C / np.outer(sd, sd))
@@ -347,20 +356,26 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
                                          "the stations do not vary the specific force along this axis")
     return ChannelFit(ch, figures["K_TO"], figures["drift"], {a: figures[f"g_{a}"] for a in G_AXES},
                       vals["psi0"] if has_q else None, correlation, tilt, spindle, v, v - resid,
-                      float(np.sqrt(np.mean(resid**2))), dof, correction, figures)
+                      float(np.sqrt(np.mean(resid**2))), dof, correction, figures,
+                      float(sd[idx["psi0"]]) if has_q else None)
 
 
 def fit_earth_rate(stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
                    restraint_s: dict[str, float] | None = None, pickoff_mV_per_urad: dict[str, float] | None = None,
                    instability_urad_per_s: dict[str, float] | None = None) -> dict[str, ChannelFit]:
     """Every channel's fit from the stations in visiting order: the horizontal channels first
-    (each profiles the base's azimuth offset), then Z at their mean offset."""
-    def one(ch: str, offset: float | None) -> ChannelFit:
+    (each profiles the base's azimuth offset), then Z at their mean offset. That offset's
+    uncertainty is the larger of the channels' own standard uncertainties and their spread (a
+    gyro's input axis misaligned on the platform turns its psi0, not the table's): no credit
+    for averaging them."""
+    def one(ch: str, offset: float | None, offset_sd: float = 0.0) -> ChannelFit:
         return fit_channel(ch, stations, latitude_deg=latitude_deg, earth_rate_rad_per_s=earth_rate_rad_per_s,
                            restraint_s=(restraint_s or {}).get(ch), pickoff_mV_per_urad=(pickoff_mV_per_urad or {}).get(ch),
-                           offset_deg=offset, instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0)
+                           offset_deg=offset, offset_sd_deg=offset_sd,
+                           instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0)
 
     fits = {ch: one(ch, None) for ch in HORIZONTAL}
-    offset = float(np.mean([fits[c].psi0_deg for c in HORIZONTAL]))
-    fits["Z"] = one("Z", offset)
+    psi0 = [float(fits[c].psi0_deg or 0.0) for c in HORIZONTAL]
+    offset_sd = max(max(float(fits[c].psi0_sd_deg or 0.0) for c in HORIZONTAL), float(np.std(psi0, ddof=1)))
+    fits["Z"] = one("Z", float(np.mean(psi0)), offset_sd)
     return {ch: fits[ch] for ch in GYRO_CHANNELS}
