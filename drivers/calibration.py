@@ -20,6 +20,12 @@ GYRO_CHANNELS = ("X", "Y", "Z", "XRD")
 FLOAT_PARTNER = {"X": "Y", "Y": "X", "Z": "XRD", "XRD": "Z"}
 AXES = ("X", "Y", "Z")
 EARTH_RATE_RAD_PER_S = 7.292115e-5
+#: the ADC's channels, volts (DESIGN.md section 5): autocollimator control and instrumentation,
+#: azimuth; gyro pickoffs; torquer outputs; power-amplifier inputs; command inputs
+ADC_CHANNELS = ("ac_x_ctl", "ac_y_ctl", "ac_x_inst", "ac_y_inst", "ac_z",
+                "gyro_x", "gyro_y", "gyro_z", "gyro_xrd",
+                "torq_x", "torq_y", "torq_z", "torq_xrd",
+                "pa_x", "pa_y", "pa_z", "cmd_x", "cmd_y", "cmd_z")
 
 
 @dataclass(frozen=True)

@@ -16,11 +16,12 @@ import json
 import sys
 from typing import Any
 
+from drivers.calibration import ADC_CHANNELS
 from fbs.usage import EXIT_ERROR
 
-#: DESIGN.md section 5 names 20 channels: a recording's disk check assumes all of them unless
+#: DESIGN.md section 5 names 19 channels: a recording's disk check assumes all of them unless
 #: --channels names fewer
-ALL_CHANNELS = 20
+ALL_CHANNELS = len(ADC_CHANNELS)
 #: no ADC this software drives streams more sample sets per second (the sim's: 2 MS/s shared);
 #: the ADC itself refuses, with its own limit, a rate it cannot keep up for the channels asked
 MAX_RECORD_RATE_HZ = 2_000_000.0

@@ -19,8 +19,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-AXES = ("X", "Y", "Z")
-GYRO_CHANNELS = ("X", "Y", "Z", "XRD")
+from drivers.calibration import AXES, GYRO_CHANNELS
+
 AC_AXES = ("X", "Y")
 BEARING_MODELS = ("none", "viscous", "spring", "dahl")
 #: The six legal modes of DESIGN.md section 4; 0 and 7 are disallowed by the console logic.

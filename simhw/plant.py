@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from drivers.calibration import ADC_CHANNELS
 from simhw.bearing import linear_part
 from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, MODES, SimConfig
 
@@ -38,10 +39,7 @@ AXIS_OF_CHANNEL = {"X": "X", "Y": "Y", "Z": "Z", "XRD": "X"}
 #: Gyro pairs (a, b) with (a, b, spin) right-handed: X-Y gyro spins along +Z, X-Z along +Y.
 GYRO_PAIRS = (("X", "Y"), ("Z", "XRD"))
 #: Recorded channels of DESIGN.md section 5, in ADC order.
-CHANNELS = ("ac_x_ctl", "ac_y_ctl", "ac_x_inst", "ac_y_inst", "ac_z",
-            "gyro_x", "gyro_y", "gyro_z", "gyro_xrd",
-            "torq_x", "torq_y", "torq_z", "torq_xrd",
-            "pa_x", "pa_y", "pa_z", "cmd_x", "cmd_y", "cmd_z")
+CHANNELS = ADC_CHANNELS   # what the simulated ADC offers: every channel of DESIGN.md section 5
 TRUTH_CHANNELS = ("theta_x", "theta_y", "theta_z")
 #: Caging-integrator reset time when the inhibit switch shorts the amplifier (Fig. 7).
 CAGING_RESET_S = 0.05

@@ -26,6 +26,7 @@ import numpy as np
 from daq import provenance
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunWriter, make_folder
+from drivers.calibration import AXES
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
 from procedures.analysis.gap.grid import (
     GapInputError,
@@ -54,7 +55,6 @@ from simhw.simulator import Simulator
 
 log = logging.getLogger(__name__)
 
-AXES = ("X", "Y", "Z")
 #: Command inputs echo the DACs: no plant response to compare.
 SKIPPED_PREFIXES = ("cmd_",)
 URAD = 1e-6
