@@ -4,7 +4,7 @@ biases and command torques, each with its range and the rig's read-back.
 A typed value is checked here with the drivers' own rules (``limits.SetpointLimits``); a bad
 entry is refused with the drivers' message, naming the value and the limit, and nothing goes
 to the rig thread. A good one is not sent yet: Enter puts the value that would be sent back
-into its box ("+3.0000", the checked number, not the keys as typed) and the line below says
+into its box ("+3", the checked number in full, not the keys as typed) and the line below says
 what it will do; only Enter on that echo sends it, and any edit cancels it. A lost or
 reordered key therefore shows before anything reaches the rig. Once sent (or refused) the box
 is emptied: the read-back column is the only value a row shows, and a safe state, a procedure
