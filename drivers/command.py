@@ -34,6 +34,11 @@ class CommandDac(Protocol):
         """Read back every output a stream set; a difference is a latched ``ProtocolError``."""
         ...
 
+    def put_ac_bias_V(self, axis: str, volts: float) -> float:
+        """One step of a stream of gamma_c set-points on ``axis`` (checked against ``limits``
+        first): taken by the node, not read back until ``confirm``; returns the volts sent."""
+        ...
+
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
         """Set gamma_c on ``axis`` (checked against ``limits`` first); returns the read-back (V)."""
         ...
@@ -71,6 +76,10 @@ class CanopenCommandDac(CanopenDac):
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.AC_BIAS, axis, volts)
         return self.write(OUTPUTS.index(f"gc_{axis}"), v, f"gc_{axis}")
+
+    def put_ac_bias_V(self, axis: str, volts: float) -> float:
+        v = self.limits.command(SetpointKind.AC_BIAS, axis, volts)
+        return self.put(OUTPUTS.index(f"gc_{axis}"), v, f"gc_{axis}")
 
     def command_torque_V(self, axis: str) -> float:
         return self.read(OUTPUTS.index(f"vtd_{check_name('axis', axis, self.axes)}"), f"vtd_{axis}")

@@ -36,6 +36,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from importlib.metadata import entry_points
 from typing import Any
 from urllib.parse import parse_qsl, quote, urlsplit
@@ -178,16 +179,29 @@ class Rig:
         last read back at the end (``confirm``), one event for the whole stream rather than one
         per set-point. V_Td is set to 0 V afterwards, however the stream ends. Returns how many
         set-points were sent."""
+        return self._stream(f"command torque V_Td {axis}", partial(self.commands.put_command_torque_V, axis),
+                            partial(self.commands.set_command_torque_V, axis), values_V, step)
+
+    def stream_ac_bias_V(self, axis: str, values_V, step: Callable[[], object]) -> int:
+        """gamma_c on ``axis`` through ``values_V``, ``step()`` after each, as
+        ``stream_command_torque_V`` does V_Td (one SDO round trip per set-point instead of the
+        two of ``set_ac_bias_V``'s read-back; the last read back at the end; one event); 0 V
+        afterwards, however the stream ends. Returns how many set-points were sent."""
+        return self._stream(f"autocollimator bias gamma_c {axis}", partial(self.commands.put_ac_bias_V, axis),
+                            partial(self.commands.set_ac_bias_V, axis), values_V, step)
+
+    def _stream(self, what: str, put: Callable[[float], float], set_: Callable[[float], float], values_V,
+                step: Callable[[], object]) -> int:
         n = 0
         try:
             for v in values_V:
-                self.commands.put_command_torque_V(axis, float(v))
+                put(float(v))
                 n += 1
                 step()
             self.commands.confirm()
         finally:
-            back = self.commands.set_command_torque_V(axis, 0.0)
-            self.event("setpoint", f"command torque V_Td {axis}: {n} set-points streamed, then {back:+.6f} V")
+            back = set_(0.0)
+            self.event("setpoint", f"{what}: {n} set-points streamed, then {back:+.6f} V")
         return n
 
     def set_ac_bias_V(self, axis: str, volts: float) -> float:

@@ -85,7 +85,8 @@ class SimRigServer:
         self.sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=3 if warm else 1,
                              spin=None if warm else 0.0, clock=clock)
         self._cond = threading.Condition()
-        self._pending: list[Callable[[Simulator], None]] = []
+        #: (rig time due, fn): the demand when submitted (0: at once)
+        self._pending: list[tuple[float, Callable[[Simulator], None]]] = []
         self._demand = 0.0
         self._time = self.sim.time_s
         self._null = {c: (0.0 if warm else 1.0) for c in GYRO_CHANNELS}
@@ -113,9 +114,14 @@ class SimRigServer:
 
     # ------------------------------------------------------------------ for the devices
     def submit(self, fn: Callable[[Simulator], None]) -> None:
-        """Run ``fn(sim)`` on the physics thread before the next block."""
+        """Run ``fn(sim)`` on the physics thread at the rig time last demanded (virtual time),
+        or before the next block (paced): a command lands at a rig time that does not depend
+        on how far the physics thread happened to have got when it arrived. (A host's read
+        that finds its samples already there returns before the physics has taken up its
+        demand; "the next block" was then the one before or the one after it, by the host's
+        load.)"""
         with self._cond:
-            self._pending.append(fn)
+            self._pending.append((self._demand, fn))
             self._cond.notify_all()
 
     def demand(self, t: float) -> None:
@@ -157,14 +163,20 @@ class SimRigServer:
         try:
             while not self._stop.is_set():
                 with self._cond:
-                    todo, self._pending = self._pending, []
-                    for fn in todo:
+                    # due: at or before this sample (due times are in submission order: the
+                    # demand never goes back)
+                    k = 0
+                    while k < len(self._pending) and self._samples_to(self._pending[k][0]) <= 0:
+                        k += 1
+                    todo, self._pending = self._pending[:k], self._pending[k:]
+                    for _, fn in todo:
                         fn(sim)
                     if self.paced:
                         n = max(1, round(self.paced_block_s * sim.rate_hz))
                     else:
-                        n = min(math.ceil((self._demand - sim.time_s) * sim.rate_hz - 1e-6),
-                                max(1, round(self.max_block_s * sim.rate_hz)))
+                        n = min(self._samples_to(self._demand), max(1, round(self.max_block_s * sim.rate_hz)))
+                        if self._pending:       # the block ends where the next command is due
+                            n = min(n, self._samples_to(self._pending[0][0]))
                         if n <= 0:
                             if not todo:
                                 self._cond.wait(0.05)
@@ -185,6 +197,11 @@ class SimRigServer:
                 node.connected = False
             with self._cond:
                 self._cond.notify_all()
+
+    def _samples_to(self, t: float) -> int:
+        """Samples from the physics' time to the first sample boundary at or after ``t``."""
+        sim = self.sim
+        return math.ceil((t - sim.time_s) * sim.rate_hz - 1e-6)
 
     def _snap(self, block) -> Snapshot:
         sim = self.sim

@@ -209,7 +209,9 @@ class Excitation(Procedure[ExcitationParams]):
         self.axis = p.axis
         self.mode = p.mode
         self.rate_hz = p.rate_hz
-        self.block_s = 1.0 / p.update_hz
+        #: one ADC read per V_Td update (not ``block_s``, the recording's read size: the quiet
+        #: record and Mode 3's polls read in the default blocks, not a few samples at a time)
+        self.update_s = 1.0 / p.update_hz
         a = p.axis.lower()
         self.names = {"cmd": f"cmd_{a}", "ac_ctl": f"ac_{a}_ctl", "ac_inst": f"ac_{a}_inst", "gyro": f"gyro_{a}",
                       "pa": f"pa_{a}"}
@@ -266,7 +268,7 @@ class Excitation(Procedure[ExcitationParams]):
         blocks = []
 
         def step() -> None:
-            got = ctx.acquire(self.block_s, keep=keep, chunk_s=self.block_s)  # type: ignore[call-overload]
+            got = ctx.acquire(self.update_s, keep=keep, chunk_s=self.update_s)  # type: ignore[call-overload]
             if keep:
                 blocks.append(got)
 

@@ -82,8 +82,10 @@ class Hysteresis(Procedure[HysteresisParams]):
         p = self.params
         self.axis = p.axis
         self.rate_hz = p.rate_hz
-        #: one ADC block per bias update: the DAC changes between blocks
-        self.block_s = 1.0 / (p.frequency_hz * p.updates_per_cycle)
+        #: one ADC read per bias update: the DAC changes between reads. Not ``block_s``, the
+        #: recording's read size: the longer acquisitions (Mode 3's polls, the bias off) read
+        #: in the default blocks, not a few samples at a time
+        self.update_s = 1.0 / (p.frequency_hz * p.updates_per_cycle)
         # The torque proxy is millivolts (To ~ 2-4 mV at the amplifier input): +-0.2 V full
         # scale puts 6 uV in a count instead of 0.3 mV at +-10 V.
         self.ranges_V = {f"pa_{p.axis.lower()}": 0.2}
@@ -115,10 +117,11 @@ class Hysteresis(Procedure[HysteresisParams]):
         amp_V = amplitude_urad * volts_per_urad
         n = (p.settle_cycles + p.cycles) * p.updates_per_cycle
         t0 = ctx.time_s
-        for k in range(n):
-            # mid-interval value of the sine; the platform goes to -gamma_c / scale
-            ctx.rig.set_ac_bias_V(p.axis, -amp_V * math.sin(2 * math.pi * (k + 0.5) / p.updates_per_cycle))
-            ctx.acquire(self.block_s, keep=False, chunk_s=self.block_s)
+        # mid-interval values of the sine; the platform goes to -gamma_c / scale. A stream: one
+        # SDO round trip per value, the last read back at the end (``Rig.stream_ac_bias_V``)
+        values = (-amp_V * math.sin(2 * math.pi * (k + 0.5) / p.updates_per_cycle) for k in range(n))
+        ctx.rig.stream_ac_bias_V(p.axis, values, partial(ctx.acquire, self.update_s, keep=False,
+                                                         chunk_s=self.update_s))
         return {"amplitude_urad": amplitude_urad, "bias_amplitude_V": round(amp_V, 6),
                 "t_s": [round(t0, 4), round(ctx.time_s, 4)], "cycles": p.settle_cycles + p.cycles}
 

@@ -306,7 +306,7 @@ def test_procedure_is_catalogued_and_plans_a_ladder():
     proc = Hysteresis(Params(axis="y", amplitudes_urad=[400, 40, 4], cycles=3))
     assert proc.axis == "Y" and proc.channels() == ("cmd_y", "ac_y_inst", "pa_y", "ac_y_ctl")
     assert proc.json_keys == ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "file")
-    assert proc.block_s * proc.rate_hz == pytest.approx(round(proc.block_s * proc.rate_hz))
+    assert proc.update_s * proc.rate_hz == pytest.approx(round(proc.update_s * proc.rate_hz))
     steps = list(proc.plan())
     assert [s.name for s in steps] == ["mode 3", "400 urad", "40 urad", "4 urad", "bias off"]
     # every step runs again on --resume: the fit needs the whole ladder in one recording
