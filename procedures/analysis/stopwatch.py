@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 import scipy.stats
 
 from procedures.analysis.intervals import Estimate, from_stderr, judged
@@ -75,19 +76,77 @@ def crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direc
     return t2 - t1
 
 
-#: the float partner's caging transient, the most it can make K_g read low (a fraction).
-#: With one channel uncaged, its float precesses at sigma_a' = (f_a + (c/h)_b f_b) / (1 + (c/h)_a
-#: (c/h)_b) (II C.4.d; ``simhw.plant``'s cross-axis coupling), f_b the partner's caging torque as
-#: a rate. Only once the partner's loop has answered the coupling (f_b = (c/h)_a f_a) is the ramp
-#: rate the K_TO dV_T of II C.1.a(6); a ramp lasts 12-20 s, while the partner's loop (omega_n
-#: 0.1 rad/s, zeta 0.7) takes 30-40 s to settle, so every ramp runs slow by (c/h)_a (c/h)_b
-#: (2.4 % on the X-Y float, 1.2 % on Z-XRD, Table 3) times the share not yet answered. The down-up
-#: pairs do not cancel it (both directions run slow) and neither does the repetitions' spread.
-#: Measured on the noise-free thesis rig (random drift, pickoff and autocollimator noise off, K_TO
-#: given exactly): -0.09 % (Y), -0.04 % (Z), +0.01 % (X), 0.00 % (XRD); a rig whose floats' h/c is
-#: x0.7 of Table 3's doubles it. K_g's interval reaches this far above the reading: a bound, with
-#: its sign, added to the statistical half-width (``ChannelResult.kg_estimate``).
-PARTNER_TRANSIENT_BOUND = 0.002
+#: the floats' viscous coupling h/c (Table 3; DESIGN.md section 3), by channel: the data sheet's,
+#: for the partner-transient model (``partner_factors``)
+VISCOUS_COUPLING_H_OVER_C = {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}
+#: caging amplifiers without integral action (the redundant channel's, II C.1.a(8)): a first-order
+#: loop of bandwidth omega_n
+PROPORTIONAL_ONLY = frozenset({"XRD"})
+#: what the partner-transient correction may be off by: this fraction of itself (a unit's h/c
+#: against Table 3's) plus the model's residual against the simulated rig (0.02-0.03 %, measured
+#: noise-free on the thesis rig and with K_g x0.75-0.83), a bound added to each side
+PARTNER_MODEL_UNCERTAINTY = (0.3, 3e-4)
+#: a result made before the correction (no ``partner_factor`` per ramp): the transient's span
+#: on drawn rigs, -0.29 % (a 250 urad ramp) .. +0.33 % (500 urad), as a bound on each side
+PARTNER_TRANSIENT_BOUND = 0.0035
+
+
+def partner_factors(t: np.ndarray, rate: np.ndarray, windows: list[tuple[float, float]], *, h_over_c: float,
+                    partner_h_over_c: float, partner_wn: float, partner_zeta: float,
+                    partner_proportional: bool = False) -> list[float]:
+    """How much more (> 1) or less the uncaged float turns over each crossing window than
+    ``rate`` (its torquer's rate, K_TO (V_T - V_T0), from rest at ``t[0]``) alone would turn it,
+    because the float partner's caging loop answers the viscous cross-coupling (II C.4.d):
+
+        sigma_a' = (f_a + (c/h)_b f_b) / (1 + (c/h)_a (c/h)_b),   sigma_b' = f_b - (c/h)_a sigma_a',
+        f_b = -(2 zeta w sigma_b + w^2 int sigma_b)   (PI caging, II C.1.a(8); -w sigma_b proportional)
+
+    (the cross-axis coupling of ``simhw.plant``). The ramp runs at K_TO dV_T only once the
+    partner's loop has answered (f_b = (c/h)_a f_a); before that it runs slow by up to (c/h)_a
+    (c/h)_b (2.4 % on the X-Y float), and the PI loop's overshoot then runs it fast, so a window
+    reads low or high by where it sits in the transient: -0.29 % to +0.33 % on X for ramps of
+    250-500 urad. The model is linear, integrated exactly (zero-order hold) on 0.05 s means of
+    ``rate``.
+    Each reading is divided by its window's factor."""
+    ka, kb = 1.0 / h_over_c, 1.0 / partner_h_over_c
+    w, z = partner_wn, partner_zeta
+    kfb = np.array([-w, 0.0]) if partner_proportional else np.array([-2 * z * w, -w * w])
+    # states (sigma_a, sigma_b, int sigma_b); sigma_a' = (f_a + kb f_b)/(1 + ka kb)
+    g = 1.0 / (1.0 + ka * kb)
+    fb_row = np.array([0.0, kfb[0], kfb[1]])
+    A = np.zeros((3, 3))
+    A[0] = kb * g * fb_row
+    A[1] = fb_row - ka * A[0]
+    A[2, 1] = 1.0
+    B = np.array([g, -ka * g, 0.0])
+    dt = float(np.median(np.diff(t)))
+    u = np.nan_to_num(np.asarray(rate, float))
+    alone = np.concatenate([[0.0], np.cumsum(u[:-1] * dt)])
+    # the coupled float's departure from the torquer's own angle is slow (the partner's loop,
+    # 0.1-1 rad/s): stepped on block means of about 0.05 s, then interpolated to the windows
+    n = max(1, int(round(0.05 / dt)))
+    m = len(u) // n * n
+    ub = u[:m].reshape(-1, n).mean(axis=1)
+    db = n * dt
+    M = np.zeros((4, 4))
+    M[:3, :3], M[:3, 3] = A * db, B * db
+    E = scipy.linalg.expm(M)
+    Ad, Bd = E[:3, :3], E[:3, 3]
+    x = np.zeros(3)
+    depart = np.zeros(len(ub) + 1)      # coupled minus alone at the block edges
+    for i, ui in enumerate(ub):
+        x = Ad @ x + Bd * ui
+        depart[i + 1] = x[0]
+    depart -= np.concatenate([[0.0], np.cumsum(ub * db)])
+    tb = t[0] + np.arange(len(ub) + 1) * db
+    out = []
+    for t1, t2 in windows:
+        i1, i2 = np.searchsorted(t, [t1, t2])
+        i2 = min(i2, len(t) - 1)
+        d_alone = alone[i2] - alone[i1]
+        extra = float(np.interp(t[i2], tb, depart) - np.interp(t[i1], tb, depart))
+        out.append(1.0 + extra / d_alone if d_alone else 1.0)
+    return out
 
 #: the restraint fit's robust covariance takes the residuals of this many seconds together
 #: (the gyro's random drift is a slowly wandering rate: neighbouring increments share it)
@@ -163,19 +222,23 @@ class ChannelResult:
     correction: float              # mean (corrected / naive - 1)
     null_rate_urad_per_s: float
     restraint_dof: int = 1
+    partner_correction: float = 0.0   # mean (reading with / without the partner transient's factor - 1)
+    partner_bound: float = PARTNER_TRANSIENT_BOUND  # relative bound on what is left of it
 
     def kg_estimate(self, kto_rel_half_width: float | None) -> Estimate:
         """K_g with its 95 % interval: Student's t over the repetitions, combined in quadrature
-        with the relative 95 % half-width of the K_TO used (K_g goes as 1 / K_TO), and above the
-        reading the float partner's caging transient, a one-sided bound added to it
-        (``PARTNER_TRANSIENT_BOUND``: every ramp runs slow, so K_g reads low, never high). With no
-        K_TO interval (``None``: the data sheet's nominal value) K_g is not resolved."""
+        with the relative 95 % half-width of the K_TO used (K_g goes as 1 / K_TO), widened on
+        each side by the bound on the float partner's caging transient left after its correction
+        (``partner_factors``, ``PARTNER_MODEL_UNCERTAINTY``; ``PARTNER_TRANSIENT_BOUND`` for a
+        result made without it): a bound, added to the statistical half-width. With no K_TO
+        interval (``None``: the data sheet's nominal value) K_g is not resolved."""
         n = len(self.repetitions)
         if n < 2:
             return Estimate(self.kg, math.nan, math.nan, False, "one repetition gives no spread to judge it by")
         q = float(scipy.stats.t.ppf(0.975, n - 1))
         rel = math.hypot(q * self.kg_se / self.kg, kto_rel_half_width or 0.0)
-        e = judged(self.kg, self.kg * (1 - rel), self.kg * (1 + rel + PARTNER_TRANSIENT_BOUND))
+        rel += self.partner_bound
+        e = judged(self.kg, self.kg * (1 - rel), self.kg * (1 + rel))
         if kto_rel_half_width is None:
             return Estimate(e.value, e.lo, e.hi, False, "K_TO is the data sheet's nominal value, not a measurement")
         return e
@@ -198,12 +261,16 @@ def channel_result(r: dict) -> ChannelResult:
     k, k_se = fit["k"], fit["k_se"]
     resolved = k > 0 and k > 2 * k_se
     tau = 1.0 / k if resolved else None
-    naive, corrected = [], []
-    for _direction, dt, dvt in r["ramps"]:
+    naive, corrected, restraint = [], [], []
+    # the float partner's transient over each window (``partner_factors``; absent in older results)
+    factors = r.get("partner_factor")
+    partner = list(factors) if factors and len(factors) == len(r["ramps"]) else [1.0] * len(r["ramps"])
+    for (_direction, dt, dvt), pf in zip(r["ramps"], partner):
         kg = r["dVg"] / (dt * abs(dvt) * kto) * 1e3                         # II C.1.a(6), V/urad -> mV/urad
         x = dt / (2 * tau) if tau else 0.0
         naive.append(kg)
-        corrected.append(kg * (x / math.tanh(x) if x > 0 else 1.0))
+        restraint.append(x / math.tanh(x) if x > 0 else 1.0)
+        corrected.append(kg * restraint[-1] / pf)
     reps = [float(np.mean(corrected[i:i + 2])) for i in range(0, len(corrected) - 1, 2)]
     up = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d > 0]
     down = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d < 0]
@@ -215,5 +282,8 @@ def channel_result(r: dict) -> ChannelResult:
                          float((np.mean(up) - np.mean(down)) / kg) if up and down else 0.0, kg,
                          kg * spread / math.sqrt(len(reps)) if len(reps) > 1 else float("nan"), spread,
                          kg_ls, ls["a_se"] / kto * 1e3, tau, (k_se / k ** 2) if resolved else None,
-                         float(np.mean(np.array(corrected) / np.array(naive)) - 1.0),
-                         r["null_slope"] / (kg * 1e-3), int(fit.get("dof", 1)))
+                         float(np.mean(restraint) - 1.0),
+                         r["null_slope"] / (kg * 1e-3), int(fit.get("dof", 1)),
+                         float(np.mean([1.0 / pf - 1.0 for pf in partner])),
+                         (float(np.mean([PARTNER_MODEL_UNCERTAINTY[0] * abs(1.0 / pf - 1.0) for pf in partner]))
+                          + PARTNER_MODEL_UNCERTAINTY[1]) if factors else PARTNER_TRANSIENT_BOUND)

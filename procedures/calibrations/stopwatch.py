@@ -60,7 +60,16 @@ import numpy as np
 
 from drivers.calibration import FLOAT_PARTNER, GYRO_CHANNELS
 from procedures.analysis.intervals import add_figure
-from procedures.analysis.stopwatch import NoCrossing, channel_result, crossing_times, restraint_fit, slope
+from procedures.analysis.stopwatch import (
+    PROPORTIONAL_ONLY,
+    VISCOUS_COUPLING_H_OVER_C,
+    NoCrossing,
+    channel_result,
+    crossing_times,
+    partner_factors,
+    restraint_fit,
+    slope,
+)
 from procedures.paramlimits import Each, OneOf, Range, above, check_limits, fraction, sample_rate
 from procedures.params import prior_value
 from procedures.reports.stopwatch import markdown, plot_channel
@@ -207,7 +216,7 @@ class Stopwatch(Procedure[StopwatchParams]):
         lo, hi = vg0 - half, vg0 + half
         margin = 0.15 * half
         expected = p.delta_pickoff_V / (kg_nom * p.ramp_rate_urad_per_s)
-        ramps = []
+        ramps, windows = [], []
         direction = +1
         self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), hi + margin, direction, expected)
         rec.hold(ctx, ch, bias, p.hold_s)
@@ -224,6 +233,7 @@ class Stopwatch(Procedure[StopwatchParams]):
             # the torquer step between the crossings: not the ADC filter's settling after the bias step
             dvt = float(np.nanmean(vt[(t >= t1) & (t <= t2)]) - vt_null)
             ramps.append([direction, round(t2 - t1, 5), round(dvt, 7)])
+            windows.append((t1, t2))
             rec.hold(ctx, ch, bias, p.hold_s)
         # back to the null position
         back = -1 if rec.last_vg() > vg0 else +1
@@ -235,6 +245,15 @@ class Stopwatch(Procedure[StopwatchParams]):
                             partner=rec.partner(rec.index_at(t_null)))
         # the ramp slope without the partner term, whose 1 / (1 + (c/h)_a (c/h)_b) it would carry
         slope_fit = restraint_fit(t_fit, vg_fit, vt_fit, vt_null=vt_null, vg0=vg0, dt_s=0.5)
+        # the float partner's caging transient over each window (II C.4.d): the data sheet's h/c
+        # and caging design, driven by this channel's torquer as recorded
+        partner, cal = FLOAT_PARTNER[ch], rig.calibration
+        factors = partner_factors(t_fit, (vt_fit - vt_null) * kto, windows,
+                                  h_over_c=VISCOUS_COUPLING_H_OVER_C[ch],
+                                  partner_h_over_c=VISCOUS_COUPLING_H_OVER_C[partner],
+                                  partner_wn=cal.caging_natural_rad_per_s[partner],
+                                  partner_zeta=cal.caging_zeta[partner],
+                                  partner_proportional=partner in PROPORTIONAL_ONLY)
 
         # 5. restore: the loop takes over from the bias
         rig.set_caging_inhibit(ch, False)
@@ -246,7 +265,8 @@ class Stopwatch(Procedure[StopwatchParams]):
         return {"ch": ch, "kto": kto, "kto_from": source, "kto_rel_ci95": self.kto_rel_half_width(ch, source, kto),
                 "gain": round(gain, 6), "vt_null": round(vt_null, 6), "vg0": round(vg0, 5), "null_slope": null_slope,
                 "caged_for_s": round(caged_for, 1), "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
-                "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit, "slope_fit": slope_fit}
+                "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit, "slope_fit": slope_fit,
+                "partner_factor": [round(f, 7) for f in factors]}
 
     def _ramp(self, ctx: Context, rec: _Record, ch: str, bias: float, step: float, target: float, direction: int,
               expected_s: float) -> None:
