@@ -1,6 +1,6 @@
 """Speed of the simulated rig through the drivers, procedure by procedure (issue 39).
 
-Every procedure of ``fbs demo``'s campaign (``fbs.demo.CAMPAIGN``, its default parameters) runs
+Every procedure of ``fbs demo``'s campaign (``fbs.demo.campaign()``, its default parameters) runs
 on the sim rig (``open_rig("sim?...")``: real bytes over a pty and CANopen frames on a virtual
 bus) and is timed: rig seconds (the rig's clock across the run) per wall second, its x real
 time. The baseline is measured in the same run: the offline simulator
@@ -43,7 +43,7 @@ def offline_speed(channels: list[str], rate_hz: float, rig_s: float, seed: int =
 
 def main(argv: list[str] | None = None) -> int:
     from drivers.rig import open_rig
-    from fbs.demo import CAMPAIGN
+    from fbs.demo import campaign
     from procedures.calibrations import get
     from procedures.params import parse_params
     from procedures.runner import run_procedure
@@ -55,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     prior: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as d, open_rig("sim?seed=0&watchdog=5") as rig:
-        for i, (name, axis, params) in enumerate(CAMPAIGN):
+        for i, (name, axis, params) in enumerate(campaign()):
             if only and name not in only:
                 continue            # not run at all: a procedure without its prior runs as ``fbs run`` does
             cls = get(name)

@@ -142,14 +142,14 @@ def sim_values(cfg: SimConfig) -> dict[str, Any]:
     }
 
 
-#: the Mode-4 excitation's records, shorter than a lab's (the roots need no more: the tests use these)
-GYRO_MODE_EXCITATION = ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40")
+def campaign() -> list[tuple[str, str | None, tuple[str, ...]]]:
+    """The campaign's runs, (procedure, axis or None, its parameters), in order: every procedure
+    of the catalogue says its own (``Procedure.demo_runs``, ``demo_order``), so adding one to
+    the catalogue adds it here."""
+    from procedures.calibrations import catalogue
 
-#: (procedure, axis or None, its parameters) in campaign order
-CAMPAIGN: list[tuple[str, str | None, tuple[str, ...]]] = [
-    ("earth-rate", None, ()), ("stopwatch", None, ()), ("hysteresis", "X", ()), ("hysteresis", "Y", ()),
-    ("baseline", "X", ()), ("survey", None, ()), ("excitation", "X", ()), ("excitation", "X", GYRO_MODE_EXCITATION),
-    ("drift", None, ())]
+    procs = sorted(catalogue().values(), key=lambda cls: (cls.demo_order, cls.name))
+    return [(cls.name, axis, tuple(params)) for cls in procs for axis, params in cls.demo_runs]
 
 
 def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
@@ -173,7 +173,7 @@ def run_campaign(out: Path, *, cfg_path: str | None = None, seed: int = 0,
     summaries: list[RunSummary] = []
     t0 = time.monotonic()
     with open_rig(url) as rig:
-        for name, axis, params in CAMPAIGN:
+        for name, axis, params in campaign():
             cls = get(name)
             proc = cls(parse_params(cls, list(params), axis), prior=prior)
             if progress:
@@ -471,7 +471,7 @@ def load_summaries(folder: Path) -> list[RunSummary]:
 
     from procedures.runner import RunSummary, Verdict
 
-    order = {name: i for i, (name, _, _) in enumerate(CAMPAIGN)}
+    order = {name: i for i, (name, _, _) in enumerate(campaign())}
     found = []
     for path in folder.glob("*.json"):
         d = json.loads(path.read_text())

@@ -220,6 +220,12 @@ class Procedure(abc.ABC, Generic[P]):
     Params: ClassVar[type[Any]]           # the dataclass P (a ClassVar cannot name a type variable)
     #: the mode the procedure measures in (the run file's ``mode``); a parameter may choose it
     mode: int = 3
+    #: its runs in ``fbs demo``'s campaign, each (axis or None, its ``--param`` settings), and
+    #: their place: the campaign runs the catalogue by ``demo_order`` (a procedure that uses
+    #: another's result comes after it), so a new procedure joins it by itself, once, with its
+    #: defaults, after the thesis's seven; ``demo_runs = ()`` leaves it out
+    demo_runs: ClassVar[tuple[tuple[str | None, tuple[str, ...]], ...]] = ((None, ()),)
+    demo_order: ClassVar[int] = 1000
 
     def __init__(self, params: P | None = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None) -> None:
         self.params: P = params if params is not None else self.Params()

@@ -98,6 +98,8 @@ def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str,
 
 class Baseline(Procedure[BaselineParams]):
     name = "baseline"
+    demo_order = 40
+    demo_runs = (("X", ()),)
     title = "Open-loop sensor baselines, platform clamped (Ch. V B)"
     json_keys = ("nea_urad", "white_urad_per_rtHz", "flicker_corner_hz", "pickoff_rms_urad", "pickoff_lines_hz",
                  "file")

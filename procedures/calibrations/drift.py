@@ -110,6 +110,7 @@ Params = DriftParams
 
 class Drift(Procedure[DriftParams]):
     name = "drift"
+    demo_order = 70   # with the earth-rate K_TO and the stopwatch K_g
     title = "Gyro drift: Allan analysis of the rate from torquer and pickoff (Mode 3)"
     json_keys = ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file")
     Params = DriftParams

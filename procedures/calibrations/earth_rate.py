@@ -90,6 +90,7 @@ Params = EarthRateParams
 
 class EarthRate(Procedure[EarthRateParams]):
     name = "earth-rate"
+    demo_order = 10
     title = "Torquer scale factor and drift from earth rate (II C.1.a(1))"
     json_keys = ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g",
                  "g_drift_y_urad_per_s_per_g", "g_drift_z_urad_per_s_per_g", "file")

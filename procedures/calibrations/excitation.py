@@ -196,6 +196,9 @@ def excitation_signal(n: int, update_hz: float, lo_hz: float, hi_hz: float, seed
 
 class Excitation(Procedure[ExcitationParams]):
     name = "excitation"
+    demo_order = 60
+    #: Mode 3, then Mode 4 with records shorter than a lab's (the roots need no more)
+    demo_runs = (("X", ()), ("X", ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40")))
     title = ("Coherent excitation through V_Td in Mode 3, 4 or 5: network, inertia, stiffness, closed-loop roots "
              "(Ch. V C-D, Tables 5-6)")
     json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "excitation_amplitude_urad",

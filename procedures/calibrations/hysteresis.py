@@ -72,6 +72,8 @@ Params = HysteresisParams
 
 class Hysteresis(Procedure[HysteresisParams]):
     name = "hysteresis"
+    demo_order = 30
+    demo_runs = (("X", ()), ("Y", ()))
     title = "Gimbal bearing torque-angle sweep: Dahl's To and eta (Ch. V F)"
     json_keys = JSON_KEYS
     Params = HysteresisParams

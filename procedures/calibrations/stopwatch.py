@@ -120,6 +120,7 @@ Params = StopwatchParams
 
 class Stopwatch(Procedure[StopwatchParams]):
     name = "stopwatch"
+    demo_order = 20   # with the earth-rate K_TO
     title = "Pickoff scale factor by the stopwatch method (II C.1.a(6))"
     json_keys = ("K_g_mV_per_urad", "h_over_k_s", "file")
     Params = StopwatchParams

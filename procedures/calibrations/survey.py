@@ -161,6 +161,7 @@ Params = SurveyParams
 
 class Survey(Procedure[SurveyParams]):
     name = "survey"
+    demo_order = 50   # it reads the baseline's record
     title = "Closed-loop spectral survey in Mode 3, 4 or 5 (Ch. V E)"
     json_keys = ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file")
     Params = SurveyParams

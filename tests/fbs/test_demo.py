@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from fbs.demo import CAMPAIGN, SimTruth, _rows, coverage, load_summaries, write_campaign_report
+from fbs.demo import SimTruth, _rows, campaign, coverage, load_summaries, write_campaign_report
 from fbs.demo_truth import binomial_tail, dahl_equivalent_linear, max_misses
 from procedures.reports import thesis
 from procedures.runner import RunSummary, Verdict
@@ -56,9 +56,16 @@ def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
     assert "Ch. V E.2, p. 138" in text and "Ch. II C.1.a(1)" in text
 
 
-def test_campaign_covers_every_procedure():
+def test_campaign_covers_every_procedure_in_the_order_their_results_need():
+    """Issue 40 item 1: the campaign is the catalogue's, each procedure saying its runs and its
+    place (``demo_runs``, ``demo_order``); nothing else lists them."""
     from procedures.calibrations import catalogue
-    assert {name for name, _, _ in CAMPAIGN} == set(catalogue())
+    runs = campaign()
+    assert {name for name, _, _ in runs} == set(catalogue())
+    order = [name for name, _, _ in runs]
+    assert order == ["earth-rate", "stopwatch", "hysteresis", "hysteresis", "baseline", "survey",
+                     "excitation", "excitation", "drift"]
+    assert runs[7] == ("excitation", "X", ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40"))
 
 
 def test_report_sets_the_baseline_beside_table_1(tmp_path):
@@ -82,7 +89,7 @@ def test_the_survey_runs_after_the_baseline_and_sets_its_net_figure_beside_the_t
     """Issue 22 part 6: the survey takes the baseline's pickoff spectrum out of the gyro's, so the
     baseline runs first; the report sets the thesis method, the net figure and the coherent part
     beside the thesis's 1.6 / 3.6 urad, an unresolved one as such."""
-    order = [name for name, _, _ in CAMPAIGN]
+    order = [name for name, _, _ in campaign()]
     assert order.index("baseline") < order.index("survey")
     values = {"platform_rms_urad": {"X": 0.73, "Y": 3.21},
               "platform_rms_baseline_net_urad": {"X": 0.447, "Y": None},
@@ -105,7 +112,7 @@ def test_the_recorded_campaigns_intervals_cover_the_simulated_truth(tmp_path):
     apart. The header names the date, software version and commit, and the rig."""
     shutil.copytree(RECORDED, tmp_path, dirs_exist_ok=True)
     summaries = load_summaries(tmp_path)
-    assert [s.procedure for s in summaries] == [name for name, _, _ in CAMPAIGN]
+    assert [s.procedure for s in summaries] == [name for name, _, _ in campaign()]
     sim = SimTruth(SimConfig(), 0)
     rows = _rows(summaries, sim)
     figures = [r for r in rows if r.measured is not None or r.interval is not None]
