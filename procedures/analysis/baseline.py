@@ -34,7 +34,7 @@ import scipy.ndimage
 
 from daq.spectra import n_segments, welch_csd_matrix
 from drivers.calibration import AutocollimatorConstants
-from procedures.analysis.intervals import Estimate, from_stderr, judged
+from procedures.analysis.intervals import LEVEL, Estimate, from_stderr, judged
 from procedures.analysis.lines import refine_line
 from procedures.analysis.transfer import BlockCsd, jackknife_se, sensor_filter
 
@@ -124,6 +124,8 @@ class WhiteFlicker:
 
     white_urad_per_rtHz: Estimate
     corner_hz: Estimate
+    #: the corner's interval over every knee form the data do not reject (``white_flicker``)
+    corner_over_forms: Estimate | None = None
 
 
 def fit_white_flicker(f: np.ndarray, p: np.ndarray) -> tuple[float, float]:
@@ -139,32 +141,162 @@ def fit_white_flicker(f: np.ndarray, p: np.ndarray) -> tuple[float, float]:
     return float(coef[0]), float(coef[1])
 
 
+#: the knee's forms a nominal unit allows (DESIGN.md section 8: any knee between
+#: ``max(1, fc/f)`` and ``1 + fc/f``, slope -0.8 .. -1.2), on a grid: each is fitted, and the
+#: figures' intervals span every form the data do not reject (``white_flicker``)
+KNEE_GRID = tuple(k / 8 for k in range(9))
+SLOPE_GRID = tuple(0.8 + 0.05 * k for k in range(9))
+#: the fit's residuals are averaged in this many log-frequency bands a decade to see a misfit no
+#: form of the grid holds (the Birge ratio of ``white_flicker``)
+MISFIT_BANDS_PER_DECADE = 10
+#: the Hann window's bin-to-bin correlation of a PSD estimate: a sum over n adjacent bins holds
+#: the information of n / HANN_BIN_FACTOR independent ones (the window's DFT -1/4, 1/2, -1/4)
+HANN_BIN_FACTOR = 1.0 + 2.0 * ((2.0 / 3.0) ** 2 + (1.0 / 6.0) ** 2)
+#: the corner's search, in ln f_c: this many points from a fifth of the band's start to half its top
+_CORNER_GRID_POINTS = 64
+
+
+def knee_shape(f: np.ndarray, corner_hz: float | np.ndarray, knee: float, slope: float) -> np.ndarray:
+    """K(f) of the angle noise W K(f): r = (f_c / f)^slope, K = knee (1 + r) + (1 - knee) max(1, r)
+    (DESIGN.md section 8: knee 1 is the thesis's 1 + f_c/f at slope 1, knee 0 the sharp corner).
+    ``corner_hz`` may be a column of corners (one row of K each)."""
+    r = (np.asarray(corner_hz, float) / f) ** slope
+    return knee * (1.0 + r) + (1.0 - knee) * np.maximum(1.0, r)
+
+
+@dataclass(frozen=True)
+class FormFit:
+    """The Whittle fit of W K(f) at one knee and slope: W, f_c, and the fit's
+    L = sum(p / m + ln m) (minus the log-likelihood, per unit of half the bins' dof)."""
+
+    knee: float
+    slope: float
+    white: float
+    corner_hz: float
+    misfit: float
+
+
+def fit_form(f: np.ndarray, p: np.ndarray, knee: float, slope: float,
+             corner_range: tuple[float, float] | None = None) -> FormFit:
+    """W and f_c of p(f) = W K(f) (``knee_shape`` at ``knee``, ``slope``) by the Whittle
+    likelihood (a Welch PSD bin is its mean times chi^2_nu / nu): for each f_c, W = mean(p / K)
+    and L = n + n ln W + sum ln K; f_c on a grid in ln f_c (``corner_range``, default a fifth of
+    the band's start to half its top), then refined between the best point's neighbours."""
+    import scipy.optimize
+
+    lo, hi = corner_range if corner_range is not None else (0.2 * float(f[0]), 0.5 * float(f[-1]))
+    n = len(f)
+
+    def objective(ln_fc: np.ndarray) -> np.ndarray:
+        K = knee_shape(f, np.exp(ln_fc)[:, None], knee, slope)
+        W = np.mean(p / K, axis=1)
+        return n + n * np.log(W) + np.sum(np.log(K), axis=1)
+
+    grid = np.linspace(math.log(lo), math.log(hi), _CORNER_GRID_POINTS)
+    j = int(np.argmin(objective(grid)))
+    a, b = grid[max(j - 1, 0)], grid[min(j + 1, len(grid) - 1)]
+    res = scipy.optimize.minimize_scalar(lambda x: float(objective(np.array([x]))[0]), bounds=(a, b),
+                                         method="bounded", options={"xatol": 1e-5})
+    ln_fc = float(res.x) if res.fun <= objective(grid[j:j + 1])[0] else float(grid[j])
+    fc = math.exp(ln_fc)
+    K = knee_shape(f, fc, knee, slope)
+    W = float(np.mean(p / K))
+    return FormFit(knee, slope, W, fc, float(np.sum(p / (W * K) + np.log(W * K))))
+
+
+def misfit_ratio(f: np.ndarray, rho: np.ndarray, bin_var: float, n_params: int) -> float:
+    """The Birge ratio chi^2 / dof (at least 1) of a fit's relative residuals ``rho`` averaged in
+    ``MISFIT_BANDS_PER_DECADE`` log-frequency bands: a band's mean of n bins scatters by
+    ``bin_var`` / n where the model holds (``bin_var`` a bin's variance times the window's
+    correlation factor); dof = bands - ``n_params``. Above 1 the data hold a misfit no fitted
+    form explains, and every interval widens by its square root."""
+    n_bands = max(n_params + 2, int(round(math.log10(f[-1] / f[0]) * MISFIT_BANDS_PER_DECADE)))
+    edges = np.geomspace(f[0], f[-1] * (1 + 1e-9), n_bands + 1)
+    which = np.clip(np.searchsorted(edges, f, side="right") - 1, 0, n_bands - 1)
+    chi2, used = 0.0, 0
+    for b in range(n_bands):
+        r = rho[which == b]
+        if len(r):
+            chi2 += float(np.mean(r)) ** 2 * len(r) / bin_var
+            used += 1
+    return max(1.0, chi2 / max(used - n_params, 1))
+
+
 def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filter_gain2: np.ndarray,
                   lo_hz: float, hi_hz: float) -> WhiteFlicker:
     """Fit the angle noise of an autocollimator channel (``filter_gain2`` its filter's |H|^2 at
     ``blocks.f``; the recorder's anti-alias filter, ``anti_alias_gain2``, is divided out here
     too) over ``lo..hi`` Hz (the band where the filter passes, above the quantization floor:
     the thesis's white band reaches 35 Hz on the control channel, 80 Hz on the instrumentation
-    channel, Ch. V B.3)."""
+    channel, Ch. V B.3).
+
+    The value is the thesis's S_w (1 + f_c / f) (``fit_white_flicker``). Its interval holds what
+    the noise model cannot know (issue 38): the knee's form and slope of a nominal unit (DESIGN.md
+    section 8). Every form of ``KNEE_GRID`` x ``SLOPE_GRID`` is fitted (``fit_form``) and its
+    deviance from the best form taken, D = (2 / (v h)) (L - L_min), v the best fit's relative
+    residual variance (2 / nu) and h ``HANN_BIN_FACTOR``. Each form the data do not reject
+    (D < chi^2_1(95 %)) gives the figure's jackknife interval over the blocks (Student's t,
+    blocks - 1 dof), narrowed to sqrt(1 - D / chi^2_1(95 %)) of its half-width: the profile
+    likelihood over the forms, in which a form's misfit uses up its share of the 95 %. The
+    figure's interval is the union. The thesis's value stands when its form is among those not
+    rejected (D < chi^2_2(95 %): knee and slope are two parameters), else the best form's; the
+    value's own form always gives its whole jackknife interval.
+
+    The corner (``corner_hz``) is still the thesis fit's, with its jackknife interval: the same
+    union over the forms (``corner_over_forms``, unresolved when wider than itself) covers the
+    harness's corners 37-39 of 40 but leaves the corner of a plain 1 + f_c/f record of 320 s
+    unresolved (a sharp knee's corner is another number the data do not reject)."""
+    import scipy.stats
+
     i = blocks.index(channel)
     band = _band(blocks.f, max(lo_hz, blocks.lowest_fit_hz), hi_hz) & (blocks.f > 0)
     f = blocks.f[band]
     gain2 = filter_gain2[band] * anti_alias_gain2(f, blocks.fs)
 
-    def fit(leave_out: int | None) -> tuple[float, float]:
-        p = blocks.mean(leave_out)[band, i, i].real / (scale_V_per_urad ** 2 * gain2)
-        return fit_white_flicker(f, p)
+    def spectrum(leave_out: int | None) -> np.ndarray:
+        return blocks.mean(leave_out)[band, i, i].real / (scale_V_per_urad ** 2 * gain2)
 
-    a, b = fit(None)
-    loo = np.array([fit(k) for k in range(blocks.n_blocks)])
+    p = spectrum(None)
     dof = blocks.n_blocks - 1
-    white = from_stderr(math.sqrt(max(a, 0.0)), float(jackknife_se(np.sqrt(np.maximum(loo[:, 0], 0.0)))), dof=dof)
-    corner_value = b / a if a > 0 else float("nan")
+    q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof))
+    c = float(scipy.stats.chi2.ppf(LEVEL, 1))
+    forms = [fit_form(f, p, k, s) for k in KNEE_GRID for s in SLOPE_GRID]
+    best = min(forms, key=lambda g: g.misfit)
+    rho = p / (best.white * knee_shape(f, best.corner_hz, best.knee, best.slope)) - 1.0
+    v = float(np.var(rho, ddof=4))
+    birge = misfit_ratio(f, rho, v * HANN_BIN_FACTOR, n_params=4)
+    dev = {g: 2.0 * (g.misfit - best.misfit) / (v * HANN_BIN_FACTOR * birge) for g in forms}
+
+    a, b = fit_white_flicker(f, p)
+    thesis = next(g for g in forms if g.knee == 1.0 and g.slope == 1.0)
+    if dev[thesis] < float(scipy.stats.chi2.ppf(LEVEL, 2)) and a > 0:
+        w_value, fc_value = math.sqrt(a), b / a
+    else:
+        w_value, fc_value = math.sqrt(best.white), best.corner_hz
+    w_lo = w_hi = w_value
+    fc_lo = fc_hi = fc_value if math.isfinite(fc_value) else best.corner_hz
+    spectra = [spectrum(k) for k in range(blocks.n_blocks)]
+    for g, d in dev.items():
+        if d >= c and not (g is thesis and w_value == math.sqrt(a)):
+            continue
+        rng = (0.2 * g.corner_hz, 5.0 * g.corner_hz)
+        loo = [fit_form(f, s, g.knee, g.slope, rng) for s in spectra]
+        # the value's own form keeps its whole jackknife interval
+        shrink = math.sqrt((1.0 if g is thesis else max(0.0, 1.0 - d / c)) * birge)
+        hw = q * shrink * float(jackknife_se(np.sqrt([x.white for x in loo])))
+        hc = q * shrink * float(jackknife_se(np.log([x.corner_hz for x in loo])))
+        w = math.sqrt(g.white)
+        w_lo, w_hi = min(w_lo, w - hw), max(w_hi, w + hw)
+        fc_lo, fc_hi = min(fc_lo, g.corner_hz * math.exp(-hc)), max(fc_hi, g.corner_hz * math.exp(hc))
+    # the corner printed stays the thesis's with its jackknife interval: over the forms the corner
+    # is unresolved on most thesis-form records of 320-480 s (a sharp knee's corner is another
+    # number), so that interval is kept beside it (``corner_over_forms``) and not yet printed
+    loo_thesis = np.array([fit_white_flicker(f, s) for s in spectra])
     with np.errstate(divide="ignore", invalid="ignore"):
-        corners = loo[:, 1] / loo[:, 0]
+        corners = loo_thesis[:, 1] / loo_thesis[:, 0]
     se = float(jackknife_se(corners)) if np.all(np.isfinite(corners)) else float("nan")
-    corner = from_stderr(corner_value, se, dof=dof)   # unresolved when its interval reaches zero
-    return WhiteFlicker(white, corner)
+    corner = from_stderr(b / a if a > 0 else float("nan"), se, dof=dof)
+    return WhiteFlicker(judged(w_value, w_lo, w_hi), corner, judged(fc_value, fc_lo, fc_hi))
 
 
 # ---------------------------------------------------------------------------- lines

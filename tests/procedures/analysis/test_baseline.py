@@ -31,12 +31,15 @@ AC = AutocollimatorConstants(5.70, 5.63)
 SCALE = {"ac_x_ctl": AC.control_mV_per_urad * 1e-3, "ac_x_inst": AC.inst_mV_per_urad * 1e-3}  # V/urad
 
 
-def angle_noise_through_filters(rng, white_urad2_per_hz, corner_hz, n):
-    """White + 1/f angle noise (one-sided PSD S_w (1 + f_c/f) above 1 mHz), synthesized in the
-    frequency domain, and the two channels' outputs (V) through their filters."""
+def angle_noise_through_filters(rng, white_urad2_per_hz, corner_hz, n, knee=1.0, slope=1.0):
+    """White + 1/f angle noise (one-sided PSD S_w (1 + f_c/f) above 1 mHz; with ``knee`` and
+    ``slope`` the nominal unit's S_w (knee (1 + r) + (1 - knee) max(1, r)), r = (f_c/f)^slope,
+    DESIGN.md section 8), synthesized in the frequency domain, and the two channels' outputs (V)
+    through their filters."""
     f = np.fft.rfftfreq(n, 1 / FS)
     S = np.zeros_like(f)
-    S[1:] = white_urad2_per_hz * (1 + corner_hz / np.maximum(f[1:], 1e-3))
+    r = (corner_hz / np.maximum(f[1:], 1e-3)) ** slope
+    S[1:] = white_urad2_per_hz * (knee * (1 + r) + (1 - knee) * np.maximum(1.0, r))
     # one-sided S: a bin's complex amplitude has E|X|^2 = S fs n / 2
     X = (rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f))) * np.sqrt(S * FS * n / 4)
     X[0] = 0.0
@@ -92,6 +95,33 @@ def test_white_level_and_corner_are_found_with_intervals():
         hits_w += wf.white_urad_per_rtHz.covers(math.sqrt(white))
         hits_c += wf.corner_hz.covers(corner)
     assert hits_w >= 10 and hits_c >= 10
+
+
+def test_white_level_and_corner_cover_the_truth_on_every_knee_a_nominal_unit_allows():
+    """Issue 38 item 5: on a sharp or part-soft knee and a slope of 0.8-1.2 (DESIGN.md section 8)
+    the thesis's S_w (1 + f_c/f) reads the white level up to 13 % off and the corner up to 58 %,
+    with intervals that held neither (white 19/40, corner 18/40 on drawn rigs). The white
+    level's interval spans the forms the data do not reject and covers the truth; so does the
+    corner's over the forms (``corner_over_forms``), unresolved with that finite interval where
+    it is wider than the corner, never a bare number."""
+    rng = np.random.default_rng(3805)
+    n = int(480 * FS)
+    hits_w = hits_c = 0
+    forms = [(0.0, 1.2), (0.0, 0.8), (0.3, 1.15), (0.0, 1.0), (0.6, 0.85), (0.0, 1.1)] * 2
+    for knee, slope in forms:
+        white = rng.uniform(1e-3, 4e-3)           # urad^2/Hz
+        corner = rng.uniform(1.5, 5.0)
+        f, S, out = angle_noise_through_filters(rng, white, corner, n, knee, slope)
+        blocks = array_blocks(out["ac_x_ctl"][:, None], FS, ("ac_x_ctl",), SEG_S, N_BLOCKS)
+        h2 = np.abs(sensor_filter(blocks.f, AC, "ac_x_ctl")) ** 2
+        wf = white_flicker(blocks, "ac_x_ctl", SCALE["ac_x_ctl"], h2, 0.1, 35.0)
+        hits_w += wf.white_urad_per_rtHz.covers(math.sqrt(white))
+        c = wf.corner_over_forms
+        assert c is not None
+        hits_c += c.covers(corner)
+        assert math.isfinite(c.lo) and math.isfinite(c.hi) and c.lo < c.hi
+        assert c.resolved or c.why
+    assert hits_w >= 11 and hits_c >= 11, (hits_w, hits_c)
 
 
 def test_a_band_the_segments_cannot_reach_is_unresolved():
