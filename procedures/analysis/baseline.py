@@ -123,9 +123,11 @@ class WhiteFlicker:
     """The angle noise S_w (1 + f_c / f): white level (urad/sqrt(Hz)) and 1/f corner (Hz)."""
 
     white_urad_per_rtHz: Estimate
+    #: the corner over every knee form the data do not reject, its interval the union of theirs
+    #: (``white_flicker``): unresolved where the record cannot tell the forms' corners apart
     corner_hz: Estimate
-    #: the corner's interval over every knee form the data do not reject (``white_flicker``)
-    corner_over_forms: Estimate | None = None
+    #: the thesis form's corner alone (S_w (1 + f_c/f)) with its jackknife interval: a diagnostic
+    corner_thesis_form: Estimate | None = None
 
 
 def fit_white_flicker(f: np.ndarray, p: np.ndarray) -> tuple[float, float]:
@@ -242,10 +244,11 @@ def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filte
     rejected (D < chi^2_2(95 %): knee and slope are two parameters), else the best form's; the
     value's own form always gives its whole jackknife interval.
 
-    The corner (``corner_hz``) is still the thesis fit's, with its jackknife interval: the same
-    union over the forms (``corner_over_forms``, unresolved when wider than itself) covers the
-    harness's corners 37-39 of 40 but leaves the corner of a plain 1 + f_c/f record of 320 s
-    unresolved (a sharp knee's corner is another number the data do not reject)."""
+    The corner (``corner_hz``) is the same union over the forms, unresolved when wider than
+    itself: it covers the harness's corners 37-39 of 40, where the thesis fit's jackknife
+    interval alone (``corner_thesis_form``) covered 18-19; on a plain 1 + f_c/f record of
+    320 s it is often unresolved, honestly: a sharp knee's corner is another number the data
+    do not reject."""
     import scipy.stats
 
     i = blocks.index(channel)
@@ -288,15 +291,13 @@ def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filte
         w = math.sqrt(g.white)
         w_lo, w_hi = min(w_lo, w - hw), max(w_hi, w + hw)
         fc_lo, fc_hi = min(fc_lo, g.corner_hz * math.exp(-hc)), max(fc_hi, g.corner_hz * math.exp(hc))
-    # the corner printed stays the thesis's with its jackknife interval: over the forms the corner
-    # is unresolved on most thesis-form records of 320-480 s (a sharp knee's corner is another
-    # number), so that interval is kept beside it (``corner_over_forms``) and not yet printed
+    # the thesis form's own corner and jackknife interval, kept as a diagnostic
     loo_thesis = np.array([fit_white_flicker(f, s) for s in spectra])
     with np.errstate(divide="ignore", invalid="ignore"):
         corners = loo_thesis[:, 1] / loo_thesis[:, 0]
     se = float(jackknife_se(corners)) if np.all(np.isfinite(corners)) else float("nan")
     corner = from_stderr(b / a if a > 0 else float("nan"), se, dof=dof)
-    return WhiteFlicker(judged(w_value, w_lo, w_hi), corner, judged(fc_value, fc_lo, fc_hi))
+    return WhiteFlicker(judged(w_value, w_lo, w_hi), judged(fc_value, fc_lo, fc_hi), corner)
 
 
 # ---------------------------------------------------------------------------- lines

@@ -101,7 +101,13 @@ def test_baseline_measures_the_drawn_noise_and_releases_the_clamp(tmp_path):
             if not lo <= truth <= hi:
                 misses.append((k, key, lo, truth, hi))
         assert v["nea_urad"]["ctl"] == pytest.approx(nea, rel=0.10)       # acceptance B, against the parameter
-        assert v["flicker_corner_hz"]["ctl"] == pytest.approx(corner, rel=0.3)
+        # the corner over the knee forms a nominal unit allows (issue 38 item 5): within 30 % when
+        # resolved, else its interval holds it (a 320 s record often cannot tell the forms apart)
+        lo, hi = v["flicker_corner_hz_ci95"]["ctl"]
+        if v["resolved"]["flicker_corner_hz"]["ctl"]:
+            assert v["flicker_corner_hz"]["ctl"] == pytest.approx(corner, rel=0.3)
+        else:
+            assert v["flicker_corner_hz"]["ctl"] is None and lo <= corner <= hi
         found = v["pickoff_lines_hz"]
         assert len(found) == len(true_lines)
         for fl, tl in zip(found, sorted(true_lines)):

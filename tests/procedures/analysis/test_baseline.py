@@ -102,8 +102,8 @@ def test_white_level_and_corner_cover_the_truth_on_every_knee_a_nominal_unit_all
     the thesis's S_w (1 + f_c/f) reads the white level up to 13 % off and the corner up to 58 %,
     with intervals that held neither (white 19/40, corner 18/40 on drawn rigs). The white
     level's interval spans the forms the data do not reject and covers the truth; so does the
-    corner's over the forms (``corner_over_forms``), unresolved with that finite interval where
-    it is wider than the corner, never a bare number."""
+    corner's over the forms (``corner_hz``), unresolved with that finite interval where it is
+    wider than the corner, never a bare number."""
     rng = np.random.default_rng(3805)
     n = int(480 * FS)
     hits_w = hits_c = 0
@@ -116,7 +116,7 @@ def test_white_level_and_corner_cover_the_truth_on_every_knee_a_nominal_unit_all
         h2 = np.abs(sensor_filter(blocks.f, AC, "ac_x_ctl")) ** 2
         wf = white_flicker(blocks, "ac_x_ctl", SCALE["ac_x_ctl"], h2, 0.1, 35.0)
         hits_w += wf.white_urad_per_rtHz.covers(math.sqrt(white))
-        c = wf.corner_over_forms
+        c = wf.corner_hz
         assert c is not None
         hits_c += c.covers(corner)
         assert math.isfinite(c.lo) and math.isfinite(c.hi) and c.lo < c.hi
