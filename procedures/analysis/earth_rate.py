@@ -339,7 +339,7 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     idx = {k: i for i, k in enumerate(keys)}
     # Of two figures the design confounds (|correlation| > 0.95) the one it leaves undetermined
     # is not resolved: each interval is marginal (the full covariance), so the better-determined
-    # partner's stays valid (Z's K_TO within 0.6 % while its fixed drift spans +-0.3 urad/s).
+    # partner's stays valid (Z's K_TO within +-0.5-1.7 % while its fixed drift spans +-0.3 urad/s).
     rel = {k: q * sd[idx[k]] / max(abs(vals[k]), 1e-300) for k in names}
     for k in names:
         i = idx[k]

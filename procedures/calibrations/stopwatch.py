@@ -35,6 +35,13 @@ Per channel, all decided from the data and read back from the ADC:
    (1 + (c/h)_a (c/h)_b) and the random drift, so h/k is shown with its interval but never
    reported as a figure (``h_over_k_s`` is ``resolved: false``); the x coth x correction it
    feeds is a few 0.01 %.
+4b. Float partner: while the channel ramps, its float partner's caging loop answers the viscous
+   cross-coupling (II C.4.d) over 30-40 s, first slowing the ramp (by up to (c/h)_a (c/h)_b,
+   2.4 % on the X-Y float) and then, overshooting, speeding it; a crossing window reads low or
+   high (-0.3 .. +0.3 %) by where it sits in that transient, alike in both directions. The step
+   integrates the coupled pair driven by the recorded torquer (``partner_factors``: Table 3's
+   h/c, the partner's caging design) and each reading is divided by its window's factor; K_g's
+   interval carries a bound on what the model may leave.
 5. Restore: caging released with the bias still holding the null, the bias slewed to zero
    while the loop takes over, settled.
 
@@ -308,6 +315,8 @@ class Stopwatch(Procedure[StopwatchParams]):
             ms.append(Measurement(f"h/k {ch} (fitted)", tau.value if tau.resolved else None, "s",
                                   note=f"95 % [{tau.lo:.0f}, {tau.hi:.0f}]" + ("" if tau.resolved else f"; {tau.why}")))
             ms.append(Measurement(f"restraint correction {ch}", r.correction * 100, "%"))
+            ms.append(Measurement(f"float partner transient correction {ch}", r.partner_correction * 100, "%",
+                                  note=f"bound left +-{100 * r.partner_bound:.3f} % (II C.4.d)"))
             ms.append(Measurement(f"residual null rate {ch}", r.null_rate_urad_per_s, "urad/s",
                                   -p.max_null_rate_urad_per_s, p.max_null_rate_urad_per_s))
         values: dict = {}

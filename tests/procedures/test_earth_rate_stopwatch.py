@@ -405,8 +405,8 @@ def uninterrupted_stopwatch(tmp_path_factory):
 def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(tmp_path, uninterrupted_stopwatch, ch):
     """Acceptance E (issue 18): aborted in the middle of channel ``ch``'s step and resumed on a
     rig started cold (a new process after a power cut), the run passes, the resumed step waited
-    the settle an uninterrupted run gives it, and every K_g is within the uninterrupted run's
-    95 % interval."""
+    the settle an uninterrupted run gives it, and every K_g agrees with the uninterrupted run's
+    within their 95 % intervals."""
     import threading
 
     from procedures.runner import load_resume
@@ -434,6 +434,9 @@ def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(tmp_path, unin
     assert second.steps_resumed == first.steps_done[1:]
     result = next(m for m in second.measurements if m.name.startswith(f"residual null rate {ch}"))
     assert abs(result.value) < params.max_null_rate_urad_per_s
+    # two runs' K_g agree within their 95 % half-widths combined (each carries its own noise: one
+    # run's value inside the other's interval alone holds only ~83 % of the time)
     for c in order:
-        lo, hi = ref.values["K_g_mV_per_urad_ci95"][c]
-        assert lo <= second.values["K_g_mV_per_urad"][c] <= hi, (c, second.values["K_g_mV_per_urad"][c], lo, hi)
+        (lo, hi), (lo2, hi2) = ref.values["K_g_mV_per_urad_ci95"][c], second.values["K_g_mV_per_urad_ci95"][c]
+        diff = second.values["K_g_mV_per_urad"][c] - ref.values["K_g_mV_per_urad"][c]
+        assert abs(diff) <= math.hypot((hi - lo) / 2, (hi2 - lo2) / 2), (c, diff, lo, hi, lo2, hi2)
