@@ -204,9 +204,22 @@ def _identifiable(X: np.ndarray) -> np.ndarray:
 
 
 COLUMNS = ("P", "Q", "one", "x", "y", "z", "order")
-#: the bound on the restraint term's relative error: data-sheet h/k and K_g of another unit of the
-#: type (the stopwatch measures K_g to 2 %, the h/k of the thesis's four channels span 424-1072 s)
+#: the bound on the restraint term's relative error from the data sheet's h/k (another unit of the
+#: type: the h/k of the thesis's four channels span 424-1072 s)
 RESTRAINT_UNCERTAINTY = 0.2
+#: the bound on a unit's K_g against the data sheet's, when no stopwatch result is at hand (issue
+#: 38: units drawn x0.8-1.2 put XRD's K_TO 4 of 40 times outside an interval that took the whole
+#: restraint term as good to 20 %: its K_g x0.72-0.76 of the data sheet's made the term 28 % small)
+PICKOFF_DATASHEET_UNCERTAINTY = 0.2
+
+
+def restraint_bound(pickoff_rel_uncertainty: float | None = None) -> float:
+    """The restraint term sigma / (h/k), sigma = V_g / K_g, is off by the factor 1 / ((1 + e_K)
+    (1 + e_h)) for relative errors e_K of K_g and e_h of h/k: at most 1 / ((1 - u_K)(1 - u_h)) - 1
+    for bounds u_K (the stopwatch's relative half-width, or ``PICKOFF_DATASHEET_UNCERTAINTY`` for
+    the data sheet's value) and u_h = ``RESTRAINT_UNCERTAINTY``."""
+    u_k = PICKOFF_DATASHEET_UNCERTAINTY if pickoff_rel_uncertainty is None else pickoff_rel_uncertainty
+    return 1.0 / ((1.0 - min(u_k, 0.5)) * (1.0 - RESTRAINT_UNCERTAINTY)) - 1.0
 
 
 def operating_instability(rate_resid: np.ndarray) -> float:
@@ -237,7 +250,7 @@ def operating_instability(rate_resid: np.ndarray) -> float:
 def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
                 restraint_s: float | None = None, pickoff_mV_per_urad: float | None = None,
                 offset_deg: float | None = None, offset_sd_deg: float = 0.0,
-                instability_urad_per_s: float = 0.0) -> ChannelFit:
+                instability_urad_per_s: float = 0.0, pickoff_rel_uncertainty: float | None = None) -> ChannelFit:
     """One channel's multi-position fit from the stations (``"tilt"``, ``"spindle"`` deg, the
     settled torquer means ``"V"`` and, for the restraint term, the pickoff means ``"pickoff_V"``,
     per channel, in visiting order).
@@ -253,7 +266,7 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     ``instability_urad_per_s``: the gyro's bias instability where known (an earlier drift run,
     a data sheet): the fixed drift's interval then carries the run-to-run wander of a run's
     mean drift (``operating_instability``); the restraint term's own uncertainty (data-sheet
-    h/k and K_g, taken as good to ``RESTRAINT_UNCERTAINTY``) is carried by K_TO's."""
+    h/k and K_g of ``pickoff_rel_uncertainty``, ``restraint_bound``) is carried by K_TO's."""
     tilt = np.array([s["tilt"] for s in stations], float)
     spindle = np.array([s["spindle"] for s in stations], float)
     v = np.array([s["V"][ch] for s in stations], float)
@@ -322,9 +335,10 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     # (operating instability) is added, as an error of its own (``operating_instability``)
     op = max(operating_instability(resid * vals["K_TO"]), instability_urad_per_s)
     C[keys.index("drift"), keys.index("drift")] += op**2
-    # the restraint term is good to +-RESTRAINT_UNCERTAINTY of itself: a bound, so a rectangular
+    # the restraint term is good to +-restraint_bound of itself: a bound, so a rectangular
     # distribution's standard uncertainty, a / sqrt(3) (GUM 4.3.7)
-    C[keys.index("K_TO"), keys.index("K_TO")] += (RESTRAINT_UNCERTAINTY / math.sqrt(3.0) * correction * vals["K_TO"]) ** 2
+    bound = restraint_bound(pickoff_rel_uncertainty)
+    C[keys.index("K_TO"), keys.index("K_TO")] += (bound / math.sqrt(3.0) * correction * vals["K_TO"]) ** 2
     if not has_q:
         # the base's azimuth offset is the horizontal channels' (Ch. II C.4.b: Z's input axis
         # leans toward the base's north by the tilt, so its earth rate is Omega (sin(lat) cos t
@@ -362,7 +376,8 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
 
 def fit_earth_rate(stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
                    restraint_s: dict[str, float] | None = None, pickoff_mV_per_urad: dict[str, float] | None = None,
-                   instability_urad_per_s: dict[str, float] | None = None) -> dict[str, ChannelFit]:
+                   instability_urad_per_s: dict[str, float] | None = None,
+                   pickoff_rel_uncertainty: dict[str, float | None] | None = None) -> dict[str, ChannelFit]:
     """Every channel's fit from the stations in visiting order: the horizontal channels first
     (each profiles the base's azimuth offset), then Z at their mean offset. That offset's
     uncertainty is the larger of the channels' own standard uncertainties and their spread (a
@@ -372,7 +387,8 @@ def fit_earth_rate(stations: list[dict], *, latitude_deg: float, earth_rate_rad_
         return fit_channel(ch, stations, latitude_deg=latitude_deg, earth_rate_rad_per_s=earth_rate_rad_per_s,
                            restraint_s=(restraint_s or {}).get(ch), pickoff_mV_per_urad=(pickoff_mV_per_urad or {}).get(ch),
                            offset_deg=offset, offset_sd_deg=offset_sd,
-                           instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0)
+                           instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0,
+                           pickoff_rel_uncertainty=(pickoff_rel_uncertainty or {}).get(ch))
 
     fits = {ch: one(ch, None) for ch in HORIZONTAL}
     psi0 = [float(fits[c].psi0_deg or 0.0) for c in HORIZONTAL]

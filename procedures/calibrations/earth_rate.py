@@ -144,6 +144,18 @@ class EarthRate(Procedure[EarthRateParams]):
                 "se": {c: float(s) for c, s in zip(GYRO_CHANNELS, se)},
                 "pickoff_V": {c: float(m) for c, m in zip(GYRO_CHANNELS, pmean)}}
 
+    def _kg_rel_half_width(self, ch: str, source: str, kg: float) -> float | None:
+        """The relative 95 % half-width of the stopwatch K_g in use, ``None`` for the data
+        sheet's (then ``PICKOFF_DATASHEET_UNCERTAINTY`` bounds it)."""
+        if source == "nominal":
+            return None
+        ci = ((self.prior.get(source) or {}).get("K_g_mV_per_urad_ci95") or {}).get(ch)
+        try:
+            lo, hi = (float(v) for v in ci or ())
+        except (TypeError, ValueError):
+            return None
+        return max(abs(hi - kg), abs(kg - lo)) / kg if math.isfinite(hi - lo) and kg else None
+
     def home(self, ctx: Context) -> dict:
         pos = ctx.rig.move_table(tilt_deg=0.0, spindle_deg=0.0)
         return {"tilt": pos.tilt_deg, "spindle": pos.spindle_deg}
@@ -154,13 +166,15 @@ class EarthRate(Procedure[EarthRateParams]):
         stations = [ctx.results[st[0]] for st in self.stations()]
         p = self.params
         # K_g for the standing pickoff: a stopwatch run's if at hand, else the data sheet's
-        kg, _ = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad)
+        kg, kg_from = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS,
+                                   cal.pickoff_scale_mV_per_urad)
+        kg_rel = {ch: self._kg_rel_half_width(ch, kg_from[ch], kg[ch]) for ch in GYRO_CHANNELS}
         given = p.bias_instability_urad_per_s or 0.0
         bi, self.instability_sources = prior_values(self.prior, "drift", "bias_instability_urad_per_s", GYRO_CHANNELS,
                                                     {ch: given for ch in GYRO_CHANNELS})
         fits = fit_earth_rate(stations, latitude_deg=cal.latitude_deg, earth_rate_rad_per_s=cal.earth_rate_rad_per_s,
                               restraint_s=cal.restraint_time_constant_s, pickoff_mV_per_urad=kg,
-                              instability_urad_per_s=bi)
+                              instability_urad_per_s=bi, pickoff_rel_uncertainty=kg_rel)
         ms: list[Measurement] = []
         for ch, f in fits.items():
             nominal = cal.torquer_scale_urad_per_s_per_V[ch]

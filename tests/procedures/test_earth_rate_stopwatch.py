@@ -119,6 +119,29 @@ def test_z_carries_the_table_offsets_uncertainty():
                    * math.radians(1.0)), rel=0.01)
 
 
+def test_the_restraint_term_carries_a_units_pickoff_scale():
+    """Issue 38 item 4: XRD's proportional caging leaves a standing pickoff angle whose restraint
+    term (sigma / (h/k), sigma from the pickoff and the data sheet's K_g) moves K_TO by about
+    -0.2 %. A unit whose K_g is x0.74 of the data sheet's makes that term 26 % small: K_TO then
+    read +0.05 % outside an interval that took the term as good to 20 % (4 of 40 drawn rigs).
+    The data sheet's K_g is now bounded by 20 % of its own, with h/k's 20 %."""
+    hk, kg_true, kto = 515.0, 5.74 * 0.74, 32.0
+    truth = {"kto": kto, "d": 0.4, "g": np.array([0.0, 0.0, 0.04]), "hk": hk, "kg": kg_true}
+    stations = []
+    for t, sp in _positions():
+        w, _ = platform_frame(t, sp, 0.1, LAT, OMEGA)
+        sigma = (w[0] + 0.4e-6) / 1.0                   # the proportional loop's standing angle, 1 rad/s
+        stations.append(_station(t, sp, 0.1, {"XRD": truth}, pickoff={"XRD": sigma}))
+    f = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, restraint_s=hk,
+                    pickoff_mV_per_urad=5.74)
+    assert f.restraint_correction < -1e-3 and abs(f.kto.value / kto - 1) > 3e-4
+    assert f.kto.covers(kto)
+    # with the stopwatch's K_g (good to 0.3 %) the term is exact and the interval narrow again
+    g = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, restraint_s=hk,
+                    pickoff_mV_per_urad=kg_true, pickoff_rel_uncertainty=0.003)
+    assert g.kto.covers(kto) and g.kto.half_width < f.kto.half_width
+
+
 def _ar1(rho: float):
     def errors(rng: np.random.Generator, n: int) -> np.ndarray:
         e = np.zeros(n)
