@@ -61,7 +61,7 @@ import math
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 
@@ -97,8 +97,10 @@ class StopwatchParams:
     #: fast enough that the gyro's random drift (a few tenths of urad/s over minutes on Z) is a
     #: small part of the ramp rate; a down-up pair cancels what is left
     ramp_rate_urad_per_s: Annotated[float, Range(0.1, 100.0)] = 20.0
-    #: a repetition is a ramp down and a ramp up: their mean cancels any residual rate
-    repetitions: Annotated[int, Range(1, 50)] = 3
+    #: a repetition is a ramp down and a ramp up: their mean cancels any residual rate. At most 4:
+    #: a channel's step result (every ramp's time and factor) is one 1 KiB event of the run file,
+    #: and 5 no longer fit with room to spare - refused here, not after the channel's 20 minutes
+    repetitions: Annotated[int, Range(1, 4, note="a channel's result is one 1 KiB event")] = 3
     hold_s: Annotated[float, above(0)] = 20.0
     null_s: Annotated[float, above(0)] = 20.0
     null_tolerance_urad_per_s: Annotated[float, above(0)] = 0.1
@@ -270,10 +272,15 @@ class Stopwatch(Procedure[StopwatchParams]):
             rig.set_torquer_bias_V(ch, bias * (1 - (i + 1) / n_steps))
             ctx.acquire(p.restore_s / n_steps, keep=False)
         wait_settled(ctx, [tcol], tol_V=1e-3, min_s=30.0, window_s=30.0)
-        return {"ch": ch, "kto": kto, "kto_from": source, "kto_rel_ci95": self.kto_rel_half_width(ch, source, kto),
-                "gain": round(gain, 6), "vt_null": round(vt_null, 6), "vg0": round(vg0, 5), "null_slope": null_slope,
-                "caged_for_s": round(caged_for, 1), "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
-                "dVg": p.delta_pickoff_V, "ramps": ramps, "fit": fit, "slope_fit": slope_fit,
+        # a step result is one event of the run file (at most 1 KiB): its fits' figures to 7
+        # significant digits, far finer than their standard errors (at 3 repetitions, 15-digit
+        # floats made 1,030 bytes and aborted the run)
+        return {"ch": ch, "kto": kto, "kto_from": source,
+                "kto_rel_ci95": _sig(self.kto_rel_half_width(ch, source, kto)),
+                "gain": round(gain, 6), "vt_null": round(vt_null, 6), "vg0": round(vg0, 5),
+                "null_slope": _sig(null_slope), "caged_for_s": round(caged_for, 1),
+                "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)], "dVg": p.delta_pickoff_V, "ramps": ramps,
+                "fit": {k: _sig(v) for k, v in fit.items()}, "slope_fit": {k: _sig(v) for k, v in slope_fit.items()},
                 "partner_factor": [round(f, 7) for f in factors]}
 
     def _ramp(self, ctx: Context, rec: _Record, ch: str, bias: float, step: float, target: float, direction: int,
@@ -364,6 +371,11 @@ class _Record:
 
     def index_at(self, time_s: float) -> int:
         return int(np.searchsorted(np.concatenate(self.t), time_s))
+
+
+def _sig(x: Any, digits: int = 7) -> Any:
+    """A float to ``digits`` significant digits (anything else as it is)."""
+    return float(f"{x:.{digits}g}") if isinstance(x, float) else x
 
 
 PROCEDURE = Stopwatch

@@ -267,7 +267,7 @@ def test_every_declared_limit_refuses_a_value_just_outside_naming_it(proc_name, 
 
 
 @pytest.mark.parametrize("proc_name, spec, message", [
-    ("stopwatch", "repetitions=51", "stopwatch: repetitions = 51 must be 1..50"),
+    ("stopwatch", "repetitions=51", "stopwatch: repetitions = 51 must be 1..4"),
     ("stopwatch", "delta_pickoff_V=9", "delta_pickoff_V = 9 V must be 0.05..8 V (the pickoff's linear range"),
     ("stopwatch", 'kto_urad_per_s_per_V={"X": 0}', "kto_urad_per_s_per_V X = 0 urad/s/V must be > 0 and < 1000 urad/s/V"),
     ("stopwatch", 'channels=["X", "Q"]', "channels[1] = 'Q' must be one of X, Y, Z, XRD"),
