@@ -71,7 +71,7 @@ def test_run_name_help_lists_the_procedures_parameters_with_defaults_units_and_l
     assert r.returncode == 0, r.stderr
     out = r.stdout
     assert "usage: fbs run" in out and "parameters of stopwatch" in out
-    assert re.search(r"^  repetitions = 3  \(integer, limits: 1\.\.50\)$", out, re.M), out
+    assert re.search(r"^  repetitions = 3  \(integer, limits: 1\.\.4\)$", out, re.M), out
     assert re.search(r"^  hold_s = 20\.0  \(number, s, limits: > 0\)$", out, re.M), out
     assert re.search(r"^  ramp_rate_urad_per_s = 20\.0  \(number, urad/s, limits: 0\.1\.\.100\)$", out, re.M), out
     assert re.search(r"^  delta_pickoff_V = 2\.0  \(number, V, limits: 0\.05\.\.8 V\)$", out, re.M), out
