@@ -101,17 +101,23 @@ async def dirty_the_panels(pilot, *, inhibit: bool = True) -> None:
     assert "mode 3 (autocollimator control) in force" in text_of(app, "#mode-last")
 
 
+async def abort_a_stopwatch(pilot, *keys: str) -> None:
+    """Dirty panels, a stopwatch into its second step, then ``keys`` abort it; until it ends."""
+    app = pilot.app
+    await dirty_the_panels(pilot, inhibit=False)
+    await start_procedure(pilot, "stopwatch")
+    await wait_for(pilot, lambda: (p := app.worker_.state.get().procedure) is not None and p.index >= 1,
+                   what="the procedure's second step")
+    await pilot.press(*keys)
+    await wait_for(pilot, lambda: app.last_summary is not None, what="the procedure to end")
+
+
 @run_async
 async def test_after_an_f8_abort_every_panel_shows_the_read_back_state(out_dir):
     app = ConsoleApp(WARM, out_dir=out_dir)
     async with app.run_test(size=(100, 40)) as pilot:
         await rig_ready(pilot)
-        await dirty_the_panels(pilot, inhibit=False)
-        await start_procedure(pilot, "stopwatch")
-        await wait_for(pilot, lambda: (p := app.worker_.state.get().procedure) is not None and p.index >= 1,
-                       what="the procedure's second step")
-        await pilot.press("f8")
-        await wait_for(pilot, lambda: app.last_summary is not None, what="the procedure to end")
+        await abort_a_stopwatch(pilot, "f8")
         assert app.last_summary.verdict == "aborted"
         await settle(pilot)
         assert nodes_safe(app.worker_.rig.emulator)
@@ -143,12 +149,7 @@ async def test_the_safe_key_during_a_procedure_aborts_it_and_the_panels_follow(o
     app = ConsoleApp(WARM, out_dir=out_dir)
     async with app.run_test(size=(100, 40)) as pilot:
         await rig_ready(pilot)
-        await dirty_the_panels(pilot, inhibit=False)
-        await start_procedure(pilot, "stopwatch")
-        await wait_for(pilot, lambda: (p := app.worker_.state.get().procedure) is not None and p.index >= 1,
-                       what="the procedure's second step")
-        await pilot.press("f2", "s")
-        await wait_for(pilot, lambda: app.last_summary is not None, what="the procedure to end")
+        await abort_a_stopwatch(pilot, "f2", "s")
         await settle(pilot)
         assert panels_show_the_read_back(app) == []
 
