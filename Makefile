@@ -18,11 +18,12 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/fbs demo --out out
 
-# The static checks first (seconds), then the suite: ruff (pyproject [tool.ruff]), mypy over
-# every package (zero errors, every import resolved), and the import contracts of the one-way
-# data flow (pyproject [tool.importlinter]).
+# The static checks first (seconds), then the suite: ruff's lint and its formatter (pyproject
+# [tool.ruff]), mypy over every package (zero errors, every import resolved), and the import
+# contracts of the one-way data flow (pyproject [tool.importlinter]).
 check: $(STAMP)
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/mypy
 	$(VENV)/bin/lint-imports
 

@@ -17,8 +17,24 @@ import sys
 import time
 from pathlib import Path
 
-CHANNELS16 = ("ac_x_ctl", "ac_y_ctl", "ac_x_inst", "ac_y_inst", "ac_z", "gyro_x", "gyro_y", "gyro_z", "gyro_xrd",
-              "torq_x", "torq_y", "torq_z", "torq_xrd", "pa_x", "pa_y", "pa_z")
+CHANNELS16 = (
+    "ac_x_ctl",
+    "ac_y_ctl",
+    "ac_x_inst",
+    "ac_y_inst",
+    "ac_z",
+    "gyro_x",
+    "gyro_y",
+    "gyro_z",
+    "gyro_xrd",
+    "torq_x",
+    "torq_y",
+    "torq_z",
+    "torq_xrd",
+    "pa_x",
+    "pa_y",
+    "pa_z",
+)
 RATE_HZ = 1000.0
 
 
@@ -51,7 +67,11 @@ def console(args) -> dict:
 
         def mark1(self) -> None:
             wall = time.monotonic() - self._t0
-            out.update(wall_s=wall, cpu_s=cpu_s() - self._c0, paints=self.query_one(MeterTable).paints - self._p0)
+            out.update(
+                wall_s=wall,
+                cpu_s=cpu_s() - self._c0,
+                paints=self.query_one(MeterTable).paints - self._p0,
+            )
             self.worker_.stop_recording()
 
     app = BenchConsole(args.rig, out_dir=args.out)
@@ -65,11 +85,21 @@ def baseline(args) -> dict:
 
     with open_rig(args.rig) as rig:
         t0, c0 = time.monotonic(), cpu_s()
-        res = record(rig, Path(args.out) / "baseline.h5", duration_s=args.warmup + args.seconds, rate_hz=RATE_HZ,
-                     channels=CHANNELS16)
+        res = record(
+            rig,
+            Path(args.out) / "baseline.h5",
+            duration_s=args.warmup + args.seconds,
+            rate_hz=RATE_HZ,
+            channels=CHANNELS16,
+        )
         # the whole recording is timed here: there is no UI to warm up, and the rig's start is done
-        return {"wall_s": time.monotonic() - t0, "cpu_s": cpu_s() - c0, "samples": res.samples,
-                "gaps": len(res.gaps), "status": res.status}
+        return {
+            "wall_s": time.monotonic() - t0,
+            "cpu_s": cpu_s() - c0,
+            "samples": res.samples,
+            "gaps": len(res.gaps),
+            "status": res.status,
+        }
 
 
 def main() -> int:
@@ -82,9 +112,13 @@ def main() -> int:
     p.add_argument("--json", required=True)
     args = p.parse_args()
     import logging
+
     # the terminal is the console's: the records go to a file (as ``run_console`` does)
-    logging.basicConfig(filename=str(Path(args.out) / "console.log"), level=logging.INFO,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        filename=str(Path(args.out) / "console.log"),
+        level=logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
     result = console(args) if args.what == "console" else baseline(args)
     Path(args.json).write_text(json.dumps(result))
     return 0

@@ -61,7 +61,11 @@ def run_one(name: str) -> dict[str, Any]:
     try:
         res = analyse(DEVSET / name).to_json()
     except Exception as e:  # a broken case is reported, not fatal
-        return {"file": name, "error": f"{type(e).__name__}: {e}", "seconds": time.perf_counter() - t0}
+        return {
+            "file": name,
+            "error": f"{type(e).__name__}: {e}",
+            "seconds": time.perf_counter() - t0,
+        }
     return {"file": name, "result": res, "seconds": time.perf_counter() - t0}
 
 
@@ -91,11 +95,16 @@ def main(argv: list[str] | None = None) -> int:
             ok, why, cov = _rules().score(t, o["result"])
             right += ok
             covered += cov
-            print(f"{o['file']} {t['axis']} {label:32s} {'right' if ok else 'WRONG'}  {why}  "
-                  f"({o['seconds']:.1f} s)", flush=True)
-    print(f"dev set: {right}/{len(outs)} right; key 95 % intervals cover the truth "
-          f"{sum(covered)}/{len(covered)}; seconds per file median {statistics.median(times):.1f}, "
-          f"max {max(times):.1f}")
+            print(
+                f"{o['file']} {t['axis']} {label:32s} {'right' if ok else 'WRONG'}  {why}  "
+                f"({o['seconds']:.1f} s)",
+                flush=True,
+            )
+    print(
+        f"dev set: {right}/{len(outs)} right; key 95 % intervals cover the truth "
+        f"{sum(covered)}/{len(covered)}; seconds per file median {statistics.median(times):.1f}, "
+        f"max {max(times):.1f}"
+    )
     return 0
 
 

@@ -83,6 +83,7 @@ def expected_codes(volts: np.ndarray) -> np.ndarray:
 
 # ---------------------------------------------------------------------------- device process
 
+
 class _Chain:
     def __init__(self, channels) -> None:
         self.ranges = dict.fromkeys(channels, RANGE_V)
@@ -111,6 +112,7 @@ class _StandInServer:
 
     def __init__(self, channels, seed: int = 0) -> None:
         import threading
+
         self.seed = seed
         self.sim = _StandInSim(channels, 1000.0)
         self._lock = threading.Lock()
@@ -155,7 +157,7 @@ def device_main(conn, max_agg_hz: float) -> None:
     base = noise_volts(len(CHANNELS))
     extra = max(1, round(BLOCK_S * max_agg_hz))  # no block is longer: slices stay views
     reps = -(-(NOISE_ROWS + extra) // NOISE_ROWS)
-    volts = np.concatenate([base] * reps)[:NOISE_ROWS + extra]
+    volts = np.concatenate([base] * reps)[: NOISE_ROWS + extra]
     over = np.zeros(volts.shape, dtype=bool)
     stats: dict = {}
     try:
@@ -184,9 +186,14 @@ def device_main(conn, max_agg_hz: float) -> None:
                 cpu0, wall0 = time.process_time(), time.monotonic()
                 stats = {}
             elif was and not dev.streaming:
-                stats = {"samples": dev.samples, "frames": dev.frames, "overruns": dev.overruns,
-                         "max_lag_s": max_lag, "cpu_s": time.process_time() - cpu0,
-                         "wall_s": time.monotonic() - wall0}
+                stats = {
+                    "samples": dev.samples,
+                    "frames": dev.frames,
+                    "overruns": dev.overruns,
+                    "max_lag_s": max_lag,
+                    "cpu_s": time.process_time() - cpu0,
+                    "wall_s": time.monotonic() - wall0,
+                }
             n = max(1, round(BLOCK_S * rate))
             due = t_base + (offered + n) / rate
             delay = due - time.monotonic()
@@ -195,7 +202,7 @@ def device_main(conn, max_agg_hz: float) -> None:
             elif dev.streaming:
                 max_lag = max(max_lag, -delay)
             if row + n <= len(volts):
-                blk = _Block(CHANNELS, volts[row:row + n], over[row:row + n])
+                blk = _Block(CHANNELS, volts[row : row + n], over[row : row + n])
             else:  # a block longer than planned: wrap by copying
                 idx = np.arange(row, row + n) % NOISE_ROWS
                 blk = _Block(CHANNELS, base[idx], np.zeros((n, len(CHANNELS)), dtype=bool))
@@ -214,8 +221,9 @@ class Device:
     def __init__(self, max_agg_hz: float) -> None:
         ctx = mp.get_context("spawn")
         self.conn, child = ctx.Pipe()
-        self.proc = ctx.Process(target=device_main, args=(child, max_agg_hz), name="sim-adc-device",
-                                daemon=True)
+        self.proc = ctx.Process(
+            target=device_main, args=(child, max_agg_hz), name="sim-adc-device", daemon=True
+        )
         self.proc.start()
         child.close()
         try:
@@ -246,6 +254,7 @@ class Device:
 
 # ---------------------------------------------------------------------------- host side
 
+
 def thread_cpu_s(thread) -> float:
     """CPU seconds of a running thread of this process (Linux: its pthread CPU clock)."""
     try:
@@ -259,18 +268,18 @@ class Trial:
     agg_hz: float
     duration_s: float
     frame_sets: int = 0
-    received: int = 0          # sample sets consumed, all of them contiguous
-    lost: int = 0              # sample sets inside SampleGaps
+    received: int = 0  # sample sets consumed, all of them contiguous
+    lost: int = 0  # sample sets inside SampleGaps
     gaps: int = 0
-    data_errors: int = 0       # checked blocks that differ from what the device sent
+    data_errors: int = 0  # checked blocks that differ from what the device sent
     checked: int = 0
     errors: list[str] = field(default_factory=list)
     device: dict = field(default_factory=dict)
-    wall_s: float = 0.0        # wall time of the stream (start .. stop command)
-    cpu_s: float = 0.0         # this process's CPU over wall_s
+    wall_s: float = 0.0  # wall time of the stream (start .. stop command)
+    cpu_s: float = 0.0  # this process's CPU over wall_s
     reader_cpu_s: float = float("nan")
     max_latency_s: float = 0.0
-    backlog_s: float = 0.0     # nominal samples not yet consumed when the stop was sent
+    backlog_s: float = 0.0  # nominal samples not yet consumed when the stop was sent
 
     @property
     def rate_hz(self) -> float:
@@ -313,14 +322,17 @@ class Trial:
         if not d:
             p.append("no device figures")
         if p and self.device_cpu_frac > 0.85:
-            p.append(f"the device process used {self.device_cpu_frac:.2f} of a core: the emulated device, "
-                     f"not only the host, is at its limit")
+            p.append(
+                f"the device process used {self.device_cpu_frac:.2f} of a core: the emulated device, "
+                f"not only the host, is at its limit"
+            )
         return p
 
     @property
     def wire_mb_s(self) -> float:
         """Bytes per second through the pty at the nominal rate (frames with header and CRC)."""
         from drivers.adc_protocol import frame_size
+
         return frame_size(self.frame_sets, N_CHANNELS) * self.rate_hz / self.frame_sets / 1e6
 
     @property
@@ -378,7 +390,9 @@ def run_trial(device: Device, agg_hz: float, duration_s: float, checker_codes: n
                 if ok is not None:
                     tr.checked += 1
                     tr.data_errors += not ok
-                tr.max_latency_s = max(tr.max_latency_s, time.monotonic() - t_ref - pos / cfg.rate_hz)
+                tr.max_latency_s = max(
+                    tr.max_latency_s, time.monotonic() - t_ref - pos / cfg.rate_hz
+                )
             tr.backlog_s = max(0.0, time.monotonic() - t_ref - pos / cfg.rate_hz)
         except DriverError as exc:
             tr.errors.append(f"{type(exc).__name__}: {exc}")
@@ -411,35 +425,47 @@ def run_trial(device: Device, agg_hz: float, duration_s: float, checker_codes: n
 
 # ---------------------------------------------------------------------------- report
 
+
 def fmt_rate(hz: float) -> str:
     return f"{hz / 1e6:.2f} MS/s" if hz >= 1e6 else f"{hz / 1e3:.0f} kS/s"
 
 
 def trial_line(tr: Trial) -> str:
     d = tr.device
-    return (f"  {fmt_rate(tr.agg_hz):>10s} {tr.rate_hz / 1e3:8.2f} {tr.frame_sets:5d} {tr.wall_s:6.1f} "
-            f"{tr.received:>10d} {tr.lost:>6d} {d.get('overruns', -1):>5d} {d.get('max_lag_s', 0) * 1e3:7.1f} "
-            f"{tr.max_latency_s * 1e3:8.1f} {tr.cpu_frac:6.3f} {tr.reader_frac:6.3f} {tr.device_cpu_frac:6.3f}  "
-            f"{'held' if tr.held else 'NOT held'}")
+    return (
+        f"  {fmt_rate(tr.agg_hz):>10s} {tr.rate_hz / 1e3:8.2f} {tr.frame_sets:5d} {tr.wall_s:6.1f} "
+        f"{tr.received:>10d} {tr.lost:>6d} {d.get('overruns', -1):>5d} {d.get('max_lag_s', 0) * 1e3:7.1f} "
+        f"{tr.max_latency_s * 1e3:8.1f} {tr.cpu_frac:6.3f} {tr.reader_frac:6.3f} {tr.device_cpu_frac:6.3f}  "
+        f"{'held' if tr.held else 'NOT held'}"
+    )
 
 
-TABLE_HEAD = ("  aggregate   kHz/ch frame  wall s  sets recv   lost  ovr   lag ms  late ms  "
-              "host   reader device")
+TABLE_HEAD = (
+    "  aggregate   kHz/ch frame  wall s  sets recv   lost  ovr   lag ms  late ms  "
+    "host   reader device"
+)
 
 
 def verdict(ok: bool) -> str:
     return "met" if ok else "missed"
 
 
-def report(trials: list[Trial], confirms: list[Trial], confirm_s: float, fifo_bytes: int,
-           total_s: float) -> None:
+def report(
+    trials: list[Trial], confirms: list[Trial], confirm_s: float, fifo_bytes: int, total_s: float
+) -> None:
     log("")
     log("=" * 96)
-    log(f"adc_stream summary: {N_CHANNELS} channels through a pty into SerialAdc, all figures from this run")
-    log(f"device: AdcDevice in its own process, paced, FIFO {fifo_bytes / 2**20:.1f} MiB, "
-        f"{BLOCK_S * 1e3:.0f} ms blocks; host: SerialAdc on the wall clock, read(frame) loop")
-    log("columns: CPU as fractions of one core (host = whole host process, reader = its reader "
-        "thread); lag = device behind schedule (max); late = host latency (max)")
+    log(
+        f"adc_stream summary: {N_CHANNELS} channels through a pty into SerialAdc, all figures from this run"
+    )
+    log(
+        f"device: AdcDevice in its own process, paced, FIFO {fifo_bytes / 2**20:.1f} MiB, "
+        f"{BLOCK_S * 1e3:.0f} ms blocks; host: SerialAdc on the wall clock, read(frame) loop"
+    )
+    log(
+        "columns: CPU as fractions of one core (host = whole host process, reader = its reader "
+        "thread); lag = device behind schedule (max); late = host latency (max)"
+    )
     log("-" * 96)
     log(TABLE_HEAD)
     for tr in trials:
@@ -450,7 +476,9 @@ def report(trials: list[Trial], confirms: list[Trial], confirm_s: float, fifo_by
             log(trial_line(tr))
     for tr in trials + confirms:
         if not tr.held:
-            log(f"  {fmt_rate(tr.agg_hz)} ({tr.wall_s:.0f} s) not held: {'; '.join(tr.problems())[:300]}")
+            log(
+                f"  {fmt_rate(tr.agg_hz)} ({tr.wall_s:.0f} s) not held: {'; '.join(tr.problems())[:300]}"
+            )
     log("-" * 96)
     best = next((c for c in confirms if c.held), None)
     if best is None:
@@ -458,25 +486,35 @@ def report(trials: list[Trial], confirms: list[Trial], confirm_s: float, fifo_by
         achieved = 0.0
     else:
         achieved = best.agg_hz
-        log(f"highest aggregate rate held for {best.wall_s:.0f} s with zero lost frames: {fmt_rate(achieved)} "
+        log(
+            f"highest aggregate rate held for {best.wall_s:.0f} s with zero lost frames: {fmt_rate(achieved)} "
             f"({best.rate_hz / 1e3:.2f} kHz x {N_CHANNELS} channels; delivered {fmt_rate(best.achieved_agg_hz)}, "
-            f"{best.received} sets, {best.checked} blocks checked sample by sample)")
-        log(f"  host CPU at that rate    {best.cpu_frac:6.3f} of one core (reader thread {best.reader_frac:.3f}); "
-            f"device process {best.device_cpu_frac:.3f}; {best.wire_mb_s:.1f} MB/s through the pty")
+            f"{best.received} sets, {best.checked} blocks checked sample by sample)"
+        )
+        log(
+            f"  host CPU at that rate    {best.cpu_frac:6.3f} of one core (reader thread {best.reader_frac:.3f}); "
+            f"device process {best.device_cpu_frac:.3f}; {best.wire_mb_s:.1f} MB/s through the pty"
+        )
         at_target = [t for t in trials + confirms if t.agg_hz == TARGET_AGG_HZ and t.held]
         if at_target:
             t = at_target[-1]
-            log(f"  host CPU at the target   {t.cpu_frac:6.3f} of one core at {fmt_rate(t.agg_hz)} "
-                f"({t.wall_s:.3g} s trial)")
+            log(
+                f"  host CPU at the target   {t.cpu_frac:6.3f} of one core at {fmt_rate(t.agg_hz)} "
+                f"({t.wall_s:.3g} s trial)"
+            )
     ratio = achieved / TARGET_AGG_HZ
     ok = ratio >= 1.0
-    log(f"  vs target {fmt_rate(TARGET_AGG_HZ)}: {ratio:5.2f} x   {verdict(ok)}   "
-        f"(the thesis's ADC: {THESIS_ADC_HZ / 1e3:.0f} kHz, {achieved / THESIS_ADC_HZ:.1f} x that)")
+    log(
+        f"  vs target {fmt_rate(TARGET_AGG_HZ)}: {ratio:5.2f} x   {verdict(ok)}   "
+        f"(the thesis's ADC: {THESIS_ADC_HZ / 1e3:.0f} kHz, {achieved / THESIS_ADC_HZ:.1f} x that)"
+    )
     tried = {t.agg_hz for t in trials}
     if trials and trials[-1].held and trials[-1].agg_hz == max(tried):
         log(f"  (the highest rate tried was held: the limit lies above {fmt_rate(max(tried))})")
-    log(f"  bench wall time {total_s:.0f} s; load average (1 min) {os.getloadavg()[0]:.2f} at the end "
-        f"(other work on the {os.cpu_count()} CPUs shares them with both processes)")
+    log(
+        f"  bench wall time {total_s:.0f} s; load average (1 min) {os.getloadavg()[0]:.2f} at the end "
+        f"(other work on the {os.cpu_count()} CPUs shares them with both processes)"
+    )
     if not ok:
         log(f"TARGET MISSED: {fmt_rate(achieved)} held < {fmt_rate(TARGET_AGG_HZ)}")
     log("=" * 96)
@@ -484,18 +522,29 @@ def report(trials: list[Trial], confirms: list[Trial], confirm_s: float, fifo_by
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="a smoke run: 1.5 s trials, 4 s confirmation")
+    ap.add_argument(
+        "--quick", action="store_true", help="a smoke run: 1.5 s trials, 4 s confirmation"
+    )
     ap.add_argument("--trial-s", type=float, default=TRIAL_S, help="length of each search trial")
-    ap.add_argument("--confirm-s", type=float, default=CONFIRM_S, help="length of the confirmation run")
-    ap.add_argument("--rates", type=str, default=",".join(f"{r / 1e3:g}" for r in RATES_AGG_HZ),
-                    help="aggregate rates to try, kS/s, comma separated")
+    ap.add_argument(
+        "--confirm-s", type=float, default=CONFIRM_S, help="length of the confirmation run"
+    )
+    ap.add_argument(
+        "--rates",
+        type=str,
+        default=",".join(f"{r / 1e3:g}" for r in RATES_AGG_HZ),
+        help="aggregate rates to try, kS/s, comma separated",
+    )
     args = ap.parse_args()
     trial_s, confirm_s = (1.5, 4.0) if args.quick else (args.trial_s, args.confirm_s)
     rates = sorted(float(r) * 1e3 for r in args.rates.split(","))
     t_start = time.monotonic()
-    log(f"adc_stream: numpy {np.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; "
-        f"trials {trial_s:g} s at {', '.join(fmt_rate(r) for r in rates)}; confirmation {confirm_s:g} s")
+    log(
+        f"adc_stream: numpy {np.__version__}, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}; "
+        f"trials {trial_s:g} s at {', '.join(fmt_rate(r) for r in rates)}; confirmation {confirm_s:g} s"
+    )
     from simhw.plant import CHANNELS
+
     codes = expected_codes(noise_volts(len(CHANNELS))[:, :N_CHANNELS])
     trials: list[Trial] = []
     confirms: list[Trial] = []
@@ -529,6 +578,7 @@ def main() -> int:
         return 130
     report(trials, confirms, confirm_s, device.fifo_bytes, time.monotonic() - t_start)
     return 0
+
 
 if __name__ == "__main__":
     sys.exit(main())

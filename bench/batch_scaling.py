@@ -94,20 +94,37 @@ def run_batch(files: list[str], out: Path, jobs: int, scheduler: str | None = No
     """Wall-clock seconds of one ``fbs batch gap`` over ``files`` (a fresh ``out``); raises if it fails."""
     if out.exists():
         out.unlink()
-    cmd = [sys.executable, "-m", "fbs", "batch", "gap", *files, "--jobs", str(jobs), "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-m",
+        "fbs",
+        "batch",
+        "gap",
+        *files,
+        "--jobs",
+        str(jobs),
+        "--out",
+        str(out),
+    ]
     if scheduler:
         cmd += ["--scheduler", scheduler]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, check=False)
     seconds = time.perf_counter() - t0
     if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd[:6])} ... --jobs {jobs} exited {proc.returncode}:\n{proc.stderr[-3000:]}")
+        raise RuntimeError(
+            f"{' '.join(cmd[:6])} ... --jobs {jobs} exited {proc.returncode}:\n{proc.stderr[-3000:]}"
+        )
     return seconds
 
 
 def task_seconds(out: Path) -> float:
     """The seconds the tasks of ``out`` took, summed (each result line's ``elapsed_s``)."""
-    return sum(float(json.loads(s).get("elapsed_s") or 0.0) for s in out.read_text().splitlines() if s.strip())
+    return sum(
+        float(json.loads(s).get("elapsed_s") or 0.0)
+        for s in out.read_text().splitlines()
+        if s.strip()
+    )
 
 
 def _strip(obj: Any) -> Any:
@@ -129,15 +146,24 @@ def compare(name: str, ref: dict[str, Any], other: dict[str, Any]) -> bool:
         log(f"  results of {name}: identical to 1 worker's apart from timing ({len(ref)} files)")
         return True
     differ = sorted(f for f in set(ref) | set(other) if ref.get(f) != other.get(f))
-    log(f"  RESULTS DIFFER: {name} against 1 worker, {len(differ)} file(s): {', '.join(differ[:5])}")
+    log(
+        f"  RESULTS DIFFER: {name} against 1 worker, {len(differ)} file(s): {', '.join(differ[:5])}"
+    )
     return False
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n", 1)[0])
-    ap.add_argument("--quick", action="store_true", help=f"{QUICK_DURATION_S:.0f} s records, {QUICK_REPEAT} repeats")
-    ap.add_argument("--scheduler", action="store_true",
-                    help="also run against a local Dask cluster of 2 single-threaded workers")
+    ap.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"{QUICK_DURATION_S:.0f} s records, {QUICK_REPEAT} repeats",
+    )
+    ap.add_argument(
+        "--scheduler",
+        action="store_true",
+        help="also run against a local Dask cluster of 2 single-threaded workers",
+    )
     args = ap.parse_args()
     duration = QUICK_DURATION_S if args.quick else DURATION_S
     repeat = QUICK_REPEAT if args.quick else REPEAT
@@ -150,8 +176,10 @@ def main() -> int:
         tmp = Path(d)
         t0 = time.perf_counter()
         files = make_files(tmp, duration, n_seeds)
-        log(f"input: {len(files)} run files ({', '.join(EFFECTS)} x {n_seeds} seeds, {duration:.0f} s each), "
-            f"made in {time.perf_counter() - t0:.0f} s (untimed)")
+        log(
+            f"input: {len(files)} run files ({', '.join(EFFECTS)} x {n_seeds} seeds, {duration:.0f} s each), "
+            f"made in {time.perf_counter() - t0:.0f} s (untimed)"
+        )
 
         t0 = time.perf_counter()
         run_batch(files, tmp / "warm.jsonl", 2)
@@ -164,18 +192,26 @@ def main() -> int:
                 s = run_batch(files, out, jobs)
                 times[jobs].append(s)
                 busy = task_seconds(out)
-                log(f"  round {i + 1}: {jobs} worker(s) {s:6.1f} s  {len(files) / s:.3f} files/s; "
-                    f"tasks {busy:.1f} s, idle or starting {jobs * s - busy:.1f} worker-s")
+                log(
+                    f"  round {i + 1}: {jobs} worker(s) {s:6.1f} s  {len(files) / s:.3f} files/s; "
+                    f"tasks {busy:.1f} s, idle or starting {jobs * s - busy:.1f} worker-s"
+                )
         ref = results_of(tmp / "jobs1.jsonl")
         ok &= compare("2 workers", ref, results_of(tmp / "jobs2.jsonl"))
 
         rate = {j: len(files) / statistics.median(t) for j, t in times.items()}
         ratio = rate[2] / rate[1]
-        log(f"1 worker : {rate[1]:.3f} files/s (median of {repeat}: {statistics.median(times[1]):.1f} s)")
-        log(f"2 workers: {rate[2]:.3f} files/s (median of {repeat}: {statistics.median(times[2]):.1f} s)")
+        log(
+            f"1 worker : {rate[1]:.3f} files/s (median of {repeat}: {statistics.median(times[1]):.1f} s)"
+        )
+        log(
+            f"2 workers: {rate[2]:.3f} files/s (median of {repeat}: {statistics.median(times[2]):.1f} s)"
+        )
         log(f"ratio 2/1: {ratio:.2f}x (target >= {TARGET_RATIO}x)")
         if ratio < TARGET_RATIO:
-            log(f"TARGET MISSED: 2 workers reach {ratio:.2f}x one worker's throughput, target {TARGET_RATIO}x")
+            log(
+                f"TARGET MISSED: 2 workers reach {ratio:.2f}x one worker's throughput, target {TARGET_RATIO}x"
+            )
 
         if args.scheduler:
             ok &= dask_run(files, tmp, repeat, ref, rate[1])
@@ -192,13 +228,17 @@ def dask_run(files: list[str], tmp: Path, repeat: int, ref: dict[str, Any], rate
     except ImportError:
         log("dask: distributed not installed; skipped")
         return True
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+    ) as cluster:
         addr = cluster.scheduler_address
         run_batch(files, tmp / "dask-warm.jsonl", 2, addr)
         secs = [run_batch(files, tmp / "dask.jsonl", 2, addr) for _ in range(repeat)]
     rate = len(files) / statistics.median(secs)
-    log(f"dask LocalCluster, 2 workers: {rate:.3f} files/s (median of {repeat}: {statistics.median(secs):.1f} s), "
-        f"{rate / rate1:.2f}x the 1-worker pool (not interleaved with it; no target)")
+    log(
+        f"dask LocalCluster, 2 workers: {rate:.3f} files/s (median of {repeat}: {statistics.median(secs):.1f} s), "
+        f"{rate / rate1:.2f}x the 1-worker pool (not interleaved with it; no target)"
+    )
     return compare("dask 2 workers", ref, results_of(tmp / "dask.jsonl"))
 
 

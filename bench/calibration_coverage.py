@@ -93,32 +93,52 @@ def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
     cfg: dict[str, dict[str, Any]] = {
         "site": {"latitude_deg": round(float(rng.uniform(-60.0, 72.0)), 3)},
         "table": {"base_azimuth_offset_deg": round(float(rng.uniform(-5.0, 5.0)), 4)},
-        "compensation": {f"w{i}_rad_per_s": getattr(nom.compensation, f"w{i}_rad_per_s") * float(rng.uniform(0.9, 1.15))
-                         for i in range(1, 7)}}
+        "compensation": {
+            f"w{i}_rad_per_s": getattr(nom.compensation, f"w{i}_rad_per_s")
+            * float(rng.uniform(0.9, 1.15))
+            for i in range(1, 7)
+        },
+    }
     for a in AXES:
-        cfg[f"platform.{a}"] = {"inertia_kg_m2": nom.platform[a].inertia_kg_m2 * float(rng.uniform(0.7, 1.4))}
+        cfg[f"platform.{a}"] = {
+            "inertia_kg_m2": nom.platform[a].inertia_kg_m2 * float(rng.uniform(0.7, 1.4))
+        }
         b = nom.bearing[a]
         model = BEARINGS[int(rng.integers(len(BEARINGS)))]
-        cfg[f"bearing.{a}"] = {"model": model, "To_Nm": b.To_Nm * _logu(rng, 0.5, 2.0),
-                               "eta_per_Nm": b.eta_per_Nm * _logu(rng, 0.5, 2.0),
-                               "stiffness_Nm_per_rad": b.stiffness_Nm_per_rad * _logu(rng, 0.5, 2.0),
-                               "damping_Nms": _logu(rng, 0.01, 0.2)}
+        cfg[f"bearing.{a}"] = {
+            "model": model,
+            "To_Nm": b.To_Nm * _logu(rng, 0.5, 2.0),
+            "eta_per_Nm": b.eta_per_Nm * _logu(rng, 0.5, 2.0),
+            "stiffness_Nm_per_rad": b.stiffness_Nm_per_rad * _logu(rng, 0.5, 2.0),
+            "damping_Nms": _logu(rng, 0.01, 0.2),
+        }
     nea, common = float(rng.uniform(0.6, 2.0)), round(float(rng.uniform(0.0, 0.6)), 3)
     for a in ("X", "Y"):
-        cfg[f"autocollimator.{a}"] = {"nea_urad": nom.autocollimator[a].nea_urad * nea, "common_noise_fraction": common}
+        cfg[f"autocollimator.{a}"] = {
+            "nea_urad": nom.autocollimator[a].nea_urad * nea,
+            "common_noise_fraction": common,
+        }
     for ch in CHANNELS:
         g = nom.gyro[ch]
         k = float(rng.uniform(0.6, 2.0))
         cfg[f"gyro.{ch}"] = {
-            "torquer_scale_urad_per_s_per_V": round(g.torquer_scale_urad_per_s_per_V * float(rng.uniform(0.85, 1.15)), 5),
-            "pickoff_scale_mV_per_urad": round(g.pickoff_scale_mV_per_urad * float(rng.uniform(0.8, 1.2)), 5),
+            "torquer_scale_urad_per_s_per_V": round(
+                g.torquer_scale_urad_per_s_per_V * float(rng.uniform(0.85, 1.15)), 5
+            ),
+            "pickoff_scale_mV_per_urad": round(
+                g.pickoff_scale_mV_per_urad * float(rng.uniform(0.8, 1.2)), 5
+            ),
             "fixed_drift_urad_per_s": round(float(rng.uniform(-1.5, 1.5)), 4),
-            **{f"g_drift_{x}_urad_per_s_per_g": round(float(rng.uniform(-0.15, 0.15)), 4) for x in "xyz"},
+            **{
+                f"g_drift_{x}_urad_per_s_per_g": round(float(rng.uniform(-0.15, 0.15)), 4)
+                for x in "xyz"
+            },
             "restraint_time_s": g.restraint_time_s * float(rng.uniform(0.85, 1.15)),
             "arw_urad_per_sqrt_s": round(_logu(rng, 0.003, 0.5), 5),
             "bias_instability_urad_per_s": round(_logu(rng, 0.005, 0.1), 5),
             "pickoff_noise_rms_urad": g.pickoff_noise_rms_urad * k,
-            "pickoff_lines": [[f, a * k] for f, a in g.pickoff_lines]}
+            "pickoff_lines": [[f, a * k] for f, a in g.pickoff_lines],
+        }
     return cfg
 
 
@@ -149,8 +169,10 @@ def run_case(seed: int, keep: str | None = None, skip: tuple[str, ...] = ()) -> 
         path = d / "rig.toml"
         path.write_text(toml_of(cfg))
         kto = {ch: truth_of(cfg, "torquer_scale_urad_per_s_per_V", ch) for ch in CHANNELS}
-        for name, make in (("earth-rate", lambda: EarthRate()),
-                           ("stopwatch", lambda: Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=kto)))):
+        for name, make in (
+            ("earth-rate", lambda: EarthRate()),
+            ("stopwatch", lambda: Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=kto))),
+        ):
             if name in skip:
                 continue
             t0 = time.perf_counter()
@@ -160,11 +182,18 @@ def run_case(seed: int, keep: str | None = None, skip: tuple[str, ...] = ()) -> 
             except Exception as e:  # reported, not fatal
                 rec[name] = {"error": f"{type(e).__name__}: {e}"}
                 continue
-            rec[name] = {"wall_s": round(time.perf_counter() - t0, 1), "verdict": str(res.verdict),
-                         "values": res.values, "error": res.error,
-                         "steps": _steps(res.file) if res.file and res.file.exists() else None}
-    rec["verdict"] = " ".join(f"{n} {rec[n].get('verdict', rec[n].get('error'))}" for n in ("earth-rate", "stopwatch")
-                              if n in rec)
+            rec[name] = {
+                "wall_s": round(time.perf_counter() - t0, 1),
+                "verdict": str(res.verdict),
+                "values": res.values,
+                "error": res.error,
+                "steps": _steps(res.file) if res.file and res.file.exists() else None,
+            }
+    rec["verdict"] = " ".join(
+        f"{n} {rec[n].get('verdict', rec[n].get('error'))}"
+        for n in ("earth-rate", "stopwatch")
+        if n in rec
+    )
     return rec
 
 
@@ -178,15 +207,23 @@ def reanalyze(rec: dict[str, Any]) -> dict[str, Any]:
     sections: dict[str, Any] = {}
     for name, kv in rec["config"].items():
         head, _, sub = name.partition(".")
-        (sections.setdefault(head, {}).setdefault(sub, {}) if sub else sections.setdefault(head, {})).update(kv)
+        (
+            sections.setdefault(head, {}).setdefault(sub, {})
+            if sub
+            else sections.setdefault(head, {})
+        ).update(kv)
     cal = rig_calibration(from_dict(sections))
     kto = {ch: truth_of(rec["config"], "torquer_scale_urad_per_s_per_V", ch) for ch in CHANNELS}
-    for name, proc in (("earth-rate", EarthRate()),
-                       ("stopwatch", Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=kto)))):
+    for name, proc in (
+        ("earth-rate", EarthRate()),
+        ("stopwatch", Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=kto))),
+    ):
         r = rec.get(name) or {}
         if not r.get("steps"):
             continue
-        ctx = SimpleNamespace(rig=SimpleNamespace(calibration=cal), results=r["steps"], spans={}, path="-")
+        ctx = SimpleNamespace(
+            rig=SimpleNamespace(calibration=cal), results=r["steps"], spans={}, path="-"
+        )
         r["values"] = proc.analyze(ctx).values  # type: ignore[arg-type]
     return rec
 
@@ -201,22 +238,37 @@ def _campaign(rec: dict[str, Any], ch: str) -> tuple[float, list[float], bool] |
     kg_ci = sw["K_g_mV_per_urad_ci95"][ch]
     if None in kto_ci or None in kg_ci:
         return None
-    kto = 0.5 * (kto_ci[0] + kto_ci[1]) if er["K_TO_urad_per_s_per_V"][ch] is None else er["K_TO_urad_per_s_per_V"][ch]
-    kg_given = 0.5 * (kg_ci[0] + kg_ci[1]) if sw["K_g_mV_per_urad"][ch] is None else sw["K_g_mV_per_urad"][ch]
+    kto = (
+        0.5 * (kto_ci[0] + kto_ci[1])
+        if er["K_TO_urad_per_s_per_V"][ch] is None
+        else er["K_TO_urad_per_s_per_V"][ch]
+    )
+    kg_given = (
+        0.5 * (kg_ci[0] + kg_ci[1])
+        if sw["K_g_mV_per_urad"][ch] is None
+        else sw["K_g_mV_per_urad"][ch]
+    )
     kg = kg_given * kto_true / kto
     # the statistical half-width below the value, and what the interval adds above it (a bound)
     below = (kg_given - kg_ci[0]) / kg_given
     above = (kg_ci[1] - kg_given) / kg_given - below
     rel = math.hypot(below, (kto_ci[1] - kto_ci[0]) / 2 / kto)
-    return kg, [kg * (1 - rel), kg * (1 + rel + above)], bool(er["resolved"]["K_TO_urad_per_s_per_V"][ch]
-                                                              and sw["resolved"]["K_g_mV_per_urad"][ch])
+    return (
+        kg,
+        [kg * (1 - rel), kg * (1 + rel + above)],
+        bool(er["resolved"]["K_TO_urad_per_s_per_V"][ch] and sw["resolved"]["K_g_mV_per_urad"][ch]),
+    )
 
 
-def rows(recs: list[dict[str, Any]]) -> list[tuple[str, str, list[tuple[float, list[float], bool, float]]]]:
+def rows(
+    recs: list[dict[str, Any]],
+) -> list[tuple[str, str, list[tuple[float, list[float], bool, float]]]]:
     """(figure, channel, [(value, ci, resolved, truth)]) per figure and channel."""
     out = []
-    for label, proc, key, cfg_key in (("K_TO", "earth-rate", "K_TO_urad_per_s_per_V", "torquer_scale_urad_per_s_per_V"),
-                                      ("K_g (K_TO given)", "stopwatch", "K_g_mV_per_urad", "pickoff_scale_mV_per_urad")):
+    for label, proc, key, cfg_key in (
+        ("K_TO", "earth-rate", "K_TO_urad_per_s_per_V", "torquer_scale_urad_per_s_per_V"),
+        ("K_g (K_TO given)", "stopwatch", "K_g_mV_per_urad", "pickoff_scale_mV_per_urad"),
+    ):
         for ch in CHANNELS:
             cases = []
             for r in recs:
@@ -227,7 +279,9 @@ def rows(recs: list[dict[str, Any]]) -> list[tuple[str, str, list[tuple[float, l
                 if ci[0] is None or ci[1] is None:
                     continue
                 val = v[key][ch] if v[key][ch] is not None else 0.5 * (ci[0] + ci[1])
-                cases.append((val, ci, bool(v["resolved"][key][ch]), truth_of(r["config"], cfg_key, ch)))
+                cases.append(
+                    (val, ci, bool(v["resolved"][key][ch]), truth_of(r["config"], cfg_key, ch))
+                )
             out.append((label, ch, cases))
     for ch in CHANNELS:
         cases = []
@@ -240,11 +294,20 @@ def rows(recs: list[dict[str, Any]]) -> list[tuple[str, str, list[tuple[float, l
 
 
 def summarize(recs: list[dict[str, Any]]) -> str:
-    lines = [f"calibration coverage: {len(recs)} rigs; errors: "
-             + "; ".join(f"seed {r['seed']} {n}: {(r.get(n) or {}).get('error')}" for r in recs
-                         for n in ("earth-rate", "stopwatch") if (r.get(n) or {}).get("error")) or "none"]
-    lines.append(f"{'figure':<18s} {'ch':<4s} {'n':>3s} {'covered':>8s} {'med |err|':>10s} {'max |err|':>10s} "
-                 f"{'med half':>9s} {'unresolved':>10s}  misses (seed: err, half-width, latitude)")
+    lines = [
+        f"calibration coverage: {len(recs)} rigs; errors: "
+        + "; ".join(
+            f"seed {r['seed']} {n}: {(r.get(n) or {}).get('error')}"
+            for r in recs
+            for n in ("earth-rate", "stopwatch")
+            if (r.get(n) or {}).get("error")
+        )
+        or "none"
+    ]
+    lines.append(
+        f"{'figure':<18s} {'ch':<4s} {'n':>3s} {'covered':>8s} {'med |err|':>10s} {'max |err|':>10s} "
+        f"{'med half':>9s} {'unresolved':>10s}  misses (seed: err, half-width, latitude)"
+    )
     total_n = total_c = 0
     for label, ch, cases in rows(recs):
         seeds = [r["seed"] for r in recs]
@@ -260,11 +323,15 @@ def summarize(recs: list[dict[str, Any]]) -> str:
         for s, (v, ci, _, t) in zip(seeds, cases):
             if not ci[0] <= t <= ci[1]:
                 lat = next(r for r in recs if r["seed"] == s)["config"]["site"]["latitude_deg"]
-                misses.append(f"{s}: {100 * (v / t - 1):+.2f} % +-{100 * (ci[1] - ci[0]) / 2 / abs(v):.2f} lat {lat:+.0f}")
+                misses.append(
+                    f"{s}: {100 * (v / t - 1):+.2f} % +-{100 * (ci[1] - ci[0]) / 2 / abs(v):.2f} lat {lat:+.0f}"
+                )
         med = f"{100 * statistics.median(err):.3f} %" if err else "-"
         mx = f"{100 * max(err):.3f} %" if err else "-"
-        lines.append(f"{label:<18s} {ch:<4s} {n:>3d} {cov:>4d}/{n:<3d} {med:>10s} {mx:>10s} "
-                     f"{100 * statistics.median(half):>7.3f} % {unres:>4d}/{n:<5d}  " + "; ".join(misses))
+        lines.append(
+            f"{label:<18s} {ch:<4s} {n:>3d} {cov:>4d}/{n:<3d} {med:>10s} {mx:>10s} "
+            f"{100 * statistics.median(half):>7.3f} % {unres:>4d}/{n:<5d}  " + "; ".join(misses)
+        )
     lines.append(f"all figures: {total_c}/{total_n} covered")
     return "\n".join(lines)
 
@@ -276,27 +343,55 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", default="/tmp/calibration_coverage.jsonl")
     ap.add_argument("--keep", default=None, help="keep each rig's run files under DIR/rig<seed>")
-    ap.add_argument("--also", nargs="*", default=[], help="earlier --out files to summarize with this run")
-    ap.add_argument("--reuse", default=None,
-                    help="an earlier --out file: its seeds' earth-rate runs are analysed again, not run "
-                         "(only the stopwatch runs on them)")
-    ap.add_argument("--reanalyze", nargs="*", default=None,
-                    help="analyse these --out files' recorded steps again (no rig runs)")
+    ap.add_argument(
+        "--also", nargs="*", default=[], help="earlier --out files to summarize with this run"
+    )
+    ap.add_argument(
+        "--reuse",
+        default=None,
+        help="an earlier --out file: its seeds' earth-rate runs are analysed again, not run "
+        "(only the stopwatch runs on them)",
+    )
+    ap.add_argument(
+        "--reanalyze",
+        nargs="*",
+        default=None,
+        help="analyse these --out files' recorded steps again (no rig runs)",
+    )
     args = ap.parse_args(argv)
     if args.reanalyze is not None:
-        recs = [reanalyze(json.loads(line)) for f in args.reanalyze for line in Path(f).read_text().splitlines()
-                if line.strip()]
+        recs = [
+            reanalyze(json.loads(line))
+            for f in args.reanalyze
+            for line in Path(f).read_text().splitlines()
+            if line.strip()
+        ]
     else:
-        reuse = ({r["seed"]: r for r in map(json.loads, Path(args.reuse).read_text().splitlines())}
-                 if args.reuse else {})
-        recs = run_cases(run_case, [(s, args.keep, ("earth-rate",) if s in reuse else ())
-                                    for s in range(args.first, args.first + args.rigs)], args.jobs, args.out)
+        reuse = (
+            {r["seed"]: r for r in map(json.loads, Path(args.reuse).read_text().splitlines())}
+            if args.reuse
+            else {}
+        )
+        recs = run_cases(
+            run_case,
+            [
+                (s, args.keep, ("earth-rate",) if s in reuse else ())
+                for s in range(args.first, args.first + args.rigs)
+            ],
+            args.jobs,
+            args.out,
+        )
         for r in recs:
             if r["seed"] in reuse:
                 r["earth-rate"] = reanalyze({**reuse[r["seed"]], "stopwatch": None})["earth-rate"]
         if reuse:
             Path(args.out).write_text("".join(json.dumps(r) + "\n" for r in recs))
-        recs += [json.loads(line) for f in args.also for line in Path(f).read_text().splitlines() if line.strip()]
+        recs += [
+            json.loads(line)
+            for f in args.also
+            for line in Path(f).read_text().splitlines()
+            if line.strip()
+        ]
     recs.sort(key=lambda r: r["seed"])
     print(summarize(recs))
     return 0

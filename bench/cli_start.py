@@ -57,12 +57,15 @@ def timed(argv: list[str]) -> float:
 def peak_rss_mb(argv: list[str]) -> float:
     """The peak resident memory of ``argv``, run in a child of its own (``ru_maxrss`` of the
     children is their maximum: a fresh child measures only ``argv``)."""
-    code = ("import resource, subprocess, sys\n"
-            "subprocess.run(sys.argv[1:], check=True, stdout=subprocess.DEVNULL)\n"
-            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
-    out = subprocess.run([sys.executable, "-c", code, *argv], check=True, cwd=ROOT,
-                         capture_output=True, text=True)
-    return int(out.stdout) / 1024     # Linux: KiB
+    code = (
+        "import resource, subprocess, sys\n"
+        "subprocess.run(sys.argv[1:], check=True, stdout=subprocess.DEVNULL)\n"
+        "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code, *argv], check=True, cwd=ROOT, capture_output=True, text=True
+    )
+    return int(out.stdout) / 1024  # Linux: KiB
 
 
 def main() -> int:
@@ -80,9 +83,11 @@ def main() -> int:
     for name, c in COMMANDS.items():
         cases[f"options {name}"] = [py, "-c", f"import {c.module}"]
         cases[f"runs {name}"] = [py, "-c", f"from fbs.cli import load; load({name!r})"]
-    log(f"{len(cases)} cases, {rounds} rounds; load average {load_average()}, "
-        f"{os.cpu_count()} cores")
-    for argv in cases.values():                  # untimed: the page cache and __pycache__ warm
+    log(
+        f"{len(cases)} cases, {rounds} rounds; load average {load_average()}, "
+        f"{os.cpu_count()} cores"
+    )
+    for argv in cases.values():  # untimed: the page cache and __pycache__ warm
         timed(argv)
     times: dict[str, list[float]] = {k: [] for k in cases}
     for _ in range(rounds):
@@ -93,9 +98,11 @@ def main() -> int:
     rss_bare = peak_rss_mb(cases["python -c pass"])
     rss_version = peak_rss_mb(cases["fbs --version"])
     log(f"python -c pass     median {bare:6.3f} s  peak {rss_bare:5.0f} MB   (the baseline)")
-    log(f"fbs --version      median {version:6.3f} s  peak {rss_version:5.0f} MB   "
+    log(
+        f"fbs --version      median {version:6.3f} s  peak {rss_version:5.0f} MB   "
         f"{version / bare:.1f}x the bare interpreter; runs "
-        + " ".join(f"{t:.2f}" for t in times["fbs --version"]))
+        + " ".join(f"{t:.2f}" for t in times["fbs --version"])
+    )
     log(f"import fbs.cli     median {med['import fbs.cli']:6.3f} s")
     log()
     log("seconds over the baseline, and as bare interpreter starts:")

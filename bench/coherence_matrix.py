@@ -67,16 +67,18 @@ def make_data(duration_s: float) -> np.ndarray:
 
 
 def matrix_way(x: np.ndarray) -> np.ndarray:
-    _, S = welch_csd_matrix(x, FS, window="hann", nperseg=NPERSEG, noverlap=NOVERLAP,
-                            detrend="constant")
+    _, S = welch_csd_matrix(
+        x, FS, window="hann", nperseg=NPERSEG, noverlap=NOVERLAP, detrend="constant"
+    )
     return coherence(S)
 
 
 def pairwise_way(x: np.ndarray) -> dict[tuple[int, int], np.ndarray]:
     out = {}
     for i, j in itertools.combinations(range(len(x)), 2):
-        _, out[(i, j)] = scipy.signal.coherence(x[i], x[j], FS, window="hann", nperseg=NPERSEG,
-                                                noverlap=NOVERLAP, detrend="constant")
+        _, out[(i, j)] = scipy.signal.coherence(
+            x[i], x[j], FS, window="hann", nperseg=NPERSEG, noverlap=NOVERLAP, detrend="constant"
+        )
     return out
 
 
@@ -101,15 +103,21 @@ def main() -> int:
     args = ap.parse_args()
     duration = 60.0 if args.quick else DURATION_S
     repeat = 2 if args.quick else args.repeat
-    log(f"coherence_matrix: numpy {np.__version__}, scipy {scipy.__version__}, {os.cpu_count()} CPUs, "
-        f"load average {os.getloadavg()[0]:.2f}")
+    log(
+        f"coherence_matrix: numpy {np.__version__}, scipy {scipy.__version__}, {os.cpu_count()} CPUs, "
+        f"load average {os.getloadavg()[0]:.2f}"
+    )
     x = make_data(duration)
     n_pairs = N_CHANNELS * (N_CHANNELS - 1) // 2
     n_seg = (x.shape[1] - NOVERLAP) // (NPERSEG - NOVERLAP)
-    log(f"  {N_CHANNELS} channels x {duration:.0f} s at {FS:.0f} Hz ({x.shape[1]} samples each), "
-        f"Hann nperseg {NPERSEG}, {NOVERLAP} overlap: {n_seg} segments, {NPERSEG // 2 + 1} bins")
-    log(f"  timing the matrix (1 call) and {n_pairs} scipy.signal.coherence calls, "
-        f"1 warm-up + {repeat} repeats each ...")
+    log(
+        f"  {N_CHANNELS} channels x {duration:.0f} s at {FS:.0f} Hz ({x.shape[1]} samples each), "
+        f"Hann nperseg {NPERSEG}, {NOVERLAP} overlap: {n_seg} segments, {NPERSEG // 2 + 1} bins"
+    )
+    log(
+        f"  timing the matrix (1 call) and {n_pairs} scipy.signal.coherence calls, "
+        f"1 warm-up + {repeat} repeats each ..."
+    )
     t_mat, C = timed(lambda: matrix_way(x), repeat)
     t_pair, pairs = timed(lambda: pairwise_way(x), repeat)
 
@@ -127,13 +135,21 @@ def main() -> int:
     log("=" * 78)
     log("coherence_matrix summary (issue 4), all figures from this run")
     log("-" * 78)
-    log(f"welch_csd_matrix + coherence   best {min(t_mat) * 1e3:8.1f} ms   median {med_mat * 1e3:8.1f} ms")
-    log(f"{n_pairs} x scipy.signal.coherence   best {min(t_pair) * 1e3:8.1f} ms   median {med_pair * 1e3:8.1f} ms "
-        f"({med_pair / n_pairs * 1e3:.1f} ms per pair)")
-    log(f"max relative difference over all pairs and bins: {worst:.2e} (pair {where}); "
-        f"median coherence of the coupled pair (0, 1): {hi:.3f}")
-    log(f"speed ratio (medians) {ratio:6.1f} x   (bests {min(t_pair) / min(t_mat):.1f} x)   "
-        f"target >= {TARGET_RATIO:.0f}: {verdict(ok)}")
+    log(
+        f"welch_csd_matrix + coherence   best {min(t_mat) * 1e3:8.1f} ms   median {med_mat * 1e3:8.1f} ms"
+    )
+    log(
+        f"{n_pairs} x scipy.signal.coherence   best {min(t_pair) * 1e3:8.1f} ms   median {med_pair * 1e3:8.1f} ms "
+        f"({med_pair / n_pairs * 1e3:.1f} ms per pair)"
+    )
+    log(
+        f"max relative difference over all pairs and bins: {worst:.2e} (pair {where}); "
+        f"median coherence of the coupled pair (0, 1): {hi:.3f}"
+    )
+    log(
+        f"speed ratio (medians) {ratio:6.1f} x   (bests {min(t_pair) / min(t_mat):.1f} x)   "
+        f"target >= {TARGET_RATIO:.0f}: {verdict(ok)}"
+    )
     if worst > 1e-10:
         log(f"RESULTS DIFFER: max relative difference {worst:.2e} > 1e-10")
     if not ok:

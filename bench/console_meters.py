@@ -71,8 +71,15 @@ def run_in_pty(cmd: list[str], warmup: float, seconds: float) -> tuple[int, floa
     master, slave = pty.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", ROWS, COLS, 0, 0))
     env = dict(os.environ, TERM="xterm-256color", COLUMNS=str(COLS), LINES=str(ROWS))
-    proc = subprocess.Popen(cmd, stdin=slave, stdout=slave, stderr=slave, env=env, start_new_session=True,
-                            cwd=HERE.parent)
+    proc = subprocess.Popen(
+        cmd,
+        stdin=slave,
+        stdout=slave,
+        stderr=slave,
+        env=env,
+        start_new_session=True,
+        cwd=HERE.parent,
+    )
     os.close(slave)
     stop = threading.Event()
 
@@ -105,10 +112,23 @@ def run_in_pty(cmd: list[str], warmup: float, seconds: float) -> tuple[int, floa
     return proc.returncode, frac
 
 
-def child(what: str, out: Path, warmup: float, seconds: float, tty: bool) -> tuple[dict, float | None]:
+def child(
+    what: str, out: Path, warmup: float, seconds: float, tty: bool
+) -> tuple[dict, float | None]:
     js = out / f"{what}.json"
-    cmd = [sys.executable, str(CHILD), what, "--out", str(out), "--warmup", str(warmup), "--seconds", str(seconds),
-           "--json", str(js)]
+    cmd = [
+        sys.executable,
+        str(CHILD),
+        what,
+        "--out",
+        str(out),
+        "--warmup",
+        str(warmup),
+        "--seconds",
+        str(seconds),
+        "--json",
+        str(js),
+    ]
     if tty:
         code, frac = run_in_pty(cmd, warmup, seconds)
     else:
@@ -131,22 +151,32 @@ def main() -> int:
     seconds = args.seconds or (10.0 if args.quick else 20.0)
     with tempfile.TemporaryDirectory(prefix="fbs-console-bench-") as tmp:
         out = Path(tmp)
-        log(f"console on an {COLS}x{ROWS} pty, rig sim?realtime=1, recording 16 channels at 1 kHz; "
-            f"{args.warmup:g} s warm-up, {seconds:g} s measured")
+        log(
+            f"console on an {COLS}x{ROWS} pty, rig sim?realtime=1, recording 16 channels at 1 kHz; "
+            f"{args.warmup:g} s warm-up, {seconds:g} s measured"
+        )
         base, _ = child("baseline", out, args.warmup, seconds, tty=False)
         con, proc_frac = child("console", out, args.warmup, seconds, tty=True)
     hz = con["paints"] / con["wall_s"]
     core = con["cpu_s"] / con["wall_s"]
     base_core = base["cpu_s"] / base["wall_s"]
-    log(f"  recording            console: {con['samples']} samples, {con['gaps']} gaps, status {con['status']}; "
-        f"baseline: {base['samples']} samples, {base['gaps']} gaps, status {base['status']}")
-    log(f"  meter refresh        {hz:6.1f} Hz    target >= {TARGET_HZ:g} Hz: ratio {hz / TARGET_HZ:5.2f}  "
-        f"{verdict(hz >= TARGET_HZ)}")
-    log(f"  console process CPU  {core:6.3f} core  target < {TARGET_CORE:g} core: ratio {TARGET_CORE / core:5.2f}  "
+    log(
+        f"  recording            console: {con['samples']} samples, {con['gaps']} gaps, status {con['status']}; "
+        f"baseline: {base['samples']} samples, {base['gaps']} gaps, status {base['status']}"
+    )
+    log(
+        f"  meter refresh        {hz:6.1f} Hz    target >= {TARGET_HZ:g} Hz: ratio {hz / TARGET_HZ:5.2f}  "
+        f"{verdict(hz >= TARGET_HZ)}"
+    )
+    log(
+        f"  console process CPU  {core:6.3f} core  target < {TARGET_CORE:g} core: ratio {TARGET_CORE / core:5.2f}  "
         f"{verdict(core < TARGET_CORE)}"
-        + (f"   (/proc cross-check {proc_frac:.3f})" if proc_frac is not None else ""))
-    log(f"  baseline (no console: rig + recording in one process) {base_core:6.3f} core; "
-        f"the console's own share {core - base_core:+.3f} core ({core / base_core:.2f} x the baseline)")
+        + (f"   (/proc cross-check {proc_frac:.3f})" if proc_frac is not None else "")
+    )
+    log(
+        f"  baseline (no console: rig + recording in one process) {base_core:6.3f} core; "
+        f"the console's own share {core - base_core:+.3f} core ({core / base_core:.2f} x the baseline)"
+    )
     if hz < TARGET_HZ:
         log(f"TARGET MISSED: meter refresh {hz:.1f} Hz < {TARGET_HZ:g} Hz")
     if core >= TARGET_CORE:

@@ -20,17 +20,26 @@ def toml_of(values: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def run_cases(run_case: Callable[..., dict[str, Any]], cases: list[tuple], jobs: int, out: str) -> list[dict[str, Any]]:
+def run_cases(
+    run_case: Callable[..., dict[str, Any]], cases: list[tuple], jobs: int, out: str
+) -> list[dict[str, Any]]:
     """``run_case(*case)`` for every case in a pool of ``jobs`` spawned processes; each record
     (a dict with ``seed`` and ``verdict`` or ``error``) is appended to ``out`` as it arrives."""
     recs: list[dict[str, Any]] = []
-    with open(out, "w") as jf, ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with (
+        open(out, "w") as jf,
+        ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool,
+    ):
         futs = [pool.submit(run_case, *case) for case in cases]
         for fut in as_completed(futs):
             rec = fut.result()
             recs.append(rec)
             jf.write(json.dumps(rec) + "\n")
             jf.flush()
-            print(f"[{len(recs)}/{len(cases)}] seed {rec['seed']}: {rec.get('verdict', rec.get('error'))} "
-                  f"{rec.get('wall_s', '')} s", file=sys.stderr, flush=True)
+            print(
+                f"[{len(recs)}/{len(cases)}] seed {rec['seed']}: {rec.get('verdict', rec.get('error'))} "
+                f"{rec.get('wall_s', '')} s",
+                file=sys.stderr,
+                flush=True,
+            )
     return recs

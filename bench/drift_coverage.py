@@ -75,22 +75,39 @@ def draw_rig(rng: np.random.Generator) -> dict[str, Any]:
     for c in CHANNELS:
         g = nominal.gyro[c]
         k = float(rng.uniform(0.5, 2.0))
-        gyro[c] = {"arw_urad_per_sqrt_s": round(_logu(rng, 0.003, 0.5), 5),
-                   "bias_instability_urad_per_s": round(_logu(rng, 0.005, 0.1), 5),
-                   "rrw_urad_per_s_per_sqrt_s": _logu(rng, 1e-6, 1e-4),
-                   "fixed_drift_urad_per_s": round(float(rng.uniform(-1.5, 1.5)), 4),
-                   "torquer_scale_urad_per_s_per_V": round(g.torquer_scale_urad_per_s_per_V * float(rng.uniform(0.85, 1.15)), 4),
-                   "pickoff_scale_mV_per_urad": round(g.pickoff_scale_mV_per_urad * float(rng.uniform(0.8, 1.2)), 4),
-                   "pickoff_noise_rms_urad": round(g.pickoff_noise_rms_urad * k, 4),
-                   "pickoff_lines": [[f, a * k] for f, a in g.pickoff_lines]}
+        gyro[c] = {
+            "arw_urad_per_sqrt_s": round(_logu(rng, 0.003, 0.5), 5),
+            "bias_instability_urad_per_s": round(_logu(rng, 0.005, 0.1), 5),
+            "rrw_urad_per_s_per_sqrt_s": _logu(rng, 1e-6, 1e-4),
+            "fixed_drift_urad_per_s": round(float(rng.uniform(-1.5, 1.5)), 4),
+            "torquer_scale_urad_per_s_per_V": round(
+                g.torquer_scale_urad_per_s_per_V * float(rng.uniform(0.85, 1.15)), 4
+            ),
+            "pickoff_scale_mV_per_urad": round(
+                g.pickoff_scale_mV_per_urad * float(rng.uniform(0.8, 1.2)), 4
+            ),
+            "pickoff_noise_rms_urad": round(g.pickoff_noise_rms_urad * k, 4),
+            "pickoff_lines": [[f, a * k] for f, a in g.pickoff_lines],
+        }
     nea = float(rng.uniform(0.6, 2.0))
     frac = round(float(rng.uniform(0.0, 0.6)), 3)
-    ac = {a: {"nea_urad": round(nominal.autocollimator[a].nea_urad * nea, 4), "common_noise_fraction": frac}
-          for a in ("X", "Y")}
-    return {"site": {"latitude_deg": round(float(rng.uniform(-60.0, 72.0)), 2)}, "gyro": gyro, "autocollimator": ac}
+    ac = {
+        a: {
+            "nea_urad": round(nominal.autocollimator[a].nea_urad * nea, 4),
+            "common_noise_fraction": frac,
+        }
+        for a in ("X", "Y")
+    }
+    return {
+        "site": {"latitude_deg": round(float(rng.uniform(-60.0, 72.0)), 2)},
+        "gyro": gyro,
+        "autocollimator": ac,
+    }
 
 
-def record(d: dict[str, Any], seed: int, duration_s: float, internal_hz: float = 200.0) -> dict[str, np.ndarray]:
+def record(
+    d: dict[str, Any], seed: int, duration_s: float, internal_hz: float = 200.0
+) -> dict[str, np.ndarray]:
     """The eight channels (V at the ADC) of ``duration_s`` in Mode 3 after the settle, the plant
     stepped at ``internal_hz`` (see the module docstring)."""
     from procedures.analysis.drift import pickoff, torq
@@ -105,7 +122,9 @@ def record(d: dict[str, Any], seed: int, duration_s: float, internal_hz: float =
     return {n: np.asarray(b[n], float) for n in names}
 
 
-def analyse(d: dict[str, Any], x: dict[str, np.ndarray], duration_s: float, scales: str) -> dict[str, Any]:
+def analyse(
+    d: dict[str, Any], x: dict[str, np.ndarray], duration_s: float, scales: str
+) -> dict[str, Any]:
     """The procedure's figures of one record; ``scales`` "true" (the rig's K_TO, K_g) or "nominal"."""
     from drivers.calibration import RigCalibration
     from procedures.analysis.drift import analyze_channels
@@ -119,21 +138,41 @@ def analyse(d: dict[str, Any], x: dict[str, np.ndarray], duration_s: float, scal
         kto, kg = dict(cal.torquer_scale_urad_per_s_per_V), dict(cal.pickoff_scale_mV_per_urad)
     p = Drift.Params(duration_s=duration_s)
     # as ``Drift.analyze``: the data sheet's tolerance where a scale is nominal
-    tol = {c: (p.nominal_kto_tol, p.nominal_kg_tol) if scales == "nominal" else (0.0, 0.0) for c in CHANNELS}
-    res = analyze_channels({k: [v] for k, v in x.items()}, FS, kto, p, kg, dict(cal.restraint_time_constant_s),
-                           getattr(cal, "viscous_coupling_h_over_c", None), scale_tol=tol)
+    tol = {
+        c: (p.nominal_kto_tol, p.nominal_kg_tol) if scales == "nominal" else (0.0, 0.0)
+        for c in CHANNELS
+    }
+    res = analyze_channels(
+        {k: [v] for k, v in x.items()},
+        FS,
+        kto,
+        p,
+        kg,
+        dict(cal.restraint_time_constant_s),
+        getattr(cal, "viscous_coupling_h_over_c", None),
+        scale_tol=tol,
+    )
     out: dict[str, Any] = {}
     for term, key in FIGURES.items():
         out[term] = {}
         for c in CHANNELS:
             e = res[c].estimate(term)
             t = d["gyro"][c][key]
-            out[term][c] = {"value": e.value, "lo": e.lo, "hi": e.hi, "resolved": e.resolved, "truth": t,
-                            "covered": bool(e.lo <= t <= e.hi), "why": e.why}
+            out[term][c] = {
+                "value": e.value,
+                "lo": e.lo,
+                "hi": e.hi,
+                "resolved": e.resolved,
+                "truth": t,
+                "covered": bool(e.lo <= t <= e.hi),
+                "why": e.why,
+            }
     return out
 
 
-def run_rig(i: int, seed: int, duration_s: float, cache: str | None, internal_hz: float) -> dict[str, Any]:
+def run_rig(
+    i: int, seed: int, duration_s: float, cache: str | None, internal_hz: float
+) -> dict[str, Any]:
     rng = np.random.default_rng([seed, i])
     d = draw_rig(rng)
     sim_seed = int(rng.integers(2**31))
@@ -163,18 +202,26 @@ def _row(label: str, items: list[dict[str, Any]]) -> str:
     mx = f"{100 * max(err):.1f}%" if err else "-"
     unres = [i for i in items if not i["resolved"]]
     held = sum(bool(i["covered"]) for i in unres)
-    return (f"{label:<28s} {n:>4d} {cov:>4d}/{n:<4d} {100 * cov / max(n, 1):>5.1f}% {med:>8s} {mx:>8s} "
-            f"{len(unres):>4d}/{n:<4d} {held:>4d}/{len(unres):<4d}")
+    return (
+        f"{label:<28s} {n:>4d} {cov:>4d}/{n:<4d} {100 * cov / max(n, 1):>5.1f}% {med:>8s} {mx:>8s} "
+        f"{len(unres):>4d}/{n:<4d} {held:>4d}/{len(unres):<4d}"
+    )
 
 
 def table(recs: list[dict[str, Any]]) -> str:
-    lines = [f"{'figure [scales, channel]':<28s} {'n':>4s} {'covered':>9s} {'':>6s} {'med|err|':>8s} {'max|err|':>8s} "
-             f"{'unresolved':>9s} {'unres held':>9s}"]
+    lines = [
+        f"{'figure [scales, channel]':<28s} {'n':>4s} {'covered':>9s} {'':>6s} {'med|err|':>8s} {'max|err|':>8s} "
+        f"{'unresolved':>9s} {'unres held':>9s}"
+    ]
     for scales in ("true", "nominal"):
         for term in FIGURES:
             for c in CHANNELS:
                 lines.append(_row(f"{term} [{scales}, {c}]", [r[scales][term][c] for r in recs]))
-            lines.append(_row(f"{term} [{scales}, all]", [r[scales][term][c] for r in recs for c in CHANNELS]))
+            lines.append(
+                _row(
+                    f"{term} [{scales}, all]", [r[scales][term][c] for r in recs for c in CHANNELS]
+                )
+            )
     return "\n".join(lines)
 
 
@@ -187,9 +234,12 @@ def misses(recs: list[dict[str, Any]]) -> str:
                     e = r[scales][term][c]
                     if not e["covered"]:
                         g = r["params"]["gyro"][c]
-                        out.append(f"rig {r['rig']} {scales} {term} {c}: {e['value']:.4g} [{e['lo']:.4g}, {e['hi']:.4g}] "
-                                   f"{'res' if e['resolved'] else 'unres'} truth {e['truth']:.4g} (N {g['arw_urad_per_sqrt_s']}, "
-                                   f"B {g['bias_instability_urad_per_s']}, pick {g['pickoff_noise_rms_urad']})")
+                        out.append(
+                            f"rig {r['rig']} {scales} {term} {c}: {e['value']:.4g} [{e['lo']:.4g}, {e['hi']:.4g}] "
+                            f"{'res' if e['resolved'] else 'unres'} truth {e['truth']:.4g} "
+                            f"(N {g['arw_urad_per_sqrt_s']}, "
+                            f"B {g['bias_instability_urad_per_s']}, pick {g['pickoff_noise_rms_urad']})"
+                        )
     return "\n".join(out)
 
 
@@ -197,9 +247,13 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rigs", type=int, default=40)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--duration", type=float, default=7200.0, help="record length after the settle (s)")
+    ap.add_argument(
+        "--duration", type=float, default=7200.0, help="record length after the settle (s)"
+    )
     ap.add_argument("--jobs", type=int, default=1)
-    ap.add_argument("--internal-hz", type=float, default=200.0, help="the plant's step rate (the rig's: 2000)")
+    ap.add_argument(
+        "--internal-hz", type=float, default=200.0, help="the plant's step rate (the rig's: 2000)"
+    )
     ap.add_argument("--cache", help="folder of the simulated records (.npz), reused when present")
     ap.add_argument("--out", type=Path, help="JSON lines of every rig")
     args = ap.parse_args()

@@ -43,10 +43,13 @@ from simhw.params import nominal_pickoff_lines  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 CHANNELS = ("X", "Y", "Z", "XRD")
 NOMINAL = {"X": (31.6, 6.03), "Y": (33.4, 6.70), "Z": (34.1, 7.51), "XRD": (32.0, 5.74)}
-FIGURES = {"K_TO_urad_per_s_per_V": "torquer_scale_urad_per_s_per_V", "drift_urad_per_s": "fixed_drift_urad_per_s",
-           "g_drift_x_urad_per_s_per_g": "g_drift_x_urad_per_s_per_g",
-           "g_drift_y_urad_per_s_per_g": "g_drift_y_urad_per_s_per_g",
-           "g_drift_z_urad_per_s_per_g": "g_drift_z_urad_per_s_per_g"}
+FIGURES = {
+    "K_TO_urad_per_s_per_V": "torquer_scale_urad_per_s_per_V",
+    "drift_urad_per_s": "fixed_drift_urad_per_s",
+    "g_drift_x_urad_per_s_per_g": "g_drift_x_urad_per_s_per_g",
+    "g_drift_y_urad_per_s_per_g": "g_drift_y_urad_per_s_per_g",
+    "g_drift_z_urad_per_s_per_g": "g_drift_z_urad_per_s_per_g",
+}
 
 
 #: the restraint time constants h/k the procedure's data sheet gives (DESIGN.md section 3)
@@ -55,27 +58,38 @@ RESTRAINT_S = {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0}
 PICKOFF_NOISE_URAD = {"X": 6.2, "Y": 12.4, "Z": 6.2, "XRD": 6.2}
 
 
-def draw(seed: int, random_drift: bool = True, vary_noise: bool = False) -> dict[str, dict[str, float]]:
+def draw(
+    seed: int, random_drift: bool = True, vary_noise: bool = False
+) -> dict[str, dict[str, float]]:
     """A random rig. ``vary_noise``: also what the analysis assumes and is never told - the
     gyros' random drift (white x0.5-3, flicker x0.3-2.5, random walk x0.3-3), the restraint time
     constants (x0.85-1.15 of the data sheet's) and the pickoff noise (x0.8-2)."""
     rng = np.random.default_rng([18, seed])
-    cfg: dict[str, dict[str, float]] = {"table": {"base_azimuth_offset_deg": float(rng.uniform(-1.0, 1.0))}}
+    cfg: dict[str, dict[str, float]] = {
+        "table": {"base_azimuth_offset_deg": float(rng.uniform(-1.0, 1.0))}
+    }
     for ch, (kto, kg) in NOMINAL.items():
-        cfg[f"gyro.{ch}"] = {"torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
-                             "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
-                             "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
-                             **{f"g_drift_{a}_urad_per_s_per_g": float(rng.uniform(-0.15, 0.15)) for a in "xyz"}}
+        cfg[f"gyro.{ch}"] = {
+            "torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
+            "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
+            "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
+            **{f"g_drift_{a}_urad_per_s_per_g": float(rng.uniform(-0.15, 0.15)) for a in "xyz"},
+        }
         if not random_drift:
-            cfg[f"gyro.{ch}"].update(arw_urad_per_sqrt_s=0.0, bias_instability_urad_per_s=0.0,
-                                     rrw_urad_per_s_per_sqrt_s=0.0)
+            cfg[f"gyro.{ch}"].update(
+                arw_urad_per_sqrt_s=0.0,
+                bias_instability_urad_per_s=0.0,
+                rrw_urad_per_s_per_sqrt_s=0.0,
+            )
     if vary_noise:
         rng2 = np.random.default_rng(seed + 77777)
         for ch in NOMINAL:
             g = cfg[f"gyro.{ch}"]
-            levels = {"arw_urad_per_sqrt_s": 0.005 * rng2.uniform(0.5, 3),
-                      "bias_instability_urad_per_s": 0.02 * rng2.uniform(0.3, 2.5),
-                      "rrw_urad_per_s_per_sqrt_s": 2e-5 * rng2.uniform(0.3, 3)}
+            levels = {
+                "arw_urad_per_sqrt_s": 0.005 * rng2.uniform(0.5, 3),
+                "bias_instability_urad_per_s": 0.02 * rng2.uniform(0.3, 2.5),
+                "rrw_urad_per_s_per_sqrt_s": 2e-5 * rng2.uniform(0.3, 3),
+            }
             if random_drift:
                 g.update({k: float(v) for k, v in levels.items()})
             g["restraint_time_s"] = float(RESTRAINT_S[ch] * rng2.uniform(0.85, 1.15))
@@ -86,8 +100,12 @@ def draw(seed: int, random_drift: bool = True, vary_noise: bool = False) -> dict
     return cfg
 
 
-def run_case(seed: int, random_drift: bool = True, spec_bias_instability: float | None = None,
-             vary_noise: bool = False) -> dict[str, Any]:
+def run_case(
+    seed: int,
+    random_drift: bool = True,
+    spec_bias_instability: float | None = None,
+    vary_noise: bool = False,
+) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from drivers.rig import open_rig
     from procedures.calibrations.earth_rate import EarthRate
@@ -101,7 +119,9 @@ def run_case(seed: int, random_drift: bool = True, spec_bias_instability: float 
         t0 = time.perf_counter()
         try:
             with open_rig(f"sim?warm=1&seed={seed}&watchdog=5&config={path}") as rig:
-                proc = EarthRate(EarthRate.Params(bias_instability_urad_per_s=spec_bias_instability))
+                proc = EarthRate(
+                    EarthRate.Params(bias_instability_urad_per_s=spec_bias_instability)
+                )
                 res = run_procedure(proc, rig, Path(d))
         except Exception as e:  # reported, not fatal
             rec["error"] = f"{type(e).__name__}: {e}"
@@ -114,9 +134,15 @@ def run_case(seed: int, random_drift: bool = True, spec_bias_instability: float 
 
 def summarize(recs: list[dict[str, Any]]) -> str:
     ok = [r for r in recs if "values" in r]
-    lines = [f"earth-rate coverage: {len(ok)} runs ({len(recs) - len(ok)} errors), verdicts "
-             + ", ".join(f"{v} {sum(r['verdict'] == v for r in ok)}" for v in sorted({r['verdict'] for r in ok}))]
-    lines.append(f"{'figure':<30s} {'channel':<4s} {'covered':>9s} {'resolved':>9s} {'|err|/half-width med':>21s}")
+    lines = [
+        f"earth-rate coverage: {len(ok)} runs ({len(recs) - len(ok)} errors), verdicts "
+        + ", ".join(
+            f"{v} {sum(r['verdict'] == v for r in ok)}" for v in sorted({r["verdict"] for r in ok})
+        )
+    ]
+    lines.append(
+        f"{'figure':<30s} {'channel':<4s} {'covered':>9s} {'resolved':>9s} {'|err|/half-width med':>21s}"
+    )
     for key, cfg_key in FIGURES.items():
         for ch in CHANNELS:
             cov, res, ratio, n = 0, 0, [], 0
@@ -140,19 +166,38 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, default=50)
     ap.add_argument("--first", type=int, default=0, help="first seed (to extend an earlier run)")
-    ap.add_argument("--also", nargs="*", default=[], help="earlier --out files to summarize with this run")
-    ap.add_argument("--spec-bias-instability", type=float, default=None,
-                    help="give the procedure the gyros' bias instability as a data sheet would (urad/s; the "
-                         "sim's default is 0.02)")
-    ap.add_argument("--no-random-drift", action="store_true",
-                    help="the gyros' random drift off (what a single run cannot average out)")
-    ap.add_argument("--vary-noise", action="store_true",
-                    help="also vary the gyros' random drift, restraint time constants and pickoff noise")
+    ap.add_argument(
+        "--also", nargs="*", default=[], help="earlier --out files to summarize with this run"
+    )
+    ap.add_argument(
+        "--spec-bias-instability",
+        type=float,
+        default=None,
+        help="give the procedure the gyros' bias instability as a data sheet would (urad/s; the "
+        "sim's default is 0.02)",
+    )
+    ap.add_argument(
+        "--no-random-drift",
+        action="store_true",
+        help="the gyros' random drift off (what a single run cannot average out)",
+    )
+    ap.add_argument(
+        "--vary-noise",
+        action="store_true",
+        help="also vary the gyros' random drift, restraint time constants and pickoff noise",
+    )
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="/tmp/earth_rate_coverage.jsonl")
     args = ap.parse_args(argv)
-    recs = run_cases(run_case, [(s, not args.no_random_drift, args.spec_bias_instability, args.vary_noise)
-                                for s in range(args.first, args.first + args.seeds)], args.jobs, args.out)
+    recs = run_cases(
+        run_case,
+        [
+            (s, not args.no_random_drift, args.spec_bias_instability, args.vary_noise)
+            for s in range(args.first, args.first + args.seeds)
+        ],
+        args.jobs,
+        args.out,
+    )
     for f in args.also:
         recs += [json.loads(line) for line in Path(f).read_text().splitlines() if line.strip()]
     print(summarize(recs))

@@ -75,11 +75,19 @@ def draw(case: int, n_defaults: int) -> tuple[str, dict[str, dict[str, Any]]]:
                     break
             bearing |= {"To_Nm": round(To, 5), "eta_per_Nm": round(eta, -3)}
         elif model == "viscous":
-            bearing["damping_Nms"] = round(float(math.exp(rng.uniform(math.log(0.02), math.log(0.5)))), 4)
+            bearing["damping_Nms"] = round(
+                float(math.exp(rng.uniform(math.log(0.02), math.log(0.5)))), 4
+            )
         elif model == "spring":
             bearing["stiffness_Nm_per_rad"] = round(float(rng.uniform(200, 700)), 1)
-        plat = {"inertia_kg_m2": round(base.platform[axis].inertia_kg_m2 * float(rng.uniform(0.7, 1.4)), 4),
-                "gyro_damping_Nms": round(base.platform[axis].gyro_damping_Nms * float(rng.uniform(0.8, 1.25)), 4)}
+        plat = {
+            "inertia_kg_m2": round(
+                base.platform[axis].inertia_kg_m2 * float(rng.uniform(0.7, 1.4)), 4
+            ),
+            "gyro_damping_Nms": round(
+                base.platform[axis].gyro_damping_Nms * float(rng.uniform(0.8, 1.25)), 4
+            ),
+        }
         comp = {k: round(v * float(rng.uniform(0.9, 1.15)), 4) for k, v in NOMINAL.items()}
         cfg = {f"platform.{axis}": plat, f"bearing.{axis}": bearing, "compensation": comp}
         import tempfile
@@ -92,8 +100,9 @@ def draw(case: int, n_defaults: int) -> tuple[str, dict[str, dict[str, Any]]]:
             return axis, cfg
 
 
-def truths(cfg_path: Path | None, axis: str, amplitude_urad: float | None, level_V_rms: float | None
-           ) -> dict[str, float | None]:
+def truths(
+    cfg_path: Path | None, axis: str, amplitude_urad: float | None, level_V_rms: float | None
+) -> dict[str, float | None]:
     from fbs.demo_truth import dahl_at_amplitude, dahl_equivalent_linear
     from simhw.params import SimConfig, load_config
 
@@ -104,12 +113,15 @@ def truths(cfg_path: Path | None, axis: str, amplitude_urad: float | None, level
     out["inertia_kg_m2"] = pa.inertia_kg_m2
     b = cfg.bearing[axis]
     if b.model == "dahl":
-        k0 = b.eta_per_Nm * b.To_Nm ** 2
+        k0 = b.eta_per_Nm * b.To_Nm**2
         w = math.sqrt(k0 / pa.inertia_kg_m2)
         out["stiffness_Nm_per_rad"] = out["damping_Nms"] = None
         if level_V_rms is not None:
             eq = dahl_equivalent_linear(cfg, axis, level_V_rms)
-            out["stiffness_Nm_per_rad"], out["damping_Nms"] = eq.stiffness_Nm_per_rad, eq.damping_Nms
+            out["stiffness_Nm_per_rad"], out["damping_Nms"] = (
+                eq.stiffness_Nm_per_rad,
+                eq.damping_Nms,
+            )
             out["offline_motion_urad_rms"] = eq.motion_urad_rms
         if amplitude_urad is not None:
             k, d, _ = dahl_at_amplitude(cfg, axis, amplitude_urad, w)
@@ -128,11 +140,18 @@ def _figures(values: dict[str, Any], axis: str) -> dict[str, dict[str, Any]]:
     out: dict[str, dict[str, Any]] = {}
     net = values.get("network") or {}
     for k in CORNERS:
-        out[k] = {"value": net.get(k), "ci95": net.get(f"{k}_ci95"), "resolved": (net.get("resolved") or {}).get(k),
-                  "why": (net.get("why_unresolved") or {}).get(k)}
+        out[k] = {
+            "value": net.get(k),
+            "ci95": net.get(f"{k}_ci95"),
+            "resolved": (net.get("resolved") or {}).get(k),
+            "why": (net.get("why_unresolved") or {}).get(k),
+        }
     for k in ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad"):
-        out[k] = {"value": (values.get(k) or {}).get(axis), "ci95": (values.get(f"{k}_ci95") or {}).get(axis),
-                  "resolved": ((values.get("resolved") or {}).get(k) or {}).get(axis)}
+        out[k] = {
+            "value": (values.get(k) or {}).get(axis),
+            "ci95": (values.get(f"{k}_ci95") or {}).get(axis),
+            "resolved": ((values.get("resolved") or {}).get(k) or {}).get(axis),
+        }
     return out
 
 
@@ -166,8 +185,13 @@ def run_case(case: int, n_defaults: int, keep: str, reanalyse: bool) -> dict[str
     files = sorted(folder.glob("excitation*.h5"))
     with open_rig(url) as rig:
         if reanalyse and files:
-            s = run_procedure(proc, rig, folder, resume=load_resume(files[-1], "excitation", complete_ok=True),
-                              report=False)
+            s = run_procedure(
+                proc,
+                rig,
+                folder,
+                resume=load_resume(files[-1], "excitation", complete_ok=True),
+                report=False,
+            )
         else:
             s = run_procedure(proc, rig, folder, report=False)
     values = s.json_values(Excitation.json_keys)
@@ -175,10 +199,20 @@ def run_case(case: int, n_defaults: int, keep: str, reanalyse: bool) -> dict[str
     amp = amplitude_of(values, axis)
     level = s.values.get("level_V_rms")
     truth = truths(cfg_path, axis, amp, None if level is None else float(level))
-    rec: dict[str, Any] = {"seed": case, "case": case, "axis": axis, "bearing": model, "config": cfg,
-                           "status": s.status, "verdict": str(s.verdict), "error": s.error, "amplitude_urad": amp,
-                           "level_limited_by": s.values.get("level_limited_by"), "truth": truth,
-                           "wall_s": round(time.monotonic() - wall, 1)}
+    rec: dict[str, Any] = {
+        "seed": case,
+        "case": case,
+        "axis": axis,
+        "bearing": model,
+        "config": cfg,
+        "status": s.status,
+        "verdict": str(s.verdict),
+        "error": s.error,
+        "amplitude_urad": amp,
+        "level_limited_by": s.values.get("level_limited_by"),
+        "truth": truth,
+        "wall_s": round(time.monotonic() - wall, 1),
+    }
     figs = _figures(values, axis)
     for k, fig in figs.items():
         t = truth.get(k)
@@ -191,21 +225,29 @@ def run_case(case: int, n_defaults: int, keep: str, reanalyse: bool) -> dict[str
 
 
 def table(recs: list[dict[str, Any]]) -> str:
-    rows = ["figure | bearing | n | resolved | covered (resolved) | covered (unresolved) | median |err| | max |err|"]
+    rows = [
+        "figure | bearing | n | resolved | covered (resolved) | covered (unresolved) | median |err| | max |err|"
+    ]
     keys = [*CORNERS, "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad"]
     for k in keys:
         for model in (*MODELS, "all"):
-            sel = [r["figures"][k] for r in recs if "figures" in r and (model == "all" or r["bearing"] == model)]
+            sel = [
+                r["figures"][k]
+                for r in recs
+                if "figures" in r and (model == "all" or r["bearing"] == model)
+            ]
             sel = [f for f in sel if f.get("truth") is not None]
             if not sel:
                 continue
             res = [f for f in sel if f["resolved"]]
             unr = [f for f in sel if not f["resolved"]]
             errs = [abs(f["rel_error"]) for f in res if f["rel_error"] is not None]
-            rows.append(f"{k} | {model} | {len(sel)} | {len(res)} | {sum(bool(f['covered']) for f in res)}/{len(res)} | "
-                        f"{sum(bool(f['covered']) for f in unr)}/{len(unr)} | "
-                        f"{statistics.median(errs) if errs else float('nan'):.3%} | "
-                        f"{max(errs) if errs else float('nan'):.3%}")
+            rows.append(
+                f"{k} | {model} | {len(sel)} | {len(res)} | {sum(bool(f['covered']) for f in res)}/{len(res)} | "
+                f"{sum(bool(f['covered']) for f in unr)}/{len(unr)} | "
+                f"{statistics.median(errs) if errs else float('nan'):.3%} | "
+                f"{max(errs) if errs else float('nan'):.3%}"
+            )
     return "\n".join(rows)
 
 
@@ -216,7 +258,9 @@ def main() -> None:
     ap.add_argument("--defaults", type=int, default=1)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--keep", default="/tmp/excitation_coverage")
-    ap.add_argument("--reanalyse", action="store_true", help="analyse the kept run files again, no new runs")
+    ap.add_argument(
+        "--reanalyse", action="store_true", help="analyse the kept run files again, no new runs"
+    )
     ap.add_argument("--out", default="excitation_coverage.jsonl")
     a = ap.parse_args()
     cases = [(c, a.defaults, a.keep, a.reanalyse) for c in range(a.first, a.first + a.cases)]
@@ -226,9 +270,14 @@ def main() -> None:
         f = r.get("figures") or {}
         line = " ".join(f"{k.split('_')[0]} {_fmt(v)}" for k, v in f.items())
         t = r.get("truth") or {}
-        df = (f" | sinusoidal DF k {t['df_stiffness_Nm_per_rad']:.4g} D {t['df_damping_Nms']:.4g}"
-              if "df_stiffness_Nm_per_rad" in t else "")
-        print(f"case {r['case']} {r['axis']} {r['bearing']} amp {r.get('amplitude_urad')}: {line}{df}")
+        df = (
+            f" | sinusoidal DF k {t['df_stiffness_Nm_per_rad']:.4g} D {t['df_damping_Nms']:.4g}"
+            if "df_stiffness_Nm_per_rad" in t
+            else ""
+        )
+        print(
+            f"case {r['case']} {r['axis']} {r['bearing']} amp {r.get('amplitude_urad')}: {line}{df}"
+        )
     print(table(recs))
 
 
@@ -236,8 +285,14 @@ def _fmt(f: dict[str, Any]) -> str:
     ci = f.get("ci95") or [None, None]
     v = f.get("value")
     mark = "" if f.get("covered") else " MISS"
-    return (f"{'-' if v is None else f'{v:.4g}'} [{ci[0]:.4g}, {ci[1]:.4g}]{'' if f.get('resolved') else ' (unres)'}"
-            f" /{f.get('truth'):.4g}{mark}") if ci[0] is not None and f.get("truth") is not None else "?"
+    return (
+        (
+            f"{'-' if v is None else f'{v:.4g}'} [{ci[0]:.4g}, {ci[1]:.4g}]{'' if f.get('resolved') else ' (unres)'}"
+            f" /{f.get('truth'):.4g}{mark}"
+        )
+        if ci[0] is not None and f.get("truth") is not None
+        else "?"
+    )
 
 
 if __name__ == "__main__":

@@ -50,16 +50,25 @@ def main() -> int:
     from simhw.simulator import Simulator
 
     conftest = _load("fbs_tests_gap_conftest", GAP_TESTS / "conftest.py")
-    independent = _load("fbs_tests_gap_independent", GAP_TESTS / "independent.py")  # = its MODULE_NAME
+    independent = _load(
+        "fbs_tests_gap_independent", GAP_TESTS / "independent.py"
+    )  # = its MODULE_NAME
     worst = 0.0
     with tempfile.TemporaryDirectory() as d:
         files = {
-            "simhw, hidden bearing": conftest.make_hidden(Path(d) / "bearing.h5",
-                                                          ["bearing_friction:stiffness_Nm_per_rad=410"], seed=3),
+            "simhw, hidden bearing": conftest.make_hidden(
+                Path(d) / "bearing.h5", ["bearing_friction:stiffness_Nm_per_rad=410"], seed=3
+            ),
             "independent, another unit, bearing + pickup line": independent.generate(
-                Path(d) / "two.h5", axis="Y", seed=5, duration_s=300.0, rate_hz=1000.0,
+                Path(d) / "two.h5",
+                axis="Y",
+                seed=5,
+                duration_s=300.0,
+                rate_hz=1000.0,
                 **independent.draw_nuisance(np.random.default_rng([17, 5])),
-                stiffness_Nm_per_rad=600.0, pickup=[(150.0, 0.004)]),
+                stiffness_Nm_per_rad=600.0,
+                pickup=[(150.0, 0.004)],
+            ),
         }
         for label, path in files.items():
             analyse(path)  # warm: numba caches, imports, the model's caches of this record
@@ -70,17 +79,23 @@ def main() -> int:
                 times.append(time.perf_counter() - t0)
             best = min(times)
             worst = max(worst, max(times))
-            print(f"fbs gap, {label}, 300 s x 4 channels at 1 kHz: {best:.1f} s (runs: "
-                  f"{', '.join(f'{t:.1f}' for t in times)}; median {statistics.median(times):.1f} s); named "
-                  f"{', '.join(f.effect for f in res.findings) or 'none'}, gap {res.gap_before_db:.2f} -> "
-                  f"{res.gap_after_db:.2f} dB")
+            print(
+                f"fbs gap, {label}, 300 s x 4 channels at 1 kHz: {best:.1f} s (runs: "
+                f"{', '.join(f'{t:.1f}' for t in times)}; median {statistics.median(times):.1f} s); named "
+                f"{', '.join(f.effect for f in res.findings) or 'none'}, gap {res.gap_before_db:.2f} -> "
+                f"{res.gap_after_db:.2f} dB"
+            )
         t0 = time.perf_counter()
         for _ in Simulator(effects.nominal(), 1000.0, seed=1, mode=3).run(300.0, 10.0):
             pass
         sim_s = time.perf_counter() - t0
-    print(f"baseline: one simulation of the record {sim_s:.2f} s; slowest analysis = {worst / sim_s:.1f} x baseline")
-    print(f"target <= {TARGET_S:.0f} s: slowest run {worst:.1f} s, ratio {worst / TARGET_S:.2f} of the target"
-          + ("" if worst <= TARGET_S else "  TARGET MISSED"))
+    print(
+        f"baseline: one simulation of the record {sim_s:.2f} s; slowest analysis = {worst / sim_s:.1f} x baseline"
+    )
+    print(
+        f"target <= {TARGET_S:.0f} s: slowest run {worst:.1f} s, ratio {worst / TARGET_S:.2f} of the target"
+        + ("" if worst <= TARGET_S else "  TARGET MISSED")
+    )
     print("development set of an independent simulator (tests/data/gapdata):", flush=True)
     devset = _load("fbs_bench_devset", Path(__file__).resolve().parent / "_devset.py")
     devset.main(["--jobs", "1"])

@@ -109,20 +109,26 @@ def envelope_corners(gen) -> list[tuple[str, dict[str, Any]]]:
     -1 Hz and x0.5), and a quiet white under a wide sharp 1/f (x0.6, max knee, 5 Hz, slope 0.8;
     gyro x2, lines -1 Hz, x2). The ADC ranges stay those ``draw_nuisance`` draws for the seed."""
     R = gen.NUISANCE_RANGES
-    freqs = [f for f, _ in gen.PICKOFF_LINES_URAD["X"]]   # the same on both axes
+    freqs = [f for f, _ in gen.PICKOFF_LINES_URAD["X"]]  # the same on both axes
     n = len(freqs)
 
     def unit(white, knee, corner, slope, gyro, shift, amp):
-        return {"ac_white_scale": R["ac_white_scale"][white], "ac_knee": float(knee),
-                "ac_flicker_corner_hz": R["ac_flicker_corner_hz"][corner], "ac_flicker_slope": R["ac_flicker_slope"][slope],
-                "pickoff_white_scale": R["pickoff_white_scale"][gyro],
-                "pickoff_line_freqs_hz": [round(f + R["line_shift_hz"][shift], 4) for f in freqs],
-                "pickoff_line_scales": [R["line_amplitude_scale"][amp]] * n}
+        return {
+            "ac_white_scale": R["ac_white_scale"][white],
+            "ac_knee": float(knee),
+            "ac_flicker_corner_hz": R["ac_flicker_corner_hz"][corner],
+            "ac_flicker_slope": R["ac_flicker_slope"][slope],
+            "pickoff_white_scale": R["pickoff_white_scale"][gyro],
+            "pickoff_line_freqs_hz": [round(f + R["line_shift_hz"][shift], 4) for f in freqs],
+            "pickoff_line_scales": [R["line_amplitude_scale"][amp]] * n,
+        }
 
     hi, lo = 1, 0
-    return [("X", unit(hi, 1, hi, hi, hi, hi, hi)),
-            ("Y", unit(lo, 0, lo, lo, lo, lo, lo)),
-            ("X", unit(lo, 0, hi, lo, hi, lo, hi))]
+    return [
+        ("X", unit(hi, 1, hi, hi, hi, hi, hi)),
+        ("Y", unit(lo, 0, lo, lo, lo, lo, lo)),
+        ("X", unit(lo, 0, hi, lo, hi, lo, hi)),
+    ]
 
 
 def cases(quick: bool) -> list[dict[str, Any]]:
@@ -134,8 +140,17 @@ def cases(quick: bool) -> list[dict[str, Any]]:
 
     def add(cat, name, axis, seed, kw, truth, hidden):
         nuisance = gen.draw_nuisance(np.random.default_rng([17, seed]))
-        out.append(dict(category=cat, name=name, axis=axis, seed=seed, kwargs={**nuisance, **kw},
-                        truth=truth, hidden=hidden))
+        out.append(
+            dict(
+                category=cat,
+                name=name,
+                axis=axis,
+                seed=seed,
+                kwargs={**nuisance, **kw},
+                truth=truth,
+                hidden=hidden,
+            )
+        )
 
     n_a = 2 if quick else 20
     for i in range(n_a):
@@ -156,20 +171,35 @@ def cases(quick: bool) -> list[dict[str, Any]]:
                 kw.update(k)
                 truth[eff] = t
             add("C", f"{pair[0]}+{pair[1]}#{i}", "XY"[(i + p_idx) % 2], seed, kw, truth, list(pair))
-    d_plan = [("dead_zone", "X"), ("lead_zero", "Y")] if quick else \
-        [("dead_zone", "X"), ("dead_zone", "Y"), ("dead_zone", "X"), ("lead_zero", "Y"), ("lead_zero", "X"),
-         ("lead_zero", "Y"), ("lead_pole", "X"), ("lead_pole", "Y")]
+    d_plan = (
+        [("dead_zone", "X"), ("lead_zero", "Y")]
+        if quick
+        else [
+            ("dead_zone", "X"),
+            ("dead_zone", "Y"),
+            ("dead_zone", "X"),
+            ("lead_zero", "Y"),
+            ("lead_zero", "X"),
+            ("lead_zero", "Y"),
+            ("lead_pole", "X"),
+            ("lead_pole", "Y"),
+        ]
+    )
     for i, (kind, axis) in enumerate(d_plan):
         seed = 4000 + i
         kw, truth = draw_outside(kind, np.random.default_rng([20, seed]))
         add("D", f"{kind}#{i}", axis, seed, kw, {kind: truth}, [kind])
-    for i, (axis, corner) in enumerate(envelope_corners(gen)[:1] if quick else envelope_corners(gen)):
+    for i, (axis, corner) in enumerate(
+        envelope_corners(gen)[:1] if quick else envelope_corners(gen)
+    ):
         add("E", f"corner#{i}", axis, 5000 + i, corner, {}, [])
     return out
 
 
 # --------------------------------------------------------------------------- one file
-def _interval(finding, param: str, value: float, unc: dict[str, float]) -> tuple[float, float] | None:
+def _interval(
+    finding, param: str, value: float, unc: dict[str, float]
+) -> tuple[float, float] | None:
     """The finding's 95 % interval of ``param``: its own if it gives one, else +-1.96 sigma."""
     for attr in ("intervals", "ci95", "intervals95"):
         iv = getattr(finding, attr, None)
@@ -194,13 +224,23 @@ def run_case(case: dict[str, Any], folder: str) -> dict[str, Any]:
     from procedures.analysis.gap.workflow import analyse
 
     gen = generator()
-    path = Path(folder) / f"{case['category']}_{case['name'].replace('#', '_').replace('+', '_')}.h5"
-    rec: dict[str, Any] = {k: case[k] for k in ("category", "name", "axis", "seed", "hidden", "truth")}
+    path = (
+        Path(folder) / f"{case['category']}_{case['name'].replace('#', '_').replace('+', '_')}.h5"
+    )
+    rec: dict[str, Any] = {
+        k: case[k] for k in ("category", "name", "axis", "seed", "hidden", "truth")
+    }
     rec["kwargs"] = case["kwargs"]
     try:
         t0 = time.perf_counter()
-        gen.generate(path, axis=case["axis"], seed=case["seed"], duration_s=DURATION_S, rate_hz=RATE_HZ,
-                     **case["kwargs"])
+        gen.generate(
+            path,
+            axis=case["axis"],
+            seed=case["seed"],
+            duration_s=DURATION_S,
+            rate_hz=RATE_HZ,
+            **case["kwargs"],
+        )
         rec["generate_s"] = round(time.perf_counter() - t0, 2)
         t0 = time.perf_counter()
         res = analyse(path)
@@ -214,7 +254,9 @@ def run_case(case: dict[str, Any], folder: str) -> dict[str, Any]:
     rec["significant"] = bool(res.significant)
     rec["explained"] = _explained(res, j)
     un = getattr(res, "unexplained", None)
-    rec["unexplained"] = un if isinstance(un, bool) else (len(un) if isinstance(un, (list, tuple)) else None)
+    rec["unexplained"] = (
+        un if isinstance(un, bool) else (len(un) if isinstance(un, (list, tuple)) else None)
+    )
     rec["gap_before_db"] = float(res.gap_before_db)
     rec["gap_after_db"] = float(res.gap_after_db)
     rec["warnings"] = list(res.warnings)
@@ -222,8 +264,12 @@ def run_case(case: dict[str, Any], folder: str) -> dict[str, Any]:
     for f in res.findings:
         params = {k: float(v) for k, v in f.parameters.items()}
         unc = {k: float(v) for k, v in f.uncertainties.items()}
-        item: dict[str, Any] = {"effect": f.effect, "parameters": params, "uncertainties": unc,
-                                "gap_closed_db": float(f.gap_before_db - f.gap_after_db)}
+        item: dict[str, Any] = {
+            "effect": f.effect,
+            "parameters": params,
+            "uncertainties": unc,
+            "gap_closed_db": float(f.gap_before_db - f.gap_after_db),
+        }
         truth = case["truth"].get(f.effect)
         key = generator().KEY_PARAM.get(f.effect)
         if truth and key in truth:
@@ -253,14 +299,19 @@ def describe(rec: dict[str, Any]) -> str:
         s = f["effect"]
         if "rel_error" in f:
             iv = f.get("interval95")
-            s += f" ({f['key']} {f['rel_error']:+.1%}" + ("" if iv is None else
-                                                          f", 95 % {'covers' if f['covers'] else 'misses'}") + ")"
+            s += (
+                f" ({f['key']} {f['rel_error']:+.1%}"
+                + ("" if iv is None else f", 95 % {'covers' if f['covers'] else 'misses'}")
+                + ")"
+            )
         parts.append(s)
     expl = rec.get("explained")
-    return (f"{head}: significant {rec['significant']!s:5s} named [{', '.join(parts) or '-'}] "
-            f"gap {rec['gap_before_db']:.2f} -> {rec['gap_after_db']:.2f} dB"
-            f"{'' if expl is None else f', explained {expl}'}, unexplained {rec['unexplained']}; "
-            f"{rec['generate_s']:.1f} + {rec['analyse_s']:.1f} s")
+    return (
+        f"{head}: significant {rec['significant']!s:5s} named [{', '.join(parts) or '-'}] "
+        f"gap {rec['gap_before_db']:.2f} -> {rec['gap_after_db']:.2f} dB"
+        f"{'' if expl is None else f', explained {expl}'}, unexplained {rec['unexplained']}; "
+        f"{rec['generate_s']:.1f} + {rec['analyse_s']:.1f} s"
+    )
 
 
 def _pct(k: int, n: int) -> str:
@@ -276,10 +327,12 @@ def summarize(recs: list[dict[str, Any]], wall_s: float, jobs: int) -> str:
     ok = [r for r in recs if "error" not in r]
     errors = [r for r in recs if "error" in r]
     an = [r["analyse_s"] for r in ok]
-    lines.append(f"gap hold-out baseline: {len(recs)} files ({DURATION_S:.0f} s, {RATE_HZ:.0f} Hz, Mode 3, axes X and Y; "
-                 f"independent generator with unit-to-unit variation), wall {wall_s:.0f} s on {jobs} workers; "
-                 f"analyse median {statistics.median(an) if an else float('nan'):.1f} s, max {max(an, default=0):.1f} s"
-                 + (f"; {len(errors)} ERRORS" if errors else ""))
+    lines.append(
+        f"gap hold-out baseline: {len(recs)} files ({DURATION_S:.0f} s, {RATE_HZ:.0f} Hz, Mode 3, axes X and Y; "
+        f"independent generator with unit-to-unit variation), wall {wall_s:.0f} s on {jobs} workers; "
+        f"analyse median {statistics.median(an) if an else float('nan'):.1f} s, max {max(an, default=0):.1f} s"
+        + (f"; {len(errors)} ERRORS" if errors else "")
+    )
 
     # A
     a = [r for r in ok if r["category"] == "A"]
@@ -288,45 +341,70 @@ def summarize(recs: list[dict[str, Any]], wall_s: float, jobs: int) -> str:
         names = Counter(n for r in a for n in _named(r))
         need = math.ceil(0.95 * len(a))
         lines.append("")
-        lines.append(f"A  nominal + unit-to-unit variation: significant:false {_pct(quiet, len(a))}  "
-                     f"(target >= {need}/{len(a)})  {_verdict(quiet >= need)}")
-        lines.append(f"   named on nominal files: {sum(bool(_named(r)) for r in a)} files; "
-                     + (", ".join(f"{k} {v}" for k, v in names.most_common()) or "none")
-                     + f"; gap_before median {statistics.median(r['gap_before_db'] for r in a):.2f} dB")
+        lines.append(
+            f"A  nominal + unit-to-unit variation: significant:false {_pct(quiet, len(a))}  "
+            f"(target >= {need}/{len(a)})  {_verdict(quiet >= need)}"
+        )
+        lines.append(
+            f"   named on nominal files: {sum(bool(_named(r)) for r in a)} files; "
+            + (", ".join(f"{k} {v}" for k, v in names.most_common()) or "none")
+            + f"; gap_before median {statistics.median(r['gap_before_db'] for r in a):.2f} dB"
+        )
 
     # B
     b = [r for r in ok if r["category"] == "B"]
     if b:
         lines.append("")
         lines.append("B  single hidden effect (draws over X and Y, with unit-to-unit variation)")
-        hdr = (f"   {'effect':<20s} {'n':>2s}  {'named 1st':>9s}  {'|err| med':>9s}  {'<=15 %':>6s}  {'95 % cov':>8s}  "
-               f"{'after<=.5 before':>16s}  {'spurious':>8s}  first-named when wrong")
+        hdr = (
+            f"   {'effect':<20s} {'n':>2s}  {'named 1st':>9s}  {'|err| med':>9s}  {'<=15 %':>6s}  {'95 % cov':>8s}  "
+            f"{'after<=.5 before':>16s}  {'spurious':>8s}  first-named when wrong"
+        )
         lines.append(hdr)
         tot = Counter()
         for eff in dict.fromkeys(r["hidden"][0] for r in b):
             rs = [r for r in b if r["hidden"][0] == eff]
             right = [r for r in rs if _named(r)[:1] == [eff]]
-            hit = [next((f for f in r["findings"] if f["effect"] == eff and "rel_error" in f), None) for r in rs]
+            hit = [
+                next((f for f in r["findings"] if f["effect"] == eff and "rel_error" in f), None)
+                for r in rs
+            ]
             errs = [abs(f["rel_error"]) for f in hit if f is not None]
             within = sum(e <= 0.15 for e in errs)
             cov_known = [f["covers"] for f in hit if f is not None and f.get("covers") is not None]
             cov = sum(cov_known)
-            halved = sum(r["gap_after_db"] <= 0.5 * r["gap_before_db"] and r["significant"] for r in rs)
+            halved = sum(
+                r["gap_after_db"] <= 0.5 * r["gap_before_db"] and r["significant"] for r in rs
+            )
             spurious = sum(sum(n != eff for n in _named(r)) for r in rs)
-            wrong = Counter(_named(r)[0] if _named(r) else "none" for r in rs if _named(r)[:1] != [eff])
+            wrong = Counter(
+                _named(r)[0] if _named(r) else "none" for r in rs if _named(r)[:1] != [eff]
+            )
             med = f"{100 * statistics.median(errs):.1f} %" if errs else "-"
-            lines.append(f"   {eff:<20s} {len(rs):>2d}  {len(right):>4d}/{len(rs):<4d}  {med:>9s}  {within:>2d}/{len(rs):<3d}  "
-                         f"{cov:>3d}/{len(cov_known):<4d}  {halved:>7d}/{len(rs):<8d}  {spurious:>8d}  "
-                         + (", ".join(f"{k} {v}" for k, v in wrong.items()) or "-"))
-            tot.update(n=len(rs), right=len(right), within=within, cov=cov, cov_n=len(cov_known), halved=halved,
-                       spurious=spurious, with_companion=sum(any(n != eff for n in _named(r)) for r in rs))
+            lines.append(
+                f"   {eff:<20s} {len(rs):>2d}  {len(right):>4d}/{len(rs):<4d}  {med:>9s}  {within:>2d}/{len(rs):<3d}  "
+                f"{cov:>3d}/{len(cov_known):<4d}  {halved:>7d}/{len(rs):<8d}  {spurious:>8d}  "
+                + (", ".join(f"{k} {v}" for k, v in wrong.items()) or "-")
+            )
+            tot.update(
+                n=len(rs),
+                right=len(right),
+                within=within,
+                cov=cov,
+                cov_n=len(cov_known),
+                halved=halved,
+                spurious=spurious,
+                with_companion=sum(any(n != eff for n in _named(r)) for r in rs),
+            )
         n = tot["n"]
-        lines.append(f"   {'all':<20s} {n:>2d}  named right {_pct(tot['right'], n)} (target >= 90 %) "
-                     f"{_verdict(tot['right'] >= 0.9 * n)}; key within 15 % {_pct(tot['within'], n)}; "
-                     f"95 % interval covers {_pct(tot['cov'], tot['cov_n'])} (target >= 85 %) "
-                     f"{_verdict(tot['cov_n'] > 0 and tot['cov'] >= 0.85 * tot['cov_n'])}; gap_after <= 0.5 gap_before "
-                     f"{_pct(tot['halved'], n)}; files with spurious companions {_pct(tot['with_companion'], n)} "
-                     f"({tot['spurious']} companions)")
+        lines.append(
+            f"   {'all':<20s} {n:>2d}  named right {_pct(tot['right'], n)} (target >= 90 %) "
+            f"{_verdict(tot['right'] >= 0.9 * n)}; key within 15 % {_pct(tot['within'], n)}; "
+            f"95 % interval covers {_pct(tot['cov'], tot['cov_n'])} (target >= 85 %) "
+            f"{_verdict(tot['cov_n'] > 0 and tot['cov'] >= 0.85 * tot['cov_n'])}; gap_after <= 0.5 gap_before "
+            f"{_pct(tot['halved'], n)}; files with spurious companions {_pct(tot['with_companion'], n)} "
+            f"({tot['spurious']} companions)"
+        )
 
     # C
     c = [r for r in ok if r["category"] == "C"]
@@ -341,11 +419,17 @@ def summarize(recs: list[dict[str, Any]], wall_s: float, jobs: int) -> str:
         missed = Counter(e for r in c for e in r["hidden"] if e not in _named(r))
         lines.append("")
         n_pairs = len({tuple(r["hidden"]) for r in c})
-        lines.append(f"C  two effects of different kinds ({len(c)} files, {n_pairs} pairs over X and Y): both named "
-                     f"{_pct(len(both), len(c))}; both and no third {_pct(len(clean), len(c))} (target >= 80 %) "
-                     f"{_verdict(len(clean) >= 0.8 * len(c))}; both key parameters within 20 % {_pct(within, len(c))}")
-        lines.append("   missed: " + (", ".join(f"{k} {v}" for k, v in missed.most_common()) or "none")
-                     + "; extra names: " + (", ".join(f"{k} {v}" for k, v in extra.most_common()) or "none"))
+        lines.append(
+            f"C  two effects of different kinds ({len(c)} files, {n_pairs} pairs over X and Y): both named "
+            f"{_pct(len(both), len(c))}; both and no third {_pct(len(clean), len(c))} (target >= 80 %) "
+            f"{_verdict(len(clean) >= 0.8 * len(c))}; both key parameters within 20 % {_pct(within, len(c))}"
+        )
+        lines.append(
+            "   missed: "
+            + (", ".join(f"{k} {v}" for k, v in missed.most_common()) or "none")
+            + "; extra names: "
+            + (", ".join(f"{k} {v}" for k, v in extra.most_common()) or "none")
+        )
         for r in c:
             lines.append(f"   {r['name']:<36s} {r['axis']}: named {', '.join(_named(r)) or '-'}")
 
@@ -356,29 +440,49 @@ def summarize(recs: list[dict[str, Any]], wall_s: float, jobs: int) -> str:
         good = [r for r in d if r.get("explained") is False or not (r["significant"] and _named(r))]
         wrong = [r for r in d if _named(r) and r.get("explained") is not False]
         lines.append("")
-        lines.append(f"D  outside the catalogue ({len(d)} files: " + ", ".join(
-            f"{k} {v}" for k, v in Counter(r["hidden"][0] for r in d).items()) + "): "
+        lines.append(
+            f"D  outside the catalogue ({len(d)} files: "
+            + ", ".join(f"{k} {v}" for k, v in Counter(r["hidden"][0] for r in d).items())
+            + "): "
             f"explained:false or not significant-and-named {_pct(len(good), len(d))} (target >= 80 %) "
             f"{_verdict(len(good) >= 0.8 * len(d))}; wrong names with explained true {_pct(len(wrong), len(d))} "
             f"(target <= 10 %) {_verdict(len(wrong) <= 0.1 * len(d))}"
-            + ("" if has_field else " [the result has no 'explained' field: any named effect counts as wrong]"))
-        lines.append(f"   significant {sum(r['significant'] for r in d)}/{len(d)}; result.unexplained true "
-                     f"{sum(bool(r.get('unexplained')) for r in d)}/{len(d)}; names given: "
-                     + (", ".join(f"{k} {v}" for k, v in Counter(n for r in d for n in _named(r)).most_common()) or "none"))
+            + (
+                ""
+                if has_field
+                else " [the result has no 'explained' field: any named effect counts as wrong]"
+            )
+        )
+        lines.append(
+            f"   significant {sum(r['significant'] for r in d)}/{len(d)}; result.unexplained true "
+            f"{sum(bool(r.get('unexplained')) for r in d)}/{len(d)}; names given: "
+            + (
+                ", ".join(
+                    f"{k} {v}" for k, v in Counter(n for r in d for n in _named(r)).most_common()
+                )
+                or "none"
+            )
+        )
         for r in d:
-            lines.append(f"   {r['name']:<14s} {r['axis']} {json.dumps(r['truth'][r['hidden'][0]])}: gap "
-                         f"{r['gap_before_db']:.2f} -> {r['gap_after_db']:.2f} dB, named {', '.join(_named(r)) or '-'}")
+            lines.append(
+                f"   {r['name']:<14s} {r['axis']} {json.dumps(r['truth'][r['hidden'][0]])}: gap "
+                f"{r['gap_before_db']:.2f} -> {r['gap_after_db']:.2f} dB, named {', '.join(_named(r)) or '-'}"
+            )
     # E
     e = [r for r in ok if r["category"] == "E"]
     if e:
         quiet = sum(not r["significant"] for r in e)
         need = math.ceil(0.95 * len(e))
         lines.append("")
-        lines.append(f"E  nominal units at the envelope's corners: significant:false {_pct(quiet, len(e))}  "
-                     f"(target >= {need}/{len(e)})  {_verdict(quiet >= need)}")
+        lines.append(
+            f"E  nominal units at the envelope's corners: significant:false {_pct(quiet, len(e))}  "
+            f"(target >= {need}/{len(e)})  {_verdict(quiet >= need)}"
+        )
         for r in e:
-            lines.append(f"   {r['name']:<10s} {r['axis']}: significant {r['significant']}, gap "
-                         f"{r['gap_before_db']:.2f} -> {r['gap_after_db']:.2f} dB, named {', '.join(_named(r)) or '-'}")
+            lines.append(
+                f"   {r['name']:<10s} {r['axis']}: significant {r['significant']}, gap "
+                f"{r['gap_before_db']:.2f} -> {r['gap_after_db']:.2f} dB, named {', '.join(_named(r)) or '-'}"
+            )
 
     if errors:
         lines.append("")
@@ -391,19 +495,36 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="a handful of cases (9 files)")
     ap.add_argument("--jobs", type=int, default=2, help="worker processes (default 2)")
     ap.add_argument("--out", default="/tmp/gap_holdout.jsonl", help="per-file results, JSON lines")
-    ap.add_argument("--only", default="", help="comma-separated substrings of '<category> <name>' (e.g. 'B pickup,C')")
+    ap.add_argument(
+        "--only",
+        default="",
+        help="comma-separated substrings of '<category> <name>' (e.g. 'B pickup,C')",
+    )
     args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
     todo = cases(args.quick)
     if args.only:
-        todo = [c for c in todo if any(p in f"{c['category']} {c['name']}" for p in args.only.split(","))]
-    print(f"gap_holdout: {len(todo)} files, {args.jobs} workers, results to {args.out}", file=sys.stderr, flush=True)
+        todo = [
+            c
+            for c in todo
+            if any(p in f"{c['category']} {c['name']}" for p in args.only.split(","))
+        ]
+    print(
+        f"gap_holdout: {len(todo)} files, {args.jobs} workers, results to {args.out}",
+        file=sys.stderr,
+        flush=True,
+    )
     t0 = time.perf_counter()
     recs: list[dict[str, Any]] = []
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(prefix="gap_holdout_") as folder, out.open("w") as jf, \
-            ProcessPoolExecutor(max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with (
+        tempfile.TemporaryDirectory(prefix="gap_holdout_") as folder,
+        out.open("w") as jf,
+        ProcessPoolExecutor(
+            max_workers=args.jobs, mp_context=multiprocessing.get_context("spawn")
+        ) as pool,
+    ):
         futures = {pool.submit(run_case, c, folder): c for c in todo}
         for fut in as_completed(futures):
             rec = fut.result()
@@ -413,9 +534,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"[{len(recs):2d}/{len(todo)}] {describe(rec)}", file=sys.stderr, flush=True)
             for f in rec.get("findings", []):
                 if f.get("interval95") is not None:
-                    print(f"        {f['effect']} {f['key']} = {f['parameters'][f['key']]:.6g}, 95 % "
-                          f"[{f['interval95'][0]:.6g}, {f['interval95'][1]:.6g}], truth "
-                          f"{rec['truth'][f['effect']][f['key']]:.6g}", file=sys.stderr, flush=True)
+                    print(
+                        f"        {f['effect']} {f['key']} = {f['parameters'][f['key']]:.6g}, 95 % "
+                        f"[{f['interval95'][0]:.6g}, {f['interval95'][1]:.6g}], truth "
+                        f"{rec['truth'][f['effect']][f['key']]:.6g}",
+                        file=sys.stderr,
+                        flush=True,
+                    )
     wall = time.perf_counter() - t0
     order = {(c["category"], c["name"]): i for i, c in enumerate(todo)}
     recs.sort(key=lambda r: order[(r["category"], r["name"])])

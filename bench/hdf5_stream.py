@@ -83,9 +83,9 @@ SAMPLES = 2_000_000
 BLOCK = 5000
 ROUNDS = 9
 RATE_HZ = 140_000.0
-FLUSH_S = 0.5             # RunWriter's default
+FLUSH_S = 0.5  # RunWriter's default
 SMALL_FLUSH_S = 0.05
-BUFFER_BYTES = 16 << 20   # RunWriter's default
+BUFFER_BYTES = 16 << 20  # RunWriter's default
 TARGET_RATIO = 0.70
 SEED = 70
 MB = 1e6
@@ -120,12 +120,21 @@ def bulk_write_reserved(x: np.ndarray, path: Path) -> float:
     return time.perf_counter() - t0
 
 
-def stream_write(x: np.ndarray, path: Path, *, block: int, flush_s: float, rate_hz: float,
-                 writer_cls: type = RunWriter) -> float:
+def stream_write(
+    x: np.ndarray,
+    path: Path,
+    *,
+    block: int,
+    flush_s: float,
+    rate_hz: float,
+    writer_cls: type = RunWriter,
+) -> float:
     t0 = time.perf_counter()
-    w = writer_cls(path, rig="bench", mode=0, rate_hz=rate_hz, channels=channel_units(), flush_s=flush_s)
+    w = writer_cls(
+        path, rig="bench", mode=0, rate_hz=rate_hz, channels=channel_units(), flush_s=flush_s
+    )
     for i in range(0, len(x), block):
-        w.append(x[i:i + block])
+        w.append(x[i : i + block])
     w.close()
     return time.perf_counter() - t0
 
@@ -138,11 +147,11 @@ def row_major_transpose(x: np.ndarray, *, block: int) -> float:
     t0 = time.perf_counter()
     k = 0
     for i in range(0, len(x), block):
-        b = x[i:i + block]
+        b = x[i : i + block]
         pos = 0
         while pos < len(b):
             m = min(len(b) - pos, cap - k)
-            buf[:, k:k + m] = b[pos:pos + m].T
+            buf[:, k : k + m] = b[pos : pos + m].T
             k, pos = (k + m) % cap, pos + m
     return time.perf_counter() - t0
 
@@ -209,11 +218,17 @@ def verdict(ok: bool) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="500,000 samples (64 MB), 3 rounds")
-    ap.add_argument("--samples", type=int, default=SAMPLES, help="rows of the (n, 16) float64 array")
+    ap.add_argument(
+        "--samples", type=int, default=SAMPLES, help="rows of the (n, 16) float64 array"
+    )
     ap.add_argument("--block", type=int, default=BLOCK, help="rows per append (an ADC block)")
     ap.add_argument("--rounds", type=int, default=ROUNDS, help="interleaved timing rounds")
-    ap.add_argument("--rate-hz", type=float, default=RATE_HZ,
-                    help="sample rate given to the writer (sets its chunk length only)")
+    ap.add_argument(
+        "--rate-hz",
+        type=float,
+        default=RATE_HZ,
+        help="sample rate given to the writer (sets its chunk length only)",
+    )
     ap.add_argument("--small-flush-s", type=float, default=SMALL_FLUSH_S)
     ap.add_argument("--dir", default=None, help="where to make the temporary directory")
     args = ap.parse_args()
@@ -225,9 +240,13 @@ def main() -> int:
     parent = pick_dir(args.dir)
     work = Path(tempfile.mkdtemp(prefix="hdf5_stream-", dir=parent))
     same_fs = work.stat().st_dev == REPO.stat().st_dev
-    log(f"hdf5_stream: h5py {h5py.version.version}, HDF5 {h5py.version.hdf5_version}, numpy {np.__version__}, "
-        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
-    log(f"  writing in {work} ({'same filesystem as' if same_fs else 'NOT the filesystem of'} the repository)")
+    log(
+        f"hdf5_stream: h5py {h5py.version.version}, HDF5 {h5py.version.hdf5_version}, numpy {np.__version__}, "
+        f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}"
+    )
+    log(
+        f"  writing in {work} ({'same filesystem as' if same_fs else 'NOT the filesystem of'} the repository)"
+    )
     try:
         x = make_data(n)
         # the same values as the ADC driver delivers blocks: [sample, channel], laid out channel
@@ -235,9 +254,11 @@ def main() -> int:
         xf = np.asfortranarray(x)
         size = x.nbytes
         chunk, chunk_small = chunk_samples(rate, FLUSH_S), chunk_samples(rate, args.small_flush_s)
-        log(f"  data: ({n}, {N_CHANNELS}) float64, {size / MB:.0f} MB; blocks of {block} rows "
+        log(
+            f"  data: ({n}, {N_CHANNELS}) float64, {size / MB:.0f} MB; blocks of {block} rows "
             f"({-(-n // block)} appends); writer at {rate:g} Hz: chunks of {chunk} samples "
-            f"({chunk * 8 // 1024} KiB) at flush_s {FLUSH_S:g}, {chunk_small} at {args.small_flush_s:g}")
+            f"({chunk * 8 // 1024} KiB) at flush_s {FLUSH_S:g}, {chunk_small} at {args.small_flush_s:g}"
+        )
 
         paths = iter(range(10**9))
 
@@ -253,7 +274,7 @@ def main() -> int:
             try:
                 view = memoryview(x).cast("B")
                 done = 0
-                while done < len(view):   # Linux writes at most ~2 GiB per call
+                while done < len(view):  # Linux writes at most ~2 GiB per call
                     done += os.write(fd, view[done:])
             finally:
                 os.close(fd)
@@ -272,26 +293,33 @@ def main() -> int:
             "bulk": lambda p: bulk_write(x, p),
             "stream": lambda p: stream_write(xf, p, block=block, flush_s=FLUSH_S, rate_hz=rate),
             "rows": lambda p: stream_write(x, p, block=block, flush_s=FLUSH_S, rate_hz=rate),
-            "small": lambda p: stream_write(xf, p, block=block, flush_s=args.small_flush_s, rate_hz=rate),
+            "small": lambda p: stream_write(
+                xf, p, block=block, flush_s=args.small_flush_s, rate_hz=rate
+            ),
             "reserved": lambda p: bulk_write_reserved(x, p),
         }
-        labels = {"bulk": "bulk h5py create_dataset",
-                  "stream": f"RunWriter, flush_s {FLUSH_S:g}",
-                  "rows": "RunWriter, row-major blocks (info)",
-                  "small": f"RunWriter, flush_s {args.small_flush_s:g}",
-                  "reserved": "bulk into reserved space (info)"}
+        labels = {
+            "bulk": "bulk h5py create_dataset",
+            "stream": f"RunWriter, flush_s {FLUSH_S:g}",
+            "rows": "RunWriter, row-major blocks (info)",
+            "small": f"RunWriter, flush_s {args.small_flush_s:g}",
+            "reserved": "bulk into reserved space (info)",
+        }
 
         # warm-up (allocator, page cache, h5py/HDF5 first-use costs), then the correctness check
         log("  warm-up: one run of each side, then the check run ...")
         for fn in sides.values():
             run(fn)
+
         def check_run(flush_s: float) -> tuple[float, int, int, Path]:
             prime()
             p = fresh()
             t0 = time.perf_counter()
-            w = CountingWriter(p, rig="bench", mode=0, rate_hz=rate, channels=channel_units(), flush_s=flush_s)
+            w = CountingWriter(
+                p, rig="bench", mode=0, rate_hz=rate, channels=channel_units(), flush_s=flush_s
+            )
             for i in range(0, n, block):
-                w.append(xf[i:i + block])
+                w.append(xf[i : i + block])
             w.close()
             return time.perf_counter() - t0, w.n_writes, w.n_flushes, p
 
@@ -301,9 +329,15 @@ def main() -> int:
         p.unlink()
         _, n_writes_small, n_flushes_small, p = check_run(args.small_flush_s)
         p.unlink()
-        log(f"  check run: {t_check:.3f} s, {n_writes} buffer writes of which {n_flushes} flushed ({n_writes_small}, "
+        log(
+            f"  check run: {t_check:.3f} s, {n_writes} buffer writes of which {n_flushes} flushed ({n_writes_small}, "
             f"{n_flushes_small} at flush_s {args.small_flush_s:g}), file {file_mb:.1f} MB; read back: "
-            f"{'all ' + str(N_CHANNELS) + ' channels equal their columns exactly' if not problems else '; '.join(problems)}")
+            + (
+                f"all {N_CHANNELS} channels equal their columns exactly"
+                if not problems
+                else "; ".join(problems)
+            )
+        )
 
         times: dict[str, list[float]] = {k: [] for k in sides}
         copy_times: list[float] = []
@@ -317,8 +351,11 @@ def main() -> int:
             for s, t in got.items():
                 times[s].append(t)
             copy_times.append(row_major_transpose(x, block=block))
-            log(f"    round {r + 1}: " + ", ".join(f"{s} {got[s]:.3f} s" for s in this)
-                + f"; row-major transpose alone {copy_times[-1]:.3f} s")
+            log(
+                f"    round {r + 1}: "
+                + ", ".join(f"{s} {got[s]:.3f} s" for s in this)
+                + f"; row-major transpose alone {copy_times[-1]:.3f} s"
+            )
 
         mem_peak = memory_peak(xf, fresh(), block=block, rate_hz=rate)
     finally:
@@ -334,31 +371,54 @@ def main() -> int:
 
     log("")
     log("=" * 90)
-    log(f"hdf5_stream summary: {N_CHANNELS} channels, {size / MB:.0f} MB float64, all figures from this run")
+    log(
+        f"hdf5_stream summary: {N_CHANNELS} channels, {size / MB:.0f} MB float64, all figures from this run"
+    )
     log("-" * 90)
     for s in sides:
-        log(f"{labels[s]:32s} best {best[s]:6.3f} s  median {med[s]:6.3f} s   "
-            f"{size / MB / med[s]:7.0f} MB/s median ({size / MB / best[s]:.0f} MB/s best)")
-    verdict = f"exact, status complete, {N_CHANNELS} 1-D float64 channels" if not problems else "PROBLEMS: " + "; ".join(problems)
+        log(
+            f"{labels[s]:32s} best {best[s]:6.3f} s  median {med[s]:6.3f} s   "
+            f"{size / MB / med[s]:7.0f} MB/s median ({size / MB / best[s]:.0f} MB/s best)"
+        )
+    verdict = (
+        f"exact, status complete, {N_CHANNELS} 1-D float64 channels"
+        if not problems
+        else "PROBLEMS: " + "; ".join(problems)
+    )
     log(f"read back: {verdict}")
-    log(f"writer memory (untimed run): tracemalloc peak {mem_peak / MB:.1f} MB = {mem_peak / size:.3f} x the data, "
-        f"{mem_peak / BUFFER_BYTES:.2f} x the {BUFFER_BYTES >> 20} MiB buffer")
+    log(
+        f"writer memory (untimed run): tracemalloc peak {mem_peak / MB:.1f} MB = {mem_peak / size:.3f} x the data, "
+        f"{mem_peak / BUFFER_BYTES:.2f} x the {BUFFER_BYTES >> 20} MiB buffer"
+    )
     med_copy = statistics.median(copy_times)
-    log(f"fed row-major (n, 16) blocks instead (information): {med['bulk'] / med['rows']:.2f} x bulk; append must "
+    log(
+        f"fed row-major (n, 16) blocks instead (information): {med['bulk'] / med['rows']:.2f} x bulk; append must "
         f"then transpose each block, which alone takes {med_copy:.3f} s (median, no HDF5) and which the writer's "
-        f"thread overlaps with the writes")
-    log(f"bulk into space reserved first (information; the target compares with plain h5py): "
+        f"thread overlaps with the writes"
+    )
+    log(
+        f"bulk into space reserved first (information; the target compares with plain h5py): "
         f"{med['bulk'] / med['reserved']:.2f} x the plain bulk throughput; streaming is "
-        f"{med['reserved'] / med['stream']:.2f} x that")
-    log(f"page-cache primes before the runs: median {statistics.median(prime_times):.3f} s, worst "
+        f"{med['reserved'] / med['stream']:.2f} x that"
+    )
+    log(
+        f"page-cache primes before the runs: median {statistics.median(prime_times):.3f} s, worst "
         f"{max(prime_times):.3f} s ({sum(t > 3 * statistics.median(prime_times) for t in prime_times)} of "
-        f"{len(prime_times)} over 3x the median: cold episodes absorbed there)")
-    log(f"flush_s {args.small_flush_s:g} (information): throughput {ratio_small:.2f} x bulk (medians), "
+        f"{len(prime_times)} over 3x the median: cold episodes absorbed there)"
+    )
+    log(
+        f"flush_s {args.small_flush_s:g} (information): throughput {ratio_small:.2f} x bulk (medians), "
         f"{ratio_small / ratio:.2f} x the default streaming; {n_flushes_small} flushes against {n_flushes}, "
-        f"chunks of {chunk_small} samples against {chunk} (more chunks, each with HDF5's per-chunk cost)")
-    log(f"streaming / bulk throughput (ratio of medians) {ratio:5.2f}   (bests {ratio_best:.2f}, "
-        f"median per-round {pair_ratio:.2f})   target >= {TARGET_RATIO:.2f}: {verdict(ok)}")
-    log(f"  bench wall time {time.monotonic() - t_start:.0f} s; load average (1 min) {os.getloadavg()[0]:.2f} at the end")
+        f"chunks of {chunk_small} samples against {chunk} (more chunks, each with HDF5's per-chunk cost)"
+    )
+    log(
+        f"streaming / bulk throughput (ratio of medians) {ratio:5.2f}   (bests {ratio_best:.2f}, "
+        f"median per-round {pair_ratio:.2f})   target >= {TARGET_RATIO:.2f}: {verdict(ok)}"
+    )
+    log(
+        f"  bench wall time {time.monotonic() - t_start:.0f} s; "
+        f"load average (1 min) {os.getloadavg()[0]:.2f} at the end"
+    )
     if problems:
         log(f"RESULTS DIFFER: {'; '.join(problems)}")
     if not ok:

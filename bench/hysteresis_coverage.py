@@ -47,7 +47,12 @@ def draw(case: int, n_defaults: int) -> tuple[str, float, float, bool]:
         return (axis, *THESIS[axis], True)
     rng = np.random.default_rng([18, 5, case])
     axis = "XY"[int(rng.integers(2))]
-    return axis, float(rng.uniform(0.008, 0.03)), float(math.exp(rng.uniform(math.log(0.8e6), math.log(3e6)))), False
+    return (
+        axis,
+        float(rng.uniform(0.008, 0.03)),
+        float(math.exp(rng.uniform(math.log(0.8e6), math.log(3e6)))),
+        False,
+    )
 
 
 def run_case(case: int, n_defaults: int) -> dict[str, Any]:
@@ -68,25 +73,40 @@ def run_case(case: int, n_defaults: int) -> dict[str, Any]:
         with open_rig(url) as rig:
             s = run_procedure(Hysteresis(Params(axis=axis)), rig, Path(tmp) / "out")
         values = s.json_values(Hysteresis.json_keys)
-    out: dict[str, Any] = {"case": case, "axis": axis, "default": default, "truth": truth, "status": s.status,
-                           "angle_lag_ms": values.get("angle_lag_ms"), "wall_s": time.monotonic() - wall}
+    out: dict[str, Any] = {
+        "case": case,
+        "axis": axis,
+        "default": default,
+        "truth": truth,
+        "status": s.status,
+        "angle_lag_ms": values.get("angle_lag_ms"),
+        "wall_s": time.monotonic() - wall,
+    }
     for key in FIGURES:
         lo, hi = values.get(f"{key}_ci95") or (None, None)
         resolved = ((values.get("resolved") or {}).get(key) or {}).get(axis)
         value = s.values.get(key)
-        out[key] = {"value": value, "ci95": [lo, hi], "resolved": resolved,
-                    "covered": lo is not None and hi is not None and lo <= truth[key] <= hi,
-                    "rel_error": None if value is None else value / truth[key] - 1.0,
-                    "error_over_half_width": None if value is None or lo is None or hi is None or hi <= lo
-                    else abs(value - truth[key]) / (0.5 * (hi - lo))}
+        out[key] = {
+            "value": value,
+            "ci95": [lo, hi],
+            "resolved": resolved,
+            "covered": lo is not None and hi is not None and lo <= truth[key] <= hi,
+            "rel_error": None if value is None else value / truth[key] - 1.0,
+            "error_over_half_width": None
+            if value is None or lo is None or hi is None or hi <= lo
+            else abs(value - truth[key]) / (0.5 * (hi - lo)),
+        }
     return out
 
 
 def report(rows: list[dict[str, Any]]) -> None:
     ok = [r for r in rows if r["status"] == "complete"]
     print(f"hysteresis coverage: {len(ok)} of {len(rows)} runs complete")
-    for subset, name in ((ok, "all"), ([r for r in ok if r["default"]], "thesis defaults"),
-                         ([r for r in ok if not r["default"]], "random bearings")):
+    for subset, name in (
+        (ok, "all"),
+        ([r for r in ok if r["default"]], "thesis defaults"),
+        ([r for r in ok if not r["default"]], "random bearings"),
+    ):
         if not subset:
             continue
         print(f"  {name} ({len(subset)} runs):")
@@ -94,19 +114,31 @@ def report(rows: list[dict[str, Any]]) -> None:
             cov = sum(r[key]["covered"] for r in subset)
             res = sum(bool(r[key]["resolved"]) for r in subset)
             errs = [abs(r[key]["rel_error"]) for r in subset if r[key]["rel_error"] is not None]
-            ratio = [r[key]["error_over_half_width"] for r in subset if r[key]["error_over_half_width"] is not None]
-            print(f"    {key:22s} coverage {cov}/{len(subset)} = {100 * cov / len(subset):5.1f} %, resolved {res}, "
-                  f"|error| median {100 * statistics.median(errs):.2f} % max {100 * max(errs):.2f} %, "
-                  f"|error|/half-width median {statistics.median(ratio):.2f}" if errs and ratio else "")
+            ratio = [
+                r[key]["error_over_half_width"]
+                for r in subset
+                if r[key]["error_over_half_width"] is not None
+            ]
+            print(
+                f"    {key:22s} coverage {cov}/{len(subset)} = {100 * cov / len(subset):5.1f} %, resolved {res}, "
+                f"|error| median {100 * statistics.median(errs):.2f} % max {100 * max(errs):.2f} %, "
+                f"|error|/half-width median {statistics.median(ratio):.2f}"
+                if errs and ratio
+                else ""
+            )
     lags = [r["angle_lag_ms"] for r in ok if r["angle_lag_ms"] is not None]
     if lags:
-        print(f"  measured angle lag: median {statistics.median(lags):.3f} ms, range {min(lags):.3f}..{max(lags):.3f} ms")
+        print(
+            f"  measured angle lag: median {statistics.median(lags):.3f} ms, range {min(lags):.3f}..{max(lags):.3f} ms"
+        )
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seeds", type=int, default=50, help="runs in all (default 50)")
-    ap.add_argument("--defaults", type=int, default=6, help="of which with the thesis's bearings (default 6)")
+    ap.add_argument(
+        "--defaults", type=int, default=6, help="of which with the thesis's bearings (default 6)"
+    )
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--out", type=Path, help="one JSON line per run")
     args = ap.parse_args(argv)
@@ -125,10 +157,16 @@ def main(argv: list[str] | None = None) -> int:
                 with args.out.open("a") as f:
                     f.write(json.dumps(row) + "\n")
             if row["status"] == "complete":
-                print(f"case {row['case']:3d} {row['axis']} {'default' if row['default'] else 'random '} "
-                      f"lag {row['angle_lag_ms']:.3f} ms " + " ".join(
-                          f"{k.split('_')[0]} {100 * (row[k]['rel_error'] or math.nan):+.2f}%"
-                          f"{'' if row[k]['covered'] else '(!)'}" for k in FIGURES), flush=True)
+                print(
+                    f"case {row['case']:3d} {row['axis']} {'default' if row['default'] else 'random '} "
+                    f"lag {row['angle_lag_ms']:.3f} ms "
+                    + " ".join(
+                        f"{k.split('_')[0]} {100 * (row[k]['rel_error'] or math.nan):+.2f}%"
+                        f"{'' if row[k]['covered'] else '(!)'}"
+                        for k in FIGURES
+                    ),
+                    flush=True,
+                )
             else:
                 print(f"case {row['case']}: {row['status']}", flush=True)
     report(rows)

@@ -33,7 +33,7 @@ def offline_speed(channels: list[str], rate_hz: float, rig_s: float, seed: int =
     from simhw.simulator import Simulator
 
     sim = Simulator(None, rate_hz=rate_hz, seed=seed, mode=3, channels=channels)
-    sim.advance(int(rate_hz))                                   # kernels compiled, caches warm
+    sim.advance(int(rate_hz))  # kernels compiled, caches warm
     seconds = min(rig_s, BASELINE_CAP_S)
     t0 = time.perf_counter()
     for _ in sim.run(seconds, block_s=1.0):
@@ -49,7 +49,9 @@ def main(argv: list[str] | None = None) -> int:
     from procedures.runner import run_procedure
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--only", default="", help="comma-separated procedure names (default: the whole campaign)")
+    ap.add_argument(
+        "--only", default="", help="comma-separated procedure names (default: the whole campaign)"
+    )
     a = ap.parse_args(argv)
     only = {s.strip() for s in a.only.split(",") if s.strip()}
     rows = []
@@ -57,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as d, open_rig("sim?seed=0&watchdog=5") as rig:
         for i, (name, axis, params) in enumerate(campaign()):
             if only and name not in only:
-                continue            # not run at all: a procedure without its prior runs as ``fbs run`` does
+                continue  # not run at all: a procedure without its prior runs as ``fbs run`` does
             cls = get(name)
             proc = cls(parse_params(cls, list(params), axis), prior=prior)
             t_rig, t_wall = rig.now(), time.perf_counter()
@@ -74,15 +76,35 @@ def main(argv: list[str] | None = None) -> int:
                 chans = list(f["channels"])
                 rate = float(f["channels"][chans[0]].attrs["sample_rate_hz"])
             base = offline_speed(chans, rate, rig_s)
-            rows.append((label, rig_s, wall, rig_s / wall, base, rig_s / wall / base, len(chans), rate, s.verdict))
-            print(f"{label}: {rig_s:.0f} rig s in {wall:.1f} s, {rig_s / wall:.1f}x real time; offline "
-                  f"{base:.0f}x ({len(chans)} channels at {rate:g} Hz)", file=sys.stderr, flush=True)
-    print(f"{'procedure':<28} {'rig s':>7} {'wall s':>7} {'x real':>7} {'offline x':>9} {'share':>6}  channels, rate")
+            rows.append(
+                (
+                    label,
+                    rig_s,
+                    wall,
+                    rig_s / wall,
+                    base,
+                    rig_s / wall / base,
+                    len(chans),
+                    rate,
+                    s.verdict,
+                )
+            )
+            print(
+                f"{label}: {rig_s:.0f} rig s in {wall:.1f} s, {rig_s / wall:.1f}x real time; offline "
+                f"{base:.0f}x ({len(chans)} channels at {rate:g} Hz)",
+                file=sys.stderr,
+                flush=True,
+            )
+    print(
+        f"{'procedure':<28} {'rig s':>7} {'wall s':>7} {'x real':>7} {'offline x':>9} {'share':>6}  channels, rate"
+    )
     for label, rig_s, wall, x, base, share, nch, rate, verdict in rows:
         miss = [f"x real {x:.1f} < {TARGET_X_REALTIME:g}"] if x < TARGET_X_REALTIME else []
         miss += [f"share {share:.2f} < {TARGET_SHARE:g}"] if share < TARGET_SHARE else []
-        print(f"{label:<28} {rig_s:7.0f} {wall:7.1f} {x:7.1f} {base:9.0f} {share:6.2f}  {nch} at {rate:g} Hz"
-              f" ({verdict})" + (f"  TARGET MISSED: {'; '.join(miss)}" if miss else ""))
+        print(
+            f"{label:<28} {rig_s:7.0f} {wall:7.1f} {x:7.1f} {base:9.0f} {share:6.2f}  {nch} at {rate:g} Hz"
+            f" ({verdict})" + (f"  TARGET MISSED: {'; '.join(miss)}" if miss else "")
+        )
     return 0
 
 

@@ -27,8 +27,11 @@ class Outcome:
 
 def discover() -> list[Path]:
     """The benchmark scripts, in sorted order."""
-    return sorted(p for p in HERE.glob("*.py")
-                  if p.resolve() != Path(__file__).resolve() and not p.name.startswith("_"))
+    return sorted(
+        p
+        for p in HERE.glob("*.py")
+        if p.resolve() != Path(__file__).resolve() and not p.name.startswith("_")
+    )
 
 
 def run_one(script: Path) -> Outcome:

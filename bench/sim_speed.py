@@ -56,10 +56,25 @@ AXIS = "X"
 SINGLE_AXIS_CHANNELS = tuple(RANGES_V)
 #: The states of one platform axis in mode 3. The gyro (sigma_*, cage_*) and the
 #: instrumentation filter (acinst*) states listen to the axis but never act on it.
-AXIS_STATES = ("theta", "omega", "i", "comp1", "comp2", "comp3", "comp4", "acctl_{a}_p", "acctl_{a}_v")
+AXIS_STATES = (
+    "theta",
+    "omega",
+    "i",
+    "comp1",
+    "comp2",
+    "comp3",
+    "comp4",
+    "acctl_{a}_p",
+    "acctl_{a}_v",
+)
 #: The smooth deterministic autocollimator-noise stand-in: (frequency Hz, amplitude rad, phase).
-INPUT_TONES = ((0.5, 1.0e-6, 0.3), (2.3, 0.8e-6, 1.1), (7.1, 1.2e-6, 2.0),
-               (17.9, 0.7e-6, 0.7), (39.7, 0.9e-6, 2.6))
+INPUT_TONES = (
+    (0.5, 1.0e-6, 0.3),
+    (2.3, 0.8e-6, 1.1),
+    (7.1, 1.2e-6, 2.0),
+    (17.9, 0.7e-6, 0.7),
+    (39.7, 0.9e-6, 2.6),
+)
 #: solve_ivp tolerances tried, loosest first (half decades: generous to scipy); atol is
 #: rtol times each state's magnitude.
 RTOLS = (1e-1, 3e-2, 1e-2, 3e-3, 1e-3, 3e-4, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9)
@@ -90,6 +105,7 @@ def peak_rss_mb(who: int) -> float:
 
 
 # ---------------------------------------------------------------------------- 1. the full rig
+
 
 def current_rss_mb() -> float:
     with open("/proc/self/status") as fh:
@@ -122,8 +138,16 @@ def run_hour_child(repeat: int, duration_s: float, channels: tuple[str, ...] | N
         pass
     del warm
     runs = [one_run() for _ in range(repeat)]
-    print(json.dumps({"seconds": [r[0] for r in runs], "samples": runs[0][1], "dt": runs[0][2],
-                      "rss_imports_mb": rss_imports}))
+    print(
+        json.dumps(
+            {
+                "seconds": [r[0] for r in runs],
+                "samples": runs[0][1],
+                "dt": runs[0][2],
+                "rss_imports_mb": rss_imports,
+            }
+        )
+    )
 
 
 @dataclass
@@ -144,11 +168,20 @@ class HourResult:
         return self.duration_s / self.best
 
 
-def bench_full_rig(repeat: int, duration_s: float, channels: tuple[str, ...] | None = None) -> HourResult:
+def bench_full_rig(
+    repeat: int, duration_s: float, channels: tuple[str, ...] | None = None
+) -> HourResult:
     """Run the hour in a child process so its peak RSS is the rig's alone (the peak over the
     children so far: run the full rig first)."""
-    cmd = [sys.executable, os.path.abspath(__file__), "--hour-child",
-           "--repeat", str(repeat), "--duration", str(duration_s)]
+    cmd = [
+        sys.executable,
+        os.path.abspath(__file__),
+        "--hour-child",
+        "--repeat",
+        str(repeat),
+        "--duration",
+        str(duration_s),
+    ]
     if channels is not None:
         cmd += ["--channels", ",".join(channels)]
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
@@ -156,11 +189,18 @@ def bench_full_rig(repeat: int, duration_s: float, channels: tuple[str, ...] | N
     if proc.returncode != 0:
         raise RuntimeError(f"hour child failed ({proc.returncode}):\n{proc.stderr}")
     data = json.loads(proc.stdout.strip().splitlines()[-1])
-    return HourResult(data["seconds"], data["samples"], data["dt"], data["rss_imports_mb"],
-                      peak_rss_mb(resource.RUSAGE_CHILDREN), duration_s)
+    return HourResult(
+        data["seconds"],
+        data["samples"],
+        data["dt"],
+        data["rss_imports_mb"],
+        peak_rss_mb(resource.RUSAGE_CHILDREN),
+        duration_s,
+    )
 
 
 # ---------------------------------------------------------------------------- 2. one axis
+
 
 def axis_state_names(axis: str) -> list[str]:
     return [s.format(a=axis) if "{a}" in s else f"{s}_{axis}" for s in AXIS_STATES]
@@ -189,7 +229,9 @@ def axis_plant(full: Plant, axis: str) -> Plant:
     dropped = [i for i in range(len(full.states)) if i not in set(xi)]
     coupling = np.abs(full.A[np.ix_(xi, dropped)]).max()
     if coupling != 0.0:
-        raise RuntimeError(f"axis {axis} is not decoupled in this mode (max |A| into it: {coupling})")
+        raise RuntimeError(
+            f"axis {axis} is not decoupled in this mode (max |A| into it: {coupling})"
+        )
     ui = [j for j in range(len(full.inputs)) if np.any(full.B[xi, j] != 0.0)]
     xmap = {i: k for k, i in enumerate(xi)}
     umap = {j: k for k, j in enumerate(ui)}
@@ -198,19 +240,43 @@ def axis_plant(full: Plant, axis: str) -> Plant:
         z = _remap(nl.z, xmap, umap)
         if z is None or (nl.col >= 0 and nl.col not in umap):
             continue
-        nonlinear.append(Nonlinearity(nl.name, nl.kind, z, umap.get(nl.col, -1), nl.p1, nl.p2, nl.gain,
-                                      xmap.get(nl.state_theta, -1), xmap.get(nl.state_omega, -1)))
+        nonlinear.append(
+            Nonlinearity(
+                nl.name,
+                nl.kind,
+                z,
+                umap.get(nl.col, -1),
+                nl.p1,
+                nl.p2,
+                nl.gain,
+                xmap.get(nl.state_theta, -1),
+                xmap.get(nl.state_omega, -1),
+            )
+        )
     fed = {nl.col for nl in nonlinear}
-    orphans = [full.inputs[j] for j in ui if full.inputs[j].startswith("corr_") and umap[j] not in fed]
+    orphans = [
+        full.inputs[j] for j in ui if full.inputs[j].startswith("corr_") and umap[j] not in fed
+    ]
     if orphans:
         raise RuntimeError(f"corrections without their nonlinearity: {orphans}")
-    keep_y = [r for r in range(len(full.outputs))
-              if not full.C[r, dropped].any() and not np.delete(full.D[r], ui).any()
-              and (full.C[r, xi].any() or full.D[r, ui].any())]
-    return Plant([full.states[i] for i in xi], [full.inputs[j] for j in ui],
-                 [full.outputs[r] for r in keep_y], full.A[np.ix_(xi, xi)], full.B[:, ui][xi],
-                 full.C[np.ix_(keep_y, xi)], full.D[np.ix_(keep_y, ui)], nonlinear,
-                 [s for s in full.slow_inputs if s in {full.inputs[j] for j in ui}])
+    keep_y = [
+        r
+        for r in range(len(full.outputs))
+        if not full.C[r, dropped].any()
+        and not np.delete(full.D[r], ui).any()
+        and (full.C[r, xi].any() or full.D[r, ui].any())
+    ]
+    return Plant(
+        [full.states[i] for i in xi],
+        [full.inputs[j] for j in ui],
+        [full.outputs[r] for r in keep_y],
+        full.A[np.ix_(xi, xi)],
+        full.B[:, ui][xi],
+        full.C[np.ix_(keep_y, xi)],
+        full.D[np.ix_(keep_y, ui)],
+        nonlinear,
+        [s for s in full.slow_inputs if s in {full.inputs[j] for j in ui}],
+    )
 
 
 _TONE_W = np.array([2 * math.pi * f for f, _, _ in INPUT_TONES])
@@ -262,8 +328,8 @@ class ZohAxis:
     """The project's method on one axis: exact ZOH (``discretize``) run by the numba kernel."""
 
     compiled: CompiledPlant
-    nac_col: int     # kernel (fast) column of nac
-    theta_out: int   # output row of the true angle
+    nac_col: int  # kernel (fast) column of nac
+    theta_out: int  # output row of the true angle
     n_slow: int
 
     @classmethod
@@ -341,14 +407,24 @@ class IvpRun:
     error: float = math.nan
 
 
-def run_ivp(ode: DahlAxisOde, t_out: np.ndarray, method: str, rtol: float,
-            scale: np.ndarray) -> IvpRun:
+def run_ivp(
+    ode: DahlAxisOde, t_out: np.ndarray, method: str, rtol: float, scale: np.ndarray
+) -> IvpRun:
     """Integrate from rest to t_out[-1]; theta at t_out (dense output between steps)."""
     y0 = np.zeros(ode.n_states)
     kw = {"jac": ode.jac} if method in ("Radau", "BDF", "LSODA") else {}
     t0 = time.perf_counter()
-    sol = solve_ivp(ode.rhs, (0.0, float(t_out[-1])), y0, method=method, t_eval=t_out,
-                    rtol=rtol, atol=rtol * scale, max_step=ode.signal.max_step, **kw)
+    sol = solve_ivp(
+        ode.rhs,
+        (0.0, float(t_out[-1])),
+        y0,
+        method=method,
+        t_eval=t_out,
+        rtol=rtol,
+        atol=rtol * scale,
+        max_step=ode.signal.max_step,
+        **kw,
+    )
     seconds = time.perf_counter() - t0
     if not sol.success:
         raise RuntimeError(f"solve_ivp {method} rtol={rtol:g}: {sol.message}")
@@ -393,7 +469,7 @@ class AxisResult:
     full_kernel_s_per_s: float
     full_kernel_diff: float
     ref_spread: float
-    runs: list[IvpRun]   # solve_ivp per method at error <= the ZOH's
+    runs: list[IvpRun]  # solve_ivp per method at error <= the ZOH's
     corrections_idle: bool
     signal: str = ""
 
@@ -410,23 +486,38 @@ def zoh_outputs(zoh: ZohAxis, t_out: np.ndarray, signal) -> np.ndarray:
     """All outputs at the 1 kHz instants t_out (the kernel's y is C x at each step's start)."""
     dt = zoh.compiled.disc.dt
     step = int(round(1.0 / (RATE_HZ * dt)))  # internal steps per output sample
-    return zoh.simulate(t_out[-1] + dt, signal)[::step][:len(t_out)]
+    return zoh.simulate(t_out[-1] + dt, signal)[::step][: len(t_out)]
 
 
-def loosest_passing(ode: DahlAxisOde, t_out: np.ndarray, method: str, scale: np.ndarray,
-                    ref: np.ndarray, max_err: float) -> IvpRun | None:
+def loosest_passing(
+    ode: DahlAxisOde,
+    t_out: np.ndarray,
+    method: str,
+    scale: np.ndarray,
+    ref: np.ndarray,
+    max_err: float,
+) -> IvpRun | None:
     """The run at the loosest rtol of RTOLS whose error is <= max_err, or None."""
     for rtol in RTOLS:
         run = run_ivp(ode, t_out, method, rtol, scale)
         run.error = rel_error(run.theta, ref)
-        log(f"    {method:6s} rtol {rtol:.0e}: error {run.error:.2e}, {run.seconds:7.3f} s, nfev {run.nfev}")
+        log(
+            f"    {method:6s} rtol {rtol:.0e}: error {run.error:.2e}, {run.seconds:7.3f} s, nfev {run.nfev}"
+        )
         if run.error <= max_err:
             return run
     return None
 
 
-def scipy_at_accuracy(ode: DahlAxisOde, t_out: np.ndarray, scale: np.ndarray, ref: np.ndarray,
-                      max_err: float, methods: tuple[str, ...], repeat: int) -> list[IvpRun]:
+def scipy_at_accuracy(
+    ode: DahlAxisOde,
+    t_out: np.ndarray,
+    scale: np.ndarray,
+    ref: np.ndarray,
+    max_err: float,
+    methods: tuple[str, ...],
+    repeat: int,
+) -> list[IvpRun]:
     """Per method, the run at its loosest passing rtol, timed as the best of ``repeat``."""
     runs = []
     for method in methods:
@@ -439,11 +530,15 @@ def scipy_at_accuracy(ode: DahlAxisOde, t_out: np.ndarray, scale: np.ndarray, re
     return runs
 
 
-def bench_axis(t_end: float, dt: float, repeat: int, methods: tuple[str, ...], signal) -> AxisResult:
+def bench_axis(
+    t_end: float, dt: float, repeat: int, methods: tuple[str, ...], signal
+) -> AxisResult:
     full = build_plant(SimConfig(), RelayState(mode=3))
     plant = axis_plant(full, AXIS)
-    log(f"  single-axis model: {len(plant.states)} states {plant.states} "
-        "(no other state drives them in mode 3: checked)")
+    log(
+        f"  single-axis model: {len(plant.states)} states {plant.states} "
+        "(no other state drives them in mode 3: checked)"
+    )
     log(f"  inputs {plant.inputs}; nonlinearities {[nl.name for nl in plant.nonlinear]}")
     zoh = ZohAxis.build(plant, dt, AXIS)
     full_zoh = ZohAxis.build(full, dt, AXIS)  # cross-check: the whole rig, only nac_X driven
@@ -454,7 +549,9 @@ def bench_axis(t_end: float, dt: float, repeat: int, methods: tuple[str, ...], s
     y = zoh_outputs(zoh, t_out, signal)
     theta_zoh = y[:, zoh.theta_out]
     zoh_s = best_time(lambda: zoh.simulate(t_end, signal), repeat)
-    full_diff = np.max(np.abs(zoh_outputs(full_zoh, t_out, signal)[:, full_zoh.theta_out] - theta_zoh))
+    full_diff = np.max(
+        np.abs(zoh_outputs(full_zoh, t_out, signal)[:, full_zoh.theta_out] - theta_zoh)
+    )
     full_s = best_time(lambda: full_zoh.simulate(t_end, signal), repeat)
 
     scale = state_scale(zoh, ode, t_end)
@@ -462,11 +559,24 @@ def bench_axis(t_end: float, dt: float, repeat: int, methods: tuple[str, ...], s
     ref = run_ivp(ode, t_out, "DOP853", REFERENCE_RTOL, scale).theta
     spread = rel_error(run_ivp(ode, t_out, "LSODA", REFERENCE_RTOL, scale).theta, ref)
     zoh_err = rel_error(theta_zoh, ref)
-    log(f"  reference spread {spread:.1e}; ZOH error {zoh_err:.2e}; loosest solve_ivp rtol at or below it:")
+    log(
+        f"  reference spread {spread:.1e}; ZOH error {zoh_err:.2e}; loosest solve_ivp rtol at or below it:"
+    )
     runs = scipy_at_accuracy(ode, t_out, scale, ref, zoh_err, methods, repeat=3)
     rms = float(np.sqrt(np.mean(ref * ref)))
-    return AxisResult(dt, t_end, zoh_s / t_end, zoh_err, len(full.states), full_s / t_end,
-                      float(full_diff) / rms, spread, runs, corrections_idle(zoh, plant, y), signal.name)
+    return AxisResult(
+        dt,
+        t_end,
+        zoh_s / t_end,
+        zoh_err,
+        len(full.states),
+        full_s / t_end,
+        float(full_diff) / rms,
+        spread,
+        runs,
+        corrections_idle(zoh, plant, y),
+        signal.name,
+    )
 
 
 def corrections_idle(zoh: ZohAxis, plant: Plant, y: np.ndarray) -> bool:
@@ -475,12 +585,15 @@ def corrections_idle(zoh: ZohAxis, plant: Plant, y: np.ndarray) -> bool:
     cfg = SimConfig()
     pa = y[:, plant.outputs.index(f"pa_{AXIS.lower()}")]
     theta = y[:, zoh.theta_out]
-    return bool(np.max(np.abs(pa)) * cfg.platform[AXIS].amp_gain < cfg.platform[AXIS].amp_limit_V
-                and np.max(np.abs(theta)) + sum(a for _, a, _ in INPUT_TONES)
-                < cfg.autocollimator[AXIS].linear_range_urad * 1e-6)
+    return bool(
+        np.max(np.abs(pa)) * cfg.platform[AXIS].amp_gain < cfg.platform[AXIS].amp_limit_V
+        and np.max(np.abs(theta)) + sum(a for _, a, _ in INPUT_TONES)
+        < cfg.autocollimator[AXIS].linear_range_urad * 1e-6
+    )
 
 
 # ---------------------------------------------------------------------------- report
+
 
 def verdict(ok: bool) -> str:
     return "met" if ok else "missed"
@@ -492,56 +605,91 @@ def report(hour: HourResult, axes: list[AxisResult], single: HourResult) -> None
     log("sim_speed summary (issue F), all figures from this run")
     log("-" * 78)
     med = statistics.median(hour.seconds)
-    log(f"full rig, {hour.duration_s:.0f} s simulated (mode 3, 3 axes, Dahl, {RATE_HZ:.0f} Hz out, "
-        f"internal dt {hour.dt * 1e3:.2f} ms, {hour.samples} samples)")
+    log(
+        f"full rig, {hour.duration_s:.0f} s simulated (mode 3, 3 axes, Dahl, {RATE_HZ:.0f} Hz out, "
+        f"internal dt {hour.dt * 1e3:.2f} ms, {hour.samples} samples)"
+    )
     log(f"  wall time best {hour.best:.2f} s, median {med:.2f} s of {len(hour.seconds)}")
-    log(f"  real-time factor      {hour.realtime:8.0f} x   target >= {TARGET_REALTIME:.0f}: "
-        f"{verdict(hour.realtime >= TARGET_REALTIME)} (one core)")
+    log(
+        f"  real-time factor      {hour.realtime:8.0f} x   target >= {TARGET_REALTIME:.0f}: "
+        f"{verdict(hour.realtime >= TARGET_REALTIME)} (one core)"
+    )
     if hour.duration_s != HOUR_S:
-        log(f"  (only {hour.duration_s:.0f} s simulated: start-up costs weigh more than in the hour)")
+        log(
+            f"  (only {hour.duration_s:.0f} s simulated: start-up costs weigh more than in the hour)"
+        )
     if hour.realtime < TARGET_REALTIME:
         log(f"TARGET MISSED: real-time factor {hour.realtime:.0f}x < {TARGET_REALTIME:.0f}x")
-    log(f"  peak memory (RSS)     {hour.peak_rss_mb:8.1f} MB  (child process; "
-        f"{hour.rss_imports_mb:.1f} MB of it after the imports alone)")
+    log(
+        f"  peak memory (RSS)     {hour.peak_rss_mb:8.1f} MB  (child process; "
+        f"{hour.rss_imports_mb:.1f} MB of it after the imports alone)"
+    )
     for i, axis in enumerate(axes):
         report_axis(axis, headline=i == 0)
     log("-" * 78)
-    log(f"single-axis record ({', '.join(SINGLE_AXIS_CHANNELS)}; the rest of the rig dropped), "
-        f"{single.duration_s:.0f} s simulated, same config and rate")
-    log(f"  wall time best {single.best:.2f} s, median {statistics.median(single.seconds):.2f} s of "
-        f"{len(single.seconds)}")
-    log(f"  real-time factor      {single.realtime:8.0f} x   target >= {TARGET_SINGLE_AXIS:.0f}: "
-        f"{verdict(single.realtime >= TARGET_SINGLE_AXIS)}; {single.realtime / hour.realtime:.2f} x the full rig's")
+    log(
+        f"single-axis record ({', '.join(SINGLE_AXIS_CHANNELS)}; the rest of the rig dropped), "
+        f"{single.duration_s:.0f} s simulated, same config and rate"
+    )
+    log(
+        f"  wall time best {single.best:.2f} s, median {statistics.median(single.seconds):.2f} s of "
+        f"{len(single.seconds)}"
+    )
+    log(
+        f"  real-time factor      {single.realtime:8.0f} x   target >= {TARGET_SINGLE_AXIS:.0f}: "
+        f"{verdict(single.realtime >= TARGET_SINGLE_AXIS)}; {single.realtime / hour.realtime:.2f} x the full rig's"
+    )
     if single.realtime < TARGET_SINGLE_AXIS:
-        log(f"TARGET MISSED: single-axis real-time factor {single.realtime:.0f}x < {TARGET_SINGLE_AXIS:.0f}x")
+        log(
+            f"TARGET MISSED: single-axis real-time factor {single.realtime:.0f}x < {TARGET_SINGLE_AXIS:.0f}x"
+        )
     log("=" * 78)
 
 
 def report_axis(axis: AxisResult, headline: bool) -> None:
     log("-" * 78)
-    log(f"single axis {AXIS}, input: {axis.signal}" + ("  [the target applies here]" if headline else ""))
+    log(
+        f"single axis {AXIS}, input: {axis.signal}"
+        + ("  [the target applies here]" if headline else "")
+    )
     log(f"  {axis.t_end:.0f} s simulated, error = max|theta - ref| / rms(ref) at 1 kHz")
-    log(f"  ZOH kernel (dt {axis.dt * 1e3:.2f} ms)  {axis.zoh_s_per_s * 1e3:10.3f} ms per simulated s, "
-        f"error {axis.zoh_err:.2e}")
-    log(f"  full {axis.full_states}-state kernel   {axis.full_kernel_s_per_s * 1e3:10.3f} ms per simulated s "
-        f"(same theta_{AXIS} to {axis.full_kernel_diff:.1e})")
-    log(f"  reference spread       {axis.ref_spread:.1e} (DOP853 vs LSODA at rtol {REFERENCE_RTOL:g})")
+    log(
+        f"  ZOH kernel (dt {axis.dt * 1e3:.2f} ms)  {axis.zoh_s_per_s * 1e3:10.3f} ms per simulated s, "
+        f"error {axis.zoh_err:.2e}"
+    )
+    log(
+        f"  full {axis.full_states}-state kernel   {axis.full_kernel_s_per_s * 1e3:10.3f} ms per simulated s "
+        f"(same theta_{AXIS} to {axis.full_kernel_diff:.1e})"
+    )
+    log(
+        f"  reference spread       {axis.ref_spread:.1e} (DOP853 vs LSODA at rtol {REFERENCE_RTOL:g})"
+    )
     log(f"  clip/softsat corrections idle (ODE omits them): {axis.corrections_idle}")
     c = axis.chosen
     if c is None:
-        log(f"  no solve_ivp method reached the ZOH error by rtol {RTOLS[-1]:g}: ratio not measured")
+        log(
+            f"  no solve_ivp method reached the ZOH error by rtol {RTOLS[-1]:g}: ratio not measured"
+        )
         return
     log("  solve_ivp at error <= ZOH's (loosest rtol per method, best of 3):")
     for r in sorted(axis.runs, key=lambda r: r.seconds):
-        log(f"    {r.method:6s} rtol {r.rtol:.0e}  error {r.error:.2e}  {r.seconds / axis.t_end * 1e3:8.2f} ms "
-            f"per simulated s  -> ZOH {axis.ratio(r):6.0f} x faster")
+        log(
+            f"    {r.method:6s} rtol {r.rtol:.0e}  error {r.error:.2e}  {r.seconds / axis.t_end * 1e3:8.2f} ms "
+            f"per simulated s  -> ZOH {axis.ratio(r):6.0f} x faster"
+        )
     ok = axis.ratio(c) >= TARGET_VS_SCIPY
-    log(f"  speed ratio vs solve_ivp ({c.method}, the fastest) {axis.ratio(c):6.0f} x   "
-        f"target >= {TARGET_VS_SCIPY:.0f}: {verdict(ok)}")
-    log(f"  conservative ratio (full {axis.full_states}-state kernel vs single-axis {c.method}) "
-        f"{axis.ratio(c, axis.full_kernel_s_per_s):.0f} x")
+    log(
+        f"  speed ratio vs solve_ivp ({c.method}, the fastest) {axis.ratio(c):6.0f} x   "
+        f"target >= {TARGET_VS_SCIPY:.0f}: {verdict(ok)}"
+    )
+    log(
+        f"  conservative ratio (full {axis.full_states}-state kernel vs single-axis {c.method}) "
+        f"{axis.ratio(c, axis.full_kernel_s_per_s):.0f} x"
+    )
     if headline and not ok:
-        log(f"TARGET MISSED: speed ratio vs solve_ivp {axis.ratio(c):.0f}x < {TARGET_VS_SCIPY:.0f}x")
+        log(
+            f"TARGET MISSED: speed ratio vs solve_ivp {axis.ratio(c):.0f}x < {TARGET_VS_SCIPY:.0f}x"
+        )
 
 
 def main() -> int:
@@ -553,7 +701,9 @@ def main() -> int:
     ap.add_argument("--channels", default="", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.hour_child:
-        run_hour_child(args.repeat, args.duration, tuple(args.channels.split(",")) if args.channels else None)
+        run_hour_child(
+            args.repeat, args.duration, tuple(args.channels.split(",")) if args.channels else None
+        )
         return 0
     log(f"sim_speed: {pin_to_one_core()}; numpy {np.__version__}")
     duration = 60.0 if args.quick else args.duration
@@ -568,8 +718,16 @@ def main() -> int:
     rep = 5 if args.quick else 20
     # On held noise the implicit methods take ~20 s per tolerance tried and are far slower
     # than LSODA (measured: BDF 11x, Radau 16x LSODA's time); LSODA and RK45 bound the rest.
-    axes = [bench_axis(NOISE_COMPARE_S, hour.dt, rep, ("LSODA", "RK45"), HeldNoise(hour.dt, NOISE_COMPARE_S + 1)),
-            bench_axis(COMPARE_S, hour.dt, rep, SCIPY_METHODS, Tones())]
+    axes = [
+        bench_axis(
+            NOISE_COMPARE_S,
+            hour.dt,
+            rep,
+            ("LSODA", "RK45"),
+            HeldNoise(hour.dt, NOISE_COMPARE_S + 1),
+        ),
+        bench_axis(COMPARE_S, hour.dt, rep, SCIPY_METHODS, Tones()),
+    ]
     report(hour, axes, single)
     return 0
 

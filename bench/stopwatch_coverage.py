@@ -36,8 +36,12 @@ from coverage_pool import run_cases, toml_of  # noqa: E402
 ROOT = Path(__file__).resolve().parent.parent
 CHANNELS = ("X", "Y", "Z", "XRD")
 #: data sheet: K_TO, K_g, h/k, h/c
-NOMINAL = {"X": (31.6, 6.03, 424.0, 1.96), "Y": (33.4, 6.70, 708.0, 21.0), "Z": (34.1, 7.51, 1072.0, 35.7),
-           "XRD": (32.0, 5.74, 515.0, 2.43)}
+NOMINAL = {
+    "X": (31.6, 6.03, 424.0, 1.96),
+    "Y": (33.4, 6.70, 708.0, 21.0),
+    "Z": (34.1, 7.51, 1072.0, 35.7),
+    "XRD": (32.0, 5.74, 515.0, 2.43),
+}
 FIGURES = {"K_g_mV_per_urad": "pickoff_scale_mV_per_urad", "h_over_k_s": "restraint_time_s"}
 KTO_REL_SIGMA = 1e-3
 
@@ -46,11 +50,13 @@ def draw(seed: int) -> dict[str, dict[str, float]]:
     rng = np.random.default_rng([1818, seed])
     cfg: dict[str, dict[str, float]] = {}
     for ch, (kto, kg, hk, hc) in NOMINAL.items():
-        cfg[f"gyro.{ch}"] = {"torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
-                             "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
-                             "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
-                             "restraint_time_s": float(hk * rng.uniform(0.7, 1.4)),
-                             "viscous_coupling_h_over_c": float(hc * rng.uniform(0.7, 1.5))}
+        cfg[f"gyro.{ch}"] = {
+            "torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
+            "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
+            "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
+            "restraint_time_s": float(hk * rng.uniform(0.7, 1.4)),
+            "viscous_coupling_h_over_c": float(hc * rng.uniform(0.7, 1.5)),
+        }
     return cfg
 
 
@@ -59,7 +65,9 @@ def prior(seed: int, cfg: dict[str, dict[str, float]]) -> dict[str, dict[str, An
     rng = np.random.default_rng([1819, seed])
     kto, ci = {}, {}
     for ch in CHANNELS:
-        v = cfg[f"gyro.{ch}"]["torquer_scale_urad_per_s_per_V"] * (1 + KTO_REL_SIGMA * rng.standard_normal())
+        v = cfg[f"gyro.{ch}"]["torquer_scale_urad_per_s_per_V"] * (
+            1 + KTO_REL_SIGMA * rng.standard_normal()
+        )
         kto[ch] = v
         ci[ch] = [v * (1 - 1.96 * KTO_REL_SIGMA), v * (1 + 1.96 * KTO_REL_SIGMA)]
     return {"earth-rate": {"K_TO_urad_per_s_per_V": kto, "K_TO_urad_per_s_per_V_ci95": ci}}
@@ -91,10 +99,16 @@ def run_case(seed: int) -> dict[str, Any]:
 
 def summarize(recs: list[dict[str, Any]]) -> str:
     ok = [r for r in recs if "values" in r]
-    lines = [f"stopwatch coverage: {len(ok)} runs ({len(recs) - len(ok)} errors), verdicts "
-             + ", ".join(f"{v} {sum(r['verdict'] == v for r in ok)}" for v in sorted({r['verdict'] for r in ok}))]
-    lines.append(f"{'figure':<18s} {'channel':<4s} {'covered':>9s} {'resolved':>9s} {'|err|/half-width med':>21s} "
-                 f"{'resolved |err| max':>19s}")
+    lines = [
+        f"stopwatch coverage: {len(ok)} runs ({len(recs) - len(ok)} errors), verdicts "
+        + ", ".join(
+            f"{v} {sum(r['verdict'] == v for r in ok)}" for v in sorted({r["verdict"] for r in ok})
+        )
+    ]
+    lines.append(
+        f"{'figure':<18s} {'channel':<4s} {'covered':>9s} {'resolved':>9s} {'|err|/half-width med':>21s} "
+        f"{'resolved |err| max':>19s}"
+    )
     for key, cfg_key in FIGURES.items():
         for ch in CHANNELS:
             cov, res, ratio, err, n = 0, 0, [], [], 0
@@ -112,7 +126,9 @@ def summarize(recs: list[dict[str, Any]]) -> str:
                     err.append(abs(v / truth - 1))
             med = f"{statistics.median(ratio):.2f}" if ratio else "-"
             worst = f"{100 * max(err):.2f} %" if err else "-"
-            lines.append(f"{key:<18s} {ch:<4s} {cov:>4d}/{n:<4d} {res:>4d}/{n:<4d} {med:>21s} {worst:>19s}")
+            lines.append(
+                f"{key:<18s} {ch:<4s} {cov:>4d}/{n:<4d} {res:>4d}/{n:<4d} {med:>21s} {worst:>19s}"
+            )
     return "\n".join(lines)
 
 
@@ -123,7 +139,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--out", default="/tmp/stopwatch_coverage.jsonl")
     args = ap.parse_args(argv)
-    recs = run_cases(run_case, [(s,) for s in range(args.first, args.first + args.seeds)], args.jobs, args.out)
+    recs = run_cases(
+        run_case, [(s,) for s in range(args.first, args.first + args.seeds)], args.jobs, args.out
+    )
     print(summarize(recs))
     return 0
 

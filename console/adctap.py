@@ -24,15 +24,21 @@ log = logging.getLogger(__name__)
 
 
 class TappedAdc(AdcDecorator):
-    def __init__(self, inner: Adc, store: MeterStore, after_block: Callable[[], None] | None = None) -> None:
+    def __init__(
+        self, inner: Adc, store: MeterStore, after_block: Callable[[], None] | None = None
+    ) -> None:
         super().__init__(inner)
         self.store = store
         self.after_block = after_block
 
     def _deliver(self, block: AdcBlock) -> None:
         try:
-            self.store.push(block.channels, block.volts, block.rate_hz,
-                            block.t0_s + block.stop_sample / block.rate_hz)
+            self.store.push(
+                block.channels,
+                block.volts,
+                block.rate_hz,
+                block.t0_s + block.stop_sample / block.rate_hz,
+            )
         except Exception:  # the meters' trouble must never cost a sample of the recording
             log.exception("meter store rejected a block")
         if self.after_block is not None:

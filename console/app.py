@@ -60,8 +60,14 @@ log = logging.getLogger(__name__)
 
 DEFAULT_RIG = "sim?realtime=1"
 #: (id, tab title, key); the tab titles carry their keys, for an operator without a footer
-PANELS = (("meters", "Meters", "f1"), ("modes", "Modes", "f2"), ("setpoints", "Set-pts", "f3"),
-          ("recording", "Record", "f4"), ("procedures", "Procs", "f5"), ("spectra", "Spectra", "f6"))
+PANELS = (
+    ("meters", "Meters", "f1"),
+    ("modes", "Modes", "f2"),
+    ("setpoints", "Set-pts", "f3"),
+    ("recording", "Record", "f4"),
+    ("procedures", "Procs", "f5"),
+    ("spectra", "Spectra", "f6"),
+)
 PANEL_KEYS = Binding.Group("panel")
 #: the smallest terminal the layout fits (columns, rows); below it a notice says what is cut off
 MIN_SIZE = (80, 24)
@@ -86,8 +92,15 @@ class ConsoleApp(App[int]):
         Binding("ctrl+q", "quit", "quit", show=False, priority=True),
     ]
 
-    def __init__(self, rig_url: str = DEFAULT_RIG, *, out_dir: str | Path = "out", live_meters: bool = True,
-                 refresh_s: float = 0.08, meter_rate_hz: float = 200.0) -> None:
+    def __init__(
+        self,
+        rig_url: str = DEFAULT_RIG,
+        *,
+        out_dir: str | Path = "out",
+        live_meters: bool = True,
+        refresh_s: float = 0.08,
+        meter_rate_hz: float = 200.0,
+    ) -> None:
         super().__init__()
         self.rig_url = rig_url
         self.out_dir = Path(out_dir)
@@ -96,12 +109,18 @@ class ConsoleApp(App[int]):
         self.meter_store = MeterStore()
         self.log_feed: Feed[str] = Feed(5000)
         self.operator = ConsoleOperator()
-        self.worker_ = RigWorker(rig_url, out_dir=self.out_dir, post=self._from_worker, meters=self.meter_store,
-                                 operator=self.operator, meter_rate_hz=meter_rate_hz)
+        self.worker_ = RigWorker(
+            rig_url,
+            out_dir=self.out_dir,
+            post=self._from_worker,
+            meters=self.meter_store,
+            operator=self.operator,
+            meter_rate_hz=meter_rate_hz,
+        )
         # the data sheet's nominal constants until the rig gives its own: the panel is up at once
         self.specs: tuple[MeterSpec, ...] = permanent_meters(RigCalibration())
         self.limits: SetpointLimits | None = None
-        self.outcomes: list[CommandOutcome] = []   # every outcome, newest last (tests read it)
+        self.outcomes: list[CommandOutcome] = []  # every outcome, newest last (tests read it)
         self.stopped: WorkerStopped | None = None
         self.last_summary: RunSummary | None = None
         self._quitting = False
@@ -122,11 +141,14 @@ class ConsoleApp(App[int]):
         yield Footer(compact=True)
 
     def _panel(self, pid: str):
-        return {"meters": lambda: MeterPanel(id="meters-panel"), "modes": lambda: ModePanel(id="modes-panel"),
-                "setpoints": lambda: SetpointPanel(id="setpoints-panel"),
-                "recording": lambda: RecordingPanel(id="recording-panel"),
-                "procedures": lambda: ProcedurePanel(id="procedures-panel"),
-                "spectra": lambda: SpectraPanel(id="spectra-panel")}[pid]()
+        return {
+            "meters": lambda: MeterPanel(id="meters-panel"),
+            "modes": lambda: ModePanel(id="modes-panel"),
+            "setpoints": lambda: SetpointPanel(id="setpoints-panel"),
+            "recording": lambda: RecordingPanel(id="recording-panel"),
+            "procedures": lambda: ProcedurePanel(id="procedures-panel"),
+            "spectra": lambda: SpectraPanel(id="spectra-panel"),
+        }[pid]()
 
     def on_mount(self) -> None:
         # the panels, looked up once: a modal screen on top hides them from query_one
@@ -183,7 +205,7 @@ class ConsoleApp(App[int]):
 
     # ------------------------------------------------------------------ terminal size
     def on_resize(self, event: events.Resize) -> None:
-        self._check_size(event.size)   # the new size: ``self.size`` follows after this handler
+        self._check_size(event.size)  # the new size: ``self.size`` follows after this handler
 
     def _check_size(self, size: Size | None = None) -> None:
         """A terminal smaller than the layout needs cuts lamps and meters off: say so on top."""
@@ -191,8 +213,10 @@ class ConsoleApp(App[int]):
         notice = self.query_one("#too-small", Static)
         small = w < MIN_SIZE[0] or h < MIN_SIZE[1]
         if small:
-            notice.update(f"terminal {w}x{h} is too small: the console needs {MIN_SIZE[0]}x{MIN_SIZE[1]}; "
-                          "lamps, meters and keys are cut off. Enlarge it.")
+            notice.update(
+                f"terminal {w}x{h} is too small: the console needs {MIN_SIZE[0]}x{MIN_SIZE[1]}; "
+                "lamps, meters and keys are cut off. Enlarge it."
+            )
         notice.display = small
 
     def stop_from_outside(self, why: str) -> None:
@@ -205,8 +229,11 @@ class ConsoleApp(App[int]):
         # Every way out (quit key, crash, signal) passes here: the rig goes safe and any
         # recording is closed with its status before the app is gone.
         exc = getattr(self, "_exception", None)
-        reason = (f"the console crashed: {type(exc).__name__}: {exc}" if exc is not None
-                  else "the operator quit the console")
+        reason = (
+            f"the console crashed: {type(exc).__name__}: {exc}"
+            if exc is not None
+            else "the operator quit the console"
+        )
         self.worker_.shutdown(reason)
         logging.getLogger().removeHandler(self._handler)
         for name, level in self._saved_levels.items():
@@ -231,13 +258,13 @@ class ConsoleApp(App[int]):
         if pane.id and (self.focused is None or pane not in self.focused.ancestors_with_self):
             self.query_one(f"#{pane.id}-panel").focus()
         if pane.id == "recording":
-            self._next_recording()   # another program may have taken the name meanwhile
+            self._next_recording()  # another program may have taken the name meanwhile
 
     async def action_quit(self) -> None:
         if self._quitting or self.worker_.stopped.is_set():
             self.exit(0)
             return
-        if isinstance(self.screen, QuitScreen):   # already asking
+        if isinstance(self.screen, QuitScreen):  # already asking
             return
         closes = what_quit_closes(self.worker_.state.get())
         if closes:  # a live recording or procedure: ask, naming what quitting would close
@@ -279,8 +306,12 @@ class ConsoleApp(App[int]):
         elif isinstance(item, RecordingEnded):
             self.w_spectra.offer(item.path, "the last recording")
             self._next_recording()
-            self.notify(f"{item.path}: {item.status}", title="recording closed",
-                        severity="information" if item.status == "complete" else "error", timeout=8)
+            self.notify(
+                f"{item.path}: {item.status}",
+                title="recording closed",
+                severity="information" if item.status == "complete" else "error",
+                timeout=8,
+            )
         elif isinstance(item, ProcedureEnded):
             summary = item.summary
             self.last_summary = summary
@@ -289,8 +320,12 @@ class ConsoleApp(App[int]):
             if summary.file is not None and summary.file.exists():
                 self.w_spectra.offer(summary.file, f"the {summary.procedure} run's file")
         elif isinstance(item, RigFault):
-            self.notify(f"{item.text}\nsafe state: {item.safe}", title="DEVICE FAULT", severity="error",
-                        timeout=60)
+            self.notify(
+                f"{item.text}\nsafe state: {item.safe}",
+                title="DEVICE FAULT",
+                severity="error",
+                timeout=60,
+            )
         elif isinstance(item, WorkerStopped):
             self.stopped = item
             if self._quitting:
@@ -301,21 +336,31 @@ class ConsoleApp(App[int]):
     def _outcome(self, o: CommandOutcome) -> None:
         if o.what in ("hold", "release", "safe state") or o.what.startswith("select"):
             snap = self.worker_.state.get()
-            same = not o.ok and o.text == snap.alarm   # said once, by the lamp
-            self.w_modes.last(f"{o.what} refused: the alarm above says why" if same else o.text, o.ok, snap)
+            same = not o.ok and o.text == snap.alarm  # said once, by the lamp
+            self.w_modes.last(
+                f"{o.what} refused: the alarm above says why" if same else o.text, o.ok, snap
+            )
         elif o.what.startswith(("torquer", "command", "autocollimator", "caging")):
-            self.w_setpoints.message(o.text if o.ok else f"refused: {o.text}", o.ok,
-                                     state_key(self.worker_.state.get()))
+            self.w_setpoints.message(
+                o.text if o.ok else f"refused: {o.text}", o.ok, state_key(self.worker_.state.get())
+            )
         elif o.what.startswith("procedure ") and not o.ok:
             self.w_procedures.refused(o.text)
         elif o.what == "start recording" and o.ok:
-            self._next_recording()   # the name just taken is not the next one any more
+            self._next_recording()  # the name just taken is not the next one any more
         if not o.ok:
             self.refuse(o.what, o.text)
 
     # ------------------------------------------------------------------ notifications
-    def notify(self, message: str, *, title: str = "", severity: SeverityLevel = "information",
-               timeout: float | None = None, markup: bool = True) -> None:
+    def notify(
+        self,
+        message: str,
+        *,
+        title: str = "",
+        severity: SeverityLevel = "information",
+        timeout: float | None = None,
+        markup: bool = True,
+    ) -> None:
         """A toast, and a repaint of the whole screen once it has gone: an expired toast is
         removed from the DOM, but a terminal kept showing its text over the panel below."""
         super().notify(message, title=title, severity=severity, timeout=timeout, markup=markup)
@@ -331,13 +376,14 @@ class ConsoleApp(App[int]):
         """A line in the event log from this thread, at the rig time last read (it never asks the rig)."""
         self.worker_.events.put(RigEventItem(self.worker_.state.get().rig_time_s, kind, text))
 
-    def refuse(self, what: str, text: str, severity: SeverityLevel = "error", timeout: float = 8) -> None:
+    def refuse(
+        self, what: str, text: str, severity: SeverityLevel = "error", timeout: float = 8
+    ) -> None:
         """A refused entry or command: a notification, and a line in the event log. ``text``
         is in the operator's words (``console.refusals``), never the protocol's; plain text, as
         a refusal may quote brackets (``channels=["X"]``) that are no markup."""
         self.note("refused", f"{what}: {text}")
-        self.notify(text, title=f"{what} refused", severity=severity, timeout=timeout,
-                    markup=False)
+        self.notify(text, title=f"{what} refused", severity=severity, timeout=timeout, markup=False)
 
     # ------------------------------------------------------------------ the refresh timer
     def refresh_live(self) -> None:
@@ -420,7 +466,11 @@ class ConsoleApp(App[int]):
         channels = tuple(c.strip() for c in msg.channels.split(",") if c.strip()) or None
         if channels == ("all",):
             channels = None
-        why = unknown_channels(channels or (), self.adc_channels, "the ADC") if self.adc_channels else None
+        why = (
+            unknown_channels(channels or (), self.adc_channels, "the ADC")
+            if self.adc_channels
+            else None
+        )
         if why:
             self.refuse("recording", why, timeout=10)
             return
@@ -433,13 +483,22 @@ class ConsoleApp(App[int]):
         if self._refuse_if_busy():
             return
         if self.worker_.state.get().phase == "recording":
-            self.refuse("procedure", "a recording is running: stop it (f4, f8) before a procedure, which records "
-                        "its own file", severity="warning", timeout=6)
+            self.refuse(
+                "procedure",
+                "a recording is running: stop it (f4, f8) before a procedure, which records "
+                "its own file",
+                severity="warning",
+                timeout=6,
+            )
             return
         cls = self.catalogue.get(msg.name)
         if cls is None:
-            self.refuse("procedure", f"no procedure {msg.name!r}" if self.catalogue
-                        else "the procedures are still loading")
+            self.refuse(
+                "procedure",
+                f"no procedure {msg.name!r}"
+                if self.catalogue
+                else "the procedures are still loading",
+            )
             return
         try:
             proc, resume_from = parse_run_text(cls, msg.params)
@@ -469,6 +528,7 @@ def run_console(rig_url: str = DEFAULT_RIG, out_dir: str | Path = "out") -> int:
     root = logging.getLogger()
     saved = root.handlers[:]
     from daq.runfile import make_folder
+
     make_folder(out)
     # this program's records from INFO, other libraries' from WARNING (drivers.logrule)
     file_handler = ruled(logging.FileHandler(out / "console.log"))

@@ -12,19 +12,35 @@ from collections.abc import Iterable
 
 #: DESIGN.md section 5, in its order
 DESCRIPTIONS: dict[str, str] = {
-    "ac_x_ctl": "autocollimator X control", "ac_y_ctl": "autocollimator Y control",
-    "ac_x_inst": "autocollimator X instrumentation", "ac_y_inst": "autocollimator Y instrumentation",
+    "ac_x_ctl": "autocollimator X control",
+    "ac_y_ctl": "autocollimator Y control",
+    "ac_x_inst": "autocollimator X instrumentation",
+    "ac_y_inst": "autocollimator Y instrumentation",
     "ac_z": "autocollimator azimuth",
-    "gyro_x": "gyro pickoff X", "gyro_y": "gyro pickoff Y", "gyro_z": "gyro pickoff Z",
+    "gyro_x": "gyro pickoff X",
+    "gyro_y": "gyro pickoff Y",
+    "gyro_z": "gyro pickoff Z",
     "gyro_xrd": "gyro pickoff XRD",
-    "torq_x": "torquer output X", "torq_y": "torquer output Y", "torq_z": "torquer output Z",
+    "torq_x": "torquer output X",
+    "torq_y": "torquer output Y",
+    "torq_z": "torquer output Z",
     "torq_xrd": "torquer output XRD",
-    "pa_x": "power-amplifier input X", "pa_y": "power-amplifier input Y", "pa_z": "power-amplifier input Z",
-    "cmd_x": "command input X", "cmd_y": "command input Y", "cmd_z": "command input Z",
+    "pa_x": "power-amplifier input X",
+    "pa_y": "power-amplifier input Y",
+    "pa_z": "power-amplifier input Z",
+    "cmd_x": "command input X",
+    "cmd_y": "command input Y",
+    "cmd_z": "command input Z",
 }
 
 #: the few words a meter row has room for
-SHORT: dict[str, str] = {"gyro": "pickoff", "torq": "torquer", "ac": "autocoll", "pa": "power amp", "cmd": "command"}
+SHORT: dict[str, str] = {
+    "gyro": "pickoff",
+    "torq": "torquer",
+    "ac": "autocoll",
+    "pa": "power amp",
+    "cmd": "command",
+}
 
 
 def short(channel: str) -> str:
@@ -57,7 +73,9 @@ def unknown_channels(typed: Iterable[str], valid: Iterable[str], where: str) -> 
     if not bad:
         return None
     hints = [f"{c!r} is {m}" for c in bad if (m := meant(c)) is not None and m in valid]
-    text = (f"{where} has no channel {', '.join(repr(c) for c in bad)}"
-            + (f" ({'; '.join(hints)})" if hints else "")
-            + f"; its channels: {', '.join(valid)}")
+    text = (
+        f"{where} has no channel {', '.join(repr(c) for c in bad)}"
+        + (f" ({'; '.join(hints)})" if hints else "")
+        + f"; its channels: {', '.join(valid)}"
+    )
     return text

@@ -21,7 +21,7 @@ class EventLog(RichLog):
 
     def add(self, line: Text) -> None:
         self.entries.append(line)
-        if self._wrapped_at:   # else kept until the log is shown (on_resize)
+        if self._wrapped_at:  # else kept until the log is shown (on_resize)
             self.write(line, width=self._wrapped_at)
 
     def clear(self) -> EventLog:

@@ -41,8 +41,15 @@ class ExitGuard:
     """``stopping(why)`` asks the rig thread and the app to stop (non-blocking); ``finish(why,
     timeout_s) -> bool`` waits for the rig thread's shutdown."""
 
-    def __init__(self, stopping: Callable[[str], None], finish: Callable[[str, float], bool], *,
-                 tty_fd: int | None = None, grace_s: float = GRACE_S, poll_s: float = 0.25) -> None:
+    def __init__(
+        self,
+        stopping: Callable[[str], None],
+        finish: Callable[[str, float], bool],
+        *,
+        tty_fd: int | None = None,
+        grace_s: float = GRACE_S,
+        poll_s: float = 0.25,
+    ) -> None:
         self._stopping, self._finish = stopping, finish
         self.tty_fd = tty_fd if tty_fd is not None else _terminal_fd()
         self.grace_s, self.poll_s = grace_s, poll_s
@@ -84,18 +91,27 @@ class ExitGuard:
             if self.tripped is not None or self._done.is_set():
                 return
             self.tripped = why
-        threading.Thread(target=self._leave, args=(why,), name="console-exit-guard", daemon=True).start()
+        threading.Thread(
+            target=self._leave, args=(why,), name="console-exit-guard", daemon=True
+        ).start()
 
     def _leave(self, why: str) -> None:
         log.warning("%s: aborting what runs, closing files, leaving the rig safe, exiting", why)
         self._stopping(why)
         if self._done.wait(self.grace_s):
-            return                           # the app quit by itself
-        log.error("%s: the console did not quit within %g s (its screen stuck): exiting without it",
-                  why, self.grace_s)
+            return  # the app quit by itself
+        log.error(
+            "%s: the console did not quit within %g s (its screen stuck): exiting without it",
+            why,
+            self.grace_s,
+        )
         finished = self._finish(why, RIG_S)
-        log.log(logging.INFO if finished else logging.ERROR, "rig thread %s; exit code %d",
-                "finished" if finished else "did NOT finish", EXIT_SIGNALLED)
+        log.log(
+            logging.INFO if finished else logging.ERROR,
+            "rig thread %s; exit code %d",
+            "finished" if finished else "did NOT finish",
+            EXIT_SIGNALLED,
+        )
         logging.shutdown()
         os._exit(EXIT_SIGNALLED)
 

@@ -33,9 +33,16 @@ def help_keys(spec: str) -> set[str]:
     for part in spec.replace(",", "/").split("/"):
         part = part.strip().lower()
         lo, dash, hi = part.partition("-")
-        if dash and lo[-1:].isdigit() and hi[-1:].isdigit() and lo.rstrip("0123456789") == hi.rstrip("0123456789"):
+        if (
+            dash
+            and lo[-1:].isdigit()
+            and hi[-1:].isdigit()
+            and lo.rstrip("0123456789") == hi.rstrip("0123456789")
+        ):
             prefix = lo.rstrip("0123456789")
-            keys |= {f"{prefix}{i}" for i in range(int(lo[len(prefix):]), int(hi[len(prefix):]) + 1)}
+            keys |= {
+                f"{prefix}{i}" for i in range(int(lo[len(prefix) :]), int(hi[len(prefix) :]) + 1)
+            }
         elif part:
             keys.add(part)
     return keys

@@ -31,8 +31,11 @@ class Entry(StrEnum):
     @property
     def setpoint(self) -> SetpointKind:
         """The drivers' set-point this entry sets (not for the caging switches or the slew rate)."""
-        return {Entry.TORQUER_BIAS: SetpointKind.TORQUER_BIAS, Entry.COMMAND_TORQUE: SetpointKind.COMMAND_TORQUE,
-                Entry.AC_BIAS: SetpointKind.AC_BIAS}[self]
+        return {
+            Entry.TORQUER_BIAS: SetpointKind.TORQUER_BIAS,
+            Entry.COMMAND_TORQUE: SetpointKind.COMMAND_TORQUE,
+            Entry.AC_BIAS: SetpointKind.AC_BIAS,
+        }[self]
 
 
 def typed_setpoint(limits: SetpointLimits, entry: Entry, key: str, text: str) -> float:
@@ -46,8 +49,13 @@ def typed_setpoint(limits: SetpointLimits, entry: Entry, key: str, text: str) ->
 
 def typed_slew(text: str) -> float:
     """The torquer bias slew rate (V/s) typed, within the console's bounds."""
-    return check_value("torquer bias slew rate (V/s)", _number(text), SLEW_MAX_V_PER_S,
-                       "the console's bounded slew", lo=SLEW_MIN_V_PER_S)
+    return check_value(
+        "torquer bias slew rate (V/s)",
+        _number(text),
+        SLEW_MAX_V_PER_S,
+        "the console's bounded slew",
+        lo=SLEW_MIN_V_PER_S,
+    )
 
 
 def _number(text: str) -> object:

@@ -14,7 +14,7 @@ class FeedHandler(logging.Handler):
         super().__init__(level)
         self.feed = feed
         self.setFormatter(logging.Formatter("%(levelname).1s %(name)s: %(message)s"))
-        self.addFilter(ProjectFilter())   # other libraries' from WARNING (drivers.logrule)
+        self.addFilter(ProjectFilter())  # other libraries' from WARNING (drivers.logrule)
 
     def emit(self, record: logging.LogRecord) -> None:
         try:

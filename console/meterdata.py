@@ -26,7 +26,7 @@ class MeterSpec:
 
     channel: str
     units: str
-    per_volt: float          # engineering units per volt at the ADC
+    per_volt: float  # engineering units per volt at the ADC
 
     @property
     def what(self) -> str:
@@ -39,12 +39,18 @@ class MeterSpec:
 
 def permanent_meters(cal: RigCalibration) -> tuple[MeterSpec, ...]:
     """The ten meters of the thesis's meter panel, in its order."""
-    gyros = tuple(MeterSpec(f"gyro_{c.lower()}", "urad", 1e3 / cal.pickoff_scale_mV_per_urad[c])
-                  for c in GYRO_CHANNELS)
-    torquers = tuple(MeterSpec(f"torq_{c.lower()}", "urad/s", cal.torquer_scale_urad_per_s_per_V[c])
-                     for c in GYRO_CHANNELS)
-    acs = tuple(MeterSpec(f"ac_{a.lower()}_ctl", "urad", 1e3 / cal.autocollimator[a].control_mV_per_urad)
-                for a in ("X", "Y"))
+    gyros = tuple(
+        MeterSpec(f"gyro_{c.lower()}", "urad", 1e3 / cal.pickoff_scale_mV_per_urad[c])
+        for c in GYRO_CHANNELS
+    )
+    torquers = tuple(
+        MeterSpec(f"torq_{c.lower()}", "urad/s", cal.torquer_scale_urad_per_s_per_V[c])
+        for c in GYRO_CHANNELS
+    )
+    acs = tuple(
+        MeterSpec(f"ac_{a.lower()}_ctl", "urad", 1e3 / cal.autocollimator[a].control_mV_per_urad)
+        for a in ("X", "Y")
+    )
     return gyros + torquers + acs
 
 
@@ -52,7 +58,7 @@ def permanent_meters(cal: RigCalibration) -> tuple[MeterSpec, ...]:
 class MeterSnapshot:
     """What the UI draws: each channel's latest reading (V) and its strip-chart points."""
 
-    seq: int                                  # bumps whenever new samples arrived
+    seq: int  # bumps whenever new samples arrived
     volts: dict[str, float] = field(default_factory=dict)
     history: dict[str, tuple[float, ...]] = field(default_factory=dict)
     rig_time_s: float = 0.0
@@ -74,21 +80,27 @@ class MeterStore:
         self._seq = 0
         self._volts: dict[str, float] = {}
         self._points: dict[str, deque[float]] = {}
-        self._acc: dict[str, tuple[float, int]] = {}   # partial strip-chart point: (sum, count)
+        self._acc: dict[str, tuple[float, int]] = {}  # partial strip-chart point: (sum, count)
         self._rig_time = 0.0
         self._rate = 0.0
 
-    def push(self, channels: tuple[str, ...], volts: np.ndarray, rate_hz: float, rig_time_s: float = 0.0) -> None:
+    def push(
+        self, channels: tuple[str, ...], volts: np.ndarray, rate_hz: float, rig_time_s: float = 0.0
+    ) -> None:
         if len(volts) == 0:
             return
         n_avg = max(1, int(round(self.average_s * rate_hz)))
         with np.errstate(all="ignore"):
-            latest = np.nanmean(volts[-n_avg:], axis=0) if np.isfinite(volts[-n_avg:]).any() else None
+            latest = (
+                np.nanmean(volts[-n_avg:], axis=0) if np.isfinite(volts[-n_avg:]).any() else None
+            )
         per_point = max(1, int(round(self.point_s * rate_hz)))
         with self._lock:
             self._seq += 1
             self._rig_time = rig_time_s
-            if rate_hz != self._rate:  # a partial point at another rate cannot be finished at this one
+            if (
+                rate_hz != self._rate
+            ):  # a partial point at another rate cannot be finished at this one
                 self._acc.clear()
                 self._rate = rate_hz
             for j, ch in enumerate(channels):
@@ -109,8 +121,10 @@ class MeterStore:
                 whole = (len(col) - i) // per_point
                 if whole:
                     with np.errstate(all="ignore"):
-                        means = np.nanmean(col[i:i + whole * per_point].reshape(whole, per_point), axis=1)
-                    pts.extend(means[-self._history:].tolist())
+                        means = np.nanmean(
+                            col[i : i + whole * per_point].reshape(whole, per_point), axis=1
+                        )
+                    pts.extend(means[-self._history :].tolist())
                     i += whole * per_point
                 rest = col[i:]
                 if len(rest):
@@ -119,8 +133,12 @@ class MeterStore:
 
     def snapshot(self, with_history: tuple[str, ...] = ()) -> MeterSnapshot:
         with self._lock:
-            return MeterSnapshot(self._seq, dict(self._volts),
-                                 {c: tuple(self._points.get(c, ())) for c in with_history}, self._rig_time)
+            return MeterSnapshot(
+                self._seq,
+                dict(self._volts),
+                {c: tuple(self._points.get(c, ())) for c in with_history},
+                self._rig_time,
+            )
 
     def clear(self) -> None:
         """Forget the readings (the stream stopped: stale digits would mislead)."""

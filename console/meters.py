@@ -45,9 +45,9 @@ class MeterTable(Static):
         super().__init__(**kw)
         self.specs: tuple[MeterSpec, ...] = ()
         self.snap = MeterSnapshot(0)
-        self.paints = 0              # how many times the table was drawn (the benchmark counts it)
+        self.paints = 0  # how many times the table was drawn (the benchmark counts it)
         self.paused = False
-        self.channels: tuple[str, ...] | None = None   # the ADC's channels, once the rig is open
+        self.channels: tuple[str, ...] | None = None  # the ADC's channels, once the rig is open
 
     def show(self, specs: tuple[MeterSpec, ...], snap: MeterSnapshot) -> None:
         self.specs, self.snap = specs, snap
@@ -56,8 +56,10 @@ class MeterTable(Static):
     def render(self) -> Text:
         self.paints += 1
         t = Text(no_wrap=True, overflow="crop")
-        t.append(f"{'channel':<18}{'value':>10} {'units':<7}{'volts':>9}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}",
-                 style="bold")
+        t.append(
+            f"{'channel':<18}{'value':>10} {'units':<7}{'volts':>9}  {'-10 V':<{BAR_HALF}}0{'+10 V':>{BAR_HALF}}",
+            style="bold",
+        )
         if self.paused:
             t.append("  PAUSED", style="bold black on yellow")
         t.append("\n")
@@ -70,8 +72,13 @@ class MeterTable(Static):
             t.append(f"{s.channel:<9}")
             t.append(f"{s.what:<9}", style="dim")
             if v is None or not math.isfinite(v):  # say why there is no number
-                why = ("not on this ADC" if self.channels is not None and s.channel not in self.channels
-                       else "no reading (stream stopped)" if self.snap.seq else "waiting for the rig")
+                why = (
+                    "not on this ADC"
+                    if self.channels is not None and s.channel not in self.channels
+                    else "no reading (stream stopped)"
+                    if self.snap.seq
+                    else "waiting for the rig"
+                )
                 t.append(f"{'—':>10} {s.units:<7}  {why}", style="dim")
             else:
                 t.append(_num(eng, 10, 2), style="bold")
@@ -112,8 +119,9 @@ class StripChart(Vertical):
         title = f"chart {self.chart_name}: {describe(self.channel)}"
         if pts:
             span = f"{len(pts) * self.point_s:.0f} s"
-            title += f"   {min(pts):+.4f} .. {max(pts):+.4f} V over " + (f"{span} before the pause" if paused
-                                                                          else f"the last {span}")
+            title += f"   {min(pts):+.4f} .. {max(pts):+.4f} V over " + (
+                f"{span} before the pause" if paused else f"the last {span}"
+            )
         else:
             title += "   no data yet"
         self._title.update(title, layout=False)
@@ -122,7 +130,8 @@ class StripChart(Vertical):
 
 class MeterPanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
-        ("c", "strip chart A: the next channel"), ("v", "strip chart B: the next channel"),
+        ("c", "strip chart A: the next channel"),
+        ("v", "strip chart B: the next channel"),
         ("p", "pause / resume the meters (the panel says PAUSED while they are frozen)"),
     )
     BINDINGS = [
@@ -133,8 +142,18 @@ class MeterPanel(Vertical, can_focus=True):
 
     def __init__(self, **kw) -> None:
         super().__init__(**kw)
-        self.channels: tuple[str, ...] = ("gyro_x", "gyro_y", "gyro_z", "gyro_xrd", "torq_x", "torq_y", "torq_z",
-                                          "torq_xrd", "ac_x_ctl", "ac_y_ctl")
+        self.channels: tuple[str, ...] = (
+            "gyro_x",
+            "gyro_y",
+            "gyro_z",
+            "gyro_xrd",
+            "torq_x",
+            "torq_y",
+            "torq_z",
+            "torq_xrd",
+            "ac_x_ctl",
+            "ac_y_ctl",
+        )
         self.paused = False
 
     def compose(self) -> ComposeResult:
@@ -152,7 +171,10 @@ class MeterPanel(Vertical, can_focus=True):
 
     def on_mount(self) -> None:
         self._table = self.query_one(MeterTable)
-        self._charts = (self.query_one("#chart-a", StripChart), self.query_one("#chart-b", StripChart))
+        self._charts = (
+            self.query_one("#chart-a", StripChart),
+            self.query_one("#chart-b", StripChart),
+        )
 
     def show(self, specs: tuple[MeterSpec, ...], snap: MeterSnapshot) -> None:
         if self.paused:
@@ -169,7 +191,7 @@ class MeterPanel(Vertical, can_focus=True):
 
     def action_pause(self) -> None:
         self.paused = not self.paused
-        self._table.paused = self.paused     # the panel says so while it is frozen, not only a toast
+        self._table.paused = self.paused  # the panel says so while it is frozen, not only a toast
         self._table.refresh()
         for chart in self._charts:
             chart.show(self._table.snap.history.get(chart.channel, ()), paused=self.paused)

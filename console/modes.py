@@ -24,11 +24,20 @@ SHORT = {1: "gyro off", 2: "spin-up", 3: "AC ctl", 4: "gyro 4ch", 5: "gyro 3ch",
 class ModePanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
         ("h", "hold the mode switches: nothing changes until the release"),
-        ("0-7", "select a mode while held: 1 gyro off, 2 spin-up, 3 autocollimator control, 4 gyro "
-        "control (4-channel caging), 5 gyro control (3-channel), 6 external; 0 and 7 light the alarm"),
-        ("r", "release: the selected mode takes effect (4 and 5 need the gyros at speed and caged; the "
-              "spin-up in mode 2 shows its time to speed)"),
-        ("s", "the safe state now: mode 1, outputs zero, caging released; aborts a running procedure"),
+        (
+            "0-7",
+            "select a mode while held: 1 gyro off, 2 spin-up, 3 autocollimator control, 4 gyro "
+            "control (4-channel caging), 5 gyro control (3-channel), 6 external; 0 and 7 light the alarm",
+        ),
+        (
+            "r",
+            "release: the selected mode takes effect (4 and 5 need the gyros at speed and caged; the "
+            "spin-up in mode 2 shows its time to speed)",
+        ),
+        (
+            "s",
+            "the safe state now: mode 1, outputs zero, caging released; aborts a running procedure",
+        ),
     )
     BINDINGS: ClassVar[list[BindingType]] = [
         Binding("h", "hold", "hold"),
@@ -51,8 +60,10 @@ class ModePanel(Vertical, can_focus=True):
         yield Static(id="mode-gyros")
         yield Static(id="mode-interlocks")
         yield Static(id="mode-last")
-        yield Static("h hold · 1-6 select (0, 7: alarm) · r release · s safe (mode 1, zero outputs)",
-                     id="mode-help")
+        yield Static(
+            "h hold · 1-6 select (0, 7: alarm) · r release · s safe (mode 1, zero outputs)",
+            id="mode-help",
+        )
 
     def action_hold(self) -> None:
         self.post_message(self.Command("hold"))
@@ -79,8 +90,13 @@ class ModePanel(Vertical, can_focus=True):
     def show(self, snap: Snapshot) -> None:
         if self._last_state is not None and self._last_state != mode_state(snap):
             self.last("", True)
-        key = (snap.relay, snap.alarm, snap.fault, snap.caging,
-               None if snap.spin_left_s is None else duration(snap.spin_left_s))
+        key = (
+            snap.relay,
+            snap.alarm,
+            snap.fault,
+            snap.caging,
+            None if snap.spin_left_s is None else duration(snap.spin_left_s),
+        )
         if key == self._shown:
             return
         self._shown = key
@@ -96,8 +112,11 @@ class ModePanel(Vertical, can_focus=True):
         self.query_one("#mode-now", Static).update(now)
         lamps = Text()
         for m, name in SHORT.items():
-            style = "bold reverse green" if m == st.mode else ("underline yellow" if st.held and m == st.selected
-                                                               else "dim")
+            style = (
+                "bold reverse green"
+                if m == st.mode
+                else ("underline yellow" if st.held and m == st.selected else "dim")
+            )
             lamps.append(f" {m} {name} ", style=style)
             lamps.append(" ")
         self.query_one("#mode-lamps", Static).update(lamps)
@@ -131,25 +150,43 @@ def spin_words(st: RelayStatus, left_s: float | None) -> str:
         return text
     if st.mode < 2:
         return text + " (mode 2 spins them up)"
-    return text + (f", at speed in about {duration(left_s)}" if left_s is not None
-                   else ", spinning up (time to speed: measuring)")
+    return text + (
+        f", at speed in about {duration(left_s)}"
+        if left_s is not None
+        else ", spinning up (time to speed: measuring)"
+    )
 
 
-def gyro_words(st: RelayStatus, inhibited: dict[str, bool], spin_left_s: float | None = None) -> Text:
+def gyro_words(
+    st: RelayStatus, inhibited: dict[str, bool], spin_left_s: float | None = None
+) -> Text:
     """The wheels and the caging in words, and what engages the caging (II D): it is not a
     switch, the relay driver cages each gyro by itself in mode 3 once its pickoff nulls."""
     t = Text(spin_words(st, spin_left_s) + "   at speed: ")
     slow = _names(st.at_speed, False)
-    t.append("all" if not slow else ("none" if len(slow) == len(st.at_speed) else "all but " + " ".join(slow)),
-             style="green" if not slow else "bold yellow")
+    t.append(
+        "all"
+        if not slow
+        else ("none" if len(slow) == len(st.at_speed) else "all but " + " ".join(slow)),
+        style="green" if not slow else "bold yellow",
+    )
     t.append("   caged: ")
     loose = _names(st.caged, False)
-    t.append("all" if not loose else ("none" if len(loose) == len(st.caged) else "all but " + " ".join(loose)),
-             style="green" if not loose else "bold yellow")
+    t.append(
+        "all"
+        if not loose
+        else ("none" if len(loose) == len(st.caged) else "all but " + " ".join(loose)),
+        style="green" if not loose else "bold yellow",
+    )
     held = _names(inhibited, True)
     if loose:
-        why = ("caging engages by itself in mode 3, each loop once its pickoff nulls" if st.mode < 3
-               else "engaging by itself as each pickoff nulls" if st.mode == 3 else "")
+        why = (
+            "caging engages by itself in mode 3, each loop once its pickoff nulls"
+            if st.mode < 3
+            else "engaging by itself as each pickoff nulls"
+            if st.mode == 3
+            else ""
+        )
         if held:
             why += ("; " if why else "") + f"inhibited on Set-points: {' '.join(held)}"
         if why:
@@ -162,8 +199,11 @@ def interlock_words(st: RelayStatus, alarm: str | None) -> Text:
     said once, by the line above (at speed, caged); a refused release once more by the alarm,
     in the drivers' words (``relay.interlock_reason``), to which these lines then point."""
     t = Text()
-    if st.clamped:   # the open-loop baseline's state (Ch. V B): modes 4-6 refused until released
-        t.append("platform CLAMPED, loops open: modes 1-3 only (fbs clamp off releases it)\n", style="bold yellow")
+    if st.clamped:  # the open-loop baseline's state (Ch. V B): modes 4-6 refused until released
+        t.append(
+            "platform CLAMPED, loops open: modes 1-3 only (fbs clamp off releases it)\n",
+            style="bold yellow",
+        )
     for m, need in CAGED_FOR_MODE.items():
         t.append(f"mode {m} needs {' '.join(need)} at speed and caged: ")
         if interlock_reason(m, st) is None:

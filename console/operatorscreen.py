@@ -29,7 +29,9 @@ class OperatorScreen(ModalScreen[str]):
         with Vertical():
             yield Static("[b]The operator is asked[/b]")
             yield Static(self.question.prompt)
-            yield OrderedInput(placeholder="Enter when done, or the angle set, or 'abort'", id="operator-answer")
+            yield OrderedInput(
+                placeholder="Enter when done, or the angle set, or 'abort'", id="operator-answer"
+            )
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         self.dismiss(event.value)

@@ -38,8 +38,10 @@ LOADING = ""
 def defaults_text(proc_cls: type[Procedure]) -> str:
     """Every parameter and its default, as ``k=v`` pairs a user can copy (``  `` between them,
     so a narrow panel wraps between pairs, never inside one)."""
-    return "  ".join(f"{k}={json.dumps(v, separators=(',', ':'))}"
-                     for k, v in dataclasses.asdict(proc_cls.Params()).items())
+    return "  ".join(
+        f"{k}={json.dumps(v, separators=(',', ':'))}"
+        for k, v in dataclasses.asdict(proc_cls.Params()).items()
+    )
 
 
 def parse_param_text(proc_cls, text: str):
@@ -56,8 +58,10 @@ def parse_run_text(proc_cls, text: str) -> tuple[Procedure, Path | None]:
     if RESUME not in specs:
         return parse_param_text(proc_cls, text), None
     if len(specs) != 2 or specs[0] != RESUME:
-        raise ValueError(f"{RESUME} FILE continues the interrupted run with its own parameters: "
-                         "give the file alone, no name=value")
+        raise ValueError(
+            f"{RESUME} FILE continues the interrupted run with its own parameters: "
+            "give the file alone, no name=value"
+        )
     return proc_cls(), Path(specs[1].strip('"'))
 
 
@@ -92,7 +96,7 @@ def value_text(m: Measurement) -> Text:
     val = f"{m.value:.6g}" if m.value is not None else "-"
     err = f" ± {m.stderr:.3g}" if m.stderr is not None and math.isfinite(m.stderr) else ""
     t.append(f"{val}{err} {m.units}".rstrip())
-    if unresolved:   # a value given, but its interval too wide to call it measured
+    if unresolved:  # a value given, but its interval too wide to call it measured
         t.append(" (not resolved)", style="bold yellow")
     return t
 
@@ -119,31 +123,51 @@ def result_text(summary: RunSummary, plots: tuple[Path, ...] = ()) -> Text:
         if m.passed is not None:
             t.append("  pass" if m.passed else "  FAIL", style="green" if m.passed else "bold red")
         t.append("\n")
-    for label, path in (("file", summary.file), ("report", summary.report), *(("plot", p) for p in plots)):
+    for label, path in (
+        ("file", summary.file),
+        ("report", summary.report),
+        *(("plot", p) for p in plots),
+    ):
         if path is not None:
             t.append(f"{label:<7}", style="bold")
             t.append(f"{path}\n")
     if can_resume(summary):
         t.append("resume ", style="bold")
         t.append(f"f9 here, or: fbs run {summary.procedure} {RESUME} {summary.file}\n")
-        t.append("       (the steps done are taken over, the run's own parameters kept)", style="dim")
+        t.append(
+            "       (the steps done are taken over, the run's own parameters kept)", style="dim"
+        )
     t.rstrip()
     return t
 
 
-
-
 class ProcedurePanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
-        ("F7", "run the chosen procedure with the typed parameters (name=value ..., as fbs run --param), "
-               "or continue an aborted run: --resume FILE"),
-        ("F8", "abort it: the rig goes safe, its file is closed \"aborted\" (F9 or --resume continues it)"),
-        ("F9", "resume the run just aborted (its parameters, the steps done taken over), as fbs run --resume"),
-        ("Tab / shift+Tab", "between the list, the parameters box, the parameter list, the log and the result"),
+        (
+            "F7",
+            "run the chosen procedure with the typed parameters (name=value ..., as fbs run --param), "
+            "or continue an aborted run: --resume FILE",
+        ),
+        (
+            "F8",
+            'abort it: the rig goes safe, its file is closed "aborted" (F9 or --resume continues it)',
+        ),
+        (
+            "F9",
+            "resume the run just aborted (its parameters, the steps done taken over), as fbs run --resume",
+        ),
+        (
+            "Tab / shift+Tab",
+            "between the list, the parameters box, the parameter list, the log and the result",
+        ),
         ("up / down", "on the parameter list, the log or the result: scroll it"),
         ("Enter", "on the list: open it; in the parameters box: run"),
     )
-    BINDINGS = [Binding("f7", "run", "run"), Binding("f8", "abort", "abort"), Binding("f9", "resume", "resume")]
+    BINDINGS = [
+        Binding("f7", "run", "run"),
+        Binding("f8", "abort", "abort"),
+        Binding("f9", "resume", "resume"),
+    ]
 
     class Run(Message):
         def __init__(self, name: str, params: str) -> None:
@@ -164,16 +188,28 @@ class ProcedurePanel(Vertical, can_focus=True):
         with Horizontal(classes="proc-row"):
             # no blank entry ever: a blank's prompt could be chosen, and named no procedure
             # ("Select.NULL"); until the catalogue is in, one disabled "loading…" entry
-            yield Select([("loading…", LOADING)], allow_blank=False, value=LOADING,
-                         disabled=True, id="proc-name", compact=True)
-            yield OrderedInput(placeholder="parameters: name=value ... (f7 run, f8 abort)", id="proc-params", compact=True)
+            yield Select(
+                [("loading…", LOADING)],
+                allow_blank=False,
+                value=LOADING,
+                disabled=True,
+                id="proc-name",
+                compact=True,
+            )
+            yield OrderedInput(
+                placeholder="parameters: name=value ... (f7 run, f8 abort)",
+                id="proc-params",
+                compact=True,
+            )
         with VerticalScroll(id="proc-about"):
             yield Static(id="proc-defaults")
         with Horizontal(classes="proc-row"):
             yield ProgressBar(total=100, show_eta=False, id="proc-bar")
             yield Static("idle", id="proc-step")
         # wrapped (re-wrapped when its width changes): no horizontal scroll bar, no line cut off
-        yield EventLog(id="proc-log", max_lines=1000, wrap=True, min_width=20, markup=False, auto_scroll=True)
+        yield EventLog(
+            id="proc-log", max_lines=1000, wrap=True, min_width=20, markup=False, auto_scroll=True
+        )
         with VerticalScroll(id="proc-result-box"):
             yield Static(id="proc-result")
 
@@ -181,7 +217,7 @@ class ProcedurePanel(Vertical, can_focus=True):
         """The procedures (imported off the UI thread: the analysis stack takes seconds)."""
         self.catalogue = catalogue
         select = self.query_one("#proc-name", Select)
-        if catalogue:   # the placeholder goes: the first procedure is chosen
+        if catalogue:  # the placeholder goes: the first procedure is chosen
             select.set_options([(n, n) for n in catalogue])
             select.disabled = False
         else:
@@ -211,8 +247,11 @@ class ProcedurePanel(Vertical, can_focus=True):
 
     def action_resume(self) -> None:
         if self.resumable is None:
-            self.app.notify("no aborted run to resume here: type --resume FILE in the parameters box",
-                            severity="warning", timeout=6)
+            self.app.notify(
+                "no aborted run to resume here: type --resume FILE in the parameters box",
+                severity="warning",
+                timeout=6,
+            )
             return
         name, path = self.resumable
         self.query_one("#proc-name", Select).value = name
@@ -228,7 +267,9 @@ class ProcedurePanel(Vertical, can_focus=True):
         self.query_one("#proc-log", EventLog).clear()
         self.query_one("#proc-result", Static).update("")
         self.query_one("#proc-bar", ProgressBar).update(progress=0)
-        self.query_one("#proc-step", Static).update(f"{name}: {'resuming ' + str(resuming) if resuming else 'starting'}")
+        self.query_one("#proc-step", Static).update(
+            f"{name}: {'resuming ' + str(resuming) if resuming else 'starting'}"
+        )
 
     def refused(self, text: str) -> None:
         """The run did not start (the rig thread refused it): the panel is idle again."""
@@ -239,10 +280,17 @@ class ProcedurePanel(Vertical, can_focus=True):
         if info is None:
             return
         self.query_one("#proc-bar", ProgressBar).update(progress=100 * info.fraction)
-        left = f"about {duration(info.remaining_wall_s)} left" if info.remaining_wall_s is not None else (
-            f"{duration(info.remaining_rig_s)} of rig time left")
-        step = (f"step {info.index + 1}/{info.n_steps} {info.step} · {left}" if info.n_steps else info.step)
-        if info.phase != "steps":      # after the steps: the analysis, the report
+        left = (
+            f"about {duration(info.remaining_wall_s)} left"
+            if info.remaining_wall_s is not None
+            else (f"{duration(info.remaining_rig_s)} of rig time left")
+        )
+        step = (
+            f"step {info.index + 1}/{info.n_steps} {info.step} · {left}"
+            if info.n_steps
+            else info.step
+        )
+        if info.phase != "steps":  # after the steps: the analysis, the report
             step = f"{info.phase} (all {info.n_steps} steps done)"
         if info.aborting:
             step = "ABORTING (rig going safe) · " + step
@@ -256,8 +304,13 @@ class ProcedurePanel(Vertical, can_focus=True):
     def finished(self, summary: RunSummary, plots: tuple[Path, ...] = ()) -> None:
         self.running = False
         self.add_class("-ran")
-        self.resumable = (summary.procedure, summary.file) if can_resume(summary) and summary.file else None
+        self.resumable = (
+            (summary.procedure, summary.file) if can_resume(summary) and summary.file else None
+        )
         self.query_one("#proc-result", Static).update(result_text(summary, plots))
         self.query_one("#proc-result-box", VerticalScroll).scroll_home(animate=False)
-        self.query_one("#proc-step", Static).update(Text(f"{summary.procedure}: {summary.verdict} (below)",
-                                                         no_wrap=True, overflow="ellipsis"))
+        self.query_one("#proc-step", Static).update(
+            Text(
+                f"{summary.procedure}: {summary.verdict} (below)", no_wrap=True, overflow="ellipsis"
+            )
+        )

@@ -24,18 +24,32 @@ def what_quit_closes(snap: Snapshot) -> list[str]:
     out: list[str] = []
     if snap.phase is Phase.RECORDING and snap.recording is not None:
         r = snap.recording
-        out.append(f"the recording {r.path} ({r.elapsed_s:.0f} s, {r.samples} samples) is closed "
-                   "\"aborted: ConsoleClosed\"")
+        out.append(
+            f"the recording {r.path} ({r.elapsed_s:.0f} s, {r.samples} samples) is closed "
+            '"aborted: ConsoleClosed"'
+        )
     if snap.phase is Phase.PROCEDURE and snap.procedure is not None:
         p = snap.procedure
         where = f"step {p.index + 1}/{p.n_steps}, {100 * p.fraction:.0f} %" if p.n_steps else p.step
-        out.append(f"the procedure {p.name} ({where}) is aborted"
-                   + (f"; its file {p.file} is closed \"aborted\" (fbs run --resume continues it)" if p.file else ""))
+        out.append(
+            f"the procedure {p.name} ({where}) is aborted"
+            + (
+                f'; its file {p.file} is closed "aborted" (fbs run --resume continues it)'
+                if p.file
+                else ""
+            )
+        )
     if out:
         st = snap.relay
         spinning = st is not None and st.spin_fraction > 0
-        out.append("the rig goes to the safe state (mode 1, outputs zero, caging released)"
-                   + (": the gyro wheels stop, and back to mode 3 is minutes of spin-up" if spinning else ""))
+        out.append(
+            "the rig goes to the safe state (mode 1, outputs zero, caging released)"
+            + (
+                ": the gyro wheels stop, and back to mode 3 is minutes of spin-up"
+                if spinning
+                else ""
+            )
+        )
     return out
 
 
@@ -44,7 +58,7 @@ class QuitScreen(ModalScreen[bool]):
         Binding("y", "answer(True)", "quit"),
         Binding("n", "answer(False)", "keep running"),
         Binding("escape", "answer(False)", "keep running"),
-        Binding("q", "noop", show=False),   # a second q is not an answer
+        Binding("q", "noop", show=False),  # a second q is not an answer
     ]
 
     DEFAULT_CSS = """

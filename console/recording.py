@@ -21,10 +21,13 @@ from console.state import RecordingInfo, RigEventItem, Snapshot
 
 class RecordingPanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
-        ("F7", "start a recording: the file (blank: the next free recording.h5, named in "
-               "the box; a name goes into --out, an absolute path as typed), rate, channels "
-               "(all, or names as gyro_x,torq_x)"),
-        ("F8", "stop it: the file is closed \"complete\""),
+        (
+            "F7",
+            "start a recording: the file (blank: the next free recording.h5, named in "
+            "the box; a name goes into --out, an absolute path as typed), rate, channels "
+            "(all, or names as gyro_x,torq_x)",
+        ),
+        ("F8", 'stop it: the file is closed "complete"'),
         ("Tab / shift+Tab", "the next / previous box"),
         ("Enter", "in a box: start the recording"),
     )
@@ -41,25 +44,35 @@ class RecordingPanel(Vertical, can_focus=True):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="rec-row"):
             yield Static("file", classes="rec-label")
-            yield OrderedInput(placeholder="blank: the next free recording.h5", id="rec-path", compact=True)
+            yield OrderedInput(
+                placeholder="blank: the next free recording.h5", id="rec-path", compact=True
+            )
         with Horizontal(classes="rec-row"):
             yield Static("rate Hz", classes="rec-label")
             yield OrderedInput("1000", id="rec-rate", compact=True, classes="rec-short")
             yield Static(" channels", classes="rec-label")
-            yield OrderedInput(placeholder="all, or names: gyro_x,torq_x,...", id="rec-channels", compact=True)
+            yield OrderedInput(
+                placeholder="all, or names: gyro_x,torq_x,...", id="rec-channels", compact=True
+            )
         yield Static("not recording   (f7 record, f8 stop)", id="rec-status")
         yield Static("event log", classes="section")
         # wrapped, so no horizontal scroll bar hides the newest line; it follows the newest entry
-        yield EventLog(id="event-log", max_lines=500, wrap=True, min_width=20, markup=False, auto_scroll=True)
+        yield EventLog(
+            id="event-log", max_lines=500, wrap=True, min_width=20, markup=False, auto_scroll=True
+        )
 
     def set_next_path(self, path: Path) -> None:
         """The file a recording started with a blank name goes to (the name shown is the name written)."""
         self.query_one("#rec-path", Input).placeholder = f"blank: {path} (the next free name)"
 
     def action_start(self) -> None:
-        self.post_message(self.Start(self.query_one("#rec-path", Input).value,
-                                     self.query_one("#rec-rate", Input).value,
-                                     self.query_one("#rec-channels", Input).value))
+        self.post_message(
+            self.Start(
+                self.query_one("#rec-path", Input).value,
+                self.query_one("#rec-rate", Input).value,
+                self.query_one("#rec-channels", Input).value,
+            )
+        )
 
     def action_stop(self) -> None:
         self.post_message(self.Stop())
@@ -72,7 +85,12 @@ class RecordingPanel(Vertical, can_focus=True):
 
     def show(self, snap: Snapshot) -> None:
         r = snap.recording
-        key = (snap.phase, r.status if r else None, round(r.elapsed_s, 1) if r else None, r.gaps if r else None)
+        key = (
+            snap.phase,
+            r.status if r else None,
+            round(r.elapsed_s, 1) if r else None,
+            r.gaps if r else None,
+        )
         if key == self._shown:
             return
         self._shown = key
@@ -82,8 +100,10 @@ class RecordingPanel(Vertical, can_focus=True):
         elif snap.phase == "recording" and r.status == "recording":
             t = Text()
             t.append(" ● REC ", style="bold white on red")
-            t.append(f" {r.path}\n elapsed {_hms(r.elapsed_s)}   samples {r.samples}   "
-                     f"{len(r.channels)} ch at {r.rate_hz:g} Hz   gaps {r.gaps} ({r.lost} lost)")
+            t.append(
+                f" {r.path}\n elapsed {_hms(r.elapsed_s)}   samples {r.samples}   "
+                f"{len(r.channels)} ch at {r.rate_hz:g} Hz   gaps {r.gaps} ({r.lost} lost)"
+            )
             status.update(t, layout=False)
         else:
             status.update(_ended(r), layout=False)
@@ -105,8 +125,15 @@ def event_line(e: RigEventItem) -> Text:
     """``12:03:07 r  1234.56 s alarm    mode 7 is not allowed ...`` (wall clock, then rig time)."""
     wall = time.strftime("%H:%M:%S", time.localtime(e.wall_s))
     rig = f"r {e.rig_time_s:9.2f} s" if e.rig_time_s is not None else "r         - s"
-    style = ("bold red" if e.kind in ("alarm", "error", "fault") else
-             "red" if e.kind == "refused" else "yellow" if e.kind == "gap" else "")
+    style = (
+        "bold red"
+        if e.kind in ("alarm", "error", "fault")
+        else "red"
+        if e.kind == "refused"
+        else "yellow"
+        if e.kind == "gap"
+        else ""
+    )
     t = Text(f"{wall} ", style="dim")
     t.append(f"{rig} ", style="dim")
     t.append(f"{e.kind:<8} {e.text}", style=style)

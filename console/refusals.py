@@ -35,33 +35,42 @@ def operator_words(what: str, exc: BaseException) -> str:
     text = str(exc)
     raw = _RAW.search(text)
     if raw is None:
-        return text            # already in words: the drivers' or the console's own
+        return text  # already in words: the drivers' or the console's own
     node = raw["node"]
     if isinstance(exc, InterlockError):
         if exc.detail == ABORT_NOT_HELD:
             if what.startswith("select mode "):
                 mode = what.removeprefix("select mode ")
-                return (f"mode {mode} not selected: the mode switches are not held; "
-                        f"press h (hold), then {mode}, then r (release)")
+                return (
+                    f"mode {mode} not selected: the mode switches are not held; "
+                    f"press h (hold), then {mode}, then r (release)"
+                )
             if what == "release":
                 return f"nothing to release: the mode switches are not held; {HOW_TO_SELECT}"
             return f"{what} refused: the mode switches are not held; {HOW_TO_SELECT}"
         if exc.detail == ABORT_NOT_OPERATIONAL:
-            return (f"{what} refused: the {node} node is latched in its safe state (not "
-                    "operational); quit and reopen the console, which starts it again")
+            return (
+                f"{what} refused: the {node} node is latched in its safe state (not "
+                "operational); quit and reopen the console, which starts it again"
+            )
         if exc.reasons:
             why = "; ".join(exc.reasons)
             do = "; ".join(_TO_DO[r] for r in exc.reasons if r in _TO_DO)
             return f"{what} refused by the interlocks: {why}" + (f"; {do}" if do else "")
-        return (f"{what} refused by the {node} node's interlocks: see Modes (F2) for what "
-                "is missing")
+        return f"{what} refused by the {node} node's interlocks: see Modes (F2) for what is missing"
     if isinstance(exc, SetpointRangeError):
-        return (f"{what} refused: the {node} node does not take that value (outside its range); "
-                "nothing changed: enter a value within the limit shown on Set-points (F3)")
+        return (
+            f"{what} refused: the {node} node does not take that value (outside its range); "
+            "nothing changed: enter a value within the limit shown on Set-points (F3)"
+        )
     if isinstance(exc, DeviceTimeout):
-        return (f"{what} failed: the {node} node did not answer; the rig went safe "
-                "(console.log has the detail)")
+        return (
+            f"{what} failed: the {node} node did not answer; the rig went safe "
+            "(console.log has the detail)"
+        )
     if isinstance(exc, ProtocolError):
-        return (f"{what} failed: the {node} node's answer was not understood; the rig went safe "
-                "(console.log has the detail)")
+        return (
+            f"{what} failed: the {node} node's answer was not understood; the rig went safe "
+            "(console.log has the detail)"
+        )
     return f"{what} failed at the {node} node (console.log has the detail)"

@@ -19,7 +19,7 @@ def report_plots(report: Path | None) -> tuple[Path, ...]:
         return ()
     try:
         text = report.read_text(encoding="utf-8")
-    except OSError as exc:   # the report could not be read: the panel names the report alone
+    except OSError as exc:  # the report could not be read: the panel names the report alone
         log.warning("cannot read the report %s for its plots: %s", report, exc)
         return ()
     return tuple(report.parent / name for name in _IMAGE.findall(text))

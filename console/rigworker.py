@@ -100,10 +100,20 @@ class Command:
 
 
 class RigWorker:
-    def __init__(self, url: str, *, out_dir: str | Path, post: Callable[[object], None], meters: MeterStore,
-                 events: Feed[RigEventItem] | None = None, operator: ConsoleOperator | None = None,
-                 meter_rate_hz: float = 200.0, tick_s: float = 0.05, status_every_s: float = 0.5,
-                 readback_every_s: float = 1.0) -> None:
+    def __init__(
+        self,
+        url: str,
+        *,
+        out_dir: str | Path,
+        post: Callable[[object], None],
+        meters: MeterStore,
+        events: Feed[RigEventItem] | None = None,
+        operator: ConsoleOperator | None = None,
+        meter_rate_hz: float = 200.0,
+        tick_s: float = 0.05,
+        status_every_s: float = 0.5,
+        readback_every_s: float = 1.0,
+    ) -> None:
         self.url = url
         self.out_dir = Path(out_dir)
         self.post_event = post
@@ -122,21 +132,21 @@ class RigWorker:
         self._stop_reason = ""
         self._abort = threading.Event()
         self._thread = threading.Thread(target=self._run, name="console-rig", daemon=True)
-        self._acq: Acquisition | None = None   # while recording
-        self._streaming = False                # the idle meter stream (or the recording) is running
+        self._acq: Acquisition | None = None  # while recording
+        self._streaming = False  # the idle meter stream (or the recording) is running
         self._stream_rate = 0.0
         self._stream_pos = 0
         self._stream_wall0 = 0.0
         self._slews: dict[str, Slew] = {}
         self._next_status = 0.0
         self._next_readback = 0.0
-        self._sharing = False                  # a procedure runs on this thread: poll on rig time
+        self._sharing = False  # a procedure runs on this thread: poll on rig time
         self._next_status_rig = 0.0
         self._next_readback_rig = 0.0
-        self._quiet_setpoints = False          # a slew's steps: one line in the event log, not one a step
+        self._quiet_setpoints = False  # a slew's steps: one line in the event log, not one a step
         self._fault_handled = False
-        self._alarm_not_held = False           # the lamp is lit by a selection without hold
-        self._alarm_mode: int | None = None    # the lamp is lit by this mode's refused release
+        self._alarm_not_held = False  # the lamp is lit by a selection without hold
+        self._alarm_mode: int | None = None  # the lamp is lit by this mode's refused release
         self._spin = SpinUpEstimate()
         #: the files the shutdown closed, "path (status)", for the console's exit line
         self.closed_on_stop: list[str] = []
@@ -203,10 +213,16 @@ class RigWorker:
         self.submit(f"torquer bias {channel}", lambda: self._slew_to(channel, volts, slew_V_per_s))
 
     def set_command_torque(self, axis: str, volts: float) -> None:
-        self.submit(f"command torque {axis}", lambda: self._set_output(SetpointKind.COMMAND_TORQUE, axis, volts))
+        self.submit(
+            f"command torque {axis}",
+            lambda: self._set_output(SetpointKind.COMMAND_TORQUE, axis, volts),
+        )
 
     def set_ac_bias(self, axis: str, volts: float) -> None:
-        self.submit(f"autocollimator bias {axis}", lambda: self._set_output(SetpointKind.AC_BIAS, axis, volts))
+        self.submit(
+            f"autocollimator bias {axis}",
+            lambda: self._set_output(SetpointKind.AC_BIAS, axis, volts),
+        )
 
     def set_caging_inhibit(self, channel: str, inhibit: bool) -> None:
         self.submit(f"caging inhibit {channel}", lambda: self._caging(channel, inhibit))
@@ -272,7 +288,9 @@ class RigWorker:
                 rig = open_rig(self.url, operator=self.operator)
             except Exception as exc:  # a bad URL or a missing device: say so, nothing to make safe
                 log.error("cannot open the rig %s: %s", self.url, exc)
-                self.state.update(phase=Phase.CLOSED, fault=f"cannot open the rig {self.url}: {exc}")
+                self.state.update(
+                    phase=Phase.CLOSED, fault=f"cannot open the rig {self.url}: {exc}"
+                )
                 self._post(RigFailed(f"cannot open the rig {self.url}: {exc}"))
                 return
             self.rig = rig
@@ -280,9 +298,16 @@ class RigWorker:
             rig.adc = TappedAdc(rig.adc, self.meters, after_block=self._poll_shared)
             rig.subscribe(self._on_rig_event)
             self.state.update(phase=Phase.READY)
-            self._note("console", f"rig {self.url} open ({'virtual' if rig.clock.virtual else 'paced'} time)")
-            self._post(RigReady(self.url, rig.calibration, tuple(rig.adc.identity.channels), rig.clock.virtual))
-            with self._safety:   # whatever ends this thread but a quit, the rig goes safe first
+            self._note(
+                "console",
+                f"rig {self.url} open ({'virtual' if rig.clock.virtual else 'paced'} time)",
+            )
+            self._post(
+                RigReady(
+                    self.url, rig.calibration, tuple(rig.adc.identity.channels), rig.clock.virtual
+                )
+            )
+            with self._safety:  # whatever ends this thread but a quit, the rig goes safe first
                 self._guard(self._start_meter_stream)
                 self._guard(lambda: self._poll(force=True))
                 while not self._stop.is_set():
@@ -301,7 +326,11 @@ class RigWorker:
         while True:
             left = until - time.monotonic()
             try:
-                cmd = self._queue.get(timeout=max(0.0, left)) if left > 0 else self._queue.get_nowait()
+                cmd = (
+                    self._queue.get(timeout=max(0.0, left))
+                    if left > 0
+                    else self._queue.get_nowait()
+                )
             except queue.Empty:
                 return
             if cmd is None or self._stop.is_set():
@@ -316,7 +345,7 @@ class RigWorker:
             text = cmd.run()
         except Refused as exc:
             self._post(CommandOutcome(cmd.what, False, str(exc)))
-        except REFUSALS as exc:   # the raw text here, the operator's words on the screen
+        except REFUSALS as exc:  # the raw text here, the operator's words on the screen
             log.info("%s refused: %s", cmd.what, exc)
             self._post(CommandOutcome(cmd.what, False, operator_words(cmd.what, exc)))
             if isinstance(exc, DriverError):
@@ -381,7 +410,10 @@ class RigWorker:
             return
         # Samples up to a little before now: a paced rig delivers ~10 ms frames, and asking
         # for samples not yet taken would block this thread (and the commands) until they are.
-        due = int((time.monotonic() - self._stream_wall0 - 0.03) * self._stream_rate) - self._stream_pos
+        due = (
+            int((time.monotonic() - self._stream_wall0 - 0.03) * self._stream_rate)
+            - self._stream_pos
+        )
         if due <= 0:
             return
         if due > 2 * self._stream_rate and self._rig.clock.virtual:
@@ -394,8 +426,17 @@ class RigWorker:
             self._acq.acquire_samples(due, keep=False)
             self._stream_pos = self._acq.pos
             r = self._acq.result
-            self.state.update(recording=RecordingInfo(r.path, self._acq.rate_hz, self._acq.channels,
-                                                      self._acq.time_s, self._acq.pos, len(r.gaps), r.lost))
+            self.state.update(
+                recording=RecordingInfo(
+                    r.path,
+                    self._acq.rate_hz,
+                    self._acq.channels,
+                    self._acq.time_s,
+                    self._acq.pos,
+                    len(r.gaps),
+                    r.lost,
+                )
+            )
             return
         try:
             block = self._rig.adc.read(due)
@@ -414,15 +455,23 @@ class RigWorker:
         check_new_path(path)  # a bad name is refused before the meter stream stops
         self._stop_meter_stream()
         try:
-            acq = Acquisition(self._rig, path, rate_hz=rate_hz, channels=channels, block_s=0.05,
-                              meta={"console": {"rig": self.url}})
+            acq = Acquisition(
+                self._rig,
+                path,
+                rate_hz=rate_hz,
+                channels=channels,
+                block_s=0.05,
+                meta={"console": {"rig": self.url}},
+            )
             acq.start()
         except BaseException:
             self._guard(self._start_meter_stream)
             raise
         self._acq = acq
         self._begin_stream(acq.rate_hz)
-        self.state.update(phase=Phase.RECORDING, recording=RecordingInfo(Path(path), acq.rate_hz, acq.channels))
+        self.state.update(
+            phase=Phase.RECORDING, recording=RecordingInfo(Path(path), acq.rate_hz, acq.channels)
+        )
         return f"recording {len(acq.channels)} channels at {acq.rate_hz:g} Hz to {path}"
 
     def _stop_recording(self) -> str:
@@ -447,9 +496,15 @@ class RigWorker:
             log.error("closing the recording failed: %s", late)
             self._abort_guard.abort(late)
         r = acq.result
-        info = RecordingInfo(r.path, acq.rate_hz, acq.channels, acq.time_s, acq.pos, len(r.gaps), r.lost, r.status)
+        info = RecordingInfo(
+            r.path, acq.rate_hz, acq.channels, acq.time_s, acq.pos, len(r.gaps), r.lost, r.status
+        )
         phase = self.state.get().phase
-        self.state.update(phase=Phase.READY if phase is Phase.RECORDING else phase, recording=info, last_file=r.path)
+        self.state.update(
+            phase=Phase.READY if phase is Phase.RECORDING else phase,
+            recording=info,
+            last_file=r.path,
+        )
         self._note("recording", f"{r.path}: {r.status}, {acq.pos} samples, {len(r.gaps)} gap(s)")
         if self._stop.is_set():
             self.closed_on_stop.append(f"recording {r.path} ({r.status})")
@@ -459,16 +514,20 @@ class RigWorker:
         return info
 
     # ------------------------------------------------------------------ procedure
-    def _run_procedure(self, proc: Procedure, prev: Phase = Phase.READY, resume_from: Path | None = None) -> str:
+    def _run_procedure(
+        self, proc: Procedure, prev: Phase = Phase.READY, resume_from: Path | None = None
+    ) -> str:
         from procedures.params import find_prior
         from procedures.runner import ProcedureError, load_resume, run_procedure
 
         try:
             if self._acq is not None:
-                raise Refused(f"recording to {self._acq.result.path}: stop it before running a procedure")
+                raise Refused(
+                    f"recording to {self._acq.result.path}: stop it before running a procedure"
+                )
             resume = None
             if resume_from is not None:
-                try:   # the file is read here, not on the UI thread
+                try:  # the file is read here, not on the UI thread
                     resume = load_resume(resume_from, proc.name)
                     proc = type(proc)(type(proc).params_from(resume.params), prior=proc.prior)
                 except (ProcedureError, ValueError, OSError) as exc:
@@ -494,25 +553,45 @@ class RigWorker:
                 # its log beside its file, as ``fbs run`` writes it
                 with RunLog() as runlog:
                     runlog.open(run_file.with_suffix(".log"))
-                    log.info("procedure %s %s (parameters %s) from the console on rig %s", proc.name,
-                             f"resuming {resume.path}" if resume else "starting", proc.params_json(), self.url)
-                    summary = run_procedure(proc, self._rig, self.out_dir, resume=resume,
-                                            progress=self._on_progress, abort=self._abort)
+                    log.info(
+                        "procedure %s %s (parameters %s) from the console on rig %s",
+                        proc.name,
+                        f"resuming {resume.path}" if resume else "starting",
+                        proc.params_json(),
+                        self.url,
+                    )
+                    summary = run_procedure(
+                        proc,
+                        self._rig,
+                        self.out_dir,
+                        resume=resume,
+                        progress=self._on_progress,
+                        abort=self._abort,
+                    )
                     runlog.follow(summary.file)
             finally:
                 self._sharing = False
         except BaseException:
-            self.state.update(phase=prev if prev in (Phase.READY, Phase.RECORDING) else Phase.READY, procedure=None)
+            self.state.update(
+                phase=prev if prev in (Phase.READY, Phase.RECORDING) else Phase.READY,
+                procedure=None,
+            )
             if not self._stop.is_set() and self._acq is None and not self._streaming:
                 self._guard(self._start_meter_stream)
             if not self._stop.is_set() and not self._check_fault():
-                self._guard(lambda: self._poll(force=True))   # the panels show the safe state at once
+                self._guard(
+                    lambda: self._poll(force=True)
+                )  # the panels show the safe state at once
             raise
         self.state.update(phase=Phase.READY, procedure=None, last_file=summary.file)
         if self._stop.is_set() and summary.file is not None:
-            self.closed_on_stop.append(f"procedure {proc.name}'s file {summary.file} ({summary.status})")
+            self.closed_on_stop.append(
+                f"procedure {proc.name}'s file {summary.file} ({summary.status})"
+            )
         self._post(ProcedureEnded(summary, report_plots(summary.report)))
-        self._note("procedure", f"{proc.name}: {summary.verdict} ({summary.status}); file {summary.file}")
+        self._note(
+            "procedure", f"{proc.name}: {summary.verdict} ({summary.status}); file {summary.file}"
+        )
         if not self._check_fault() and not self._stop.is_set():
             self._guard(self._start_meter_stream)
             self._guard(lambda: self._poll(force=True))
@@ -520,15 +599,25 @@ class RigWorker:
 
     def _on_progress(self, p: Progress) -> None:
         cur = self.state.get().procedure
-        self.state.update(procedure=ProcedureInfo(p.procedure, p.step, p.index, p.n_steps, p.fraction,
-                                                  p.remaining_rig_s, p.remaining_wall_s,
-                                                  cur.file if cur else None, bool(cur and cur.aborting),
-                                                  p.phase))
+        self.state.update(
+            procedure=ProcedureInfo(
+                p.procedure,
+                p.step,
+                p.index,
+                p.n_steps,
+                p.fraction,
+                p.remaining_rig_s,
+                p.remaining_wall_s,
+                cur.file if cur else None,
+                bool(cur and cur.aborting),
+                p.phase,
+            )
+        )
 
     # ------------------------------------------------------------------ modes
     def _hold(self) -> str:
         self._rig.relays.hold()
-        if self._alarm_not_held:   # its cause is gone: the switches are held now
+        if self._alarm_not_held:  # its cause is gone: the switches are held now
             self._alarm(None)
         self._poll(force=True)
         return "mode switches held: select a mode (1-6), then release"
@@ -551,8 +640,10 @@ class RigWorker:
             if mode not in MODES:
                 self._alarm(str(exc))
             else:
-                self._alarm(operator_words(f"select mode {mode}", exc),
-                            not_held=exc.detail == ABORT_NOT_HELD)
+                self._alarm(
+                    operator_words(f"select mode {mode}", exc),
+                    not_held=exc.detail == ABORT_NOT_HELD,
+                )
             raise
         relays.alarm = None
         self._alarm(None)
@@ -572,9 +663,9 @@ class RigWorker:
                 relays.alarm = text
             self._alarm(text, not_held=not status.held)
             if why is not None:
-                self._alarm_mode = status.selected   # its words follow the rig (``_refused_alarm``)
+                self._alarm_mode = status.selected  # its words follow the rig (``_refused_alarm``)
             self._poll(force=True)
-            log.info("release refused: %s", exc)   # the node's raw refusal, for the log
+            log.info("release refused: %s", exc)  # the node's raw refusal, for the log
             raise InterlockError(text) from None
         relays.alarm = None
         self._alarm(None)
@@ -608,16 +699,21 @@ class RigWorker:
         back = dict(self.state.get().readback)
         for ch, s in list(self._slews.items()):
             v = s.step(t)
-            self._quiet_setpoints = True   # the steps are in the rig's events (a recording keeps them)
+            self._quiet_setpoints = (
+                True  # the steps are in the rig's events (a recording keeps them)
+            )
             try:
                 back[f"torq {ch}"] = self._rig.set_torquer_bias_V(ch, v)
             finally:
                 self._quiet_setpoints = False
             if s.done:
                 del self._slews[ch]
-                self._note("setpoint", f"torquer bias {ch} {s.start_V:+.4f} -> {s.target_V:+.4f} V at "
-                           f"{s.rate_V_per_s:g} V/s in {s.steps} step(s), {t - s.t0:.2f} s; "
-                           f"read back {back[f'torq {ch}']:+.4f} V")
+                self._note(
+                    "setpoint",
+                    f"torquer bias {ch} {s.start_V:+.4f} -> {s.target_V:+.4f} V at "
+                    f"{s.rate_V_per_s:g} V/s in {s.steps} step(s), {t - s.t0:.2f} s; "
+                    f"read back {back[f'torq {ch}']:+.4f} V",
+                )
         self.state.update(readback=back, slewing={c: s.target_V for c, s in self._slews.items()})
 
     def _set_output(self, kind: SetpointKind, axis: str, volts: float) -> str:
@@ -691,8 +787,12 @@ class RigWorker:
         if reason is None:
             self._alarm_mode = None
             self._rig.relays.alarm = None
-            self._note("alarm", f"alarm out: mode {mode}'s interlocks are met now (h {mode} r enters it)"
-                       if st.mode != mode else f"alarm out: mode {mode} is in force")
+            self._note(
+                "alarm",
+                f"alarm out: mode {mode}'s interlocks are met now (h {mode} r enters it)"
+                if st.mode != mode
+                else f"alarm out: mode {mode} is in force",
+            )
             return None
         self._rig.relays.alarm = reason
         return reason
@@ -733,8 +833,11 @@ class RigWorker:
                 self._streaming = False
                 rig.unsubscribe(self._on_rig_event)
                 report = rig.close()
-                safe = ("yes (read back)" if report is None or report.ok
-                        else "INCOMPLETE: " + "; ".join(report.failed))
+                safe = (
+                    "yes (read back)"
+                    if report is None or report.ok
+                    else "INCOMPLETE: " + "; ".join(report.failed)
+                )
                 log.info("console closed the rig (%s); safe state: %s", reason, safe)
         except BaseException as exc:  # noqa: B036 - report it; the nodes' watchdogs are the last resort
             log.exception("closing the rig failed")

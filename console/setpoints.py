@@ -24,7 +24,14 @@ from textual.widgets import Checkbox, Input, Static
 
 from console.keyhelp import PanelHelp
 from console.keyorder import OrderedInput
-from console.limits import SLEW_DEFAULT_V_PER_S, SLEW_MAX_V_PER_S, SLEW_MIN_V_PER_S, Entry, typed_setpoint, typed_slew
+from console.limits import (
+    SLEW_DEFAULT_V_PER_S,
+    SLEW_MAX_V_PER_S,
+    SLEW_MIN_V_PER_S,
+    Entry,
+    typed_setpoint,
+    typed_slew,
+)
 from console.state import Snapshot
 from drivers.calibration import AXES, GYRO_CHANNELS
 from drivers.errors import SetpointRangeError
@@ -34,8 +41,14 @@ from drivers.setpoints import SetpointLimits
 class SetpointPanel(VerticalScroll, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
         ("Tab / shift+Tab", "the next / previous box"),
-        ("Enter", "in a box: send the typed value (checked against its range first; a ramp for a torquer bias)"),
-        ("Space", "on a caging switch: inhibit caging on that channel / release it (read back from the node)"),
+        (
+            "Enter",
+            "in a box: send the typed value (checked against its range first; a ramp for a torquer bias)",
+        ),
+        (
+            "Space",
+            "on a caging switch: inhibit caging on that channel / release it (read back from the node)",
+        ),
         ("up / down", "scroll the panel"),
     )
 
@@ -76,14 +89,20 @@ class SetpointPanel(VerticalScroll, can_focus=True):
             yield Static("caging (Space)", classes="sp-label")
             for c in GYRO_CHANNELS:
                 yield Checkbox(caging_label(c, False), id=f"cage-{c}", compact=True)
-        yield Static("  auto: the gyro cages by itself in mode 3; inhibited: its loop is held open",
-                     id="sp-caging-note")
-        yield Static("torquer bias (V)   set             range           read-back", classes="sp-head")
+        yield Static(
+            "  auto: the gyro cages by itself in mode 3; inhibited: its loop is held open",
+            id="sp-caging-note",
+        )
+        yield Static(
+            "torquer bias (V)   set             range           read-back", classes="sp-head"
+        )
         for c in GYRO_CHANNELS:
             yield from self._row("torq", c, f"  gyro {c}")
         with Horizontal(classes="sp-row"):
             yield Static("  slew (V/s)", classes="sp-label")
-            yield OrderedInput(f"{SLEW_DEFAULT_V_PER_S:g}", id="slew", compact=True, classes="sp-input")
+            yield OrderedInput(
+                f"{SLEW_DEFAULT_V_PER_S:g}", id="slew", compact=True, classes="sp-input"
+            )
             yield Static(f"{SLEW_MIN_V_PER_S:g}..{SLEW_MAX_V_PER_S:g}", classes="sp-range")
         yield Static("autocollimator bias gamma_c (V)", classes="sp-head")
         for a in AXES:
@@ -96,23 +115,31 @@ class SetpointPanel(VerticalScroll, can_focus=True):
     def _row(self, kind: str, key: str, label: str) -> ComposeResult:
         with Horizontal(classes="sp-row"):
             yield Static(label, classes="sp-label")
-            yield OrderedInput(placeholder="volts", id=f"{kind}-{key}", compact=True, classes="sp-input")
+            yield OrderedInput(
+                placeholder="volts", id=f"{kind}-{key}", compact=True, classes="sp-input"
+            )
             yield Static("", id=f"range-{kind}-{key}", classes="sp-range")
             yield Static("—", id=f"back-{kind}-{key}", classes="sp-back")
 
     def set_limits(self, limits: SetpointLimits) -> None:
         self.limits = limits
         for c in GYRO_CHANNELS:
-            self.query_one(f"#range-torq-{c}", Static).update(f"+-{limits.torquer_limit_V(c):.4g} V")
+            self.query_one(f"#range-torq-{c}", Static).update(
+                f"+-{limits.torquer_limit_V(c):.4g} V"
+            )
         for a in AXES:
             for kind in ("gc", "vtd"):
-                self.query_one(f"#range-{kind}-{a}", Static).update(f"+-{limits.calibration.dac_range_V:g} V")
+                self.query_one(f"#range-{kind}-{a}", Static).update(
+                    f"+-{limits.calibration.dac_range_V:g} V"
+                )
 
     def message(self, text: str, ok: bool, state: tuple | None = None) -> None:
         """The panel's message line; with ``state`` (``state_key`` of the snapshot it
         describes) it is cleared once the rig's state moves on."""
         self._message_state = state
-        self.query_one("#sp-message", Static).update(Text(text, style="green" if ok else "bold red"))
+        self.query_one("#sp-message", Static).update(
+            Text(text, style="green" if ok else "bold red")
+        )
 
     def on_input_submitted(self, event: Input.Submitted) -> None:
         event.stop()
@@ -124,7 +151,7 @@ class SetpointPanel(VerticalScroll, can_focus=True):
         kind = Entry(prefix)
         echo = self._pending.pop(box.id, None)
         if echo is not None and event.value == echo.text:
-            box.value = ""     # sent: the read-back column shows what the rig took
+            box.value = ""  # sent: the read-back column shows what the rig took
             self.message(f"sent: {echo.words}", True)
             self.post_message(self.Request(echo.kind, echo.key, echo.value, echo.slew))
             return
@@ -138,7 +165,7 @@ class SetpointPanel(VerticalScroll, can_focus=True):
         except SetpointRangeError as exc:  # refused here: nothing goes to the rig
             box.value = ""
             self.message(f"refused: {exc}", False)
-            self.post_message(self.Refused("set-point", str(exc)))   # the app notifies and logs it
+            self.post_message(self.Refused("set-point", str(exc)))  # the app notifies and logs it
             return
         echo = Echo(kind, key, value, rate if kind is Entry.TORQUER_BIAS else 0.0)
         self._pending[box.id] = echo
@@ -148,7 +175,7 @@ class SetpointPanel(VerticalScroll, can_focus=True):
 
     def on_input_changed(self, event: Input.Changed) -> None:
         echo = self._pending.get(event.input.id or "")
-        if echo is not None and event.value != echo.text:    # edited: the echo is not what it says
+        if echo is not None and event.value != echo.text:  # edited: the echo is not what it says
             del self._pending[event.input.id or ""]
             self.message("not sent: type the value and Enter to check it again", True)
 
@@ -173,13 +200,13 @@ class SetpointPanel(VerticalScroll, can_focus=True):
         before, self._shown = self._shown, key
         if before and self._pending:
             # the rig moved under an echo not yet sent: its value was checked against another state
-            if before[3:] != key[3:]:    # a safe state, an abort, a procedure, a mode change
+            if before[3:] != key[3:]:  # a safe state, an abort, a procedure, a mode change
                 self.cancel_pending(f"the console is now {snap.phase}, mode {key[4]}")
             else:
                 moved = [name for name, v in snap.readback.items() if before[0].get(name) != v]
                 self.cancel_pending("its read-back changed", [n.replace(" ", "-") for n in moved])
         if self._message_state is not None and self._message_state != key:
-            self.message("", True)            # it described a state the rig has left
+            self.message("", True)  # it described a state the rig has left
         for name, v in snap.readback.items():
             kind, ch = name.split(" ")
             text = f"{v:+.4f} V"
@@ -200,7 +227,13 @@ class SetpointPanel(VerticalScroll, can_focus=True):
 def state_key(snap: Snapshot) -> tuple:
     """What the panel shows of a snapshot, and what a set-point was checked in: read-backs,
     slews, caging switches, the console's phase, the mode in force."""
-    return (snap.readback, snap.slewing, snap.caging, snap.phase, snap.relay.mode if snap.relay else None)
+    return (
+        snap.readback,
+        snap.slewing,
+        snap.caging,
+        snap.phase,
+        snap.relay.mode if snap.relay else None,
+    )
 
 
 @dataclass(frozen=True)
@@ -214,13 +247,20 @@ class Echo:
 
     @property
     def text(self) -> str:
-        return f"{self.value:+.10g}"   # every digit that will be sent
+        return f"{self.value:+.10g}"  # every digit that will be sent
 
     @property
     def words(self) -> str:
-        what = {Entry.TORQUER_BIAS: f"torquer bias {self.key}", Entry.COMMAND_TORQUE: f"command torque {self.key}",
-                Entry.AC_BIAS: f"autocollimator bias {self.key}"}[self.kind]
-        return what + f" {self.text} V" + (f" at {self.slew:g} V/s" if self.kind is Entry.TORQUER_BIAS else "")
+        what = {
+            Entry.TORQUER_BIAS: f"torquer bias {self.key}",
+            Entry.COMMAND_TORQUE: f"command torque {self.key}",
+            Entry.AC_BIAS: f"autocollimator bias {self.key}",
+        }[self.kind]
+        return (
+            what
+            + f" {self.text} V"
+            + (f" at {self.slew:g} V/s" if self.kind is Entry.TORQUER_BIAS else "")
+        )
 
 
 def caging_label(channel: str, inhibited: bool) -> str:

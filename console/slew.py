@@ -17,7 +17,7 @@ class Slew:
     rate_V_per_s: float
     now_V: float
     last_t: float
-    steps: int = 0                 # set-points sent so far
+    steps: int = 0  # set-points sent so far
     start_V: float = field(init=False)
     t0: float = field(init=False)  # rig time the ramp began
 
@@ -34,6 +34,8 @@ class Slew:
         self.last_t = t
         room = self.target_V - self.now_V
         move = self.rate_V_per_s * dt
-        self.now_V = self.target_V if abs(room) <= move else self.now_V + (move if room > 0 else -move)
+        self.now_V = (
+            self.target_V if abs(room) <= move else self.now_V + (move if room > 0 else -move)
+        )
         self.steps += 1
         return self.now_V

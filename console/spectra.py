@@ -40,12 +40,12 @@ class SpectraView:
 
     path: Path
     channels: tuple[str, ...]
-    f_hz: tuple[float, ...]                   # log-spaced band centres, first nonzero bin .. Nyquist
-    psd: dict[str, tuple[float, ...]]         # per channel, V^2/Hz in each band
-    coherence: tuple[float, ...]              # first pair, 0..1 in each band (empty for one channel)
+    f_hz: tuple[float, ...]  # log-spaced band centres, first nonzero bin .. Nyquist
+    psd: dict[str, tuple[float, ...]]  # per channel, V^2/Hz in each band
+    coherence: tuple[float, ...]  # first pair, 0..1 in each band (empty for one channel)
     segments: str
-    f_lo: float                               # the first nonzero Welch bin (Hz)
-    f_hi: float                               # the last (Nyquist)
+    f_lo: float  # the first nonzero Welch bin (Hz)
+    f_hi: float  # the last (Nyquist)
 
 
 def log_bands(f: np.ndarray, y: np.ndarray, n: int = POINTS) -> tuple[np.ndarray, np.ndarray]:
@@ -83,11 +83,21 @@ def compute_view(path: Path, channels: tuple[str, ...]) -> SpectraView:
     if len(channels) >= 2:
         _, cb = log_bands(csd.f, np.nan_to_num(csd.coherence()[:, 0, 1]))
         coh = tuple(float(v) for v in np.clip(cb, 0.0, 1.0))
-    seg = (f"{csd.segments_used} segments of {csd.segment_s:g} s ({csd.segments_skipped} skipped), "
-           f"resolution {csd.resolution_hz:.3g} Hz")
+    seg = (
+        f"{csd.segments_used} segments of {csd.segment_s:g} s ({csd.segments_skipped} skipped), "
+        f"resolution {csd.resolution_hz:.3g} Hz"
+    )
     f_pos = csd.f[csd.f > 0]
-    return SpectraView(Path(path), tuple(channels), tuple(float(v) for v in f_hz), psd, coh, seg,
-                       float(f_pos[0]), float(f_pos[-1]))
+    return SpectraView(
+        Path(path),
+        tuple(channels),
+        tuple(float(v) for v in f_hz),
+        psd,
+        coh,
+        seg,
+        float(f_pos[0]),
+        float(f_pos[-1]),
+    )
 
 
 def decade_ticks(lo: float, hi: float, unit: str = "") -> tuple[list[float], list[str]]:
@@ -98,8 +108,12 @@ def decade_ticks(lo: float, hi: float, unit: str = "") -> tuple[list[float], lis
         return [], []
     ticks: list[float] = []
     for steps in ((1.0,), (1.0, 2.0, 5.0), (1.0, 1.5, 2.0, 3.0, 5.0, 7.0)):
-        ticks = [m * 10.0 ** e for e in range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
-                 for m in steps if lo <= m * 10.0 ** e <= hi]
+        ticks = [
+            m * 10.0**e
+            for e in range(math.floor(math.log10(lo)), math.ceil(math.log10(hi)) + 1)
+            for m in steps
+            if lo <= m * 10.0**e <= hi
+        ]
         if len(ticks) >= 2:
             break
     labels = [f"{v:g}" for v in ticks]
@@ -130,8 +144,11 @@ def _rgb(c: tuple[int, int, int]) -> str:
 
 class SpectraPanel(Vertical, can_focus=True):
     KEY_HELP: ClassVar[PanelHelp] = (
-        ("F7", "PSD and coherence of the named channels (gyro_x, torq_y, ...) of the file "
-               "(blank: the newest run file, said which)"),
+        (
+            "F7",
+            "PSD and coherence of the named channels (gyro_x, torq_y, ...) of the file "
+            "(blank: the newest run file, said which)",
+        ),
         ("Tab / shift+Tab", "between the file and channels boxes"),
         ("Enter", "in a box: compute"),
     )
@@ -154,7 +171,9 @@ class SpectraPanel(Vertical, can_focus=True):
     def compose(self) -> ComposeResult:
         with Horizontal(classes="spec-row"):
             yield Static("file", classes="rec-label")
-            yield OrderedInput(placeholder="blank: the newest run file (none yet)", id="spec-path", compact=True)
+            yield OrderedInput(
+                placeholder="blank: the newest run file (none yet)", id="spec-path", compact=True
+            )
         with Horizontal(classes="spec-row"):
             yield Static("channels", classes="rec-label")
             yield OrderedInput("gyro_x,gyro_y", id="spec-channels", compact=True)
@@ -181,11 +200,15 @@ class SpectraPanel(Vertical, can_focus=True):
         if path is None:
             self._failed("no run file yet: record one (f4), run a procedure (f5) or type a file")
             return
-        channels = tuple(c.strip() for c in self.query_one("#spec-channels", Input).value.split(",") if c.strip())
+        channels = tuple(
+            c.strip() for c in self.query_one("#spec-channels", Input).value.split(",") if c.strip()
+        )
         if not channels or len(channels) > 2:
             self._failed(f"name one or two channels, e.g. gyro_x,gyro_y ({len(channels)} given)")
             return
-        self.query_one("#spec-info", Static).update(f"computing {', '.join(channels)} of {path} ({what}) …")
+        self.query_one("#spec-info", Static).update(
+            f"computing {', '.join(channels)} of {path} ({what}) …"
+        )
         self._compute(path, channels, what)
 
     @work(thread=True, exclusive=True, group="spectra")
@@ -194,8 +217,10 @@ class SpectraPanel(Vertical, can_focus=True):
         try:
             view = compute_view(path, channels)
         except Exception as exc:  # a missing file, an unknown channel: tell the operator
-            self.app.call_from_thread(self._failed, str(exc) if isinstance(exc, ValueError)
-                                      else f"{type(exc).__name__}: {exc}")
+            self.app.call_from_thread(
+                self._failed,
+                str(exc) if isinstance(exc, ValueError) else f"{type(exc).__name__}: {exc}",
+            )
             return
         self.app.call_from_thread(self.draw, view, what)
 
@@ -204,7 +229,11 @@ class SpectraPanel(Vertical, can_focus=True):
 
     def draw(self, view: SpectraView, what: str = "") -> None:
         self.view = view
-        info = Text(f"{view.path}" + (f" ({what})" if what and what != "typed" else "") + f": {view.segments}")
+        info = Text(
+            f"{view.path}"
+            + (f" ({what})" if what and what != "typed" else "")
+            + f": {view.segments}"
+        )
         self.query_one("#spec-info", Static).update(info)
         title = Text("PSD (V^2/Hz, log-log): ")
         for c, colour in zip(view.channels, COLOURS, strict=False):
@@ -229,8 +258,10 @@ class SpectraPanel(Vertical, can_focus=True):
         plt.clear_figure()
         tc = self.query_one("#spec-tc", Static)
         if view.coherence:
-            tc.update(f"coherence {view.channels[0]} / {view.channels[1]} (0..1, log frequency; "
-                      f"max {max(view.coherence):.2f})")
+            tc.update(
+                f"coherence {view.channels[0]} / {view.channels[1]} (0..1, log frequency; "
+                f"max {max(view.coherence):.2f})"
+            )
             plt.plot(f, list(view.coherence), marker="braille", color=COLOURS[0])
             _log_frequency_axis(plt, view)
             plt.ylim(0.0, 1.0)

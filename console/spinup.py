@@ -33,7 +33,7 @@ class SpinUpEstimate:
             self._seen.clear()
             return None
         if self._seen and (fraction < self._seen[-1][1] or t_s < self._seen[-1][0]):
-            self._seen.clear()          # slowing down, or a new rig clock: start again
+            self._seen.clear()  # slowing down, or a new rig clock: start again
         if not self._seen or fraction > self._seen[-1][1]:
             self._seen.append((t_s, fraction))
         while len(self._seen) > 2 and t_s - self._seen[1][0] >= self.window_s:

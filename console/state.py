@@ -54,12 +54,12 @@ class Phase(StrEnum):
     """What the console's rig thread is doing; ``LiveState.update`` allows only the moves in
     ``_NEXT`` (as bluesky's RunEngine guards its state machine)."""
 
-    OPENING = "opening"          # the rig is being opened
-    READY = "ready"              # meters running, commands accepted
-    RECORDING = "recording"      # an operator's recording is open
-    PROCEDURE = "procedure"      # a procedure owns the rig; only its abort is accepted
-    FAULT = "fault"              # a device fault is latched; the rig went safe
-    CLOSED = "closed"            # the thread has ended (quit, or the rig could not be opened)
+    OPENING = "opening"  # the rig is being opened
+    READY = "ready"  # meters running, commands accepted
+    RECORDING = "recording"  # an operator's recording is open
+    PROCEDURE = "procedure"  # a procedure owns the rig; only its abort is accepted
+    FAULT = "fault"  # a device fault is latched; the rig went safe
+    CLOSED = "closed"  # the thread has ended (quit, or the rig could not be opened)
 
     def can_become(self, other: Phase) -> bool:
         return other is self or other in _NEXT[self]
@@ -83,16 +83,16 @@ class PhaseError(RuntimeError):
 class Snapshot:
     phase: Phase = Phase.OPENING
     relay: RelayStatus | None = None
-    alarm: str | None = None                   # the alarm lamp's reason (disallowed mode, interlock)
-    fault: str | None = None                   # a latched device fault (the rig went safe)
-    readback: dict[str, float] = field(default_factory=dict)   # torquer X.., vtd X.., gc X..
+    alarm: str | None = None  # the alarm lamp's reason (disallowed mode, interlock)
+    fault: str | None = None  # a latched device fault (the rig went safe)
+    readback: dict[str, float] = field(default_factory=dict)  # torquer X.., vtd X.., gc X..
     caging: dict[str, bool] = field(default_factory=dict)
-    slewing: dict[str, float] = field(default_factory=dict)    # channel -> target V
+    slewing: dict[str, float] = field(default_factory=dict)  # channel -> target V
     recording: RecordingInfo | None = None
     procedure: ProcedureInfo | None = None
     last_file: Path | None = None
     rig_time_s: float = 0.0
-    spin_left_s: float | None = None           # rig time until the wheels are at speed (estimated)
+    spin_left_s: float | None = None  # rig time until the wheels are at speed (estimated)
 
 
 class LiveState:
@@ -145,20 +145,20 @@ class RecordingEnded:
 @dataclass(frozen=True)
 class ProcedureEnded:
     summary: RunSummary
-    plots: tuple[Path, ...] = ()   # the report's plots, as written (read on the rig thread)
+    plots: tuple[Path, ...] = ()  # the report's plots, as written (read on the rig thread)
 
 
 @dataclass(frozen=True)
 class RigFault:
     text: str
-    safe: str                 # what the safe-state read-back said
+    safe: str  # what the safe-state read-back said
 
 
 @dataclass(frozen=True)
 class WorkerStopped:
     reason: str
     safe: str
-    closed: tuple[str, ...] = ()   # what the shutdown closed: "recording out/x.h5 (aborted: ...)"
+    closed: tuple[str, ...] = ()  # what the shutdown closed: "recording out/x.h5 (aborted: ...)"
 
 
 @dataclass(frozen=True)

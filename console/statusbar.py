@@ -21,16 +21,23 @@ class StatusBar(Static):
     def show(self, snap: Snapshot) -> None:
         rec = snap.recording
         width = self.size.width
-        key = (snap.relay, snap.phase, snap.fault, snap.alarm, self.note,
-               int(rec.elapsed_s) if rec else None,
-               round(100 * snap.procedure.fraction) if snap.procedure else None,
-               _spin(snap) and duration(snap.spin_left_s), width)
+        key = (
+            snap.relay,
+            snap.phase,
+            snap.fault,
+            snap.alarm,
+            self.note,
+            int(rec.elapsed_s) if rec else None,
+            round(100 * snap.procedure.fraction) if snap.procedure else None,
+            _spin(snap) and duration(snap.spin_left_s),
+            width,
+        )
         if key == self._shown:
             return
         self._shown = key
         text = status_text(snap, self.url, self.note, width)
         lines = text.plain.count("\n") + 1
-        self.update(text, layout=lines != self._lines)   # a second line moves the panels down
+        self.update(text, layout=lines != self._lines)  # a second line moves the panels down
         self._lines = lines
 
 

@@ -159,10 +159,21 @@ def used_segments_dof(window, nperseg: int, noverlap: int, used: np.ndarray) -> 
     return 2.0 * K * K / (K + 2.0 * acc)
 
 
-def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperseg: int,
-                   noverlap: int | None = None, nfft: int | None = None, window="hann",
-                   detrend="linear", scaling: Scaling = "density", start: int = 0, stop: int | None = None,
-                   read_bytes: int = READ_BYTES, batch_bytes: int = BATCH_BYTES) -> RunCsd:
+def run_csd_matrix(
+    run: RunFile | str | Path,
+    channels: Sequence[str],
+    *,
+    nperseg: int,
+    noverlap: int | None = None,
+    nfft: int | None = None,
+    window="hann",
+    detrend="linear",
+    scaling: Scaling = "density",
+    start: int = 0,
+    stop: int | None = None,
+    read_bytes: int = READ_BYTES,
+    batch_bytes: int = BATCH_BYTES,
+) -> RunCsd:
     """Welch cross-spectral matrix of ``channels`` of a run file (samples ``start .. stop``,
     default all), in bounded memory.
 
@@ -176,16 +187,29 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     """
     if not isinstance(run, RunFile):
         with RunFile(run) as opened:
-            return run_csd_matrix(opened, channels, nperseg=nperseg, noverlap=noverlap, nfft=nfft,
-                                  window=window, detrend=detrend, scaling=scaling, start=start, stop=stop,
-                                  read_bytes=read_bytes, batch_bytes=batch_bytes)
+            return run_csd_matrix(
+                opened,
+                channels,
+                nperseg=nperseg,
+                noverlap=noverlap,
+                nfft=nfft,
+                window=window,
+                detrend=detrend,
+                scaling=scaling,
+                start=start,
+                stop=stop,
+                read_bytes=read_bytes,
+                batch_bytes=batch_bytes,
+            )
     channels = tuple(channels)
     if not channels:
         raise ValueError("no channels given")
     missing = [c for c in channels if c not in run.channels]
     if missing:
-        raise ValueError(f"{run.path} has no channel {', '.join(repr(c) for c in missing)} "
-                         f"(its channels: {', '.join(run.channels)})")
+        raise ValueError(
+            f"{run.path} has no channel {', '.join(repr(c) for c in missing)} "
+            f"(its channels: {', '.join(run.channels)})"
+        )
     if len(set(channels)) != len(channels):
         raise ValueError(f"channels {', '.join(channels)} name one channel twice")
     if scaling not in ("density", "spectrum"):
@@ -195,14 +219,18 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     fs = run.rate_hz
     start, stop = int(start), run.n_samples if stop is None else min(int(stop), run.n_samples)
     if not 0 <= start <= stop:
-        raise ValueError(f"samples {start}..{stop} are not a span of {run.path} ({run.n_samples} samples)")
+        raise ValueError(
+            f"samples {start}..{stop} are not a span of {run.path} ({run.n_samples} samples)"
+        )
     n = stop - start
     nperseg = int(nperseg)
     if nperseg < 1:
         raise ValueError(f"nperseg={nperseg} is not a positive integer")
     if n < nperseg:
-        raise ValueError(f"{run.path} holds {n} samples ({n / fs:g} s at {fs:g} Hz), fewer than one "
-                         f"segment of {nperseg} ({nperseg / fs:g} s): use shorter segments")
+        raise ValueError(
+            f"{run.path} holds {n} samples ({n / fs:g} s at {fs:g} Hz), fewer than one "
+            f"segment of {nperseg} ({nperseg / fs:g} s): use shorter segments"
+        )
     win, nperseg, noverlap, nfft = _window_and_sizes(window, nperseg, noverlap, nfft, n)
     step = nperseg - noverlap
     n_ch = len(channels)
@@ -220,9 +248,17 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
         for s, e in _runs(good):
             for b0 in range(s, e, per_batch):
                 b1 = min(e, b0 + per_batch)
-                f, X = _segment_ffts(buf[:, b0 * step:(b1 - 1) * step + nperseg], fs, win, nperseg,
-                                     noverlap, nfft, detrend, "onesided")
-                Xf = np.ascontiguousarray(X.transpose(2, 0, 1))      # (n_freq, N, k)
+                f, X = _segment_ffts(
+                    buf[:, b0 * step : (b1 - 1) * step + nperseg],
+                    fs,
+                    win,
+                    nperseg,
+                    noverlap,
+                    nfft,
+                    detrend,
+                    "onesided",
+                )
+                Xf = np.ascontiguousarray(X.transpose(2, 0, 1))  # (n_freq, N, k)
                 del X
                 part = np.matmul(Xf.conj(), Xf.transpose(0, 2, 1))  # eq. 4.41 summed over segments
                 if acc is None:
@@ -234,13 +270,15 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     k_used = int(used.sum())
     if k_used == 0 or acc is None:
         lost = []
-        for c in channels:      # where they are (the error path only: a second pass over the file)
+        for c in channels:  # where they are (the error path only: a second pass over the file)
             spans = run.lost_spans(c, start, stop)
             if spans:
                 lost.append(lost_text(c, spans, fs))
-        raise ValueError(f"every one of the {K} segments of {nperseg} samples ({nperseg / fs:g} s) in "
-                         f"{run.path} holds lost samples (NaN): nothing to average; try shorter segments. "
-                         f"{'; '.join(lost)} ({LOST_SAMPLES_NOTE})")
+        raise ValueError(
+            f"every one of the {K} segments of {nperseg} samples ({nperseg / fs:g} s) in "
+            f"{run.path} holds lost samples (NaN): nothing to average; try shorter segments. "
+            f"{'; '.join(lost)} ({LOST_SAMPLES_NOTE})"
+        )
     assert f is not None  # set together with acc
     S = acc
     S *= _scale(win, fs, scaling) / k_used
@@ -250,8 +288,28 @@ def run_csd_matrix(run: RunFile | str | Path, channels: Sequence[str], *, nperse
     dof = used_segments_dof(win, nperseg, noverlap, used)
     if k_used < K:
         log.info("%s: %d of %d segments skipped: they hold lost samples", run.path, K - k_used, K)
-    log.debug("%s: Welch CSD of %s, %d segments of %d samples, EDOF %.1f", run.path, ",".join(channels),
-              k_used, nperseg, dof)
-    return RunCsd(path=run.path, channels=channels, units=tuple(run.units[c] for c in channels), fs=fs,
-                  n_samples=n, f=f, S=S, window=window, nperseg=nperseg, noverlap=noverlap, nfft=nfft,
-                  detrend=detrend, scaling=scaling, used=used, dof=dof)
+    log.debug(
+        "%s: Welch CSD of %s, %d segments of %d samples, EDOF %.1f",
+        run.path,
+        ",".join(channels),
+        k_used,
+        nperseg,
+        dof,
+    )
+    return RunCsd(
+        path=run.path,
+        channels=channels,
+        units=tuple(run.units[c] for c in channels),
+        fs=fs,
+        n_samples=n,
+        f=f,
+        S=S,
+        window=window,
+        nperseg=nperseg,
+        noverlap=noverlap,
+        nfft=nfft,
+        detrend=detrend,
+        scaling=scaling,
+        used=used,
+        dof=dof,
+    )

@@ -131,22 +131,38 @@ def octave_bands(f, p, *, factor: float = 3.0, f1: float | None = None) -> Octav
     threshold[inb] = factor * average[idx[inb]]
     with np.errstate(invalid="ignore"):
         kept = finite & (p > threshold)
-    return OctaveBands(f_lo=lo, f_hi=hi, f_center=f_center, average=average, count=count,
-                       kept_f=f[kept], kept_p=p[kept], kept_band=idx[kept], band_index=idx,
-                       factor=float(factor), f1=f1)
+    return OctaveBands(
+        f_lo=lo,
+        f_hi=hi,
+        f_center=f_center,
+        average=average,
+        count=count,
+        kept_f=f[kept],
+        kept_p=p[kept],
+        kept_band=idx[kept],
+        band_index=idx,
+        factor=float(factor),
+        f1=f1,
+    )
 
 
 def _bin_correlations(window, nperseg: int, nfft: int, max_lag: int) -> np.ndarray:
     """rho(d), d = 0 .. max_lag: the correlation of the periodogram values of bins d apart
     for white Gaussian data, |sum w^2 e^{-j 2 pi d m / nfft}|^2 / (sum w^2)^2 (the frequency
     dual of Welch's segment-overlap correlation in ``spectra.equivalent_dof``)."""
-    w = scipy.signal.get_window(window, nperseg) if isinstance(window, (str, tuple)) else np.asarray(window, float)
+    w = (
+        scipy.signal.get_window(window, nperseg)
+        if isinstance(window, (str, tuple))
+        else np.asarray(window, float)
+    )
     W2 = np.fft.fft(w * w, n=nfft)
     lags = np.arange(max_lag + 1) % nfft
     return np.abs(W2[lags]) ** 2 / np.abs(W2[0]) ** 2
 
 
-def band_average_dof(dof_bin: float, count, *, window="hann", nperseg: int, nfft: int | None = None) -> np.ndarray:
+def band_average_dof(
+    dof_bin: float, count, *, window="hann", nperseg: int, nfft: int | None = None
+) -> np.ndarray:
     r"""Equivalent degrees of freedom of the mean of ``count`` adjacent bins (App. A.4).
 
     Each bin of a Welch estimate is about :math:`\chi^2_\nu/\nu` distributed with
@@ -165,8 +181,10 @@ def band_average_dof(dof_bin: float, count, *, window="hann", nperseg: int, nfft
     nfft = nperseg if nfft is None else int(nfft)
     top = int(m.max()) if m.size else 1
     if top > nfft // 2 + 1:
-        raise ValueError(f"a band of {top} bins does not fit in the {nfft // 2 + 1} bins of a one-sided "
-                         f"spectrum of nfft={nfft}")
+        raise ValueError(
+            f"a band of {top} bins does not fit in the {nfft // 2 + 1} bins of a one-sided "
+            f"spectrum of nfft={nfft}"
+        )
     rho = _bin_correlations(window, nperseg, nfft, max(top - 1, 0))
     out = np.empty(m.shape, dtype=float)
     for i, mi in enumerate(m.flat):

@@ -26,8 +26,15 @@ from matplotlib.figure import Figure
 from daq.octave import OctaveBands, band_average_dof, octave_bands
 from daq.spectra import psd_confidence
 
-__all__ = ["coherence_significance", "narrow_lines", "new_figure", "plot_coherence", "plot_psd", "psd_units_label",
-           "save_figure"]
+__all__ = [
+    "coherence_significance",
+    "narrow_lines",
+    "new_figure",
+    "plot_coherence",
+    "plot_psd",
+    "psd_units_label",
+    "save_figure",
+]
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +61,9 @@ def coherence_significance(n_segments: float, alpha: float = 0.05) -> float:
     return float(1.0 - alpha ** (1.0 / (n_segments - 1.0)))
 
 
-def _strongest_distinct(f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float = 0.25) -> list[tuple[float, float]]:
+def _strongest_distinct(
+    f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float = 0.25
+) -> list[tuple[float, float]]:
     """The ``n`` largest points whose frequencies differ from every stronger one chosen by
     more than the fraction ``spacing`` (one label per line or cluster, so labels do not overlap)."""
     out: list[tuple[float, float]] = []
@@ -70,7 +79,9 @@ def _strongest_distinct(f: np.ndarray, p: np.ndarray, n: int = 3, spacing: float
 LINE_FACTOR = 10.0
 
 
-def narrow_lines(f, p, candidates, *, factor: float = LINE_FACTOR, guard_bins: int = 3) -> np.ndarray:
+def narrow_lines(
+    f, p, candidates, *, factor: float = LINE_FACTOR, guard_bins: int = 3
+) -> np.ndarray:
     """Which of the ``candidates`` (frequencies of the spectrum ``p(f)``, e.g. the App. A.8 points
     kept above 3 times their band's average) are narrow lines: points more than ``factor`` times
     the median of their neighbours between ``max(guard_bins bins, 5 % of f)`` and ``max(4
@@ -94,8 +105,12 @@ def narrow_lines(f, p, candidates, *, factor: float = LINE_FACTOR, guard_bins: i
     return out
 
 
-def new_figure(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = (9.0, 5.5),
-               layout: Literal["constrained", "compressed", "tight"] | None = None) -> tuple[Figure, np.ndarray]:
+def new_figure(
+    nrows: int = 1,
+    ncols: int = 1,
+    figsize: tuple[float, float] = (9.0, 5.5),
+    layout: Literal["constrained", "compressed", "tight"] | None = None,
+) -> tuple[Figure, np.ndarray]:
     """A figure on the Agg canvas with an (nrows, ncols) array of axes; no pyplot, no GUI."""
     fig = Figure(figsize=figsize, layout=layout)
     FigureCanvasAgg(fig)
@@ -130,9 +145,23 @@ def _finish(fig: Figure, ax: Axes, out: str | Path) -> Path:
     return save_figure(fig, out, dpi=DPI)
 
 
-def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, window="hann",
-             nperseg: int, nfft: int | None = None, title: str = "", factor: float = 3.0,
-             level: float = 0.95, scaling: str = "density", bands: OctaveBands | None = None) -> Path:
+def plot_psd(
+    out: str | Path,
+    f,
+    p,
+    *,
+    channel: str,
+    units: str,
+    dof: float,
+    window="hann",
+    nperseg: int,
+    nfft: int | None = None,
+    title: str = "",
+    factor: float = 3.0,
+    level: float = 0.95,
+    scaling: str = "density",
+    bands: OctaveBands | None = None,
+) -> Path:
     """Write the App. A.8 log-log PSD plot of one channel to ``out`` (PNG); returns the path.
 
     ``f``, ``p``: the one-sided Welch PSD; ``dof``: its per-bin EDOF
@@ -150,24 +179,57 @@ def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, win
     if ok.any():
         nu = band_average_dof(dof, b.count[ok], window=window, nperseg=nperseg, nfft=nfft)
         lo, hi = psd_confidence(b.average[ok], nu, level)
-        ax.fill_between(b.f_center[ok], lo, hi, color="C0", alpha=0.2, linewidth=0,
-                        label=f"{level:.0%} χ² interval of the band average (EDOF ν = {dof:.0f} per bin)")
-        ax.loglog(b.f_center[ok], b.average[ok], "o-", color="C0", markersize=4,
-                  label="octave-band average (bands double in width)")
+        ax.fill_between(
+            b.f_center[ok],
+            lo,
+            hi,
+            color="C0",
+            alpha=0.2,
+            linewidth=0,
+            label=f"{level:.0%} χ² interval of the band average (EDOF ν = {dof:.0f} per bin)",
+        )
+        ax.loglog(
+            b.f_center[ok],
+            b.average[ok],
+            "o-",
+            color="C0",
+            markersize=4,
+            label="octave-band average (bands double in width)",
+        )
         kept = b.kept_p > 0
         # App. A.8 keeps every point above 3 times its band's average; only the narrow ones are
         # lines: a filter's roll-off or a resonance's peak is kept too, and is marked apart
         line = narrow_lines(f, p, b.kept_f[kept])
         kf, kp = b.kept_f[kept], b.kept_p[kept]
-        ax.loglog(kf[~line], kp[~line], "v", color="0.45", markersize=4, linestyle="none",
-                  label=f"points > {factor:g} × band average, broad (roll-off, resonance): no line "
-                        f"({int((~line).sum())})")
-        ax.loglog(kf[line], kp[line], "^", color="C3", markersize=5, linestyle="none",
-                  label=f"narrow lines: > {factor:g} × band average and > {LINE_FACTOR:g} × their neighbours "
-                        f"({int(line.sum())})")
+        ax.loglog(
+            kf[~line],
+            kp[~line],
+            "v",
+            color="0.45",
+            markersize=4,
+            linestyle="none",
+            label=f"points > {factor:g} × band average, broad (roll-off, resonance): no line "
+            f"({int((~line).sum())})",
+        )
+        ax.loglog(
+            kf[line],
+            kp[line],
+            "^",
+            color="C3",
+            markersize=5,
+            linestyle="none",
+            label=f"narrow lines: > {factor:g} × band average and > {LINE_FACTOR:g} × their neighbours "
+            f"({int(line.sum())})",
+        )
         for fk, pk in _strongest_distinct(kf[line], kp[line]):
-            ax.annotate(f"{fk:.4g} Hz", (fk, pk), textcoords="offset points", xytext=(4, 4), fontsize=8,
-                        color="C3")
+            ax.annotate(
+                f"{fk:.4g} Hz",
+                (fk, pk),
+                textcoords="offset points",
+                xytext=(4, 4),
+                fontsize=8,
+                color="C3",
+            )
         ax.legend(loc="best", fontsize=8)
     else:
         ax.set_xscale("log")
@@ -176,13 +238,25 @@ def plot_psd(out: str | Path, f, p, *, channel: str, units: str, dof: float, win
     ax.set_xlabel("frequency (Hz)")
     what = "PSD" if scaling == "density" else "power spectrum"
     ax.set_ylabel(f"{what} ({psd_units_label(units, scaling)})")
-    ax.set_title(f"{title}\n{channel}: {what}, App. A.8 octave-band display" if title else
-                 f"{channel}: {what}", fontsize=10)
+    ax.set_title(
+        f"{title}\n{channel}: {what}, App. A.8 octave-band display"
+        if title
+        else f"{channel}: {what}",
+        fontsize=10,
+    )
     return _finish(fig, ax, out)
 
 
-def plot_coherence(out: str | Path, f, coh, *, pair: tuple[str, str], n_segments: int, title: str = "",
-                   alpha: float = 0.05) -> Path:
+def plot_coherence(
+    out: str | Path,
+    f,
+    coh,
+    *,
+    pair: tuple[str, str],
+    n_segments: int,
+    title: str = "",
+    alpha: float = 0.05,
+) -> Path:
     """Write the coherence plot of one pair to ``out`` (PNG); returns the path.
 
     Linear 0..1 against log frequency: the raw estimate faintly, its octave-band average
@@ -195,16 +269,29 @@ def plot_coherence(out: str | Path, f, coh, *, pair: tuple[str, str], n_segments
     pos = f > 0
     b = octave_bands(f, coh)
     fig, ax = _new_figure()
-    ax.semilogx(f[pos], coh[pos], "-", color="0.55", linewidth=0.6, alpha=0.6, label="coherence (per bin)")
+    ax.semilogx(
+        f[pos], coh[pos], "-", color="0.55", linewidth=0.6, alpha=0.6, label="coherence (per bin)"
+    )
     ok = np.isfinite(b.average)
-    ax.semilogx(b.f_center[ok], b.average[ok], "o-", color="C0", markersize=4, label="octave-band average")
+    ax.semilogx(
+        b.f_center[ok], b.average[ok], "o-", color="C0", markersize=4, label="octave-band average"
+    )
     sig = coherence_significance(n_segments, alpha)
-    ax.axhline(sig, color="C3", linestyle="--", linewidth=1.0,
-               label=f"{1 - alpha:.0%} significance of zero coherence, K = {n_segments}: {sig:.3f}")
-    ax.set_ylim(0.0, 1.03)   # a coherence of 1 stays visible above the frame's top
+    ax.axhline(
+        sig,
+        color="C3",
+        linestyle="--",
+        linewidth=1.0,
+        label=f"{1 - alpha:.0%} significance of zero coherence, K = {n_segments}: {sig:.3f}",
+    )
+    ax.set_ylim(0.0, 1.03)  # a coherence of 1 stays visible above the frame's top
     ax.set_xlabel("frequency (Hz)")
     ax.set_ylabel(f"coherence γ² {pair[0]}–{pair[1]} (dimensionless)")
     ax.legend(loc="best", fontsize=8)
-    ax.set_title(f"{title}\ncoherence {pair[0]} – {pair[1]} (eq. 4.44)" if title else
-                 f"coherence {pair[0]} – {pair[1]}", fontsize=10)
+    ax.set_title(
+        f"{title}\ncoherence {pair[0]} – {pair[1]} (eq. 4.44)"
+        if title
+        else f"coherence {pair[0]} – {pair[1]}",
+        fontsize=10,
+    )
     return _finish(fig, ax, out)

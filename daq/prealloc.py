@@ -73,9 +73,9 @@ class Preallocator:
         self.fd = fd
         self.step = int(step_bytes)
         self.headroom = int(headroom_bytes)
-        self.reserved = 0           # bytes from 0 reserved so far
+        self.reserved = 0  # bytes from 0 reserved so far
         self._call = _fallocate()
-        self.enabled = self._call is not None      # reserving (else: checking free space)
+        self.enabled = self._call is not None  # reserving (else: checking free space)
 
     def reserve(self, nbytes: int) -> None:
         """Make sure the ``nbytes`` after the current end of file, and the headroom after
@@ -93,17 +93,24 @@ class Preallocator:
                 return
             err = ctypes.get_errno()
             if err in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
-                if new > end and call(self.fd, FALLOC_FL_KEEP_SIZE, self.reserved, end - self.reserved) == 0:
-                    self.reserved = end          # the step was too much, what is needed fits
+                if (
+                    new > end
+                    and call(self.fd, FALLOC_FL_KEEP_SIZE, self.reserved, end - self.reserved) == 0
+                ):
+                    self.reserved = end  # the step was too much, what is needed fits
                     return
                 raise self._no_room(err, nbytes, os.strerror(err))
             self.enabled = False
             if err not in _UNSUPPORTED and err != errno.EINTR:
-                log.warning("fallocate failed: %s; checking the free space instead of reserving it",
-                            os.strerror(err))
+                log.warning(
+                    "fallocate failed: %s; checking the free space instead of reserving it",
+                    os.strerror(err),
+                )
             else:
-                log.debug("not reserving disk space ahead (fallocate: %s); checking the free space",
-                          os.strerror(err))
+                log.debug(
+                    "not reserving disk space ahead (fallocate: %s); checking the free space",
+                    os.strerror(err),
+                )
         st = os.fstatvfs(self.fd)
         free = st.f_bavail * st.f_frsize
         if free < end - max(size, self.reserved):
@@ -116,8 +123,11 @@ class Preallocator:
         self.reserved = min(self.reserved, os.fstat(self.fd).st_size)
 
     def _no_room(self, err: int, nbytes: int, why: str) -> DiskFull:
-        return DiskFull(err, f"no room for {nbytes + self.headroom} more bytes ({nbytes} to write, "
-                             f"{self.headroom} kept to close the file): {why}")
+        return DiskFull(
+            err,
+            f"no room for {nbytes + self.headroom} more bytes ({nbytes} to write, "
+            f"{self.headroom} kept to close the file): {why}",
+        )
 
 
 def release(path: str | Path) -> None:

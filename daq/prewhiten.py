@@ -28,8 +28,10 @@ class Prewhitened:
     """The residual and what was taken out of the data."""
 
     residual: np.ndarray
-    line: tuple[float, float] | None          # (offset, slope per second) at t = 0
-    sine: tuple[float, float, float] | None   # (frequency Hz, amplitude, phase rad): a sin(2 pi f t + phase)
+    line: tuple[float, float] | None  # (offset, slope per second) at t = 0
+    sine: (
+        tuple[float, float, float] | None
+    )  # (frequency Hz, amplitude, phase rad): a sin(2 pi f t + phase)
     outliers: list[tuple[int, float]] = field(default_factory=list)  # (index, original value)
     passes: int = 1
 
@@ -65,13 +67,23 @@ def _best_frequency(x: np.ndarray, t: np.ndarray, ok: np.ndarray, fs: float, lin
         _, model = _fit(x, t, ok, line, f)
         return float(np.sum((x - model)[ok] ** 2))
 
-    res = scipy.optimize.minimize_scalar(cost, bounds=(max(df * (k - 1), df * 0.1), df * (k + 1)),
-                                         method="bounded", options={"xatol": df * 1e-4})
+    res = scipy.optimize.minimize_scalar(
+        cost,
+        bounds=(max(df * (k - 1), df * 0.1), df * (k + 1)),
+        method="bounded",
+        options={"xatol": df * 1e-4},
+    )
     return float(res.x)
 
 
-def prewhiten(x: np.ndarray, fs: float, *, line: bool = True, sine_hz: float | Literal["auto"] | None = None,
-              max_passes: int = 20) -> Prewhitened:
+def prewhiten(
+    x: np.ndarray,
+    fs: float,
+    *,
+    line: bool = True,
+    sine_hz: float | Literal["auto"] | None = None,
+    max_passes: int = 20,
+) -> Prewhitened:
     """Remove a least-squares line and/or sine and the 4-sigma outliers (App. A.3).
 
     ``sine_hz``: None (no sine), a frequency in Hz, or ``"auto"`` (the periodogram's largest
@@ -83,7 +95,9 @@ def prewhiten(x: np.ndarray, fs: float, *, line: bool = True, sine_hz: float | L
         raise ValueError(f"prewhiten needs a 1-D record of at least 4 samples, got shape {x.shape}")
     if not np.all(np.isfinite(x)):
         bad = int(np.count_nonzero(~np.isfinite(x)))
-        raise ValueError(f"prewhiten: {bad} samples are NaN or infinite (gaps?); cut the record at the gaps first")
+        raise ValueError(
+            f"prewhiten: {bad} samples are NaN or infinite (gaps?); cut the record at the gaps first"
+        )
     if not fs > 0:
         raise ValueError(f"sample rate {fs!r} Hz must be > 0")
     if isinstance(sine_hz, str) and sine_hz != "auto":

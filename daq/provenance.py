@@ -44,10 +44,16 @@ def utc_now() -> str:
 def commit() -> str | None:
     """The commit this code is at, or None where nothing says (a failure stays quiet: a
     result is not lost for want of its commit)."""
-    if (_ROOT / ".git").exists():   # a checkout of its own, not a site-packages inside one
+    if (_ROOT / ".git").exists():  # a checkout of its own, not a site-packages inside one
         try:
-            r = subprocess.run(["git", "rev-parse", "HEAD"], cwd=_ROOT, capture_output=True,
-                               text=True, timeout=5, check=False)
+            r = subprocess.run(
+                ["git", "rev-parse", "HEAD"],
+                cwd=_ROOT,
+                capture_output=True,
+                text=True,
+                timeout=5,
+                check=False,
+            )
             if r.returncode == 0 and r.stdout.strip():
                 return r.stdout.strip()
         except (OSError, subprocess.SubprocessError):
@@ -66,14 +72,24 @@ def software() -> dict[str, Any]:
 
 def of_rig(rig: Rig) -> dict[str, Any]:
     """The rig's part, as the rig states it; with the software and the time now."""
-    return {"rig": rig.url, "simulated": bool(rig.simulated), "sim_config": rig.sim_config,
-            "software": software(), "time": utc_now()}
+    return {
+        "rig": rig.url,
+        "simulated": bool(rig.simulated),
+        "sim_config": rig.sim_config,
+        "software": software(),
+        "time": utc_now(),
+    }
 
 
 def offline(rig: str, sim_config: dict[str, str] | None) -> dict[str, Any]:
     """A file made without a rig by the simulator itself (``fbs simulate``, the gap's models)."""
-    return {"rig": rig, "simulated": True, "sim_config": sim_config, "software": software(),
-            "time": utc_now()}
+    return {
+        "rig": rig,
+        "simulated": True,
+        "sim_config": sim_config,
+        "software": software(),
+        "time": utc_now(),
+    }
 
 
 def of_file(rf: RunFile) -> dict[str, Any]:
@@ -84,10 +100,13 @@ def of_file(rf: RunFile) -> dict[str, Any]:
     meta = meta if isinstance(meta, dict) else {}
     simulated = meta.get("simulated")
     cfg = meta.get("sim_config")
-    return {"rig": str(meta.get("rig", rf.attrs.get("rig", ""))),
-            "simulated": simulated if isinstance(simulated, bool) else None,
-            "sim_config": cfg if isinstance(cfg, dict) else None,
-            "software": software(), "time": utc_now()}
+    return {
+        "rig": str(meta.get("rig", rf.attrs.get("rig", ""))),
+        "simulated": simulated if isinstance(simulated, bool) else None,
+        "sim_config": cfg if isinstance(cfg, dict) else None,
+        "software": software(),
+        "time": utc_now(),
+    }
 
 
 def header_lines(p: dict[str, Any]) -> list[str]:
@@ -96,7 +115,9 @@ def header_lines(p: dict[str, Any]) -> list[str]:
     sim = "**simulated**" if said else "hardware" if said is False else "not stated by the file"
     cfg = p.get("sim_config")
     sw = p.get("software") or {}
-    return [f"- rig: `{p.get('rig')}` ({sim})"
-            + (f"; sim config `{cfg['path']}` (sha256 {cfg['sha256'][:16]}...)" if cfg else ""),
-            f"- software: fbs-hil {sw.get('version')}, commit {sw.get('commit') or 'unknown'}",
-            f"- time: {p.get('time')}"]
+    return [
+        f"- rig: `{p.get('rig')}` ({sim})"
+        + (f"; sim config `{cfg['path']}` (sha256 {cfg['sha256'][:16]}...)" if cfg else ""),
+        f"- software: fbs-hil {sw.get('version')}, commit {sw.get('commit') or 'unknown'}",
+        f"- time: {p.get('time')}",
+    ]

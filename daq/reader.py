@@ -73,8 +73,10 @@ RATE_RTOL = 1e-6
 #: problems a ContractError message lists (the rest are counted)
 _MAX_LISTED = 8
 #: what a lost-samples message tells the reader about NaN in a run file
-LOST_SAMPLES_NOTE = ("the recorder writes samples it lost as NaN and logs a `gap` event for them, "
-                     "which `fbs inspect FILE` lists")
+LOST_SAMPLES_NOTE = (
+    "the recorder writes samples it lost as NaN and logs a `gap` event for them, "
+    "which `fbs inspect FILE` lists"
+)
 
 
 class ContractError(RunFileError):
@@ -104,7 +106,7 @@ class Block:
     start: int
     rate_hz: float
     channels: tuple[str, ...]
-    data: np.ndarray                         # (n_channels, n)
+    data: np.ndarray  # (n_channels, n)
 
     def __len__(self) -> int:
         return self.data.shape[1]
@@ -223,7 +225,7 @@ def _string(v: Any) -> str:
         raise _Bad(f"{_show(v)} is not a string")
     try:
         x.encode("utf-8")
-    except UnicodeEncodeError:      # h5py's undecodable bytes, as lone surrogates
+    except UnicodeEncodeError:  # h5py's undecodable bytes, as lone surrogates
         raise _Bad(f"{ascii(x)} is not UTF-8 text") from None
     return str(x)
 
@@ -234,7 +236,9 @@ def _rate_problem(rate: float) -> str | None:
     if rate <= 0:
         return f"{rate!r} Hz is not positive"
     if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
-        return f"{rate!r} Hz is outside the {MIN_RATE_HZ:g} .. {MAX_RATE_HZ:g} Hz this reader accepts"
+        return (
+            f"{rate!r} Hz is outside the {MIN_RATE_HZ:g} .. {MAX_RATE_HZ:g} Hz this reader accepts"
+        )
     return None
 
 
@@ -244,8 +248,10 @@ def member_dataset(g: h5py.Group, name: str) -> tuple[h5py.Dataset | None, str |
     HDF5 would wait for ever)."""
     link = g.get(name, getlink=True)
     if isinstance(link, h5py.ExternalLink):
-        return None, (f"a link to {link.filename}:{link.path} (another file): a channel is a dataset "
-                      f"in the run file itself")
+        return None, (
+            f"a link to {link.filename}:{link.path} (another file): a channel is a dataset "
+            f"in the run file itself"
+        )
     obj = g.get(name)
     if obj is None:
         return None, f"a link to {getattr(link, 'path', '?')}, which does not exist"
@@ -262,7 +268,9 @@ def _storage_problem(ds: h5py.Dataset) -> str | None:
         return "a virtual dataset (its samples live in other files): a channel's samples are in the run file"
     if ds.external:
         files = ", ".join(str(e[0]) for e in ds.external)
-        return f"samples stored in external file(s) {files}: a channel's samples are in the run file"
+        return (
+            f"samples stored in external file(s) {files}: a channel's samples are in the run file"
+        )
     plist = ds.id.get_create_plist()
     for i in range(plist.get_nfilters()):
         code, _flags, _values, name = plist.get_filter(i)
@@ -278,7 +286,9 @@ def _events_problem(ds: Any) -> str | None:
         return f"/events is a {type(ds).__name__}: it must be a table (dataset) of time, kind, text"
     names = ds.dtype.names or ()
     if not {"time", "kind", "text"} <= set(names):
-        return f"/events lacks time, kind or text (has {', '.join(names) or f'no fields: {ds.dtype}'})"
+        return (
+            f"/events lacks time, kind or text (has {', '.join(names) or f'no fields: {ds.dtype}'})"
+        )
     if ds.ndim != 1:
         return f"/events is {ds.ndim}-D (shape {ds.shape}): it must be a 1-D table"
     t = ds.dtype["time"]
@@ -301,7 +311,9 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
     empty = _Found((), math.nan, {})
     fmt = f.attrs.get("format")
     if fmt is None:
-        return [f"is not an {FORMAT} file (no root attribute format; an {FORMAT} file has format = {FORMAT!r})"], empty
+        return [
+            f"is not an {FORMAT} file (no root attribute format; an {FORMAT} file has format = {FORMAT!r})"
+        ], empty
     try:
         fmt_text = _string(fmt)
     except _Bad as exc:
@@ -310,7 +322,9 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
         return [f"is not an {FORMAT} file (format = {fmt_text!r})"], empty
     readable = " or ".join(str(v) for v in READABLE_VERSIONS)
     if "format_version" not in f.attrs:
-        problems.append(f"no root attribute format_version (this reader reads {FORMAT} version {readable})")
+        problems.append(
+            f"no root attribute format_version (this reader reads {FORMAT} version {readable})"
+        )
     else:
         v = f.attrs["format_version"]
         try:
@@ -318,14 +332,18 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
         except _Bad as exc:
             return [f"format_version = {exc}; this reader reads {FORMAT} version {readable}"], empty
         if version not in READABLE_VERSIONS:
-            return [f"format_version = {_show(_scalar(v))}: this reader reads {FORMAT} version {readable} only "
-                    f"(a newer layout needs a newer fbs-hil)"], empty
+            return [
+                f"format_version = {_show(_scalar(v))}: this reader reads {FORMAT} version {readable} only "
+                f"(a newer layout needs a newer fbs-hil)"
+            ], empty
     linked = []
     for name in ("channels", "events", "meta"):
-        link = f.get(name, getlink=True)      # the link only: an external one is not followed
+        link = f.get(name, getlink=True)  # the link only: an external one is not followed
         if isinstance(link, h5py.ExternalLink):
-            linked.append(f"/{name} is a link to {link.filename}:{link.path} (another file): the layout's "
-                          f"objects are in the run file itself")
+            linked.append(
+                f"/{name} is a link to {link.filename}:{link.path} (another file): the layout's "
+                f"objects are in the run file itself"
+            )
     if linked:
         return problems + linked, empty
     if "channels" not in f:
@@ -333,7 +351,9 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
         return problems, empty
     g = f["channels"]
     if not isinstance(g, h5py.Group):
-        problems.append(f"/channels is a {type(g).__name__}, not a group of one dataset per channel")
+        problems.append(
+            f"/channels is a {type(g).__name__}, not a group of one dataset per channel"
+        )
         return problems, empty
     names = tuple(g)
     if not names:
@@ -342,7 +362,7 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
     rates: dict[str, float] = {}
     units: dict[str, str] = {}
     lengths: dict[str, int] = {}
-    per_channel: dict[str, list[str]] = {}       # a rule broken -> the channels breaking it
+    per_channel: dict[str, list[str]] = {}  # a rule broken -> the channels breaking it
 
     def bad(c: str, text: str) -> None:
         per_channel.setdefault(text, []).append(c)
@@ -359,8 +379,11 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
             continue
         shape = ds.shape
         if shape is None or len(shape) != 1:
-            bad(c, f"{'a null dataspace' if shape is None else f'{len(shape)}-D (shape {shape})'}: a channel is a "
-                   f"1-D dataset")
+            bad(
+                c,
+                f"{'a null dataspace' if shape is None else f'{len(shape)}-D (shape {shape})'}: a channel is a "
+                f"1-D dataset",
+            )
             continue
         lengths[c] = shape[0]
         try:
@@ -369,7 +392,11 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
             bad(c, f"an HDF5 type this reader cannot map ({exc}): channels are floating point")
             continue
         if dt.kind != "f":
-            hint = " (integer ADC counts are not volts: scale them to volts first)" if dt.kind in "iub" else ""
+            hint = (
+                " (integer ADC counts are not volts: scale them to volts first)"
+                if dt.kind in "iub"
+                else ""
+            )
             bad(c, f"{dt} samples, not floating point{hint}")
         storage = _storage_problem(ds)
         if storage:
@@ -403,17 +430,22 @@ def contract_problems(f: h5py.File, *, live: bool = False) -> tuple[list[str], _
             by_rate: dict[float, list[str]] = {}
             for c, r in rates.items():
                 by_rate.setdefault(r, []).append(c)
-            problems.append("channels have different sample rates (" + "; ".join(
-                f"{r!r} Hz: {_names(cs)}" for r, cs in by_rate.items()) + "): all channels share one time base")
+            problems.append(
+                "channels have different sample rates ("
+                + "; ".join(f"{r!r} Hz: {_names(cs)}" for r, cs in by_rate.items())
+                + "): all channels share one time base"
+            )
     if lengths and not live:
         if len(set(lengths.values())) > 1:
             by_length: dict[int, list[str]] = {}
             for c, n in lengths.items():
                 by_length.setdefault(n, []).append(c)
-            problems.append("channels have different lengths (" + "; ".join(
-                f"{n} samples: {_names(cs)}" for n, cs in sorted(by_length.items()))
+            problems.append(
+                "channels have different lengths ("
+                + "; ".join(f"{n} samples: {_names(cs)}" for n, cs in sorted(by_length.items()))
                 + "): all channels share one time base; a writer that died between channels leaves this, "
-                "and `fbs recover FILE` pads the short ones with NaN")
+                "and `fbs recover FILE` pads the short ones with NaN"
+            )
         elif max(lengths.values()) == 0:
             problems.append("holds no samples (every channel has length 0)")
     if "events" in f:
@@ -437,8 +469,10 @@ def contract_error(path: Path, problems: Sequence[str]) -> ContractError:
     listed = list(problems[:_MAX_LISTED])
     if len(problems) > _MAX_LISTED:
         listed.append(f"... and {len(problems) - _MAX_LISTED} more")
-    return ContractError(f"{path} breaks the {FORMAT} version {FORMAT_VERSION} layout: "
-                         + "; ".join(listed), problems)
+    return ContractError(
+        f"{path} breaks the {FORMAT} version {FORMAT_VERSION} layout: " + "; ".join(listed),
+        problems,
+    )
 
 
 def nonfinite_spans(x: np.ndarray) -> list[tuple[int, int]]:
@@ -450,15 +484,26 @@ def nonfinite_spans(x: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1).tolist(), np.flatnonzero(d == -1).tolist()))
 
 
-def spans_text(spans: Sequence[tuple[int, int]], rate_hz: float, offset: int = 0, max_spans: int = 3) -> str:
+def spans_text(
+    spans: Sequence[tuple[int, int]], rate_hz: float, offset: int = 0, max_spans: int = 3
+) -> str:
     """The spans ``(start, stop)`` (``offset`` added) as "samples 500..509 (2.500..2.545 s), ..."."""
-    shown = ", ".join(f"samples {offset + a}..{offset + b - 1} ({(offset + a) / rate_hz:.3f}..{(offset + b - 1) / rate_hz:.3f} s)"
-                      for a, b in spans[:max_spans])
+    shown = ", ".join(
+        f"samples {offset + a}..{offset + b - 1} ({(offset + a) / rate_hz:.3f}..{(offset + b - 1) / rate_hz:.3f} s)"
+        for a, b in spans[:max_spans]
+    )
     return shown + (f" and {len(spans) - max_spans} more span(s)" if len(spans) > max_spans else "")
 
 
-def lost_text(channel: str, spans: Sequence[tuple[int, int]], rate_hz: float, *, kinds: str | None = None,
-              offset: int = 0, max_spans: int = 3) -> str:
+def lost_text(
+    channel: str,
+    spans: Sequence[tuple[int, int]],
+    rate_hz: float,
+    *,
+    kinds: str | None = None,
+    offset: int = 0,
+    max_spans: int = 3,
+) -> str:
     """The one wording every error uses for a channel's lost samples: the channel, the count
     (``kinds``, when the caller told NaN from inf; else "N lost (NaN/inf)") and the spans, e.g.
     "gyro_x has 10 lost (NaN/inf) samples: samples 500..509 (2.500..2.545 s)"."""
@@ -466,7 +511,9 @@ def lost_text(channel: str, spans: Sequence[tuple[int, int]], rate_hz: float, *,
     return f"{channel} has {kinds} samples: {spans_text(spans, rate_hz, offset, max_spans)}"
 
 
-def lost_samples(channel: str, x: np.ndarray, rate_hz: float, offset: int = 0, max_spans: int = 3) -> str | None:
+def lost_samples(
+    channel: str, x: np.ndarray, rate_hz: float, offset: int = 0, max_spans: int = 3
+) -> str | None:
     """None if every sample of ``x`` is finite; else ``lost_text`` with NaN and inf counted
     apart, e.g. "gyro_x has 10 lost (NaN) samples: samples 500..509 (2.500..2.545 s)"."""
     spans = nonfinite_spans(x)
@@ -475,12 +522,21 @@ def lost_samples(channel: str, x: np.ndarray, rate_hz: float, offset: int = 0, m
     x = np.asarray(x)
     n_nan = int(np.count_nonzero(np.isnan(x)))
     n_inf = int(np.count_nonzero(np.isinf(x)))
-    kinds = " and ".join(k for k in (f"{n_nan} lost (NaN)" if n_nan else "", f"{n_inf} infinite" if n_inf else "") if k)
+    kinds = " and ".join(
+        k
+        for k in (f"{n_nan} lost (NaN)" if n_nan else "", f"{n_inf} infinite" if n_inf else "")
+        if k
+    )
     return lost_text(channel, spans, rate_hz, kinds=kinds, offset=offset, max_spans=max_spans)
 
 
-_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
-          (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
 
 
 def check_regular_file(path: Path) -> None:
@@ -494,8 +550,10 @@ def check_regular_file(path: Path) -> None:
         raise UnreadableRunFile(f"{path}: cannot look at it: {exc.strerror or exc}") from None
     if not stat.S_ISREG(mode):
         kind = next((k for test, k in _KINDS if test(mode)), f"not a regular file (mode {mode:o})")
-        raise UnreadableRunFile(f"{path} is {kind}, not a run file: a run file is a regular HDF5 file "
-                                f"(it was not opened)")
+        raise UnreadableRunFile(
+            f"{path} is {kind}, not a run file: a run file is a regular HDF5 file "
+            f"(it was not opened)"
+        )
 
 
 _TRUNCATED = re.compile(r"truncated file: eof = (\d+).*stored_eof = (\d+)")
@@ -517,10 +575,13 @@ def open_hdf5(path: str | Path) -> tuple[h5py.File, bool]:
                 f"{path} is truncated: {m.group(1)} bytes on disk, its HDF5 superblock records {m.group(2)} (cut "
                 f"short by a copy or a download, or its writer failed while extending it, e.g. on a full disk; "
                 f"`fbs recover {path}` repairs the latter where the metadata reads, or says "
-                f"why it cannot)") from exc
+                f"why it cannot)"
+            ) from exc
         if "signature not found" in text:
-            raise UnreadableRunFile(f"{path} is not an HDF5 file (no HDF5 signature in its "
-                                    f"{_size(path)} bytes): a run file is an HDF5 file") from exc
+            raise UnreadableRunFile(
+                f"{path} is not an HDF5 file (no HDF5 signature in its "
+                f"{_size(path)} bytes): a run file is an HDF5 file"
+            ) from exc
         if "already open for write" not in text and "unable to lock" not in text.lower():
             raise UnreadableRunFile(f"cannot open {path} as HDF5: {exc}") from exc
     except (RuntimeError, ValueError, KeyError) as exc:
@@ -534,8 +595,11 @@ def open_hdf5(path: str | Path) -> tuple[h5py.File, bool]:
             raise UnreadableRunFile(
                 f"{path} was left open for writing before its first flush (by a writer that died, "
                 f"or one on another host): `fbs recover {path}` makes it readable when no writer "
-                f"has it, or says why it cannot") from exc
-        raise UnreadableRunFile(f"cannot open {path} (held by a writer, or left by one that died): {exc}") from exc
+                f"has it, or says why it cannot"
+            ) from exc
+        raise UnreadableRunFile(
+            f"cannot open {path} (held by a writer, or left by one that died): {exc}"
+        ) from exc
 
 
 def _size(path: Path) -> int | str:
@@ -567,8 +631,9 @@ class RunFile:
         except RunFileError:
             raise
         except (OSError, RuntimeError, KeyError, ValueError, TypeError, AttributeError) as exc:
-            raise UnreadableRunFile(f"{self.path}: its HDF5 metadata cannot be read ({type(exc).__name__}: "
-                                    f"{exc})") from exc
+            raise UnreadableRunFile(
+                f"{self.path}: its HDF5 metadata cannot be read ({type(exc).__name__}: {exc})"
+            ) from exc
         if problems:
             raise contract_error(self.path, problems)
         self._group = self.f["channels"]
@@ -657,10 +722,14 @@ class RunFile:
     def _need(self, names: Sequence[str]) -> None:
         missing = [n for n in names if n not in self.channels]
         if missing:
-            raise RunFileError(f"{self.path} lacks channel(s) {', '.join(missing)} "
-                               f"(has {', '.join(self.channels)})")
+            raise RunFileError(
+                f"{self.path} lacks channel(s) {', '.join(missing)} "
+                f"(has {', '.join(self.channels)})"
+            )
 
-    def read(self, channels: Sequence[str] | None = None, start: int = 0, stop: int | None = None) -> np.ndarray:
+    def read(
+        self, channels: Sequence[str] | None = None, start: int = 0, stop: int | None = None
+    ) -> np.ndarray:
         """Samples ``start .. stop`` of ``channels`` (default all) as (n_channels, n)."""
         channels = list(self.channels if channels is None else channels)
         self._need(channels)
@@ -673,26 +742,31 @@ class RunFile:
         try:
             out = np.full((len(channels), stop - start), np.nan)
         except MemoryError:
-            raise RunFileError(f"{self.path}: samples {start}..{stop} of {len(channels)} channel(s) "
-                               f"({8 * len(channels) * (stop - start) / 1e9:.3g} GB) do not fit in memory; "
-                               f"analyse a shorter span") from None
+            raise RunFileError(
+                f"{self.path}: samples {start}..{stop} of {len(channels)} channel(s) "
+                f"({8 * len(channels) * (stop - start) / 1e9:.3g} GB) do not fit in memory; "
+                f"analyse a shorter span"
+            ) from None
         for i, c in enumerate(channels):
             if stop > start:
                 try:
                     self._group[c].read_direct(out, np.s_[start:stop], np.s_[i, :])
                 except (OSError, RuntimeError, TypeError, ValueError) as exc:
-                    raise UnreadableRunFile(f"{self.path}: samples {start}..{stop} of channel {c} cannot be "
-                                            f"read ({exc})") from exc
+                    raise UnreadableRunFile(
+                        f"{self.path}: samples {start}..{stop} of channel {c} cannot be "
+                        f"read ({exc})"
+                    ) from exc
         return out
 
-    def lost_spans(self, channel: str, start: int = 0, stop: int | None = None,
-                   block_samples: int = 1 << 20) -> list[tuple[int, int]]:
+    def lost_spans(
+        self, channel: str, start: int = 0, stop: int | None = None, block_samples: int = 1 << 20
+    ) -> list[tuple[int, int]]:
         """``(start, stop)`` of every run of lost (non-finite) samples of ``channel`` in samples
         ``start .. stop``, read a block at a time (bounded memory on a file of any size)."""
         spans: list[tuple[int, int]] = []
         for b in self.blocks(block_samples, channels=[channel], start=start, stop=stop):
             for a, e in nonfinite_spans(b.data[0]):
-                if spans and spans[-1][1] == b.start + a:          # a run across the block boundary
+                if spans and spans[-1][1] == b.start + a:  # a run across the block boundary
                     spans[-1] = (spans[-1][0], b.start + e)
                 else:
                     spans.append((b.start + a, b.start + e))
@@ -708,9 +782,16 @@ class RunFile:
         channels = tuple(self.channels if channels is None else channels)
         return Block(a, self.rate_hz, channels, self.read(channels, a, b))
 
-    def blocks(self, block_samples: int | None = None, *, block_s: float | None = None,
-               channels: Sequence[str] | None = None, overlap: int = 0, start: int = 0,
-               stop: int | None = None) -> Iterator[Block]:
+    def blocks(
+        self,
+        block_samples: int | None = None,
+        *,
+        block_s: float | None = None,
+        channels: Sequence[str] | None = None,
+        overlap: int = 0,
+        start: int = 0,
+        stop: int | None = None,
+    ) -> Iterator[Block]:
         """Consecutive blocks of ``block_samples`` (or ``block_s``) samples, each starting
         ``block - overlap`` after the previous; the last may be shorter. One block in memory."""
         if (block_samples is None) == (block_s is None):
@@ -721,7 +802,9 @@ class RunFile:
             assert block_s is not None  # exactly one of the two was given
             size = int(round(block_s * self.rate_hz))
         if size < 1 or not 0 <= overlap < size:
-            raise ValueError(f"block of {size} samples with overlap {overlap}: need size >= 1, 0 <= overlap < size")
+            raise ValueError(
+                f"block of {size} samples with overlap {overlap}: need size >= 1, 0 <= overlap < size"
+            )
         channels = tuple(self.channels if channels is None else channels)
         self._need(channels)
         stop = self.n_samples if stop is None else min(stop, self.n_samples)
@@ -762,7 +845,9 @@ def writer_alive(writer: str) -> bool | None:
     return True
 
 
-def read_channels(path: str | Path, names: list[str] | None = None) -> tuple[dict[str, np.ndarray], float]:
+def read_channels(
+    path: str | Path, names: list[str] | None = None
+) -> tuple[dict[str, np.ndarray], float]:
     """Whole channels of a run file (in memory), and the common sample rate."""
     with RunFile(path) as run:
         names = list(run.channels) if names is None else names

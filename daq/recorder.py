@@ -59,11 +59,22 @@ class Acquisition:
     """The ADC streaming into one run file for as long as the ``with`` block lasts (or from
     ``start`` to ``close``, for a caller that holds a recording open across calls)."""
 
-    def __init__(self, rig: Rig, path: str | Path, *, rate_hz: float,
-                 channels: list[str] | tuple[str, ...] | None = None,
-                 ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1,
-                 flush_s: float = 0.5, procedure: str | None = None, axis: str | None = None,
-                 meta: Mapping[str, Any] | None = None, overwrite: bool = False, mode: int | None = None) -> None:
+    def __init__(
+        self,
+        rig: Rig,
+        path: str | Path,
+        *,
+        rate_hz: float,
+        channels: list[str] | tuple[str, ...] | None = None,
+        ranges_V: Mapping[str, float] | float | None = None,
+        block_s: float = 0.1,
+        flush_s: float = 0.5,
+        procedure: str | None = None,
+        axis: str | None = None,
+        meta: Mapping[str, Any] | None = None,
+        overwrite: bool = False,
+        mode: int | None = None,
+    ) -> None:
         self.rig = rig
         self.channels = tuple(channels or rig.adc.identity.channels)
         self.cfg = rig.adc.configure(self.channels, rate_hz, ranges_V)
@@ -71,16 +82,31 @@ class Acquisition:
         self.block = max(1, int(round(block_s * self.rate_hz)))
         # The file's mode is the one the run is about (a procedure may start by switching to it).
         self.mode = rig.relays.status().mode if mode is None else mode
-        meta = dict(meta or {}) | {"adc": {"channels": list(self.cfg.channels), "rate_hz": self.rate_hz,
-                                           "ranges_V": self.cfg.ranges_V, "identity": rig.adc.identity.__dict__}}
+        meta = dict(meta or {}) | {
+            "adc": {
+                "channels": list(self.cfg.channels),
+                "rate_hz": self.rate_hz,
+                "ranges_V": self.cfg.ranges_V,
+                "identity": rig.adc.identity.__dict__,
+            }
+        }
         # which rig, simulated or not, which software: every file says (daq.provenance)
         meta.setdefault("provenance", provenance.of_rig(rig))
-        self.writer = RunWriter(path, rig=rig.url, mode=self.mode, rate_hz=self.rate_hz,
-                                channels=dict.fromkeys(self.channels, "V"), procedure=procedure, axis=axis,
-                                meta=meta, overwrite=overwrite, flush_s=flush_s)
+        self.writer = RunWriter(
+            path,
+            rig=rig.url,
+            mode=self.mode,
+            rate_hz=self.rate_hz,
+            channels=dict.fromkeys(self.channels, "V"),
+            procedure=procedure,
+            axis=axis,
+            meta=meta,
+            overwrite=overwrite,
+            flush_s=flush_s,
+        )
         self.result = RecordResult(Path(path), 0, self.rate_hz, STATUS_RECORDING)
-        self.pos = 0                    # samples acquired (the next sample's index)
-        self.t0 = 0.0                   # rig time of sample 0
+        self.pos = 0  # samples acquired (the next sample's index)
+        self.t0 = 0.0  # rig time of sample 0
         self._pending: list[tuple[float, str, str]] = []
         self._lock = threading.Lock()
 
@@ -91,8 +117,11 @@ class Acquisition:
             self.t0 = self.rig.adc.start()
             self.rig.subscribe(self._on_event)
             self.writer.set_meta("acquisition", _start_stamp(self.rig, self.t0))
-            self.writer.event(0.0, "start", f"recording {len(self.channels)} channels at {self.rate_hz:g} Hz, "
-                              f"mode {self.mode}")
+            self.writer.event(
+                0.0,
+                "start",
+                f"recording {len(self.channels)} channels at {self.rate_hz:g} Hz, mode {self.mode}",
+            )
         except BaseException as exc:
             self.close(exc)
             raise
@@ -107,7 +136,7 @@ class Acquisition:
                 self.rig.adc.stop()
                 self._flush_events()
                 self.writer.close(status)
-        except BaseException as failure:   # a failure while finishing is an abort like any other
+        except BaseException as failure:  # a failure while finishing is an abort like any other
             exc = failure
             raise
         finally:
@@ -118,7 +147,9 @@ class Acquisition:
     def __enter__(self) -> Acquisition:
         return self.start()
 
-    def __exit__(self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None) -> None:
+    def __exit__(
+        self, et: type[BaseException] | None, ev: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.close(ev)
 
     def _finish(self, status: str) -> None:
@@ -179,12 +210,12 @@ class Acquisition:
                 self.writer.event(gap.start / self.rate_hz, "gap", str(gap))
                 self.result.gaps.append((gap.start, gap.stop, gap.reason))
                 if out is not None:
-                    out[start - base:stop - base] = np.nan
+                    out[start - base : stop - base] = np.nan
                 self.pos = stop
                 continue
             self.writer.append(block.volts)
             if out is not None:
-                out[start - base:block.stop_sample - base] = block.volts
+                out[start - base : block.stop_sample - base] = block.volts
             self._overrange_events(block)
             self.pos = block.stop_sample
             self._flush_events()
@@ -194,24 +225,46 @@ class Acquisition:
         over = block.overrange.any(axis=0)
         for j in np.flatnonzero(over):
             k = int(block.overrange[:, j].argmax())
-            self.writer.event((block.first_sample + k) / self.rate_hz, "overrange",
-                              f"{self.channels[j]}: {int(block.overrange[:, j].sum())} samples at full scale")
+            self.writer.event(
+                (block.first_sample + k) / self.rate_hz,
+                "overrange",
+                f"{self.channels[j]}: {int(block.overrange[:, j].sum())} samples at full scale",
+            )
 
 
-def record(rig: Rig, path: str | Path, *, duration_s: float, rate_hz: float,
-           channels: list[str] | tuple[str, ...] | None = None,
-           ranges_V: Mapping[str, float] | float | None = None, block_s: float = 0.1, flush_s: float = 0.5,
-           procedure: str | None = None, meta: Mapping[str, Any] | None = None,
-           overwrite: bool = False) -> RecordResult:
+def record(
+    rig: Rig,
+    path: str | Path,
+    *,
+    duration_s: float,
+    rate_hz: float,
+    channels: list[str] | tuple[str, ...] | None = None,
+    ranges_V: Mapping[str, float] | float | None = None,
+    block_s: float = 0.1,
+    flush_s: float = 0.5,
+    procedure: str | None = None,
+    meta: Mapping[str, Any] | None = None,
+    overwrite: bool = False,
+) -> RecordResult:
     """Record ``duration_s`` seconds of the ADC to ``path``; returns what was written. An abort
     leaves the rig safe (``SafeOnAbort``) and the file closed "aborted: <why>"."""
     if not (duration_s > 0 and duration_s < float("inf")):
         raise ValueError(f"record duration {duration_s!r} s must be a finite number > 0")
     guard = SafeOnAbort(rig, "recording")
     with guard:
-        acq = Acquisition(rig, path, rate_hz=rate_hz, channels=channels, ranges_V=ranges_V, block_s=block_s,
-                          flush_s=flush_s, procedure=procedure, meta=meta, overwrite=overwrite)
-        with acq, guard:   # the inner guard first: the safe state lands in the file before it closes
+        acq = Acquisition(
+            rig,
+            path,
+            rate_hz=rate_hz,
+            channels=channels,
+            ranges_V=ranges_V,
+            block_s=block_s,
+            flush_s=flush_s,
+            procedure=procedure,
+            meta=meta,
+            overwrite=overwrite,
+        )
+        with acq, guard:  # the inner guard first: the safe state lands in the file before it closes
             acq.acquire(duration_s, keep=False)
     return acq.result
 
@@ -222,5 +275,7 @@ def _start_stamp(rig: Rig, t0: float) -> dict[str, Any]:
     start = rig.clock.unix_time(t0)
     if start is not None:
         stamp["start_unix_s"] = start
-        stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.UTC).isoformat(timespec="microseconds")
+        stamp["start_utc"] = _dt.datetime.fromtimestamp(start, _dt.UTC).isoformat(
+            timespec="microseconds"
+        )
     return stamp

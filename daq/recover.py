@@ -43,7 +43,14 @@ import numpy as np
 
 from daq.prealloc import release
 from daq.reader import as_text, member_dataset, writer_alive
-from daq.runfile import EVENT_DTYPE, KIND_BYTES, STATUS_RECORDING, TEXT_BYTES, RunFileError, fit_utf8
+from daq.runfile import (
+    EVENT_DTYPE,
+    KIND_BYTES,
+    STATUS_RECORDING,
+    TEXT_BYTES,
+    RunFileError,
+    fit_utf8,
+)
 
 log = logging.getLogger(__name__)
 
@@ -65,28 +72,28 @@ def lookup3(data: bytes, initval: int = 0) -> int:
     n = len(data)
     v = [(0xDEADBEEF + n + initval) & _M32] * 3
     padded = data + bytes(-n % 12 if n else 0)
-    words = [int.from_bytes(padded[i:i + 4], "little") for i in range(0, len(padded), 4)]
-    blocks = [words[i:i + 3] for i in range(0, len(words), 3)]
+    words = [int.from_bytes(padded[i : i + 4], "little") for i in range(0, len(padded), 4)]
+    blocks = [words[i : i + 3] for i in range(0, len(words), 3)]
     if not blocks:
         return v[2]
     for blk in blocks[:-1]:
         v = [(v[j] + blk[j]) & _M32 for j in range(3)]
-        for x, y, z, r in _MIX:          # x -= y; x ^= rot(y, r); y += z
+        for x, y, z, r in _MIX:  # x -= y; x ^= rot(y, r); y += z
             v[x] = ((v[x] - v[y]) & _M32) ^ _rot(v[y], r)
             v[y] = (v[y] + v[z]) & _M32
     v = [(v[j] + blocks[-1][j]) & _M32 for j in range(3)]
-    for x, y, r in _FINAL:               # x ^= y; x -= rot(y, r)
+    for x, y, r in _FINAL:  # x ^= y; x -= rot(y, r)
         v[x] = ((v[x] ^ v[y]) - _rot(v[y], r)) & _M32
     return v[2]
 
 
 @dataclass(frozen=True)
 class Superblock:
-    offset: int          # where the signature is (0, 512, 1024, ...)
+    offset: int  # where the signature is (0, 512, 1024, ...)
     version: int
-    flags: int           # file-consistency flags: non-zero while a writer has the file
-    base: int            # base address: file addresses count from here
-    eof: int             # end-of-file address, relative to base
+    flags: int  # file-consistency flags: non-zero while a writer has the file
+    base: int  # base address: file addresses count from here
+    eof: int  # end-of-file address, relative to base
 
     def needs_repair(self, file_size: int) -> bool:
         """Marked open for writing, or shorter than its recorded end of file."""
@@ -104,23 +111,36 @@ def read_superblock(path: str | Path) -> Superblock:
             raw = fh.read(48)
             if raw[:8] == SIGNATURE:
                 if len(raw) < 48:
-                    raise RunFileError(f"{path}: cut short inside its HDF5 superblock ({len(raw)} of 48 bytes at "
-                                       f"offset {offset}); nothing is left to recover")
+                    raise RunFileError(
+                        f"{path}: cut short inside its HDF5 superblock ({len(raw)} of 48 bytes at "
+                        f"offset {offset}); nothing is left to recover"
+                    )
                 break
             offset = 512 if offset == 0 else offset * 2
         else:
             raise RunFileError(f"{path}: no HDF5 signature found; not an HDF5 file")
     version = raw[8]
     if version not in (2, 3):
-        raise RunFileError(f"{path}: superblock version {version} has no open-for-write flags to clear "
-                           "(only versions 2 and 3 do)")
+        raise RunFileError(
+            f"{path}: superblock version {version} has no open-for-write flags to clear "
+            "(only versions 2 and 3 do)"
+        )
     if raw[9] != 8 or raw[10] != 8:
-        raise RunFileError(f"{path}: {raw[9]}-byte offsets / {raw[10]}-byte lengths are not supported (8/8 only)")
+        raise RunFileError(
+            f"{path}: {raw[9]}-byte offsets / {raw[10]}-byte lengths are not supported (8/8 only)"
+        )
     stored = int.from_bytes(raw[44:48], "little")
     if lookup3(raw[:44]) != stored:
-        raise RunFileError(f"{path}: superblock checksum mismatch; the file is damaged beyond this repair")
-    return Superblock(offset, version, raw[11], int.from_bytes(raw[12:20], "little"),
-                      int.from_bytes(raw[28:36], "little"))
+        raise RunFileError(
+            f"{path}: superblock checksum mismatch; the file is damaged beyond this repair"
+        )
+    return Superblock(
+        offset,
+        version,
+        raw[11],
+        int.from_bytes(raw[12:20], "little"),
+        int.from_bytes(raw[28:36], "little"),
+    )
 
 
 def _repaired_superblock(sb: Superblock, raw: bytes, size: int) -> bytes:
@@ -155,7 +175,9 @@ class _RepairedView(io.RawIOBase):
         return True
 
     def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
-        self._pos = {io.SEEK_SET: 0, io.SEEK_CUR: self._pos, io.SEEK_END: self.size}[whence] + offset
+        self._pos = {io.SEEK_SET: 0, io.SEEK_CUR: self._pos, io.SEEK_END: self.size}[
+            whence
+        ] + offset
         return self._pos
 
     def tell(self) -> int:
@@ -169,10 +191,10 @@ class _RepairedView(io.RawIOBase):
             self._fh.seek(self._pos)
             got = self._fh.readinto(view[:real]) or 0
             view[got:real] = bytes(real - got)
-        view[real:n] = bytes(n - real)                     # the zero fill past the real end
+        view[real:n] = bytes(n - real)  # the zero fill past the real end
         lo, hi = max(self._pos, self._at), min(self._pos + n, self._at + len(self._patch))
         if lo < hi:
-            view[lo - self._pos:hi - self._pos] = self._patch[lo - self._at:hi - self._at]
+            view[lo - self._pos : hi - self._pos] = self._patch[lo - self._at : hi - self._at]
         self._pos += n
         return n
 
@@ -186,10 +208,10 @@ class _Survey:
     """What the repair will find and add, read before it writes."""
 
     status: str
-    writer: str                  # the writer attribute ("fbs-hil V, pid P on HOST")
+    writer: str  # the writer attribute ("fbs-hil V, pid P on HOST")
     rate_hz: float
     lengths: dict[str, int]
-    events_ok: bool              # an events table the gap event can be added to
+    events_ok: bool  # an events table the gap event can be added to
 
     @property
     def padding(self) -> dict[str, int]:
@@ -210,41 +232,55 @@ def _survey(path: Path, sb: Superblock | None) -> _Survey:
         with h5py.File(src, "r") as f:
             status = as_text(f.attrs.get("status", ""))
             writer = as_text(f.attrs.get("writer", ""))
-            for name in ("channels", "events"):     # never followed to another file (it may be a FIFO)
+            for name in ("channels", "events"):  # never followed to another file (it may be a FIFO)
                 if isinstance(f.get(name, getlink=True), h5py.ExternalLink):
-                    raise RunFileError(f"{path}: /{name} is a link to another file; not a run file this can repair")
+                    raise RunFileError(
+                        f"{path}: /{name} is a link to another file; not a run file this can repair"
+                    )
             g = f.get("channels")
             if not isinstance(g, h5py.Group) or not len(g):
-                raise RunFileError(f"{path}: no /channels group with datasets; not a run file this can repair")
+                raise RunFileError(
+                    f"{path}: no /channels group with datasets; not a run file this can repair"
+                )
             lengths: dict[str, int] = {}
             rate = math.nan
             for c in g:
                 ds, why = member_dataset(g, c)
                 if ds is None or ds.ndim != 1:
-                    raise RunFileError(f"{path}: /channels/{c} is {why or 'not 1-D'}; not a run file this can repair")
+                    raise RunFileError(
+                        f"{path}: /channels/{c} is {why or 'not 1-D'}; not a run file this can repair"
+                    )
                 lengths[c] = ds.shape[0]
                 if not math.isfinite(rate):
                     rate = float(np.asarray(ds.attrs.get("sample_rate_hz", math.nan)).ravel()[0])
             if not (math.isfinite(rate) and rate > 0):
-                raise RunFileError(f"{path}: channel sample_rate_hz {rate!r} is not a positive number")
+                raise RunFileError(
+                    f"{path}: channel sample_rate_hz {rate!r} is not a positive number"
+                )
             ev = f.get("events")
-            events_ok = isinstance(ev, h5py.Dataset) and ev.dtype == EVENT_DTYPE and ev.maxshape == (None,)
+            events_ok = (
+                isinstance(ev, h5py.Dataset) and ev.dtype == EVENT_DTYPE and ev.maxshape == (None,)
+            )
             return _Survey(status, writer, rate, lengths, events_ok)
     except RunFileError:
         raise
     except (OSError, KeyError, ValueError, RuntimeError, TypeError, IndexError) as exc:
-        raise RunFileError(f"{path}: its metadata cannot be read ({exc}); a write that failed (a full disk, a "
-                           f"crash) left it damaged beyond this repair. Nothing was written") from exc
+        raise RunFileError(
+            f"{path}: its metadata cannot be read ({exc}); a write that failed (a full disk, a "
+            f"crash) left it damaged beyond this repair. Nothing was written"
+        ) from exc
     finally:
         if isinstance(src, _RepairedView):
             src.close()
 
 
 def _refuse_without_room(path: Path, need: int) -> None:
-    free = shutil.disk_usage(path.parent).free          # as ``runfile.check_request`` measures it
+    free = shutil.disk_usage(path.parent).free  # as ``runfile.check_request`` measures it
     if free < need:
-        raise RunFileError(f"{path}: the repair needs about {need} bytes on its disk and {free} are free. Nothing "
-                           f"was written; copy the file to a disk with room and recover the copy")
+        raise RunFileError(
+            f"{path}: the repair needs about {need} bytes on its disk and {free} are free. Nothing "
+            f"was written; copy the file to a disk with room and recover the copy"
+        )
 
 
 def clear_open_flags(path: str | Path) -> Superblock:
@@ -263,7 +299,11 @@ def clear_open_flags(path: str | Path) -> Superblock:
         raw = _repaired_superblock(sb, fh.read(48), size)
         if sb.eof > size - sb.base:
             fh.truncate(sb.base + sb.eof)
-            log.warning("%s: zero-filled %d bytes up to the recorded end of file", path, sb.base + sb.eof - size)
+            log.warning(
+                "%s: zero-filled %d bytes up to the recorded end of file",
+                path,
+                sb.base + sb.eof - size,
+            )
         fh.seek(sb.offset)
         fh.write(raw)
         fh.flush()
@@ -274,18 +314,24 @@ def clear_open_flags(path: str | Path) -> Superblock:
 @dataclass
 class Recovery:
     path: Path
-    was_open: bool              # the flags said open for writing
-    samples: int                # samples per channel now in the file
+    was_open: bool  # the flags said open for writing
+    samples: int  # samples per channel now in the file
     rate_hz: float
-    padded: dict[str, int]      # channel -> NaN samples added to reach the longest
+    padded: dict[str, int]  # channel -> NaN samples added to reach the longest
     status: str
 
     def summary(self) -> str:
         if not self.was_open:
             return f"{self.path}: was closed properly; status {self.status!r}; nothing to do"
-        pad = (", padded with NaN: " + ", ".join(f"{c} +{n}" for c, n in self.padded.items())) if self.padded else ""
-        return (f"{self.path}: recovered; {self.samples} samples per channel ({self.samples / self.rate_hz:.3f} s) "
-                f"kept{pad}; status {self.status!r}; opens with plain h5py now")
+        pad = (
+            (", padded with NaN: " + ", ".join(f"{c} +{n}" for c, n in self.padded.items()))
+            if self.padded
+            else ""
+        )
+        return (
+            f"{self.path}: recovered; {self.samples} samples per channel ({self.samples / self.rate_hz:.3f} s) "
+            f"kept{pad}; status {self.status!r}; opens with plain h5py now"
+        )
 
 
 def _refuse_if_writer_alive(path: Path, writer: str, *, force: bool) -> None:
@@ -297,11 +343,15 @@ def _refuse_if_writer_alive(path: Path, writer: str, *, force: bool) -> None:
         return
     m = _WRITER_PID.search(writer)
     if m and _holds_open(int(m.group(1)), path):
-        raise RunFileError(f"{path}: its writer ({writer}) is still running and has the file open; stop it "
-                           f"first (not even force repairs a file under its writer)")
+        raise RunFileError(
+            f"{path}: its writer ({writer}) is still running and has the file open; stop it "
+            f"first (not even force repairs a file under its writer)"
+        )
     if not force:
-        raise RunFileError(f"{path}: its writer ({writer}) is still running; stop it first "
-                           "(or pass force if that process is not the writer)")
+        raise RunFileError(
+            f"{path}: its writer ({writer}) is still running; stop it first "
+            "(or pass force if that process is not the writer)"
+        )
 
 
 _WRITER_PID = re.compile(r"pid (\d+) on ")
@@ -319,7 +369,7 @@ def _holds_open(pid: int, path: Path) -> bool:
         return False
     for fd in fds:
         try:
-            st = fd.stat()          # follows the link to the open file, renamed or not
+            st = fd.stat()  # follows the link to the open file, renamed or not
         except OSError:
             continue
         if (st.st_dev, st.st_ino) == (target.st_dev, target.st_ino):
@@ -340,7 +390,9 @@ def recover(path: str | Path, *, force: bool = False) -> Recovery:
     Raises ``RunFileError``, having written nothing, where the repair cannot succeed."""
     path = Path(path)
     if not path.is_file():
-        raise RunFileError(f"{path}: {'no such file' if not path.exists() else 'not a regular file'}")
+        raise RunFileError(
+            f"{path}: {'no such file' if not path.exists() else 'not a regular file'}"
+        )
     sb = read_superblock(path)
     size = path.stat().st_size
     was_open = sb.needs_repair(size)
@@ -348,8 +400,10 @@ def recover(path: str | Path, *, force: bool = False) -> Recovery:
         survey = _survey(path, sb if was_open else None)
     except RunFileError:
         pid = _held_by_anyone(path) if was_open else None
-        if pid is not None:     # a live writer's metadata may be caught half-written: not damage
-            raise RunFileError(f"{path}: process {pid} has the file open (its writer?); stop it first") from None
+        if pid is not None:  # a live writer's metadata may be caught half-written: not damage
+            raise RunFileError(
+                f"{path}: process {pid} has the file open (its writer?); stop it first"
+            ) from None
         raise
     if was_open and sb.flags:
         _refuse_if_writer_alive(path, survey.writer, force=force)
@@ -358,17 +412,21 @@ def recover(path: str | Path, *, force: bool = False) -> Recovery:
         fill = max(0, sb.base + sb.eof - size) if was_open else 0
         _refuse_without_room(path, fill + 8 * sum(padding.values()) + REPAIR_MARGIN_BYTES)
     else:
-        return Recovery(path, False, max(survey.lengths.values()), survey.rate_hz, {}, survey.status)
+        return Recovery(
+            path, False, max(survey.lengths.values()), survey.rate_hz, {}, survey.status
+        )
     if was_open:
         clear_open_flags(path)
         log.info("%s: cleared open-for-write flags 0x%02x", path, sb.flags)
     try:
         status = _repair(path, survey, was_open)
     except (OSError, KeyError, ValueError, RuntimeError) as exc:
-        raise RunFileError(f"{path}: the repair failed after the superblock was repaired: {exc}") from exc
+        raise RunFileError(
+            f"{path}: the repair failed after the superblock was repaired: {exc}"
+        ) from exc
     if was_open:
         try:
-            release(path)               # the dead writer's space reserved past the end
+            release(path)  # the dead writer's space reserved past the end
         except OSError as exc:
             log.warning("%s: could not return the disk space reserved past its end: %s", path, exc)
     return Recovery(path, was_open, max(survey.lengths.values()), survey.rate_hz, padding, status)
@@ -384,16 +442,24 @@ def _repair(path: Path, survey: _Survey, was_open: bool) -> str:
         g = f["channels"]
         for c, k in padding.items():
             g[c].resize((n,))
-            g[c][n - k:] = np.nan
+            g[c][n - k :] = np.nan
         if padding and survey.events_ok:
             ev = f["events"]
             k = len(ev)
             ev.resize((k + 1,))
-            ev[k] = (lo / rate, fit_utf8("gap", KIND_BYTES),
-                     fit_utf8(f"samples {lo}..{n} of {', '.join(padding)} lost when the writer stopped", TEXT_BYTES))
+            ev[k] = (
+                lo / rate,
+                fit_utf8("gap", KIND_BYTES),
+                fit_utf8(
+                    f"samples {lo}..{n} of {', '.join(padding)} lost when the writer stopped",
+                    TEXT_BYTES,
+                ),
+            )
         if was_open or status == STATUS_RECORDING:
-            why = status[len("aborted: "):] + "; " if status.startswith("aborted: ") else ""
-            status = (f"aborted: {why}not closed by its writer (killed, or its disk filled); {n} samples "
-                      f"({n / rate:.3f} s) were flushed and kept")
+            why = status[len("aborted: ") :] + "; " if status.startswith("aborted: ") else ""
+            status = (
+                f"aborted: {why}not closed by its writer (killed, or its disk filled); {n} samples "
+                f"({n / rate:.3f} s) were flushed and kept"
+            )
             f.attrs["status"] = status
     return status

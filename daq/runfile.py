@@ -83,12 +83,16 @@ STATUS_RECORDING = "recording"
 STATUS_COMPLETE = "complete"
 KIND_BYTES = 32
 TEXT_BYTES = 1024
-EVENT_DTYPE = np.dtype([("time", "f8"),
-                        ("kind", h5py.string_dtype("utf-8", KIND_BYTES)),
-                        ("text", h5py.string_dtype("utf-8", TEXT_BYTES))])
+EVENT_DTYPE = np.dtype(
+    [
+        ("time", "f8"),
+        ("kind", h5py.string_dtype("utf-8", KIND_BYTES)),
+        ("text", h5py.string_dtype("utf-8", TEXT_BYTES)),
+    ]
+)
 _CUT = " [cut]"
-_F8 = h5t.py_create(np.dtype("<f8"))        # the channels' type, for h5py's low-level calls
-_VSTR = h5py.string_dtype()                 # str attributes as attrs[...] = "..." stores them
+_F8 = h5t.py_create(np.dtype("<f8"))  # the channels' type, for h5py's low-level calls
+_VSTR = h5py.string_dtype()  # str attributes as attrs[...] = "..." stores them
 #: Rows transposed into the channel-major buffer at a time: a tile (128 KiB at 16 channels)
 #: stays in cache while it is scattered, ~25 % faster than one big strided copy.
 _TILE = 1024
@@ -108,7 +112,7 @@ def fit_utf8(text: str, limit: int) -> bytes:
     raw = text.encode("utf-8")
     if len(raw) <= limit:
         return raw
-    cut = raw[:limit - len(_CUT)].decode("utf-8", errors="ignore").encode("utf-8")
+    cut = raw[: limit - len(_CUT)].decode("utf-8", errors="ignore").encode("utf-8")
     return cut + _CUT.encode()
 
 
@@ -150,7 +154,9 @@ def make_folder(path: str | Path, what: str = "output folder") -> Path:
     for part in (path, *path.parents):
         if part.exists() and not part.is_dir():
             where = "it" if part == path else f"{part}, on its path,"
-            raise RunFileError(f"cannot make {what} {path}: {where} is a file, not a folder; choose another --out")
+            raise RunFileError(
+                f"cannot make {what} {path}: {where} is a file, not a folder; choose another --out"
+            )
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -162,20 +168,31 @@ def check_new_path(path: str | Path, overwrite: bool = False) -> None:
     """Raise ``RunFileError`` unless a run file can be created at ``path`` (its folder is
     made if missing). Call it before moving the rig, so a bad ``--out`` fails first."""
     if isinstance(path, str) and path.endswith(("/", os.sep)):
-        raise RunFileError(f"cannot create run file {path!r}: it names a folder (it ends with '/'); give a file "
-                           f"name in it, e.g. {path}run.h5")
+        raise RunFileError(
+            f"cannot create run file {path!r}: it names a folder (it ends with '/'); give a file "
+            f"name in it, e.g. {path}run.h5"
+        )
     path = Path(path)
     if path.is_dir():
         raise RunFileError(f"cannot create run file {path}: it is a directory")
     if path.exists() and not overwrite:
-        raise RunFileError(f"{path} exists; a recording is never overwritten: choose another file name or remove it")
+        raise RunFileError(
+            f"{path} exists; a recording is never overwritten: choose another file name or remove it"
+        )
     make_folder(path.parent, "the run file's folder")
     if not os.access(path.parent, os.W_OK):
         raise RunFileError(f"cannot create run file {path}: folder {path.parent} is not writable")
 
 
-def check_request(out: str | Path, *, duration_s: float, rate_hz: float, n_channels: int, max_rate_hz: float,
-                  overwrite: bool = False) -> None:
+def check_request(
+    out: str | Path,
+    *,
+    duration_s: float,
+    rate_hz: float,
+    n_channels: int,
+    max_rate_hz: float,
+    overwrite: bool = False,
+) -> None:
     """Refuse, before anything is opened or a rig is told anything, a recording that cannot be
     what was meant: a duration or rate that is not a finite positive number, a rate beyond
     ``max_rate_hz``, fewer than two samples, more data than the output's disk has room for, or
@@ -185,11 +202,15 @@ def check_request(out: str | Path, *, duration_s: float, rate_hz: float, n_chann
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise ValueError(f"--{name} {v!r} must be a finite number > 0")
     if rate_hz > max_rate_hz:
-        raise ValueError(f"--rate {rate_hz:g} Hz is beyond the {max_rate_hz:g} Hz this command can deliver")
+        raise ValueError(
+            f"--rate {rate_hz:g} Hz is beyond the {max_rate_hz:g} Hz this command can deliver"
+        )
     samples = duration_s * rate_hz
     if samples < 2:
-        raise ValueError(f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz gives {samples:.3g} samples; "
-                         f"at least 2 are needed")
+        raise ValueError(
+            f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz gives {samples:.3g} samples; "
+            f"at least 2 are needed"
+        )
     check_new_path(out, overwrite)
     out = Path(out)
     if out.exists():
@@ -197,16 +218,22 @@ def check_request(out: str | Path, *, duration_s: float, rate_hz: float, n_chann
             with h5py.File(out, "r") as f:
                 status = str(f.attrs.get("status", ""))
         except OSError as exc:
-            raise RunFileError(f"{out} cannot be opened ({exc}): perhaps a writer has it; not replaced") from None
+            raise RunFileError(
+                f"{out} cannot be opened ({exc}): perhaps a writer has it; not replaced"
+            ) from None
         if status == STATUS_RECORDING:
-            raise RunFileError(f"{out} has status {STATUS_RECORDING!r} (a writer may still be filling it): "
-                               f"not replaced, even with --force")
+            raise RunFileError(
+                f"{out} has status {STATUS_RECORDING!r} (a writer may still be filling it): "
+                f"not replaced, even with --force"
+            )
     # float64 per channel, a little for the layout, and the room the writer keeps to close in
     need = samples * n_channels * 8 * 1.05 + CLOSE_HEADROOM_BYTES + _METADATA_MARGIN
     free = shutil.disk_usage(out.parent).free
     if need > free:
-        raise ValueError(f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz needs about {need / 1e9:.3g} GB; "
-                         f"{out.parent} has {free / 1e9:.3g} GB free")
+        raise ValueError(
+            f"--duration {duration_s:g} s at --rate {rate_hz:g} Hz needs about {need / 1e9:.3g} GB; "
+            f"{out.parent} has {free / 1e9:.3g} GB free"
+        )
 
 
 class RunWriter:
@@ -217,18 +244,31 @@ class RunWriter:
     ``flush``) the file is not yet in SWMR mode and ``set_meta`` may still add to it.
     """
 
-    def __init__(self, path: str | Path, *, rig: str, mode: int, rate_hz: float,
-                 channels: Mapping[str, str], axis: str | None = None, procedure: str | None = None,
-                 meta: Mapping[str, Any] | None = None, overwrite: bool = False,
-                 flush_s: float = 0.5, buffer_bytes: int = 16 << 20,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        rig: str,
+        mode: int,
+        rate_hz: float,
+        channels: Mapping[str, str],
+        axis: str | None = None,
+        procedure: str | None = None,
+        meta: Mapping[str, Any] | None = None,
+        overwrite: bool = False,
+        flush_s: float = 0.5,
+        buffer_bytes: int = 16 << 20,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
         if not (np.isfinite(rate_hz) and rate_hz > 0):
             raise ValueError(f"sample rate {rate_hz!r} Hz must be a positive number")
         if not channels:
             raise ValueError("a run file needs at least one channel")
         bad = [c for c in channels if not c or "/" in c or c in (".", "..")]
         if bad:
-            raise ValueError(f"channel name(s) {bad} cannot name an HDF5 dataset (empty, '/', '.' or '..')")
+            raise ValueError(
+                f"channel name(s) {bad} cannot name an HDF5 dataset (empty, '/', '.' or '..')"
+            )
         if not flush_s > 0:
             raise ValueError(f"flush interval {flush_s!r} s must be > 0")
         self.path = Path(path)
@@ -240,27 +280,29 @@ class RunWriter:
         n_ch = len(self.names)
         self._chunk = chunk_samples(self.rate_hz, self.flush_s)
         cap = max(1, int(buffer_bytes) // (8 * n_ch))
-        self._cap = cap // self._chunk * self._chunk or cap     # whole chunks when it can hold one
+        self._cap = cap // self._chunk * self._chunk or cap  # whole chunks when it can hold one
         # two channel-major buffers (each channel's run contiguous): the acquisition fills one
         # while the write thread writes the other
         self._buf = np.empty((n_ch, self._cap))
         self._spare = np.empty((n_ch, self._cap))
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix=f"runfile-{self.path.name}")
+        self._pool = ThreadPoolExecutor(
+            max_workers=1, thread_name_prefix=f"runfile-{self.path.name}"
+        )
         self._inflight: Future | None = None
-        self._k = 0                               # samples in self._buf
-        self._submitted = 0                       # samples handed to the write thread
-        self.written = 0                          # samples written to the file
-        self.flushed = 0                          # samples flushed (visible to SWMR readers)
+        self._k = 0  # samples in self._buf
+        self._submitted = 0  # samples handed to the write thread
+        self.written = 0  # samples written to the file
+        self.flushed = 0  # samples flushed (visible to SWMR readers)
         self._events: list[tuple[float, bytes, bytes]] = []
         self._n_events = 0
         self._failed: str | None = None
         self._closed = False
         self._last_flush = clock()
-        self._tmp: Path | None = None            # the file's name until it is published
+        self._tmp: Path | None = None  # the file's name until it is published
         self._open(overwrite)
         try:
             self._layout(rig, mode, channels, axis, procedure, meta or {})
-            self.f.flush()                          # the whole layout on disk before it has a name
+            self.f.flush()  # the whole layout on disk before it has a name
             # disk reserved ahead: about 2 s of data, at least 1 MiB, at most two buffers. The
             # room to close the file in is reserved now, so a disk that fills before the first
             # write still lets the file be closed with its status; after the flush, whose
@@ -269,15 +311,18 @@ class RunWriter:
             step = min(2 * self._cap * row, max(1 << 20, int(2 * self.rate_hz) * row))
             self._space = Preallocator(self.f.id.get_vfd_handle(), step, CLOSE_HEADROOM_BYTES)
             self._space.reserve(0)
-        except BaseException as exc:                # Ctrl-C too: nothing is left behind
+        except BaseException as exc:  # Ctrl-C too: nothing is left behind
             self._discard()
             if isinstance(exc, DiskFull):
-                raise RunFileError(f"cannot create run file {self.path}: the disk is full "
-                                   f"({exc.strerror}); nothing was created. Free some space or "
-                                   f"record to another disk") from exc
+                raise RunFileError(
+                    f"cannot create run file {self.path}: the disk is full "
+                    f"({exc.strerror}); nothing was created. Free some space or "
+                    f"record to another disk"
+                ) from exc
             if isinstance(exc, (OSError, ValueError, RuntimeError, TypeError)):
-                raise RunFileError(f"cannot lay out run file {self.path} ({_write_hint(exc)}): "
-                                   f"{exc}") from exc
+                raise RunFileError(
+                    f"cannot lay out run file {self.path} ({_write_hint(exc)}): {exc}"
+                ) from exc
             raise
         try:
             self._publish(overwrite)
@@ -320,19 +365,20 @@ class RunWriter:
                 except OSError as exc:
                     # a filesystem without hard links (FAT, some network ones): a rename after
                     # a look, which leaves a moment in which another file could be replaced
-                    if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOSYS,
-                                         errno.EMLINK):
+                    if exc.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.ENOSYS, errno.EMLINK):
                         raise
                     if os.path.lexists(self.path):
                         raise FileExistsError(errno.EEXIST, "File exists") from None
                     os.rename(tmp, self.path)
-                else:   # published; a second name left here is removed as a dead writer's
+                else:  # published; a second name left here is removed as a dead writer's
                     with contextlib.suppress(OSError):
                         tmp.unlink()
         except FileExistsError:
-            raise RunFileError(f"{self.path} exists (it appeared while this recording was being "
-                               f"created); a recording is never overwritten: choose another file "
-                               f"name") from None
+            raise RunFileError(
+                f"{self.path} exists (it appeared while this recording was being "
+                f"created); a recording is never overwritten: choose another file "
+                f"name"
+            ) from None
         except OSError as exc:
             raise RunFileError(f"cannot create run file {self.path}: {exc}") from exc
         self._tmp = None
@@ -347,8 +393,15 @@ class RunWriter:
             with contextlib.suppress(OSError):
                 self._tmp.unlink(missing_ok=True)
 
-    def _layout(self, rig: str, mode: int, channels: Mapping[str, str], axis: str | None,
-                procedure: str | None, meta: Mapping[str, Any]) -> None:
+    def _layout(
+        self,
+        rig: str,
+        mode: int,
+        channels: Mapping[str, str],
+        axis: str | None,
+        procedure: str | None,
+        meta: Mapping[str, Any],
+    ) -> None:
         a = self.f.attrs
         a["format"] = FORMAT
         a["format_version"] = FORMAT_VERSION
@@ -381,8 +434,9 @@ class RunWriter:
             h5a.create(did, b"units", str_type, scalar).write(np.array(units, dtype=_VSTR))
             h5a.create(did, b"sample_rate_hz", rate_type, scalar).write(rate)
             self.datasets.append(h5py.Dataset(did))
-        self.events = self.f.create_dataset("events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE,
-                                            chunks=(64,))
+        self.events = self.f.create_dataset(
+            "events", shape=(0,), maxshape=(None,), dtype=EVENT_DTYPE, chunks=(64,)
+        )
         self.meta = self.f.create_group("meta")
         self.meta.attrs["software_version"] = json.dumps({"fbs-hil": __version__})
         for k, v in meta.items():
@@ -391,8 +445,10 @@ class RunWriter:
     def set_meta(self, name: str, value: Any) -> None:
         """Store ``value`` as JSON in ``/meta`` (before the first flush, which writes it)."""
         if self._swmr:
-            raise RuntimeError(f"{self.path}: a meta can only be added before the first sample or event "
-                               "(SWMR files cannot grow new objects)")
+            raise RuntimeError(
+                f"{self.path}: a meta can only be added before the first sample or event "
+                "(SWMR files cannot grow new objects)"
+            )
         self.meta.attrs[name] = json.dumps(value, default=str)
 
     # ------------------------------------------------------------------ streaming
@@ -405,7 +461,9 @@ class RunWriter:
         """Append samples: an (n, n_channels) array in channel order, or every channel by name."""
         if isinstance(block, Mapping):
             if set(block) != set(self.names):
-                raise ValueError(f"a block must hold exactly the channels {self.names}, got {tuple(block)}")
+                raise ValueError(
+                    f"a block must hold exactly the channels {self.names}, got {tuple(block)}"
+                )
             lengths = {len(block[c]) for c in self.names}
             if len(lengths) != 1:
                 raise ValueError(f"channel blocks of different lengths {sorted(lengths)}")
@@ -435,13 +493,13 @@ class RunWriter:
         while pos < n:
             m = min(n - pos, self._room() - self._k)
             if cols is None:
-                self._buf[:, self._k:self._k + m].fill(np.nan)
-            elif cols.strides[1] == cols.itemsize:       # channel-major already (ADC blocks are)
-                self._buf[:, self._k:self._k + m] = cols[:, pos:pos + m]
+                self._buf[:, self._k : self._k + m].fill(np.nan)
+            elif cols.strides[1] == cols.itemsize:  # channel-major already (ADC blocks are)
+                self._buf[:, self._k : self._k + m] = cols[:, pos : pos + m]
             else:
                 for j in range(0, m, _TILE):
                     e = min(m, j + _TILE)
-                    self._buf[:, self._k + j:self._k + e] = cols[:, pos + j:pos + e]
+                    self._buf[:, self._k + j : self._k + e] = cols[:, pos + j : pos + e]
             self._k += m
             pos += m
             if self._k == self._room():
@@ -480,7 +538,7 @@ class RunWriter:
         that fills sooner is written without one: readers may not see it until the next flush,
         at most ``flush_s`` later. Waits only if the previous write has not finished."""
         self.sync()
-        self._swmr = True           # from here on the file is (being switched to) SWMR
+        self._swmr = True  # from here on the file is (being switched to) SWMR
         job = (self._buf, self._k, self._submitted, self._events, flush)
         self._submitted += self._k
         self._buf, self._spare = self._spare, self._buf
@@ -503,17 +561,24 @@ class RunWriter:
                 self._space.reserve(0)
             # every byte this write can need is the file's before HDF5 writes one: HDF5 cannot
             # survive a disk found full half-way through its metadata (daq.prealloc)
-            self._space.reserve(k * buf.shape[0] * buf.itemsize + _METADATA_MARGIN
-                                + len(events) * EVENT_DTYPE.itemsize)
+            self._space.reserve(
+                k * buf.shape[0] * buf.itemsize
+                + _METADATA_MARGIN
+                + len(events) * EVENT_DTYPE.itemsize
+            )
         except DiskFull as exc:
-            self._failed = (f"writing {self.path} stopped: the disk is full ({exc.strerror}). Nothing of samples "
-                            f"{n0}..{n0 + k} was written. Samples 0..{self.flushed} ({self.flushed / self.rate_hz:.3f} s)"
-                            f" were flushed before and are kept. Free some space or record to another disk")
+            self._failed = (
+                f"writing {self.path} stopped: the disk is full ({exc.strerror}). Nothing of samples "
+                f"{n0}..{n0 + k} was written. Samples 0..{self.flushed} ({self.flushed / self.rate_hz:.3f} s)"
+                f" were flushed before and are kept. Free some space or record to another disk"
+            )
             raise RunFileError(self._failed) from exc
         except (OSError, ValueError, RuntimeError) as exc:
             done = f"0..{self.flushed} ({self.flushed / self.rate_hz:.3f} s)"
-            self._failed = (f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples "
-                            f"{done} were flushed before")
+            self._failed = (
+                f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples "
+                f"{done} were flushed before"
+            )
             raise RunFileError(self._failed) from exc
         try:
             if k:
@@ -522,12 +587,14 @@ class RunWriter:
             if events:
                 new = np.array(events, dtype=EVENT_DTYPE)
                 self.events.resize((self._n_events + len(new),))
-                self.events[self._n_events:] = new
+                self.events[self._n_events :] = new
             if flush:
                 self.f.flush()
         except (OSError, ValueError, RuntimeError) as exc:
-            self._failed = (f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples 0..{self.flushed} "
-                            f"({self.flushed / self.rate_hz:.3f} s) were flushed before")
+            self._failed = (
+                f"writing {self.path} failed ({_write_hint(exc)}): {exc}. Samples 0..{self.flushed} "
+                f"({self.flushed / self.rate_hz:.3f} s) were flushed before"
+            )
             self._roll_back(n0)
             raise RunFileError(self._failed) from exc
         self._n_events += len(events)
@@ -543,7 +610,13 @@ class RunWriter:
                 if ds.id.shape[0] > n0:
                     ds.id.set_extent((n0,))
             except (OSError, ValueError, RuntimeError) as exc:
-                log.warning("%s: could not take channel %s back to %d samples: %s", self.path, ds.name, n0, exc)
+                log.warning(
+                    "%s: could not take channel %s back to %d samples: %s",
+                    self.path,
+                    ds.name,
+                    n0,
+                    exc,
+                )
 
     def _write_channel(self, did: h5d.DatasetID, x: np.ndarray, n0: int) -> None:
         """Extend one channel's dataset by ``x`` at ``n0``. Whole chunks go straight to the file
@@ -552,7 +625,7 @@ class RunWriter:
         resize/write_direct rebuild selections on every call (~25 ms per 256 MB here)."""
         k, c = len(x), self._chunk
         did.set_extent((n0 + k,))
-        head = min(k, -n0 % c)                      # up to the first chunk boundary
+        head = min(k, -n0 % c)  # up to the first chunk boundary
         whole = (k - head) // c * c
         for a, b in ((0, head), (head + whole, k)):
             if b > a:
@@ -561,7 +634,7 @@ class RunWriter:
                 space.select_hyperslab((n0 + a,), (b - a,))
                 did.write(mem, space, x[a:b])
         for a in range(head, head + whole, c):
-            did.write_direct_chunk((n0 + a,), x[a:a + c])
+            did.write_direct_chunk((n0 + a,), x[a : a + c])
 
     @property
     def failed(self) -> str | None:
@@ -575,7 +648,7 @@ class RunWriter:
     def _check_ok(self) -> None:
         if self._failed:
             raise RunFileError(self._failed)
-        if self._closed:     # not f.id.valid: h5py's lock would wait for the write thread's write
+        if self._closed:  # not f.id.valid: h5py's lock would wait for the write thread's write
             raise RunFileError(f"{self.path} is closed")
 
     # ------------------------------------------------------------------ closing
@@ -595,7 +668,7 @@ class RunWriter:
             except RunFileError as exc:
                 error = exc
         self._closed = True
-        if self._inflight is not None:           # a failed write still has to end first
+        if self._inflight is not None:  # a failed write still has to end first
             try:
                 self._inflight.result()
             except RunFileError:
@@ -603,23 +676,34 @@ class RunWriter:
         self._pool.shutdown(wait=True)
         if self._failed and not status.startswith("aborted"):
             status = f"aborted: {self._failed}"
-            error = error or RunFileError(self._failed)   # even if no earlier call raised it
+            error = error or RunFileError(self._failed)  # even if no earlier call raised it
         try:
             self.f.close()
-        except (OSError, RuntimeError) as exc:  # h5py raises either; the status attempt still follows
+        except (
+            OSError,
+            RuntimeError,
+        ) as exc:  # h5py raises either; the status attempt still follows
             log.error("closing %s failed: %s", self.path, exc)
         try:
             _set_status(self.path, status)
         except (OSError, RuntimeError) as exc:
             # the file still says "recording"; recover marks such a file aborted, where it can
-            log.error("could not set the status of %s to %r: %s. It still says %r; "
-                      "`fbs recover %s` marks it aborted, keeping its flushed samples, once "
-                      "its disk has room, or says why it cannot",
-                      self.path, status, exc, STATUS_RECORDING, self.path)
+            log.error(
+                "could not set the status of %s to %r: %s. It still says %r; "
+                "`fbs recover %s` marks it aborted, keeping its flushed samples, once "
+                "its disk has room, or says why it cannot",
+                self.path,
+                status,
+                exc,
+                STATUS_RECORDING,
+                self.path,
+            )
         try:
             release(self.path)
         except OSError as exc:
-            log.warning("could not return the disk space reserved past the end of %s: %s", self.path, exc)
+            log.warning(
+                "could not return the disk space reserved past the end of %s: %s", self.path, exc
+            )
         if error is not None:
             raise error
 
@@ -631,7 +715,7 @@ class RunWriter:
 
 
 _TEMP_MARK = ".creating-"
-_temp_serial = itertools.count()     # two writers of one process never share a temporary name
+_temp_serial = itertools.count()  # two writers of one process never share a temporary name
 
 
 def _temp_prefix(path: Path) -> str:
@@ -656,20 +740,19 @@ def _remove_dead_temps(path: Path) -> None:
     except OSError:
         return
     for name in names:
-        pid, _, serial = name[len(prefix):].partition("-")
+        pid, _, serial = name[len(prefix) :].partition("-")
         if not (pid.isdigit() and serial.isdigit()) or int(pid) == os.getpid():
             continue
         try:
             os.kill(int(pid), 0)
-            continue                 # alive (or another process got the number): not ours to judge
+            continue  # alive (or another process got the number): not ours to judge
         except ProcessLookupError:
             pass
         except OSError:
             continue
         try:
             os.unlink(path.parent / name)
-            log.info("removed %s, left by a writer that died creating %s",
-                     path.parent / name, path)
+            log.info("removed %s, left by a writer that died creating %s", path.parent / name, path)
         except OSError as exc:
             log.debug("could not remove %s: %s", path.parent / name, exc)
 

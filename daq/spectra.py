@@ -48,9 +48,20 @@ import scipy.signal
 import scipy.stats
 
 __all__ = [
-    "band_rms", "coherence", "coherence_pair", "dip_depth_db", "dip_frequency", "equivalent_dof",
-    "gain", "n_segments", "phase_deg", "psd", "psd_confidence", "quantization_floor",
-    "transfer_h1", "welch_csd_matrix",
+    "band_rms",
+    "coherence",
+    "coherence_pair",
+    "dip_depth_db",
+    "dip_frequency",
+    "equivalent_dof",
+    "gain",
+    "n_segments",
+    "phase_deg",
+    "psd",
+    "psd_confidence",
+    "quantization_floor",
+    "transfer_h1",
+    "welch_csd_matrix",
 ]
 
 Scaling = Literal["density", "spectrum"]
@@ -60,8 +71,10 @@ DEFAULT_NPERSEG = 256  # scipy.signal's default for a named window
 
 # ----------------------------------------------------------------------------- segmentation
 
-def _window_and_sizes(window, nperseg: int | None, noverlap: int | None, nfft: int | None,
-                      n: int) -> tuple[np.ndarray, int, int, int]:
+
+def _window_and_sizes(
+    window, nperseg: int | None, noverlap: int | None, nfft: int | None, n: int
+) -> tuple[np.ndarray, int, int, int]:
     """The window array and (nperseg, noverlap, nfft), triaged exactly as ``scipy.signal.csd``.
 
     A named window (str or tuple for ``scipy.signal.get_window``; periodic, as scipy's) gets
@@ -73,8 +86,10 @@ def _window_and_sizes(window, nperseg: int | None, noverlap: int | None, nfft: i
         if nperseg < 1:
             raise ValueError(f"nperseg={nperseg} is not a positive integer")
         if n < nperseg:
-            warnings.warn(f"nperseg={nperseg} is greater than the record length {n}, "
-                          f"using nperseg={n}", stacklevel=3)
+            warnings.warn(
+                f"nperseg={nperseg} is greater than the record length {n}, using nperseg={n}",
+                stacklevel=3,
+            )
             nperseg = n
         win = scipy.signal.get_window(window, nperseg)
     else:
@@ -124,13 +139,23 @@ def _detrended_segments(x: np.ndarray, nperseg: int, noverlap: int, detrend) -> 
     return d
 
 
-def _segment_ffts(x: np.ndarray, fs: float, win: np.ndarray, nperseg: int, noverlap: int,
-                  nfft: int, detrend, sides: str) -> tuple[np.ndarray, np.ndarray]:
+def _segment_ffts(
+    x: np.ndarray,
+    fs: float,
+    win: np.ndarray,
+    nperseg: int,
+    noverlap: int,
+    nfft: int,
+    detrend,
+    sides: str,
+) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies and the FFTs (..., K, n_freq) of the windowed, detrended segments of ``x``."""
     d = _detrended_segments(x, nperseg, noverlap, detrend)
     d *= win
     if sides == "onesided":
-        return scipy.fft.rfftfreq(nfft, 1.0 / fs), scipy.fft.rfft(d, n=nfft, axis=-1, overwrite_x=True)
+        return scipy.fft.rfftfreq(nfft, 1.0 / fs), scipy.fft.rfft(
+            d, n=nfft, axis=-1, overwrite_x=True
+        )
     return scipy.fft.fftfreq(nfft, 1.0 / fs), scipy.fft.fft(d, n=nfft, axis=-1, overwrite_x=True)
 
 
@@ -152,15 +177,24 @@ def _scale(win: np.ndarray, fs: float, scaling: str) -> float:
 def _double_one_sided(S: np.ndarray, nfft: int) -> None:
     """Fold the negative frequencies onto the positive ones in place (axis 0 = frequency):
     every bin but DC and, for even nfft, the unpaired Nyquist bin is doubled."""
-    S[1:None if nfft % 2 else -1] *= 2.0
+    S[1 : None if nfft % 2 else -1] *= 2.0
 
 
 # ----------------------------------------------------------------------------- estimators
 
-def welch_csd_matrix(x, fs: float = 1.0, *, window="hann", nperseg: int | None = None,
-                     noverlap: int | None = None, nfft: int | None = None, detrend="constant",
-                     scaling: Scaling = "density", sides: Sides = "onesided"
-                     ) -> tuple[np.ndarray, np.ndarray]:
+
+def welch_csd_matrix(
+    x,
+    fs: float = 1.0,
+    *,
+    window="hann",
+    nperseg: int | None = None,
+    noverlap: int | None = None,
+    nfft: int | None = None,
+    detrend="constant",
+    scaling: Scaling = "density",
+    sides: Sides = "onesided",
+) -> tuple[np.ndarray, np.ndarray]:
     r"""Welch estimate of the full cross-spectral matrix of N channels.
 
     Parameters
@@ -221,19 +255,29 @@ def welch_csd_matrix(x, fs: float = 1.0, *, window="hann", nperseg: int | None =
     win, nperseg, noverlap, nfft = _window_and_sizes(window, nperseg, noverlap, nfft, x.shape[-1])
     f, X = _segment_ffts(x, fs, win, nperseg, noverlap, nfft, detrend, sides)
     K = X.shape[1]
-    Xf = np.ascontiguousarray(X.transpose(2, 0, 1))        # (n_freq, N, K)
-    S = np.matmul(Xf.conj(), Xf.transpose(0, 2, 1))         # eq. 4.41 summed over segments
+    Xf = np.ascontiguousarray(X.transpose(2, 0, 1))  # (n_freq, N, K)
+    S = np.matmul(Xf.conj(), Xf.transpose(0, 2, 1))  # eq. 4.41 summed over segments
     S *= _scale(win, fs, scaling) / K
     if sides == "onesided":
         _double_one_sided(S, nfft)
     idx = np.arange(x.shape[0])
-    S[:, idx, idx] = S[:, idx, idx].real                    # autospectra are real (eq. 4.16)
+    S[:, idx, idx] = S[:, idx, idx].real  # autospectra are real (eq. 4.16)
     return f, S
 
 
-def psd(x, fs: float, seg_s: float = 8.0, *, nperseg: int | None = None, window="hann",
-        noverlap: int | None = None, nfft: int | None = None, detrend="linear",
-        scaling: Scaling = "density", sides: Sides = "onesided") -> tuple[np.ndarray, np.ndarray]:
+def psd(
+    x,
+    fs: float,
+    seg_s: float = 8.0,
+    *,
+    nperseg: int | None = None,
+    window="hann",
+    noverlap: int | None = None,
+    nfft: int | None = None,
+    detrend="linear",
+    scaling: Scaling = "density",
+    sides: Sides = "onesided",
+) -> tuple[np.ndarray, np.ndarray]:
     """Welch PSD (eq. 4.16 averaged, App. A.4): one-sided density (units^2/Hz) by default.
 
     The project's default: Hann segments of ``seg_s`` seconds (cut to the record), 50 %
@@ -272,7 +316,7 @@ def coherence(S: np.ndarray) -> np.ndarray:
     floor against which a coherent line (Ch. IV I) has to stand out.
     """
     S = np.asarray(S)
-    d = np.real(np.diagonal(S, axis1=-2, axis2=-1))         # (n_freq, N)
+    d = np.real(np.diagonal(S, axis1=-2, axis2=-1))  # (n_freq, N)
     with np.errstate(divide="ignore", invalid="ignore"):
         return (S.real**2 + S.imag**2) / (d[..., :, None] * d[..., None, :])
 
@@ -319,6 +363,7 @@ def phase_deg(H: np.ndarray, unwrap: bool = False) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- statistics
+
 
 def equivalent_dof(window, nperseg: int, noverlap: int, n_segments: int) -> float:
     r"""Equivalent degrees of freedom of a Welch average of overlapped segments ([Welch]).
@@ -411,6 +456,7 @@ def quantization_floor(range_V: float, bits: int, fs: float, sides: Sides = "one
 
 # ----------------------------------------------------------------------------- features
 
+
 def band_rms(f: np.ndarray, p: np.ndarray, lo: float, hi: float) -> float:
     """rms of the part of a one-sided PSD between ``lo`` and ``hi`` Hz."""
     sel = (f >= lo) & (f <= hi)
@@ -422,8 +468,9 @@ def _smoothed_db(f: np.ndarray, p: np.ndarray, smooth_hz: float) -> np.ndarray:
     return 10 * np.convolve(np.log10(p), np.ones(k) / k, mode="same")
 
 
-def dip_frequency(f: np.ndarray, p: np.ndarray, lo: float = 1.0, hi: float = 12.0,
-                  smooth_hz: float = 0.5) -> float:
+def dip_frequency(
+    f: np.ndarray, p: np.ndarray, lo: float = 1.0, hi: float = 12.0, smooth_hz: float = 0.5
+) -> float:
     """Frequency of the deepest minimum of a PSD within ``lo``..``hi`` Hz (Ch. V E.1).
 
     The PSD is first smoothed in log over ``smooth_hz`` so a single low estimate does not win.

@@ -36,8 +36,15 @@ def _set_read_attempts() -> Callable[[int, int], int] | None:
         maps = Path("/proc/self/maps").read_text()
     except OSError:
         return None
-    paths = sorted({line.split()[-1] for line in maps.splitlines()
-                    if "libhdf5" in line and "hl" not in line.rsplit("/", 1)[-1] and line.split()[-1].startswith("/")})
+    paths = sorted(
+        {
+            line.split()[-1]
+            for line in maps.splitlines()
+            if "libhdf5" in line
+            and "hl" not in line.rsplit("/", 1)[-1]
+            and line.split()[-1].startswith("/")
+        }
+    )
     for p in paths:
         try:
             fn = ctypes.CDLL(p).H5Pset_metadata_read_attempts

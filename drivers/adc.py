@@ -16,9 +16,9 @@ class AdcIdentity:
     serial: str
     firmware: str
     bits: int
-    max_aggregate_rate_hz: float          # sample sets/s x channels the device can stream
-    ranges_V: tuple[float, ...]           # selectable full-scale ranges (+-V)
-    channels: tuple[str, ...]             # input names, DESIGN.md section 5
+    max_aggregate_rate_hz: float  # sample sets/s x channels the device can stream
+    ranges_V: tuple[float, ...]  # selectable full-scale ranges (+-V)
+    channels: tuple[str, ...]  # input names, DESIGN.md section 5
 
 
 @dataclass(frozen=True)
@@ -26,15 +26,15 @@ class AdcConfig:
     channels: tuple[str, ...]
     rate_hz: float
     ranges_V: dict[str, float]
-    frame_sets: int                       # sample sets per frame on the wire
+    frame_sets: int  # sample sets per frame on the wire
 
 
 @dataclass(frozen=True)
 class AdcStatus:
     streaming: bool
-    samples: int                          # sample sets sent since START (device count)
+    samples: int  # sample sets sent since START (device count)
     frames: int
-    overruns: int                         # device FIFO overflows since START
+    overruns: int  # device FIFO overflows since START
 
 
 @dataclass
@@ -48,9 +48,9 @@ class AdcBlock:
 
     first_sample: int
     rate_hz: float
-    t0_s: float                           # rig time of the stream's sample 0
+    t0_s: float  # rig time of the stream's sample 0
     channels: tuple[str, ...]
-    volts: np.ndarray                     # (n, n_channels) float64, channel-major in memory
+    volts: np.ndarray  # (n, n_channels) float64, channel-major in memory
     overrange: np.ndarray = field(repr=False)  # (n, n_channels) bool
 
     def __len__(self) -> int:
@@ -72,14 +72,19 @@ class AdcBlock:
 class Adc(abc.ABC):
     """Configure, start, read, stop. ``read`` raises ``SampleGap`` where samples were lost."""
 
-    identity: AdcIdentity                 # what ``identify`` answered when the driver opened the device
+    identity: AdcIdentity  # what ``identify`` answered when the driver opened the device
 
     @abc.abstractmethod
     def identify(self) -> AdcIdentity: ...
 
     @abc.abstractmethod
-    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
-                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig: ...
+    def configure(
+        self,
+        channels: tuple[str, ...] | list[str],
+        rate_hz: float,
+        ranges_V: Mapping[str, float] | float | None = None,
+        frame_sets: int | None = None,
+    ) -> AdcConfig: ...
 
     @property
     @abc.abstractmethod
@@ -117,7 +122,9 @@ class AdcDecorator(Adc):
     raises reaches the reader: a decorator that must never cost a sample catches its own."""
 
     def __init__(self, inner: Adc) -> None:
-        self.inner = inner   # its ``identity`` and every other attribute read through (``__getattr__``)
+        self.inner = (
+            inner  # its ``identity`` and every other attribute read through (``__getattr__``)
+        )
 
     def _deliver(self, block: AdcBlock) -> None:
         """See a block on its way to the reader (nothing here)."""
@@ -125,8 +132,13 @@ class AdcDecorator(Adc):
     def identify(self) -> AdcIdentity:
         return self.inner.identify()
 
-    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
-                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig:
+    def configure(
+        self,
+        channels: tuple[str, ...] | list[str],
+        rate_hz: float,
+        ranges_V: Mapping[str, float] | float | None = None,
+        frame_sets: int | None = None,
+    ) -> AdcConfig:
         return self.inner.configure(channels, rate_hz, ranges_V, frame_sets)
 
     @property
@@ -168,7 +180,12 @@ class AdcDecorator(Adc):
     def __setattr__(self, name: str, value: object) -> None:
         # ... and settable: a driver's setting (``stall_timeout_s``) set on the decorator is the driver's
         inner = self.__dict__.get("inner")
-        if inner is not None and name not in self.__dict__ and not hasattr(type(self), name) and hasattr(inner, name):
+        if (
+            inner is not None
+            and name not in self.__dict__
+            and not hasattr(type(self), name)
+            and hasattr(inner, name)
+        ):
             setattr(inner, name, value)
         else:
             object.__setattr__(self, name, value)

@@ -71,16 +71,18 @@ class Reply:
     """One ASCII reply line: ``OK <verb> <words...>`` or ``ERR <code> <text>``."""
 
     ok: bool
-    verb: str                      # OK: echoed command keyword; ERR: the error code
-    words: tuple[str, ...] = ()    # OK: tokens that are not key=value
+    verb: str  # OK: echoed command keyword; ERR: the error code
+    words: tuple[str, ...] = ()  # OK: tokens that are not key=value
     fields: dict[str, str] = field(default_factory=dict)  # OK: key=value tokens
-    text: str = ""                 # the whole line after the keyword
+    text: str = ""  # the whole line after the keyword
 
     def field(self, key: str) -> str:
         try:
             return self.fields[key]
         except KeyError:
-            raise ProtocolError(f"ADC reply 'OK {self.verb} {self.text}' lacks the field {key!r}") from None
+            raise ProtocolError(
+                f"ADC reply 'OK {self.verb} {self.text}' lacks the field {key!r}"
+            ) from None
 
 
 # --------------------------------------------------------------------------- frames
@@ -89,9 +91,13 @@ def encode_frame(seq: int, first_sample: int, codes: np.ndarray, flags: int = 0)
     codes = np.asarray(codes)
     n, c = codes.shape
     if not (1 <= c <= MAX_CHANNELS and 1 <= n <= MAX_SETS):
-        raise ValueError(f"frame of {n} sets x {c} channels is outside 1..{MAX_SETS} x 1..{MAX_CHANNELS}")
-    body = (HEADER.pack(SYNC, TYPE_SAMPLES, c, n, flags & 0xFFFF, seq & 0xFFFFFFFF, first_sample)
-            + codes.astype("<i2", copy=False).tobytes())
+        raise ValueError(
+            f"frame of {n} sets x {c} channels is outside 1..{MAX_SETS} x 1..{MAX_CHANNELS}"
+        )
+    body = (
+        HEADER.pack(SYNC, TYPE_SAMPLES, c, n, flags & 0xFFFF, seq & 0xFFFFFFFF, first_sample)
+        + codes.astype("<i2", copy=False).tobytes()
+    )
     return body + struct.pack("<I", zlib.crc32(memoryview(body)[2:]))
 
 
@@ -99,7 +105,9 @@ def frame_size(n_sets: int, n_channels: int) -> int:
     return HEADER_SIZE + 2 * n_sets * n_channels + CRC_SIZE
 
 
-def _check_header(ftype: int, c: int, n: int, expect_channels: int | None, max_sets: int = MAX_SETS) -> str | None:
+def _check_header(
+    ftype: int, c: int, n: int, expect_channels: int | None, max_sets: int = MAX_SETS
+) -> str | None:
     if ftype != TYPE_SAMPLES:
         return f"unknown frame type 0x{ftype:02x}"
     if not 1 <= c <= MAX_CHANNELS:
@@ -124,17 +132,25 @@ def decode_frame(data: bytes, expect_channels: int | None = None) -> Frame:
         raise ProtocolError(problem)
     size = frame_size(n, c)
     if len(data) != size:
-        raise ProtocolError(f"bad length: {len(data)} bytes for a frame of {n} sets x {c} channels ({size} bytes)")
+        raise ProtocolError(
+            f"bad length: {len(data)} bytes for a frame of {n} sets x {c} channels ({size} bytes)"
+        )
     return _finish_frame(data, 0, c, n, flags, seq, first)
 
 
-def _finish_frame(buf: bytes | bytearray, pos: int, c: int, n: int, flags: int, seq: int, first: int) -> Frame:
+def _finish_frame(
+    buf: bytes | bytearray, pos: int, c: int, n: int, flags: int, seq: int, first: int
+) -> Frame:
     end = pos + HEADER_SIZE + 2 * n * c
     (crc,) = struct.unpack_from("<I", buf, end)
-    got = zlib.crc32(memoryview(buf)[pos + 2:end])
+    got = zlib.crc32(memoryview(buf)[pos + 2 : end])
     if got != crc:
-        raise ProtocolError(f"bad CRC in frame seq {seq}: computed 0x{got:08x}, frame says 0x{crc:08x}")
-    codes = np.frombuffer(buf, dtype="<i2", count=n * c, offset=pos + HEADER_SIZE).reshape(n, c).copy()
+        raise ProtocolError(
+            f"bad CRC in frame seq {seq}: computed 0x{got:08x}, frame says 0x{crc:08x}"
+        )
+    codes = (
+        np.frombuffer(buf, dtype="<i2", count=n * c, offset=pos + HEADER_SIZE).reshape(n, c).copy()
+    )
     return Frame(seq, first, flags, codes)
 
 
@@ -170,7 +186,9 @@ def decode_reply(line: bytes) -> Reply:
     if head == "ERR":
         code, _, msg = rest.partition(" ")
         if code not in ERR_CODES:
-            raise ProtocolError(f"unknown reply {text!r}: error code {code!r} is not one of {', '.join(ERR_CODES)}")
+            raise ProtocolError(
+                f"unknown reply {text!r}: error code {code!r} is not one of {', '.join(ERR_CODES)}"
+            )
         return Reply(False, code, text=msg)
     raise ProtocolError(f"unknown reply {text[:60]!r} (expected 'OK ...' or 'ERR ...')")
 
@@ -201,7 +219,7 @@ class StreamDecoder:
 
     def feed(self, data: bytes) -> None:
         if self.pos > 1 << 16:
-            del self.buf[:self.pos]
+            del self.buf[: self.pos]
             self.offset += self.pos
             self.pos = 0
         self.buf += data
@@ -214,8 +232,10 @@ class StreamDecoder:
         """The line went quiet with bytes held: a frame still waiting for its body will not be
         completed (its length field was corrupted), so report it and decode what follows."""
         if self.pending() and self.buf[self.pos] == 0xA5:
-            err = self._error(f"bad length: frame header at stream offset {self.offset + self.pos} claims more "
-                              f"bytes than arrived before the line went quiet")
+            err = self._error(
+                f"bad length: frame header at stream offset {self.offset + self.pos} claims more "
+                f"bytes than arrived before the line went quiet"
+            )
             if err is not None:
                 self._quiet_error = err
 
@@ -254,7 +274,9 @@ class StreamDecoder:
                 if avail < 2:
                     return None
                 if buf[pos + 1] != 0x5A:
-                    err = self._error(f"garbage: byte 0x{b0:02x} where a frame or reply should start")
+                    err = self._error(
+                        f"garbage: byte 0x{b0:02x} where a frame or reply should start"
+                    )
                     if err:
                         return err
                     continue
@@ -289,7 +311,7 @@ class StreamDecoder:
                     if err:
                         return err
                     continue
-                line = bytes(buf[pos:end + 1])
+                line = bytes(buf[pos : end + 1])
                 try:
                     reply = decode_reply(line)
                 except ProtocolError as exc:
@@ -311,7 +333,7 @@ COMMANDS = ("IDN?", "CHAN?", "STAT?", "CONF", "START", "STOP")
 
 @dataclass(frozen=True)
 class Command:
-    verb: str               # IDN?, CHAN?, STAT?, CONF, START, STOP
+    verb: str  # IDN?, CHAN?, STAT?, CONF, START, STOP
     args: tuple[str, ...]
 
 

@@ -39,10 +39,16 @@ class CanopenCagingSwitches:
 
     def __init__(self, link: CanLink) -> None:
         mask = (1 << len(self.channels)) - 1
-        self.node = CanopenClient(link, "caging", cf.DEVICE_TYPE_401_DO, raw_index=DO_8, raw_bits=True,
-                                  safe_values=[((DO_8, 1), 0)],
-                                  configure=[((DO_ERROR_MODE, 1), mask), ((DO_ERROR_VALUE, 1), 0)])
-        self._lock = threading.Lock()     # one read-modify-write of the output byte at a time
+        self.node = CanopenClient(
+            link,
+            "caging",
+            cf.DEVICE_TYPE_401_DO,
+            raw_index=DO_8,
+            raw_bits=True,
+            safe_values=[((DO_8, 1), 0)],
+            configure=[((DO_ERROR_MODE, 1), mask), ((DO_ERROR_VALUE, 1), 0)],
+        )
+        self._lock = threading.Lock()  # one read-modify-write of the output byte at a time
 
     def clear(self) -> None:
         for c in self.channels:
@@ -51,16 +57,21 @@ class CanopenCagingSwitches:
     def set_inhibit(self, channel: str, inhibit: bool) -> bool:
         i = self.channels.index(check_name("gyro channel", channel, self.channels))
         if not isinstance(inhibit, bool):
-            raise SetpointRangeError(f"caging inhibit for {channel} must be True or False, not {inhibit!r}; "
-                                     f"nothing was sent", value=inhibit)
+            raise SetpointRangeError(
+                f"caging inhibit for {channel} must be True or False, not {inhibit!r}; "
+                f"nothing was sent",
+                value=inhibit,
+            )
         with self._lock:
             word = self.node.read(DO_8, 1, what="read caging outputs")
             want = (word | 1 << i) if inhibit else (word & ~(1 << i))
             self.node.write(DO_8, 1, want, what=f"caging inhibit {channel} = {inhibit}")
             back = self.node.read(DO_8, 1, what="read back caging outputs")
         if back != want:
-            fault = ProtocolError(f"CAN node 'caging': outputs read back 0x{back:02x} after setting 0x{want:02x} "
-                                  f"(inhibit {channel} = {inhibit})")
+            fault = ProtocolError(
+                f"CAN node 'caging': outputs read back 0x{back:02x} after setting 0x{want:02x} "
+                f"(inhibit {channel} = {inhibit})"
+            )
             self.node.link.faults.report(fault)
             raise fault
         return bool(back >> i & 1)

@@ -22,10 +22,27 @@ AXES = ("X", "Y", "Z")
 EARTH_RATE_RAD_PER_S = 7.292115e-5
 #: the ADC's channels, volts (DESIGN.md section 5): autocollimator control and instrumentation,
 #: azimuth; gyro pickoffs; torquer outputs; power-amplifier inputs; command inputs
-ADC_CHANNELS = ("ac_x_ctl", "ac_y_ctl", "ac_x_inst", "ac_y_inst", "ac_z",
-                "gyro_x", "gyro_y", "gyro_z", "gyro_xrd",
-                "torq_x", "torq_y", "torq_z", "torq_xrd",
-                "pa_x", "pa_y", "pa_z", "cmd_x", "cmd_y", "cmd_z")
+ADC_CHANNELS = (
+    "ac_x_ctl",
+    "ac_y_ctl",
+    "ac_x_inst",
+    "ac_y_inst",
+    "ac_z",
+    "gyro_x",
+    "gyro_y",
+    "gyro_z",
+    "gyro_xrd",
+    "torq_x",
+    "torq_y",
+    "torq_z",
+    "torq_xrd",
+    "pa_x",
+    "pa_y",
+    "pa_z",
+    "cmd_x",
+    "cmd_y",
+    "cmd_z",
+)
 
 
 @dataclass(frozen=True)
@@ -33,12 +50,12 @@ class PlatformConstants:
     """One gimbal axis (Ch. III C-E): what turns the power-amplifier input into torque."""
 
     inertia_kg_m2: float
-    damping_Nms: float            # gyro-gimbal viscous damping on the platform, D (eq. 3.31)
-    amp_gain: float               # Kp
-    motor_Nm_per_A: float         # Km
-    back_emf_V_s: float           # Kb
-    armature_ohm: float           # Ra
-    armature_H: float = 0.023     # La (eq. 3.25)
+    damping_Nms: float  # gyro-gimbal viscous damping on the platform, D (eq. 3.31)
+    amp_gain: float  # Kp
+    motor_Nm_per_A: float  # Km
+    back_emf_V_s: float  # Kb
+    armature_ohm: float  # Ra
+    armature_H: float = 0.023  # La (eq. 3.25)
     command_divider: float = 0.0075  # Kd: V_Td into the amplifier input (eq. 3.27)
 
     @property
@@ -68,9 +85,11 @@ class AutocollimatorConstants:
 
 
 def _platform_defaults() -> dict[str, PlatformConstants]:
-    return {"X": PlatformConstants(0.70, 1.02, 302.0, 0.53, 0.53, 23.0),
-            "Y": PlatformConstants(0.25, 0.51, 164.0, 0.53, 0.53, 23.0),
-            "Z": PlatformConstants(0.52, 0.51, 333.0, 0.53, 0.53, 23.0)}
+    return {
+        "X": PlatformConstants(0.70, 1.02, 302.0, 0.53, 0.53, 23.0),
+        "Y": PlatformConstants(0.25, 0.51, 164.0, 0.53, 0.53, 23.0),
+        "Z": PlatformConstants(0.52, 0.51, 333.0, 0.53, 0.53, 23.0),
+    }
 
 
 def _ac_defaults() -> dict[str, AutocollimatorConstants]:
@@ -80,19 +99,25 @@ def _ac_defaults() -> dict[str, AutocollimatorConstants]:
 @dataclass(frozen=True)
 class RigCalibration:
     torquer_scale_urad_per_s_per_V: dict[str, float] = field(
-        default_factory=lambda: {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0})
+        default_factory=lambda: {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0}
+    )
     #: nominal pickoff scale factors: a fallback when no stopwatch result is at hand
     pickoff_scale_mV_per_urad: dict[str, float] = field(
-        default_factory=lambda: {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74})
+        default_factory=lambda: {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74}
+    )
     #: the floats' elastic-restraint time constants h/k (s; Table 3): a standing pickoff angle
     #: sigma is balanced by the rate sigma / (h/k) without torquer current
     restraint_time_constant_s: dict[str, float] = field(
-        default_factory=lambda: {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0})
+        default_factory=lambda: {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0}
+    )
     #: the caging loops as designed (II C.1.a(8)): natural frequency (rad/s) and damping. In the
     #: gyro modes the autocollimator cages the float through them, inside the stabilization loop
     caging_natural_rad_per_s: dict[str, float] = field(
-        default_factory=lambda: {"X": 0.1, "Y": 0.1, "Z": 0.1, "XRD": 1.0})
-    caging_zeta: dict[str, float] = field(default_factory=lambda: {"X": 0.7, "Y": 0.7, "Z": 0.7, "XRD": 1.0})
+        default_factory=lambda: {"X": 0.1, "Y": 0.1, "Z": 0.1, "XRD": 1.0}
+    )
+    caging_zeta: dict[str, float] = field(
+        default_factory=lambda: {"X": 0.7, "Y": 0.7, "Z": 0.7, "XRD": 1.0}
+    )
     max_torquing_earth_rates: float = 3.5
     dac_range_V: float = 10.0
     dac_bits: int = 16
@@ -108,7 +133,7 @@ class RigCalibration:
 
     @property
     def dac_lsb_V(self) -> float:
-        return 2.0 * self.dac_range_V / 2 ** self.dac_bits
+        return 2.0 * self.dac_range_V / 2**self.dac_bits
 
     def torquer_limit_V(self, channel: str) -> float:
         """Bias voltage that torques at the rate limit, or the DAC range if that is lower."""

@@ -41,10 +41,19 @@ log = logging.getLogger(__name__)
 
 
 class CanLink:
-    def __init__(self, bus: can.BusABC, nodes: list[str], *, faults: FaultLatch | None = None,
-                 heartbeat_period_s: float = 0.1, node_timeout_s: float = 1.0, reply_timeout_s: float = 0.5,
-                 channel: str = "", monotonic: Callable[[], float] = time.monotonic,
-                 listen_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        bus: can.BusABC,
+        nodes: list[str],
+        *,
+        faults: FaultLatch | None = None,
+        heartbeat_period_s: float = 0.1,
+        node_timeout_s: float = 1.0,
+        reply_timeout_s: float = 0.5,
+        channel: str = "",
+        monotonic: Callable[[], float] = time.monotonic,
+        listen_s: float = 0.0,
+    ) -> None:
         """``listen_s``: first listen that long, sending nothing, for another host's heartbeat
         (``0x77F``); one heard raises ``RigBusy`` (``drivers.claim``). A bus only this process
         can reach (the sim rig's) needs none."""
@@ -82,7 +91,9 @@ class CanLink:
         #: node's watchdog then trips and the nodes go safe by themselves.
         self.heartbeat_suspended = False
         self._notifier = can.Notifier(bus, [self._on_message], timeout=0.05)
-        self._hb_thread = threading.Thread(target=self._heartbeat_loop, name="can-heartbeat", daemon=True)
+        self._hb_thread = threading.Thread(
+            target=self._heartbeat_loop, name="can-heartbeat", daemon=True
+        )
         if listen_s > 0:
             self._listen(listen_s)
         self._hb_thread.start()
@@ -97,8 +108,10 @@ class CanLink:
                 self._notifier.stop(timeout=1.0)
             finally:
                 self.bus.shutdown()
-            raise RigBusy(f"CAN {self.channel}: another host is driving this bus (its heartbeat 0x{cf.HOST_HEARTBEAT_COB:03x} "
-                          f"was heard); this host sent nothing. Close the other session (or its PC's), then try again")
+            raise RigBusy(
+                f"CAN {self.channel}: another host is driving this bus (its heartbeat 0x{cf.HOST_HEARTBEAT_COB:03x} "
+                f"was heard); this host sent nothing. Close the other session (or its PC's), then try again"
+            )
 
     # ------------------------------------------------------------------ receive
     def _on_message(self, msg: can.Message) -> None:
@@ -112,16 +125,24 @@ class CanLink:
             log.warning("CAN %s: bus error frame %s", self.channel, msg)
             return
         node = cf.node_of(msg.arbitration_id)
-        if msg.arbitration_id == cf.HOST_HEARTBEAT_COB and not msg.is_extended_id and not self._hb_thread.is_alive():
-            self._other_host = msg   # before this host's first heartbeat: another host's
+        if (
+            msg.arbitration_id == cf.HOST_HEARTBEAT_COB
+            and not msg.is_extended_id
+            and not self._hb_thread.is_alive()
+        ):
+            self._other_host = msg  # before this host's first heartbeat: another host's
         if msg.is_extended_id or node not in self._used_ids or msg.arbitration_id == node:
             # another device's frame, NMT and SYNC (node 0), a 29-bit frame: not ours
             self._foreign(msg)
             return
         function = msg.arbitration_id & 0x780
-        if function == 0x580 and len(msg.data) != 8:   # CiA 301: every SDO frame carries 8 bytes
-            self.faults.report(ProtocolError(f"CAN {self.channel}: SDO answer 0x{msg.arbitration_id:03x} of node "
-                                             f"'{rn.NODE_NAMES[node]}': {len(msg.data)} data bytes (expected 8)"))
+        if function == 0x580 and len(msg.data) != 8:  # CiA 301: every SDO frame carries 8 bytes
+            self.faults.report(
+                ProtocolError(
+                    f"CAN {self.channel}: SDO answer 0x{msg.arbitration_id:03x} of node "
+                    f"'{rn.NODE_NAMES[node]}': {len(msg.data)} data bytes (expected 8)"
+                )
+            )
             # passed on all the same: the transfer waiting for it fails now, not at its deadline
         # the project's own checks first: a frame the canopen package chokes on still latches
         try:
@@ -139,9 +160,14 @@ class CanLink:
         PDO, SDO, NMT or SYNC): not ours, ignored; said once per identifier."""
         first = msg.arbitration_id not in self._foreign_seen
         self._foreign_seen.add(msg.arbitration_id)
-        log.log(logging.INFO if first else logging.DEBUG, "CAN %s: ignored frame 0x%03x of node %d, which this "
-                "rig does not use (%d bytes)", self.channel, msg.arbitration_id, cf.node_of(msg.arbitration_id),
-                len(msg.data))
+        log.log(
+            logging.INFO if first else logging.DEBUG,
+            "CAN %s: ignored frame 0x%03x of node %d, which this rig does not use (%d bytes)",
+            self.channel,
+            msg.arbitration_id,
+            cf.node_of(msg.arbitration_id),
+            len(msg.data),
+        )
 
     def _on_heartbeat(self, m: cf.CoHeartbeat) -> None:
         name = rn.NODE_NAMES[m.node]
@@ -151,12 +177,21 @@ class CanLink:
             self._operational.add(m.node)
         elif m.state == cf.NMT_BOOT and was_up:
             self._operational.discard(m.node)
-            self.faults.report(NodeReset(f"CAN node '{name}' (id {m.node}) rebooted (CANopen boot-up) and lost "
-                                         f"its set-points; the rig went safe"))
+            self.faults.report(
+                NodeReset(
+                    f"CAN node '{name}' (id {m.node}) rebooted (CANopen boot-up) and lost "
+                    f"its set-points; the rig went safe"
+                )
+            )
         elif was_up:
             self._operational.discard(m.node)
-            self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) left the operational state by itself "
-                                         f"(now {m.text()})", node=name))
+            self.faults.report(
+                NodeError(
+                    f"CAN node '{name}' (id {m.node}) left the operational state by itself "
+                    f"(now {m.text()})",
+                    node=name,
+                )
+            )
 
     def _on_emergency(self, m: cf.CoEmergency) -> None:
         name = rn.NODE_NAMES[m.node]
@@ -164,13 +199,25 @@ class CanLink:
             log.info("CAN node '%s' (id %d): error reset (EMCY 0x0000)", name, m.node)
             return
         if m.node not in self._started:
-            log.warning("CAN node '%s' (id %d): EMCY 0x%04x (%s) before this host's NMT start: from before this "
-                        "connection (a node tripped at the previous session's end sits at its error values); "
-                        "not a fault of this one", name, m.node, m.code, m.text())
+            log.warning(
+                "CAN node '%s' (id %d): EMCY 0x%04x (%s) before this host's NMT start: from before this "
+                "connection (a node tripped at the previous session's end sits at its error values); "
+                "not a fault of this one",
+                name,
+                m.node,
+                m.code,
+                m.text(),
+            )
             return
-        self.faults.report(NodeError(f"CAN node '{name}' (id {m.node}) reports an error: {m.text()} "
-                                     f"(EMCY 0x{m.code:04x}, error register 0x{m.register:02x}, "
-                                     f"data {m.data.hex()}); the rig went safe", node=name, code=m.code))
+        self.faults.report(
+            NodeError(
+                f"CAN node '{name}' (id {m.node}) reports an error: {m.text()} "
+                f"(EMCY 0x{m.code:04x}, error register 0x{m.register:02x}, "
+                f"data {m.data.hex()}); the rig went safe",
+                node=name,
+                code=m.code,
+            )
+        )
 
     # ------------------------------------------------------------------ heartbeat and watch
     def _heartbeat_loop(self) -> None:
@@ -191,9 +238,12 @@ class CanLink:
                 if node not in self._lost and now - last > self.node_timeout_s:
                     self._lost.add(node)
                     self._operational.discard(node)
-                    self.faults.report(DeviceLost(
-                        f"CAN node '{name}' (id {node}) is silent: no heartbeat for {now - last:.1f} s "
-                        f"(limit {self.node_timeout_s:g} s); check its cable and power; the rig went safe"))
+                    self.faults.report(
+                        DeviceLost(
+                            f"CAN node '{name}' (id {node}) is silent: no heartbeat for {now - last:.1f} s "
+                            f"(limit {self.node_timeout_s:g} s); check its cable and power; the rig went safe"
+                        )
+                    )
             if self._stop.wait(self.heartbeat_period_s):
                 return
 
@@ -210,8 +260,10 @@ class CanLink:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
         missing = self._wait(timeout_s, self.nodes, lambda node: node in self._last_hb)
         if missing:
-            raise DeviceLost(f"CAN {self.channel}: no heartbeat from node(s) {missing} within {timeout_s:g} s; "
-                             f"check the bus wiring, termination and node power")
+            raise DeviceLost(
+                f"CAN {self.channel}: no heartbeat from node(s) {missing} within {timeout_s:g} s; "
+                f"check the bus wiring, termination and node power"
+            )
 
     def wait_operational(self, names: Sequence[str], timeout_s: float) -> None:
         """Block until each node of ``names`` says operational in its heartbeat (after the
@@ -219,8 +271,10 @@ class CanLink:
         From then on a boot-up or a change of state of theirs is a fault."""
         missing = self._wait(timeout_s, names, lambda node: node in self._operational)
         if missing:
-            raise DeviceTimeout(f"CAN {self.channel}: node(s) {missing} did not report the operational state "
-                                f"within {timeout_s:g} s of the NMT start; check their error register (0x1001)")
+            raise DeviceTimeout(
+                f"CAN {self.channel}: node(s) {missing} did not report the operational state "
+                f"within {timeout_s:g} s of the NMT start; check their error register (0x1001)"
+            )
 
     def _wait(self, timeout_s: float, names: Sequence[str], ready: Callable[[int], bool]) -> str:
         """Wait until ``ready`` holds for each node of ``names``; '' or the ones it does not hold for."""
@@ -238,8 +292,10 @@ class CanLink:
             with self._send_lock:
                 self.bus.send(msg, timeout=self.reply_timeout_s)
         except (can.CanError, OSError, ValueError) as exc:
-            raise DeviceLost(f"CAN {self.channel}: cannot send frame 0x{arbitration_id:03x} ({exc}); "
-                             f"is the interface up?") from exc
+            raise DeviceLost(
+                f"CAN {self.channel}: cannot send frame 0x{arbitration_id:03x} ({exc}); "
+                f"is the interface up?"
+            ) from exc
 
     def close(self) -> None:
         self._stop.set()

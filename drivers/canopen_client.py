@@ -23,7 +23,14 @@ from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
 from drivers.can_link import CanLink
-from drivers.errors import DeviceLost, DeviceTimeout, DriverError, InterlockError, ProtocolError, SetpointRangeError
+from drivers.errors import (
+    DeviceLost,
+    DeviceTimeout,
+    DriverError,
+    InterlockError,
+    ProtocolError,
+    SetpointRangeError,
+)
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +40,11 @@ ABORT_RANGE = (0x06090030, 0x06090031, 0x06090032, 0x06090036)
 #: an interlock (reasons in 0x2003), the mode switches not held, the node not operational
 ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL = 0x08000020, 0x08000021, 0x08000022
 ABORT_STATE = (ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL)
-ABORT_TEXT = {ABORT_INTERLOCK: "interlock", ABORT_NOT_HELD: "mode switches not held",
-              ABORT_NOT_OPERATIONAL: "node not operational (latched safe: the host's NMT start releases it)"}
+ABORT_TEXT = {
+    ABORT_INTERLOCK: "interlock",
+    ABORT_NOT_HELD: "mode switches not held",
+    ABORT_NOT_OPERATIONAL: "node not operational (latched safe: the host's NMT start releases it)",
+}
 ABORT_NO_OBJECT = 0x06020000
 
 #: one object of a node: (index, subindex)
@@ -55,8 +65,13 @@ class DeadlineSdoClient(SdoClient):
     (``CanLink.monotonic``) instead of the wall's: the sim rig's nodes run in this process, so
     its deadline leaves out the time the host could not run them (``drivers.runclock``)."""
 
-    def __init__(self, rx_cobid: int, tx_cobid: int, od: canopen.ObjectDictionary,
-                 monotonic: Callable[[], float]) -> None:
+    def __init__(
+        self,
+        rx_cobid: int,
+        tx_cobid: int,
+        od: canopen.ObjectDictionary,
+        monotonic: Callable[[], float],
+    ) -> None:
         super().__init__(rx_cobid, tx_cobid, od)
         self.monotonic = monotonic
         #: the object of the transfer under way (from its initiate request): what an initiate
@@ -65,9 +80,9 @@ class DeadlineSdoClient(SdoClient):
 
     def send_request(self, request: bytes | bytearray) -> None:
         request = bytearray(request)
-        if request[0] & 0xE0 in (0x20, 0x40):         # initiate download / upload
+        if request[0] & 0xE0 in (0x20, 0x40):  # initiate download / upload
             self._object = bytes(request[1:4])
-        elif request[0] == 0x80:                       # abort: the package leaves 0x0000:00
+        elif request[0] == 0x80:  # abort: the package leaves 0x0000:00
             request[1:4] = self._object
         super().send_request(request)
 
@@ -75,7 +90,9 @@ class DeadlineSdoClient(SdoClient):
         deadline = self.monotonic() + self.RESPONSE_TIMEOUT
         while True:
             try:
-                response: bytes = self.responses.get(block=True, timeout=min(0.05, self.RESPONSE_TIMEOUT))
+                response: bytes = self.responses.get(
+                    block=True, timeout=min(0.05, self.RESPONSE_TIMEOUT)
+                )
                 break
             except queue.Empty:
                 if self.monotonic() > deadline:
@@ -85,8 +102,10 @@ class DeadlineSdoClient(SdoClient):
         if response[0] & 0xE0 in (0x40, 0x60) and bytes(response[1:4]) != self._object:
             # an initiate answer for another object (the package checks uploads, not downloads)
             got, want = (int.from_bytes(o[:2], "little") for o in (response[1:4], self._object))
-            raise SdoCommunicationError(f"the answer names object 0x{got:04x}:{response[3]}, not the "
-                                        f"0x{want:04x}:{self._object[2]} asked")
+            raise SdoCommunicationError(
+                f"the answer names object 0x{got:04x}:{response[3]}, not the "
+                f"0x{want:04x}:{self._object[2]} asked"
+            )
         return response
 
 
@@ -94,7 +113,7 @@ class RigRemoteNode(canopen.RemoteNode):
     """A remote node whose SDO clients are ``DeadlineSdoClient`` on ``monotonic``."""
 
     def __init__(self, node_id: int, eds: str, monotonic: Callable[[], float]) -> None:
-        self._monotonic = monotonic          # before the base class adds the default SDO channel
+        self._monotonic = monotonic  # before the base class adds the default SDO channel
         super().__init__(node_id, eds)
 
     def add_sdo(self, rx_cobid: int, tx_cobid: int) -> SdoClient:
@@ -108,8 +127,17 @@ class RigRemoteNode(canopen.RemoteNode):
 class CanopenClient:
     """Node ``name`` (an id of ``rig_nodes.NODES``) on ``link``, described by its EDS file."""
 
-    def __init__(self, link: CanLink, name: str, device_type: int, *, safe_values: Sequence[tuple[Address, int]] = (),
-                 raw_index: int = 0, raw_bits: bool = False, configure: Sequence[tuple[Address, int]] = ()) -> None:
+    def __init__(
+        self,
+        link: CanLink,
+        name: str,
+        device_type: int,
+        *,
+        safe_values: Sequence[tuple[Address, int]] = (),
+        raw_index: int = 0,
+        raw_bits: bool = False,
+        configure: Sequence[tuple[Address, int]] = (),
+    ) -> None:
         self.link = link
         self.name = name
         self.node_id = rn.NODES[name]
@@ -157,17 +185,24 @@ class CanopenClient:
         try:
             return self._variable(index, sub).decode_raw(raw)
         except (canopen.objectdictionary.ObjectDictionaryError, struct.error) as exc:
-            raise self._bad_answer(index, sub, what, exc) from None   # a short or long answer
+            raise self._bad_answer(index, sub, what, exc) from None  # a short or long answer
 
-    def write(self, index: int, sub: int, value: int, *, what: str = "", check_faults: bool = True) -> None:
+    def write(
+        self, index: int, sub: int, value: int, *, what: str = "", check_faults: bool = True
+    ) -> None:
         """Download one numeric object; a refusal raises its typed error, a fault latches."""
         var = self._variable(index, sub)
         try:
             data = var.encode_raw(value)
         except (struct.error, OverflowError, ValueError, TypeError) as exc:
-            raise SetpointRangeError(f"{self._where(index, sub)}: {value!r} does not fit its type "
-                                     f"({exc}); nothing was sent", value=value) from None
-        self._transfer(index, sub, data, what or f"write 0x{index:04x}:{sub} = {value}", check_faults)
+            raise SetpointRangeError(
+                f"{self._where(index, sub)}: {value!r} does not fit its type "
+                f"({exc}); nothing was sent",
+                value=value,
+            ) from None
+        self._transfer(
+            index, sub, data, what or f"write 0x{index:04x}:{sub} = {value}", check_faults
+        )
 
     def eds_default(self, index: int, sub: int = 0) -> int:
         """The EDS's default value of an integer object."""
@@ -181,12 +216,21 @@ class CanopenClient:
             obj = self.node.object_dictionary[index]
             var = obj if isinstance(obj, canopen.objectdictionary.ODVariable) else obj[sub]
         except KeyError:
-            raise ProtocolError(f"{self._where(index, sub)} is not in its EDS ({cf.eds_path(self.name).name})") from None
+            raise ProtocolError(
+                f"{self._where(index, sub)} is not in its EDS ({cf.eds_path(self.name).name})"
+            ) from None
         assert isinstance(var, canopen.objectdictionary.ODVariable)
         return var
 
-    def _transfer(self, index: int, sub: int, data: bytes | None, what: str, check_faults: bool,
-                  missing_ok: bool = False) -> bytes | None:
+    def _transfer(
+        self,
+        index: int,
+        sub: int,
+        data: bytes | None,
+        what: str,
+        check_faults: bool,
+        missing_ok: bool = False,
+    ) -> bytes | None:
         if check_faults:
             self.link.faults.check()
         try:
@@ -202,11 +246,15 @@ class CanopenClient:
         except (SdoCommunicationError, struct.error) as exc:
             if isinstance(exc, struct.error) or "No SDO response" not in str(exc):
                 raise self._bad_answer(index, sub, what, exc) from None
-            fault: DriverError = DeviceTimeout(f"{self._where(index, sub)}: no SDO answer to {what} within "
-                                               f"{self.link.reply_timeout_s:g} s ({exc}); the rig went safe")
+            fault: DriverError = DeviceTimeout(
+                f"{self._where(index, sub)}: no SDO answer to {what} within "
+                f"{self.link.reply_timeout_s:g} s ({exc}); the rig went safe"
+            )
         except (can.CanError, OSError, ValueError) as exc:
-            fault = DeviceLost(f"CAN {self.link.channel}: cannot send to node '{self.name}' ({exc}); "
-                               f"is the interface up?")
+            fault = DeviceLost(
+                f"CAN {self.link.channel}: cannot send to node '{self.name}' ({exc}); "
+                f"is the interface up?"
+            )
         self.link.faults.report(fault)
         raise fault
 
@@ -242,12 +290,14 @@ class CanopenClient:
                     if "No SDO response" not in str(exc):
                         raise self._bad_answer(0x1000, 0, "read device type", exc) from None
                     if self.link.monotonic() >= deadline:
-                        raise DeviceLost(f"CAN node '{self.name}' (id {self.node_id}) did not answer within the "
-                                         f"connect window of {window_s:g} s (rig URL connect_s=S); check its "
-                                         f"power, its cable and termination, and that its node id is "
-                                         f"{self.node_id}") from None
+                        raise DeviceLost(
+                            f"CAN node '{self.name}' (id {self.node_id}) did not answer within the "
+                            f"connect window of {window_s:g} s (rig URL connect_s=S); check its "
+                            f"power, its cable and termination, and that its node id is "
+                            f"{self.node_id}"
+                        ) from None
                 except SdoAbortedError:
-                    break              # it answers: ``identify`` says what
+                    break  # it answers: ``identify`` says what
         finally:
             self.node.sdo.RESPONSE_TIMEOUT = timeout
         product = self.identify()
@@ -263,11 +313,18 @@ class CanopenClient:
         """Check the node's device type (0x1000); returns its product code (0x1018:2)."""
         kind = self.read(0x1000, 0, what="read device type", check_faults=False)
         if not device_type_serves(kind, self.device_type):
-            raise ProtocolError(f"CAN node id {self.node_id} has device type 0x{kind:08x}, expected "
-                                f"0x{self.device_type:08x} for '{self.name}'; check the node ids and its EDS")
+            raise ProtocolError(
+                f"CAN node id {self.node_id} has device type 0x{kind:08x}, expected "
+                f"0x{self.device_type:08x} for '{self.name}'; check the node ids and its EDS"
+            )
         product = self.read(0x1018, 2, what="read product code", check_faults=False)
-        log.info("CAN node '%s' (id %d): device type 0x%08x, product code 0x%08x", self.name, self.node_id, kind,
-                 product)
+        log.info(
+            "CAN node '%s' (id %d): device type 0x%08x, product code 0x%08x",
+            self.name,
+            self.node_id,
+            kind,
+            product,
+        )
         return product
 
     def clear(self, wait: bool = True) -> None:
@@ -276,19 +333,23 @@ class CanopenClient:
         up, so a reboot is caught. Without ``wait`` the caller waits (``CanLink.wait_operational``),
         for several nodes at once."""
         ms = max(1, round(self.link.node_timeout_s * 1000))
-        settings = [((0x1016, 1), (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), "host heartbeat consumer"),
-                    ((0x1017, 0), max(1, round(self.link.heartbeat_period_s * 1000)), "heartbeat period"),
-                    # CiA 301 error behaviour: a communication error takes it to pre-operational
-                    # (2 would stop it, and a stopped module never opens again until power-cycled)
-                    ((0x1029, 1), 0, "error behaviour")]
+        settings = [
+            ((0x1016, 1), (cf.HOST_NODE_ID << 16) | min(ms, 0xFFFF), "host heartbeat consumer"),
+            ((0x1017, 0), max(1, round(self.link.heartbeat_period_s * 1000)), "heartbeat period"),
+            # CiA 301 error behaviour: a communication error takes it to pre-operational
+            # (2 would stop it, and a stopped module never opens again until power-cycled)
+            ((0x1029, 1), 0, "error behaviour"),
+        ]
         for (index, sub), value, what in settings:
             if index == 0x1029 and self.read_if_present(index, sub, what=f"read {what}") is None:
-                continue                  # a module without it: pre-operational is CiA 301's default
+                continue  # a module without it: pre-operational is CiA 301's default
             self.write(index, sub, value, what=f"set {what}", check_faults=False)
             back = self.read(index, sub, what=f"read back {what}", check_faults=False)
             if back != value:
-                raise ProtocolError(f"{self._where(index, sub)} ({what}) reads back 0x{back:x} after 0x{value:x} "
-                                    f"was written; the module does not keep it")
+                raise ProtocolError(
+                    f"{self._where(index, sub)} ({what}) reads back 0x{back:x} after 0x{value:x} "
+                    f"was written; the module does not keep it"
+                )
         self.link.watch(self.name)
         for (index, sub), value in self.configuration:
             self.write(index, sub, value, check_faults=False)
@@ -304,7 +365,14 @@ class CanopenClient:
     def raw_get(self, index: int) -> int:
         """Output ``index`` (0-based) as the node has it, while a fault is latched too."""
         if self.raw_bits:
-            return self.read(self.raw_index, 1, what="read outputs 1-8", check_faults=False) >> index & 1
-        if isinstance(self.node.object_dictionary[self.raw_index], canopen.objectdictionary.ODVariable):
+            return (
+                self.read(self.raw_index, 1, what="read outputs 1-8", check_faults=False) >> index
+                & 1
+            )
+        if isinstance(
+            self.node.object_dictionary[self.raw_index], canopen.objectdictionary.ODVariable
+        ):
             return self.read(self.raw_index, 0, what="read its state", check_faults=False)
-        return self.read(self.raw_index, index + 1, what=f"read output {index + 1}", check_faults=False)
+        return self.read(
+            self.raw_index, index + 1, what=f"read output {index + 1}", check_faults=False
+        )

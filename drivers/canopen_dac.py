@@ -20,26 +20,35 @@ from drivers.setpoints import SetpointLimits
 
 log = logging.getLogger(__name__)
 
-AO_16 = 0x6411           # write analogue output 16-bit (I16 counts)
-AO_ERROR_MODE = 0x6443   # 1: the output takes its error value on a communication error
+AO_16 = 0x6411  # write analogue output 16-bit (I16 counts)
+AO_ERROR_MODE = 0x6443  # 1: the output takes its error value on a communication error
 AO_ERROR_VALUE = 0x6444  # the error value, counts
-AO_SI_UNIT = 0x6450      # CiA 303-2 unit of the output
-AO_FULL_SCALE = 0x2100   # manufacturer: microvolts at 32768 counts
-RPDO_ASYNC = 255         # CiA 301 transmission type: a receive PDO acts on arrival
+AO_SI_UNIT = 0x6450  # CiA 303-2 unit of the output
+AO_FULL_SCALE = 0x2100  # manufacturer: microvolts at 32768 counts
+RPDO_ASYNC = 255  # CiA 301 transmission type: a receive PDO acts on arrival
 COUNTS_MIN, COUNTS_MAX = -32768, 32767
 
 
 class CanopenDac:
     """The node ``name``'s ``outputs`` analogue outputs, with the rig's set-point limits."""
 
-    def __init__(self, link: CanLink, name: str, outputs: int, calibration: RigCalibration | None = None) -> None:
+    def __init__(
+        self, link: CanLink, name: str, outputs: int, calibration: RigCalibration | None = None
+    ) -> None:
         self.limits = SetpointLimits(calibration or RigCalibration())
         self.outputs = outputs
         subs = range(1, outputs + 1)
         self.node = CanopenClient(
-            link, name, cf.DEVICE_TYPE_401_AO, raw_index=AO_16,
+            link,
+            name,
+            cf.DEVICE_TYPE_401_AO,
+            raw_index=AO_16,
             safe_values=[((AO_16, s), 0) for s in subs],
-            configure=[*(((AO_ERROR_MODE, s), 1) for s in subs), *(((AO_ERROR_VALUE, s), 0) for s in subs)])
+            configure=[
+                *(((AO_ERROR_MODE, s), 1) for s in subs),
+                *(((AO_ERROR_VALUE, s), 0) for s in subs),
+            ],
+        )
         self._lsb_V: list[float] | None = None
         #: the receive PDOs of the EDS: (COB-ID, [output index per mapped I16]); outputs as last
         #: sent by the host (counts), for the outputs a PDO carries but a stream does not change
@@ -61,19 +70,33 @@ class CanopenDac:
 
     def _read_lsb(self, sub: int) -> float:
         unit = self.node.read_if_present(AO_SI_UNIT, sub, what=f"read SI unit of output {sub}")
-        if unit is None:                     # optional in CiA 401: the module is set up per its EDS
+        if unit is None:  # optional in CiA 401: the module is set up per its EDS
             unit = self.node.eds_default(AO_SI_UNIT, sub)
-            log.info("CAN node '%s' has no SI-unit object for output %d: 0x%08x from its EDS",
-                     self.node.name, sub, unit)
+            log.info(
+                "CAN node '%s' has no SI-unit object for output %d: 0x%08x from its EDS",
+                self.node.name,
+                sub,
+                unit,
+            )
         if unit != cf.SI_VOLT:
-            raise ProtocolError(f"CAN node '{self.node.name}' output {sub} is in SI unit 0x{unit:08x}, "
-                                f"not volts (0x{cf.SI_VOLT:08x}); set the module up per its EDS")
-        full_uV = self.node.read_if_present(AO_FULL_SCALE, sub, what=f"read full scale of output {sub}")
+            raise ProtocolError(
+                f"CAN node '{self.node.name}' output {sub} is in SI unit 0x{unit:08x}, "
+                f"not volts (0x{cf.SI_VOLT:08x}); set the module up per its EDS"
+            )
+        full_uV = self.node.read_if_present(
+            AO_FULL_SCALE, sub, what=f"read full scale of output {sub}"
+        )
         if full_uV is None:
             full_uV = self.node.eds_default(AO_FULL_SCALE, sub)
-            log.info("CAN node '%s' has no full-scale object: +-%g V from its EDS", self.node.name, full_uV * 1e-6)
+            log.info(
+                "CAN node '%s' has no full-scale object: +-%g V from its EDS",
+                self.node.name,
+                full_uV * 1e-6,
+            )
         if full_uV <= 0:
-            raise ProtocolError(f"CAN node '{self.node.name}' output {sub}: full scale {full_uV} uV is not positive")
+            raise ProtocolError(
+                f"CAN node '{self.node.name}' output {sub}: full scale {full_uV} uV is not positive"
+            )
         return full_uV * 1e-6 / 32768
 
     def counts(self, index: int, volts: float) -> int:
@@ -81,9 +104,12 @@ class CanopenDac:
         lsb = self.lsb_V(index)
         lo, hi = COUNTS_MIN * lsb, 32768 * lsb
         if not lo <= volts <= hi:
-            raise SetpointRangeError(f"CAN node '{self.node.name}' output {index + 1}: {volts:+.6f} V is beyond the "
-                                     f"module's range {lo:+.6f}..{hi:+.6f} V; nothing was sent", value=volts,
-                                     limit=(lo, hi))
+            raise SetpointRangeError(
+                f"CAN node '{self.node.name}' output {index + 1}: {volts:+.6f} V is beyond the "
+                f"module's range {lo:+.6f}..{hi:+.6f} V; nothing was sent",
+                value=volts,
+                limit=(lo, hi),
+            )
         return max(COUNTS_MIN, min(COUNTS_MAX, round(volts / lsb)))
 
     # ------------------------------------------------------------------ outputs
@@ -122,8 +148,10 @@ class CanopenDac:
                 entry = self.node.eds_default(0x1600 + n, s)
                 index, sub, bits = entry >> 16, (entry >> 8) & 0xFF, entry & 0xFF
                 if index != AO_16 or bits != 16:
-                    raise ProtocolError(f"CAN node '{self.node.name}': RPDO{n + 1} maps 0x{entry:08x}, not a "
-                                        f"16-bit analogue output; check its EDS")
+                    raise ProtocolError(
+                        f"CAN node '{self.node.name}': RPDO{n + 1} maps 0x{entry:08x}, not a "
+                        f"16-bit analogue output; check its EDS"
+                    )
                 mapped.append(sub - 1)
             out.append((cob, mapped))
         return out
@@ -142,24 +170,40 @@ class CanopenDac:
             if self._rpdo_is(got, cob, want):
                 continue
             found = self._rpdo_text(got)
-            log.warning("CAN node '%s': RPDO%d (%s) differs from its EDS; configuring it per the EDS",
-                        self.node.name, n + 1, found)
+            log.warning(
+                "CAN node '%s': RPDO%d (%s) differs from its EDS; configuring it per the EDS",
+                self.node.name,
+                n + 1,
+                found,
+            )
             why = "does not keep"
             try:
-                self.node.write(comm, 1, cob | 0x80000000, what=f"disable RPDO{n + 1}", check_faults=False)
-                self.node.write(mapping, 0, 0, what=f"clear RPDO{n + 1} mapping", check_faults=False)
+                self.node.write(
+                    comm, 1, cob | 0x80000000, what=f"disable RPDO{n + 1}", check_faults=False
+                )
+                self.node.write(
+                    mapping, 0, 0, what=f"clear RPDO{n + 1} mapping", check_faults=False
+                )
                 for s, entry in enumerate(want, start=1):
-                    self.node.write(mapping, s, entry, what=f"map RPDO{n + 1} entry {s}", check_faults=False)
-                self.node.write(mapping, 0, len(want), what=f"RPDO{n + 1} mapping count", check_faults=False)
-                self.node.write(comm, 2, RPDO_ASYNC, what=f"RPDO{n + 1} transmission type", check_faults=False)
+                    self.node.write(
+                        mapping, s, entry, what=f"map RPDO{n + 1} entry {s}", check_faults=False
+                    )
+                self.node.write(
+                    mapping, 0, len(want), what=f"RPDO{n + 1} mapping count", check_faults=False
+                )
+                self.node.write(
+                    comm, 2, RPDO_ASYNC, what=f"RPDO{n + 1} transmission type", check_faults=False
+                )
                 self.node.write(comm, 1, cob, what=f"enable RPDO{n + 1}", check_faults=False)
                 ok = self._rpdo_is(self._read_rpdo(comm, mapping), cob, want)
             except DriverError as exc:
                 ok, why = False, f"refused its EDS mapping ({exc})"
             if not ok:
-                fault = ProtocolError(f"CAN node '{self.node.name}': RPDO{n + 1} {why}: it has {found}; the EDS "
-                                      f"has COB-ID 0x{cob:03x}, maps {', '.join(f'0x{e:08x}' for e in want)}. "
-                                      f"Set the module up per its EDS")
+                fault = ProtocolError(
+                    f"CAN node '{self.node.name}': RPDO{n + 1} {why}: it has {found}; the EDS "
+                    f"has COB-ID 0x{cob:03x}, maps {', '.join(f'0x{e:08x}' for e in want)}. "
+                    f"Set the module up per its EDS"
+                )
                 self.node.link.faults.report(fault)
                 raise fault
 
@@ -168,9 +212,15 @@ class CanopenDac:
         mapping entries."""
         cob = self.node.read(comm, 1, what=f"read RPDO COB-ID 0x{comm:04x}", check_faults=False)
         kind = self.node.read_if_present(comm, 2, what=f"read RPDO transmission type 0x{comm:04x}")
-        count = self.node.read(mapping, 0, what=f"read RPDO mapping count 0x{mapping:04x}", check_faults=False)
-        entries = [self.node.read(mapping, s, what=f"read RPDO mapping 0x{mapping:04x}:{s}", check_faults=False)
-                   for s in range(1, min(count, 8) + 1)]
+        count = self.node.read(
+            mapping, 0, what=f"read RPDO mapping count 0x{mapping:04x}", check_faults=False
+        )
+        entries = [
+            self.node.read(
+                mapping, s, what=f"read RPDO mapping 0x{mapping:04x}:{s}", check_faults=False
+            )
+            for s in range(1, min(count, 8) + 1)
+        ]
         return cob, kind, entries
 
     @staticmethod
@@ -191,17 +241,21 @@ class CanopenDac:
         counts = self.counts(index, volts)
         cob, mapped = next(((c, m) for c, m in self.rpdos if index in m), (0, []))
         if not mapped:
-            raise ProtocolError(f"CAN node '{self.node.name}': output {index + 1} ({what}) is on no receive PDO")
-        for i in mapped:              # the PDO carries its other outputs as they are
+            raise ProtocolError(
+                f"CAN node '{self.node.name}': output {index + 1} ({what}) is on no receive PDO"
+            )
+        for i in mapped:  # the PDO carries its other outputs as they are
             if i != index and i not in self._sent:
                 self.read(i, f"output {i + 1}")
         self._sent[index] = counts
         data = struct.pack(f"<{len(mapped)}h", *(self._sent[i] for i in mapped))
         try:
             self.node.link.network.send_message(cob, data)
-        except (OSError, ValueError) as exc:   # can.CanError is an OSError
-            fault = DeviceLost(f"CAN {self.node.link.channel}: cannot send RPDO 0x{cob:03x} to node "
-                               f"'{self.node.name}' ({exc}); is the interface up?")
+        except (OSError, ValueError) as exc:  # can.CanError is an OSError
+            fault = DeviceLost(
+                f"CAN {self.node.link.channel}: cannot send RPDO 0x{cob:03x} to node "
+                f"'{self.node.name}' ({exc}); is the interface up?"
+            )
             self.node.link.faults.report(fault)
             raise fault from exc
         return counts * self.lsb_V(index)
@@ -212,9 +266,11 @@ class CanopenDac:
         for index, counts in sorted(self._sent.items()):
             got = self.node.read(AO_16, index + 1, what=f"read back output {index + 1}")
             if got != counts:
-                fault = ProtocolError(f"CAN node '{self.node.name}': output {index + 1} reads back {got} counts "
-                                      f"after the stream sent {counts} (a receive PDO lost, or the node not "
-                                      f"operational)")
+                fault = ProtocolError(
+                    f"CAN node '{self.node.name}': output {index + 1} reads back {got} counts "
+                    f"after the stream sent {counts} (a receive PDO lost, or the node not "
+                    f"operational)"
+                )
                 self.node.link.faults.report(fault)
                 raise fault
 
@@ -222,8 +278,10 @@ class CanopenDac:
 def check_readback(node: CanopenClient, what: str, sent: float, back: float, lsb: float) -> float:
     """A DAC's read-back must equal the set-point within one LSB; anything else is a fault."""
     if abs(back - sent) > lsb * 1.001 + 1e-6:
-        fault = ProtocolError(f"CAN node '{node.name}': {what} reads back {back:+.6f} V after setting "
-                              f"{sent:+.6f} V (more than one LSB, {lsb * 1e3:.3f} mV, apart)")
+        fault = ProtocolError(
+            f"CAN node '{node.name}': {what} reads back {back:+.6f} V after setting "
+            f"{sent:+.6f} V (more than one LSB, {lsb * 1e3:.3f} mV, apart)"
+        )
         node.link.faults.report(fault)
         raise fault
     return back

@@ -18,17 +18,25 @@ HOST_NODE_ID = 0x7F
 HOST_HEARTBEAT_COB = 0x700 + HOST_NODE_ID
 
 NMT_BOOT, NMT_STOPPED, NMT_OPERATIONAL, NMT_PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
-NMT_STATE_TEXT = {NMT_BOOT: "boot-up", NMT_STOPPED: "stopped", NMT_OPERATIONAL: "operational",
-                  NMT_PRE_OPERATIONAL: "pre-operational"}
+NMT_STATE_TEXT = {
+    NMT_BOOT: "boot-up",
+    NMT_STOPPED: "stopped",
+    NMT_OPERATIONAL: "operational",
+    NMT_PRE_OPERATIONAL: "pre-operational",
+}
 NMT_START = 0x01
-NMT_ENTER_PRE_OPERATIONAL = 0x80   # CiA 301: a stopped node answers SDO again
+NMT_ENTER_PRE_OPERATIONAL = 0x80  # CiA 301: a stopped node answers SDO again
 
 #: CiA 301 emergency codes the rig's nodes send
 EMCY_ERROR_RESET = 0x0000
-EMCY_HEARTBEAT = 0x8130          # the host's heartbeat stopped: outputs at their error values
+EMCY_HEARTBEAT = 0x8130  # the host's heartbeat stopped: outputs at their error values
 EMCY_HARDWARE, EMCY_OVERCURRENT, EMCY_OVERTEMP = 0x5000, 0x2310, 0x4210
-EMCY_TEXT = {EMCY_HEARTBEAT: "host heartbeat lost, outputs at their error values", EMCY_HARDWARE: "hardware fault",
-             EMCY_OVERCURRENT: "output over-current", EMCY_OVERTEMP: "over-temperature"}
+EMCY_TEXT = {
+    EMCY_HEARTBEAT: "host heartbeat lost, outputs at their error values",
+    EMCY_HARDWARE: "hardware fault",
+    EMCY_OVERCURRENT: "output over-current",
+    EMCY_OVERTEMP: "over-temperature",
+}
 
 #: CiA 303-2 SI unit code of the volt, as in 0x6450
 SI_VOLT = 0x00260000
@@ -73,8 +81,10 @@ def node_of(cob_id: int) -> int:
 
 def decode_heartbeat(cob_id: int, data: bytes | bytearray) -> CoHeartbeat:
     if len(data) != 1:
-        raise ProtocolError(f"CANopen heartbeat 0x{cob_id:03x}: {len(data)} data bytes (expected 1)")
-    state = data[0] & 0x7F           # bit 7 is the node-guarding toggle
+        raise ProtocolError(
+            f"CANopen heartbeat 0x{cob_id:03x}: {len(data)} data bytes (expected 1)"
+        )
+    state = data[0] & 0x7F  # bit 7 is the node-guarding toggle
     if state not in NMT_STATE_TEXT:
         raise ProtocolError(f"CANopen heartbeat 0x{cob_id:03x}: unknown NMT state 0x{state:02x}")
     return CoHeartbeat(node_of(cob_id), state)

@@ -53,7 +53,9 @@ class RigClaim:
     """Exclusive locks on the devices ``resources`` ((kind, name) pairs) for this process.
     ``RigBusy`` names the holder of the first one held elsewhere; nothing is left locked then."""
 
-    def __init__(self, url: str, resources: list[tuple[str, str]], *, directory: Path | None = None) -> None:
+    def __init__(
+        self, url: str, resources: list[tuple[str, str]], *, directory: Path | None = None
+    ) -> None:
         self.url = url
         self.directory = directory or lock_dir()
         self._held: list[tuple[Path, int]] = []
@@ -72,21 +74,32 @@ class RigClaim:
         except BlockingIOError:
             holder = _describe(path)
             os.close(fd)
-            raise RigBusy(f"rig {self.url}: its {what} is held by {holder}; this command sent nothing to the "
-                          f"rig. Wait for that command to end (or stop it), then try again") from None
+            raise RigBusy(
+                f"rig {self.url}: its {what} is held by {holder}; this command sent nothing to the "
+                f"rig. Wait for that command to end (or stop it), then try again"
+            ) from None
         except OSError:
             os.close(fd)
             raise
         os.ftruncate(fd, 0)
-        os.write(fd, json.dumps({"pid": os.getpid(), "command": " ".join(_command()), "url": self.url,
-                                 "since": time.strftime("%Y-%m-%dT%H:%M:%S%z")}).encode())
+        os.write(
+            fd,
+            json.dumps(
+                {
+                    "pid": os.getpid(),
+                    "command": " ".join(_command()),
+                    "url": self.url,
+                    "since": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+                }
+            ).encode(),
+        )
         self._held.append((path, fd))
 
     def release(self) -> None:
         while self._held:
             path, fd = self._held.pop()
             try:
-                os.ftruncate(fd, 0)      # the next holder writes its own; a reader sees no stale holder
+                os.ftruncate(fd, 0)  # the next holder writes its own; a reader sees no stale holder
             finally:
                 os.close(fd)
 

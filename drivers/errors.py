@@ -57,17 +57,21 @@ class PlatformClamped(InterlockError):
     state, Ch. V B): a procedure that needs the stabilization loops closed refuses to start."""
 
     def __init__(self, what: str) -> None:
-        super().__init__(f"{what}: platform clamped (loops open); release it with `fbs clamp off --rig URL` "
-                         f"(the command inputs at zero), then start again",
-                         reasons=("platform clamped",))
+        super().__init__(
+            f"{what}: platform clamped (loops open); release it with `fbs clamp off --rig URL` "
+            f"(the command inputs at zero), then start again",
+            reasons=("platform clamped",),
+        )
 
 
 class ModeNotAllowed(InterlockError, ValueError):
     """Modes 0 and 7 do not exist on the relay driver; selecting one lights the alarm."""
 
     def __init__(self, mode: int) -> None:
-        super().__init__(f"mode {mode} is not allowed (modes 1-6 only; 0 and 7 are disallowed and "
-                         f"light the alarm); the rig stays in its present mode")
+        super().__init__(
+            f"mode {mode} is not allowed (modes 1-6 only; 0 and 7 are disallowed and "
+            f"light the alarm); the rig stays in its present mode"
+        )
         self.mode = mode
 
 
@@ -101,7 +105,9 @@ class SampleGap(DriverError):
     """
 
     def __init__(self, start: int, stop: int, reason: str) -> None:
-        super().__init__(f"ADC samples {start}..{stop - 1} lost ({stop - start} sample sets): {reason}")
+        super().__init__(
+            f"ADC samples {start}..{stop - 1} lost ({stop - start} sample sets): {reason}"
+        )
         self.start = start
         self.stop = stop
         self.reason = reason

@@ -26,8 +26,14 @@ from drivers.errors import DriverError, InterlockError, ModeNotAllowed
 
 log = logging.getLogger(__name__)
 
-MODES = {1: "gyro off", 2: "gyro spin-up", 3: "autocollimator control", 4: "gyro control, 4-channel caging",
-         5: "gyro control, 3-channel caging", 6: "external"}
+MODES = {
+    1: "gyro off",
+    2: "gyro spin-up",
+    3: "autocollimator control",
+    4: "gyro control, 4-channel caging",
+    5: "gyro control, 3-channel caging",
+    6: "external",
+}
 #: Gyro channels that must be caged before each gyro-control mode (mode 5 cages all but Z).
 CAGED_FOR_MODE = {4: ("X", "Y", "Z", "XRD"), 5: ("X", "Y", "XRD")}
 SAFE_MODE = 1
@@ -41,8 +47,8 @@ class RelayStatus:
     alarm: bool
     at_speed: dict[str, bool]
     caged: dict[str, bool]
-    spin_fraction: float      # slowest wheel, fraction of operating speed
-    clamped: bool = False     # platform clamped to the table, motor drive open (Ch. V B)
+    spin_fraction: float  # slowest wheel, fraction of operating speed
+    clamped: bool = False  # platform clamped to the table, motor drive open (Ch. V B)
 
 
 def check_mode(mode: object) -> int:
@@ -59,19 +65,25 @@ UNCLAMP_HINT = "release it with `fbs clamp off --rig URL`"
 def interlock_reason(mode: int, status: RelayStatus) -> str | None:
     """Why ``mode`` may not be entered now (None if it may)."""
     if status.clamped and mode not in CLAMP_MODES:
-        return (f"mode {mode} refused: platform clamped (loops open; modes 1-3 only while clamped); "
-                f"{UNCLAMP_HINT}")
+        return (
+            f"mode {mode} refused: platform clamped (loops open; modes 1-3 only while clamped); "
+            f"{UNCLAMP_HINT}"
+        )
     if mode not in CAGED_FOR_MODE:
         return None
     why = []
     if not all(status.at_speed.values()):
         slow = [c for c, ok in status.at_speed.items() if not ok]
-        why.append(f"gyros not at speed ({', '.join(slow)}; wheels at {100 * status.spin_fraction:.0f} % "
-                   f"of operating speed; spin up in mode 2)")
+        why.append(
+            f"gyros not at speed ({', '.join(slow)}; wheels at {100 * status.spin_fraction:.0f} % "
+            f"of operating speed; spin up in mode 2)"
+        )
     uncaged = [c for c in CAGED_FOR_MODE[mode] if not status.caged[c]]
     if uncaged:
-        why.append(f"gyro channel(s) {', '.join(uncaged)} not caged (mode {status.mode}; cage in mode 3 "
-                   f"with caging not inhibited and the pickoffs at null)")
+        why.append(
+            f"gyro channel(s) {', '.join(uncaged)} not caged (mode {status.mode}; cage in mode 3 "
+            f"with caging not inhibited and the pickoffs at null)"
+        )
     return f"mode {mode} refused: " + "; ".join(why) if why else None
 
 
@@ -162,19 +174,29 @@ class RelayDriver(abc.ABC):
 R_MODE, R_SWITCHES, R_SELECTED, R_REASONS, R_STATUS, R_CLAMP, R_SAFE = range(0x2000, 0x2007)
 SWITCH_HOLD, SWITCH_RELEASE = 1, 2
 #: the reason bits of 0x2003, spelled out
-REASONS = ((rn.WHY_NOT_AT_SPEED, "gyros not at speed"), (rn.WHY_NOT_CAGED, "gyros not caged"),
-           (rn.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}"), (rn.WHY_MODE, "mode outside 1-3"),
-           (rn.WHY_COMMAND, "a command input not at zero"))
+REASONS = (
+    (rn.WHY_NOT_AT_SPEED, "gyros not at speed"),
+    (rn.WHY_NOT_CAGED, "gyros not caged"),
+    (rn.WHY_CLAMPED, f"platform clamped; {UNCLAMP_HINT}"),
+    (rn.WHY_MODE, "mode outside 1-3"),
+    (rn.WHY_COMMAND, "a command input not at zero"),
+)
 
 
 def decode_status(w: int) -> RelayStatus:
     """The relay node's status word (object 0x2004, docs/protocol.md 2.5)."""
     return RelayStatus(
-        mode=(w >> rn.ST_MODE_SHIFT) & 7, selected=(w >> rn.ST_SELECT_SHIFT) & 7,
-        held=bool(w & rn.ST_HELD), alarm=bool(w & rn.ST_ALARM),
-        at_speed={c: bool(w >> (rn.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
+        mode=(w >> rn.ST_MODE_SHIFT) & 7,
+        selected=(w >> rn.ST_SELECT_SHIFT) & 7,
+        held=bool(w & rn.ST_HELD),
+        alarm=bool(w & rn.ST_ALARM),
+        at_speed={
+            c: bool(w >> (rn.ST_AT_SPEED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)
+        },
         caged={c: bool(w >> (rn.ST_CAGED_SHIFT + i) & 1) for i, c in enumerate(GYRO_CHANNELS)},
-        spin_fraction=((w >> rn.ST_SPIN_SHIFT) & 0xFF) / 100.0, clamped=bool(w & rn.ST_CLAMPED))
+        spin_fraction=((w >> rn.ST_SPIN_SHIFT) & 0xFF) / 100.0,
+        clamped=bool(w & rn.ST_CLAMPED),
+    )
 
 
 class CanopenRelayDriver(RelayDriver):
@@ -183,7 +205,9 @@ class CanopenRelayDriver(RelayDriver):
     in 0x2003."""
 
     def __init__(self, link: CanLink) -> None:
-        self.node = CanopenClient(link, "relay", 0, raw_index=R_MODE, safe_values=[((R_SAFE, 0), 1)])
+        self.node = CanopenClient(
+            link, "relay", 0, raw_index=R_MODE, safe_values=[((R_SAFE, 0), 1)]
+        )
 
     def hold(self) -> None:
         self.node.write(R_SWITCHES, 0, SWITCH_HOLD, what="HOLD")
@@ -210,8 +234,9 @@ class CanopenRelayDriver(RelayDriver):
                 raise
             bits = self.node.read(R_REASONS, 0, what="read the interlock reasons")
             why = tuple(w for b, w in REASONS if bits & b)
-            raise InterlockError(f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why,
-                                 detail=bits) from None
+            raise InterlockError(
+                f"{exc}" + (f" ({'; '.join(why)})" if why else ""), reasons=why, detail=bits
+            ) from None
 
     def status(self) -> RelayStatus:
         st = decode_status(self.node.read(R_STATUS, 0, what="STATUS"))

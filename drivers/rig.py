@@ -56,7 +56,14 @@ from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanopenRelayDriver, RelayDriver
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
 from drivers.supervision import ModeSupervisor, SupervisedAdc
-from drivers.table import CanopenTable, ManualTable, Operator, RotaryTable, TablePosition, terminal_operator
+from drivers.table import (
+    CanopenTable,
+    ManualTable,
+    Operator,
+    RotaryTable,
+    TablePosition,
+    terminal_operator,
+)
 from drivers.torquer import CanopenTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
@@ -78,11 +85,25 @@ class SafeReport:
 
 
 class Rig:
-    def __init__(self, *, url: str, adc: Adc, relays: RelayDriver, torquers: TorquerDac, commands: CommandDac,
-                 caging: CagingSwitches, table: RotaryTable, clock: RigClock, faults: FaultLatch,
-                 link: CanLink | None = None, safe_nodes: Sequence[CanopenClient] = (),
-                 closers: Sequence[Callable[[], None]] = (), emulator: Any = None,
-                 simulated: bool = False, sim_config: Mapping[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        *,
+        url: str,
+        adc: Adc,
+        relays: RelayDriver,
+        torquers: TorquerDac,
+        commands: CommandDac,
+        caging: CagingSwitches,
+        table: RotaryTable,
+        clock: RigClock,
+        faults: FaultLatch,
+        link: CanLink | None = None,
+        safe_nodes: Sequence[CanopenClient] = (),
+        closers: Sequence[Callable[[], None]] = (),
+        emulator: Any = None,
+        simulated: bool = False,
+        sim_config: Mapping[str, str] | None = None,
+    ) -> None:
         self.url = url
         #: what the rig states about itself, for every result's provenance: a simulated rig
         #: says so (its scheme sets it), never guessed from the URL's text; its config file
@@ -119,7 +140,13 @@ class Rig:
     def event(self, kind: str, text: str) -> None:
         t = self.clock.now()
         # set-points can come a hundred a second (a swept bias): debug, the rest info
-        log.log(logging.DEBUG if kind == "setpoint" else logging.INFO, "rig event at %.3f s: %s: %s", t, kind, text)
+        log.log(
+            logging.DEBUG if kind == "setpoint" else logging.INFO,
+            "rig event at %.3f s: %s: %s",
+            t,
+            kind,
+            text,
+        )
         for fn in list(self._listeners):
             try:
                 fn(t, kind, text)
@@ -138,8 +165,10 @@ class Rig:
 
     def commands_zero(self) -> bool:
         """Every command input (V_Td, gamma_c) reads back 0 V from its DAC."""
-        return all(self.commands.command_torque_V(a) == 0.0 and self.commands.ac_bias_V(a) == 0.0
-                   for a in self.commands.axes)
+        return all(
+            self.commands.command_torque_V(a) == 0.0 and self.commands.ac_bias_V(a) == 0.0
+            for a in self.commands.axes
+        )
 
     def clamp(self) -> bool:
         """Clamp the platform to the table, motor drive open (Ch. V B; ``RelayDriver.clamp``)."""
@@ -179,19 +208,35 @@ class Rig:
         last read back at the end (``confirm``), one event for the whole stream rather than one
         per set-point. V_Td is set to 0 V afterwards, however the stream ends. Returns how many
         set-points were sent."""
-        return self._stream(f"command torque V_Td {axis}", partial(self.commands.put_command_torque_V, axis),
-                            partial(self.commands.set_command_torque_V, axis), values_V, step)
+        return self._stream(
+            f"command torque V_Td {axis}",
+            partial(self.commands.put_command_torque_V, axis),
+            partial(self.commands.set_command_torque_V, axis),
+            values_V,
+            step,
+        )
 
     def stream_ac_bias_V(self, axis: str, values_V, step: Callable[[], object]) -> int:
         """gamma_c on ``axis`` through ``values_V``, ``step()`` after each, as
         ``stream_command_torque_V`` does V_Td (one SDO round trip per set-point instead of the
         two of ``set_ac_bias_V``'s read-back; the last read back at the end; one event); 0 V
         afterwards, however the stream ends. Returns how many set-points were sent."""
-        return self._stream(f"autocollimator bias gamma_c {axis}", partial(self.commands.put_ac_bias_V, axis),
-                            partial(self.commands.set_ac_bias_V, axis), values_V, step)
+        return self._stream(
+            f"autocollimator bias gamma_c {axis}",
+            partial(self.commands.put_ac_bias_V, axis),
+            partial(self.commands.set_ac_bias_V, axis),
+            values_V,
+            step,
+        )
 
-    def _stream(self, what: str, put: Callable[[float], float], set_: Callable[[float], float], values_V,
-                step: Callable[[], object]) -> int:
+    def _stream(
+        self,
+        what: str,
+        put: Callable[[float], float],
+        set_: Callable[[float], float],
+        values_V,
+        step: Callable[[], object],
+    ) -> int:
         n = 0
         try:
             for v in values_V:
@@ -214,7 +259,9 @@ class Rig:
         self.event("setpoint", f"caging inhibit {channel} = {'on' if back else 'off'}")
         return back
 
-    def move_table(self, tilt_deg: float | None = None, spindle_deg: float | None = None) -> TablePosition:
+    def move_table(
+        self, tilt_deg: float | None = None, spindle_deg: float | None = None
+    ) -> TablePosition:
         pos = self.table.move_to(tilt_deg, spindle_deg)
         self.event("table", f"table tilt {pos.tilt_deg:.4f} deg, spindle {pos.spindle_deg:.4f} deg")
         return pos
@@ -228,8 +275,13 @@ class Rig:
         self.clock.sleep(seconds)
         self.faults.check()
 
-    def wait_until(self, predicate: Callable[[], bool], timeout_s: float, poll_s: float = 0.5,
-                   what: str = "condition") -> float:
+    def wait_until(
+        self,
+        predicate: Callable[[], bool],
+        timeout_s: float,
+        poll_s: float = 0.5,
+        what: str = "condition",
+    ) -> float:
         """Poll ``predicate`` every ``poll_s`` of rig time; returns the rig time it came true."""
         t_end = self.clock.now() + timeout_s
         while not predicate():
@@ -250,7 +302,7 @@ class Rig:
         # safe-state requests need): go safe on a thread of its own.
         self.event("error", str(fault))
         t = threading.Thread(target=self.safe, name="rig-safe", daemon=True)
-        t.start()                   # before close() can see it: joining an unstarted thread raises
+        t.start()  # before close() can see it: joining an unstarted thread raises
         self._safe_thread = t
 
     def safe(self) -> SafeReport:
@@ -265,8 +317,10 @@ class Rig:
                     report.done.append(f"{node.name} safe")
                 except DriverError as exc:
                     report.failed.append(f"{node.name}: {exc}")
-            for name, check in (("mode 1", self._mode_is_safe),
-                                ("biases, commands zero and caging released", self._outputs_zero)):
+            for name, check in (
+                ("mode 1", self._mode_is_safe),
+                ("biases, commands zero and caging released", self._outputs_zero),
+            ):
                 try:
                     if check():
                         report.done.append(f"{name} read back")
@@ -280,9 +334,15 @@ class Rig:
                 log.error("rig NOT fully safe: %s", "; ".join(report.failed))
                 if self.link is not None and not self.link.heartbeat_suspended:
                     self.link.heartbeat_suspended = True
-                    report.failed.append("host heartbeat stopped: the nodes' watchdogs will make them safe")
-            self.event("safe", "safe state reached" if report.ok else "safe state incomplete: "
-                       + "; ".join(report.failed))
+                    report.failed.append(
+                        "host heartbeat stopped: the nodes' watchdogs will make them safe"
+                    )
+            self.event(
+                "safe",
+                "safe state reached"
+                if report.ok
+                else "safe state incomplete: " + "; ".join(report.failed),
+            )
             return report
 
     def _mode_is_safe(self) -> bool:
@@ -291,9 +351,11 @@ class Rig:
         return mode == SAFE_MODE
 
     def _outputs_zero(self) -> bool:
-        return (all(self._raw("torquer", i) == 0 for i in range(4))
-                and all(self._raw("command", i) == 0 for i in range(6))
-                and all(self._raw("caging", i) == 0 for i in range(4)))
+        return (
+            all(self._raw("torquer", i) == 0 for i in range(4))
+            and all(self._raw("command", i) == 0 for i in range(6))
+            and all(self._raw("caging", i) == 0 for i in range(4))
+        )
 
     def _raw(self, name: str, index: int) -> int:
         for node in self._safe_nodes:
@@ -342,11 +404,15 @@ def bus_options(url: str, params: Mapping[str, str]) -> dict[str, Any]:
     float, a flag (true/false/yes/no/on/off) or else a string."""
     out: dict[str, Any] = {}
     for key, text in params.items():
-        if key == "bitrate" or (key.startswith(BUS_OPTION_PREFIX) and len(key) > len(BUS_OPTION_PREFIX)):
-            option = key if key == "bitrate" else key[len(BUS_OPTION_PREFIX):]
+        if key == "bitrate" or (
+            key.startswith(BUS_OPTION_PREFIX) and len(key) > len(BUS_OPTION_PREFIX)
+        ):
+            option = key if key == "bitrate" else key[len(BUS_OPTION_PREFIX) :]
             out[option] = _option_value(text)
     if "bitrate" in out and (not isinstance(out["bitrate"], int) or out["bitrate"] <= 0):
-        raise ValueError(f"rig URL {url!r}: bitrate={params['bitrate']!r} must be a positive integer (bit/s)")
+        raise ValueError(
+            f"rig URL {url!r}: bitrate={params['bitrate']!r} must be a positive integer (bit/s)"
+        )
     return out
 
 
@@ -359,6 +425,8 @@ def _option_value(text: str) -> Any:
     if text.lower() in ("true", "yes", "on", "false", "no", "off"):
         return text.lower() in ("true", "yes", "on")
     return text
+
+
 #: the entry-point group where rig URL schemes other than ``serial`` are registered
 SCHEME_GROUP = "fbs.rig_schemes"
 
@@ -375,18 +443,23 @@ def flag(key: str, value: str) -> bool:
     raise ValueError(f"rig URL: {key}={value!r} must be 1 or 0")
 
 
-def open_rig(url: str = "sim", *, operator: Operator | None = None,
-             calibration: RigCalibration | None = None) -> Rig:
+def open_rig(
+    url: str = "sim", *, operator: Operator | None = None, calibration: RigCalibration | None = None
+) -> Rig:
     """Connect to the rig at ``url`` (see the module docstring); raises DriverError/ValueError."""
     parts = urlsplit(url)
     params = dict(parse_qsl(parts.query, keep_blank_values=True))
     if parts.scheme == "serial":
         return _open_serial(url, parts.path, params, operator, calibration)
-    kind = parts.scheme or parts.path    # "sim?seed=3" has no scheme: its name is the path
-    opener = scheme_opener(kind) if kind and (not parts.scheme or parts.path in ("", kind)) else None
+    kind = parts.scheme or parts.path  # "sim?seed=3" has no scheme: its name is the path
+    opener = (
+        scheme_opener(kind) if kind and (not parts.scheme or parts.path in ("", kind)) else None
+    )
     if opener is None:
-        raise ValueError(f"rig URL {url!r}: unknown rig; use 'sim[?realtime=1&seed=N&warm=1&config=F.toml&table=manual]' "
-                         f"or 'serial:///dev/ttyACM0?can=socketcan:can0' (schemes: {', '.join(schemes())})")
+        raise ValueError(
+            f"rig URL {url!r}: unknown rig; use 'sim[?realtime=1&seed=N&warm=1&config=F.toml&table=manual]' "
+            f"or 'serial:///dev/ttyACM0?can=socketcan:can0' (schemes: {', '.join(schemes())})"
+        )
     return opener(url, params, operator, calibration)
 
 
@@ -412,21 +485,31 @@ def scheme_opener(name: str) -> RigOpener | None:
 def check_keys(url: str, params: Mapping[str, str], allowed: set[str]) -> None:
     """Refuse a URL parameter the scheme does not know, naming the known ones (``can_<option>``
     bus options are known wherever ``bitrate`` is)."""
-    unknown = sorted(k for k in set(params) - allowed
-                     if not ("bitrate" in allowed and k.startswith(BUS_OPTION_PREFIX)))
+    unknown = sorted(
+        k
+        for k in set(params) - allowed
+        if not ("bitrate" in allowed and k.startswith(BUS_OPTION_PREFIX))
+    )
     if unknown:
-        raise ValueError(f"rig URL {url!r}: unknown parameter(s) {', '.join(unknown)} "
-                         f"(known: {', '.join(sorted(allowed))})")
+        raise ValueError(
+            f"rig URL {url!r}: unknown parameter(s) {', '.join(unknown)} "
+            f"(known: {', '.join(sorted(allowed))})"
+        )
 
 
-def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
-                 calibration: RigCalibration | None) -> Rig:
+def _open_serial(
+    url: str, path: str, params: dict, operator: Operator | None, calibration: RigCalibration | None
+) -> Rig:
     check_keys(url, params, _SERIAL_KEYS)
     if not path:
-        raise ValueError(f"rig URL {url!r}: no serial device path (e.g. serial:///dev/ttyACM0?can=socketcan:can0)")
+        raise ValueError(
+            f"rig URL {url!r}: no serial device path (e.g. serial:///dev/ttyACM0?can=socketcan:can0)"
+        )
     iface, _, channel = params.get("can", "").partition(":")
     if not iface or not channel:
-        raise ValueError(f"rig URL {url!r}: give the CAN interface as can=<interface>:<channel>, e.g. can=socketcan:can0")
+        raise ValueError(
+            f"rig URL {url!r}: give the CAN interface as can=<interface>:<channel>, e.g. can=socketcan:can0"
+        )
     table = params.get("table", "manual")
     if table not in ("can", "manual"):
         raise ValueError(f"rig URL {url!r}: table={table!r} must be 'can' or 'manual'")
@@ -439,8 +522,10 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
         connect_s = float(window)
     except ValueError:
         connect_s = float("nan")
-    if not 0.1 <= connect_s <= 600:   # NaN fails too
-        raise ValueError(f"rig URL {url!r}: connect_s={window!r} must be a number of seconds in 0.1..600")
+    if not 0.1 <= connect_s <= 600:  # NaN fails too
+        raise ValueError(
+            f"rig URL {url!r}: connect_s={window!r} must be a number of seconds in 0.1..600"
+        )
     options = bus_options(url, params)
     # One host per rig: the locks before any byte, then the bus heard before it is spoken on
     claim = RigClaim(url, [("adc", path), ("can", f"{iface}:{channel}")])
@@ -448,22 +533,52 @@ def _open_serial(url: str, path: str, params: dict, operator: Operator | None,
         try:
             bus = can.Bus(interface=iface, channel=channel, **options)
         except (can.CanError, OSError, ValueError, ImportError, TypeError) as exc:
-            raise DeviceLost(f"cannot open CAN interface {iface}:{channel} with {options or 'no options'}: "
-                             f"{exc}") from exc
-        tab = ("manual", operator or terminal_operator, TablePosition(0.0, 0.0)) if table == "manual" else ("can",)
-        return assemble(url, path, bus, f"{iface}:{channel}", WallClock(), tab, calibration, baudrate=baud,
-                        connect_s=connect_s, listen_s=LISTEN_S, closers=[claim.release])
+            raise DeviceLost(
+                f"cannot open CAN interface {iface}:{channel} with {options or 'no options'}: {exc}"
+            ) from exc
+        tab = (
+            ("manual", operator or terminal_operator, TablePosition(0.0, 0.0))
+            if table == "manual"
+            else ("can",)
+        )
+        return assemble(
+            url,
+            path,
+            bus,
+            f"{iface}:{channel}",
+            WallClock(),
+            tab,
+            calibration,
+            baudrate=baud,
+            connect_s=connect_s,
+            listen_s=LISTEN_S,
+            closers=[claim.release],
+        )
     except BaseException:
         claim.release()
         raise
 
 
-def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigClock, table: tuple,
-              calibration: RigCalibration | None, *, baudrate: int = 2_000_000, node_timeout_s: float = 1.0,
-              reply_timeout_s: float = 0.5, closers: list | None = None, emulator=None,
-              monotonic: Callable[[], float] = time.monotonic, connect_s: float = CONNECT_WINDOW_S,
-              listen_s: float = 0.0, simulated: bool = False,
-              sim_config: Mapping[str, str] | None = None) -> Rig:
+def assemble(
+    url: str,
+    adc_port: str,
+    bus: can.BusABC,
+    channel: str,
+    clock: RigClock,
+    table: tuple,
+    calibration: RigCalibration | None,
+    *,
+    baudrate: int = 2_000_000,
+    node_timeout_s: float = 1.0,
+    reply_timeout_s: float = 0.5,
+    closers: list | None = None,
+    emulator=None,
+    monotonic: Callable[[], float] = time.monotonic,
+    connect_s: float = CONNECT_WINDOW_S,
+    listen_s: float = 0.0,
+    simulated: bool = False,
+    sim_config: Mapping[str, str] | None = None,
+) -> Rig:
     """The rig from its ADC port and CAN bus. ``monotonic``: the drivers' deadline clock (the
     wall's; the sim rig, whose devices run in this process, gives ``drivers.runclock``'s).
     ``connect_s``: how long the nodes have to answer; ``listen_s``: how long to listen for
@@ -475,13 +590,23 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
     adc = None
     link = None
     try:
-        link = CanLink(bus, names, faults=faults, channel=channel, node_timeout_s=node_timeout_s,
-                       reply_timeout_s=reply_timeout_s, monotonic=monotonic, listen_s=listen_s)
+        link = CanLink(
+            bus,
+            names,
+            faults=faults,
+            channel=channel,
+            node_timeout_s=node_timeout_s,
+            reply_timeout_s=reply_timeout_s,
+            monotonic=monotonic,
+            listen_s=listen_s,
+        )
         torquers = CanopenTorquerDac(link, calibration)
         commands = CanopenCommandDac(link, calibration)
         caging = CanopenCagingSwitches(link)
         relays = CanopenRelayDriver(link)
-        tab: RotaryTable = CanopenTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
+        tab: RotaryTable = (
+            CanopenTable(link, clock) if table[0] == "can" else ManualTable(table[1], table[2])
+        )
         clients: list[CanopenClient] = [relays.node, caging.node, torquers.node, commands.node]
         if isinstance(tab, CanopenTable):
             clients.append(tab.node)
@@ -492,23 +617,48 @@ def assemble(url: str, adc_port: str, bus: can.BusABC, channel: str, clock: RigC
         link.wait_operational([c.name for c in clients], max(2.0, reply_timeout_s))
         for dac in (torquers, commands):
             dac.read_scale()
-            dac.configure_rpdos()   # a stream must drive the output it is meant for
+            dac.configure_rpdos()  # a stream must drive the output it is meant for
         # the ADC's own deadlines (2 s for a reply, 3 s of silence while streaming) stretch with a
         # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them
-        adc = SerialAdc(adc_port, clock=clock, faults=faults, baudrate=baudrate, monotonic=monotonic,
-                        reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
-                        stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s))
-        rig = Rig(url=url, adc=adc, relays=relays, torquers=torquers,
-                  commands=commands, caging=caging, table=tab,
-                  clock=clock, faults=faults, link=link, safe_nodes=[c for c in clients if c.name != "table"],
-                  closers=[link.close, *(closers or [])], emulator=emulator, simulated=simulated,
-                  sim_config=sim_config)
+        adc = SerialAdc(
+            adc_port,
+            clock=clock,
+            faults=faults,
+            baudrate=baudrate,
+            monotonic=monotonic,
+            reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
+            stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s),
+        )
+        rig = Rig(
+            url=url,
+            adc=adc,
+            relays=relays,
+            torquers=torquers,
+            commands=commands,
+            caging=caging,
+            table=tab,
+            clock=clock,
+            faults=faults,
+            link=link,
+            safe_nodes=[c for c in clients if c.name != "table"],
+            closers=[link.close, *(closers or [])],
+            emulator=emulator,
+            simulated=simulated,
+            sim_config=sim_config,
+        )
     except BaseException:
         if adc is not None:
             adc.close()
         if link is not None:
             link.close()
         raise
-    log.info("rig %s open: ADC %s %s on %s; CAN nodes %s on %s", url, adc.identity.model, adc.identity.serial,
-             adc_port, ", ".join(names), channel)
+    log.info(
+        "rig %s open: ADC %s %s on %s; CAN nodes %s on %s",
+        url,
+        adc.identity.model,
+        adc.identity.serial,
+        adc_port,
+        ", ".join(names),
+        channel,
+    )
     return rig

@@ -49,7 +49,9 @@ def go_safe(rig: Rig, why: str) -> SafeReport:
     log.warning("%s: putting the rig in the safe state", why)
     try:
         report = rig.safe()
-    except Exception as exc:  # the rig itself is gone: say so; the nodes' watchdogs are the last line
+    except (
+        Exception
+    ) as exc:  # the rig itself is gone: say so; the nodes' watchdogs are the last line
         report = SafeReport(failed=[f"safe state not commanded: {type(exc).__name__}: {exc}"])
     if not report.ok:
         log.error("the rig did not confirm the safe state: %s", "; ".join(report.failed))
@@ -69,8 +71,9 @@ class SafeOnAbort:
     def __enter__(self) -> SafeOnAbort:
         return self
 
-    def __exit__(self, et: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, et: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         if exc is not None:
             self.abort(exc)
 

@@ -89,14 +89,14 @@ class _Resync:
         self.frames = 0
         self.replies = 0
         self.last_reply = ""
-        self.stale = 0          # replies other than ERR SYNTAX (the host's own empty line gets that)
+        self.stale = 0  # replies other than ERR SYNTAX (the host's own empty line gets that)
         self.bad = 0
         self.first_bad = ""
 
     def received(self, data: bytes) -> None:
         self.nbytes += len(data)
         if len(self.head) < self.HEAD:
-            self.head += data[:self.HEAD - len(self.head)]
+            self.head += data[: self.HEAD - len(self.head)]
 
     def discard(self, item: Frame | Reply | ProtocolError) -> None:
         if isinstance(item, Frame):
@@ -111,11 +111,17 @@ class _Resync:
             self.first_bad = self.first_bad or str(item)
 
     def summary(self) -> str:
-        parts = [_count(self.frames, "frame"), _count(self.replies, "other reply line")
-                 + (f" (the last {self.last_reply!r})" if self.replies else ""),
-                 _count(self.bad, "undecodable unit") + (f" (the first: {self.first_bad})" if self.bad else "")]
-        return (f"{_count(self.nbytes, 'byte')}: {', '.join(parts)}; they began "
-                f"{bytes(self.head)!r}" + (" ..." if self.nbytes > len(self.head) else ""))
+        parts = [
+            _count(self.frames, "frame"),
+            _count(self.replies, "other reply line")
+            + (f" (the last {self.last_reply!r})" if self.replies else ""),
+            _count(self.bad, "undecodable unit")
+            + (f" (the first: {self.first_bad})" if self.bad else ""),
+        ]
+        return (
+            f"{_count(self.nbytes, 'byte')}: {', '.join(parts)}; they began "
+            f"{bytes(self.head)!r}" + (" ..." if self.nbytes > len(self.head) else "")
+        )
 
 
 def _err_from_reply(reply: Reply, what: str) -> DriverError:
@@ -138,12 +144,20 @@ ADC_STALL_TIMEOUT_S = 3.0
 class SerialAdc(Adc):
     """Driver of the FBS ADC on a serial port (a USB CDC device, or the simulator's pty)."""
 
-    def __init__(self, port: str, *, clock: RigClock | None = None, faults: FaultLatch | None = None,
-                 baudrate: int = 2_000_000, reply_timeout_s: float = ADC_REPLY_TIMEOUT_S,
-                 stall_timeout_s: float = ADC_STALL_TIMEOUT_S,
-                 buffer_s: float = 120.0, resync_bytes: int = RESYNC_BYTES,
-                 resync_timeout_s: float = RESYNC_TIMEOUT_S,
-                 monotonic: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        port: str,
+        *,
+        clock: RigClock | None = None,
+        faults: FaultLatch | None = None,
+        baudrate: int = 2_000_000,
+        reply_timeout_s: float = ADC_REPLY_TIMEOUT_S,
+        stall_timeout_s: float = ADC_STALL_TIMEOUT_S,
+        buffer_s: float = 120.0,
+        resync_bytes: int = RESYNC_BYTES,
+        resync_timeout_s: float = RESYNC_TIMEOUT_S,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.port = port
         #: the clock of every deadline here: the wall's, or one that leaves out the host's pauses
         #: (``drivers.runclock``) for a device that runs in this process
@@ -157,34 +171,41 @@ class SerialAdc(Adc):
         self.buffer_s = buffer_s
         try:
             # exclusive (flock): a second host's open fails here, before it sends a byte
-            self.ser = serial.Serial(port, baudrate=baudrate, timeout=0.05, write_timeout=reply_timeout_s,
-                                     exclusive=True)
+            self.ser = serial.Serial(
+                port, baudrate=baudrate, timeout=0.05, write_timeout=reply_timeout_s, exclusive=True
+            )
         except serial.SerialException as exc:
             if "exclusively lock" in str(exc):
-                raise RigBusy(f"the ADC's serial port {port} is held by another program ({exc}); this command "
-                              f"sent nothing to it. Close the other session, then try again") from exc
-            raise DeviceLost(f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
-                             f"the device path and that no other program holds the port") from exc
+                raise RigBusy(
+                    f"the ADC's serial port {port} is held by another program ({exc}); this command "
+                    f"sent nothing to it. Close the other session, then try again"
+                ) from exc
+            raise DeviceLost(
+                f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
+                f"the device path and that no other program holds the port"
+            ) from exc
         except (OSError, ValueError) as exc:
-            raise DeviceLost(f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
-                             f"the device path and that no other program holds the port") from exc
+            raise DeviceLost(
+                f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
+                f"the device path and that no other program holds the port"
+            ) from exc
         self._decoder = StreamDecoder()
         self._replies: queue.Queue = queue.Queue()
         self._cmd_lock = threading.Lock()
         self._cond = threading.Condition()
-        self._items: deque = deque()        # (first_sample, codes) or SampleGap / ProtocolError
-        self._buffered = 0                  # sample sets held in _items
+        self._items: deque = deque()  # (first_sample, codes) or SampleGap / ProtocolError
+        self._buffered = 0  # sample sets held in _items
         self._capacity = 0
-        self._rx_streaming = False          # between the START and STOP replies, as the reader sees it
+        self._rx_streaming = False  # between the START and STOP replies, as the reader sees it
         self._next_sample = 0
         self._next_seq = 0
-        self._bad_data: str | None = None   # decode error since the last good frame
+        self._bad_data: str | None = None  # decode error since the last good frame
         self._read_pos = 0
         self._t0 = 0.0
         self._config: AdcConfig | None = None
         self._last_rx = self._mono()
         self._closed = False
-        self._stopping = False              # STOP sent: a full buffer may no longer hold the reader
+        self._stopping = False  # STOP sent: a full buffer may no longer hold the reader
         # From the first byte read until the device's OK STAT, everything is discarded (1.8).
         self._sync: _Resync | None = _Resync(("STOP", "STAT"))
         self._thread = threading.Thread(target=self._reader, name="adc-reader", daemon=True)
@@ -204,8 +225,12 @@ class SerialAdc(Adc):
                 data = self.ser.read(waiting if waiting > 0 else 1)
             except (serial.SerialException, OSError, TypeError, AttributeError) as exc:
                 if not self._closed:
-                    self._lost(DeviceLost(f"ADC on {self.port}: the serial device went away ({exc}); "
-                                          f"check the cable and power, then reopen the rig"))
+                    self._lost(
+                        DeviceLost(
+                            f"ADC on {self.port}: the serial device went away ({exc}); "
+                            f"check the cable and power, then reopen the rig"
+                        )
+                    )
                 return
             if not data:
                 # A frame cut short (corrupted length field) would hold back what follows,
@@ -238,7 +263,7 @@ class SerialAdc(Adc):
         if isinstance(item, Reply) and item.ok and item.verb == sync.steps[0]:
             sync.steps.pop(0)
             if not sync.steps:
-                self._sync = None     # in sync: what follows is the replies to the host's commands
+                self._sync = None  # in sync: what follows is the replies to the host's commands
             self._replies.put(item)
         else:
             sync.discard(item)
@@ -258,11 +283,17 @@ class SerialAdc(Adc):
                 with self._cond:
                     self._rx_streaming = False
                     self._cond.notify_all()
-                self._replies.put(ProtocolError(f"STOP reply {reply.text!r}: samples= is not an integer"))
+                self._replies.put(
+                    ProtocolError(f"STOP reply {reply.text!r}: samples= is not an integer")
+                )
                 return
             with self._cond:
                 if self._rx_streaming and sent > self._next_sample:
-                    self._push(SampleGap(self._next_sample, sent, self._bad_data or "frames lost before STOP"))
+                    self._push(
+                        SampleGap(
+                            self._next_sample, sent, self._bad_data or "frames lost before STOP"
+                        )
+                    )
                     self._next_sample = sent
                 self._rx_streaming = False
                 self._cond.notify_all()
@@ -278,25 +309,35 @@ class SerialAdc(Adc):
     def _on_frame(self, frame: Frame) -> None:
         with self._cond:
             if not self._rx_streaming:
-                log.warning("ADC on %s: frame seq %d outside a stream, ignored", self.port, frame.seq)
+                log.warning(
+                    "ADC on %s: frame seq %d outside a stream, ignored", self.port, frame.seq
+                )
                 return
             first = frame.first_sample  # the decoder has checked the channel count
             if first < self._next_sample:
-                fault = ProtocolError(f"ADC frame seq {frame.seq} starts at sample {first}, before sample "
-                                      f"{self._next_sample} already received; the device's counters are "
-                                      f"inconsistent")
+                fault = ProtocolError(
+                    f"ADC frame seq {frame.seq} starts at sample {first}, before sample "
+                    f"{self._next_sample} already received; the device's counters are "
+                    f"inconsistent"
+                )
                 self._push(fault)
                 self._report_unlocked(fault, stream_lost=False)
                 return
             if first == self._next_sample and frame.seq != self._next_seq:
-                log.warning("ADC on %s: frame seq %d, expected %d, with contiguous samples", self.port,
-                            frame.seq, self._next_seq)
+                log.warning(
+                    "ADC on %s: frame seq %d, expected %d, with contiguous samples",
+                    self.port,
+                    frame.seq,
+                    self._next_seq,
+                )
             if first > self._next_sample:
                 if self._bad_data:
                     reason = f"corrupted frame(s): {self._bad_data}"
                 elif frame.seq != self._next_seq:
-                    reason = (f"frame(s) seq {self._next_seq}..{(frame.seq - 1) & 0xFFFFFFFF} missing "
-                              f"(sequence counter)")
+                    reason = (
+                        f"frame(s) seq {self._next_seq}..{(frame.seq - 1) & 0xFFFFFFFF} missing "
+                        f"(sequence counter)"
+                    )
                 else:
                     reason = "sample index jumped (frame counter consistent)"
                 if frame.flags & FLAG_OVERRUN:
@@ -315,8 +356,13 @@ class SerialAdc(Adc):
                 if not self.clock.virtual or self._stopping:
                     first = item[0]
                     log.error("ADC host buffer full: samples %d..%d dropped", first, first + n - 1)
-                    self._merge_gap(SampleGap(first, first + n, "host buffer overrun: the application did "
-                                                                "not read the stream in time"))
+                    self._merge_gap(
+                        SampleGap(
+                            first,
+                            first + n,
+                            "host buffer overrun: the application did not read the stream in time",
+                        )
+                    )
                     return
                 self._cond.wait(0.05)
             self._buffered += n
@@ -358,20 +404,26 @@ class SerialAdc(Adc):
             self._send(encode_command("STAT?"), "STAT?")
             stat = self._await_resync(sync, "STAT", t_start)
         if stat.fields.get("state") == "streaming":
-            fault = ProtocolError(f"ADC on {self.port}: still streaming after STOP at connect ('OK STAT {stat.text}'); "
-                                  f"power-cycle the ADC, then reopen the rig")
+            fault = ProtocolError(
+                f"ADC on {self.port}: still streaming after STOP at connect ('OK STAT {stat.text}'); "
+                f"power-cycle the ADC, then reopen the rig"
+            )
             self.faults.report(fault)
             raise fault
         if sync.frames or sync.bad or sync.stale:
-            log.warning("ADC on %s had output left when opened (an earlier session ended without STOP?): stopped "
-                        "it and discarded %s", self.port, sync.summary())
+            log.warning(
+                "ADC on %s had output left when opened (an earlier session ended without STOP?): stopped "
+                "it and discarded %s",
+                self.port,
+                sync.summary(),
+            )
         else:
             log.debug("ADC on %s: in sync after %s", self.port, sync.summary())
 
     def _await_resync(self, sync: _Resync, keyword: str, t_start: float) -> Reply:
         sent = self._mono()
         while True:
-            self.faults.check()        # the port went away under the reader
+            self.faults.check()  # the port went away under the reader
             try:
                 reply: Reply = self._replies.get(timeout=0.05)
                 return reply
@@ -387,15 +439,21 @@ class SerialAdc(Adc):
             else:
                 continue
             asked = "STOP" if keyword == "STOP" else "STAT? (after STOP)"
-            advice = (f"check that {self.port} is the FBS ADC (not another device), that it is powered and its "
-                      f"baud rate is {self.ser.baudrate}; power-cycle the ADC, then reopen the rig")
+            advice = (
+                f"check that {self.port} is the FBS ADC (not another device), that it is powered and its "
+                f"baud rate is {self.ser.baudrate}; power-cycle the ADC, then reopen the rig"
+            )
             fault: DriverError
             if not sync.nbytes:
-                fault = DeviceTimeout(f"ADC on {self.port}: no reply to {asked} at connect within "
-                                      f"{self.reply_timeout_s:g} s: the device sent nothing at all; {advice}")
+                fault = DeviceTimeout(
+                    f"ADC on {self.port}: no reply to {asked} at connect within "
+                    f"{self.reply_timeout_s:g} s: the device sent nothing at all; {advice}"
+                )
             else:
-                fault = ProtocolError(f"ADC on {self.port}: cannot resynchronise at connect: sent {asked} and read "
-                                      f"{sync.summary()}, but no 'OK {keyword}' reply ({why}); {advice}")
+                fault = ProtocolError(
+                    f"ADC on {self.port}: cannot resynchronise at connect: sent {asked} and read "
+                    f"{sync.summary()}, but no 'OK {keyword}' reply ({why}); {advice}"
+                )
             self.faults.report(fault)
             raise fault
 
@@ -404,7 +462,9 @@ class SerialAdc(Adc):
         try:
             self.ser.write(data)
         except (serial.SerialException, OSError) as exc:
-            fault = DeviceLost(f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away")
+            fault = DeviceLost(
+                f"ADC on {self.port}: cannot send {what!r} ({exc}); the device went away"
+            )
             self._lost(fault)
             raise fault from exc
 
@@ -436,7 +496,8 @@ class SerialAdc(Adc):
             if reply is None:
                 fault: DriverError = DeviceTimeout(
                     f"ADC on {self.port}: no reply to {what!r} within {self.reply_timeout_s:g} s"
-                    + (f" (last bad data: {self._bad_data})" if self._bad_data else ""))
+                    + (f" (last bad data: {self._bad_data})" if self._bad_data else "")
+                )
                 self.faults.report(fault)
                 raise fault from None
         if isinstance(reply, ProtocolError):
@@ -445,7 +506,9 @@ class SerialAdc(Adc):
             raise fault
         keyword = verb.rstrip("?")
         if reply.ok and reply.verb != keyword:
-            fault = ProtocolError(f"ADC on {self.port}: unexpected reply 'OK {reply.verb} {reply.text}' to {what!r}")
+            fault = ProtocolError(
+                f"ADC on {self.port}: unexpected reply 'OK {reply.verb} {reply.text}' to {what!r}"
+            )
             self.faults.report(fault)
             raise fault
         if not reply.ok:
@@ -460,13 +523,19 @@ class SerialAdc(Adc):
         ch = self._command("CHAN?")
         try:
             return AdcIdentity(
-                vendor=r.field("vendor"), model=r.field("model"), serial=r.field("serial"),
-                firmware=r.field("fw"), bits=int(r.field("bits")),
+                vendor=r.field("vendor"),
+                model=r.field("model"),
+                serial=r.field("serial"),
+                firmware=r.field("fw"),
+                bits=int(r.field("bits")),
                 max_aggregate_rate_hz=float(r.field("max_rate_hz")),
                 ranges_V=tuple(float(v) for v in r.field("ranges").split(",")),
-                channels=tuple(ch.words[0].split(",")) if ch.words else ())
+                channels=tuple(ch.words[0].split(",")) if ch.words else (),
+            )
         except ValueError as exc:
-            raise ProtocolError(f"ADC on {self.port}: identity reply {r.text!r} is malformed: {exc}") from exc
+            raise ProtocolError(
+                f"ADC on {self.port}: identity reply {r.text!r} is malformed: {exc}"
+            ) from exc
 
     @property
     def config(self) -> AdcConfig | None:
@@ -476,8 +545,13 @@ class SerialAdc(Adc):
     def streaming(self) -> bool:
         return self._rx_streaming
 
-    def configure(self, channels: tuple[str, ...] | list[str], rate_hz: float,
-                  ranges_V: Mapping[str, float] | float | None = None, frame_sets: int | None = None) -> AdcConfig:
+    def configure(
+        self,
+        channels: tuple[str, ...] | list[str],
+        rate_hz: float,
+        ranges_V: Mapping[str, float] | float | None = None,
+        frame_sets: int | None = None,
+    ) -> AdcConfig:
         ident = self.identity
         channels = tuple(channels)
         # Everything is checked before the first byte goes out.
@@ -486,44 +560,68 @@ class SerialAdc(Adc):
         if not channels:
             raise SetpointRangeError("no ADC channels chosen", value=channels, limit=ident.channels)
         if len(channels) > MAX_CHANNELS:
-            raise SetpointRangeError(f"{len(channels)} channels requested; a frame carries at most {MAX_CHANNELS}",
-                                     value=len(channels), limit=MAX_CHANNELS)
+            raise SetpointRangeError(
+                f"{len(channels)} channels requested; a frame carries at most {MAX_CHANNELS}",
+                value=len(channels),
+                limit=MAX_CHANNELS,
+            )
         for c in channels:
             if c not in ident.channels:
-                raise SetpointRangeError(f"ADC channel {c!r} does not exist (channels: {', '.join(ident.channels)})",
-                                         value=c, limit=ident.channels)
+                raise SetpointRangeError(
+                    f"ADC channel {c!r} does not exist (channels: {', '.join(ident.channels)})",
+                    value=c,
+                    limit=ident.channels,
+                )
         dup = {c for c in channels if channels.count(c) > 1}
         if dup:
-            raise SetpointRangeError(f"ADC channel(s) {', '.join(sorted(dup))} chosen twice", value=channels)
+            raise SetpointRangeError(
+                f"ADC channel(s) {', '.join(sorted(dup))} chosen twice", value=channels
+            )
         try:
             rate = float(rate_hz)
         except (TypeError, ValueError):
-            raise SetpointRangeError(f"ADC sample rate {rate_hz!r} is not a number", value=rate_hz) from None
+            raise SetpointRangeError(
+                f"ADC sample rate {rate_hz!r} is not a number", value=rate_hz
+            ) from None
         limit = ident.max_aggregate_rate_hz / len(channels)
         if not (math.isfinite(rate) and 0 < rate <= limit):
-            raise SetpointRangeError(f"ADC sample rate {rate_hz!r} Hz is outside 0 < rate <= {limit:g} Hz "
-                                     f"({ident.max_aggregate_rate_hz:g} samples/s shared by {len(channels)} channels)",
-                                     value=rate_hz, limit=limit)
+            raise SetpointRangeError(
+                f"ADC sample rate {rate_hz!r} Hz is outside 0 < rate <= {limit:g} Hz "
+                f"({ident.max_aggregate_rate_hz:g} samples/s shared by {len(channels)} channels)",
+                value=rate_hz,
+                limit=limit,
+            )
         if ranges_V is None:
             ranges_V = max(ident.ranges_V)
-        ranges = dict(ranges_V) if isinstance(ranges_V, Mapping) else dict.fromkeys(channels, ranges_V)
+        ranges = (
+            dict(ranges_V) if isinstance(ranges_V, Mapping) else dict.fromkeys(channels, ranges_V)
+        )
         for c, rng in ranges.items():
             if c not in channels:
-                raise SetpointRangeError(f"range given for {c!r}, which is not among the chosen channels",
-                                         value=c, limit=channels)
+                raise SetpointRangeError(
+                    f"range given for {c!r}, which is not among the chosen channels",
+                    value=c,
+                    limit=channels,
+                )
             if rng not in ident.ranges_V:
-                raise SetpointRangeError(f"ADC range {rng!r} V for {c} is not available (ranges: "
-                                         f"{', '.join(f'{v:g}' for v in ident.ranges_V)} V)", value=rng,
-                                         limit=ident.ranges_V)
+                raise SetpointRangeError(
+                    f"ADC range {rng!r} V for {c} is not available (ranges: "
+                    f"{', '.join(f'{v:g}' for v in ident.ranges_V)} V)",
+                    value=rng,
+                    limit=ident.ranges_V,
+                )
         for c in channels:
             ranges.setdefault(c, max(ident.ranges_V))
         if frame_sets is None:
             frame_sets = int(min(MAX_SETS, max(1, round(rate * FRAME_SECONDS))))
         max_sets = int(min(MAX_SETS, max(1, rate * MAX_FRAME_SECONDS)))
         if not (isinstance(frame_sets, int) and 1 <= frame_sets <= max_sets):
-            raise SetpointRangeError(f"frame length {frame_sets!r} sample sets is outside 1..{max_sets} (at most "
-                                     f"{MAX_SETS} sets and {MAX_FRAME_SECONDS:g} s per frame)",
-                                     value=frame_sets, limit=max_sets)
+            raise SetpointRangeError(
+                f"frame length {frame_sets!r} sample sets is outside 1..{max_sets} (at most "
+                f"{MAX_SETS} sets and {MAX_FRAME_SECONDS:g} s per frame)",
+                value=frame_sets,
+                limit=max_sets,
+            )
         self._config = None  # from the first byte on, until the device has confirmed every setting
         r = self._command("CONF", "CHAN", ",".join(channels))
         self._expect(r, ["CHAN", ",".join(channels)])
@@ -535,11 +633,15 @@ class SerialAdc(Adc):
             got_rate = float("nan")
         if not got_rate == rate:
             # A device that cannot make a rate exactly must refuse it (ERR RANGE), not change it.
-            fault = ProtocolError(f"ADC on {self.port}: rate echo {r.text!r} does not match the requested {rate:.9g} Hz")
+            fault = ProtocolError(
+                f"ADC on {self.port}: rate echo {r.text!r} does not match the requested {rate:.9g} Hz"
+            )
             self.faults.report(fault)
             raise fault
         for c in channels:
-            self._expect(self._command("CONF", "RANGE", c, f"{ranges[c]:g}"), ["RANGE", c, f"{ranges[c]:g}"])
+            self._expect(
+                self._command("CONF", "RANGE", c, f"{ranges[c]:g}"), ["RANGE", c, f"{ranges[c]:g}"]
+            )
         self._expect(self._command("CONF", "FRAME", frame_sets), ["FRAME", str(frame_sets)])
         self._scale = np.array([ranges[c] / 32768.0 for c in channels])
         self._decoder.expect_channels = len(channels)
@@ -548,9 +650,11 @@ class SerialAdc(Adc):
         return self._config
 
     def _expect(self, reply: Reply, words: list[str]) -> None:
-        if list(reply.words[:len(words)]) != words:
-            fault = ProtocolError(f"ADC on {self.port}: configuration echo 'OK {reply.verb} {reply.text}' does not "
-                                  f"match the request {' '.join(words)!r}")
+        if list(reply.words[: len(words)]) != words:
+            fault = ProtocolError(
+                f"ADC on {self.port}: configuration echo 'OK {reply.verb} {reply.text}' does not "
+                f"match the request {' '.join(words)!r}"
+            )
             self.faults.report(fault)
             raise fault
 
@@ -581,8 +685,12 @@ class SerialAdc(Adc):
 
     def _status_from(self, r: Reply, streaming: bool) -> AdcStatus:
         try:
-            return AdcStatus(streaming, int(r.fields.get("samples", 0)), int(r.fields.get("frames", 0)),
-                             int(r.fields.get("overruns", 0)))
+            return AdcStatus(
+                streaming,
+                int(r.fields.get("samples", 0)),
+                int(r.fields.get("frames", 0)),
+                int(r.fields.get("overruns", 0)),
+            )
         except ValueError:
             fault = ProtocolError(f"ADC on {self.port}: status reply {r.text!r} is malformed")
             self.faults.report(fault)
@@ -617,22 +725,32 @@ class SerialAdc(Adc):
                 if avail >= n or (avail and (blocked or not self._rx_streaming)):
                     return self._take(min(n, avail), cfg)
                 if not self._rx_streaming:
-                    raise InterlockError(f"the ADC stream has ended at sample {self._read_pos}; start it again")
+                    raise InterlockError(
+                        f"the ADC stream has ended at sample {self._read_pos}; start it again"
+                    )
                 now = self._mono()
                 if timeout_s is not None and now - t_start > timeout_s:
-                    raise DeviceTimeout(f"ADC on {self.port}: {n} sample sets not received within {timeout_s:g} s")
+                    raise DeviceTimeout(
+                        f"ADC on {self.port}: {n} sample sets not received within {timeout_s:g} s"
+                    )
                 if now - max(self._last_rx, t_start) > self.stall_timeout_s:
-                    fault = DeviceTimeout(f"ADC on {self.port} stalled: no data for {self.stall_timeout_s:g} s while "
-                                          f"streaming at {cfg.rate_hz:g} Hz (last sample {self._read_pos}); "
-                                          f"check the device and the cable")
+                    fault = DeviceTimeout(
+                        f"ADC on {self.port} stalled: no data for {self.stall_timeout_s:g} s while "
+                        f"streaming at {cfg.rate_hz:g} Hz (last sample {self._read_pos}); "
+                        f"check the device and the cable"
+                    )
                     self._report_unlocked(fault, stream_lost=True)
                     raise fault
                 # Ask a virtual clock for more only once the rig got as far as asked and the frames
                 # were lost on the way: asking because the host merely waited (a busy machine, a
                 # slow pty) would run the physics further ahead, and a set-point sent next would
                 # land at a rig time that depends on the machine's load.
-                if (not self._cond.wait(0.05) and self.clock.virtual
-                        and self.clock.now() >= demanded - 0.5 / cfg.rate_hz and self._lost_in_flight(n, t_start)):
+                if (
+                    not self._cond.wait(0.05)
+                    and self.clock.virtual
+                    and self.clock.now() >= demanded - 0.5 / cfg.rate_hz
+                    and self._lost_in_flight(n, t_start)
+                ):
                     ahead = min(2 * ahead, int(10 * cfg.rate_hz) + cfg.frame_sets)
                     demanded = self._t0 + (self._read_pos + n + ahead) / cfg.rate_hz
                     self.clock.demand(demanded)
@@ -644,7 +762,7 @@ class SerialAdc(Adc):
         once the reply is here, whatever is still missing will not come without more rig time.
         It is an in-band marker, so the answer is the same however slow the host or the pty.
         No reply (a stalled or silent device) is not a loss: the read's own rules decide."""
-        self._cond.release()    # the reader needs _cond to hand over the frames ahead of the reply
+        self._cond.release()  # the reader needs _cond to hand over the frames ahead of the reply
         try:
             answered = self._marker(t_start)
         finally:

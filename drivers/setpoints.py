@@ -20,16 +20,19 @@ from drivers.errors import SetpointRangeError
 class SetpointKind(StrEnum):
     """The rig's analogue set-points; the value is the name messages use."""
 
-    TORQUER_BIAS = "torquer bias"                       # per gyro channel (II C.1.a(1))
-    COMMAND_TORQUE = "command torque V_Td"              # per platform axis, through Kd (Ch. III)
-    AC_BIAS = "autocollimator bias gamma_c"             # per platform axis (eqs. 3.21-3.22)
+    TORQUER_BIAS = "torquer bias"  # per gyro channel (II C.1.a(1))
+    COMMAND_TORQUE = "command torque V_Td"  # per platform axis, through Kd (Ch. III)
+    AC_BIAS = "autocollimator bias gamma_c"  # per platform axis (eqs. 3.21-3.22)
 
 
 def check_name(what: str, name: object, allowed: Iterable[str]) -> str:
     allowed = tuple(allowed)
     if name not in allowed:
-        raise SetpointRangeError(f"{what} {name!r} does not exist (choose one of {', '.join(allowed)}); nothing was sent",
-                                 value=name, limit=allowed)
+        raise SetpointRangeError(
+            f"{what} {name!r} does not exist (choose one of {', '.join(allowed)}); nothing was sent",
+            value=name,
+            limit=allowed,
+        )
     return str(name)
 
 
@@ -39,11 +42,16 @@ def check_value(what: str, value: object, limit: float, why: str, lo: float | No
     try:
         v = float(value)  # type: ignore[arg-type]  # whatever float() takes: typed text, numpy scalars
     except (TypeError, ValueError):
-        raise SetpointRangeError(f"{what} {value!r} is not a number; nothing was sent", value=value) from None
+        raise SetpointRangeError(
+            f"{what} {value!r} is not a number; nothing was sent", value=value
+        ) from None
     if not math.isfinite(v) or not lo <= v <= limit:
         span = f"+-{limit:g}" if lo == -limit else f"{lo:g}..{limit:g}"
-        raise SetpointRangeError(f"{what} {value!r} is outside {span} ({why}); nothing was sent",
-                                 value=value, limit=limit)
+        raise SetpointRangeError(
+            f"{what} {value!r} is outside {span} ({why}); nothing was sent",
+            value=value,
+            limit=limit,
+        )
     return v
 
 
@@ -62,13 +70,20 @@ class SetpointLimits:
         lim = self.torquer_limit_V(channel)
         cal = self.calibration
         kto = cal.torquer_scale_urad_per_s_per_V[channel]
-        why = (f"the torquer's {cal.max_torquing_earth_rates:g} x earth-rate limit at K_TO {kto:g} urad/s/V"
-               if lim < cal.dac_range_V else "the DAC's range")
-        return check_value(f"{SetpointKind.TORQUER_BIAS} (V) on gyro channel {channel}", volts, lim, why)
+        why = (
+            f"the torquer's {cal.max_torquing_earth_rates:g} x earth-rate limit at K_TO {kto:g} urad/s/V"
+            if lim < cal.dac_range_V
+            else "the DAC's range"
+        )
+        return check_value(
+            f"{SetpointKind.TORQUER_BIAS} (V) on gyro channel {channel}", volts, lim, why
+        )
 
     def command(self, kind: SetpointKind, axis: str, volts: object) -> float:
         """A command DAC output (V_Td or gamma_c) on platform ``axis``."""
         if kind is SetpointKind.TORQUER_BIAS:
             raise ValueError("a torquer bias is per gyro channel: use torquer_bias")
         check_name("axis", axis, AXES)
-        return check_value(f"{kind} (V) on axis {axis}", volts, self.calibration.dac_range_V, "the DAC's range")
+        return check_value(
+            f"{kind} (V) on axis {axis}", volts, self.calibration.dac_range_V, "the DAC's range"
+        )

@@ -66,17 +66,33 @@ def watches(calibration: RigCalibration, mode: int) -> list[Watch]:
     out: list[Watch] = []
     for c in CAGED.get(mode, ()):
         kg = cal.pickoff_scale_mV_per_urad[c] * 1e-3
-        out.append(Watch(f"gyro_{c.lower()}", kg * cal.pickoff_linear_range_urad,
-                         f"beyond the pickoff's linear range ({cal.pickoff_linear_range_urad:g} urad)"))
+        out.append(
+            Watch(
+                f"gyro_{c.lower()}",
+                kg * cal.pickoff_linear_range_urad,
+                f"beyond the pickoff's linear range ({cal.pickoff_linear_range_urad:g} urad)",
+            )
+        )
         limit = cal.torquer_limit_V(c)
-        out.append(Watch(f"torq_{c.lower()}", TORQUER_SHARE * limit,
-                         f"at {TORQUER_SHARE:.0%} of its torquing limit ({limit:.3f} V) or beyond: saturated"))
+        out.append(
+            Watch(
+                f"torq_{c.lower()}",
+                TORQUER_SHARE * limit,
+                f"at {TORQUER_SHARE:.0%} of its torquing limit ({limit:.3f} V) or beyond: saturated",
+            )
+        )
     if mode in CAGED:
         for a, ac in cal.autocollimator.items():
             k = ac.control_mV_per_urad * 1e-3
-            out.append(Watch(f"ac_{a.lower()}_ctl", k * cal.ac_linear_range_urad,
-                             f"beyond the autocollimator's linear range ({cal.ac_linear_range_urad:g} urad) or on "
-                             "the converter's rail: the platform has run off", at_end_code=True))
+            out.append(
+                Watch(
+                    f"ac_{a.lower()}_ctl",
+                    k * cal.ac_linear_range_urad,
+                    f"beyond the autocollimator's linear range ({cal.ac_linear_range_urad:g} urad) or on "
+                    "the converter's rail: the platform has run off",
+                    at_end_code=True,
+                )
+            )
     return out
 
 
@@ -95,7 +111,9 @@ class ModeSupervisor:
     """Watches the blocks the host reads against the mode in force (``mode``, kept by the rig
     as it sets modes and goes safe); reports a ``SupervisionAlarm`` to ``faults`` once."""
 
-    def __init__(self, calibration: RigCalibration, faults: FaultLatch, hold_s: float = HOLD_S) -> None:
+    def __init__(
+        self, calibration: RigCalibration, faults: FaultLatch, hold_s: float = HOLD_S
+    ) -> None:
         self.calibration = calibration
         self.faults = faults
         self.hold_s = hold_s
@@ -129,10 +147,13 @@ class ModeSupervisor:
             longest, self._runs[w.channel] = longest_run(beyond, self._runs.get(w.channel, 0))
             if longest >= need:
                 t = block.t0_s + block.stop_sample / block.rate_hz
-                self.faults.report(SupervisionAlarm(
-                    f"mode {self._mode} supervision at {t:.2f} s: {w.channel} = {v[-1]:+.3f} V, {w.what}, "
-                    f"for {self.hold_s:g} s; the rig went safe (Mode 1). Check the caging switches and the "
-                    f"gyros before entering mode {self._mode} again"))
+                self.faults.report(
+                    SupervisionAlarm(
+                        f"mode {self._mode} supervision at {t:.2f} s: {w.channel} = {v[-1]:+.3f} V, {w.what}, "
+                        f"for {self.hold_s:g} s; the rig went safe (Mode 1). Check the caging switches and the "
+                        f"gyros before entering mode {self._mode} again"
+                    )
+                )
                 return
 
 

@@ -47,8 +47,10 @@ class CanopenTorquerDac(CanopenDac):
         return self.write(self.channels.index(channel), v, f"torquer bias on {channel}")
 
     def bias_V(self, channel: str) -> float:
-        return self.read(self.channels.index(check_name("gyro channel", channel, self.channels)),
-                         f"torquer bias {channel}")
+        return self.read(
+            self.channels.index(check_name("gyro channel", channel, self.channels)),
+            f"torquer bias {channel}",
+        )
 
     def zero(self) -> None:
         for c in self.channels:

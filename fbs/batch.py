@@ -54,12 +54,12 @@ class Plan:
 
     command: str
     extra: list[str]
-    files: list[str]                    # absolute paths, in the order given, each once
+    files: list[str]  # absolute paths, in the order given, each once
     out: Path
     jobs: int | None
     scheduler: str | None
-    latest: dict[str, dict[str, Any]] = field(default_factory=dict)   # --out's newest line per file
-    torn_tail: int = 0                  # bytes of an unfinished last line in --out (a killed writer)
+    latest: dict[str, dict[str, Any]] = field(default_factory=dict)  # --out's newest line per file
+    torn_tail: int = 0  # bytes of an unfinished last line in --out (a killed writer)
 
     @property
     def todo(self) -> list[str]:
@@ -79,8 +79,13 @@ def _files(names: list[str]) -> list[str]:
         raise BatchError("no FILE given")
     bad = [n for n in names if not os.path.isfile(n)]
     if bad:
-        why = ", ".join(f"{n} ({'not a regular file' if os.path.exists(n) else 'does not exist'})" for n in bad[:10])
-        raise BatchError(f"{len(bad)} FILE(s) cannot be read: {why}" + (" ..." if len(bad) > 10 else ""))
+        why = ", ".join(
+            f"{n} ({'not a regular file' if os.path.exists(n) else 'does not exist'})"
+            for n in bad[:10]
+        )
+        raise BatchError(
+            f"{len(bad)} FILE(s) cannot be read: {why}" + (" ..." if len(bad) > 10 else "")
+        )
     return list(dict.fromkeys(os.path.abspath(n) for n in names))
 
 
@@ -92,11 +97,15 @@ def _extra(command: str, text: str, first_file: str) -> list[str]:
     try:
         args = batch_task.parse_command(command, first_file, extra)
     except ValueError as exc:
-        raise BatchError(f"--args {text!r} for fbs {' '.join(batch_task.COMMANDS[command])}: {exc}") from None
+        raise BatchError(
+            f"--args {text!r} for fbs {' '.join(batch_task.COMMANDS[command])}: {exc}"
+        ) from None
     for dest in batch_task.SHARED_OUTPUTS.get(command, ()):
         if getattr(args, dest, None) is not None:
-            raise BatchError(f"--args {text!r}: --{dest} would send every file's output to one place; "
-                             f"leave it out")
+            raise BatchError(
+                f"--args {text!r}: --{dest} would send every file's output to one place; "
+                f"leave it out"
+            )
     return extra
 
 
@@ -106,18 +115,30 @@ def _read_results(out: Path, plan: Plan) -> None:
     try:
         lines, plan.torn_tail = batch_exec.read_results(out)
     except ValueError as exc:
-        raise BatchError(f"--out {out} is not a batch results file ({exc}); give another --out") from None
+        raise BatchError(
+            f"--out {out} is not a batch results file ({exc}); give another --out"
+        ) from None
     for n, rec in lines:
-        missing = [k for k in batch_task.RECORD_KEYS if k != "args" and not (isinstance(rec, dict) and k in rec)]
+        missing = [
+            k
+            for k in batch_task.RECORD_KEYS
+            if k != "args" and not (isinstance(rec, dict) and k in rec)
+        ]
         if missing:
-            raise BatchError(f"--out {out} is not a batch results file (line {n} has no {', '.join(missing)}); "
-                             f"give another --out")
+            raise BatchError(
+                f"--out {out} is not a batch results file (line {n} has no {', '.join(missing)}); "
+                f"give another --out"
+            )
         if rec["command"] != plan.command:
-            raise BatchError(f"--out {out} holds results of `fbs batch {rec['command']}`, not `fbs batch "
-                             f"{plan.command}`: give another --out")
+            raise BatchError(
+                f"--out {out} holds results of `fbs batch {rec['command']}`, not `fbs batch "
+                f"{plan.command}`: give another --out"
+            )
         if rec.get("args", []) != plan.extra:
-            raise BatchError(f"--out {out} holds results made with --args {shlex.join(rec.get('args', []))!r}, "
-                             f"not {shlex.join(plan.extra)!r}: give the same --args, or another --out")
+            raise BatchError(
+                f"--out {out} holds results made with --args {shlex.join(rec.get('args', []))!r}, "
+                f"not {shlex.join(plan.extra)!r}: give the same --args, or another --out"
+            )
         plan.latest[str(rec["file"])] = rec
 
 
@@ -141,14 +162,22 @@ def plan_of(args: argparse.Namespace) -> Plan:
     """Every argument checked (``BatchError`` naming the bad value); nothing written."""
     command = args.batch_command
     if command not in batch_task.COMMANDS:
-        raise BatchError(f"unknown COMMAND {command!r}; fbs batch runs {', '.join(batch_task.COMMANDS)}")
+        raise BatchError(
+            f"unknown COMMAND {command!r}; fbs batch runs {', '.join(batch_task.COMMANDS)}"
+        )
     jobs = _jobs(args.jobs)
     files = _files(args.files)
     out = _out(args.out)
     if any(os.path.exists(out) and os.path.samefile(out, f) for f in files):
         raise BatchError(f"--out {out} is one of the FILEs")
-    plan = Plan(command=command, extra=_extra(command, args.args, files[0]), files=files, out=out, jobs=jobs,
-                scheduler=args.scheduler)
+    plan = Plan(
+        command=command,
+        extra=_extra(command, args.args, files[0]),
+        files=files,
+        out=out,
+        jobs=jobs,
+        scheduler=args.scheduler,
+    )
     if out.exists():
         _read_results(out, plan)
     return plan
@@ -161,13 +190,22 @@ def _say(text: str) -> None:
 
 def _lost(plan: Plan, path: str, exc: BaseException) -> dict[str, Any]:
     """The line of a file whose worker failed it (not the command: the process or the cluster)."""
-    return batch_task.record(path, plan.command, plan.extra, 2, None,
-                             f"{batch_exec.lost_reason(exc)}; run the batch again to retry it", 0.0)
+    return batch_task.record(
+        path,
+        plan.command,
+        plan.extra,
+        2,
+        None,
+        f"{batch_exec.lost_reason(exc)}; run the batch again to retry it",
+        0.0,
+    )
 
 
 def _exit_code(plan: Plan) -> int:
     recs = [plan.latest[f] for f in plan.files if f in plan.latest]
-    if len(recs) < len(plan.files) or any(r.get("error") is not None or r.get("exit") not in (0, 1) for r in recs):
+    if len(recs) < len(plan.files) or any(
+        r.get("error") is not None or r.get("exit") not in (0, 1) for r in recs
+    ):
         return 2
     return 1 if any(r["exit"] == 1 for r in recs) else 0
 
@@ -184,17 +222,28 @@ def _run(plan: Plan, backend: batch_exec.Backend, results: batch_exec.ResultsFil
         results.append(rec)
         plan.latest[path] = rec
         n_err += rec["error"] is not None
-        how = "ok" if rec["error"] is None else f"exit {rec['exit']}: {rec['error'].splitlines()[-1]}"
+        how = (
+            "ok" if rec["error"] is None else f"exit {rec['exit']}: {rec['error'].splitlines()[-1]}"
+        )
         n_done += 1
-        _say(f"[{n_done}/{n_todo}] {path}: {how} ({rec['elapsed_s']:.1f} s); {n_err} error(s), "
-             f"{time.monotonic() - t0:.0f} s elapsed")
+        _say(
+            f"[{n_done}/{n_todo}] {path}: {how} ({rec['elapsed_s']:.1f} s); {n_err} error(s), "
+            f"{time.monotonic() - t0:.0f} s elapsed"
+        )
 
     def interrupted(n_done: int, n_in_flight: int, n_not_submitted: int) -> None:
-        _say(f"interrupted: {n_done} result(s) of this run kept in {plan.out}, {n_in_flight} unfinished "
-             f"cancelled, {n_not_submitted} not submitted; run the same command again to go on")
+        _say(
+            f"interrupted: {n_done} result(s) of this run kept in {plan.out}, {n_in_flight} unfinished "
+            f"cancelled, {n_not_submitted} not submitted; run the same command again to go on"
+        )
 
-    batch_exec.run_tasks(backend, batch_task.run_file, [(p, (plan.command, plan.extra, p)) for p in todo],
-                         done, interrupted)
+    batch_exec.run_tasks(
+        backend,
+        batch_task.run_file,
+        [(p, (plan.command, plan.extra, p)) for p in todo],
+        done,
+        interrupted,
+    )
 
 
 def _batch(args: argparse.Namespace) -> int:
@@ -214,15 +263,21 @@ def _batch(args: argparse.Namespace) -> int:
         backend = batch_exec.open_backend(jobs, plan.scheduler) if todo else None
     except BaseException:
         results.close()
-        if created and out.stat().st_size == 0:   # refused (a backend that cannot start): no file left behind
+        if (
+            created and out.stat().st_size == 0
+        ):  # refused (a backend that cannot start): no file left behind
             out.unlink()
         raise
     try:
         if plan.torn_tail:
-            _say(f"dropped an unfinished last line ({plan.torn_tail} bytes) a killed batch left in {plan.out}")
-        _say(f"{plan.command} on {len(plan.files)} file(s): {done} already done in {plan.out} (skipped)"
-             + (f", {retried} earlier error(s) retried" if retried else "")
-             + (f"; {len(todo)} to run on {backend.describe()}" if backend else "; nothing to run"))
+            _say(
+                f"dropped an unfinished last line ({plan.torn_tail} bytes) a killed batch left in {plan.out}"
+            )
+        _say(
+            f"{plan.command} on {len(plan.files)} file(s): {done} already done in {plan.out} (skipped)"
+            + (f", {retried} earlier error(s) retried" if retried else "")
+            + (f"; {len(todo)} to run on {backend.describe()}" if backend else "; nothing to run")
+        )
         if backend:
             try:
                 _run(plan, backend, results)
@@ -237,21 +292,46 @@ def _batch(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    b = sub.add_parser("batch", help="one analysis command on many run files, in parallel (local processes or a "
-                       "Dask cluster), one JSON result line per file",
-                       description="Runs COMMAND on every FILE as `fbs COMMAND FILE --json OPTIONS` would, in "
-                       "parallel, and appends one JSON line per file to --out as each finishes; an interrupted batch "
-                       "goes on where it stopped when run again. Exit 0 all ok, 1 some file's limits failed, 2 some "
-                       "file failed (or interrupted, or refused).")
-    b.add_argument("batch_command", metavar="COMMAND", help=f"one of {', '.join(batch_task.COMMANDS)}")
-    b.add_argument("files", nargs="*", metavar="FILE", help="fbs-run files (finished ones, on storage every worker "
-                   "reads)")
-    b.add_argument("--out", required=True, metavar="RESULTS.jsonl",
-                   help="results, one JSON line per file; an existing one of the same COMMAND is resumed")
-    b.add_argument("--jobs", metavar="N", help="local processes (default: one per core); with --scheduler, the "
-                   "most files in flight at once (default: all)")
-    b.add_argument("--scheduler", metavar="ADDR", help="a Dask distributed scheduler, e.g. tcp://host:8786 "
-                   f"(needs {batch_exec.CLUSTER_EXTRA})")
-    b.add_argument("--args", default="", metavar="'OPTIONS'",
-                   help="options for COMMAND, as one word: e.g. --args='--axis X --seed 2'")
+    b = sub.add_parser(
+        "batch",
+        help="one analysis command on many run files, in parallel (local processes or a "
+        "Dask cluster), one JSON result line per file",
+        description="Runs COMMAND on every FILE as `fbs COMMAND FILE --json OPTIONS` would, in "
+        "parallel, and appends one JSON line per file to --out as each finishes; an interrupted batch "
+        "goes on where it stopped when run again. Exit 0 all ok, 1 some file's limits failed, 2 some "
+        "file failed (or interrupted, or refused).",
+    )
+    b.add_argument(
+        "batch_command", metavar="COMMAND", help=f"one of {', '.join(batch_task.COMMANDS)}"
+    )
+    b.add_argument(
+        "files",
+        nargs="*",
+        metavar="FILE",
+        help="fbs-run files (finished ones, on storage every worker reads)",
+    )
+    b.add_argument(
+        "--out",
+        required=True,
+        metavar="RESULTS.jsonl",
+        help="results, one JSON line per file; an existing one of the same COMMAND is resumed",
+    )
+    b.add_argument(
+        "--jobs",
+        metavar="N",
+        help="local processes (default: one per core); with --scheduler, the "
+        "most files in flight at once (default: all)",
+    )
+    b.add_argument(
+        "--scheduler",
+        metavar="ADDR",
+        help="a Dask distributed scheduler, e.g. tcp://host:8786 "
+        f"(needs {batch_exec.CLUSTER_EXTRA})",
+    )
+    b.add_argument(
+        "--args",
+        default="",
+        metavar="'OPTIONS'",
+        help="options for COMMAND, as one word: e.g. --args='--axis X --seed 2'",
+    )
     b.set_defaults(func=_batch)

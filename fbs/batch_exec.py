@@ -29,7 +29,14 @@ import signal
 import socket
 from collections import deque
 from collections.abc import Callable, Hashable, Iterable, Iterator
-from concurrent.futures import FIRST_COMPLETED, CancelledError, Executor, Future, ProcessPoolExecutor, wait
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    CancelledError,
+    Executor,
+    Future,
+    ProcessPoolExecutor,
+    wait,
+)
 from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from pathlib import Path
@@ -51,7 +58,9 @@ class BackendError(ValueError):
 
 # ---------------------------------------------------------------------------- the executors
 #: a scheduler address: ``[tcp|tls://]host:port`` (an IPv6 host in brackets)
-_ADDRESS = re.compile(r"^(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9.-]+):(?P<port>\d{1,5})$")
+_ADDRESS = re.compile(
+    r"^(?:(?P<scheme>tcp|tls)://)?(?P<host>\[[0-9a-fA-F:.]+\]|[A-Za-z0-9.-]+):(?P<port>\d{1,5})$"
+)
 
 
 def check_scheduler_address(address: str) -> None:
@@ -59,13 +68,18 @@ def check_scheduler_address(address: str) -> None:
     and, over TCP, one where nothing answers within ``CONNECT_TIMEOUT_S``."""
     m = _ADDRESS.match(address)
     if m is None or not 1 <= int(m["port"]) <= 65535:
-        raise BackendError(f"--scheduler {address!r} must be a Dask scheduler address [tcp://]HOST:PORT, port "
-                           f"1..65535, e.g. tcp://127.0.0.1:8786")
+        raise BackendError(
+            f"--scheduler {address!r} must be a Dask scheduler address [tcp://]HOST:PORT, port "
+            f"1..65535, e.g. tcp://127.0.0.1:8786"
+        )
     host = m["host"].strip("[]")
     try:
         socket.create_connection((host, int(m["port"])), timeout=CONNECT_TIMEOUT_S).close()
     except OSError as exc:
-        raise BackendError(f"--scheduler {address}: nothing answers there ({exc.strerror or exc})") from None
+        raise BackendError(
+            f"--scheduler {address}: nothing answers there ({exc.strerror or exc})"
+        ) from None
+
 
 def _init_local_worker() -> None:
     for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGHUP")):
@@ -79,15 +93,18 @@ class LocalPool:
 
     def __init__(self, jobs: int) -> None:
         self.jobs = jobs
-        self.max_in_flight = jobs           # no queue behind the workers: a broken pool loses no queued task
+        self.max_in_flight = jobs  # no queue behind the workers: a broken pool loses no queued task
         env = batch_task.worker_environment()
         self._saved = {k: os.environ.get(k) for k in env}
-        os.environ.update(env)              # inherited by the workers the pool spawns
+        os.environ.update(env)  # inherited by the workers the pool spawns
         self._pool = self._new_pool()
 
     def _new_pool(self) -> ProcessPoolExecutor:
-        return ProcessPoolExecutor(self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_init_local_worker)
+        return ProcessPoolExecutor(
+            self.jobs,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_init_local_worker,
+        )
 
     def describe(self) -> str:
         return f"{self.jobs} local process{'es' if self.jobs != 1 else ''} (one BLAS thread each)"
@@ -95,7 +112,7 @@ class LocalPool:
     def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
         try:
             return self._pool.submit(fn, *args)
-        except BrokenProcessPool:          # a worker died: its tasks failed with it; go on afresh
+        except BrokenProcessPool:  # a worker died: its tasks failed with it; go on afresh
             self._pool.shutdown(wait=True)
             self._pool = self._new_pool()
             return self._pool.submit(fn, *args)
@@ -103,7 +120,7 @@ class LocalPool:
     def abort(self) -> None:
         """Cancel what has not started and end the workers (what they were doing is lost)."""
         self._pool.shutdown(wait=False, cancel_futures=True)
-        for p in multiprocessing.active_children():     # this process's pool workers
+        for p in multiprocessing.active_children():  # this process's pool workers
             p.terminate()
         self._pool.shutdown(wait=True)
 
@@ -123,29 +140,39 @@ class DaskCluster:
         try:
             import distributed
         except ImportError as exc:
-            raise BackendError(f"--scheduler needs Dask's distributed, an optional dependency that is not installed "
-                               f"here ({exc}): {CLUSTER_EXTRA}") from None
+            raise BackendError(
+                f"--scheduler needs Dask's distributed, an optional dependency that is not installed "
+                f"here ({exc}): {CLUSTER_EXTRA}"
+            ) from None
         # A Client that fails in its constructor still closes itself when collected, waiting 60 s
         # and printing a traceback at exit: an address that cannot work is refused before one is made.
         check_scheduler_address(address)
         try:
-            self._client = distributed.Client(address, timeout=CONNECT_TIMEOUT_S, set_as_default=False)
+            self._client = distributed.Client(
+                address, timeout=CONNECT_TIMEOUT_S, set_as_default=False
+            )
         except (OSError, TimeoutError, ValueError, TypeError) as exc:
-            raise BackendError(f"--scheduler {address}: cannot connect ({type(exc).__name__}: {exc})") from None
+            raise BackendError(
+                f"--scheduler {address}: cannot connect ({type(exc).__name__}: {exc})"
+            ) from None
         self.address = address
-        self.max_in_flight = jobs if jobs is not None else 1 << 30    # all at once unless --jobs caps it
+        self.max_in_flight = (
+            jobs if jobs is not None else 1 << 30
+        )  # all at once unless --jobs caps it
         self._executor: Executor = self._client.get_executor(pure=False)
 
     def describe(self) -> str:
         threads = self._client.nthreads()
-        return (f"Dask scheduler {self.address} ({len(threads)} worker{'s' if len(threads) != 1 else ''}, "
-                f"{sum(threads.values())} threads)")
+        return (
+            f"Dask scheduler {self.address} ({len(threads)} worker{'s' if len(threads) != 1 else ''}, "
+            f"{sum(threads.values())} threads)"
+        )
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Future[Any]:
         return self._executor.submit(fn, *args)
 
     def abort(self) -> None:
-        self._executor.shutdown(wait=False)      # cancels every future not finished
+        self._executor.shutdown(wait=False)  # cancels every future not finished
         self._client.close()
 
     def close(self) -> None:
@@ -166,7 +193,7 @@ def default_jobs() -> int:
     """The cores this process may run on."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:          # not Linux
+    except AttributeError:  # not Linux
         return max(1, os.cpu_count() or 1)
 
 
@@ -192,14 +219,24 @@ def local_jobs(jobs: int | None, scheduler: str | None, n_tasks: int) -> int | N
 # ---------------------------------------------------------------------------- submitting and collecting
 def lost_reason(exc: BaseException) -> str:
     """Why a task has no result when the executor, not the task, failed it."""
-    why = "its worker process died" if isinstance(exc, BrokenProcessPool) else "its executor failed it"
+    why = (
+        "its worker process died"
+        if isinstance(exc, BrokenProcessPool)
+        else "its executor failed it"
+    )
     return f"{why} ({type(exc).__name__}: {exc})"
 
 
-def run_tasks(backend: Backend, fn: Callable[..., Any], tasks: Iterable[tuple[K, tuple[Any, ...]]],
-              done: Callable[[K, Any, BaseException | None], None],
-              interrupted: Callable[[int, int, int], None], *, retry_lost: int = 0,
-              retrying: Callable[[K, BaseException], None] | None = None) -> None:
+def run_tasks(
+    backend: Backend,
+    fn: Callable[..., Any],
+    tasks: Iterable[tuple[K, tuple[Any, ...]]],
+    done: Callable[[K, Any, BaseException | None], None],
+    interrupted: Callable[[int, int, int], None],
+    *,
+    retry_lost: int = 0,
+    retrying: Callable[[K, BaseException], None] | None = None,
+) -> None:
     """``fn(*args)`` for every ``(key, args)`` of ``tasks`` on ``backend``, at most
     ``backend.max_in_flight`` at once; ``done(key, result, None)`` as each finishes, in this
     thread, or ``done(key, None, exc)`` for a task the executor failed (its worker process died,
@@ -225,7 +262,9 @@ def run_tasks(backend: Backend, fn: Callable[..., Any], tasks: Iterable[tuple[K,
                 key, args = in_flight.pop(fut)
                 try:
                     exc = fut.exception()
-                except CancelledError as cancelled:     # by the cluster (a scheduler restarted), not by us
+                except (
+                    CancelledError
+                ) as cancelled:  # by the cluster (a scheduler restarted), not by us
                     exc = cancelled
                 if isinstance(exc, BrokenProcessPool) and retries.get(key, 0) < retry_lost:
                     retries[key] = retries.get(key, 0) + 1
@@ -236,7 +275,7 @@ def run_tasks(backend: Backend, fn: Callable[..., Any], tasks: Iterable[tuple[K,
                 done(key, None if exc is not None else fut.result(), exc)
                 n_done += 1
     except KeyboardInterrupt:
-        with signals_held():           # a second signal does not cut the stopping short
+        with signals_held():  # a second signal does not cut the stopping short
             backend.abort()
             interrupted(n_done, len(in_flight), len(todo))
         raise
@@ -272,8 +311,10 @@ class ResultsFile:
             fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             os.close(self._fd)
-            raise ResultsBusy(f"--out {path} is being written by another `fbs batch` now: wait for it to end "
-                              f"(then run again to resume), or give another --out") from None
+            raise ResultsBusy(
+                f"--out {path} is being written by another `fbs batch` now: wait for it to end "
+                f"(then run again to resume), or give another --out"
+            ) from None
 
     def cut(self, torn_tail: int) -> None:
         """Cut off an unfinished last line (``torn_tail`` bytes, from ``read_results``)."""
@@ -285,7 +326,7 @@ class ResultsFile:
         with signals_held():
             view = memoryview(data)
             while view:
-                view = view[os.write(self._fd, view):]
+                view = view[os.write(self._fd, view) :]
             os.fsync(self._fd)
 
     def close(self) -> None:

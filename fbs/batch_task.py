@@ -40,8 +40,12 @@ COMMANDS: dict[str, tuple[str, ...]] = {
     "analyze-transfer": ("analyze", "transfer"),
 }
 #: options that name one output place for every file: refused, the files would overwrite each other's
-SHARED_OUTPUTS: dict[str, tuple[str, ...]] = {"gap": ("report",), "spectra": ("out",), "analyze-hysteresis": ("out",),
-                                                 "analyze-transfer": ("out",)}
+SHARED_OUTPUTS: dict[str, tuple[str, ...]] = {
+    "gap": ("report",),
+    "spectra": ("out",),
+    "analyze-hysteresis": ("out",),
+    "analyze-transfer": ("out",),
+}
 #: the environment variables that hold a worker's BLAS to one thread
 BLAS_THREAD_VARS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 #: the keys of a result line, in order
@@ -71,7 +75,7 @@ def limit_loaded_blas() -> None:
     """One thread for every BLAS/OpenMP library loaded in this process (threadpoolctl, where installed)."""
     try:
         from threadpoolctl import threadpool_limits
-    except ImportError:     # the environment variables set before numpy was loaded do it
+    except ImportError:  # the environment variables set before numpy was loaded do it
         return
     threadpool_limits(limits=1)
 
@@ -98,10 +102,21 @@ def parse_command(command: str, path: str, extra: list[str]) -> argparse.Namespa
     return args
 
 
-def record(path: str, command: str, extra: list[str], exit_code: int, result: Any, error: str | None,
-           elapsed_s: float) -> dict[str, Any]:
+def record(
+    path: str,
+    command: str,
+    extra: list[str],
+    exit_code: int,
+    result: Any,
+    error: str | None,
+    elapsed_s: float,
+) -> dict[str, Any]:
     """One line of the results file."""
-    return dict(zip(RECORD_KEYS, (path, command, list(extra), exit_code, result, error, round(elapsed_s, 3))))
+    return dict(
+        zip(
+            RECORD_KEYS, (path, command, list(extra), exit_code, result, error, round(elapsed_s, 3))
+        )
+    )
 
 
 def guarded(fn: Callable[..., Any], *args: Any) -> tuple[int, Any, str | None, float]:
@@ -116,9 +131,14 @@ def guarded(fn: Callable[..., Any], *args: Any) -> tuple[int, Any, str | None, f
         result = fn(*args)
     except command_errors() as exc:
         return 2, None, str(exc), time.perf_counter() - t0
-    except Exception as exc:      # a bug: the single command says "internal error", exit 2
+    except Exception as exc:  # a bug: the single command says "internal error", exit 2
         text = "".join(traceback.format_exception(exc)).rstrip()
-        return 2, None, f"internal error: {type(exc).__name__}: {exc}\n{text}", time.perf_counter() - t0
+        return (
+            2,
+            None,
+            f"internal error: {type(exc).__name__}: {exc}\n{text}",
+            time.perf_counter() - t0,
+        )
     return verdict_exit(result), result, None, time.perf_counter() - t0
 
 

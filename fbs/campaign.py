@@ -55,7 +55,12 @@ GRID_DIGITS = 12
 MAX_GRID_POINTS = 1000
 MAX_SEEDS = 10_000
 MAX_DURATION_S = 3600.0
-RUNS_FILE, CURVES_JSON, CURVES_MD, CURVES_PNG = "runs.jsonl", "curves.json", "curves.md", "curves.png"
+RUNS_FILE, CURVES_JSON, CURVES_MD, CURVES_PNG = (
+    "runs.jsonl",
+    "curves.json",
+    "curves.md",
+    "curves.png",
+)
 #: the workflows a campaign runs (``fbs campaign WORKFLOW``)
 WORKFLOWS = ("gap",)
 
@@ -133,7 +138,9 @@ def _param_names(effect: Any) -> str:
 def _in_prior(effect: Any, name: str, x: float, what: str) -> None:
     p = next(q for q in effect.params if q.name == name)
     if not p.lo <= x <= p.hi:
-        raise CampaignError(f"{what}: {name} = {x:g} is outside the effect's range {p.lo:g}..{p.hi:g}")
+        raise CampaignError(
+            f"{what}: {name} = {x:g} is outside the effect's range {p.lo:g}..{p.hi:g}"
+        )
 
 
 def parse_grid(text: str, effect: Any, log: bool = False) -> Grid:
@@ -144,16 +151,22 @@ def parse_grid(text: str, effect: Any, log: bool = False) -> Grid:
     name, eq, rest = text.partition("=")
     parts = rest.split(":")
     if not eq or len(parts) != 3:
-        raise CampaignError(f"{what}: expected PARAM=LO:HI:N, e.g. {effect.params[0].name}="
-                            f"{effect.params[0].lo:g}:{effect.params[0].hi:g}:5")
+        raise CampaignError(
+            f"{what}: expected PARAM=LO:HI:N, e.g. {effect.params[0].name}="
+            f"{effect.params[0].lo:g}:{effect.params[0].hi:g}:5"
+        )
     name = name.strip()
     if name not in {p.name for p in effect.params}:
-        raise CampaignError(f"{what}: {effect.name} has no parameter {name!r}; its parameters: "
-                            f"{_param_names(effect)}")
+        raise CampaignError(
+            f"{what}: {effect.name} has no parameter {name!r}; its parameters: "
+            f"{_param_names(effect)}"
+        )
     lo, hi = _number(parts[0].strip(), f"{what}: LO"), _number(parts[1].strip(), f"{what}: HI")
     n = _whole(parts[2].strip(), f"{what}: N", 1, MAX_GRID_POINTS)
     if n == 1 and lo != hi:
-        raise CampaignError(f"{what}: N = 1 is one value; give it as LO and HI both ({name}={lo!r}:{lo!r}:1)")
+        raise CampaignError(
+            f"{what}: N = 1 is one value; give it as LO and HI both ({name}={lo!r}:{lo!r}:1)"
+        )
     if n > 1 and not lo < hi:
         raise CampaignError(f"{what}: LO must be below HI for N > 1")
     if log and lo <= 0:
@@ -163,8 +176,10 @@ def parse_grid(text: str, effect: Any, log: bool = False) -> Grid:
     grid = Grid(name, lo, hi, n, log)
     values = grid.values
     if any(a >= b for a, b in zip(values, values[1:])):
-        raise CampaignError(f"{what}: {n} values between {lo!r} and {hi!r} are not distinct to {GRID_DIGITS} "
-                            f"digits; give fewer")
+        raise CampaignError(
+            f"{what}: {n} values between {lo!r} and {hi!r} are not distinct to {GRID_DIGITS} "
+            f"digits; give fewer"
+        )
     return grid
 
 
@@ -180,7 +195,9 @@ def parse_sets(items: Iterable[str], effect: Any, grid_param: str) -> dict[str, 
         if not eq:
             raise CampaignError(f"{what}: expected PARAM=VALUE")
         if k not in {p.name for p in effect.params}:
-            raise CampaignError(f"{what}: {effect.name} has no parameter {k!r}; its parameters: {_param_names(effect)}")
+            raise CampaignError(
+                f"{what}: {effect.name} has no parameter {k!r}; its parameters: {_param_names(effect)}"
+            )
         if k == grid_param:
             raise CampaignError(f"{what}: {k} is the --grid parameter")
         if k in out:
@@ -201,16 +218,18 @@ class Campaign:
 
     effect: str
     grid: Grid
-    fixed: dict[str, float]            # every other parameter of the effect, as injected
+    fixed: dict[str, float]  # every other parameter of the effect, as injected
     n_seeds: int
     duration_s: float
     out: Path
     jobs: int | None = None
     scheduler: str | None = None
     param_order: tuple[str, ...] = ()
-    latest: dict[tuple[Any, ...], dict[str, Any]] = field(default_factory=dict)   # runs.jsonl's newest line per run
+    latest: dict[tuple[Any, ...], dict[str, Any]] = field(
+        default_factory=dict
+    )  # runs.jsonl's newest line per run
     torn_tail: int = 0
-    replace: bool = False              # --force over another campaign's runs
+    replace: bool = False  # --force over another campaign's runs
 
     @property
     def seeds(self) -> list[int]:
@@ -235,11 +254,20 @@ class Campaign:
             out.append((run_key("none", {}, s), ("none", None, {}, s, self.duration_s)))
             for v in self.grid.values:
                 p = self.params_at(v)
-                out.append((run_key(self.effect, p, s), (self.effect, self.grid.param, p, s, self.duration_s)))
+                out.append(
+                    (
+                        run_key(self.effect, p, s),
+                        (self.effect, self.grid.param, p, s, self.duration_s),
+                    )
+                )
         return out
 
     def todo(self) -> list[tuple[tuple[Any, ...], tuple[Any, ...]]]:
-        return [r for r in self.runs() if self.latest.get(r[0], {"error": "missing"})["error"] is not None]
+        return [
+            r
+            for r in self.runs()
+            if self.latest.get(r[0], {"error": "missing"})["error"] is not None
+        ]
 
     def command(self) -> str:
         """The command line of this campaign (for curves.md)."""
@@ -256,8 +284,11 @@ class Campaign:
 
     def describe(self) -> str:
         fixed = ", ".join(f"{k} = {v:g}" for k, v in self.fixed.items())
-        return (f"{self.effect} over {self.grid.param}" + (f" ({fixed})" if fixed else "")
-                + f", {self.duration_s:g} s records")
+        return (
+            f"{self.effect} over {self.grid.param}"
+            + (f" ({fixed})" if fixed else "")
+            + f", {self.duration_s:g} s records"
+        )
 
 
 def _defaults(effect: str) -> dict[str, float]:
@@ -281,8 +312,10 @@ def _duration(text: str | None) -> float:
     d = _number(text, "--duration")
     lo = _min_duration_s()
     if not lo <= d <= MAX_DURATION_S:
-        raise CampaignError(f"--duration {text!r} must be {lo:g} to {MAX_DURATION_S:g} s (the gap workflow needs "
-                            f"{lo:g} s at {campaign_task.RATE_HZ:g} Hz)")
+        raise CampaignError(
+            f"--duration {text!r} must be {lo:g} to {MAX_DURATION_S:g} s (the gap workflow needs "
+            f"{lo:g} s at {campaign_task.RATE_HZ:g} Hz)"
+        )
     return d
 
 
@@ -307,9 +340,14 @@ def _out_dir(text: str) -> Path:
 
 def _describe_run(rec: dict[str, Any]) -> str:
     rd = rec.get("record") or {}
-    what = "a null run" if rec.get("effect") == "none" else (
-        f"{rec.get('effect')} over {rec.get('grid')} at " + ", ".join(f"{k} = {v!r}" for k, v in
-                                                                     (rec.get("params") or {}).items()))
+    what = (
+        "a null run"
+        if rec.get("effect") == "none"
+        else (
+            f"{rec.get('effect')} over {rec.get('grid')} at "
+            + ", ".join(f"{k} = {v!r}" for k, v in (rec.get("params") or {}).items())
+        )
+    )
     return f"{what}, {rd.get('duration_s')} s at {rd.get('rate_hz')} Hz, mode {rd.get('mode')}, axis {rd.get('axis')}"
 
 
@@ -322,8 +360,11 @@ def _foreign(c: Campaign, rec: dict[str, Any]) -> bool:
     if rec.get("effect") != c.effect or rec.get("grid") != c.grid.param:
         return True
     params = rec.get("params")
-    return (not isinstance(params, dict) or set(params) != set(c.param_order)
-            or any(params[k] != v for k, v in c.fixed.items()))
+    return (
+        not isinstance(params, dict)
+        or set(params) != set(c.param_order)
+        or any(params[k] != v for k, v in c.fixed.items())
+    )
 
 
 def _read_runs(c: Campaign, force: bool) -> None:
@@ -337,8 +378,10 @@ def _read_runs(c: Campaign, force: bool) -> None:
         if force:
             c.replace = True
             return
-        raise CampaignError(f"--out {c.out}: {path} is not a campaign's runs file ({exc}); give another --out, "
-                            f"or --force to start afresh") from None
+        raise CampaignError(
+            f"--out {c.out}: {path} is not a campaign's runs file ({exc}); give another --out, "
+            f"or --force to start afresh"
+        ) from None
     for n, rec in lines:
         missing = [k for k in campaign_task.RUN_KEYS if not (isinstance(rec, dict) and k in rec)]
         if missing or _foreign(c, rec):
@@ -346,11 +389,15 @@ def _read_runs(c: Campaign, force: bool) -> None:
                 c.replace, c.latest, c.torn_tail = True, {}, 0
                 return
             if missing:
-                raise CampaignError(f"--out {c.out}: {path} is not a campaign's runs file (line {n} has no "
-                                    f"{', '.join(missing)}); give another --out, or --force to start afresh")
-            raise CampaignError(f"--out {c.out} holds runs of another campaign (line {n}: {_describe_run(rec)}); "
-                                f"this one is {c.describe()}: give another --out, or --force to start afresh "
-                                f"(the runs there are moved to {RUNS_FILE}.old)")
+                raise CampaignError(
+                    f"--out {c.out}: {path} is not a campaign's runs file (line {n} has no "
+                    f"{', '.join(missing)}); give another --out, or --force to start afresh"
+                )
+            raise CampaignError(
+                f"--out {c.out} holds runs of another campaign (line {n}: {_describe_run(rec)}); "
+                f"this one is {c.describe()}: give another --out, or --force to start afresh "
+                f"(the runs there are moved to {RUNS_FILE}.old)"
+            )
         c.latest[run_key(rec["effect"], rec["params"], rec["seed"])] = rec
 
 
@@ -359,14 +406,20 @@ def plan_of(args: argparse.Namespace) -> Campaign:
     from simhw import effects
 
     if args.workflow not in WORKFLOWS:
-        raise CampaignError(f"unknown workflow {args.workflow!r}; fbs campaign runs {', '.join(WORKFLOWS)}")
+        raise CampaignError(
+            f"unknown workflow {args.workflow!r}; fbs campaign runs {', '.join(WORKFLOWS)}"
+        )
     catalogue = effects.catalogue()
     if args.effect not in catalogue:
-        raise CampaignError(f"unknown effect {args.effect!r}; the catalogue: "
-                            f"{', '.join(n for n in catalogue if n != 'none')}")
+        raise CampaignError(
+            f"unknown effect {args.effect!r}; the catalogue: "
+            f"{', '.join(n for n in catalogue if n != 'none')}"
+        )
     if args.effect == "none":
-        raise CampaignError("--effect none has nothing to detect: every campaign runs the null runs; name an effect "
-                            f"of the catalogue: {', '.join(n for n in catalogue if n != 'none')}")
+        raise CampaignError(
+            "--effect none has nothing to detect: every campaign runs the null runs; name an effect "
+            f"of the catalogue: {', '.join(n for n in catalogue if n != 'none')}"
+        )
     effect = catalogue[args.effect]
     grid = parse_grid(args.grid, effect, args.log)
     sets = parse_sets(args.set or [], effect, grid.param)
@@ -375,8 +428,17 @@ def plan_of(args: argparse.Namespace) -> Campaign:
     duration = _duration(args.duration)
     jobs = batch_exec.parse_jobs(args.jobs)
     out = _out_dir(args.out)
-    c = Campaign(effect.name, grid, fixed, n_seeds, duration, out, jobs, args.scheduler,
-                 tuple(p.name for p in effect.params))
+    c = Campaign(
+        effect.name,
+        grid,
+        fixed,
+        n_seeds,
+        duration,
+        out,
+        jobs,
+        args.scheduler,
+        tuple(p.name for p in effect.params),
+    )
     _read_runs(c, args.force)
     return c
 
@@ -393,7 +455,9 @@ def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float] | None:
     centre = (p + z2 / (2 * n)) / (1 + z2 / n)
     half = z / (1 + z2 / n) * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
     # at k = 0 (k = n) the bound is 0 (1) exactly; the sum leaves a rounding error there
-    return (0.0 if k == 0 else max(0.0, centre - half)), (1.0 if k == n else min(1.0, centre + half))
+    return (0.0 if k == 0 else max(0.0, centre - half)), (
+        1.0 if k == n else min(1.0, centre + half)
+    )
 
 
 def _quantile(xs: list[float], q: float) -> float:
@@ -408,7 +472,12 @@ def _spread(xs: list[float]) -> dict[str, Any]:
     xs = sorted(xs)
     if not xs:
         return {"n": 0, "median": None, "p16": None, "p84": None}
-    return {"n": len(xs), "median": _quantile(xs, 0.5), "p16": _quantile(xs, 0.16), "p84": _quantile(xs, 0.84)}
+    return {
+        "n": len(xs),
+        "median": _quantile(xs, 0.5),
+        "p16": _quantile(xs, 0.16),
+        "p84": _quantile(xs, 0.84),
+    }
 
 
 def _truth(effect: str, params: dict[str, float]) -> dict[str, float]:
@@ -421,15 +490,38 @@ def _truth(effect: str, params: dict[str, float]) -> dict[str, float]:
 
 def compute_curves(c: Campaign) -> dict[str, Any]:
     """The detection curves of the runs of ``c`` done so far (its newest line per run)."""
-    return curves(c.effect, c.grid, c.params_at, c.seeds, c.latest, meta={
-        "effect": c.effect, "grid": {"param": c.grid.param, "lo": c.grid.lo, "hi": c.grid.hi, "n": c.grid.n,
-                                     "log": c.grid.log},
-        "fixed": c.fixed, "seeds": c.n_seeds, "record": c.record, "channels_V": campaign_task.RANGES_V,
-        "command": c.command()})
+    return curves(
+        c.effect,
+        c.grid,
+        c.params_at,
+        c.seeds,
+        c.latest,
+        meta={
+            "effect": c.effect,
+            "grid": {
+                "param": c.grid.param,
+                "lo": c.grid.lo,
+                "hi": c.grid.hi,
+                "n": c.grid.n,
+                "log": c.grid.log,
+            },
+            "fixed": c.fixed,
+            "seeds": c.n_seeds,
+            "record": c.record,
+            "channels_V": campaign_task.RANGES_V,
+            "command": c.command(),
+        },
+    )
 
 
-def curves(effect: str, grid: Grid, params_at: Any, seeds: list[int], latest: dict[tuple[Any, ...], dict[str, Any]],
-           meta: dict[str, Any] | None = None) -> dict[str, Any]:
+def curves(
+    effect: str,
+    grid: Grid,
+    params_at: Any,
+    seeds: list[int],
+    latest: dict[tuple[Any, ...], dict[str, Any]],
+    meta: dict[str, Any] | None = None,
+) -> dict[str, Any]:
     """Per grid value: ``p_named`` (the effect named first, of the runs analysed) with
     ``p_named_ci95`` (Wilson), ``first_named`` (what was named first, counted), and per parameter
     ``param_error`` (fitted / true - 1 over the runs named right: n, median, p16, p84); over the
@@ -444,29 +536,56 @@ def curves(effect: str, grid: Grid, params_at: Any, seeds: list[int], latest: di
         right = [r for r in ok if r["named"][:1] == [effect]]
         errors: dict[str, dict[str, Any]] = {}
         for k, t in truth.items():
-            rel = [r["fitted"][k] / t - 1 for r in right if isinstance(r["fitted"].get(k), int | float) and t != 0]
+            rel = [
+                r["fitted"][k] / t - 1
+                for r in right
+                if isinstance(r["fitted"].get(k), int | float) and t != 0
+            ]
             errors[k] = _spread(rel)
         n_runs, n_done, n_err = n_runs + len(seeds), n_done + len(rows), n_err + len(rows) - len(ok)
-        points.append({
-            "value": v, "params": params, "runs": len(seeds), "done": len(rows), "errors": len(rows) - len(ok),
-            "analysed": len(ok), "named_right": len(right),
-            "named_right_explained": sum(1 for r in right if r["explained"]),
-            "p_named": len(right) / len(ok) if ok else None, "p_named_ci95": wilson(len(right), len(ok)),
-            "significant": sum(1 for r in ok if r["significant"]),
-            "first_named": dict(Counter(r["named"][0] if r["named"] else "none" for r in ok).most_common()),
-            "param_error": errors,
-        })
+        points.append(
+            {
+                "value": v,
+                "params": params,
+                "runs": len(seeds),
+                "done": len(rows),
+                "errors": len(rows) - len(ok),
+                "analysed": len(ok),
+                "named_right": len(right),
+                "named_right_explained": sum(1 for r in right if r["explained"]),
+                "p_named": len(right) / len(ok) if ok else None,
+                "p_named_ci95": wilson(len(right), len(ok)),
+                "significant": sum(1 for r in ok if r["significant"]),
+                "first_named": dict(
+                    Counter(r["named"][0] if r["named"] else "none" for r in ok).most_common()
+                ),
+                "param_error": errors,
+            }
+        )
     rows = [r for s in seeds if (r := latest.get(run_key("none", {}, s))) is not None]
     ok = [r for r in rows if r["error"] is None]
     alarms = [r for r in ok if r["significant"] or r["named"]]
     n_runs, n_done, n_err = n_runs + len(seeds), n_done + len(rows), n_err + len(rows) - len(ok)
-    nulls = {"runs": len(seeds), "done": len(rows), "errors": len(rows) - len(ok), "analysed": len(ok),
-             "false_alarms": len(alarms), "rate": len(alarms) / len(ok) if ok else None,
-             "rate_ci95": wilson(len(alarms), len(ok)), "significant": sum(1 for r in ok if r["significant"]),
-             "named": dict(Counter(n for r in ok for n in r["named"]).most_common())}
-    return {"campaign": meta or {"effect": effect, "grid": {"param": grid.param}},
-            "complete": n_done == n_runs and n_err == 0, "runs": n_runs, "done": n_done, "errors": n_err,
-            "curve": points, "nulls": nulls}
+    nulls = {
+        "runs": len(seeds),
+        "done": len(rows),
+        "errors": len(rows) - len(ok),
+        "analysed": len(ok),
+        "false_alarms": len(alarms),
+        "rate": len(alarms) / len(ok) if ok else None,
+        "rate_ci95": wilson(len(alarms), len(ok)),
+        "significant": sum(1 for r in ok if r["significant"]),
+        "named": dict(Counter(n for r in ok for n in r["named"]).most_common()),
+    }
+    return {
+        "campaign": meta or {"effect": effect, "grid": {"param": grid.param}},
+        "complete": n_done == n_runs and n_err == 0,
+        "runs": n_runs,
+        "done": n_done,
+        "errors": n_err,
+        "curve": points,
+        "nulls": nulls,
+    }
 
 
 # ---------------------------------------------------------------------------- writing the curves
@@ -481,36 +600,70 @@ def _ci(iv: Any) -> str:
 def curves_markdown(cv: dict[str, Any]) -> str:
     meta = cv["campaign"]
     effect, param = meta["effect"], meta["grid"]["param"]
-    shown = [param] + [k for k in (cv["curve"][0]["param_error"] if cv["curve"] else {}) if k != param]
+    shown = [param] + [
+        k for k in (cv["curve"][0]["param_error"] if cv["curve"] else {}) if k != param
+    ]
     rec = meta.get("record", {})
     chans = ", ".join(f"{k} {v:g} V" for k, v in meta.get("channels_V", {}).items())
     fixed = ", ".join(f"{k} = {v:g}" for k, v in meta.get("fixed", {}).items()) or "none"
-    lines = [f"# Detection curve: `{effect}` over `{param}`", "",
-             f"Record: {rec.get('duration_s', 0):g} s at {rec.get('rate_hz', 0):g} Hz, Mode {rec.get('mode')}, "
-             f"axis {rec.get('axis')} ({chans}); other parameters: {fixed}; "
-             + ("seed 1." if meta.get("seeds") == 1 else f"seeds 1-{meta.get('seeds')}."),
-             f"Made by `{meta.get('command', '')}`" + ("" if cv["complete"] else
-                                                       f" (incomplete: {cv['done'] - cv['errors']} of {cv['runs']} "
-                                                       "runs have a result)") + ".", "",
-             "P: share of the runs analysed in which the workflow named the effect first, with its 95 % Wilson "
-             "interval; errors: fitted / true - 1 over those runs, median [16th, 84th percentile].", "",
-             "| " + " | ".join([f"`{param}`", "runs", "named right", "P", "95 %"]
-                               + [f"`{k}` error" for k in shown]) + " |",
-             "|" + "---|" * (5 + len(shown))]
+    lines = [
+        f"# Detection curve: `{effect}` over `{param}`",
+        "",
+        f"Record: {rec.get('duration_s', 0):g} s at {rec.get('rate_hz', 0):g} Hz, Mode {rec.get('mode')}, "
+        f"axis {rec.get('axis')} ({chans}); other parameters: {fixed}; "
+        + ("seed 1." if meta.get("seeds") == 1 else f"seeds 1-{meta.get('seeds')}."),
+        f"Made by `{meta.get('command', '')}`"
+        + (
+            ""
+            if cv["complete"]
+            else f" (incomplete: {cv['done'] - cv['errors']} of {cv['runs']} runs have a result)"
+        )
+        + ".",
+        "",
+        "P: share of the runs analysed in which the workflow named the effect first, with its 95 % Wilson "
+        "interval; errors: fitted / true - 1 over those runs, median [16th, 84th percentile].",
+        "",
+        "| "
+        + " | ".join(
+            [f"`{param}`", "runs", "named right", "P", "95 %"] + [f"`{k}` error" for k in shown]
+        )
+        + " |",
+        "|" + "---|" * (5 + len(shown)),
+    ]
     for pt in cv["curve"]:
         errs = []
         for k in shown:
             e = pt["param_error"].get(k, {})
-            errs.append("-" if not e.get("n") else f"{_pct(e['median'])} [{_pct(e['p16'])}, {_pct(e['p84'])}]")
+            errs.append(
+                "-"
+                if not e.get("n")
+                else f"{_pct(e['median'])} [{_pct(e['p16'])}, {_pct(e['p84'])}]"
+            )
         p = "-" if pt["p_named"] is None else f"{pt['p_named']:.2f}"
-        lines.append("| " + " | ".join([f"{pt['value']:g}", str(pt["analysed"]), str(pt["named_right"]), p,
-                                        _ci(pt["p_named_ci95"]), *errs]) + " |")
+        lines.append(
+            "| "
+            + " | ".join(
+                [
+                    f"{pt['value']:g}",
+                    str(pt["analysed"]),
+                    str(pt["named_right"]),
+                    p,
+                    _ci(pt["p_named_ci95"]),
+                    *errs,
+                ]
+            )
+            + " |"
+        )
     nl = cv["nulls"]
     rate = "-" if nl["rate"] is None else f"{nl['rate']:.2f}"
     named = ", ".join(f"{k} {v}" for k, v in nl["named"].items()) or "nothing named"
-    lines += ["", f"False alarms on the null runs (no effect; significant, or an effect named): {nl['false_alarms']} "
-                  f"of {nl['analysed']} ({rate}, 95 % {_ci(nl['rate_ci95'])}; {nl['significant']} significant; "
-                  f"{named}).", ""]
+    lines += [
+        "",
+        f"False alarms on the null runs (no effect; significant, or an effect named): {nl['false_alarms']} "
+        f"of {nl['analysed']} ({rate}, 95 % {_ci(nl['rate_ci95'])}; {nl['significant']} significant; "
+        f"{named}).",
+        "",
+    ]
     return "\n".join(lines)
 
 
@@ -529,17 +682,26 @@ def plot_curves(cv: dict[str, Any], path: Path) -> Path:
         y = [pt["p_named"] for pt in have]
         lo = [pt["p_named"] - pt["p_named_ci95"][0] for pt in have]
         hi = [pt["p_named_ci95"][1] - pt["p_named"] for pt in have]
-        top.errorbar(x, y, yerr=[lo, hi], fmt="o-", capsize=3, label=f"{meta['effect']} named (95 % Wilson)")
+        top.errorbar(
+            x, y, yerr=[lo, hi], fmt="o-", capsize=3, label=f"{meta['effect']} named (95 % Wilson)"
+        )
     nl = cv["nulls"]
     if nl["rate"] is not None and xs:
-        top.axhline(nl["rate"], color="C3", ls="--",
-                    label=f"false alarms on nulls: {nl['false_alarms']}/{nl['analysed']}")
+        top.axhline(
+            nl["rate"],
+            color="C3",
+            ls="--",
+            label=f"false alarms on nulls: {nl['false_alarms']}/{nl['analysed']}",
+        )
         top.axhspan(nl["rate_ci95"][0], nl["rate_ci95"][1], color="C3", alpha=0.12)
     top.set_ylim(-0.03, 1.03)
     top.set_ylabel("P(named right)")
     top.legend(loc="best", fontsize=8)
-    top.set_title(f"{meta['effect']}: {meta.get('record', {}).get('duration_s', 0):g} s records, "
-                  f"{meta.get('seeds')} seed(s) per point", fontsize=10)
+    top.set_title(
+        f"{meta['effect']}: {meta.get('record', {}).get('duration_s', 0):g} s records, "
+        f"{meta.get('seeds')} seed(s) per point",
+        fontsize=10,
+    )
     names = list(cv["curve"][0]["param_error"]) if cv["curve"] else []
     for i, k in enumerate(names):
         pts = [pt for pt in cv["curve"] if pt["param_error"][k]["n"]]
@@ -547,9 +709,17 @@ def plot_curves(cv: dict[str, Any], path: Path) -> Path:
             continue
         e = [pt["param_error"][k] for pt in pts]
         med = [100 * q["median"] for q in e]
-        bottom.errorbar([pt["value"] for pt in pts], med,
-                        yerr=[[m - 100 * q["p16"] for m, q in zip(med, e)], [100 * q["p84"] - m for m, q in zip(med, e)]],
-                        fmt="os^vd"[i % 5], capsize=3, label=k)
+        bottom.errorbar(
+            [pt["value"] for pt in pts],
+            med,
+            yerr=[
+                [m - 100 * q["p16"] for m, q in zip(med, e)],
+                [100 * q["p84"] - m for m, q in zip(med, e)],
+            ],
+            fmt="os^vd"[i % 5],
+            capsize=3,
+            label=k,
+        )
     bottom.axhline(0.0, color="0.5", lw=0.8)
     bottom.set_ylabel("fitted / true - 1 (%)\nmedian, 16-84 %")
     bottom.set_xlabel(param)
@@ -589,10 +759,20 @@ def _run_name(rec: dict[str, Any]) -> str:
 def _lost(args: tuple[Any, ...], exc: BaseException) -> dict[str, Any]:
     effect, grid, params, seed, duration_s = args
     line: dict[str, Any] = dict.fromkeys(campaign_task.RUN_KEYS)
-    line |= {"effect": effect, "grid": grid, "params": params, "seed": seed,
-             "record": campaign_task.record_spec(duration_s), "exit": 2, "named": [], "fitted": {}, "fitted_ci95": {},
-             "warnings": [], "error": f"{batch_exec.lost_reason(exc)}; run the campaign again to retry it",
-             "elapsed_s": 0.0}
+    line |= {
+        "effect": effect,
+        "grid": grid,
+        "params": params,
+        "seed": seed,
+        "record": campaign_task.record_spec(duration_s),
+        "exit": 2,
+        "named": [],
+        "fitted": {},
+        "fitted_ci95": {},
+        "warnings": [],
+        "error": f"{batch_exec.lost_reason(exc)}; run the campaign again to retry it",
+        "elapsed_s": 0.0,
+    }
     return line
 
 
@@ -606,7 +786,7 @@ def _execute(c: Campaign, backend: batch_exec.Backend, results: batch_exec.Resul
         nonlocal n_done, n_err
         if exc is not None:
             rec = _lost(args_of[key], exc)
-        with batch_exec.signals_held():      # the line and the curves' view of it together
+        with batch_exec.signals_held():  # the line and the curves' view of it together
             results.append(rec)
             c.latest[key] = rec
         n_done += 1
@@ -614,25 +794,38 @@ def _execute(c: Campaign, backend: batch_exec.Backend, results: batch_exec.Resul
         if rec["error"] is not None:
             how = f"exit {rec['exit']}: {rec['error'].splitlines()[-1]}"
         else:
-            how = ("named " + ", ".join(rec["named"]) if rec["named"] else
-                   "significant, nothing named" if rec["significant"] else "nothing named")
-        _say(f"[{n_done}/{n_todo}] {_run_name(rec)}: {how} ({rec['elapsed_s']:.1f} s); {n_err} error(s), "
-             f"{time.monotonic() - t0:.0f} s elapsed")
+            how = (
+                "named " + ", ".join(rec["named"])
+                if rec["named"]
+                else "significant, nothing named"
+                if rec["significant"]
+                else "nothing named"
+            )
+        _say(
+            f"[{n_done}/{n_todo}] {_run_name(rec)}: {how} ({rec['elapsed_s']:.1f} s); {n_err} error(s), "
+            f"{time.monotonic() - t0:.0f} s elapsed"
+        )
 
     def interrupted(n_done: int, n_in_flight: int, n_not_submitted: int) -> None:
-        _say(f"interrupted: {n_done} run(s) of this invocation kept in {c.runs_path}, {n_in_flight} unfinished "
-             f"cancelled, {n_not_submitted} not submitted; run the same command again to go on")
+        _say(
+            f"interrupted: {n_done} run(s) of this invocation kept in {c.runs_path}, {n_in_flight} unfinished "
+            f"cancelled, {n_not_submitted} not submitted; run the same command again to go on"
+        )
         write_curves(c, compute_curves(c))
         _say(f"curves of the runs done so far in {c.out}/{CURVES_MD}, .json, .png")
 
     def retrying(key: tuple[Any, ...], exc: BaseException) -> None:
         effect, grid, params, seed, _ = args_of[key]
-        _say(f"{_run_name({'effect': effect, 'grid': grid, 'params': params, 'seed': seed})}: "
-             f"{batch_exec.lost_reason(exc)}; submitted again")
+        _say(
+            f"{_run_name({'effect': effect, 'grid': grid, 'params': params, 'seed': seed})}: "
+            f"{batch_exec.lost_reason(exc)}; submitted again"
+        )
 
     # a local worker killed under its run (which takes the other runs in flight in its pool down
     # with it) costs those runs one more try here, not an error line
-    batch_exec.run_tasks(backend, campaign_task.run, todo, done, interrupted, retry_lost=1, retrying=retrying)
+    batch_exec.run_tasks(
+        backend, campaign_task.run, todo, done, interrupted, retry_lost=1, retrying=retrying
+    )
 
 
 def _campaign(args: argparse.Namespace) -> int:
@@ -640,8 +833,11 @@ def _campaign(args: argparse.Namespace) -> int:
     todo = c.todo()
     runs = c.runs()
     retried = sum(1 for k, _ in todo if k in c.latest)
-    backend = batch_exec.open_backend(batch_exec.local_jobs(c.jobs, c.scheduler, len(todo)),
-                                      c.scheduler) if todo else None
+    backend = (
+        batch_exec.open_backend(batch_exec.local_jobs(c.jobs, c.scheduler, len(todo)), c.scheduler)
+        if todo
+        else None
+    )
     try:
         c.out.mkdir(exist_ok=True)
         if c.replace:
@@ -655,11 +851,15 @@ def _campaign(args: argparse.Namespace) -> int:
         raise
     try:
         if c.torn_tail:
-            _say(f"dropped an unfinished last line ({c.torn_tail} bytes) a killed campaign left in {c.runs_path}")
-        _say(f"{c.describe()}: {len(runs)} run(s) ({c.grid.n} value(s) x {c.n_seeds} seed(s) + {c.n_seeds} null), "
-             f"{len(runs) - len(todo)} already done in {c.runs_path} (skipped)"
-             + (f", {retried} earlier error(s) retried" if retried else "")
-             + (f"; {len(todo)} to run on {backend.describe()}" if backend else "; nothing to run"))
+            _say(
+                f"dropped an unfinished last line ({c.torn_tail} bytes) a killed campaign left in {c.runs_path}"
+            )
+        _say(
+            f"{c.describe()}: {len(runs)} run(s) ({c.grid.n} value(s) x {c.n_seeds} seed(s) + {c.n_seeds} null), "
+            f"{len(runs) - len(todo)} already done in {c.runs_path} (skipped)"
+            + (f", {retried} earlier error(s) retried" if retried else "")
+            + (f"; {len(todo)} to run on {backend.describe()}" if backend else "; nothing to run")
+        )
         if backend:
             try:
                 _execute(c, backend, results)
@@ -670,40 +870,84 @@ def _campaign(args: argparse.Namespace) -> int:
     cv = compute_curves(c)
     write_curves(c, cv)
     code = 0 if cv["complete"] else 2
-    _say(f"{cv['runs']} run(s), {cv['errors']} with an error; curves in {c.out}/{CURVES_MD} (.json, .png); exit {code}")
+    _say(
+        f"{cv['runs']} run(s), {cv['errors']} with an error; curves in {c.out}/{CURVES_MD} (.json, .png); exit {code}"
+    )
     if args.json:
         print(json.dumps(cv))
     return code
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("campaign", help="Monte-Carlo detection curves of the model-gap workflow over an effect's "
-                       "parameter grid and seeds (local processes or a Dask cluster)",
-                       description="Simulates the detection-limit record (mode 3, axis X: ac_x_ctl, ac_x_inst, gyro_x, "
-                       "pa_x at 1 kHz) with the effect "
-                       "injected at every grid value and seed, and without it (null runs), runs the gap workflow on "
-                       "each, and writes DIR/runs.jsonl (one line per run, resumable), DIR/curves.json, curves.md and "
-                       "curves.png: P(effect named) with 95 % Wilson intervals, parameter errors, false-alarm rate. "
-                       "Exit 0 every run done, 2 some run failed (run again to retry), interrupted or refused.")
+    p = sub.add_parser(
+        "campaign",
+        help="Monte-Carlo detection curves of the model-gap workflow over an effect's "
+        "parameter grid and seeds (local processes or a Dask cluster)",
+        description="Simulates the detection-limit record (mode 3, axis X: ac_x_ctl, ac_x_inst, gyro_x, "
+        "pa_x at 1 kHz) with the effect "
+        "injected at every grid value and seed, and without it (null runs), runs the gap workflow on "
+        "each, and writes DIR/runs.jsonl (one line per run, resumable), DIR/curves.json, curves.md and "
+        "curves.png: P(effect named) with 95 % Wilson intervals, parameter errors, false-alarm rate. "
+        "Exit 0 every run done, 2 some run failed (run again to retry), interrupted or refused.",
+    )
     p.add_argument("workflow", metavar="WORKFLOW", help=f"what to run: {', '.join(WORKFLOWS)}")
-    p.add_argument("--effect", required=True, metavar="NAME", help="the effect to inject (e.g. pickup_line, "
-                   "bearing_friction; an unknown name is refused with the catalogue listed)")
-    p.add_argument("--grid", required=True, metavar="PARAM=LO:HI:N",
-                   help="the effect's parameter and its N values from LO to HI, e.g. amplitude_V=0.0001:0.01:5")
+    p.add_argument(
+        "--effect",
+        required=True,
+        metavar="NAME",
+        help="the effect to inject (e.g. pickup_line, "
+        "bearing_friction; an unknown name is refused with the catalogue listed)",
+    )
+    p.add_argument(
+        "--grid",
+        required=True,
+        metavar="PARAM=LO:HI:N",
+        help="the effect's parameter and its N values from LO to HI, e.g. amplitude_V=0.0001:0.01:5",
+    )
     p.add_argument("--log", action="store_true", help="space the grid geometrically (LO > 0)")
-    p.add_argument("--set", action="append", metavar="PARAM=VALUE",
-                   help="another parameter of the effect (default: the catalogue's), e.g. --set freq_hz=50; repeat "
-                   "or separate with commas")
-    p.add_argument("--seeds", required=True, metavar="N", help="seeds 1..N at every grid value, and N null runs")
-    p.add_argument("--duration", metavar="S", help=f"record length, s (default {campaign_task.DURATION_S:g}, the "
-                   "detection-limit record's; at least what the gap workflow needs, 73.728 s)")
-    p.add_argument("--out", required=True, metavar="DIR", help="runs.jsonl and the curves; an existing one of "
-                   "the same campaign is resumed")
-    p.add_argument("--force", action="store_true", help="start afresh in a DIR holding another campaign's runs "
-                   f"(moved to {RUNS_FILE}.old)")
-    p.add_argument("--jobs", metavar="N", help="local processes (default: one per core); with --scheduler, the "
-                   "most runs in flight at once (default: all)")
-    p.add_argument("--scheduler", metavar="ADDR", help="a Dask distributed scheduler, e.g. tcp://host:8786 "
-                   f"(needs {batch_exec.CLUSTER_EXTRA})")
-    p.add_argument("--json", action="store_true", help="print the curves as one JSON object on stdout")
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PARAM=VALUE",
+        help="another parameter of the effect (default: the catalogue's), e.g. --set freq_hz=50; repeat "
+        "or separate with commas",
+    )
+    p.add_argument(
+        "--seeds",
+        required=True,
+        metavar="N",
+        help="seeds 1..N at every grid value, and N null runs",
+    )
+    p.add_argument(
+        "--duration",
+        metavar="S",
+        help=f"record length, s (default {campaign_task.DURATION_S:g}, the "
+        "detection-limit record's; at least what the gap workflow needs, 73.728 s)",
+    )
+    p.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="runs.jsonl and the curves; an existing one of the same campaign is resumed",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help=f"start afresh in a DIR holding another campaign's runs (moved to {RUNS_FILE}.old)",
+    )
+    p.add_argument(
+        "--jobs",
+        metavar="N",
+        help="local processes (default: one per core); with --scheduler, the "
+        "most runs in flight at once (default: all)",
+    )
+    p.add_argument(
+        "--scheduler",
+        metavar="ADDR",
+        help="a Dask distributed scheduler, e.g. tcp://host:8786 "
+        f"(needs {batch_exec.CLUSTER_EXTRA})",
+    )
+    p.add_argument(
+        "--json", action="store_true", help="print the curves as one JSON object on stdout"
+    )
     p.set_defaults(func=_campaign)

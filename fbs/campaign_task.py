@@ -34,8 +34,24 @@ RANGES_V = {"ac_x_ctl": 1.0, "ac_x_inst": 1.0, "gyro_x": 1.0, "pa_x": 0.05}
 #: the simulator's output block
 BLOCK_S = 10.0
 #: the keys of a line of ``runs.jsonl``, in order
-RUN_KEYS = ("effect", "grid", "params", "seed", "record", "exit", "named", "significant", "explained", "fitted",
-            "fitted_ci95", "gap_before_db", "gap_after_db", "warnings", "error", "elapsed_s")
+RUN_KEYS = (
+    "effect",
+    "grid",
+    "params",
+    "seed",
+    "record",
+    "exit",
+    "named",
+    "significant",
+    "explained",
+    "fitted",
+    "fitted_ci95",
+    "gap_before_db",
+    "gap_after_db",
+    "warnings",
+    "error",
+    "elapsed_s",
+)
 
 
 def record_spec(duration_s: float = DURATION_S) -> dict[str, Any]:
@@ -43,8 +59,13 @@ def record_spec(duration_s: float = DURATION_S) -> dict[str, Any]:
     return {"duration_s": duration_s, "rate_hz": RATE_HZ, "mode": MODE, "axis": AXIS}
 
 
-def simulate_record(path: str | Path, effect: str, params: dict[str, float], seed: int,
-                    duration_s: float = DURATION_S) -> Path:
+def simulate_record(
+    path: str | Path,
+    effect: str,
+    params: dict[str, float],
+    seed: int,
+    duration_s: float = DURATION_S,
+) -> Path:
     """The detection-limit record with ``effect`` at ``params`` (``"none"``: nominal), seed
     ``seed``, written as an fbs-run file with the axis attribute."""
     from daq.runfile import RunWriter
@@ -56,17 +77,29 @@ def simulate_record(path: str | Path, effect: str, params: dict[str, float], see
     if effect != "none":
         cfg = effects.get(effect).inject(cfg, AXIS, **params)
         spec = [effect + ":" + ",".join(f"{k}={v!r}" for k, v in params.items())]
-    sim = Simulator(cfg, RATE_HZ, seed=seed, mode=MODE, channels=tuple(RANGES_V))  # the recorded channels only
+    sim = Simulator(
+        cfg, RATE_HZ, seed=seed, mode=MODE, channels=tuple(RANGES_V)
+    )  # the recorded channels only
     for c, r in RANGES_V.items():
         sim.set_range(c, r)
-    with RunWriter(path, rig="sim-offline", mode=MODE, rate_hz=RATE_HZ, channels=dict.fromkeys(RANGES_V, "V"),
-                   axis=AXIS, meta={"effects": spec, "seed": seed}, overwrite=True) as w:
+    with RunWriter(
+        path,
+        rig="sim-offline",
+        mode=MODE,
+        rate_hz=RATE_HZ,
+        channels=dict.fromkeys(RANGES_V, "V"),
+        axis=AXIS,
+        meta={"effects": spec, "seed": seed},
+        overwrite=True,
+    ) as w:
         for block in sim.run(duration_s, BLOCK_S):
             w.append({c: block[c] for c in RANGES_V})
     return Path(path)
 
 
-def _simulate_and_analyse(effect: str, params: dict[str, float], seed: int, duration_s: float) -> dict[str, Any]:
+def _simulate_and_analyse(
+    effect: str, params: dict[str, float], seed: int, duration_s: float
+) -> dict[str, Any]:
     from procedures.analysis.gap.workflow import analyse
 
     with tempfile.TemporaryDirectory(prefix="fbs-campaign-") as d:
@@ -75,7 +108,9 @@ def _simulate_and_analyse(effect: str, params: dict[str, float], seed: int, dura
         return {"json": res.to_json(), "warnings": list(res.warnings)}
 
 
-def run(effect: str, grid: str | None, params: dict[str, float], seed: int, duration_s: float) -> dict[str, Any]:
+def run(
+    effect: str, grid: str | None, params: dict[str, float], seed: int, duration_s: float
+) -> dict[str, Any]:
     """One run of the campaign, in this process, as its line of ``runs.jsonl``: ``named`` the
     effects the workflow named, in the order found; ``fitted`` (and ``fitted_ci95``) the
     parameters it gave the injected effect where it named it (empty for a null run or an effect
@@ -84,20 +119,39 @@ def run(effect: str, grid: str | None, params: dict[str, float], seed: int, dura
     batch_task.prepare_process()
     from fbs.cli import load
 
-    load("simulate", "gap")   # the numerics load here, not in the run's elapsed_s
+    load("simulate", "gap")  # the numerics load here, not in the run's elapsed_s
 
     batch_task.limit_loaded_blas()
-    code, out, error, elapsed = batch_task.guarded(_simulate_and_analyse, effect, params, seed, duration_s)
+    code, out, error, elapsed = batch_task.guarded(
+        _simulate_and_analyse, effect, params, seed, duration_s
+    )
     line: dict[str, Any] = dict.fromkeys(RUN_KEYS)
-    line |= {"effect": effect, "grid": grid, "params": dict(params), "seed": seed, "record": record_spec(duration_s),
-             "exit": code, "error": error, "elapsed_s": round(elapsed, 3), "named": [], "fitted": {},
-             "fitted_ci95": {}, "warnings": []}
+    line |= {
+        "effect": effect,
+        "grid": grid,
+        "params": dict(params),
+        "seed": seed,
+        "record": record_spec(duration_s),
+        "exit": code,
+        "error": error,
+        "elapsed_s": round(elapsed, 3),
+        "named": [],
+        "fitted": {},
+        "fitted_ci95": {},
+        "warnings": [],
+    }
     if out is not None:
         j = out["json"]
         found = {e["effect"]: e for e in j["effects"]}
         mine = found.get(effect, {})
-        line |= {"named": list(found), "significant": bool(j["significant"]), "explained": bool(j["explained"]),
-                 "fitted": mine.get("parameters", {}), "fitted_ci95": mine.get("parameters_ci95", {}),
-                 "gap_before_db": j["gap_before_db"], "gap_after_db": j["gap_after_db"], "warnings": out["warnings"]}
+        line |= {
+            "named": list(found),
+            "significant": bool(j["significant"]),
+            "explained": bool(j["explained"]),
+            "fitted": mine.get("parameters", {}),
+            "fitted_ci95": mine.get("parameters_ci95", {}),
+            "gap_before_db": j["gap_before_db"],
+            "gap_after_db": j["gap_after_db"],
+            "warnings": out["warnings"],
+        }
     return line
-

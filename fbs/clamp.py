@@ -25,12 +25,16 @@ def _clamp(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps({"clamped": st.clamped, "mode": st.mode}))
     else:
-        print(f"platform {'clamped (loops open)' if st.clamped else 'released (loops closed)'}; mode {st.mode}")
+        print(
+            f"platform {'clamped (loops open)' if st.clamped else 'released (loops closed)'}; mode {st.mode}"
+        )
     return 0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("clamp", help="clamp the platform to the table (loops open, Ch. V B) or release it")
+    c = sub.add_parser(
+        "clamp", help="clamp the platform to the table (loops open, Ch. V B) or release it"
+    )
     c.add_argument("state", choices=("on", "off"), help="on: clamp; off: release")
     c.add_argument("--rig", default="sim", help="rig URL (default: the simulated rig, 'sim')")
     c.add_argument("--json", action="store_true", help="print one JSON object: clamped, mode")

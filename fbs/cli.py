@@ -38,32 +38,51 @@ class Command:
     start, so it imports nothing heavy at its top); ``loads`` are the modules its work imports
     when it runs (a name ending in ``.*``: every module of that package). ``loads`` is what
     the bench times and a batch worker loads before it times its first file."""
+
     module: str
     loads: tuple[str, ...] = ()
 
 
 #: every command, in ``fbs --help``'s order (``recover`` is defined by ``fbs.inspect``)
 COMMANDS: dict[str, Command] = {
-    "simulate": Command("fbs.simulate",
-                        ("simhw.simulator", "simhw.effects", "daq.runfile", "daq.reader")),
+    "simulate": Command(
+        "fbs.simulate", ("simhw.simulator", "simhw.effects", "daq.runfile", "daq.reader")
+    ),
     "record": Command("fbs.record", ("drivers.rig", "daq.recorder", "daq.reader")),
     "clamp": Command("fbs.clamp", ("drivers.rig",)),
     "console": Command("fbs.console", ("console.app",)),
     "inspect": Command("fbs.inspect", ("daq.reader", "daq.recover")),
     "recover": Command("fbs.inspect", ("daq.recover",)),
     "spectra": Command("fbs.spectra", ("procedures.analysis.spectra", "daq.plots")),
-    "run": Command("fbs.run", ("drivers.rig", "procedures.params", "procedures.calibrations.*",
-                               "fbs.progress")),
-    "demo": Command("fbs.demo", ("drivers.rig", "procedures.params", "procedures.calibrations.*",
-                                 "fbs.progress", "simhw.plant")),
-    "analyze": Command("fbs.analyze",
-                       ("procedures.analysis.hysteresis", "procedures.analysis.transfer",
-                        "procedures.reports.hysteresis", "procedures.reports.excitation")),
-    "gap": Command("fbs.gap",
-                   ("procedures.analysis.gap.workflow", "procedures.analysis.gap.report")),
+    "run": Command(
+        "fbs.run", ("drivers.rig", "procedures.params", "procedures.calibrations.*", "fbs.progress")
+    ),
+    "demo": Command(
+        "fbs.demo",
+        (
+            "drivers.rig",
+            "procedures.params",
+            "procedures.calibrations.*",
+            "fbs.progress",
+            "simhw.plant",
+        ),
+    ),
+    "analyze": Command(
+        "fbs.analyze",
+        (
+            "procedures.analysis.hysteresis",
+            "procedures.analysis.transfer",
+            "procedures.reports.hysteresis",
+            "procedures.reports.excitation",
+        ),
+    ),
+    "gap": Command(
+        "fbs.gap", ("procedures.analysis.gap.workflow", "procedures.analysis.gap.report")
+    ),
     "batch": Command("fbs.batch"),
-    "campaign": Command("fbs.campaign",
-                        ("simhw.effects", "procedures.analysis.gap.grid", "daq.plots")),
+    "campaign": Command(
+        "fbs.campaign", ("simhw.effects", "procedures.analysis.gap.grid", "daq.plots")
+    ),
 }
 
 
@@ -91,12 +110,19 @@ def command_errors() -> tuple[type[Exception], ...]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = Parser(prog="fbs", description="Fixed Base Simulator HIL: DAQ, procedures, simulation.",
-               epilog=EXIT_CODES_HELP + "\n\n`fbs COMMAND --help` describes a command; "
-                      "`fbs run PROCEDURE --help` lists a procedure's parameters.",
-               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("-v", "--verbose", action="store_true",
-                   help="debug logging of this program's own modules on stderr (other libraries stay at warnings)")
+    p = Parser(
+        prog="fbs",
+        description="Fixed Base Simulator HIL: DAQ, procedures, simulation.",
+        epilog=EXIT_CODES_HELP + "\n\n`fbs COMMAND --help` describes a command; "
+        "`fbs run PROCEDURE --help` lists a procedure's parameters.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "-v",
+        "--verbose",
+        action="store_true",
+        help="debug logging of this program's own modules on stderr (other libraries stay at warnings)",
+    )
     p.add_argument("--version", action="version", version=f"fbs-hil {version()}")
     # subparsers are made of the parser's own class: a usage error in any command exits 64
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
@@ -114,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             return _main(argv)
         finally:
-            sys.stdout.flush()     # a closed pipe shows here, not at Python's exit ("ignored")
+            sys.stdout.flush()  # a closed pipe shows here, not at Python's exit ("ignored")
     except BrokenPipeError:
         _stdout_to_devnull()
         return EXIT_ERROR
@@ -127,7 +153,7 @@ def _stdout_to_devnull() -> None:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         os.close(devnull)
-    except (AttributeError, OSError, ValueError):   # not a real file (a test's capture)
+    except (AttributeError, OSError, ValueError):  # not a real file (a test's capture)
         pass
 
 
@@ -137,13 +163,13 @@ def _stdout_gone() -> bool:
         poller = select.poll()
         poller.register(sys.stdout.fileno(), select.POLLERR)
         return bool(poller.poll(0))
-    except (AttributeError, OSError, ValueError):   # no poll (Windows), no fd (a test's capture)
+    except (AttributeError, OSError, ValueError):  # no poll (Windows), no fd (a test's capture)
         return False
 
 
 def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(argv)   # a usage error exits 64 here
+    args = build_parser().parse_args(argv)  # a usage error exits 64 here
     args.argv = argv
     with command_logging(args.verbose):
         try:
@@ -152,14 +178,16 @@ def _main(argv: list[str] | None) -> int:
                 return args.func(args)
         except command_errors() as exc:
             if isinstance(exc, BrokenPipeError) and _stdout_gone():
-                raise              # stdout's reader left: main ends it quietly
+                raise  # stdout's reader left: main ends it quietly
             print(f"fbs {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
             return EXIT_ERROR
-        except KeyboardInterrupt as exc:   # fbs.signals names the signal; Python's Ctrl-C: none
+        except KeyboardInterrupt as exc:  # fbs.signals names the signal; Python's Ctrl-C: none
             why = one_line(str(exc)) or "Ctrl-C"
             print(f"fbs {args.command}: interrupted ({why})", file=sys.stderr)
             return EXIT_ERROR
-        except Exception as exc:  # a defect of this program: said so, never "limits failed" (exit 1)
+        except (
+            Exception
+        ) as exc:  # a defect of this program: said so, never "limits failed" (exit 1)
             print(internal_error(args, exc), file=sys.stderr)
             return EXIT_ERROR
 
@@ -174,8 +202,10 @@ def internal_error(args: argparse.Namespace, exc: Exception) -> str:
         where = "its traceback is above"
     else:
         where = "; ".join(notes) or f"`fbs -v {args.command} ...` shows its traceback"
-    return (f"fbs {args.command}: internal error: {type(exc).__name__}: {one_line(str(exc))} "
-            f"(a defect of fbs, please report it with the command line; {where})")
+    return (
+        f"fbs {args.command}: internal error: {type(exc).__name__}: {one_line(str(exc))} "
+        f"(a defect of fbs, please report it with the command line; {where})"
+    )
 
 
 if __name__ == "__main__":

@@ -15,11 +15,19 @@ def _console(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    c = sub.add_parser("console", help="the operator console (Textual): meters, modes, "
-                                       "set-points, recording, procedures, spectra")
-    c.add_argument("--rig", default="sim?realtime=1",
-                   help="rig URL (default: the simulated rig paced to the wall clock, "
-                        "'sim?realtime=1')")
-    c.add_argument("--out", default="out",
-                   help="directory for recordings, procedure runs and console.log (default: out)")
+    c = sub.add_parser(
+        "console",
+        help="the operator console (Textual): meters, modes, "
+        "set-points, recording, procedures, spectra",
+    )
+    c.add_argument(
+        "--rig",
+        default="sim?realtime=1",
+        help="rig URL (default: the simulated rig paced to the wall clock, 'sim?realtime=1')",
+    )
+    c.add_argument(
+        "--out",
+        default="out",
+        help="directory for recordings, procedure runs and console.log (default: out)",
+    )
     c.set_defaults(func=_console)

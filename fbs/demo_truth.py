@@ -25,7 +25,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-if TYPE_CHECKING:   # numpy and the simulator load when a truth is computed (``fbs --version`` imports fbs.demo)
+if (
+    TYPE_CHECKING
+):  # numpy and the simulator load when a truth is computed (``fbs --version`` imports fbs.demo)
     import numpy as np
 
     from simhw.params import Autocollimator, SimConfig
@@ -40,7 +42,7 @@ NEA_BAND_HZ = (0.1, 100.0)
 @dataclass(frozen=True)
 class Truth:
     value: float | None
-    kind: str            # "parameter" | "computed" | "offline" | "describing function"
+    kind: str  # "parameter" | "computed" | "offline" | "describing function"
     how: str = ""
 
     @property
@@ -74,8 +76,14 @@ def ac_white_level(ac: Autocollimator) -> float:
     """The angle noise's white level W (rad^2/Hz, one-sided) the simulator makes."""
     from simhw.simulator import ac_white_psd
 
-    return ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s, ac.control_filter_zeta,
-                        knee=ac.flicker_knee, slope=ac.flicker_slope)
+    return ac_white_psd(
+        ac.nea_urad,
+        ac.flicker_corner_hz,
+        ac.control_filter_rad_per_s,
+        ac.control_filter_zeta,
+        knee=ac.flicker_knee,
+        slope=ac.flicker_slope,
+    )
 
 
 def ac_noise_psd(ac: Autocollimator, f: np.ndarray) -> np.ndarray:
@@ -83,8 +91,10 @@ def ac_noise_psd(ac: Autocollimator, f: np.ndarray) -> np.ndarray:
     from simhw.simulator import ac_knee
 
     w = ac_white_level(ac)
-    return w * (ac_knee(f, ac.flicker_corner_hz, ac.flicker_knee, ac.flicker_slope)
-                + ac.extra_flicker_corner_hz / f)
+    return w * (
+        ac_knee(f, ac.flicker_corner_hz, ac.flicker_knee, ac.flicker_slope)
+        + ac.extra_flicker_corner_hz / f
+    )
 
 
 def ac_nea_urad(ac: Autocollimator, channel: str) -> float:
@@ -107,17 +117,30 @@ def baseline_truths(cfg: SimConfig, axis: str) -> dict[str, dict[str, Truth]]:
     pw = pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines) * 1e12
     in_band = [a for f, a in g.pickoff_lines if 1.0 <= f <= 50.0]
     return {
-        "nea_urad": {"ctl": Truth(ac_nea_urad(ac, "ctl"), "computed", "W K(f) through the control filter" + extra),
-                     "inst": Truth(ac_nea_urad(ac, "inst"), "computed",
-                                   "W K(f) through the instrumentation filters (eq. 3.22)" + extra),
-                     "z": param(cfg.azimuth.nea_urad, "sim config (pure 1/f, no filter)")},
-        "white_urad_per_rtHz": {ch: Truth(white, "computed", "sqrt(W), the white level the simulator makes")
-                                for ch in ("ctl", "inst")},
+        "nea_urad": {
+            "ctl": Truth(
+                ac_nea_urad(ac, "ctl"), "computed", "W K(f) through the control filter" + extra
+            ),
+            "inst": Truth(
+                ac_nea_urad(ac, "inst"),
+                "computed",
+                "W K(f) through the instrumentation filters (eq. 3.22)" + extra,
+            ),
+            "z": param(cfg.azimuth.nea_urad, "sim config (pure 1/f, no filter)"),
+        },
+        "white_urad_per_rtHz": {
+            ch: Truth(white, "computed", "sqrt(W), the white level the simulator makes")
+            for ch in ("ctl", "inst")
+        },
         "flicker_corner_hz": {ch: param(ac.flicker_corner_hz) for ch in ("ctl", "inst")},
         "pickoff_rms_urad": {
-            "1-50 Hz": Truth(math.sqrt(pw * 49.0 + sum(a * a / 2 for a in in_band)), "computed",
-                             "the pickoff's white level over 1-50 Hz and its lines there"),
-            "0.1-200 Hz": param(g.pickoff_noise_rms_urad)},
+            "1-50 Hz": Truth(
+                math.sqrt(pw * 49.0 + sum(a * a / 2 for a in in_band)),
+                "computed",
+                "the pickoff's white level over 1-50 Hz and its lines there",
+            ),
+            "0.1-200 Hz": param(g.pickoff_noise_rms_urad),
+        },
     }
 
 
@@ -133,9 +156,17 @@ class OfflineRun:
     gyro: dict[tuple[str, float, float], float]
 
 
-def offline_band_rms(cfg: SimConfig, *, mode: int, seconds: float, rate_hz: float, seed: int,
-                     bands: Sequence[tuple[float, float]], axes: Sequence[str] = ("X", "Y"),
-                     seg_s: float = 16.0) -> OfflineRun:
+def offline_band_rms(
+    cfg: SimConfig,
+    *,
+    mode: int,
+    seconds: float,
+    rate_hz: float,
+    seed: int,
+    bands: Sequence[tuple[float, float]],
+    axes: Sequence[str] = ("X", "Y"),
+    seg_s: float = 16.0,
+) -> OfflineRun:
     """Simulate ``seconds`` of the rig in ``mode`` offline (no drivers, virtual time) with the
     true platform angles, and give the rms of each axis's true angle and gyro reading in each
     band (Welch PSD, ``seg_s`` segments, Hann)."""
@@ -152,7 +183,10 @@ def offline_band_rms(cfg: SimConfig, *, mode: int, seconds: float, rate_hz: floa
     for block in sim.run(seconds, 20.0):
         for a in axes:
             theta[a].append(np.asarray(block[f"theta_{a.lower()}"]) * 1e6)
-            gyro[a].append(np.asarray(block[f"gyro_{a.lower()}"]) / (cfg.gyro[a].pickoff_scale_mV_per_urad * 1e-3))
+            gyro[a].append(
+                np.asarray(block[f"gyro_{a.lower()}"])
+                / (cfg.gyro[a].pickoff_scale_mV_per_urad * 1e-3)
+            )
     nper = int(round(seg_s * rate_hz))
     out_t: dict[tuple[str, float, float], float] = {}
     out_g: dict[tuple[str, float, float], float] = {}
@@ -166,7 +200,9 @@ def offline_band_rms(cfg: SimConfig, *, mode: int, seconds: float, rate_hz: floa
 
 
 # ---------------------------------------------------------------------------- Dahl bearings
-def dahl_at_amplitude(cfg: SimConfig, axis: str, rms_urad: float, w_rad_per_s: float) -> tuple[float, float, str]:
+def dahl_at_amplitude(
+    cfg: SimConfig, axis: str, rms_urad: float, w_rad_per_s: float
+) -> tuple[float, float, str]:
     """The bearing's describing-function stiffness (N m/rad) and equivalent viscous damping
     (N m s, at ``w_rad_per_s``) at the amplitude of a sinusoid of ``rms_urad`` rms (eq. 5.12);
     for a linear bearing model its own constants. Returns (k, D, how)."""
@@ -177,12 +213,15 @@ def dahl_at_amplitude(cfg: SimConfig, axis: str, rms_urad: float, w_rad_per_s: f
     if b.model != "dahl":
         lin = linear_part(b)
         return lin.stiffness_Nm_per_rad, lin.damping_Nms, f"the {b.model} bearing's own constants"
-    k0 = b.eta_per_Nm * b.To_Nm ** 2
+    k0 = b.eta_per_Nm * b.To_Nm**2
     amp = math.sqrt(2.0) * rms_urad * 1e-6
     df = complex(describing_function(b.eta_per_Nm * b.To_Nm * amp))
-    return (k0 * df.real, k0 * df.imag / w_rad_per_s,
-            f"Dahl's describing function (eq. 5.12) at {amp * 1e6:.3g} urad amplitude (a sinusoid of "
-            f"{rms_urad:g} urad rms): {df.real:.4f} eta To^2")
+    return (
+        k0 * df.real,
+        k0 * df.imag / w_rad_per_s,
+        f"Dahl's describing function (eq. 5.12) at {amp * 1e6:.3g} urad amplitude (a sinusoid of "
+        f"{rms_urad:g} urad rms): {df.real:.4f} eta To^2",
+    )
 
 
 @dataclass(frozen=True)
@@ -198,10 +237,20 @@ class EquivalentLinear:
     how: str
 
 
-def dahl_equivalent_linear(cfg: SimConfig, axis: str, level_V_rms: float, *, period_s: float = 16.0,
-                           update_hz: float = 250.0, band_hz: tuple[float, float] = (0.1, 60.0),
-                           signal_seed: int = 1, fit_hz: tuple[float, float] = (0.5, 50.0), periods: int = 25,
-                           rate_hz: float = 1000.0, seed: int = 97) -> EquivalentLinear:
+def dahl_equivalent_linear(
+    cfg: SimConfig,
+    axis: str,
+    level_V_rms: float,
+    *,
+    period_s: float = 16.0,
+    update_hz: float = 250.0,
+    band_hz: tuple[float, float] = (0.1, 60.0),
+    signal_seed: int = 1,
+    fit_hz: tuple[float, float] = (0.5, 50.0),
+    periods: int = 25,
+    rate_hz: float = 1000.0,
+    seed: int = 97,
+) -> EquivalentLinear:
     """What the excitation's platform fit measures on a Dahl bearing, exactly: the rig simulated
     offline in Mode 3 with the excitation's multisine as V_Td at ``level_V_rms`` (its noise
     included: the loop's jitter dithers the friction), the bearing's torque integrated along the
@@ -225,7 +274,9 @@ def dahl_equivalent_linear(cfg: SimConfig, axis: str, level_V_rms: float, *, per
     if b.model != "dahl":
         raise ValueError(f"dahl_equivalent_linear: the {axis} bearing is {b.model!r}, not Dahl")
     sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=3, truth=True, channels=[f"cmd_{a}"])
-    x = excitation_signal(int(round(period_s * update_hz)), update_hz, band_hz[0], band_hz[1], signal_seed)
+    x = excitation_signal(
+        int(round(period_s * update_hz)), update_hz, band_hz[0], band_hz[1], signal_seed
+    )
     per = int(round(rate_hz / update_hz))
     theta, cmd = [], []
     for _ in range(periods):
@@ -237,19 +288,29 @@ def dahl_equivalent_linear(cfg: SimConfig, axis: str, level_V_rms: float, *, per
     th, r = np.concatenate(theta), np.concatenate(cmd)
     torque = dahl_torque(th - th.mean(), b.To_Nm, b.eta_per_Nm)
     n = int(round(period_s * rate_hz))
-    R, TH, T = (np.fft.rfft(v[n:periods * n].reshape(-1, n), axis=1) for v in (r, th, torque))
+    R, TH, T = (np.fft.rfft(v[n : periods * n].reshape(-1, n), axis=1) for v in (r, th, torque))
     f = np.fft.rfftfreq(n, 1.0 / rate_hz)
     sel = (f >= max(fit_hz[0], band_hz[0])) & (f <= min(fit_hz[1], band_hz[1]))
     B = np.sum(R.conj() * T, axis=0)[sel] / np.sum(R.conj() * TH, axis=0)[sel]
     s = 2j * np.pi * f[sel]
-    J, D, k = fit_impedance(f[sel], pa.inertia_kg_m2 * s * s + (pa.gyro_damping_Nms + pa.extra_damping_Nms) * s + B)
+    J, D, k = fit_impedance(
+        f[sel], pa.inertia_kg_m2 * s * s + (pa.gyro_damping_Nms + pa.extra_damping_Nms) * s + B
+    )
     rms = float(np.std(th[n:])) * 1e6
-    return EquivalentLinear(k, D, J, rms, f"the bearing's torque along the true angle of an offline run at {level_V_rms:.4g} "
-                            f"V rms ({rms:.3g} urad rms), its best linear approximation fitted over "
-                            f"{fit_hz[0]:g}-{fit_hz[1]:g} Hz")
+    return EquivalentLinear(
+        k,
+        D,
+        J,
+        rms,
+        f"the bearing's torque along the true angle of an offline run at {level_V_rms:.4g} "
+        f"V rms ({rms:.3g} urad rms), its best linear approximation fitted over "
+        f"{fit_hz[0]:g}-{fit_hz[1]:g} Hz",
+    )
 
 
-def linearized_at_amplitude(cfg: SimConfig, mode: int, axis: str, rms_urad: float) -> tuple[np.ndarray, str]:
+def linearized_at_amplitude(
+    cfg: SimConfig, mode: int, axis: str, rms_urad: float
+) -> tuple[np.ndarray, str]:
     """The closed-loop poles of the rig linearized with the bearing replaced by its describing
     function at the amplitude (stiffness and, at the platform pair's frequency, the equivalent
     damping; two passes so that the damping is taken at the pair it moves)."""
@@ -257,7 +318,11 @@ def linearized_at_amplitude(cfg: SimConfig, mode: int, axis: str, rms_urad: floa
     from simhw.plant import linearized_poles
 
     c = cfg.copy()
-    w = math.sqrt(cfg.bearing[axis].eta_per_Nm * cfg.bearing[axis].To_Nm ** 2 / cfg.platform[axis].inertia_kg_m2)
+    w = math.sqrt(
+        cfg.bearing[axis].eta_per_Nm
+        * cfg.bearing[axis].To_Nm ** 2
+        / cfg.platform[axis].inertia_kg_m2
+    )
     how = ""
     poles = linearized_poles(cfg, mode, axis)
     for _ in range(2):
@@ -282,7 +347,7 @@ def in_interval(value: float | None, iv: Sequence[float | None] | None) -> bool 
 
 def binomial_tail(k: int, n: int, p: float = 0.05) -> float:
     """P(X >= k) for X ~ Binomial(n, p): how likely ``k`` or more misses of ``n`` 95 % intervals are."""
-    return float(sum(math.comb(n, i) * p ** i * (1 - p) ** (n - i) for i in range(k, n + 1)))
+    return float(sum(math.comb(n, i) * p**i * (1 - p) ** (n - i) for i in range(k, n + 1)))
 
 
 def max_misses(n: int, p: float = 0.05, alpha: float = 0.01) -> int:

@@ -21,7 +21,7 @@ EXIT_ERROR = 2
 def _starting(signum: int, frame: FrameType | None) -> None:
     sys.stderr.write(f"fbs: {signal.Signals(signum).name} while starting; nothing was done\n")
     sys.stderr.flush()
-    os._exit(EXIT_ERROR)   # from anywhere in an import, without a traceback or half-run cleanup
+    os._exit(EXIT_ERROR)  # from anywhere in an import, without a traceback or half-run cleanup
 
 
 def main() -> int:
@@ -32,6 +32,6 @@ def main() -> int:
             previous[sig] = signal.signal(sig, _starting)
     from fbs.cli import main as cli_main
 
-    for sig, handler in previous.items():   # loaded: the command's own handling from here on
+    for sig, handler in previous.items():  # loaded: the command's own handling from here on
         signal.signal(sig, handler)
     return cli_main()

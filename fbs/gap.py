@@ -37,8 +37,10 @@ def _analyse(args: argparse.Namespace) -> GapResult:
     if args.report and not getattr(args, "force", False):
         held = [name for name in REPORT_FILES if (Path(args.report) / name).exists()]
         if held:
-            raise FileExistsError(f"--report {args.report} already holds {', '.join(held)} (an earlier report): "
-                                  f"give another folder, or --force to replace them")
+            raise FileExistsError(
+                f"--report {args.report} already holds {', '.join(held)} (an earlier report): "
+                f"give another folder, or --force to replace them"
+            )
     return analyse(args.file, axis=args.axis, options=opt, report_dir=args.report)
 
 
@@ -63,9 +65,19 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
 
 #: an interrupted workflow's keys: nothing found, nothing explained
 NOTHING_FOUND: dict[str, Any] = {
-    "effect": None, "parameters": {}, "uncertainties": {}, "parameters_ci95": {}, "significant": None,
-    "gap_before_db": None, "gap_after_db": None, "candidates": [], "effects": [], "explained": None,
-    "unexplained": [], "partial": []}
+    "effect": None,
+    "parameters": {},
+    "uncertainties": {},
+    "parameters_ci95": {},
+    "significant": None,
+    "gap_before_db": None,
+    "gap_after_db": None,
+    "candidates": [],
+    "effects": [],
+    "explained": None,
+    "unexplained": [],
+    "partial": [],
+}
 
 
 def _gap(args: argparse.Namespace) -> int:
@@ -75,59 +87,108 @@ def _gap(args: argparse.Namespace) -> int:
         try:
             out = json_result(args)
         except KeyboardInterrupt:
-            print(json.dumps(header("gap", args.file, "aborted", "aborted: interrupted") | NOTHING_FOUND
-                             | {"file": str(args.file)}))
+            print(
+                json.dumps(
+                    header("gap", args.file, "aborted", "aborted: interrupted")
+                    | NOTHING_FOUND
+                    | {"file": str(args.file)}
+                )
+            )
             print("fbs gap: interrupted", file=sys.stderr)
             return EXIT["aborted"]
         print(json.dumps(out))
         return EXIT[out["verdict"]]
     res = _analyse(args)
-    print(f"fbs gap {res.file}: axis {res.axis}, mode {res.mode}, {res.duration_s:.0f} s at {res.rate_hz:g} Hz, "
-          f"channels {', '.join(res.channels)} ({res.elapsed_s:.1f} s)")
+    print(
+        f"fbs gap {res.file}: axis {res.axis}, mode {res.mode}, {res.duration_s:.0f} s at {res.rate_hz:g} Hz, "
+        f"channels {', '.join(res.channels)} ({res.elapsed_s:.1f} s)"
+    )
     if not res.significant:
         print("  no significant departure from the nominal model: effect none")
     for i, f in enumerate(res.findings, 1):
         print(f"  {i}. {f.effect}: {f.parameter_text()} (95 % intervals in brackets)")
-        print(f"     BIC score {f.score:.1f}, {f.margin:.1f} better than {f.runner_up}; closes "
-              f"{f.gap_before_db:.2f} -> {f.gap_after_db:.2f} dB on its bands")
+        print(
+            f"     BIC score {f.score:.1f}, {f.margin:.1f} better than {f.runner_up}; closes "
+            f"{f.gap_before_db:.2f} -> {f.gap_after_db:.2f} dB on its bands"
+        )
     if res.unexplained:
         print("  explained: no - a significant departure remains that no catalogue effect closes:")
         for b in res.remaining[:8]:
             print(f"    {b.channel} {b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz, {b.deviation_db:+.1f} dB")
         for s in res.remaining_steps[:8]:
-            print(f"    a step at {s.time_s:.1f} s ({s.size * 1e6:+.3g} urad) the model does not make")
+            print(
+                f"    a step at {s.time_s:.1f} s ({s.size * 1e6:+.3g} urad) the model does not make"
+            )
         for c in res.partial:
-            closes = (f", closes {c['gap_closed_db']:.2f} of {c['of_db']:.2f} dB" if "gap_closed_db" in c else "")
-            closes += f", fitted at its prior's bound: {'; '.join(c['at_bound'])}" if "at_bound" in c else ""
+            closes = (
+                f", closes {c['gap_closed_db']:.2f} of {c['of_db']:.2f} dB"
+                if "gap_closed_db" in c
+                else ""
+            )
+            closes += (
+                f", fitted at its prior's bound: {'; '.join(c['at_bound'])}"
+                if "at_bound" in c
+                else ""
+            )
             print(f"    best partial candidate: {c['effect']} (score {c['score']:.1f}{closes})")
-    print(f"  gap {res.gap_before_db:.2f} dB before, {res.gap_after_db:.2f} dB after (models' expected spectra, "
-          f"located bands)" + (f"; simulated runs {res.sim_gaps[0]:.2f} -> {res.sim_gaps[1]:.2f} dB" if res.sim_gaps else ""))
+    print(
+        f"  gap {res.gap_before_db:.2f} dB before, {res.gap_after_db:.2f} dB after (models' expected spectra, "
+        f"located bands)"
+        + (
+            f"; simulated runs {res.sim_gaps[0]:.2f} -> {res.sim_gaps[1]:.2f} dB"
+            if res.sim_gaps
+            else ""
+        )
+    )
     for b in res.located[:8]:
-        print(f"  departs: {b.channel} {b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz, {b.deviation_db:+.1f} dB at {b.peak_hz:.4g} Hz")
+        print(
+            f"  departs: {b.channel} {b.f_lo_hz:.3g}-{b.f_hi_hz:.3g} Hz, {b.deviation_db:+.1f} dB at {b.peak_hz:.4g} Hz"
+        )
     if res.steps:
-        print(f"  {len(res.steps)} offset step(s) in {res.step_channel}: "
-              + ", ".join(f"{s.time_s:.1f} s ({s.size * 1e6:+.3g} urad)" for s in res.steps[:8]))
+        print(
+            f"  {len(res.steps)} offset step(s) in {res.step_channel}: "
+            + ", ".join(f"{s.time_s:.1f} s ({s.size * 1e6:+.3g} urad)" for s in res.steps[:8])
+        )
     for w in res.warnings:
         print(f"  warning: {w}")
     if args.report:
         refined = _refined_config(res, args.report)
-        print(f"  wrote {args.report}/model_before.h5, model_after.h5, gap.md and plots"
-              + (f"; the refined model as a sim config: {refined} (fbs simulate --sim-config {refined})" if refined
-                 else "; no refined sim config (see gap.md)"))
+        print(
+            f"  wrote {args.report}/model_before.h5, model_after.h5, gap.md and plots"
+            + (
+                f"; the refined model as a sim config: {refined} (fbs simulate --sim-config {refined})"
+                if refined
+                else "; no refined sim config (see gap.md)"
+            )
+        )
     return 0
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    g = sub.add_parser("gap", help="model-gap workflow: where the measurement departs from the nominal model, "
-                       "and which catalogue effect closes the gap")
+    g = sub.add_parser(
+        "gap",
+        help="model-gap workflow: where the measurement departs from the nominal model, "
+        "and which catalogue effect closes the gap",
+    )
     g.add_argument("file", metavar="FILE.h5", help="an fbs-run file (any writer)")
-    g.add_argument("--json", action="store_true", help="one JSON object on stdout: effect, parameters (with uncertainties "
-                   "and 95 %% intervals), significant, gap_before_db, gap_after_db, candidates, effects, explained, "
-                   "unexplained, file; with --report also refined_config, the path of DIR/refined.toml")
-    g.add_argument("--report", metavar="DIR", help="write model_before.h5, model_after.h5, plots, gap.md and "
-                   "refined.toml (the refined model as a sim config for --sim-config) to DIR")
+    g.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object on stdout: effect, parameters (with uncertainties "
+        "and 95 %% intervals), significant, gap_before_db, gap_after_db, candidates, effects, explained, "
+        "unexplained, file; with --report also refined_config, the path of DIR/refined.toml",
+    )
+    g.add_argument(
+        "--report",
+        metavar="DIR",
+        help="write model_before.h5, model_after.h5, plots, gap.md and "
+        "refined.toml (the refined model as a sim config for --sim-config) to DIR",
+    )
     g.add_argument("--force", action="store_true", help="replace an earlier report in --report DIR")
     g.add_argument("--axis", help="platform axis X, Y or Z (default: the file's 'axis' attribute)")
-    g.add_argument("--sim-config", help="TOML sim config the nominal model starts from (default: the data sheet)")
+    g.add_argument(
+        "--sim-config",
+        help="TOML sim config the nominal model starts from (default: the data sheet)",
+    )
     g.add_argument("--seed", type=int, default=1, help="seed of the model simulations (default 1)")
     g.set_defaults(func=_gap, json_result=json_result)

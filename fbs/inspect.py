@@ -21,7 +21,7 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-if TYPE_CHECKING:   # h5py, numpy and the reader load when the command runs, not with the parser
+if TYPE_CHECKING:  # h5py, numpy and the reader load when the command runs, not with the parser
     import h5py
 
     from daq.recover import Recovery
@@ -38,19 +38,30 @@ def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
 
     with RunFile(path) as run:
         a = run.attrs
-        lines = [f"{run.path}: {a.get('format')} version {a.get('format_version')}, created {a.get('created', '?')}"]
+        lines = [
+            f"{run.path}: {a.get('format')} version {a.get('format_version')}, created {a.get('created', '?')}"
+        ]
         ident = [f"rig {a.get('rig', '?')}", f"mode {a.get('mode', '?')}"]
         ident += [f"{k} {a[k]}" for k in ("axis", "procedure") if k in a]
         lines.append("  " + ", ".join(ident))
         lines.append(f"  status: {run.status}")
         if "writer" in a:
-            alive = {True: "still running", False: "gone", None: "on another host"}[run.writer_alive()]
-            lines.append(f"  writer: {a['writer']} ({alive})" if a.get("status") == STATUS_RECORDING
-                         else f"  writer: {a['writer']}")
+            alive = {True: "still running", False: "gone", None: "on another host"}[
+                run.writer_alive()
+            ]
+            lines.append(
+                f"  writer: {a['writer']} ({alive})"
+                if a.get("status") == STATUS_RECORDING
+                else f"  writer: {a['writer']}"
+            )
         if run.swmr:
-            lines.append("  opened in SWMR mode: the file is open for writing, or its writer died "
-                         "(`fbs recover` then makes it open with plain h5py)")
-        lines.append(f"  rate {run.rate_hz:g} Hz, {run.n_samples} samples, duration {run.duration_s:.3f} s")
+            lines.append(
+                "  opened in SWMR mode: the file is open for writing, or its writer died "
+                "(`fbs recover` then makes it open with plain h5py)"
+            )
+        lines.append(
+            f"  rate {run.rate_hz:g} Hz, {run.n_samples} samples, duration {run.duration_s:.3f} s"
+        )
         lengths = run.lengths
         lines.append(f"  channels ({len(run.channels)}):")
         width = max(len(c) for c in run.channels)
@@ -65,7 +76,9 @@ def describe(path: str | Path, max_events: int = MAX_EVENTS) -> list[str]:
             lines.append(f"    ... {len(events) - max_events} more")
         meta = run.meta
         if meta:
-            lines.append("  meta: " + ", ".join(f"{k} ({len(json.dumps(v))} bytes)" for k, v in meta.items()))
+            lines.append(
+                "  meta: " + ", ".join(f"{k} ({len(json.dumps(v))} bytes)" for k, v in meta.items())
+            )
     return lines
 
 
@@ -80,7 +93,9 @@ def _value(v: Any) -> str:
 
 def _attrs(obj: Any, names: tuple[str, ...] | None = None) -> str:
     out = []
-    for k in list(obj.attrs)[:MAX_LISTED] if names is None else [n for n in names if n in obj.attrs]:
+    for k in (
+        list(obj.attrs)[:MAX_LISTED] if names is None else [n for n in names if n in obj.attrs]
+    ):
         try:
             out.append(f"{k} {_value(obj.attrs[k])}")
         except (OSError, RuntimeError, TypeError, ValueError) as exc:
@@ -93,9 +108,11 @@ def _member_line(g: h5py.Group, name: str) -> str:
 
     link = g.get(name, getlink=True)
     if isinstance(link, (h5py.ExternalLink, h5py.SoftLink)):
-        target = f"{link.filename}:{link.path}" if isinstance(link, h5py.ExternalLink) else link.path
+        target = (
+            f"{link.filename}:{link.path}" if isinstance(link, h5py.ExternalLink) else link.path
+        )
         kind = f"{type(link).__name__} to {target}"
-        if isinstance(link, h5py.ExternalLink):     # not followed: the other file is not this one's
+        if isinstance(link, h5py.ExternalLink):  # not followed: the other file is not this one's
             return kind
         obj = g.get(name)
         if obj is None:
@@ -108,7 +125,9 @@ def _member_line(g: h5py.Group, name: str) -> str:
             dtype = str(obj.dtype)
         except (TypeError, ValueError) as exc:
             dtype = f"<type unreadable: {exc}>"
-        return f"{kind}dataset {dtype} shape {obj.shape}; {_attrs(obj, ('units', 'sample_rate_hz'))}"
+        return (
+            f"{kind}dataset {dtype} shape {obj.shape}; {_attrs(obj, ('units', 'sample_rate_hz'))}"
+        )
     return f"{kind}{'group' if isinstance(obj, h5py.Group) else type(obj).__name__}"
 
 
@@ -119,7 +138,9 @@ def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
 
     from daq.reader import as_text, open_hdf5
 
-    lines = [f"{path}: HDF5, but not a valid fbs-run version 1 file (the rules it breaks are listed below)"]
+    lines = [
+        f"{path}: HDF5, but not a valid fbs-run version 1 file (the rules it breaks are listed below)"
+    ]
     try:
         f, _swmr = open_hdf5(path)
     except OSError as exc:
@@ -143,8 +164,13 @@ def describe_broken(path: str | Path, problems: tuple[str, ...]) -> list[str]:
                         lines.append(f"    ... {len(names) - MAX_LISTED} more")
                 others = [k for k in f if k != "channels"]
                 if others:
-                    lines.append("  other members: " + ", ".join(
-                        f"/{k} ({_member_line(f, k).split(';')[0]})" for k in others[:MAX_LISTED]))
+                    lines.append(
+                        "  other members: "
+                        + ", ".join(
+                            f"/{k} ({_member_line(f, k).split(';')[0]})"
+                            for k in others[:MAX_LISTED]
+                        )
+                    )
         except (OSError, RuntimeError, KeyError, TypeError, ValueError) as exc:
             lines.append(f"  (the rest cannot be read: {exc})")
     lines.append("  breaks the layout contract:")
@@ -191,7 +217,9 @@ def summary(path: str | Path, max_events: int = MAX_EVENTS) -> dict[str, Any]:
             "n_samples": run.n_samples,
             "duration_s": run.duration_s,
             "channels": {c: {"units": run.units[c], "samples": lengths[c]} for c in run.channels},
-            "events": [{"time_s": e.time_s, "kind": e.kind, "text": e.text} for e in events[:max_events]],
+            "events": [
+                {"time_s": e.time_s, "kind": e.kind, "text": e.text} for e in events[:max_events]
+            ],
             "events_total": len(events),
             "meta": sorted(run.meta),
         }
@@ -199,7 +227,9 @@ def summary(path: str | Path, max_events: int = MAX_EVENTS) -> dict[str, Any]:
 
 def _max_events(args: argparse.Namespace) -> int:
     if args.max_events < 0:
-        raise ValueError(f"--max-events {args.max_events} must be >= 0 (0 lists none, only the count)")
+        raise ValueError(
+            f"--max-events {args.max_events} must be >= 0 (0 lists none, only the count)"
+        )
     return int(args.max_events)
 
 
@@ -211,12 +241,14 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
 def _inspect(args: argparse.Namespace) -> int:
     from daq.reader import ContractError
 
-    if args.json:          # a broken file is only the error (exit 2), stdout stays empty
+    if args.json:  # a broken file is only the error (exit 2), stdout stays empty
         print(json.dumps(json_result(args)))
         return 0
     try:
         lines = describe(args.file, _max_events(args))
-    except ContractError as exc:      # shown as far as it reads, then an error (exit 2) naming the rules
+    except (
+        ContractError
+    ) as exc:  # shown as far as it reads, then an error (exit 2) naming the rules
         print("\n".join(describe_broken(args.file, exc.problems)))
         raise
     print("\n".join(lines))
@@ -227,8 +259,15 @@ def recovery_json(r: Recovery) -> dict[str, Any]:
     """What ``fbs recover --json`` prints: ``file``, ``was_open`` (false: closed properly,
     nothing done), ``n_samples`` per channel kept, ``rate_hz``, ``duration_s``, ``padded``
     {channel: NaN samples added} and ``status``."""
-    return {"file": str(r.path), "was_open": r.was_open, "n_samples": r.samples, "rate_hz": r.rate_hz,
-            "duration_s": r.samples / r.rate_hz if r.rate_hz else None, "padded": dict(r.padded), "status": r.status}
+    return {
+        "file": str(r.path),
+        "was_open": r.was_open,
+        "n_samples": r.samples,
+        "rate_hz": r.rate_hz,
+        "duration_s": r.samples / r.rate_hz if r.rate_hz else None,
+        "padded": dict(r.padded),
+        "status": r.status,
+    }
 
 
 def recover_json_result(args: argparse.Namespace) -> dict[str, Any]:
@@ -247,15 +286,31 @@ def _recover(args: argparse.Namespace) -> int:
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
-    i = sub.add_parser("inspect", help="channels, units, rate, duration, status and events of a run file")
+    i = sub.add_parser(
+        "inspect", help="channels, units, rate, duration, status and events of a run file"
+    )
     i.add_argument("file")
-    i.add_argument("--max-events", type=int, default=MAX_EVENTS, help="events to list (default %(default)s)")
-    i.add_argument("--json", action="store_true", help="one JSON object on stdout: attributes, status, rate, "
-                   "samples, duration, channels with units, events, meta names")
+    i.add_argument(
+        "--max-events", type=int, default=MAX_EVENTS, help="events to list (default %(default)s)"
+    )
+    i.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object on stdout: attributes, status, rate, "
+        "samples, duration, channels with units, events, meta names",
+    )
     i.set_defaults(func=_inspect, json_result=json_result)
-    r = sub.add_parser("recover", help="make a run file left by a killed writer open with plain h5py again")
+    r = sub.add_parser(
+        "recover", help="make a run file left by a killed writer open with plain h5py again"
+    )
     r.add_argument("file")
-    r.add_argument("--force", action="store_true", help="even if a process with the writer's pid runs")
-    r.add_argument("--json", action="store_true", help="one JSON object on stdout: file, was_open, n_samples, "
-                   "rate_hz, duration_s, padded, status")
+    r.add_argument(
+        "--force", action="store_true", help="even if a process with the writer's pid runs"
+    )
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object on stdout: file, was_open, n_samples, "
+        "rate_hz, duration_s, padded, status",
+    )
     r.set_defaults(func=_recover, json_result=recover_json_result)

@@ -55,7 +55,7 @@ class StderrHandler(logging.Handler):
         """stderr is a terminal that understands carriage return and "erase line"."""
         try:
             return self.stream.isatty() and os.environ.get("TERM") != "dumb"
-        except (AttributeError, ValueError):   # no stream, or a closed one
+        except (AttributeError, ValueError):  # no stream, or a closed one
             return False
 
     def _shown(self, record: logging.LogRecord) -> bool:
@@ -93,7 +93,7 @@ class StderrHandler(logging.Handler):
     def _status_text(self) -> str:
         # one column short of the width: a line that fills the last column wraps on some
         # terminals, and the carriage return would then rewrite only its second half
-        return "\r" + self._status[:max(1, self._columns() - 1)] + _ERASE_LINE
+        return "\r" + self._status[: max(1, self._columns() - 1)] + _ERASE_LINE
 
     def set_status(self, text: str) -> None:
         """Show ``text`` as the status line (a terminal only; elsewhere nothing)."""
@@ -103,7 +103,7 @@ class StderrHandler(logging.Handler):
         try:
             self._status = text.replace("\n", " ")
             self._write(self._status_text())
-        except (OSError, ValueError):   # the terminal went away: the run goes on
+        except (OSError, ValueError):  # the terminal went away: the run goes on
             self._status = ""
         finally:
             self.release()

@@ -31,8 +31,18 @@ from procedures import paramtypes
 from procedures.paramlimits import describe_limits
 
 #: unit words of a field name's suffix, and how they are written
-UNITS = {"s": "s", "ms": "ms", "hz": "Hz", "v": "V", "mv": "mV", "deg": "deg", "urad": "urad", "rad": "rad",
-         "db": "dB", "nm": "N m"}
+UNITS = {
+    "s": "s",
+    "ms": "ms",
+    "hz": "Hz",
+    "v": "V",
+    "mv": "mV",
+    "deg": "deg",
+    "urad": "urad",
+    "rad": "rad",
+    "db": "dB",
+    "nm": "N m",
+}
 
 
 def units(name: str) -> str:
@@ -59,7 +69,13 @@ def _type_name(hint: Any) -> str:
         return f"list of {_type_name(args[0])}"
     if origin is dict:
         return f"mapping {_type_name(args[0])} -> {_type_name(args[1])}"
-    return {int: "integer", float: "number", str: "text", bool: "true/false", type(None): "null"}.get(hint, str(hint))
+    return {
+        int: "integer",
+        float: "number",
+        str: "text",
+        bool: "true/false",
+        type(None): "null",
+    }.get(hint, str(hint))
 
 
 def _comments(cls: type) -> dict[str, str]:
@@ -99,7 +115,9 @@ def parameter_help(name: str, width: int = 100) -> str:
     hints = typing.get_type_hints(cls)
     comments = _comments(cls)
     limits = describe_limits(cls)
-    lines = textwrap.wrap(f"parameters of {proc.name} ({proc.title}), as --param NAME=VALUE (VALUE in JSON):", width)
+    lines = textwrap.wrap(
+        f"parameters of {proc.name} ({proc.title}), as --param NAME=VALUE (VALUE in JSON):", width
+    )
     for f in dataclasses.fields(cls):
         hint = hints.get(f.name, Any)
         facts = [_type_name(hint)]
@@ -110,9 +128,14 @@ def parameter_help(name: str, width: int = 100) -> str:
             facts.append(f"limits: {limits[f.name]}")
         lines.append(f"  {f.name} = {json.dumps(_default(f))}  ({', '.join(facts)})")
         if f.name in comments:
-            lines += textwrap.wrap(comments[f.name], width, initial_indent=" " * 6, subsequent_indent=" " * 6)
-    lines += textwrap.wrap(f"Numbers must be finite, durations (names ending in _s) at most {paramtypes.MAX_SECONDS:g} s. "
-                           "Every value is checked before the rig moves: one of the wrong type, out of its limits or at "
-                           "odds with another (a band past the Nyquist frequency) is an error (exit 2) naming it and "
-                           "the limit.", width)
+            lines += textwrap.wrap(
+                comments[f.name], width, initial_indent=" " * 6, subsequent_indent=" " * 6
+            )
+    lines += textwrap.wrap(
+        f"Numbers must be finite, durations (names ending in _s) at most {paramtypes.MAX_SECONDS:g} s. "
+        "Every value is checked before the rig moves: one of the wrong type, out of its limits or at "
+        "odds with another (a band past the Nyquist frequency) is an error (exit 2) naming it and "
+        "the limit.",
+        width,
+    )
     return "\n".join(lines)

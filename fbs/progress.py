@@ -47,8 +47,10 @@ def describe(p: Progress) -> str:
     """What a progress report says, in one line: a step, or a phase after the steps."""
     if p.phase != STEPS:
         return f"{p.procedure}: {100 * p.fraction:3.0f} %, {p.phase}"
-    return (f"{p.procedure}: {100 * p.fraction:3.0f} %, step {p.index + 1}/{p.n_steps} {p.step}; "
-            f"left: rig {fmt_duration(p.remaining_rig_s)}, wall ~{fmt_duration(p.remaining_wall_s)}")
+    return (
+        f"{p.procedure}: {100 * p.fraction:3.0f} %, step {p.index + 1}/{p.n_steps} {p.step}; "
+        f"left: rig {fmt_duration(p.remaining_rig_s)}, wall ~{fmt_duration(p.remaining_wall_s)}"
+    )
 
 
 def bar(fraction: float, width: int = BAR_WIDTH) -> str:
@@ -66,7 +68,7 @@ class ProgressReporter:
         self._t0 = time.monotonic()
         self._last_draw = -math.inf
         self._last_plain = -math.inf
-        self._step: tuple[int, str] | None = None       # the step shown last (live line)
+        self._step: tuple[int, str] | None = None  # the step shown last (live line)
         self._plain_step: tuple[int, str] | None = None  # ... and written last (plain line)
         self._next_mark = 0.0
 
@@ -76,8 +78,14 @@ class ProgressReporter:
         if self._handler is not None and (step != self._step or now - self._last_draw >= REDRAW_S):
             self._step, self._last_draw = step, now
             # the bar first and the elapsed time last: a narrow terminal cuts the end
-            self._handler.set_status(f"{bar(p.fraction)} {describe(p)}; {fmt_duration(now - self._t0)} elapsed")
-        if step != self._plain_step or p.fraction >= self._next_mark or now - self._last_plain >= PLAIN_HEARTBEAT_S:
+            self._handler.set_status(
+                f"{bar(p.fraction)} {describe(p)}; {fmt_duration(now - self._t0)} elapsed"
+            )
+        if (
+            step != self._plain_step
+            or p.fraction >= self._next_mark
+            or now - self._last_plain >= PLAIN_HEARTBEAT_S
+        ):
             self._plain_step, self._last_plain = step, now
             self._next_mark = (math.floor(p.fraction / PLAIN_STEP + 1e-9) + 1) * PLAIN_STEP
             log.info("%s", describe(p), extra={"progress": True})
@@ -91,8 +99,9 @@ class ProgressReporter:
         return time.monotonic() - self._t0
 
 
-def run_with_progress(proc: Procedure[Any], rig: Rig, out: Path, runlog: RunLog, *,
-                      resume: Resumed | None = None) -> RunSummary:
+def run_with_progress(
+    proc: Procedure[Any], rig: Rig, out: Path, runlog: RunLog, *, resume: Resumed | None = None
+) -> RunSummary:
     """``run_procedure`` as the command line runs it: ``runlog`` opened as ``<run>.log`` beside
     the run file (a complete run analysed again: its own log, appended to), progress on the
     status line and in plain lines."""

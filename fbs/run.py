@@ -64,21 +64,29 @@ def run_command(args: argparse.Namespace) -> int:
 
     with RunLog() as runlog:
         # the log's first line (held until the log is named; never on stderr)
-        log.info("%s (fbs-hil %s, pid %d on %s)", shlex.join(["fbs", *getattr(args, "argv", [])]), version(),
-                 os.getpid(), socket.gethostname(), extra={"stderr": False})
+        log.info(
+            "%s (fbs-hil %s, pid %d on %s)",
+            shlex.join(["fbs", *getattr(args, "argv", [])]),
+            version(),
+            os.getpid(),
+            socket.gethostname(),
+            extra={"stderr": False},
+        )
         proc_cls = get(args.procedure)
         out = Path(args.out)
-        make_folder(out)   # a file in --out's way is refused before the rig opens
+        make_folder(out)  # a file in --out's way is refused before the rig opens
         resume = None
         if args.resume:
             resume = load_resume(args.resume, proc_cls.name, complete_ok=True)
             if args.param or args.axis:
-                raise ValueError("--resume continues with the interrupted run's parameters; do not give --param/--axis")
+                raise ValueError(
+                    "--resume continues with the interrupted run's parameters; do not give --param/--axis"
+                )
             params = proc_cls.params_from(resume.params)
         else:
             params = parse_params(proc_cls, args.param or [], args.axis)
         if resume is not None and resume.complete and not args.prior:
-            prior = resume.prior   # analysed again: with the earlier results it was made with
+            prior = resume.prior  # analysed again: with the earlier results it was made with
         else:
             prior = find_prior(out, args.prior)
         proc = proc_cls(params, prior=prior)
@@ -89,16 +97,25 @@ def run_command(args: argparse.Namespace) -> int:
         except ProcedureError as exc:
             raise ValueError(str(exc)) from None
         # the verdict ends the log; on a terminal stdout says it (the status line's place)
-        log.info("fbs run %s: %s (%s); file %s; report %s", proc.name, summary.verdict, summary.status,
-                 summary.file, summary.report, extra={"progress": True})
+        log.info(
+            "fbs run %s: %s (%s); file %s; report %s",
+            proc.name,
+            summary.verdict,
+            summary.status,
+            summary.file,
+            summary.report,
+            extra={"progress": True},
+        )
     if args.json:
         print(json.dumps(summary.json_result(proc)))
     else:
         made = summary.provenance
         sim = "simulated" if made.get("simulated") else "hardware"
-        print(f"fbs run {proc.name}: {summary.verdict} ({summary.status}) on rig "
-              f"{made.get('rig')} ({sim}); file {summary.file}; report {summary.report}; "
-              f"log {runlog.path}")
+        print(
+            f"fbs run {proc.name}: {summary.verdict} ({summary.status}) on rig "
+            f"{made.get('rig')} ({sim}); file {summary.file}; report {summary.report}; "
+            f"log {runlog.path}"
+        )
         for m in summary.measurements:
             print(f"  {measurement_line(m)}")
         if summary.error:
@@ -143,12 +160,22 @@ def procedure_name(text: str) -> str:
 class _Help(argparse.Action):
     """``-h/--help``; after a procedure's name, its parameters too (only then is it imported)."""
 
-    def __init__(self, option_strings: list[str], dest: str = argparse.SUPPRESS, default: str = argparse.SUPPRESS,
-                 help: str | None = None) -> None:
+    def __init__(
+        self,
+        option_strings: list[str],
+        dest: str = argparse.SUPPRESS,
+        default: str = argparse.SUPPRESS,
+        help: str | None = None,
+    ) -> None:
         super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: object,
-                 option_string: str | None = None) -> None:
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
         from fbs.procedure_help import parameter_help
 
         parser.print_help()
@@ -161,30 +188,57 @@ class _Help(argparse.Action):
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     known = ", ".join(m.replace("_", "-") for m in module_names())
-    r = sub.add_parser("run", help="run a procedure unattended (exit 0 pass, 1 limits failed, 2 aborted/error)",
-                       add_help=False, formatter_class=argparse.RawDescriptionHelpFormatter,
-                       description="Run a procedure on the rig, recording everything into one run file in --out\n"
-                                   "(NAME.h5, then NAME-2.h5, ...), with its JSON summary, a Markdown report with\n"
-                                   "plots and its log (NAME.log) beside it. On a terminal a status line shows the\n"
-                                   "step and the time left. `fbs run PROCEDURE --help` lists its parameters.",
-                       epilog=EXIT_CODES_HELP)
-    r.add_argument("-h", "--help", action=_Help, help="show this help; after PROCEDURE, its parameters too")
+    r = sub.add_parser(
+        "run",
+        help="run a procedure unattended (exit 0 pass, 1 limits failed, 2 aborted/error)",
+        add_help=False,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Run a procedure on the rig, recording everything into one run file in --out\n"
+        "(NAME.h5, then NAME-2.h5, ...), with its JSON summary, a Markdown report with\n"
+        "plots and its log (NAME.log) beside it. On a terminal a status line shows the\n"
+        "step and the time left. `fbs run PROCEDURE --help` lists its parameters.",
+        epilog=EXIT_CODES_HELP,
+    )
+    r.add_argument(
+        "-h", "--help", action=_Help, help="show this help; after PROCEDURE, its parameters too"
+    )
     # Named, not imported: importing every procedure (allantools, matplotlib) would cost every
     # `fbs` command ~2 s; the name is checked against the modules' names.
-    r.add_argument("procedure", metavar="PROCEDURE", type=procedure_name, help=f"the procedure ({known})")
+    r.add_argument(
+        "procedure", metavar="PROCEDURE", type=procedure_name, help=f"the procedure ({known})"
+    )
     r.add_argument("--rig", default="sim", help="rig URL (default: the simulated rig, 'sim')")
     r.add_argument("--sim-config", help="TOML sim config for the simulated rig")
     r.add_argument("--axis", help="the axis or gyro channel to measure (procedure-dependent)")
-    r.add_argument("--out", default="out", help="directory for the run file, summary, report and log (default: out)")
-    r.add_argument("--json", action="store_true",
-                   help="print the result as one JSON object on stdout (procedure, status, verdict, "
-                   "rig, simulated, sim_config, software, time; its figures per channel with "
-                   "K_ci95 and resolved; file): docs/schema/run-summary.schema.json")
-    r.add_argument("--resume", metavar="FILE",
-                   help="continue an aborted run from its last completed step; "
-                        "a complete run: analyse it again (its summary and report rewritten)")
-    r.add_argument("--param", action="append", metavar="NAME=VALUE", type=param_text,
-                   help="a procedure parameter (repeatable; `fbs run PROCEDURE --help` lists them)")
-    r.add_argument("--prior", action="append", metavar="SUMMARY.json",
-                   help="an earlier procedure's summary to use (default: the newest in --out)")
+    r.add_argument(
+        "--out",
+        default="out",
+        help="directory for the run file, summary, report and log (default: out)",
+    )
+    r.add_argument(
+        "--json",
+        action="store_true",
+        help="print the result as one JSON object on stdout (procedure, status, verdict, "
+        "rig, simulated, sim_config, software, time; its figures per channel with "
+        "K_ci95 and resolved; file): docs/schema/run-summary.schema.json",
+    )
+    r.add_argument(
+        "--resume",
+        metavar="FILE",
+        help="continue an aborted run from its last completed step; "
+        "a complete run: analyse it again (its summary and report rewritten)",
+    )
+    r.add_argument(
+        "--param",
+        action="append",
+        metavar="NAME=VALUE",
+        type=param_text,
+        help="a procedure parameter (repeatable; `fbs run PROCEDURE --help` lists them)",
+    )
+    r.add_argument(
+        "--prior",
+        action="append",
+        metavar="SUMMARY.json",
+        help="an earlier procedure's summary to use (default: the newest in --out)",
+    )
     r.set_defaults(func=run_command)

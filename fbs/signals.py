@@ -18,7 +18,9 @@ from contextlib import contextmanager
 from types import FrameType
 
 #: the signals that abort a command (SIGHUP does not exist on Windows)
-ABORT_SIGNALS = tuple(s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None)
+ABORT_SIGNALS = tuple(
+    s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None
+)
 
 
 class Signalled(KeyboardInterrupt):

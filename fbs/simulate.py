@@ -24,10 +24,20 @@ log = logging.getLogger(__name__)
 MAX_RATE_HZ = 100_000.0
 
 
-def simulate_to_file(cfg: SimConfig, out: str | Path, *, mode: int, duration_s: float, rate_hz: float,
-                     seed: int = 0, truth: bool = False, effects: list[str] | None = None,
-                     block_s: float = 10.0, overwrite: bool = False,
-                     config_path: str | None = None) -> Path:
+def simulate_to_file(
+    cfg: SimConfig,
+    out: str | Path,
+    *,
+    mode: int,
+    duration_s: float,
+    rate_hz: float,
+    seed: int = 0,
+    truth: bool = False,
+    effects: list[str] | None = None,
+    block_s: float = 10.0,
+    overwrite: bool = False,
+    config_path: str | None = None,
+) -> Path:
     """Simulate ``duration_s`` seconds and write an "fbs-run" file; returns its path. The request
     is checked first (``daq.runfile.check_request``): an existing ``out`` is replaced only with
     ``overwrite``. ``config_path``: the sim config ``cfg`` was read from (the file's
@@ -38,15 +48,33 @@ def simulate_to_file(cfg: SimConfig, out: str | Path, *, mode: int, duration_s: 
     from simhw.plant import CHANNELS, TRUTH_CHANNELS
     from simhw.simulator import Simulator
 
-    check_request(out, duration_s=duration_s, rate_hz=rate_hz, max_rate_hz=MAX_RATE_HZ,
-                  n_channels=len(CHANNELS) + (len(TRUTH_CHANNELS) if truth else 0), overwrite=overwrite)
+    check_request(
+        out,
+        duration_s=duration_s,
+        rate_hz=rate_hz,
+        max_rate_hz=MAX_RATE_HZ,
+        n_channels=len(CHANNELS) + (len(TRUTH_CHANNELS) if truth else 0),
+        overwrite=overwrite,
+    )
     sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=mode, truth=truth)
     units = {c: "V" for c in CHANNELS} | ({t: "rad" for t in TRUTH_CHANNELS} if truth else {})
-    meta = {"configuration": to_dict(cfg), "seed": seed, "effects": effects or [],
-            "calibration": {}, "source": "fbs simulate (virtual time, no drivers)",
-            "provenance": provenance.offline("sim-offline", config_stamp(config_path))}
-    with RunWriter(out, rig="sim-offline", mode=mode, rate_hz=rate_hz, channels=units, meta=meta,
-                   overwrite=overwrite) as w:
+    meta = {
+        "configuration": to_dict(cfg),
+        "seed": seed,
+        "effects": effects or [],
+        "calibration": {},
+        "source": "fbs simulate (virtual time, no drivers)",
+        "provenance": provenance.offline("sim-offline", config_stamp(config_path)),
+    }
+    with RunWriter(
+        out,
+        rig="sim-offline",
+        mode=mode,
+        rate_hz=rate_hz,
+        channels=units,
+        meta=meta,
+        overwrite=overwrite,
+    ) as w:
         w.event(0.0, "mode", f"mode {mode}")
         for e in effects or []:
             w.event(0.0, "effect", e)
@@ -59,7 +87,11 @@ def simulate_to_file(cfg: SimConfig, out: str | Path, *, mode: int, duration_s: 
                 over = block.overrange[:, j]
                 if over.any():
                     first = int(over.argmax())
-                    w.event(block.t0 + first / rate_hz, "overrange", f"{c}: {int(over.sum())} samples beyond range")
+                    w.event(
+                        block.t0 + first / rate_hz,
+                        "overrange",
+                        f"{c}: {int(over.sum())} samples beyond range",
+                    )
     return Path(out)
 
 
@@ -75,13 +107,31 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
         effect, values, axis = effect_catalogue.parse_spec(spec)
         cfg = effect.inject(cfg, axis, **values)
         applied.append(spec)
-    path = simulate_to_file(cfg, args.out, mode=args.mode, duration_s=args.duration, rate_hz=args.rate,
-                            seed=args.seed, truth=args.truth, effects=applied,
-                            overwrite=args.force, config_path=args.sim_config)
+    path = simulate_to_file(
+        cfg,
+        args.out,
+        mode=args.mode,
+        duration_s=args.duration,
+        rate_hz=args.rate,
+        seed=args.seed,
+        truth=args.truth,
+        effects=applied,
+        overwrite=args.force,
+        config_path=args.sim_config,
+    )
     with RunFile(path) as run:
-        return {"file": str(path), "mode": args.mode, "rate_hz": run.rate_hz, "n_samples": run.n_samples,
-                "duration_s": run.duration_s, "status": run.status, "channels": dict(run.units),
-                "seed": args.seed, "truth": bool(args.truth), "effects": applied}
+        return {
+            "file": str(path),
+            "mode": args.mode,
+            "rate_hz": run.rate_hz,
+            "n_samples": run.n_samples,
+            "duration_s": run.duration_s,
+            "status": run.status,
+            "channels": dict(run.units),
+            "seed": args.seed,
+            "truth": bool(args.truth),
+            "effects": applied,
+        }
 
 
 def _simulate(args: argparse.Namespace) -> int:
@@ -89,8 +139,10 @@ def _simulate(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
-    print(f"wrote {result['file']}: mode {args.mode}, {args.duration:g} s at {args.rate:g} Hz"
-          + (f", effects {', '.join(result['effects'])}" if result["effects"] else ""))
+    print(
+        f"wrote {result['file']}: mode {args.mode}, {args.duration:g} s at {args.rate:g} Hz"
+        + (f", effects {', '.join(result['effects'])}" if result["effects"] else "")
+    )
     return 0
 
 
@@ -100,14 +152,25 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--duration", type=float, required=True, help="seconds")
     s.add_argument("--rate", type=float, required=True, help="output sample rate, Hz")
     s.add_argument("--sim-config", help="TOML sim config")
-    s.add_argument("--effect", action="append", metavar="NAME:k=v,..",
-                   help="inject an effect of the model-gap catalogue (the names `fbs gap` reports), "
-                        "e.g. pickup_line:freq_hz=200,amplitude_V=0.003")
+    s.add_argument(
+        "--effect",
+        action="append",
+        metavar="NAME:k=v,..",
+        help="inject an effect of the model-gap catalogue (the names `fbs gap` reports), "
+        "e.g. pickup_line:freq_hz=200,amplitude_V=0.003",
+    )
     s.add_argument("--truth", action="store_true", help="also record the true platform angles")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--out", required=True, help="output .h5 file (never replaced unless --force)")
-    s.add_argument("--force", action="store_true",
-                   help="replace an existing --out (never one a writer may still be filling)")
-    s.add_argument("--json", action="store_true", help="one JSON object on stdout: file, mode, rate_hz, n_samples, "
-                   "duration_s, status, channels with units, seed, truth, effects")
+    s.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing --out (never one a writer may still be filling)",
+    )
+    s.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object on stdout: file, mode, rate_hz, n_samples, "
+        "duration_s, status, channels with units, seed, truth, effects",
+    )
     s.set_defaults(func=_simulate, json_result=json_result)

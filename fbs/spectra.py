@@ -44,10 +44,16 @@ def summary(result: SpectraResult) -> dict[str, Any]:
         "segments_total": int(c.segments_total),
         "segments_skipped": int(c.segments_skipped),
         "dof": float(c.dof),
-        "channels": {ch: {"psd_units": psd_units_label(c.units[c.index(ch)], c.scaling),
-                          "octave_bands": int(b.n_bands), "keep_factor": float(b.factor),
-                          "kept_f_hz": [float(f) for f in b.kept_f], "kept_psd": [float(p) for p in b.kept_p]}
-                     for ch, b in result.bands.items()},
+        "channels": {
+            ch: {
+                "psd_units": psd_units_label(c.units[c.index(ch)], c.scaling),
+                "octave_bands": int(b.n_bands),
+                "keep_factor": float(b.factor),
+                "kept_f_hz": [float(f) for f in b.kept_f],
+                "kept_psd": [float(p) for p in b.kept_p],
+            }
+            for ch, b in result.bands.items()
+        },
     }
 
 
@@ -70,18 +76,35 @@ def _run(args: argparse.Namespace) -> int:
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``spectra`` on the ``fbs`` subcommands (``sub`` from ``add_subparsers``)."""
-    s = sub.add_parser("spectra", help="PSD and coherence plots of a run file (App. A.8 octave bands)",
-                       description="PSD of each channel and coherence of each pair, Welch-averaged in bounded "
-                                   "memory (segments with lost samples skipped), plotted log-log as octave-band "
-                                   "averages plus the points above 3x their band's average (thesis App. A.8), "
-                                   "and written to spectra.csv.")
+    s = sub.add_parser(
+        "spectra",
+        help="PSD and coherence plots of a run file (App. A.8 octave bands)",
+        description="PSD of each channel and coherence of each pair, Welch-averaged in bounded "
+        "memory (segments with lost samples skipped), plotted log-log as octave-band "
+        "averages plus the points above 3x their band's average (thesis App. A.8), "
+        "and written to spectra.csv.",
+    )
     s.add_argument("file", metavar="FILE.h5", help="an fbs-run file")
-    s.add_argument("--channels", required=True, help="comma-separated channel names, e.g. ac_x_ctl,gyro_x")
-    s.add_argument("--out", metavar="DIR", help="output directory (default: next to FILE, FILE stem + '_spectra')")
-    s.add_argument("--seg-s", type=float, metavar="S",
-                   help="Welch segment length in seconds (default: a power of two of samples near 10 s, "
-                        "shorter if the run holds fewer than 8 such segments)")
-    s.add_argument("--json", action="store_true", help="one JSON object on stdout (files written, segments, "
-                   "resolution, EDOF, the points kept above their band's average) instead of the summary lines")
+    s.add_argument(
+        "--channels", required=True, help="comma-separated channel names, e.g. ac_x_ctl,gyro_x"
+    )
+    s.add_argument(
+        "--out",
+        metavar="DIR",
+        help="output directory (default: next to FILE, FILE stem + '_spectra')",
+    )
+    s.add_argument(
+        "--seg-s",
+        type=float,
+        metavar="S",
+        help="Welch segment length in seconds (default: a power of two of samples near 10 s, "
+        "shorter if the run holds fewer than 8 such segments)",
+    )
+    s.add_argument(
+        "--json",
+        action="store_true",
+        help="one JSON object on stdout (files written, segments, "
+        "resolution, EDOF, the points kept above their band's average) instead of the summary lines",
+    )
     s.set_defaults(func=_run, json_result=json_result)
     return s

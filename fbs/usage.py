@@ -42,7 +42,9 @@ def one_line(text: str) -> str:
     """``text`` as one line of printable text: a newline or other control character (a path
     typed with one, a value pasted from elsewhere) is shown escaped (``\\n``), so an error is
     always the one line a script reads and never forges a second one."""
-    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+    return "".join(
+        c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text
+    )
 
 
 def version() -> str:

@@ -105,8 +105,13 @@ class Range(Validator):
     def __post_init__(self) -> None:
         if self.lo is None and self.hi is None:
             raise ValueError("Range: give lo, hi or both (a limit with neither limits nothing)")
-        if self.lo is not None and self.hi is not None and not (
-                self.lo < self.hi or (self.lo == self.hi and not (self.lo_open or self.hi_open))):
+        if (
+            self.lo is not None
+            and self.hi is not None
+            and not (
+                self.lo < self.hi or (self.lo == self.hi and not (self.lo_open or self.hi_open))
+            )
+        ):
             raise ValueError(f"Range: {self.lo}..{self.hi} holds no value")
 
     def describe(self) -> str:
@@ -164,9 +169,13 @@ class OneOf(Validator):
     def problem(self, value: Any, name: str) -> str:
         try:
             ok = value in self.choices
-        except TypeError:       # an unhashable value compared with hashable choices
+        except TypeError:  # an unhashable value compared with hashable choices
             ok = False
-        return "" if ok else _with_note(f"{name} = {_shown(value)} must be {self.describe()}", self.note)
+        return (
+            ""
+            if ok
+            else _with_note(f"{name} = {_shown(value)} must be {self.describe()}", self.note)
+        )
 
 
 @dataclass(frozen=True)
@@ -244,7 +253,9 @@ def check_limits(params: Any, procedure: str) -> None:
 def describe_limits(params_cls: type) -> dict[str, str]:
     """Each limited field's limits as help shows them (``{"repetitions": "1..50"}``); the help of
     ``fbs run NAME --help`` and any parameter form read them from here."""
-    return {name: " and ".join(v.describe() for v in vs) for name, vs in declared(params_cls).items()}
+    return {
+        name: " and ".join(v.describe() for v in vs) for name, vs in declared(params_cls).items()
+    }
 
 
 #: the sample rates a procedure may ask of the recorder: below 1 Hz no procedure has the samples
@@ -257,8 +268,12 @@ MAX_PROCEDURE_RATE_HZ = 20_000.0
 def sample_rate() -> Range:
     """The limit of every procedure's ``rate_hz``: 1..20000 Hz, declared so that a rate the
     ADC would refuse is refused before the rig or any output is opened."""
-    return Range(1.0, MAX_PROCEDURE_RATE_HZ, units="Hz",
-                 note="the recorder's rates a procedure may use; the ADC's own limit is checked again")
+    return Range(
+        1.0,
+        MAX_PROCEDURE_RATE_HZ,
+        units="Hz",
+        note="the recorder's rates a procedure may use; the ADC's own limit is checked again",
+    )
 
 
 def fraction(**kw: Any) -> Range:
@@ -284,6 +299,8 @@ class ExistingFile(Validator):
         except OSError as exc:
             return f"{name} = {value!r} must be {self.describe()} ({exc.strerror or exc})"
         if not stat.S_ISREG(st.st_mode):
-            kind = "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a FIFO or device?)"
+            kind = (
+                "a folder" if stat.S_ISDIR(st.st_mode) else "not a regular file (a FIFO or device?)"
+            )
             return f"{name} = {value!r} must be {self.describe()}: it is {kind}"
         return ""

@@ -18,8 +18,9 @@ from typing import Any
 from procedures.runner import Procedure
 
 
-def prior_value(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channel: str,
-                nominal: float) -> tuple[float, str]:
+def prior_value(
+    prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channel: str, nominal: float
+) -> tuple[float, str]:
     """An earlier ``procedure``'s measured ``key`` for ``channel`` (e.g. earth-rate's K_TO for X),
     else the data sheet's ``nominal``; with where it came from (``procedure`` or "nominal")."""
     v = (((prior.get(procedure) or {}).get(key)) or {}).get(channel)
@@ -28,8 +29,13 @@ def prior_value(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str
     return float(nominal), "nominal"
 
 
-def prior_values(prior: Mapping[str, Mapping[str, Any]], procedure: str, key: str, channels: Iterable[str],
-                 nominal: Mapping[str, float]) -> tuple[dict[str, float], dict[str, str]]:
+def prior_values(
+    prior: Mapping[str, Mapping[str, Any]],
+    procedure: str,
+    key: str,
+    channels: Iterable[str],
+    nominal: Mapping[str, float],
+) -> tuple[dict[str, float], dict[str, str]]:
     """``prior_value`` for each of ``channels``: the values, and where each came from."""
     got = {ch: prior_value(prior, procedure, key, ch, nominal[ch]) for ch in channels}
     return {ch: v for ch, (v, _) in got.items()}, {ch: src for ch, (_, src) in got.items()}
@@ -41,14 +47,18 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
     candidates = sorted(out_dir.glob("*.json")) if out_dir.is_dir() else []
     for path in candidates:
         if not path.is_file():
-            continue   # a FIFO would block the read forever, a folder named *.json is not a summary
+            continue  # a FIFO would block the read forever, a folder named *.json is not a summary
         try:
             data = json.loads(path.read_text())
         except (OSError, ValueError):
             continue
-        if (not isinstance(data, dict) or data.get("verdict") not in ("pass", "fail")
-                or not isinstance(data.get("procedure"), str) or not isinstance(data.get("values"), dict)):
-            continue   # not a summary `fbs run` wrote (notes, another tool's JSON): not evidence
+        if (
+            not isinstance(data, dict)
+            or data.get("verdict") not in ("pass", "fail")
+            or not isinstance(data.get("procedure"), str)
+            or not isinstance(data.get("values"), dict)
+        ):
+            continue  # not a summary `fbs run` wrote (notes, another tool's JSON): not evidence
         mtime = path.stat().st_mtime
         if data["procedure"] not in found or mtime >= found[data["procedure"]][0]:
             found[data["procedure"]] = (mtime, data["values"] | _provenance(path, data))
@@ -56,16 +66,23 @@ def find_prior(out_dir: Path, extra: list[str] | None = None) -> dict[str, dict[
     for spec in extra or []:
         path = Path(spec)
         if path.exists() and not path.is_file():
-            raise ValueError(f"--prior {path}: not a regular file (a folder, FIFO or device); give a summary .json")
+            raise ValueError(
+                f"--prior {path}: not a regular file (a folder, FIFO or device); give a summary .json"
+            )
         try:
             data = json.loads(path.read_text())
         except OSError as exc:
             raise ValueError(f"--prior {path}: cannot read it ({exc.strerror or exc})") from None
         except ValueError as exc:
             raise ValueError(f"--prior {path}: not JSON ({exc})") from None
-        if (not isinstance(data, dict) or not isinstance(data.get("procedure"), str)
-                or not isinstance(data.get("values"), dict)):
-            raise ValueError(f"--prior {path}: not a procedure summary (written by `fbs run` beside its .h5)")
+        if (
+            not isinstance(data, dict)
+            or not isinstance(data.get("procedure"), str)
+            or not isinstance(data.get("values"), dict)
+        ):
+            raise ValueError(
+                f"--prior {path}: not a procedure summary (written by `fbs run` beside its .h5)"
+            )
         prior[data["procedure"]] = data["values"] | _provenance(path, data)
     return prior
 
@@ -77,7 +94,9 @@ def _provenance(path: Path, data: Mapping[str, Any]) -> dict[str, Any]:
     run = data.get("file")
     if isinstance(run, str) and run:
         f = Path(run)
-        out["_file"] = str(path.parent / f.name if not f.exists() and (path.parent / f.name).exists() else f)
+        out["_file"] = str(
+            path.parent / f.name if not f.exists() and (path.parent / f.name).exists() else f
+        )
     return out
 
 
@@ -99,7 +118,9 @@ def parse_params(proc_cls: type[Procedure], specs: list[str], axis: str | None) 
         elif "channels" in fields:
             data["channels"] = [axis]
         else:
-            raise ValueError(f"fbs run {proc_cls.name}: --axis does not apply (it measures all channels at once)")
+            raise ValueError(
+                f"fbs run {proc_cls.name}: --axis does not apply (it measures all channels at once)"
+            )
     try:
         return proc_cls.params_from(data)
     except TypeError as exc:

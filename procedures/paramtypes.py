@@ -69,7 +69,7 @@ def _mismatch(hint: Any, value: Any, name: str) -> str:
         return ""
     if origin is dict:
         if not isinstance(value, dict):
-            return "must be a mapping, e.g. {\"X\": 1.0}"
+            return 'must be a mapping, e.g. {"X": 1.0}'
         for k, v in value.items():
             why = _mismatch(args[1], v, name)
             if why:

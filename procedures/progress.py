@@ -39,14 +39,14 @@ REPORT_PART = 0.4
 @dataclass(frozen=True)
 class Progress:
     procedure: str
-    step: str                     # the current step's name; in a later phase, the phase's
-    index: int                    # 0-based index of the current step (the last one after the steps)
+    step: str  # the current step's name; in a later phase, the phase's
+    index: int  # 0-based index of the current step (the last one after the steps)
     n_steps: int
-    fraction: float               # 0..1, monotone; 1.0 only when the run has finished
+    fraction: float  # 0..1, monotone; 1.0 only when the run has finished
     elapsed_rig_s: float
     remaining_rig_s: float
     remaining_wall_s: float | None  # from the rig-time speed seen so far (None until measurable)
-    phase: str = STEPS            # STEPS, ANALYSING, WRITING_REPORT or DONE
+    phase: str = STEPS  # STEPS, ANALYSING, WRITING_REPORT or DONE
 
 
 ProgressListener = Callable[[Progress], None]
@@ -57,9 +57,15 @@ class ProgressModel:
     The runner calls ``in_step`` as rig time passes, ``step_done`` at each step's end (a resumed
     step included), ``phase`` for the analysis and the report, and ``phase(DONE)`` at the end."""
 
-    def __init__(self, procedure: str, plan: Sequence[tuple[str, float]],
-                 listener: ProgressListener | None, *, analysis_share: float = ANALYSIS_SHARE,
-                 rig_t0_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        procedure: str,
+        plan: Sequence[tuple[str, float]],
+        listener: ProgressListener | None,
+        *,
+        analysis_share: float = ANALYSIS_SHARE,
+        rig_t0_s: float = 0.0,
+    ) -> None:
         self.procedure = procedure
         self.names = [name for name, _ in plan]
         # a weight that is not a positive number counts nothing; a plan of only such steps
@@ -92,10 +98,22 @@ class ProgressModel:
     def phase(self, name: str, rig_now_s: float) -> None:
         """A phase after the steps: its fixed point of the analysis share; ``DONE`` is 1.0."""
         share = 1.0 - self.steps_share
-        at = {ANALYSING: self.steps_share, WRITING_REPORT: 1.0 - share * REPORT_PART,
-              DONE: 1.0}[name]
-        self._emit(Progress(self.procedure, name, max(len(self.names) - 1, 0), len(self.names),
-                            at, rig_now_s, 0.0, None, name))
+        at = {ANALYSING: self.steps_share, WRITING_REPORT: 1.0 - share * REPORT_PART, DONE: 1.0}[
+            name
+        ]
+        self._emit(
+            Progress(
+                self.procedure,
+                name,
+                max(len(self.names) - 1, 0),
+                len(self.names),
+                at,
+                rig_now_s,
+                0.0,
+                None,
+                name,
+            )
+        )
 
     def _steps(self, index: int, in_step_s: float | None, rig_now_s: float) -> None:
         done = self._weight_done(index, in_step_s)
@@ -104,14 +122,27 @@ class ProgressModel:
         rig_run = rig_now_s - self._rig0
         speed = rig_run / wall if wall > 1.0 and rig_run > 0 else None
         name = self.names[index] if self.names else ""
-        self._emit(Progress(self.procedure, name, index, len(self.names),
-                            self.steps_share * done / self.total_s, rig_now_s, remaining,
-                            remaining / speed if speed else None))
+        self._emit(
+            Progress(
+                self.procedure,
+                name,
+                index,
+                len(self.names),
+                self.steps_share * done / self.total_s,
+                rig_now_s,
+                remaining,
+                remaining / speed if speed else None,
+            )
+        )
 
     def _emit(self, p: Progress) -> None:
-        if p.fraction < self._shown:    # the last guard only: the rule above is monotone
-            log.warning("progress %.4f after %.4f held back (%s): a bug in the progress rule",
-                        p.fraction, self._shown, p.step)
+        if p.fraction < self._shown:  # the last guard only: the rule above is monotone
+            log.warning(
+                "progress %.4f after %.4f held back (%s): a bug in the progress rule",
+                p.fraction,
+                self._shown,
+                p.step,
+            )
             p = replace(p, fraction=self._shown)
         self._shown = p.fraction
         if self._listener is None:

@@ -11,8 +11,14 @@ from drivers.errors import DeviceTimeout, PlatformClamped
 from procedures.runner import Context
 
 
-def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_s: float = 600.0,
-                   poll_s: float = 2.0, clamped_ok: bool = False) -> dict:
+def bring_to_mode3(
+    ctx: Context,
+    *,
+    spin_timeout_s: float = 900.0,
+    cage_timeout_s: float = 600.0,
+    poll_s: float = 2.0,
+    clamped_ok: bool = False,
+) -> dict:
     """Mode 3 with the wheels at speed and every channel caged (II D): spin up in mode 2 if
     needed, then mode 3, then wait for the relay driver's null detectors. ``t_caged_s`` is the
     rig time from which every loop is known closed (now, if the rig was found in mode 3): a step
@@ -24,18 +30,32 @@ def bring_to_mode3(ctx: Context, *, spin_timeout_s: float = 900.0, cage_timeout_
     if st.clamped and not clamped_ok:
         # the loops are open: the null detectors may never see the platform caged, and a
         # procedure would wait for nothing; only the open-loop baseline works clamped
-        raise PlatformClamped(f"{ctx.proc.name}: cannot bring the rig to mode 3 with the loops closed")
+        raise PlatformClamped(
+            f"{ctx.proc.name}: cannot bring the rig to mode 3 with the loops closed"
+        )
     t0 = ctx.time_s
     if st.mode == 3 and all(st.at_speed.values()) and all(st.caged.values()):
         return {"already": True, "waited_s": 0.0, "t_caged_s": round(ctx.time_s, 3)}
     if not all(st.at_speed.values()):
         if st.mode != 2:
             rig.set_mode(2)
-        _poll(ctx, lambda s: all(s.at_speed.values()), spin_timeout_s, poll_s, "gyro wheels at speed")
+        _poll(
+            ctx, lambda s: all(s.at_speed.values()), spin_timeout_s, poll_s, "gyro wheels at speed"
+        )
     if rig.relays.status().mode != 3:
         rig.set_mode(3)
-    _poll(ctx, lambda s: all(s.caged.values()), cage_timeout_s, poll_s, "every gyro channel caged in mode 3")
-    return {"already": False, "waited_s": round(ctx.time_s - t0, 3), "t_caged_s": round(ctx.time_s, 3)}
+    _poll(
+        ctx,
+        lambda s: all(s.caged.values()),
+        cage_timeout_s,
+        poll_s,
+        "every gyro channel caged in mode 3",
+    )
+    return {
+        "already": False,
+        "waited_s": round(ctx.time_s - t0, 3),
+        "t_caged_s": round(ctx.time_s, 3),
+    }
 
 
 def enter_gyro_mode(ctx: Context, mode: int, settle_s: float) -> dict:
@@ -63,11 +83,19 @@ def _poll(ctx: Context, ok, timeout_s: float, poll_s: float, what: str) -> None:
 @dataclass
 class Settled:
     waited_s: float
-    slope_V_per_s: np.ndarray     # per channel, over the last window
+    slope_V_per_s: np.ndarray  # per channel, over the last window
 
 
-def wait_settled(ctx: Context, columns: list[int], *, tol_V: float | np.ndarray, window_s: float = 40.0,
-                 chunk_s: float = 2.0, min_s: float = 20.0, timeout_s: float = 900.0) -> Settled:
+def wait_settled(
+    ctx: Context,
+    columns: list[int],
+    *,
+    tol_V: float | np.ndarray,
+    window_s: float = 40.0,
+    chunk_s: float = 2.0,
+    min_s: float = 20.0,
+    timeout_s: float = 900.0,
+) -> Settled:
     """Acquire until the listed channels have settled, decided from the data: a straight line
     through the last ``window_s`` of ``chunk_s`` means changes by less than ``tol_V`` over the
     window, or by less than three standard errors of its slope (no significant trend left)."""
@@ -85,14 +113,16 @@ def wait_settled(ctx: Context, columns: list[int], *, tol_V: float | np.ndarray,
             t = (np.arange(n_win) - (n_win - 1) / 2) * chunk_s
             slope = t @ (y - y.mean(axis=0)) / (t @ t)
             resid = y - y.mean(axis=0) - np.outer(t, slope)
-            se = np.sqrt((resid ** 2).sum(axis=0) / (n_win - 2) / (t @ t))
+            se = np.sqrt((resid**2).sum(axis=0) / (n_win - 2) / (t @ t))
             change = np.abs(slope) * window_s
             if np.all((change < tol) | (np.abs(slope) < 3 * se)):
                 return Settled(waited, slope)
         if waited >= timeout_s:
-            raise DeviceTimeout(f"not settled after {timeout_s:g} s of rig time (last trend "
-                                f"{np.array2string(np.abs(slope) * window_s, precision=4)} V "
-                                f"over {window_s:g} s, tolerance {np.array2string(tol, precision=4)} V)")
+            raise DeviceTimeout(
+                f"not settled after {timeout_s:g} s of rig time (last trend "
+                f"{np.array2string(np.abs(slope) * window_s, precision=4)} V "
+                f"over {window_s:g} s, tolerance {np.array2string(tol, precision=4)} V)"
+            )
 
 
 def mean_and_stderr(x: np.ndarray, batches: int = 10) -> tuple[np.ndarray, np.ndarray]:

@@ -33,7 +33,10 @@ class _Held(logging.Handler):
 
     def emit(self, record: logging.LogRecord) -> None:
         if len(self.records) < MAX_HELD:
-            record.msg, record.args = record.getMessage(), None   # as it reads now, not when written out
+            record.msg, record.args = (
+                record.getMessage(),
+                None,
+            )  # as it reads now, not when written out
             self.records.append(record)
 
 
@@ -55,6 +58,7 @@ class RunLog:
         """Write the held records to ``path`` (appended to: an earlier log is never lost), then
         every record until the block ends."""
         from daq.runfile import make_folder
+
         make_folder(path.parent, "the log's folder")
         handler = logging.FileHandler(path, mode="a", encoding="utf-8", errors="backslashreplace")
         handler.setFormatter(Formatter())
@@ -80,16 +84,23 @@ class RunLog:
                 os.replace(self.path, wanted)
                 self.path = wanted
             except OSError as exc:
-                log.warning("the run's log stays %s (not renamed to %s: %s)", self.path, wanted, exc)
+                log.warning(
+                    "the run's log stays %s (not renamed to %s: %s)", self.path, wanted, exc
+                )
         return self.path
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         if isinstance(exc, Exception) and self._file is not None:
             # the traceback of what ended the run belongs with the run; stderr gets it only
             # with -v, so the command line's one line says where it is (fbs.cli)
-            log.error("the run ended by %s", type(exc).__name__, exc_info=exc,
-                      extra={"stderr": False})
+            log.error(
+                "the run ended by %s", type(exc).__name__, exc_info=exc, extra={"stderr": False}
+            )
             exc.add_note(f"its traceback is in {self.path}")
         root = logging.getLogger()
         if self._held is not None:

@@ -82,10 +82,10 @@ class ProcedureError(Exception):
 class Verdict(StrEnum):
     """How a run ended. A ``str``, so summaries and JSON read as before ("pass", ...)."""
 
-    PASS = "pass"            # every measurement within its limits
-    FAIL = "fail"            # the run completed, a measurement is outside its limits
-    ABORTED = "aborted"      # stopped before its end (operator, Ctrl-C, device fault)
-    ERROR = "error"          # could not start, or its analysis failed
+    PASS = "pass"  # every measurement within its limits
+    FAIL = "fail"  # the run completed, a measurement is outside its limits
+    ABORTED = "aborted"  # stopped before its end (operator, Ctrl-C, device fault)
+    ERROR = "error"  # could not start, or its analysis failed
 
     @property
     def exit_code(self) -> int:
@@ -112,7 +112,10 @@ class Measurement:
             return None
         if self.value is None or not math.isfinite(self.value):
             return False
-        return bool((self.lo is None or self.value >= self.lo) and (self.hi is None or self.value <= self.hi))
+        return bool(
+            (self.lo is None or self.value >= self.lo)
+            and (self.hi is None or self.value <= self.hi)
+        )
 
     def limits_text(self) -> str:
         if self.lo is not None and self.hi is not None:
@@ -165,8 +168,12 @@ class Span:
         """With ``recorded_in`` (the run file this is written into), a data file beside it is
         named by its name alone: the step's event then fits whatever the directory's depth."""
         beside = recorded_in is not None and self.file.parent == Path(recorded_in).resolve().parent
-        return {"file": self.file.name if beside else str(self.file), "start": self.start, "stop": self.stop,
-                "rate_hz": self.rate_hz}
+        return {
+            "file": self.file.name if beside else str(self.file),
+            "start": self.start,
+            "stop": self.stop,
+            "rate_hz": self.rate_hz,
+        }
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any], recorded_in: Path) -> Span:
@@ -185,7 +192,12 @@ def merge_spans(spans: Iterable[Span]) -> list[Span]:
     """The spans in order, back-to-back spans of one file joined into one continuous stretch."""
     out: list[Span] = []
     for s in spans:
-        if out and out[-1].file == s.file and out[-1].stop == s.start and out[-1].rate_hz == s.rate_hz:
+        if (
+            out
+            and out[-1].file == s.file
+            and out[-1].stop == s.start
+            and out[-1].rate_hz == s.rate_hz
+        ):
             out[-1] = Span(s.file, out[-1].start, s.stop, s.rate_hz)
         else:
             out.append(s)
@@ -214,10 +226,10 @@ class Procedure(abc.ABC, Generic[P]):
     ``--param``) and write ``plan`` and ``analyze``; ``procedures.calibrations.catalogue``
     finds them by their module's ``PROCEDURE``."""
 
-    name: ClassVar[str]                  # CLI name, e.g. "earth-rate"
+    name: ClassVar[str]  # CLI name, e.g. "earth-rate"
     title: ClassVar[str]
     json_keys: ClassVar[tuple[str, ...]]  # DESIGN.md section 7, "file" included
-    Params: ClassVar[type[Any]]           # the dataclass P (a ClassVar cannot name a type variable)
+    Params: ClassVar[type[Any]]  # the dataclass P (a ClassVar cannot name a type variable)
     #: the mode the procedure measures in (the run file's ``mode``); a parameter may choose it
     mode: int = 3
     #: its runs in ``fbs demo``'s campaign, each (axis or None, its ``--param`` settings), and
@@ -227,7 +239,9 @@ class Procedure(abc.ABC, Generic[P]):
     demo_runs: ClassVar[tuple[tuple[str | None, tuple[str, ...]], ...]] = ((None, ()),)
     demo_order: ClassVar[int] = 1000
 
-    def __init__(self, params: P | None = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None) -> None:
+    def __init__(
+        self, params: P | None = None, *, prior: Mapping[str, Mapping[str, Any]] | None = None
+    ) -> None:
         self.params: P = params if params is not None else self.Params()
         #: summaries of earlier procedures (by name), e.g. the earth-rate K_TO a stopwatch run uses
         self.prior = dict(prior or {})
@@ -269,7 +283,9 @@ class Procedure(abc.ABC, Generic[P]):
         names = {f.name: f for f in dataclasses.fields(cls.Params)}
         unknown = sorted(set(data) - set(names))
         if unknown:
-            raise ValueError(f"{cls.name}: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(names)})")
+            raise ValueError(
+                f"{cls.name}: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(names)})"
+            )
         paramtypes.check(cls.Params, data, cls.name)
         return cls.Params(**data)
 
@@ -282,9 +298,16 @@ class Context:
     #: the recording; not set when a complete run is analysed again from its file
     acq: Acquisition
 
-    def __init__(self, proc: Procedure[Any], rig: Rig, acq: Acquisition | None, *,
-                 progress: ProgressListener | None, abort: threading.Event,
-                 path: Path | None = None) -> None:
+    def __init__(
+        self,
+        proc: Procedure[Any],
+        rig: Rig,
+        acq: Acquisition | None,
+        *,
+        progress: ProgressListener | None,
+        abort: threading.Event,
+        path: Path | None = None,
+    ) -> None:
         self.proc, self.rig = proc, rig
         self.path: Path
         if acq is not None:
@@ -302,7 +325,7 @@ class Context:
         self.step: Step | None = None
         self.index = 0
         self.steps: list[Step] = []
-        self._step_t0 = 0.0         # file time the current step began
+        self._step_t0 = 0.0  # file time the current step began
         #: the run's progress, its weights fixed from the plan when the steps start
         self._model: ProgressModel | None = None
 
@@ -313,12 +336,16 @@ class Context:
         return self.acq.time_s
 
     @overload
-    def acquire(self, duration_s: float, *, keep: Literal[True] = True, chunk_s: float = 5.0) -> np.ndarray: ...
+    def acquire(
+        self, duration_s: float, *, keep: Literal[True] = True, chunk_s: float = 5.0
+    ) -> np.ndarray: ...
 
     @overload
     def acquire(self, duration_s: float, *, keep: Literal[False], chunk_s: float = 5.0) -> None: ...
 
-    def acquire(self, duration_s: float, *, keep: bool = True, chunk_s: float = 5.0) -> np.ndarray | None:
+    def acquire(
+        self, duration_s: float, *, keep: bool = True, chunk_s: float = 5.0
+    ) -> np.ndarray | None:
         """Acquire ``duration_s`` (all channels, (n, c) volts, NaN where lost), checking for an
         abort and reporting progress every ``chunk_s``."""
         n_total = int(round(duration_s * self.acq.rate_hz))
@@ -330,7 +357,7 @@ class Context:
             n = min(chunk, n_total - done)
             block = self.acq.acquire_samples(n, keep=keep)
             if out is not None:
-                out[done:done + n] = block
+                out[done : done + n] = block
             done += n
             self.report()
         return out
@@ -342,7 +369,9 @@ class Context:
         """The samples of the data steps done (``steps``, default all), in plan order,
         back-to-back spans of one file joined; a step not done is left out."""
         wanted = set(self.spans) if steps is None else set(steps)
-        return merge_spans(self.spans[s.name] for s in self.steps if s.name in wanted and s.name in self.spans)
+        return merge_spans(
+            self.spans[s.name] for s in self.steps if s.name in wanted and s.name in self.spans
+        )
 
     def note(self, text: str, kind: str = "note") -> None:
         self.acq.note(kind, text)
@@ -369,7 +398,7 @@ class Context:
 class RunSummary:
     procedure: str
     file: Path | None
-    status: str                      # "complete" | "aborted: <why>"
+    status: str  # "complete" | "aborted: <why>"
     verdict: Verdict
     values: dict[str, Any] = field(default_factory=dict)
     measurements: list[Measurement] = field(default_factory=list)
@@ -390,8 +419,9 @@ class RunSummary:
         """DESIGN.md section 7: 0 pass, 1 limits failed, 2 aborted or error."""
         return self.verdict.exit_code
 
-    def json_values(self, keys: tuple[str, ...],
-                    headline: Mapping[str, Sequence[str]] | None = None) -> dict[str, Any]:
+    def json_values(
+        self, keys: tuple[str, ...], headline: Mapping[str, Sequence[str]] | None = None
+    ) -> dict[str, Any]:
         """The keys of DESIGN.md section 7 (None where not measured), with each figure's
         ``K_ci95`` and the ``resolved`` map where the analysis gives them
         (``procedures.analysis.intervals.add_figure``). A ``headline`` figure has one shape
@@ -405,8 +435,10 @@ class RunSummary:
         # the verdicts of the keys printed: a figure kept out of the JSON keeps its verdict out too
         resolved = {k: v for k, v in given.items() if k in keys}
         for k, channels in headline.items():
-            got, ci, ok = (v if isinstance(v, dict) else {}
-                           for v in (out[k], out.get(f"{k}_ci95"), given.get(k)))
+            got, ci, ok = (
+                v if isinstance(v, dict) else {}
+                for v in (out[k], out.get(f"{k}_ci95"), given.get(k))
+            )
             chans = list(dict.fromkeys([*channels, *got]))
             out[k] = {c: got.get(c) for c in chans}
             out[f"{k}_ci95"] = {c: ci.get(c) for c in chans}
@@ -421,18 +453,31 @@ class RunSummary:
     def json_result(self, proc: Procedure[Any]) -> dict[str, Any]:
         """What ``fbs run --json`` prints: the procedure, its status and verdict, where the
         result came from (``daq.provenance``), then ``json_values`` (docs/schema/)."""
-        return {"procedure": self.procedure, "status": self.status, "verdict": str(self.verdict),
-                **{k: self.provenance.get(k) for k in provenance.KEYS},
-                **self.json_values(proc.json_keys, proc.headline())}
+        return {
+            "procedure": self.procedure,
+            "status": self.status,
+            "verdict": str(self.verdict),
+            **{k: self.provenance.get(k) for k in provenance.KEYS},
+            **self.json_values(proc.json_keys, proc.headline()),
+        }
 
     def to_json(self) -> dict[str, Any]:
-        return {"procedure": self.procedure, "file": str(self.file) if self.file else None, "status": self.status,
-                "verdict": self.verdict, **{k: self.provenance.get(k) for k in provenance.KEYS},
-                "values": self.values,
-                "measurements": [m.to_json() for m in self.measurements], "steps_done": self.steps_done,
-                "steps_resumed": self.steps_resumed, "steps_planned": self.steps_planned,
-                "spans": {name: s.to_json() for name, s in self.spans.items()}, "params": self.params, "error": self.error,
-                "report": str(self.report) if self.report else None}
+        return {
+            "procedure": self.procedure,
+            "file": str(self.file) if self.file else None,
+            "status": self.status,
+            "verdict": self.verdict,
+            **{k: self.provenance.get(k) for k in provenance.KEYS},
+            "values": self.values,
+            "measurements": [m.to_json() for m in self.measurements],
+            "steps_done": self.steps_done,
+            "steps_resumed": self.steps_resumed,
+            "steps_planned": self.steps_planned,
+            "spans": {name: s.to_json() for name, s in self.spans.items()},
+            "params": self.params,
+            "error": self.error,
+            "report": str(self.report) if self.report else None,
+        }
 
 
 def next_free(out_dir: Path, stem: str, suffix: str = ".h5") -> Path:
@@ -480,17 +525,25 @@ def load_resume(path: str | Path, procedure: str, *, complete_ok: bool = False) 
     if not isinstance(info, dict) or "name" not in info:
         raise ProcedureError(f"--resume {path}: not a procedure run (no /meta/procedure)")
     if info["name"] != procedure:
-        raise ProcedureError(f"--resume {path}: that file is a {info['name']!r} run, not {procedure!r}")
+        raise ProcedureError(
+            f"--resume {path}: that file is a {info['name']!r} run, not {procedure!r}"
+        )
     if status == STATUS_COMPLETE and not complete_ok:
         raise ProcedureError(f"--resume {path}: that run is complete; nothing to resume")
     results, spans = steps_done(path, events)
     prior = meta.get("prior")
     # JSON (steps_done checked it)
     done = [json.loads(e.text) for e in events if e.kind == EVENT_STEP_DONE]
-    return Resumed(path, procedure, dict(info.get("params", {})), results, spans,
-                   complete=status == STATUS_COMPLETE,
-                   prior=dict(prior) if isinstance(prior, dict) else {},
-                   taken_over=[d["step"] for d in done if "resumed" in d])
+    return Resumed(
+        path,
+        procedure,
+        dict(info.get("params", {})),
+        results,
+        spans,
+        complete=status == STATUS_COMPLETE,
+        prior=dict(prior) if isinstance(prior, dict) else {},
+        taken_over=[d["step"] for d in done if "resumed" in d],
+    )
 
 
 def steps_done(path: Path, events: Iterable[Event]) -> tuple[dict[str, Any], dict[str, Span]]:
@@ -503,8 +556,10 @@ def steps_done(path: Path, events: Iterable[Event]) -> tuple[dict[str, Any], dic
             try:
                 item = json.loads(e.text)
             except json.JSONDecodeError:
-                raise ProcedureError(f"{path}: a step-done event at {e.time_s:.3f} s is not JSON "
-                                     f"(cut at {len(e.text)} bytes?)") from None
+                raise ProcedureError(
+                    f"{path}: a step-done event at {e.time_s:.3f} s is not JSON "
+                    f"(cut at {len(e.text)} bytes?)"
+                ) from None
             results[item["step"]] = item.get("result")
             if item.get("span"):
                 spans[item["step"]] = Span.from_json(item["span"], path)
@@ -512,9 +567,16 @@ def steps_done(path: Path, events: Iterable[Event]) -> tuple[dict[str, Any], dic
 
 
 # ---------------------------------------------------------------------------- the runner
-def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume: Resumed | None = None,
-                  progress: ProgressListener | None = None, abort: threading.Event | None = None,
-                  report: bool = True) -> RunSummary:
+def run_procedure(
+    proc: Procedure[Any],
+    rig: Rig,
+    out_dir: str | Path,
+    *,
+    resume: Resumed | None = None,
+    progress: ProgressListener | None = None,
+    abort: threading.Event | None = None,
+    report: bool = True,
+) -> RunSummary:
     """Run ``proc`` on ``rig``, recording to a new file in ``out_dir``; never raises for an
     abort or a failure of the procedure: the summary says what happened (exit code 2). A
     ``resume`` of a complete run analyses that run again (its summary and report beside it)."""
@@ -524,16 +586,37 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
     make_folder(out_dir)
     path = next_free(out_dir, proc.name)
     abort = abort or threading.Event()
-    summary = RunSummary(proc.name, path, "aborted: not started", Verdict.ERROR,
-                         params=proc.params_json(), provenance=provenance.of_rig(rig))
-    meta = {"procedure": {"name": proc.name, "title": proc.title, "params": proc.params_json(),
-                          "resumed_from": str(resume.path) if resume else None},
-            "calibration": dataclasses.asdict(rig.calibration),
-            "prior": {k: dict(v) for k, v in proc.prior.items()}}
+    summary = RunSummary(
+        proc.name,
+        path,
+        "aborted: not started",
+        Verdict.ERROR,
+        params=proc.params_json(),
+        provenance=provenance.of_rig(rig),
+    )
+    meta = {
+        "procedure": {
+            "name": proc.name,
+            "title": proc.title,
+            "params": proc.params_json(),
+            "resumed_from": str(resume.path) if resume else None,
+        },
+        "calibration": dataclasses.asdict(rig.calibration),
+        "prior": {k: dict(v) for k, v in proc.prior.items()},
+    }
     try:
-        acq = Acquisition(rig, path, rate_hz=proc.rate_hz, channels=proc.channels(), ranges_V=proc.ranges_V,
-                          block_s=proc.block_s,
-                          procedure=proc.name, axis=proc.axis, meta=meta, mode=proc.mode)
+        acq = Acquisition(
+            rig,
+            path,
+            rate_hz=proc.rate_hz,
+            channels=proc.channels(),
+            ranges_V=proc.ranges_V,
+            block_s=proc.block_s,
+            procedure=proc.name,
+            axis=proc.axis,
+            meta=meta,
+            mode=proc.mode,
+        )
     except (RunFileError, OSError, ValueError) as exc:
         summary.file = None
         summary.status = f"aborted: {exc}"
@@ -550,29 +633,41 @@ def run_procedure(proc: Procedure[Any], rig: Rig, out_dir: str | Path, *, resume
             _execute(ctx, resume, summary)
         summary.status = acq.result.status
     except BaseException as exc:  # noqa: B036 - Ctrl-C included: the summary must say what was done
-        summary.status = acq.result.status if acq.result.status.startswith("aborted") else abort_status(exc)
+        summary.status = (
+            acq.result.status if acq.result.status.startswith("aborted") else abort_status(exc)
+        )
         summary.verdict = Verdict.ABORTED
         # a signal's KeyboardInterrupt carries its name (fbs.signals); Python's own Ctrl-C none
-        summary.error = (f"interrupted ({str(exc) or 'Ctrl-C'})"
-                         if isinstance(exc, KeyboardInterrupt) else f"{type(exc).__name__}: {exc}")
-        log.error("%s aborted in step %r: %s; rig safe: %s", proc.name, ctx.step.name if ctx.step else "-",
-                  summary.error, _safe_text(rig))
+        summary.error = (
+            f"interrupted ({str(exc) or 'Ctrl-C'})"
+            if isinstance(exc, KeyboardInterrupt)
+            else f"{type(exc).__name__}: {exc}"
+        )
+        log.error(
+            "%s aborted in step %r: %s; rig safe: %s",
+            proc.name,
+            ctx.step.name if ctx.step else "-",
+            summary.error,
+            _safe_text(rig),
+        )
         _finish_report(proc, summary, None, out_dir, report)
         return summary
     _analyse(proc, ctx, summary, out_dir, report)
     return summary
 
 
-def _analyse_again(proc: Procedure[Any], rig: Rig, resume: Resumed, abort: threading.Event,
-                   report: bool) -> RunSummary:
+def _analyse_again(
+    proc: Procedure[Any], rig: Rig, resume: Resumed, abort: threading.Event, report: bool
+) -> RunSummary:
     """A complete run's analysis once more, from its file (its step results and spans); its
     summary and report are rewritten beside it. The rig is only asked for its calibration."""
     path = resume.path
     log.info("%s: %s is complete: analysing it again", proc.name, path)
-    with RunFile(path) as rf:   # the data's rig, not the one asked for its calibration now
+    with RunFile(path) as rf:  # the data's rig, not the one asked for its calibration now
         made = provenance.of_file(rf)
-    summary = RunSummary(proc.name, path, STATUS_COMPLETE, Verdict.ERROR,
-                         params=proc.params_json(), provenance=made)
+    summary = RunSummary(
+        proc.name, path, STATUS_COMPLETE, Verdict.ERROR, params=proc.params_json(), provenance=made
+    )
     ctx = Context(proc, rig, None, progress=None, abort=abort, path=path)
     ctx.steps = list(proc.plan())
     ctx.results, ctx.spans = dict(resume.results), dict(resume.spans)
@@ -584,8 +679,9 @@ def _analyse_again(proc: Procedure[Any], rig: Rig, resume: Resumed, abort: threa
     return summary
 
 
-def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: Path,
-             report: bool) -> None:
+def _analyse(
+    proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: Path, report: bool
+) -> None:
     """After a complete acquisition: the analysis, the verdict, the report and the summary."""
     how_again = f"`--resume {summary.file}` analyses the complete run again"
     ctx.progress_phase(ANALYSING)
@@ -593,13 +689,17 @@ def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: P
         analysis = proc.analyze(ctx)
     except KeyboardInterrupt:
         summary.verdict = Verdict.ABORTED
-        summary.error = (f"interrupted during the analysis (the acquisition is complete); "
-                         f"{how_again}")
+        summary.error = (
+            f"interrupted during the analysis (the acquisition is complete); {how_again}"
+        )
         _finish_report(proc, summary, None, out_dir, report)
         return
     except Exception as exc:
         log.exception("%s: analysis failed", proc.name)
-        summary.verdict, summary.error = Verdict.ERROR, f"analysis failed: {type(exc).__name__}: {exc}"
+        summary.verdict, summary.error = (
+            Verdict.ERROR,
+            f"analysis failed: {type(exc).__name__}: {exc}",
+        )
         _finish_report(proc, summary, None, out_dir, report)
         return
     summary.analysis = analysis
@@ -608,7 +708,9 @@ def _analyse(proc: Procedure[Any], ctx: Context, summary: RunSummary, out_dir: P
     if unmeasured is not None:
         analysis.measurements.append(unmeasured)
     summary.measurements = analysis.measurements
-    summary.verdict = Verdict.FAIL if any(m.passed is False for m in analysis.measurements) else Verdict.PASS
+    summary.verdict = (
+        Verdict.FAIL if any(m.passed is False for m in analysis.measurements) else Verdict.PASS
+    )
     if report:
         ctx.progress_phase(WRITING_REPORT)
     _finish_report(proc, summary, analysis, out_dir, report)
@@ -620,9 +722,13 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
     proc, acq = ctx.proc, ctx.acq
     ctx.steps = list(proc.plan())
     if ctx._progress is not None:
-        ctx._model = ProgressModel(proc.name, [(s.name, s.expected_s) for s in ctx.steps],
-                                   ctx._progress, analysis_share=proc.analysis_share,
-                                   rig_t0_s=acq.time_s)
+        ctx._model = ProgressModel(
+            proc.name,
+            [(s.name, s.expected_s) for s in ctx.steps],
+            ctx._progress,
+            analysis_share=proc.analysis_share,
+            rig_t0_s=acq.time_s,
+        )
     summary.steps_planned = [s.name for s in ctx.steps]
     for i, step in enumerate(ctx.steps):
         ctx.index, ctx.step = i, step
@@ -633,8 +739,11 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
             result = resume.results[step.name]
             source = Path(resume.path).resolve()
             beside = source.parent == Path(ctx.path).resolve().parent
-            done: dict[str, Any] = {"step": step.name, "result": result,
-                                    "resumed": source.name if beside else str(source)}
+            done: dict[str, Any] = {
+                "step": step.name,
+                "result": result,
+                "resumed": source.name if beside else str(source),
+            }
             if step.name in resume.spans:
                 ctx.spans[step.name] = resume.spans[step.name]
                 done["span"] = resume.spans[step.name].to_json()
@@ -652,7 +761,7 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
             acq.note(EVENT_STEP_DONE, _step_done_text(done))
         ctx.results[step.name] = result
         summary.steps_done.append(step.name)
-        if ctx._model is not None:   # its whole weight, however long it took (or resumed)
+        if ctx._model is not None:  # its whole weight, however long it took (or resumed)
             ctx._model.step_done(i, ctx.time_s)
 
 
@@ -664,19 +773,33 @@ def headline_measurement(proc: Procedure[Any], values: Mapping[str, Any]) -> Mea
     headline = proc.headline()
     if not headline:
         return None
-    measured = [v for k in headline if isinstance(values.get(k), dict) for v in values[k].values()
-                if isinstance(v, int | float) and math.isfinite(v)]   # NaN prints as null: none
+    measured = [
+        v
+        for k in headline
+        if isinstance(values.get(k), dict)
+        for v in values[k].values()
+        if isinstance(v, int | float) and math.isfinite(v)
+    ]  # NaN prints as null: none
     if measured:
         return None
-    return Measurement("headline figures measured", 0.0, "", lo=1.0,
-                       note=f"none of {', '.join(headline)} resolved on any channel: not a pass")
+    return Measurement(
+        "headline figures measured",
+        0.0,
+        "",
+        lo=1.0,
+        note=f"none of {', '.join(headline)} resolved on any channel: not a pass",
+    )
 
 
 def _step_done_text(done: Mapping[str, Any]) -> str:
     text = json.dumps(done, default=_jsonable, separators=(",", ":"))
-    if len(text.encode()) > TEXT_BYTES:  # a cut result could not be resumed from: a bug in the procedure
-        raise ProcedureError(f"step {done['step']!r}: its result is {len(text.encode())} bytes of JSON, more than "
-                             f"an event holds ({TEXT_BYTES}); keep step results small")
+    if (
+        len(text.encode()) > TEXT_BYTES
+    ):  # a cut result could not be resumed from: a bug in the procedure
+        raise ProcedureError(
+            f"step {done['step']!r}: its result is {len(text.encode())} bytes of JSON, more than "
+            f"an event holds ({TEXT_BYTES}); keep step results small"
+        )
     return text
 
 
@@ -687,24 +810,31 @@ def _safe_text(rig: Rig) -> str:
         return f"unknown ({exc})"
 
 
-def _finish_report(proc: Procedure[Any], summary: RunSummary, analysis: Analysis | None, out_dir: Path,
-                   report: bool) -> None:
+def _finish_report(
+    proc: Procedure[Any],
+    summary: RunSummary,
+    analysis: Analysis | None,
+    out_dir: Path,
+    report: bool,
+) -> None:
     from procedures.reports.report import write_report
     from procedures.reports.textfile import write_text_atomic
 
     stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem
-    summary.provenance["time"] = provenance.utc_now()   # the result's time: now it is made
+    summary.provenance["time"] = provenance.utc_now()  # the result's time: now it is made
     # the report first, the summary last: a summary never names a report that is not there
     if report:
         try:
             summary.report = write_report(proc, summary, analysis, out_dir / f"{stem}.md")
-        except KeyboardInterrupt:   # Ctrl-C, SIGTERM or SIGHUP (fbs.signals): said, not hidden
+        except KeyboardInterrupt:  # Ctrl-C, SIGTERM or SIGHUP (fbs.signals): said, not hidden
             summary.report = None
             if summary.verdict in (Verdict.PASS, Verdict.FAIL):
                 summary.verdict = Verdict.ABORTED
-                summary.error = (f"interrupted while the report was written (the acquisition "
-                                 f"and analysis are complete); no report; "
-                                 f"`--resume {summary.file}` analyses it again")
+                summary.error = (
+                    f"interrupted while the report was written (the acquisition "
+                    f"and analysis are complete); no report; "
+                    f"`--resume {summary.file}` analyses it again"
+                )
             else:
                 why = "interrupted while the report was written: no report"
                 summary.error = "; ".join(filter(None, [summary.error, why]))
@@ -712,9 +842,11 @@ def _finish_report(proc: Procedure[Any], summary: RunSummary, analysis: Analysis
         except Exception as exc:  # a report that cannot be written must not hide the run's outcome
             log.error("%s: the report could not be written: %s", proc.name, exc)
     try:
-        with _signals_held():   # a few ms: the summary is written whole, a signal acts after it
-            write_text_atomic(out_dir / f"{stem}.json",
-                              json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n")
+        with _signals_held():  # a few ms: the summary is written whole, a signal acts after it
+            write_text_atomic(
+                out_dir / f"{stem}.json",
+                json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n",
+            )
     except Exception as exc:
         log.error("%s: the summary could not be written: %s", proc.name, exc)
 
@@ -734,7 +866,7 @@ def _signals_held() -> Iterator[None]:
         yield
     finally:
         for s, handler in previous.items():
-            if handler is not None:   # None: not set from Python, nothing to put back
+            if handler is not None:  # None: not set from Python, nothing to put back
                 signal.signal(s, handler)
         if caught:
             handler = previous[caught[0]]

@@ -49,8 +49,12 @@ FAULTS = ("drop", "corrupt", "bad_length", "garbage", "bad_reply", "stall", "dis
 
 
 class AdcDevice:
-    def __init__(self, server: SimRigServer, max_aggregate_rate_hz: float = 2_000_000.0,
-                 fifo_bytes: int = 1 << 20) -> None:
+    def __init__(
+        self,
+        server: SimRigServer,
+        max_aggregate_rate_hz: float = 2_000_000.0,
+        fifo_bytes: int = 1 << 20,
+    ) -> None:
         self.server = server
         self.max_aggregate_rate_hz = max_aggregate_rate_hz
         self.master, self._slave = os.openpty()
@@ -72,16 +76,20 @@ class AdcDevice:
         self._stall_until: float | None = None
         self._hold_lock = threading.Lock()
         self._hold_bytes: int | None = None  # bytes still to send before the output holds
-        self._hold_lines = 0                 # command lines to receive before it goes on
+        self._hold_lines = 0  # command lines to receive before it goes on
         self._connected = True
         self._stop = threading.Event()
-        self._threads = [threading.Thread(target=self._command_loop, name="sim-adc-commands", daemon=True),
-                         threading.Thread(target=self._write_loop, name="sim-adc-writer", daemon=True)]
+        self._threads = [
+            threading.Thread(target=self._command_loop, name="sim-adc-commands", daemon=True),
+            threading.Thread(target=self._write_loop, name="sim-adc-writer", daemon=True),
+        ]
         for t in self._threads:
             t.start()
 
     # ------------------------------------------------------------------ faults
-    def inject(self, fault: str, count: int = 1, seconds: float | None = None, nbytes: int = 64) -> None:
+    def inject(
+        self, fault: str, count: int = 1, seconds: float | None = None, nbytes: int = 64
+    ) -> None:
         """Misbehave on purpose: ``drop``/``corrupt``/``bad_length`` the next ``count`` frames,
         write ``garbage`` bytes, answer the next command with a ``bad_reply``, ``stall`` (stop
         sending and answering, for ``seconds`` or for good), or ``disconnect`` (close the port).
@@ -96,7 +104,9 @@ class AdcDevice:
             raise ValueError(f"unknown ADC fault {fault!r} (one of {', '.join(FAULTS)})")
         if fault == "hold":
             if count < 1 or nbytes < 0:
-                raise ValueError(f"hold needs count >= 1 command lines and nbytes >= 0 (got {count}, {nbytes})")
+                raise ValueError(
+                    f"hold needs count >= 1 command lines and nbytes >= 0 (got {count}, {nbytes})"
+                )
             with self._hold_lock:
                 self._hold_bytes, self._hold_lines = nbytes, count
         elif fault == "disconnect":
@@ -106,8 +116,11 @@ class AdcDevice:
             self._stall_until = float("inf") if seconds is None else now + seconds
         elif fault == "garbage":
             rng = np.random.default_rng(nbytes)
-            junk = bytes(b for b in rng.integers(0, 256, 4 * nbytes, dtype=np.uint8).tolist()
-                         if b not in (0xA5, ord("O"), ord("E")))[:nbytes]
+            junk = bytes(
+                b
+                for b in rng.integers(0, 256, 4 * nbytes, dtype=np.uint8).tolist()
+                if b not in (0xA5, ord("O"), ord("E"))
+            )[:nbytes]
             self._put(junk, control=True)
         else:
             self._faults[fault] = self._faults.get(fault, 0) + count
@@ -168,8 +181,12 @@ class AdcDevice:
         """Queue bytes for the writer. Returns False if a data frame was dropped (FIFO full)."""
         with self._fifo_cond:
             # An empty FIFO always takes a frame, however large.
-            while (self._fifo_bytes and self._fifo_bytes + len(data) > self._fifo_limit and not control
-                   and self._connected):
+            while (
+                self._fifo_bytes
+                and self._fifo_bytes + len(data) > self._fifo_limit
+                and not control
+                and self._connected
+            ):
                 if self.server.paced:
                     return False
                 self._fifo_cond.wait(0.05)
@@ -234,7 +251,7 @@ class AdcDevice:
         codes[block.overrange[:, cols] & (block.volts[:, cols] > 0)] = CODE_MAX
         codes[block.overrange[:, cols] & (block.volts[:, cols] <= 0)] = CODE_MIN
         for i in range(0, len(codes), self.frame_sets):
-            chunk = codes[i:i + self.frame_sets]
+            chunk = codes[i : i + self.frame_sets]
             self._emit(chunk)
 
     def _emit(self, chunk: np.ndarray) -> None:
@@ -280,7 +297,7 @@ class AdcDevice:
                 while self._stalled() and not self._stop.is_set():
                     self._stop.wait(0.01)
                 if self._stop.is_set():
-                    return      # stopped while stalled for good: the wait above would spin for ever
+                    return  # stopped while stalled for good: the wait above would spin for ever
                 try:
                     self._handle(decode_command(line))
                 except ProtocolError as exc:
@@ -296,26 +313,34 @@ class AdcDevice:
     def _handle(self, cmd: Command) -> None:
         a = cmd.args
         if cmd.verb == "IDN?":
-            self._reply(f"OK IDN vendor=fbs-hil model=SIM-ADC16 serial=SIM-{self.server.seed:04d} fw={FIRMWARE} "
-                        f"bits=16 max_rate_hz={self.max_aggregate_rate_hz:.9g} "
-                        f"ranges={','.join(f'{r:g}' for r in ADC_RANGES_V)}")
+            self._reply(
+                f"OK IDN vendor=fbs-hil model=SIM-ADC16 serial=SIM-{self.server.seed:04d} fw={FIRMWARE} "
+                f"bits=16 max_rate_hz={self.max_aggregate_rate_hz:.9g} "
+                f"ranges={','.join(f'{r:g}' for r in ADC_RANGES_V)}"
+            )
         elif cmd.verb == "CHAN?":
             self._reply("OK CHAN " + ",".join(CHANNELS))
         elif cmd.verb == "STAT?":
-            self._reply(f"OK STAT state={'streaming' if self.streaming else 'idle'} rate={self.rate_hz:.9g} "
-                        f"channels={len(self.channels)} samples={self.samples} frames={self.frames} "
-                        f"overruns={self.overruns}")
+            self._reply(
+                f"OK STAT state={'streaming' if self.streaming else 'idle'} rate={self.rate_hz:.9g} "
+                f"channels={len(self.channels)} samples={self.samples} frames={self.frames} "
+                f"overruns={self.overruns}"
+            )
         elif cmd.verb == "START":
             if self.streaming:
                 self._reply("ERR STATE already streaming")
             elif self.rate_hz * len(self.channels) > self.max_aggregate_rate_hz:
-                self._reply(f"ERR RANGE {len(self.channels)} channels at {self.rate_hz:g} Hz exceed "
-                            f"{self.max_aggregate_rate_hz:g} samples/s")
+                self._reply(
+                    f"ERR RANGE {len(self.channels)} channels at {self.rate_hz:g} Hz exceed "
+                    f"{self.max_aggregate_rate_hz:g} samples/s"
+                )
             else:
                 self.server.submit(lambda sim: self.begin())
         elif cmd.verb == "STOP":
             if not self.streaming:
-                self._reply(f"OK STOP samples={self.samples} frames={self.frames} overruns={self.overruns}")
+                self._reply(
+                    f"OK STOP samples={self.samples} frames={self.frames} overruns={self.overruns}"
+                )
             else:
                 self.server.submit(lambda sim: self.end())
         elif cmd.verb == "CONF":
@@ -341,7 +366,9 @@ class AdcDevice:
             except ValueError:
                 rate = float("nan")
             if not (0 < rate <= self.max_aggregate_rate_hz):
-                self._reply(f"ERR RANGE rate {a[1]} Hz (0 < rate <= {self.max_aggregate_rate_hz:g})")
+                self._reply(
+                    f"ERR RANGE rate {a[1]} Hz (0 < rate <= {self.max_aggregate_rate_hz:g})"
+                )
             else:
                 self.rate_hz = rate
                 self.server.submit(lambda sim: sim.set_rate(rate))

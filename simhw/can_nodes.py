@@ -34,9 +34,15 @@ class CanNodeHost:
     """Every simulated node of the rig on the virtual channel ``channel``, but the ``external``
     ones, which the caller runs there itself (a CiA 401 module written in a test)."""
 
-    def __init__(self, server: SimRigServer, channel: str, watchdog_s: float = 1.0,
-                 monotonic: Callable[[], float] = time.monotonic, external: Collection[str] = (),
-                 interface: str = "virtual") -> None:
+    def __init__(
+        self,
+        server: SimRigServer,
+        channel: str,
+        watchdog_s: float = 1.0,
+        monotonic: Callable[[], float] = time.monotonic,
+        external: Collection[str] = (),
+        interface: str = "virtual",
+    ) -> None:
         self.channel = channel
         #: every simulated node by name (tests look at their objects)
         self.nodes: dict[str, CanopenSimNode] = {}
@@ -48,12 +54,16 @@ class CanNodeHost:
         try:
             for name in rn.NODES:
                 if name not in external:
-                    self.nodes[name] = CANOPEN_NODE_CLASSES[name](server, self.network, watchdog_s, monotonic)
+                    self.nodes[name] = CANOPEN_NODE_CLASSES[name](
+                        server, self.network, watchdog_s, monotonic
+                    )
         except BaseException:
             self.close()
             raise
 
-    def inject(self, node: str, fault: str, code: int = cf.EMCY_OVERTEMP, delay_s: float = 1.5) -> None:
+    def inject(
+        self, node: str, fault: str, code: int = cf.EMCY_OVERTEMP, delay_s: float = 1.5
+    ) -> None:
         if node not in self.nodes:
             raise ValueError(f"unknown node {node!r} (one of {', '.join(self.nodes)})")
         if fault not in NODE_FAULTS:

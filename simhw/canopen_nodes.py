@@ -32,7 +32,12 @@ from canopen.sdo.exceptions import SdoAbortedError
 from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
 from drivers.caging import DO_8, DO_ERROR_MODE, DO_ERROR_VALUE
-from drivers.canopen_client import ABORT_INTERLOCK, ABORT_NOT_HELD, ABORT_NOT_OPERATIONAL, ABORT_RANGE
+from drivers.canopen_client import (
+    ABORT_INTERLOCK,
+    ABORT_NOT_HELD,
+    ABORT_NOT_OPERATIONAL,
+    ABORT_RANGE,
+)
 from drivers.canopen_dac import AO_16, AO_ERROR_MODE, AO_ERROR_VALUE
 from drivers.relay import R_CLAMP, R_MODE, R_REASONS, R_SAFE, R_SELECTED, R_STATUS, R_SWITCHES
 from drivers.table import T_ACTUAL_SPINDLE, T_ACTUAL_TILT, T_MOVING, T_SPINDLE, T_TILT
@@ -58,8 +63,13 @@ class CanopenSimNode:
 
     name = ""
 
-    def __init__(self, server: SimRigServer, network: canopen.Network, watchdog_s: float,
-                 monotonic: Callable[[], float] = time.monotonic) -> None:
+    def __init__(
+        self,
+        server: SimRigServer,
+        network: canopen.Network,
+        watchdog_s: float,
+        monotonic: Callable[[], float] = time.monotonic,
+    ) -> None:
         self.server = server
         self.node_id = rn.NODES[self.name]
         self._mono = monotonic
@@ -92,7 +102,9 @@ class CanopenSimNode:
         self._stop = threading.Event()
         #: answers held back by the ``busy`` fault, cancelled at close
         self._timers: list[threading.Timer] = []
-        self._thread = threading.Thread(target=self._watch, name=f"sim-canopen-{self.name}", daemon=True)
+        self._thread = threading.Thread(
+            target=self._watch, name=f"sim-canopen-{self.name}", daemon=True
+        )
         self.power_on()
         self._thread.start()
 
@@ -100,11 +112,13 @@ class CanopenSimNode:
     def power_on(self) -> None:
         """Power-on values (outputs 0, the EDS's defaults), boot-up, then pre-operational."""
         self.node.data_store.clear()
-        self.node.data_store[0x1016] = {1: ((cf.HOST_NODE_ID << 16) | round(self.watchdog_s * 1000)).to_bytes(4, "little")}
+        self.node.data_store[0x1016] = {
+            1: ((cf.HOST_NODE_ID << 16) | round(self.watchdog_s * 1000)).to_bytes(4, "little")
+        }
         self.reset_outputs()
         self._last_host = None
-        self.node.nmt.send_command(0x81)   # reset node: boot-up frame ...
-        self.node.nmt.send_command(0x80)   # ... pre-operational; heartbeat per 0x1017
+        self.node.nmt.send_command(0x81)  # reset node: boot-up frame ...
+        self.node.nmt.send_command(0x80)  # ... pre-operational; heartbeat per 0x1017
 
     def reset_outputs(self) -> None:
         """Outputs to their power-on values, in the physics too (the data store is cleared)."""
@@ -117,10 +131,14 @@ class CanopenSimNode:
     def go_safe(self) -> None:
         raise NotImplementedError
 
-    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+    def _on_write(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes
+    ) -> None:
         """Check a written value (``SdoAbortedError`` refuses it) and apply it."""
 
-    def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
+    def _on_read(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable
+    ) -> int | None:
         """An object the node computes when read (None: the data store's, or the EDS default)."""
         return None
 
@@ -143,14 +161,16 @@ class CanopenSimNode:
         self._connected = on
         if not on:
             self.node.nmt.stop_heartbeat()
-            self._last_host = self._mono()          # off the bus: its watchdog runs out
+            self._last_host = self._mono()  # off the bus: its watchdog runs out
 
     # ------------------------------------------------------------------ the bus
     def _on_sdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self.reply_delay_s:
             # a host too busy to run the node's thread; the other nodes on the shared network
             # answer meanwhile (a sleep here would hold up the whole bus's receive thread)
-            timer = threading.Timer(self.reply_delay_s, self._serve_sdo, (can_id, bytes(data), timestamp))
+            timer = threading.Timer(
+                self.reply_delay_s, self._serve_sdo, (can_id, bytes(data), timestamp)
+            )
             timer.daemon = True
             self._timers = [t for t in self._timers if t.is_alive()] + [timer]
             timer.start()
@@ -177,15 +197,17 @@ class CanopenSimNode:
 
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if len(data) == 2 and data[0] == cf.NMT_START and data[1] in (0, self.node_id):
-            self.latched = False                     # back to work: outputs stay as they are
+            self.latched = False  # back to work: outputs stay as they are
             if self._connected and not self.stalled:
                 # the new state at once, besides the periodic heartbeat (LocalNode's NMT slave has
                 # already switched: it subscribed first), so the host's wait for it is short
-                self.network.send_message(0x700 + self.node_id, bytes([NMT_CODES[self.node.nmt.state]]))
+                self.network.send_message(
+                    0x700 + self.node_id, bytes([NMT_CODES[self.node.nmt.state]])
+                )
 
     def _on_host_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self._connected and len(data) == 1:
-            self._last_host = self._mono()          # the first one arms the consumer
+            self._last_host = self._mono()  # the first one arms the consumer
 
     # ------------------------------------------------------------------ watchdog and faults
     def _consumer_s(self) -> float:
@@ -196,9 +218,11 @@ class CanopenSimNode:
         while not self._stop.wait(0.05):
             last, period = self._last_host, self._consumer_s()
             if last is not None and period and self._mono() - last > period:
-                self._last_host = None              # disarmed until the host is heard again
+                self._last_host = None  # disarmed until the host is heard again
                 if not self.latched:
-                    log.warning("simulated CANopen node %s: host heartbeat lost, error values", self.name)
+                    log.warning(
+                        "simulated CANopen node %s: host heartbeat lost, error values", self.name
+                    )
                     self.go_error(cf.EMCY_HEARTBEAT, emcy=self._connected)
 
     def go_error(self, code: int, emcy: bool = True) -> None:
@@ -262,7 +286,9 @@ class CanopenDacNode(CanopenSimNode):
         for sub in range(1, len(self.outputs) + 1):
             self.set(AO_16, sub, 0)
 
-    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+    def _on_write(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes
+    ) -> None:
         value = od.decode_raw(data)
         if index == AO_ERROR_MODE and value not in (0, 1):
             raise SdoAbortedError(ABORT_VALUE_RANGE)
@@ -297,18 +323,21 @@ class CanopenCagingNode(CanopenSimNode):
     def go_safe(self) -> None:
         self.set(DO_8, 1, 0)
 
-    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+    def _on_write(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes
+    ) -> None:
         value = od.decode_raw(data)
         assert isinstance(value, int)
         if index == DO_8 and subindex == 1:
             if value & ~0x0F:
-                raise SdoAbortedError(ABORT_VALUE_RANGE)   # outputs 5-8 are not wired
+                raise SdoAbortedError(ABORT_VALUE_RANGE)  # outputs 5-8 are not wired
             self._apply(value)
 
     def _apply(self, word: int) -> None:
         def apply(sim) -> None:
             for i, c in enumerate(self.channels):
                 sim.set_caging_inhibit(c, bool(word >> i & 1))
+
         self.server.submit(apply)
 
 
@@ -344,7 +373,7 @@ class CanopenRelayNode(CanopenSimNode):
     def _commands_zero(self) -> bool:
         """The node senses the command DAC outputs (V_Td, gamma_c) on its interlock lines."""
         command = self.server.nodes.nodes["command"]
-        return not any(cast(Any, command).values.values())   # a CanopenCommandNode
+        return not any(cast(Any, command).values.values())  # a CanopenCommandNode
 
     def status_word(self) -> int:
         snap = self.server.snapshot
@@ -356,11 +385,20 @@ class CanopenRelayNode(CanopenSimNode):
             w |= int(snap.caged[c]) << (rn.ST_CAGED_SHIFT + i)
         return w | (min(100, int(snap.spin * 100)) << rn.ST_SPIN_SHIFT)
 
-    def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
-        return {R_MODE: lambda: self.mode, R_SELECTED: lambda: self.selected, R_REASONS: lambda: self.reasons,
-                R_STATUS: self.status_word, R_CLAMP: lambda: int(self.clamped)}.get(index, lambda: None)()
+    def _on_read(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable
+    ) -> int | None:
+        return {
+            R_MODE: lambda: self.mode,
+            R_SELECTED: lambda: self.selected,
+            R_REASONS: lambda: self.reasons,
+            R_STATUS: self.status_word,
+            R_CLAMP: lambda: int(self.clamped),
+        }.get(index, lambda: None)()
 
-    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+    def _on_write(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes
+    ) -> None:
         if index not in (R_SWITCHES, R_SELECTED, R_CLAMP, R_SAFE):
             return
         value = od.decode_raw(data)
@@ -383,7 +421,7 @@ class CanopenRelayNode(CanopenSimNode):
             if not self.held:
                 raise SdoAbortedError(ABORT_NOT_HELD)
             if not 1 <= value <= 6:
-                self.alarm = True            # the register is not clocked; the lamp lights
+                self.alarm = True  # the register is not clocked; the lamp lights
                 raise SdoAbortedError(ABORT_VALUE_RANGE)
             self.selected, self.alarm = value, False
         else:
@@ -405,7 +443,8 @@ class CanopenRelayNode(CanopenSimNode):
             snap = self.server.snapshot
             need = ("X", "Y", "Z", "XRD") if m == 4 else ("X", "Y", "XRD")
             why = (0 if snap.at_speed else rn.WHY_NOT_AT_SPEED) | (
-                0 if all(snap.caged[c] for c in need) else rn.WHY_NOT_CAGED)
+                0 if all(snap.caged[c] for c in need) else rn.WHY_NOT_CAGED
+            )
             if why:
                 self.selected = self.mode
                 self._refuse(why)
@@ -420,7 +459,9 @@ class CanopenRelayNode(CanopenSimNode):
         if on == self.clamped:
             return
         why = 0 if self._commands_zero() else rn.WHY_COMMAND
-        if on and (self.mode not in rn.CLAMP_MODES or (self.held and self.selected not in rn.CLAMP_MODES)):
+        if on and (
+            self.mode not in rn.CLAMP_MODES or (self.held and self.selected not in rn.CLAMP_MODES)
+        ):
             why |= rn.WHY_MODE
         if why:
             self._refuse(why)
@@ -435,20 +476,29 @@ class CanopenTableNode(CanopenSimNode):
     name = "table"
 
     def reset_outputs(self) -> None:
-        t = self.server.sim.cfg.table          # at power-on the table reports where it is
+        t = self.server.sim.cfg.table  # at power-on the table reports where it is
         self.tilt, self.spindle = rn.to_micro(t.tilt_deg), rn.to_micro(t.spindle_deg % 360.0)
 
     def error_outputs(self) -> None:
-        pass                                   # a table at rest is safe where it is
+        pass  # a table at rest is safe where it is
 
     def go_safe(self) -> None:
         pass
 
-    def _on_read(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable) -> int | None:
-        return {T_TILT: self.tilt, T_SPINDLE: self.spindle, T_ACTUAL_TILT: self.tilt,
-                T_ACTUAL_SPINDLE: self.spindle, T_MOVING: 0}.get(index)
+    def _on_read(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable
+    ) -> int | None:
+        return {
+            T_TILT: self.tilt,
+            T_SPINDLE: self.spindle,
+            T_ACTUAL_TILT: self.tilt,
+            T_ACTUAL_SPINDLE: self.spindle,
+            T_MOVING: 0,
+        }.get(index)
 
-    def _on_write(self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes) -> None:
+    def _on_write(
+        self, index: int, subindex: int, od: canopen.objectdictionary.ODVariable, data: bytes
+    ) -> None:
         value = od.decode_raw(data)
         assert isinstance(value, int)
         if index == T_TILT:
@@ -489,4 +539,12 @@ class CanopenCommandNode(CanopenDacNode):
 
 #: the simulated nodes that can speak CANopen, by name
 CANOPEN_NODE_CLASSES: dict[str, type[CanopenSimNode]] = {
-    c.name: c for c in (CanopenTorquerNode, CanopenCommandNode, CanopenCagingNode, CanopenRelayNode, CanopenTableNode)}
+    c.name: c
+    for c in (
+        CanopenTorquerNode,
+        CanopenCommandNode,
+        CanopenCagingNode,
+        CanopenRelayNode,
+        CanopenTableNode,
+    )
+}

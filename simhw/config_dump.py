@@ -24,7 +24,15 @@ from simhw.params import SimConfig, to_dict
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 #: TOML basic strings must escape these (tab may stay, but escaping it is as valid)
-_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+_ESCAPES = {
+    '"': '\\"',
+    "\\": "\\\\",
+    "\b": "\\b",
+    "\t": "\\t",
+    "\n": "\\n",
+    "\f": "\\f",
+    "\r": "\\r",
+}
 
 
 def dump_config(cfg: SimConfig, base: SimConfig | None = None, header: str = "") -> str:
@@ -68,18 +76,26 @@ def _same(a: Any, b: Any) -> bool:
 
 
 def _is_table_array(value: Any) -> bool:
-    return isinstance(value, (list, tuple)) and len(value) > 0 and all(isinstance(v, dict) for v in value)
+    return (
+        isinstance(value, (list, tuple))
+        and len(value) > 0
+        and all(isinstance(v, dict) for v in value)
+    )
 
 
-def _table(out: list[str], path: tuple[str, ...], cur: dict[str, Any], ref: dict[str, Any] | None) -> None:
+def _table(
+    out: list[str], path: tuple[str, ...], cur: dict[str, Any], ref: dict[str, Any] | None
+) -> None:
     """Write the keys of ``cur`` that differ from ``ref`` (all of them when ``ref`` is None) as
     the table at ``path``: its plain keys under its header, then its sub-tables and arrays of
     tables (TOML wants a table's own keys before any sub-table's header)."""
     if ref is not None:
         gone = [k for k in ref if k not in cur]
         if gone:
-            raise ValueError(f"sim config: '{_dotted((*path, gone[0]))}' is in the base config but not in "
-                             "this one; an overlay cannot remove a key")
+            raise ValueError(
+                f"sim config: '{_dotted((*path, gone[0]))}' is in the base config but not in "
+                "this one; an overlay cannot remove a key"
+            )
     plain: list[str] = []
     subtables: list[tuple[str, dict[str, Any], dict[str, Any] | None]] = []
     arrays: list[tuple[str, list[Any]]] = []
@@ -113,7 +129,10 @@ def _table(out: list[str], path: tuple[str, ...], cur: dict[str, Any], ref: dict
 
 def _comment(text: str) -> str:
     """A comment line holds no control character but tab (TOML): others are shown escaped."""
-    return "".join(c if c == "\t" or not (ord(c) < 0x20 or ord(c) == 0x7F) else f"\\x{ord(c):02x}" for c in text)
+    return "".join(
+        c if c == "\t" or not (ord(c) < 0x20 or ord(c) == 0x7F) else f"\\x{ord(c):02x}"
+        for c in text
+    )
 
 
 def _dotted(path: tuple[str, ...]) -> str:
@@ -131,6 +150,7 @@ def _string(s: str) -> str:
         if ord(c) < 0x20 or ord(c) == 0x7F:
             return f"\\u{ord(c):04x}"
         return c
+
     return '"' + "".join(esc(c) for c in s) + '"'
 
 
@@ -153,7 +173,11 @@ def _value(v: Any, path: tuple[str, ...]) -> str:
     if isinstance(v, (list, tuple)):
         return "[" + ", ".join(_value(x, path) for x in v) + "]"
     if isinstance(v, dict):
-        return "{" + ", ".join(f"{_key(str(k))} = {_value(x, (*path, str(k)))}" for k, x in v.items()) + "}"
+        return (
+            "{"
+            + ", ".join(f"{_key(str(k))} = {_value(x, (*path, str(k)))}" for k, x in v.items())
+            + "}"
+        )
     tolist = getattr(v, "tolist", None)  # a numpy array
     if callable(tolist):
         return _value(tolist(), path)

@@ -34,7 +34,9 @@ class Csr:
             idx.extend(nz)
             val.extend(row[nz])
             ptr.append(len(idx))
-        return cls(np.asarray(ptr, np.int64), np.asarray(idx, np.int64), np.asarray(val, np.float64))
+        return cls(
+            np.asarray(ptr, np.int64), np.asarray(idx, np.int64), np.asarray(val, np.float64)
+        )
 
 
 @dataclass
@@ -42,21 +44,21 @@ class CompiledPlant:
     """A :class:`DiscretePlant` packed for the kernel; fast inputs are given per step."""
 
     disc: DiscretePlant
-    fast_cols: np.ndarray   # input indices that vary per step, in kernel column order
-    slow_cols: np.ndarray   # input indices held over a whole block
+    fast_cols: np.ndarray  # input indices that vary per step, in kernel column order
+    slow_cols: np.ndarray  # input indices held over a whole block
     ad: Csr
-    bf_t: Csr               # Bd[:, fast] transposed: one row per fast input (skipped when 0)
-    bs: np.ndarray          # Bd[:, slow]
+    bf_t: Csr  # Bd[:, fast] transposed: one row per fast input (skipped when 0)
+    bs: np.ndarray  # Bd[:, slow]
     c: Csr
     df_t: Csr
     ds: np.ndarray
     nl_kind: np.ndarray
     nl_zx: Csr
-    nl_zu: Csr              # over fast columns
-    nl_zs: np.ndarray       # over slow columns (dense, tiny)
-    nl_col: np.ndarray      # fast column receiving the correction, -1 for none
-    nl_p: np.ndarray        # (n_nl, 3): p1, p2, gain
-    nl_sidx: np.ndarray     # (n_nl, 2): theta, omega state indices for stops
+    nl_zu: Csr  # over fast columns
+    nl_zs: np.ndarray  # over slow columns (dense, tiny)
+    nl_col: np.ndarray  # fast column receiving the correction, -1 for none
+    nl_p: np.ndarray  # (n_nl, 3): p1, p2, gain
+    nl_sidx: np.ndarray  # (n_nl, 2): theta, omega state indices for stops
 
     @classmethod
     def build(cls, disc: DiscretePlant) -> CompiledPlant:
@@ -78,27 +80,67 @@ class CompiledPlant:
                 else:
                     zs[j, slow_pos[i]] += v
         return cls(
-            disc, fast, slow,
-            Csr.from_dense(disc.Ad), Csr.from_dense(disc.Bd[:, fast].T), disc.Bd[:, slow].copy(),
-            Csr.from_dense(plant.C), Csr.from_dense(plant.D[:, fast].T), plant.D[:, slow].copy(),
-            np.array([n.kind for n in nl], np.int64), Csr.from_dense(zx), Csr.from_dense(zu), zs,
+            disc,
+            fast,
+            slow,
+            Csr.from_dense(disc.Ad),
+            Csr.from_dense(disc.Bd[:, fast].T),
+            disc.Bd[:, slow].copy(),
+            Csr.from_dense(plant.C),
+            Csr.from_dense(plant.D[:, fast].T),
+            plant.D[:, slow].copy(),
+            np.array([n.kind for n in nl], np.int64),
+            Csr.from_dense(zx),
+            Csr.from_dense(zu),
+            zs,
             np.array([pos[n.col] if n.col >= 0 else -1 for n in nl], np.int64),
             np.array([[n.p1, n.p2, n.gain] for n in nl], np.float64).reshape(len(nl), 3),
             np.array([[n.state_theta, n.state_omega] for n in nl], np.int64).reshape(len(nl), 2),
         )
 
-    def run(self, x: np.ndarray, u_fast: np.ndarray, u_slow: np.ndarray, nl_state: np.ndarray,
-            y: np.ndarray) -> None:
+    def run(
+        self,
+        x: np.ndarray,
+        u_fast: np.ndarray,
+        u_slow: np.ndarray,
+        nl_state: np.ndarray,
+        y: np.ndarray,
+    ) -> None:
         """Advance ``x`` over ``len(u_fast)`` steps, writing outputs to ``y`` (in place)."""
         b_slow = self.bs @ u_slow
         y_slow = self.ds @ u_slow
         z_slow = self.nl_zs @ u_slow if len(u_slow) else np.zeros(len(self.nl_kind))
-        _run(x, u_fast, b_slow, y_slow, z_slow,
-             self.ad.ptr, self.ad.idx, self.ad.val, self.bf_t.ptr, self.bf_t.idx, self.bf_t.val,
-             self.c.ptr, self.c.idx, self.c.val, self.df_t.ptr, self.df_t.idx, self.df_t.val,
-             self.nl_kind, self.nl_zx.ptr, self.nl_zx.idx, self.nl_zx.val,
-             self.nl_zu.ptr, self.nl_zu.idx, self.nl_zu.val, self.nl_col, self.nl_p, self.nl_sidx,
-             nl_state, y)
+        _run(
+            x,
+            u_fast,
+            b_slow,
+            y_slow,
+            z_slow,
+            self.ad.ptr,
+            self.ad.idx,
+            self.ad.val,
+            self.bf_t.ptr,
+            self.bf_t.idx,
+            self.bf_t.val,
+            self.c.ptr,
+            self.c.idx,
+            self.c.val,
+            self.df_t.ptr,
+            self.df_t.idx,
+            self.df_t.val,
+            self.nl_kind,
+            self.nl_zx.ptr,
+            self.nl_zx.idx,
+            self.nl_zx.val,
+            self.nl_zu.ptr,
+            self.nl_zu.idx,
+            self.nl_zu.val,
+            self.nl_col,
+            self.nl_p,
+            self.nl_sidx,
+            nl_state,
+            y,
+        )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -111,11 +153,37 @@ def _softsat(z: float, lim: float, ceil: float) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def _run(x, u, b_slow, y_slow, z_slow,
-         ad_ptr, ad_idx, ad_val, bf_ptr, bf_idx, bf_val,
-         c_ptr, c_idx, c_val, df_ptr, df_idx, df_val,
-         nl_kind, zx_ptr, zx_idx, zx_val, zu_ptr, zu_idx, zu_val, nl_col, nl_p, nl_sidx,
-         nl_state, y):
+def _run(
+    x,
+    u,
+    b_slow,
+    y_slow,
+    z_slow,
+    ad_ptr,
+    ad_idx,
+    ad_val,
+    bf_ptr,
+    bf_idx,
+    bf_val,
+    c_ptr,
+    c_idx,
+    c_val,
+    df_ptr,
+    df_idx,
+    df_val,
+    nl_kind,
+    zx_ptr,
+    zx_idx,
+    zx_val,
+    zu_ptr,
+    zu_idx,
+    zu_val,
+    nl_col,
+    nl_p,
+    nl_sidx,
+    nl_state,
+    y,
+):
     nx = x.shape[0]
     ny = y.shape[1]
     nf = u.shape[1]
@@ -180,4 +248,3 @@ def _run(x, u, b_slow, y_slow, z_slow,
                     xn[bf_idx[q]] += bf_val[q] * v
         for i in range(nx):
             x[i] = xn[i]
-

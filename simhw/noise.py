@@ -87,7 +87,11 @@ def knee_excess(f: np.ndarray | float, corner_hz: float, knee: float, slope: flo
 def _box2(dec: int, w: np.ndarray) -> np.ndarray:
     """|P(w)|^2 of the ``dec``-step box (zero-order-hold upsampling by ``dec``)."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(np.abs(np.sin(w / 2)) < 1e-300, float(dec * dec), (np.sin(dec * w / 2) / np.sin(w / 2)) ** 2)
+        return np.where(
+            np.abs(np.sin(w / 2)) < 1e-300,
+            float(dec * dec),
+            (np.sin(dec * w / 2) / np.sin(w / 2)) ** 2,
+        )
 
 
 def _decimation(fc: np.ndarray, dt: float, margin: float | None = 40.0) -> np.ndarray:
@@ -108,7 +112,9 @@ def _fit_margin(slope: float) -> float | None:
     return 1000.0 ** (1.0 / (2.0 - slope)) if slope < 1.75 else None
 
 
-def _lag_psd(fc: np.ndarray, q: np.ndarray, dt: float, f: np.ndarray, margin: float | None) -> np.ndarray:
+def _lag_psd(
+    fc: np.ndarray, q: np.ndarray, dt: float, f: np.ndarray, margin: float | None
+) -> np.ndarray:
     """One-sided PSD (len(f), len(fc)) of each lag of corner ``fc`` and white intensity ``q`` as
     the bank makes it (an AR(1) at its decimated step, held): as :meth:`FlickerNoise.spectrum`."""
     w = 2 * np.pi * np.asarray(f, float) * dt
@@ -135,16 +141,18 @@ def _minimax_nonneg(M: np.ndarray, t: np.ndarray) -> np.ndarray:
     c[-1] = 1.0
     ones = np.ones((m, 1))
     A = np.vstack([np.hstack([M, -ones]), np.hstack([-M, -ones])])
-    res = scipy.optimize.linprog(c, A_ub=A, b_ub=np.concatenate([t, -t]), bounds=[(0, None)] * (n + 1),
-                                 method="highs")
+    res = scipy.optimize.linprog(
+        c, A_ub=A, b_ub=np.concatenate([t, -t]), bounds=[(0, None)] * (n + 1), method="highs"
+    )
     if res.status == 0:
         return np.maximum(res.x[:n], 0.0)
     return scipy.optimize.nnls(M, t, maxiter=50 * n)[0]
 
 
 @functools.lru_cache(maxsize=64)
-def _fitted_bank(f_lo: float, f_top: float, dt: float, corner_hz: float, knee: float,
-                 slope: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+def _fitted_bank(
+    f_lo: float, f_top: float, dt: float, corner_hz: float, knee: float, slope: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
     """Lags for the one-sided PSD K(f) - 1 (white level 1, ``knee_excess``) from 10 f_lo to
     f_top: corners, intensities, whether each passes the knee's low-pass, and that low-pass (SOS).
 
@@ -162,8 +170,10 @@ def _fitted_bank(f_lo: float, f_top: float, dt: float, corner_hz: float, knee: f
     n = max(2, int(math.ceil(decades * per_decade)) + 1)
     fc = np.geomspace(f_lo, f_top, n)
     d = math.log(fc[1] / fc[0])
-    q1 = 4 * math.pi * d * fc            # 1/f at unit level (the closed form): weights near 1
-    f = np.geomspace(min(10.0 * f_lo, math.sqrt(f_lo * f_top)), f_top, max(50, int(40 * (decades - 1))))
+    q1 = 4 * math.pi * d * fc  # 1/f at unit level (the closed form): weights near 1
+    f = np.geomspace(
+        min(10.0 * f_lo, math.sqrt(f_lo * f_top)), f_top, max(50, int(40 * (decades - 1)))
+    )
     k = 1.0 + knee_excess(f, corner_hz, knee, slope)
     cols = [_lag_psd(fc, q1, dt, f, _fit_margin(slope))]
     filtered = [np.zeros(n, bool)]
@@ -179,8 +189,12 @@ def _fitted_bank(f_lo: float, f_top: float, dt: float, corner_hz: float, knee: f
     g = _minimax_nonneg(M / scale, (k - 1.0) / k)
     keep = g > 1e-9  # a lag below a billionth of the largest error is no lag
     g = g / scale
-    return (np.concatenate([fc] * len(cols))[keep], (np.concatenate([q1] * len(cols)) * g)[keep],
-            np.concatenate(filtered)[keep], sos)
+    return (
+        np.concatenate([fc] * len(cols))[keep],
+        (np.concatenate([q1] * len(cols)) * g)[keep],
+        np.concatenate(filtered)[keep],
+        sos,
+    )
 
 
 #: how far beyond its band (a factor, each side) a 1/f bank's lags reach (``_one_over_f_bank``)
@@ -239,8 +253,18 @@ class FlickerNoise:
     #: the knee's low-pass starts this many of its time constants 1 / (2 pi f) before t = 0
     PREROLL = 60.0
 
-    def __init__(self, rng: np.random.Generator, level: float, f_lo: float, f_hi: float, dt: float, *,
-                 corner_hz: float = 1.0, knee: float = 1.0, slope: float = 1.0) -> None:
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        level: float,
+        f_lo: float,
+        f_hi: float,
+        dt: float,
+        *,
+        corner_hz: float = 1.0,
+        knee: float = 1.0,
+        slope: float = 1.0,
+    ) -> None:
         self.level, self.f_lo, self.f_hi, self.dt = level, f_lo, f_hi, dt
         self.corner_hz, self.knee, self.slope = float(corner_hz), float(knee), float(slope)
         self.rng = rng
@@ -258,8 +282,9 @@ class FlickerNoise:
         """The knee's low-pass (second-order sections), or None."""
         if self.level <= 0 or self.corner_hz <= 0 or not self.fitted:
             return None
-        return _fitted_bank(self.f_lo, min(self.f_hi, 0.2 / self.dt), self.dt, self.corner_hz, self.knee,
-                            self.slope)[3]
+        return _fitted_bank(
+            self.f_lo, min(self.f_hi, 0.2 / self.dt), self.dt, self.corner_hz, self.knee, self.slope
+        )[3]
 
     def _bank(self) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray, bool]]:
         """The lags, deterministic: (decimation, a, b, stationary variance, through the knee's
@@ -271,7 +296,9 @@ class FlickerNoise:
         if self.fitted:
             if self.corner_hz <= 0:
                 return []
-            fc, q, through, _ = _fitted_bank(self.f_lo, f_hi, dt, self.corner_hz, self.knee, self.slope)
+            fc, q, through, _ = _fitted_bank(
+                self.f_lo, f_hi, dt, self.corner_hz, self.knee, self.slope
+            )
             q = q * (self.level / self.corner_hz)
         else:
             fc, q = _one_over_f_bank(self.f_lo, self.f_hi, dt)
@@ -297,9 +324,18 @@ class FlickerNoise:
             self._groups = []
             for dec, a, b, var, lp in self._bank():
                 x0 = np.sqrt(var) * self.rng.standard_normal(len(a))  # start in steady state
-                self._groups.append({"dec": dec, "a": a, "b": b, "state": x0, "lowpass": lp,
-                                     "rng": np.random.Generator(np.random.PCG64(self.rng.integers(2**63))),
-                                     "held": np.zeros(0), "pos": 0})
+                self._groups.append(
+                    {
+                        "dec": dec,
+                        "a": a,
+                        "b": b,
+                        "state": x0,
+                        "lowpass": lp,
+                        "rng": np.random.Generator(np.random.PCG64(self.rng.integers(2**63))),
+                        "held": np.zeros(0),
+                        "pos": 0,
+                    }
+                )
             sos = self._sos()
             through = [g for g in self._groups if g["lowpass"]]
             if sos is not None and through:
@@ -451,8 +487,13 @@ class Lines:
     """Sinusoids of fixed amplitude, phase-continuous across blocks; random phases from
     ``rng``, or all starting at ``phase`` (rad) when it is given."""
 
-    def __init__(self, rng: np.random.Generator | None, lines: list[tuple[float, float]], dt: float,
-                 phase: float | None = None) -> None:
+    def __init__(
+        self,
+        rng: np.random.Generator | None,
+        lines: list[tuple[float, float]],
+        dt: float,
+        phase: float | None = None,
+    ) -> None:
         self.freq_dt = np.array([f * dt for f, _ in lines], float)
         self.amp = np.array([a for _, a in lines], float)
         if phase is not None:
@@ -495,7 +536,9 @@ class LagNoise:
     def take(self, n: int) -> np.ndarray:
         if self.white.sigma == 0.0:
             return np.zeros(n)
-        y, _ = scipy.signal.lfilter([1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y])
+        y, _ = scipy.signal.lfilter(
+            [1 - self.a], [1, -self.a], self.white.take(n), zi=[self.a * self.y]
+        )
         self.y = float(y[-1])
         return y
 
@@ -514,7 +557,9 @@ class TelegraphJumps:
     """Random offset steps of +-amplitude at Poisson times (the thesis's locked-oscillator
     offsets: square-wave-like jumps of tens of urad, 40-400 s apart, Ch. II B.10)."""
 
-    def __init__(self, rng: np.random.Generator, amplitude: float, mean_interval_s: float, dt: float) -> None:
+    def __init__(
+        self, rng: np.random.Generator, amplitude: float, mean_interval_s: float, dt: float
+    ) -> None:
         self.rng, self.amp, self.p = rng, amplitude, dt / mean_interval_s
         self.level = amplitude * (1 if rng.random() < 0.5 else -1)
 

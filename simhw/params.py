@@ -31,8 +31,14 @@ class ConfigError(ValueError):
     """A sim config names an unknown key or gives a bad value; the message names both."""
 
 
-def _f(default: float, *, lo: float | None = None, hi: float | None = None,
-       lo_open: bool = False, doc: str = "") -> Any:
+def _f(
+    default: float,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    doc: str = "",
+) -> Any:
     """A float field with an allowed range checked by :func:`validate`."""
     return field(default=default, metadata={"lo": lo, "hi": hi, "lo_open": lo_open, "doc": doc})
 
@@ -66,18 +72,20 @@ class PlatformAxis:
     """One gimbal axis: inertia, gyro-gimbal viscous damping, motor and amplifier (Ch. III C-E)."""
 
     inertia_kg_m2: float = _f(0.70, lo=0.0, lo_open=True)
-    gyro_damping_Nms: float = _f(1.02, lo=0.0)          # 2*Do on X, Do on Y and Z (eq. 3.31-3.33)
-    extra_damping_Nms: float = _f(0.0, lo=0.0)          # effect `extra_damping`
-    amp_gain: float = _f(302.0, lo=0.0, lo_open=True)   # Kp
+    gyro_damping_Nms: float = _f(1.02, lo=0.0)  # 2*Do on X, Do on Y and Z (eq. 3.31-3.33)
+    extra_damping_Nms: float = _f(0.0, lo=0.0)  # effect `extra_damping`
+    amp_gain: float = _f(302.0, lo=0.0, lo_open=True)  # Kp
     amp_limit_V: float = _f(28.0, lo=0.0, lo_open=True)  # 28 VDC supply
-    command_divider: float = _f(0.0075, lo=0.0)         # Kd
+    command_divider: float = _f(0.0075, lo=0.0)  # Kd
     motor_torque_Nm_per_A: float = _f(0.53, lo=0.0, lo_open=True)  # Km
-    back_emf_V_s: float = _f(0.53, lo=0.0)              # Kb
-    armature_ohm: float = _f(23.0, lo=0.0, lo_open=True)           # Ra
-    armature_H: float = _f(0.023, lo=0.0, lo_open=True)            # La
+    back_emf_V_s: float = _f(0.53, lo=0.0)  # Kb
+    armature_ohm: float = _f(23.0, lo=0.0, lo_open=True)  # Ra
+    armature_H: float = _f(0.023, lo=0.0, lo_open=True)  # La
     stop_deg: float = _f(25.0, lo=0.0, lo_open=True)
     disturbance_torque_rms_Nm: float = _f(0.0, lo=0.0)  # effect `platform_disturbance`
-    disturbance_corner_hz: float = _f(5.0, lo=0.0, lo_open=True)  # as the effect and docs/simhw.md 6
+    disturbance_corner_hz: float = _f(
+        5.0, lo=0.0, lo_open=True
+    )  # as the effect and docs/simhw.md 6
 
 
 @dataclass
@@ -88,7 +96,7 @@ class Bearing:
     To_Nm: float = _f(0.016, lo=0.0, lo_open=True)
     eta_per_Nm: float = _f(1.6e6, lo=0.0, lo_open=True)
     stiffness_Nm_per_rad: float = _f(410.0, lo=0.0)  # used by model "spring"
-    damping_Nms: float = _f(0.05, lo=0.0)            # used by model "viscous"
+    damping_Nms: float = _f(0.05, lo=0.0)  # used by model "viscous"
 
 
 @dataclass
@@ -164,7 +172,10 @@ def nominal_pickoff_lines(rms_urad: float) -> list[list[float]]:
     together 85 % of its variance (Ch. VI A), split as ``PICKOFF_LINE_SHARES``. A sinusoid of
     amplitude a has variance a^2/2, so a line's amplitude is sqrt(2 share 0.85 rms^2); the
     white part is the rest (``simhw.simulator.pickoff_white_psd``)."""
-    return [[f, math.sqrt(2.0 * share * PICKOFF_LINES_FRACTION * rms_urad**2)] for f, share in PICKOFF_LINE_SHARES]
+    return [
+        [f, math.sqrt(2.0 * share * PICKOFF_LINES_FRACTION * rms_urad**2)]
+        for f, share in PICKOFF_LINE_SHARES
+    ]
 
 
 @dataclass
@@ -172,10 +183,10 @@ class GyroChannel:
     """One gyro channel (Ch. II C.1.a, Tables 3-4)."""
 
     torquer_scale_urad_per_s_per_V: float = _f(31.6, lo=0.0, lo_open=True)  # KTO
-    pickoff_scale_mV_per_urad: float = _f(6.03, lo=0.0, lo_open=True)       # Kg
+    pickoff_scale_mV_per_urad: float = _f(6.03, lo=0.0, lo_open=True)  # Kg
     pickoff_linear_range_urad: float = _f(1000.0, lo=0.0, lo_open=True)
-    restraint_time_s: float = _f(424.0, lo=0.0, lo_open=True)               # h/k
-    viscous_coupling_h_over_c: float = _f(1.96, lo=0.0, lo_open=True)       # h/c
+    restraint_time_s: float = _f(424.0, lo=0.0, lo_open=True)  # h/k
+    viscous_coupling_h_over_c: float = _f(1.96, lo=0.0, lo_open=True)  # h/c
     fixed_drift_urad_per_s: float = _f(0.35)
     g_drift_x_urad_per_s_per_g: float = _f(0.0)
     g_drift_y_urad_per_s_per_g: float = _f(0.0)
@@ -201,8 +212,8 @@ class Gyros:
     """Properties common to both gyros and the torquer amplifiers (Ch. II C.1.a(1))."""
 
     angular_momentum_kg_m2_per_s: float = _f(1.0, lo=0.0, lo_open=True)
-    torquer_caging_mA_per_V: float = _f(-6.04)   # KTC
-    torquer_bias_mA_per_V: float = _f(-10.00)    # KTB
+    torquer_caging_mA_per_V: float = _f(-6.04)  # KTC
+    torquer_bias_mA_per_V: float = _f(-10.00)  # KTB
     sense_resistor_ohm: float = _f(92.1, lo=0.0, lo_open=True)
     max_rate_earth_rates: float = _f(3.5, lo=0.0, lo_open=True)
     spin_up_time_s: float = _f(120.0, lo=0.0, lo_open=True)  # to 99 % speed
@@ -227,7 +238,9 @@ def _axis_defaults() -> dict[str, PlatformAxis]:
     return {
         "X": PlatformAxis(inertia_kg_m2=0.70, gyro_damping_Nms=1.02, amp_gain=302.0, stop_deg=25.0),
         "Y": PlatformAxis(inertia_kg_m2=0.25, gyro_damping_Nms=0.51, amp_gain=164.0, stop_deg=90.0),
-        "Z": PlatformAxis(inertia_kg_m2=0.52, gyro_damping_Nms=0.51, amp_gain=333.0, stop_deg=110.0),
+        "Z": PlatformAxis(
+            inertia_kg_m2=0.52, gyro_damping_Nms=0.51, amp_gain=333.0, stop_deg=110.0
+        ),
     }
 
 
@@ -242,8 +255,12 @@ def _bearing_defaults() -> dict[str, Bearing]:
 
 def _ac_defaults() -> dict[str, Autocollimator]:
     return {
-        "X": Autocollimator(control_scale_mV_per_urad=5.70, inst_scale_mV_per_urad=5.63, nea_urad=0.451),
-        "Y": Autocollimator(control_scale_mV_per_urad=5.99, inst_scale_mV_per_urad=5.92, nea_urad=0.506),
+        "X": Autocollimator(
+            control_scale_mV_per_urad=5.70, inst_scale_mV_per_urad=5.63, nea_urad=0.451
+        ),
+        "Y": Autocollimator(
+            control_scale_mV_per_urad=5.99, inst_scale_mV_per_urad=5.92, nea_urad=0.506
+        ),
     }
 
 
@@ -252,20 +269,48 @@ def _gyro_defaults() -> dict[str, GyroChannel]:
     # Pickoff noise 6.2 (X) / 12.4 (Y) urad rms, Z and XRD as X (Fig. 33), 85 % of its variance
     # in the lines (Ch. VI A), so Y's lines are twice X's.
     return {
-        "X": GyroChannel(31.6, 6.03, restraint_time_s=424.0, viscous_coupling_h_over_c=1.96,
-                         fixed_drift_urad_per_s=0.35, g_drift_y_urad_per_s_per_g=0.08,
-                         pickoff_noise_rms_urad=6.2, pickoff_lines=nominal_pickoff_lines(6.2)),
-        "Y": GyroChannel(33.4, 6.70, restraint_time_s=708.0, viscous_coupling_h_over_c=21.0,
-                         fixed_drift_urad_per_s=-0.22, g_drift_x_urad_per_s_per_g=-0.05,
-                         pickoff_noise_rms_urad=12.4, pickoff_lines=nominal_pickoff_lines(12.4)),
-        "Z": GyroChannel(34.1, 7.51, restraint_time_s=1072.0, viscous_coupling_h_over_c=35.7,
-                         fixed_drift_urad_per_s=0.15, g_drift_x_urad_per_s_per_g=0.06,
-                         pickoff_noise_rms_urad=6.2, pickoff_lines=nominal_pickoff_lines(6.2)),
-        "XRD": GyroChannel(32.0, 5.74, restraint_time_s=515.0, viscous_coupling_h_over_c=2.43,
-                           fixed_drift_urad_per_s=0.41, g_drift_z_urad_per_s_per_g=0.04,
-                           pickoff_noise_rms_urad=6.2, pickoff_lines=nominal_pickoff_lines(6.2),
-                           caging_natural_freq_rad_per_s=1.0,
-                           caging_proportional_only=True),
+        "X": GyroChannel(
+            31.6,
+            6.03,
+            restraint_time_s=424.0,
+            viscous_coupling_h_over_c=1.96,
+            fixed_drift_urad_per_s=0.35,
+            g_drift_y_urad_per_s_per_g=0.08,
+            pickoff_noise_rms_urad=6.2,
+            pickoff_lines=nominal_pickoff_lines(6.2),
+        ),
+        "Y": GyroChannel(
+            33.4,
+            6.70,
+            restraint_time_s=708.0,
+            viscous_coupling_h_over_c=21.0,
+            fixed_drift_urad_per_s=-0.22,
+            g_drift_x_urad_per_s_per_g=-0.05,
+            pickoff_noise_rms_urad=12.4,
+            pickoff_lines=nominal_pickoff_lines(12.4),
+        ),
+        "Z": GyroChannel(
+            34.1,
+            7.51,
+            restraint_time_s=1072.0,
+            viscous_coupling_h_over_c=35.7,
+            fixed_drift_urad_per_s=0.15,
+            g_drift_x_urad_per_s_per_g=0.06,
+            pickoff_noise_rms_urad=6.2,
+            pickoff_lines=nominal_pickoff_lines(6.2),
+        ),
+        "XRD": GyroChannel(
+            32.0,
+            5.74,
+            restraint_time_s=515.0,
+            viscous_coupling_h_over_c=2.43,
+            fixed_drift_urad_per_s=0.41,
+            g_drift_z_urad_per_s_per_g=0.04,
+            pickoff_noise_rms_urad=6.2,
+            pickoff_lines=nominal_pickoff_lines(6.2),
+            caging_natural_freq_rad_per_s=1.0,
+            caging_proportional_only=True,
+        ),
     }
 
 
@@ -303,7 +348,9 @@ class SimConfig:
         """A copy with the gyros' random drift switched off (fixed and g drift stay)."""
         cfg = self.copy()
         for ch in cfg.gyro.values():
-            ch.arw_urad_per_sqrt_s = ch.bias_instability_urad_per_s = ch.rrw_urad_per_s_per_sqrt_s = 0.0
+            ch.arw_urad_per_sqrt_s = ch.bias_instability_urad_per_s = (
+                ch.rrw_urad_per_s_per_sqrt_s
+            ) = 0.0
         return cfg
 
 
@@ -324,8 +371,12 @@ def _clone(obj: Any) -> Any:
     return new
 
 
-_KEYED = {"platform": (PlatformAxis, AXES), "bearing": (Bearing, AXES),
-          "autocollimator": (Autocollimator, AC_AXES), "gyro": (GyroChannel, GYRO_CHANNELS)}
+_KEYED = {
+    "platform": (PlatformAxis, AXES),
+    "bearing": (Bearing, AXES),
+    "autocollimator": (Autocollimator, AC_AXES),
+    "gyro": (GyroChannel, GYRO_CHANNELS),
+}
 
 
 def to_dict(cfg: SimConfig) -> dict[str, Any]:
@@ -338,8 +389,10 @@ def _set_fields(obj: Any, values: dict[str, Any], where: str) -> None:
     for key, value in values.items():
         name = f"{where}.{key}"
         if key not in known:
-            raise ConfigError(f"sim config: unknown key '{name}' (known keys in [{where}]: "
-                              f"{', '.join(sorted(known))})")
+            raise ConfigError(
+                f"sim config: unknown key '{name}' (known keys in [{where}]: "
+                f"{', '.join(sorted(known))})"
+            )
         current = getattr(obj, key)
         if isinstance(current, bool):
             if not isinstance(value, bool):
@@ -370,8 +423,10 @@ def from_dict(data: dict[str, Any], base: SimConfig | None = None) -> SimConfig:
             cfg.pickup = []
             for i, item in enumerate(value):
                 if not isinstance(item, dict):
-                    raise ConfigError(f"sim config: pickup[{i}] = {item!r} must be a table "
-                                      "(channel, freq_hz, amplitude_V)")
+                    raise ConfigError(
+                        f"sim config: pickup[{i}] = {item!r} must be a table "
+                        "(channel, freq_hz, amplitude_V)"
+                    )
                 line = PickupLine(channel="", freq_hz=0.0, amplitude_V=0.0)
                 _set_fields(line, item, f"pickup[{i}]")
                 cfg.pickup.append(line)
@@ -381,8 +436,9 @@ def from_dict(data: dict[str, Any], base: SimConfig | None = None) -> SimConfig:
                 raise ConfigError(f"sim config: [{section}] must be a table of {', '.join(keys)}")
             for key, sub in value.items():
                 if key not in keys:
-                    raise ConfigError(f"sim config: unknown key '{section}.{key}' "
-                                      f"(known: {', '.join(keys)})")
+                    raise ConfigError(
+                        f"sim config: unknown key '{section}.{key}' (known: {', '.join(keys)})"
+                    )
                 if not isinstance(sub, dict):
                     raise ConfigError(f"sim config: [{section}.{key}] must be a table")
                 _set_fields(getattr(cfg, section)[key], sub, f"{section}.{key}")
@@ -392,7 +448,9 @@ def from_dict(data: dict[str, Any], base: SimConfig | None = None) -> SimConfig:
             _set_fields(getattr(cfg, section), value, section)
         else:
             known = sorted(f.name for f in dataclasses.fields(SimConfig))
-            raise ConfigError(f"sim config: unknown key '{section}' (known sections: {', '.join(known)})")
+            raise ConfigError(
+                f"sim config: unknown key '{section}' (known sections: {', '.join(known)})"
+            )
     validate(cfg)
     return cfg
 
@@ -416,7 +474,9 @@ def load_config(path: str | Path | None) -> SimConfig:
     path = Path(path)
     if path.exists() and not path.is_file():
         # a FIFO or a device would block the read (or never end): refused, as the run-file reader does
-        raise ConfigError(f"sim config: {path} is not a regular file (a folder, FIFO or device); give a .toml file")
+        raise ConfigError(
+            f"sim config: {path} is not a regular file (a folder, FIFO or device); give a .toml file"
+        )
     try:
         with path.open("rb") as fh:
             data = tomllib.load(fh)
@@ -439,7 +499,9 @@ def _check_range(obj: Any, where: str) -> None:
                 raise ConfigError(f"sim config: {name} = {value} must be finite")
             if lo is not None and (value < lo or (lo_open and value == lo)):
                 rel = ">" if lo_open else ">="
-                raise ConfigError(f"sim config: {name} = {value} is out of range (must be {rel} {lo})")
+                raise ConfigError(
+                    f"sim config: {name} = {value} is out of range (must be {rel} {lo})"
+                )
             if hi is not None and value > hi:
                 raise ConfigError(f"sim config: {name} = {value} is out of range (must be <= {hi})")
 
@@ -457,27 +519,43 @@ def validate(cfg: SimConfig) -> None:
             _check_range(getattr(cfg, section)[key], f"{section}.{key}")
     for axis, b in cfg.bearing.items():
         if b.model not in BEARING_MODELS:
-            raise ConfigError(f"sim config: bearing.{axis}.model = {b.model!r} is not one of "
-                              f"{', '.join(BEARING_MODELS)}")
+            raise ConfigError(
+                f"sim config: bearing.{axis}.model = {b.model!r} is not one of "
+                f"{', '.join(BEARING_MODELS)}"
+            )
     for name, ch in cfg.gyro.items():
         for i, line in enumerate(ch.pickoff_lines):
-            if (not isinstance(line, (list, tuple)) or len(line) != 2
-                    or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                               for v in line)
-                    or line[0] <= 0 or line[1] < 0):
-                raise ConfigError(f"sim config: gyro.{name}.pickoff_lines[{i}] = {line!r} must be "
-                                  "[freq_hz > 0, amplitude_urad >= 0]")
+            if (
+                not isinstance(line, (list, tuple))
+                or len(line) != 2
+                or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                    for v in line
+                )
+                or line[0] <= 0
+                or line[1] < 0
+            ):
+                raise ConfigError(
+                    f"sim config: gyro.{name}.pickoff_lines[{i}] = {line!r} must be "
+                    "[freq_hz > 0, amplitude_urad >= 0]"
+                )
         lines_var = sum(a * a / 2 for _, a in ch.pickoff_lines)
-        if lines_var > ch.pickoff_noise_rms_urad ** 2:
-            raise ConfigError(f"sim config: gyro.{name}.pickoff_lines carry {math.sqrt(lines_var):.3g} urad rms, "
-                              f"more than pickoff_noise_rms_urad = {ch.pickoff_noise_rms_urad}")
+        if lines_var > ch.pickoff_noise_rms_urad**2:
+            raise ConfigError(
+                f"sim config: gyro.{name}.pickoff_lines carry {math.sqrt(lines_var):.3g} urad rms, "
+                f"more than pickoff_noise_rms_urad = {ch.pickoff_noise_rms_urad}"
+            )
     s = cfg.sampling
     if s.adc_bits < 8 or s.adc_bits > 24:
         raise ConfigError(f"sim config: sampling.adc_bits = {s.adc_bits} is out of range (8..24)")
     if s.anti_alias_poles < 1 or s.anti_alias_poles > 8:
-        raise ConfigError(f"sim config: sampling.anti_alias_poles = {s.anti_alias_poles} is out of range (1..8)")
+        raise ConfigError(
+            f"sim config: sampling.anti_alias_poles = {s.anti_alias_poles} is out of range (1..8)"
+        )
     if s.oversample < 1 or s.oversample > 64:
-        raise ConfigError(f"sim config: sampling.oversample = {s.oversample} is out of range (1..64)")
+        raise ConfigError(
+            f"sim config: sampling.oversample = {s.oversample} is out of range (1..64)"
+        )
     for i, p in enumerate(cfg.pickup):
         _check_range(p, f"pickup[{i}]")
         if p.freq_hz <= 0:

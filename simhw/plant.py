@@ -39,7 +39,7 @@ AXIS_OF_CHANNEL = {"X": "X", "Y": "Y", "Z": "Z", "XRD": "X"}
 #: Gyro pairs (a, b) with (a, b, spin) right-handed: X-Y gyro spins along +Z, X-Z along +Y.
 GYRO_PAIRS = (("X", "Y"), ("Z", "XRD"))
 #: Recorded channels of DESIGN.md section 5, in ADC order.
-CHANNELS = ADC_CHANNELS   # what the simulated ADC offers: every channel of DESIGN.md section 5
+CHANNELS = ADC_CHANNELS  # what the simulated ADC offers: every channel of DESIGN.md section 5
 TRUTH_CHANNELS = ("theta_x", "theta_y", "theta_z")
 #: Caging-integrator reset time when the inhibit switch shorts the amplifier (Fig. 7).
 CAGING_RESET_S = 0.05
@@ -73,11 +73,11 @@ class Lin(dict):
 class Nonlinearity:
     name: str
     kind: int
-    z: Lin              # pre-signal (linear in x and u, may use earlier corrections)
-    col: int            # input column the correction is written to (-1: none)
-    p1: float = 0.0     # limit (clip, softsat, stop), To (dahl)
-    p2: float = 0.0     # hard ceiling (softsat), eta (dahl)
-    gain: float = 1.0   # slope of the linear part already in A: corr = f(z) - gain z
+    z: Lin  # pre-signal (linear in x and u, may use earlier corrections)
+    col: int  # input column the correction is written to (-1: none)
+    p1: float = 0.0  # limit (clip, softsat, stop), To (dahl)
+    p2: float = 0.0  # hard ceiling (softsat), eta (dahl)
+    gain: float = 1.0  # slope of the linear part already in A: corr = f(z) - gain z
     state_theta: int = -1
     state_omega: int = -1
 
@@ -119,12 +119,14 @@ class _Builder:
         self.x(state)
         self.deriv[self.states.index(state)] = expr
 
-    def correction(self, name: str, kind: int, z: Lin, *, p1: float = 0.0, p2: float = 0.0,
-                   gain: float = 1.0) -> Lin:
+    def correction(
+        self, name: str, kind: int, z: Lin, *, p1: float = 0.0, p2: float = 0.0, gain: float = 1.0
+    ) -> Lin:
         """Register a nonlinearity; returns its correction input f(z) - gain z."""
         col = self.u(f"corr_{name}")
-        self.nonlinear.append(Nonlinearity(name, kind, z, self.inputs.index(f"corr_{name}"), p1=p1, p2=p2,
-                                           gain=gain))
+        self.nonlinear.append(
+            Nonlinearity(name, kind, z, self.inputs.index(f"corr_{name}"), p1=p1, p2=p2, gain=gain)
+        )
         return col
 
     def first_order(self, prefix: str, inp: Lin, w: float) -> Lin:
@@ -166,8 +168,17 @@ class _Builder:
         missing = set(range(nx)) - set(self.deriv)
         if missing:
             raise RuntimeError(f"states without dynamics: {[self.states[i] for i in missing]}")
-        return Plant(list(self.states), list(self.inputs), out_names, A, B, C, D,
-                     self.nonlinear, [s for s in slow_inputs if s in self.inputs])
+        return Plant(
+            list(self.states),
+            list(self.inputs),
+            out_names,
+            A,
+            B,
+            C,
+            D,
+            self.nonlinear,
+            [s for s in slow_inputs if s in self.inputs],
+        )
 
 
 def _scatter(expr: Lin, xrow: np.ndarray, urow: np.ndarray) -> None:
@@ -187,7 +198,9 @@ class RelayState:
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
-            raise ValueError(f"mode {self.mode} is not allowed (modes 0 and 7 are disallowed; use 1..6)")
+            raise ValueError(
+                f"mode {self.mode} is not allowed (modes 0 and 7 are disallowed; use 1..6)"
+            )
         if not 0.0 <= self.spin <= 1.0:
             raise ValueError(f"spin fraction {self.spin} outside 0..1")
 
@@ -200,7 +213,13 @@ def caging_gains(cfg: SimConfig, ch: str) -> tuple[float, float]:
     of bandwidth omega_n.
     """
     g, p = cfg.gyro[ch], cfg.gyros
-    kt = p.sense_resistor_ohm * g.torquer_scale_urad_per_s_per_V * URAD * p.torquer_caging_mA_per_V * 1e-3
+    kt = (
+        p.sense_resistor_ohm
+        * g.torquer_scale_urad_per_s_per_V
+        * URAD
+        * p.torquer_caging_mA_per_V
+        * 1e-3
+    )
     kg = g.pickoff_scale_mV_per_urad * 1e-3 / URAD
     wn, zeta = g.caging_natural_freq_rad_per_s, g.caging_zeta
     if g.caging_proportional_only:
@@ -211,12 +230,19 @@ def caging_gains(cfg: SimConfig, ch: str) -> tuple[float, float]:
 def torquer_limit_V(cfg: SimConfig, ch: str) -> float:
     """Torquer output voltage at the amplifier's maximum, 3.5 x earth rate (II C.1.a(1))."""
     g = cfg.gyro[ch]
-    return (cfg.gyros.max_rate_earth_rates * cfg.site.earth_rate_rad_per_s
-            / (g.torquer_scale_urad_per_s_per_V * URAD))
+    return (
+        cfg.gyros.max_rate_earth_rates
+        * cfg.site.earth_rate_rad_per_s
+        / (g.torquer_scale_urad_per_s_per_V * URAD)
+    )
 
 
-SLOW_INPUTS = ([f"vtd_{a}" for a in AXES] + [f"gc_{a}" for a in AXES]
-               + [f"vb_{c}" for c in GYRO_CHANNELS] + [f"wconst_{c}" for c in GYRO_CHANNELS])
+SLOW_INPUTS = (
+    [f"vtd_{a}" for a in AXES]
+    + [f"gc_{a}" for a in AXES]
+    + [f"vb_{c}" for c in GYRO_CHANNELS]
+    + [f"wconst_{c}" for c in GYRO_CHANNELS]
+)
 
 
 def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
@@ -236,27 +262,43 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         ac = cfg.autocollimator[a]
         theta = b.x(f"theta_{a}")
         if ac.mount_freq_hz > 0:  # flexible mount: the sensed angle lags the gimbal (III B)
-            theta = b.second_order(f"mount_{a}", theta, 2 * math.pi * ac.mount_freq_hz, ac.mount_damping)
+            theta = b.second_order(
+                f"mount_{a}", theta, 2 * math.pi * ac.mount_freq_hz, ac.mount_damping
+            )
             if ac.mount_excitation > 0:
                 # floor motion shakes the mount too (DESIGN.md section 8): its angular
                 # acceleration n drives the mode, th_b'' + 2 zeta w th_b' + w^2 th_b = w^2 th + n
                 v = b.states.index(f"mount_{a}_v")
                 b.deriv[v] = b.deriv[v] + b.u(f"nmount_{a}")
         seen = theta + b.u(f"nac_{a}")
-        seen = seen + b.correction(f"ac_{a}", NL_SOFTSAT, seen, p1=ac.linear_range_urad * URAD,
-                                   p2=1.2 * ac.linear_range_urad * URAD)
+        seen = seen + b.correction(
+            f"ac_{a}",
+            NL_SOFTSAT,
+            seen,
+            p1=ac.linear_range_urad * URAD,
+            p2=1.2 * ac.linear_range_urad * URAD,
+        )
         if ac.delay_s > 0:
             seen = b.pade2(f"delay_{a}", seen, ac.delay_s)
-        ctl = b.second_order(f"acctl_{a}", seen, ac.control_filter_rad_per_s, ac.control_filter_zeta)
+        ctl = b.second_order(
+            f"acctl_{a}", seen, ac.control_filter_rad_per_s, ac.control_filter_zeta
+        )
         gamma[a] = ctl * (ac.control_scale_mV_per_urad * 1e-3 / URAD) + b.u(f"gc_{a}")
         inst1 = b.first_order(f"acinst1_{a}", seen, ac.inst_filter1_rad_per_s)
-        inst = b.second_order(f"acinst2_{a}", inst1, ac.inst_filter2_rad_per_s, ac.inst_filter2_zeta)
+        inst = b.second_order(
+            f"acinst2_{a}", inst1, ac.inst_filter2_rad_per_s, ac.inst_filter2_zeta
+        )
         b.outputs[f"ac_{a.lower()}_ctl"] = gamma[a]
         b.outputs[f"ac_{a.lower()}_inst"] = inst * (ac.inst_scale_mV_per_urad * 1e-3 / URAD)
     az = cfg.azimuth
     seen_z = b.x("theta_Z") + b.u("nac_Z")
-    seen_z = seen_z + b.correction("ac_Z", NL_SOFTSAT, seen_z, p1=az.linear_range_urad * URAD,
-                                   p2=1.2 * az.linear_range_urad * URAD)
+    seen_z = seen_z + b.correction(
+        "ac_Z",
+        NL_SOFTSAT,
+        seen_z,
+        p1=az.linear_range_urad * URAD,
+        p2=1.2 * az.linear_range_urad * URAD,
+    )
     gamma["Z"] = seen_z * (az.scale_mV_per_urad * 1e-3 / URAD) + b.u("gc_Z")
     b.outputs["ac_z"] = gamma["Z"]
 
@@ -267,16 +309,25 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         g = cfg.gyro[c]
         sigma = b.x(f"sigma_{c}")
         noisy = sigma + b.u(f"np_{c}")
-        noisy = noisy + b.correction(f"pickoff_{c}", NL_SOFTSAT, noisy, p1=g.pickoff_linear_range_urad * URAD,
-                                     p2=1.5 * g.pickoff_linear_range_urad * URAD)
+        noisy = noisy + b.correction(
+            f"pickoff_{c}",
+            NL_SOFTSAT,
+            noisy,
+            p1=g.pickoff_linear_range_urad * URAD,
+            p2=1.5 * g.pickoff_linear_range_urad * URAD,
+        )
         pickoff[c] = noisy * (g.pickoff_scale_mV_per_urad * 1e-3 / URAD)
         b.outputs[f"gyro_{c.lower()}"] = pickoff[c]
     for c in GYRO_CHANNELS:
         g = cfg.gyro[c]
         c1, c2 = caging_gains(cfg, c)
         ax = AXIS_OF_CHANNEL[c]
-        caged = (mode in (3, 4) or (mode == 5 and c != "Z")) and not relays.caging_inhibit[GYRO_CHANNELS.index(c)]
-        cage_in = pickoff[c] if mode == 3 else -gamma[ax]  # autocollimator supervision (II C.1.a(9))
+        caged = (mode in (3, 4) or (mode == 5 and c != "Z")) and not relays.caging_inhibit[
+            GYRO_CHANNELS.index(c)
+        ]
+        cage_in = (
+            pickoff[c] if mode == 3 else -gamma[ax]
+        )  # autocollimator supervision (II C.1.a(9))
         vint = b.x(f"cage_{c}")
         if caged:
             b.set_deriv(f"cage_{c}", cage_in if c2 != 0.0 else vint * (-1.0 / CAGING_RESET_S))
@@ -293,8 +344,12 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         b.outputs[f"torq_{c.lower()}"] = vt
         kto = g.torquer_scale_urad_per_s_per_V * URAD
         # sigma' = r (omega_i + omega_c + omega_d) - sigma / (h/k), before cross-axis coupling.
-        drive = (b.x(f"omega_{ax}") + b.u(f"wconst_{c}") + b.u(f"wrand_{c}") + vt * kto) * relays.spin
-        b.deriv[b.states.index(f"sigma_{c}")] = drive - b.x(f"sigma_{c}") * (1.0 / g.restraint_time_s)
+        drive = (
+            b.x(f"omega_{ax}") + b.u(f"wconst_{c}") + b.u(f"wrand_{c}") + vt * kto
+        ) * relays.spin
+        b.deriv[b.states.index(f"sigma_{c}")] = drive - b.x(f"sigma_{c}") * (
+            1.0 / g.restraint_time_s
+        )
     for a_ch, b_ch in GYRO_PAIRS:
         # Viscous cross-axis coupling (II C.4.d): float drag c sigma' about one input axis
         # precesses the float about the other; with (a, b, spin) right-handed
@@ -321,7 +376,7 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
         s2 = b.lead_lag(f"comp2_{a}", s1, comp.w2_rad_per_s, comp.w4_rad_per_s)
         s3 = b.lead_lag(f"comp3_{a}", s2, comp.w3_rad_per_s, comp.w5_rad_per_s)
         vc = -b.first_order(f"comp4_{a}", s3, comp.w6_rad_per_s)  # eq. 3.28, inverted
-        pa = vc + b.u(f"vtd_{a}") * p.command_divider                 # eq. 3.27 (input side)
+        pa = vc + b.u(f"vtd_{a}") * p.command_divider  # eq. 3.27 (input side)
         b.outputs[f"pa_{a.lower()}"] = pa
         b.outputs[f"cmd_{a.lower()}"] = b.u(f"vtd_{a}") + b.u(f"gc_{a}")
         vp = pa * p.amp_gain
@@ -333,23 +388,43 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
             vp = Lin()
         theta, omega, cur = b.x(f"theta_{a}"), b.x(f"omega_{a}"), b.x(f"i_{a}")
         # eq. 3.25-3.26: La i' = V_p - Kb theta' - Ra i
-        b.set_deriv(f"i_{a}", (vp - omega * p.back_emf_V_s - cur * p.armature_ohm) * (1.0 / p.armature_H))
+        b.set_deriv(
+            f"i_{a}", (vp - omega * p.back_emf_V_s - cur * p.armature_ohm) * (1.0 / p.armature_H)
+        )
         damping = p.gyro_damping_Nms + p.extra_damping_Nms + br.damping_Nms
-        torque = (cur * p.motor_torque_Nm_per_A - omega * damping - theta * br.stiffness_Nm_per_rad
-                  + b.u(f"md_{a}"))
+        torque = (
+            cur * p.motor_torque_Nm_per_A
+            - omega * damping
+            - theta * br.stiffness_Nm_per_rad
+            + b.u(f"md_{a}")
+        )
         if br.dahl:
             bb = cfg.bearing[a]
-            torque = torque + b.correction(f"dahl_{a}", NL_DAHL, theta, p1=bb.To_Nm, p2=bb.eta_per_Nm,
-                                           gain=-br.stiffness_Nm_per_rad)
+            torque = torque + b.correction(
+                f"dahl_{a}",
+                NL_DAHL,
+                theta,
+                p1=bb.To_Nm,
+                p2=bb.eta_per_Nm,
+                gain=-br.stiffness_Nm_per_rad,
+            )
         if relays.clamped:
             b.set_deriv(f"theta_{a}", Lin())
             b.set_deriv(f"omega_{a}", Lin())
         else:
             b.set_deriv(f"theta_{a}", omega)
             b.set_deriv(f"omega_{a}", torque * (1.0 / p.inertia_kg_m2))  # eq. 3.23
-        b.nonlinear.append(Nonlinearity(f"stop_{a}", NL_STOP, theta, -1, p1=math.radians(p.stop_deg),
-                                        state_theta=b.states.index(f"theta_{a}"),
-                                        state_omega=b.states.index(f"omega_{a}")))
+        b.nonlinear.append(
+            Nonlinearity(
+                f"stop_{a}",
+                NL_STOP,
+                theta,
+                -1,
+                p1=math.radians(p.stop_deg),
+                state_theta=b.states.index(f"theta_{a}"),
+                state_omega=b.states.index(f"omega_{a}"),
+            )
+        )
         b.outputs[f"theta_{a.lower()}"] = theta
     return b.build(SLOW_INPUTS)
 
@@ -388,6 +463,11 @@ def linearized_poles(cfg: SimConfig, mode: int = 3, axis: str | None = None) -> 
     if axis is None:
         return np.linalg.eigvals(plant.A)
     gyro_loop = mode in (4, 5)
-    keep = [i for i, s in enumerate(plant.states) if axis in s.split("_")[1:]
-            and not s.startswith("acinst") and (gyro_loop or not s.startswith(("sigma_", "cage_")))]
+    keep = [
+        i
+        for i, s in enumerate(plant.states)
+        if axis in s.split("_")[1:]
+        and not s.startswith("acinst")
+        and (gyro_loop or not s.startswith(("sigma_", "cage_")))
+    ]
     return np.linalg.eigvals(plant.A[np.ix_(keep, keep)])

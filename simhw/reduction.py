@@ -66,9 +66,9 @@ Node = tuple[str, str]
 class _Element:
     """A nonlinear element as the closure sees it."""
 
-    col: Node | None                                    # the input its correction is written to
-    reads: set[Node] = field(default_factory=set)       # its pre-signal's states and inputs
-    clamps: set[Node] = field(default_factory=set)      # states a stop clamps in place
+    col: Node | None  # the input its correction is written to
+    reads: set[Node] = field(default_factory=set)  # its pre-signal's states and inputs
+    clamps: set[Node] = field(default_factory=set)  # states a stop clamps in place
 
 
 def _graph(plants: Iterable[Plant]) -> tuple[dict[Node, set[Node]], dict[str, _Element]]:
@@ -77,8 +77,10 @@ def _graph(plants: Iterable[Plant]) -> tuple[dict[Node, set[Node]], dict[str, _E
     reads: dict[Node, set[Node]] = {}
     elements: dict[str, _Element] = {}
     for p in plants:
+
         def node(kind: str, i: int, p: Plant = p) -> Node:
             return (kind, p.states[i] if kind == "x" else p.inputs[i])
+
         for kind, rows, m_x, m_u in (("x", p.states, p.A, p.B), ("y", p.outputs, p.C, p.D)):
             for r, row in enumerate(rows):
                 got = reads.setdefault((kind, row), set())
@@ -104,10 +106,14 @@ def kept(cfg: SimConfig, outputs: Sequence[str]) -> Kept:
     plants = [build_plant(cfg, r) for r in relay_states()]
     unknown = [o for o in outputs if o not in plants[0].outputs]
     if unknown:
-        raise ValueError(f"no model output {', '.join(map(repr, unknown))} "
-                         f"(the outputs are {', '.join(plants[0].outputs)})")
+        raise ValueError(
+            f"no model output {', '.join(map(repr, unknown))} "
+            f"(the outputs are {', '.join(plants[0].outputs)})"
+        )
     if any(p.states != plants[0].states for p in plants):
-        raise RuntimeError("the model's states differ between relay states: a reduced run would be wrong")
+        raise RuntimeError(
+            "the model's states differ between relay states: a reduced run would be wrong"
+        )
     reads, elements = _graph(plants)
     need: set[Node] = set()
     chosen: set[str] = set()
@@ -119,13 +125,19 @@ def kept(cfg: SimConfig, outputs: Sequence[str]) -> Kept:
                 todo.append(dep)
         if not todo:
             for name, e in elements.items():
-                if name not in chosen and ((e.col is not None and e.col in need) or e.clamps & need):
+                if name not in chosen and (
+                    (e.col is not None and e.col in need) or e.clamps & need
+                ):
                     chosen.add(name)
                     more = e.reads | e.clamps | ({e.col} if e.col is not None else set())
                     todo += [d for d in more if d not in need]
                     need |= more
-    return Kept(tuple(outputs), frozenset(n for k, n in need if k == "x"),
-                frozenset(n for k, n in need if k == "u"), frozenset(chosen))
+    return Kept(
+        tuple(outputs),
+        frozenset(n for k, n in need if k == "x"),
+        frozenset(n for k, n in need if k == "u"),
+        frozenset(chosen),
+    )
 
 
 def reduce(disc: DiscretePlant, keep: Kept) -> DiscretePlant:
@@ -141,14 +153,23 @@ def reduce(disc: DiscretePlant, keep: Kept) -> DiscretePlant:
     def renumber(n: Nonlinearity) -> Nonlinearity:
         z = {(kind, x_new[i] if kind == "x" else u_new[i]): v for (kind, i), v in n.z.items()}
         return dataclasses.replace(
-            n, z=Lin(z), col=u_new[n.col] if n.col >= 0 else -1,
+            n,
+            z=Lin(z),
+            col=u_new[n.col] if n.col >= 0 else -1,
             state_theta=x_new[n.state_theta] if n.state_theta >= 0 else -1,
-            state_omega=x_new[n.state_omega] if n.state_omega >= 0 else -1)
+            state_omega=x_new[n.state_omega] if n.state_omega >= 0 else -1,
+        )
 
     inputs = [p.inputs[i] for i in us]
     plant = Plant(
-        states=[p.states[i] for i in xs], inputs=inputs, outputs=list(keep.outputs),
-        A=p.A[np.ix_(xs, xs)], B=p.B[np.ix_(xs, us)], C=p.C[np.ix_(ys, xs)], D=p.D[np.ix_(ys, us)],
+        states=[p.states[i] for i in xs],
+        inputs=inputs,
+        outputs=list(keep.outputs),
+        A=p.A[np.ix_(xs, xs)],
+        B=p.B[np.ix_(xs, us)],
+        C=p.C[np.ix_(ys, xs)],
+        D=p.D[np.ix_(ys, us)],
         nonlinear=[renumber(n) for n in p.nonlinear if n.name in keep.nonlinear],
-        slow_inputs=[s for s in p.slow_inputs if s in inputs])
+        slow_inputs=[s for s in p.slow_inputs if s in inputs],
+    )
     return DiscretePlant(plant, disc.dt, disc.Ad[np.ix_(xs, xs)], disc.Bd[np.ix_(xs, us)])

@@ -41,18 +41,23 @@ def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str]]:
     if "can" in params:
         iface, _, channel = params["can"].partition(":")
         if iface != "virtual" or not channel:
-            raise ValueError(f"rig URL {url!r}: can={params['can']!r}: the sim's bus is python-can's "
-                             f"virtual one, give can=virtual:NAME")
+            raise ValueError(
+                f"rig URL {url!r}: can={params['can']!r}: the sim's bus is python-can's "
+                f"virtual one, give can=virtual:NAME"
+            )
     external = [n for n in params.get("external", "").split(",") if n]
     bad = [n for n in external if n not in rn.NODES]
     if bad:
-        raise ValueError(f"rig URL {url!r}: external={params['external']!r}: unknown node(s) {', '.join(bad)} "
-                         f"(nodes: {', '.join(rn.NODES)})")
+        raise ValueError(
+            f"rig URL {url!r}: external={params['external']!r}: unknown node(s) {', '.join(bad)} "
+            f"(nodes: {', '.join(rn.NODES)})"
+        )
     return channel, external
 
 
-def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
-                 calibration: RigCalibration | None) -> Rig:
+def open_sim_rig(
+    url: str, params: dict[str, str], operator: Operator | None, calibration: RigCalibration | None
+) -> Rig:
     """Start the simulated rig's devices and connect the drivers to them."""
     check_keys(url, params, SIM_KEYS)
     table = params.get("table", "can")
@@ -74,16 +79,24 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         raise ValueError(f"rig URL {url!r}: {exc}") from None
     channel, external = sim_can(url, params)
     cfg = load_config(params.get("config"))
-    stamp = config_stamp(params.get("config"))   # read after the parse: a regular file
+    stamp = config_stamp(params.get("config"))  # read after the parse: a regular file
     if calibration is None:
-        calibration = rig_calibration(cfg)   # the data sheet the simulated rig ships with
+        calibration = rig_calibration(cfg)  # the data sheet the simulated rig ships with
     # the devices run in this process: their deadlines, and the drivers', leave out the time the
     # process could not run (a busy host), so they measure the rig (``drivers.runclock``)
     running = RunningClock()
     try:
-        server = SimRigServer(cfg, seed=seed, realtime=flag("realtime", params.get("realtime", "0")), speed=speed,
-                              warm=flag("warm", params.get("warm", "0")), watchdog_s=watchdog, monotonic=running,
-                              can_channel=channel, external_nodes=external)
+        server = SimRigServer(
+            cfg,
+            seed=seed,
+            realtime=flag("realtime", params.get("realtime", "0")),
+            speed=speed,
+            warm=flag("warm", params.get("warm", "0")),
+            watchdog_s=watchdog,
+            monotonic=running,
+            can_channel=channel,
+            external_nodes=external,
+        )
     except BaseException:
         running.close()
         raise
@@ -92,13 +105,29 @@ def open_sim_rig(url: str, params: dict[str, str], operator: Operator | None,
         tab: tuple
         if table == "manual":
             t = server.sim.cfg.table
-            tab = ("manual", operator or terminal_operator, TablePosition(t.tilt_deg, t.spindle_deg % 360.0))
+            tab = (
+                "manual",
+                operator or terminal_operator,
+                TablePosition(t.tilt_deg, t.spindle_deg % 360.0),
+            )
         else:
             tab = ("can",)
-        return assemble(url, server.adc_port, bus, server.can_channel, server.clock, tab, calibration,
-                        node_timeout_s=watchdog, reply_timeout_s=max(0.5, watchdog),
-                        closers=[server.stop, running.close], emulator=server, monotonic=running,
-                        simulated=True, sim_config=stamp)
+        return assemble(
+            url,
+            server.adc_port,
+            bus,
+            server.can_channel,
+            server.clock,
+            tab,
+            calibration,
+            node_timeout_s=watchdog,
+            reply_timeout_s=max(0.5, watchdog),
+            closers=[server.stop, running.close],
+            emulator=server,
+            monotonic=running,
+            simulated=True,
+            sim_config=stamp,
+        )
     except BaseException:
         server.stop()
         running.close()

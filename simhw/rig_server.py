@@ -53,7 +53,7 @@ class Snapshot:
     caged: dict[str, bool] = field(default_factory=lambda: dict.fromkeys(GYRO_CHANNELS, False))
 
 
-_COMPILED: set[float] = set()   # sample rates whose kernels this process has compiled or loaded
+_COMPILED: set[float] = set()  # sample rates whose kernels this process has compiled or loaded
 
 
 def _compile_kernels(cfg: SimConfig | None, rate_hz: float) -> None:
@@ -68,11 +68,23 @@ def _compile_kernels(cfg: SimConfig | None, rate_hz: float) -> None:
 
 
 class SimRigServer:
-    def __init__(self, cfg: SimConfig | None = None, *, seed: int = 0, realtime: bool = False, speed: float = 1.0,
-                 warm: bool = False, rate_hz: float = 1000.0, max_block_s: float = 1.0,
-                 paced_block_s: float = 0.01, watchdog_s: float = 1.0,
-                 monotonic: Callable[[], float] = time.monotonic, can_channel: str | None = None,
-                 external_nodes: Collection[str] = (), can_interface: str = "virtual") -> None:
+    def __init__(
+        self,
+        cfg: SimConfig | None = None,
+        *,
+        seed: int = 0,
+        realtime: bool = False,
+        speed: float = 1.0,
+        warm: bool = False,
+        rate_hz: float = 1000.0,
+        max_block_s: float = 1.0,
+        paced_block_s: float = 0.01,
+        watchdog_s: float = 1.0,
+        monotonic: Callable[[], float] = time.monotonic,
+        can_channel: str | None = None,
+        external_nodes: Collection[str] = (),
+        can_interface: str = "virtual",
+    ) -> None:
         self.seed = seed
         #: the devices' deadline clock (``drivers.runclock.RunningClock`` from the sim rig scheme)
         self.monotonic = monotonic
@@ -82,8 +94,14 @@ class SimRigServer:
         self._wall0 = time.monotonic()
         _compile_kernels(cfg, rate_hz)
         clock = PacedClock(speed) if realtime else VirtualClock()
-        self.sim = Simulator(cfg, rate_hz=rate_hz, seed=seed, mode=3 if warm else 1,
-                             spin=None if warm else 0.0, clock=clock)
+        self.sim = Simulator(
+            cfg,
+            rate_hz=rate_hz,
+            seed=seed,
+            mode=3 if warm else 1,
+            spin=None if warm else 0.0,
+            clock=clock,
+        )
         self._cond = threading.Condition()
         #: (rig time due, fn): the demand when submitted (0: at once)
         self._pending: list[tuple[float, Callable[[Simulator], None]]] = []
@@ -99,8 +117,14 @@ class SimRigServer:
         #: says otherwise: ``udp_multicast`` serves hosts in other processes, ``simhw.serve``);
         #: ``external_nodes`` are left to devices the caller puts on it
         self.can_channel = can_channel or f"fbs-sim-{uuid.uuid4().hex[:12]}"
-        self.nodes = CanNodeHost(self, self.can_channel, interface=can_interface, watchdog_s=watchdog_s,
-                                 monotonic=monotonic, external=external_nodes)
+        self.nodes = CanNodeHost(
+            self,
+            self.can_channel,
+            interface=can_interface,
+            watchdog_s=watchdog_s,
+            monotonic=monotonic,
+            external=external_nodes,
+        )
         self.clock = SimClock(self)
         self._thread = threading.Thread(target=self._run, name="sim-physics", daemon=True)
         self._thread.start()
@@ -154,8 +178,10 @@ class SimRigServer:
                 if self._time != last:
                     last, since = self._time, self.monotonic()
                 elif self.monotonic() - since > stall_s:
-                    raise DeviceTimeout(f"rig time stalled at {self._time:.3f} s while waiting for {t:.3f} s"
-                                        + (f": {self.stall_reason}" if self.stall_reason else ""))
+                    raise DeviceTimeout(
+                        f"rig time stalled at {self._time:.3f} s while waiting for {t:.3f} s"
+                        + (f": {self.stall_reason}" if self.stall_reason else "")
+                    )
 
     # ------------------------------------------------------------------ physics thread
     def _run(self) -> None:
@@ -174,8 +200,11 @@ class SimRigServer:
                     if self.paced:
                         n = max(1, round(self.paced_block_s * sim.rate_hz))
                     else:
-                        n = min(self._samples_to(self._demand), max(1, round(self.max_block_s * sim.rate_hz)))
-                        if self._pending:       # the block ends where the next command is due
+                        n = min(
+                            self._samples_to(self._demand),
+                            max(1, round(self.max_block_s * sim.rate_hz)),
+                        )
+                        if self._pending:  # the block ends where the next command is due
                             n = min(n, self._samples_to(self._pending[0][0]))
                         if n <= 0:
                             if not todo:
@@ -210,9 +239,15 @@ class SimRigServer:
             for c, name in _PICKOFF.items():
                 self._null[c] += alpha * (float(np.mean(np.abs(block[name]))) - self._null[c])
         ready = sim.gyros_at_speed
-        caged = {c: bool(ready and sim.mode in (3, 4, 5) and not sim.relays.caging_inhibit[i]
-                         and self._null[c] < CAGED_NULL_V)
-                 for i, c in enumerate(GYRO_CHANNELS)}
+        caged = {
+            c: bool(
+                ready
+                and sim.mode in (3, 4, 5)
+                and not sim.relays.caging_inhibit[i]
+                and self._null[c] < CAGED_NULL_V
+            )
+            for i, c in enumerate(GYRO_CHANNELS)
+        }
         return Snapshot(sim.time_s, sim.mode, sim.spin, ready, caged)
 
     def stop(self) -> None:

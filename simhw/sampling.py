@@ -24,12 +24,16 @@ class RangeError(ValueError):
 
 def check_range(channel: str, range_V: float) -> float:
     if range_V not in ADC_RANGES_V:
-        raise RangeError(f"ADC range {range_V!r} V for {channel} is not available "
-                         f"(choose one of {', '.join(str(r) for r in ADC_RANGES_V)} V)")
+        raise RangeError(
+            f"ADC range {range_V!r} V for {channel} is not available "
+            f"(choose one of {', '.join(str(r) for r in ADC_RANGES_V)} V)"
+        )
     return float(range_V)
 
 
-def quantize(v: np.ndarray, range_V: float | np.ndarray, bits: int) -> tuple[np.ndarray, np.ndarray]:
+def quantize(
+    v: np.ndarray, range_V: float | np.ndarray, bits: int
+) -> tuple[np.ndarray, np.ndarray]:
     """Volts -> volts on the converter's grid, and the overrange flags (|v| beyond full scale).
 
     Codes run from -2^(bits-1) to 2^(bits-1) - 1 with LSB q = 2 range / 2^bits; the Widrow
@@ -39,8 +43,8 @@ def quantize(v: np.ndarray, range_V: float | np.ndarray, bits: int) -> tuple[np.
     lo, hi = -(2 ** (bits - 1)), 2 ** (bits - 1) - 1
     code = np.rint(v / q)
     over = (v > range_V) | (v < -range_V) | ~np.isfinite(v)
-    code = np.clip(code, lo, hi)                   # +-inf to the end codes; NaN stays NaN ...
-    code = np.where(np.isnan(code), 0.0, code)     # ... and reads 0 (flagged in ``over``)
+    code = np.clip(code, lo, hi)  # +-inf to the end codes; NaN stays NaN ...
+    code = np.where(np.isnan(code), 0.0, code)  # ... and reads 0 (flagged in ``over``)
     return code * q, over
 
 
@@ -102,9 +106,15 @@ class SamplingChain:
     def process(self, analog: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Filter (n_int, nch) analog volts; return (kept internal indices, volts, overrange)."""
         if len(analog) == 0:
-            return np.zeros(0, int), np.zeros((0, len(self.channels))), np.zeros((0, len(self.channels)), bool)
+            return (
+                np.zeros(0, int),
+                np.zeros((0, len(self.channels))),
+                np.zeros((0, len(self.channels)), bool),
+            )
         if self.zi is None:
-            self.zi = np.ascontiguousarray(scipy.signal.sosfilt_zi(self.sos)[:, :, None] * analog[0][None, None, :])
+            self.zi = np.ascontiguousarray(
+                scipy.signal.sosfilt_zi(self.sos)[:, :, None] * analog[0][None, None, :]
+            )
         filtered = _sosfilt_cols(self.sos, np.asarray(analog, np.float64), self.zi)
         keep = np.arange(self.phase, len(analog), self.oversample)
         self.phase = (self.phase - len(analog)) % self.oversample

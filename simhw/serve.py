@@ -31,8 +31,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--config", default=None, help="sim config (TOML)")
     ap.add_argument("--warm", action="store_true", help="start in mode 3, spun up and caged")
     a = ap.parse_args(argv)
-    server = SimRigServer(load_config(a.config), seed=a.seed, realtime=True, warm=a.warm,
-                          can_channel=a.can, can_interface="udp_multicast")
+    server = SimRigServer(
+        load_config(a.config),
+        seed=a.seed,
+        realtime=True,
+        warm=a.warm,
+        can_channel=a.can,
+        can_interface="udp_multicast",
+    )
     done = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: done.set())

@@ -31,7 +31,16 @@ from simhw.noise import (
     WhiteNoise,
 )
 from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig, validate
-from simhw.plant import CHANNELS, TRUTH_CHANNELS, URAD, Plant, RelayState, build_plant, discretize, torquer_limit_V
+from simhw.plant import (
+    CHANNELS,
+    TRUTH_CHANNELS,
+    URAD,
+    Plant,
+    RelayState,
+    build_plant,
+    discretize,
+    torquer_limit_V,
+)
 from simhw.reduction import Kept, kept, reduce
 from simhw.sampling import SamplingChain, internal_rate
 
@@ -48,6 +57,8 @@ DIVERGED_V = 1e6
 
 class SimulationDiverged(ValueError):
     """The plant's outputs left any physical range: the message says when, where and what."""
+
+
 #: Wheel-speed resolution of the plant model during run-up and run-down.
 SPIN_MODEL_STEP = 0.1
 
@@ -59,8 +70,8 @@ class Block:
     t0: float
     rate_hz: float
     channels: tuple[str, ...]
-    volts: np.ndarray            # (n, n_channels)
-    overrange: np.ndarray        # (n, n_channels) bool
+    volts: np.ndarray  # (n, n_channels)
+    overrange: np.ndarray  # (n, n_channels) bool
     truth: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __getitem__(self, channel: str) -> np.ndarray:
@@ -86,8 +97,15 @@ def ac_knee(f: np.ndarray | float, corner_hz: float, knee: float, slope: float) 
     return knee * (1.0 + r) + (1.0 - knee) * np.maximum(1.0, r)
 
 
-def ac_white_psd(nea_urad: float, corner_hz: float, w: float, zeta: float, *, knee: float = 1.0,
-                 slope: float = 1.0) -> float:
+def ac_white_psd(
+    nea_urad: float,
+    corner_hz: float,
+    w: float,
+    zeta: float,
+    *,
+    knee: float = 1.0,
+    slope: float = 1.0,
+) -> float:
     """One-sided white PSD W (rad^2/Hz) of the autocollimator angle noise such that the control
     channel (second-order filter w, zeta; eq. 3.21) shows ``nea_urad`` rms in 0.1-100 Hz
     when the noise's PSD is W K(f) (``ac_knee``: a 1/f part of that slope meeting the white
@@ -106,7 +124,7 @@ def pickoff_white_psd(rms_urad: float, lines: list) -> float:
 
 
 #: the largest seed (numpy takes any non-negative integer; this is a sane bound on a typo)
-MAX_SEED = 2 ** 63 - 1
+MAX_SEED = 2**63 - 1
 
 
 def check_seed(seed: object, what: str | None = None) -> None:
@@ -120,19 +138,29 @@ def check_seed(seed: object, what: str | None = None) -> None:
 class Sources:
     """All random inputs of the plant, one independent stream each."""
 
-    def __init__(self, cfg: SimConfig, seed: int | tuple[int, int], dt: float, *,
-                 spectral: bool = False) -> None:
+    def __init__(
+        self, cfg: SimConfig, seed: int | tuple[int, int], dt: float, *, spectral: bool = False
+    ) -> None:
         """``spectral``: for ``spectrum`` and ``lines`` only (a model of the spectra builds one
         per trial): every source shares one generator, so ``take`` refuses."""
         self.dt, self.spectral = dt, spectral
         #: samples of each input drawn ahead and not yet taken (``take``)
         self._ahead: dict[str, np.ndarray] = {}
         ss = np.random.SeedSequence(seed)
-        names = ([f"nac_{a}" for a in AXES] + [f"np_{c}" for c in GYRO_CHANNELS]
-                 + [f"wrand_{c}" for c in GYRO_CHANNELS] + [f"md_{a}" for a in AXES])
+        names = (
+            [f"nac_{a}" for a in AXES]
+            + [f"np_{c}" for c in GYRO_CHANNELS]
+            + [f"wrand_{c}" for c in GYRO_CHANNELS]
+            + [f"md_{a}" for a in AXES]
+        )
         shared = np.random.Generator(np.random.PCG64(0)) if spectral else None
-        rngs = {} if spectral else dict(zip(names, (np.random.Generator(np.random.PCG64(s))
-                                                    for s in ss.spawn(len(names)))))
+        rngs = (
+            {}
+            if spectral
+            else dict(
+                zip(names, (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(len(names))))
+            )
+        )
 
         def sub(name: str) -> np.random.Generator:
             if shared is not None:
@@ -152,8 +180,14 @@ class Sources:
         for a in AC_AXES:
             ac = cfg.autocollimator[a]
             fc = ac.flicker_corner_hz
-            white = white_of[a] = ac_white_psd(ac.nea_urad, fc, ac.control_filter_rad_per_s, ac.control_filter_zeta,
-                                               knee=ac.flicker_knee, slope=ac.flicker_slope)
+            white = white_of[a] = ac_white_psd(
+                ac.nea_urad,
+                fc,
+                ac.control_filter_rad_per_s,
+                ac.control_filter_zeta,
+                knee=ac.flicker_knee,
+                slope=ac.flicker_slope,
+            )
             frac = ac.common_noise_fraction
             # The unit's own 1/f, W (K - 1) (``ac_knee``); the bank reaches 10 x the corner (for
             # a high corner, the flicker_noise effect's) and at least the NEA band's top, over
@@ -161,10 +195,22 @@ class Sources:
             f_top = max(NEA_BAND_HZ[1], 10.0 * fc)
             self.parts[f"nac_{a}"] = [
                 WhiteNoise(sub(f"nac_{a}"), white * (1.0 - frac), dt),
-                FlickerNoise(sub(f"nac_{a}"), white * fc, 1e-4, f_top, dt, corner_hz=fc, knee=ac.flicker_knee,
-                             slope=ac.flicker_slope),
-                ExcessFlickerNoise(sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt),
-                TelegraphJumps(sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt),
+                FlickerNoise(
+                    sub(f"nac_{a}"),
+                    white * fc,
+                    1e-4,
+                    f_top,
+                    dt,
+                    corner_hz=fc,
+                    knee=ac.flicker_knee,
+                    slope=ac.flicker_slope,
+                ),
+                ExcessFlickerNoise(
+                    sub(f"nac_{a}"), white * ac.extra_flicker_corner_hz, 1e-4, 50.0, dt
+                ),
+                TelegraphJumps(
+                    sub(f"nac_{a}"), ac.offset_jump_urad * URAD, ac.offset_jump_interval_s, dt
+                ),
             ]
             if frac > 0:
                 common = shared or np.random.Generator(np.random.PCG64(common_seed))
@@ -176,29 +222,44 @@ class Sources:
             g = cfg.gyro[c]
             lines = [(f, a * URAD) for f, a in g.pickoff_lines if f < 0.5 / dt]
             self.parts[f"np_{c}"] = [
-                WhiteNoise(sub(f"np_{c}"), pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines), dt),
+                WhiteNoise(
+                    sub(f"np_{c}"), pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines), dt
+                ),
                 Lines(sub(f"np_{c}"), lines, dt),
             ]
             # Random drift (IEEE 952 conventions, one-sided PSDs): white rate 2 N^2,
             # flicker B^2/(pi f), rate random walk K.
             self.parts[f"wrand_{c}"] = [
                 WhiteNoise(sub(f"wrand_{c}"), 2 * (g.arw_urad_per_sqrt_s * URAD) ** 2, dt),
-                FlickerNoise(sub(f"wrand_{c}"), (g.bias_instability_urad_per_s * URAD) ** 2 / math.pi,
-                             1e-5, 1.0, dt),
+                FlickerNoise(
+                    sub(f"wrand_{c}"),
+                    (g.bias_instability_urad_per_s * URAD) ** 2 / math.pi,
+                    1e-5,
+                    1.0,
+                    dt,
+                ),
                 RandomWalk(sub(f"wrand_{c}"), g.rrw_urad_per_s_per_sqrt_s * URAD, dt),
             ]
         for a in AXES:
             p = cfg.platform[a]
             # Optional platform disturbance torque (effect `platform_disturbance`).
-            self.parts[f"md_{a}"] = [LagNoise(sub(f"md_{a}"), p.disturbance_torque_rms_Nm, p.disturbance_corner_hz, dt)]
+            self.parts[f"md_{a}"] = [
+                LagNoise(sub(f"md_{a}"), p.disturbance_torque_rms_Nm, p.disturbance_corner_hz, dt)
+            ]
         for a in AC_AXES:
             # A flexible mount's floor excitation (angular acceleration, rad/s^2, white): the
             # mode th_b'' + 2 zeta w th_b' + w^2 th_b = w^2 th + n has |H(jw)|^2 = 1/(2 zeta w^2)^2
             # at w, so S_n = excitation W (2 zeta w^2)^2 puts excitation x W there (simhw.plant).
             ac = cfg.autocollimator[a]
             w = 2 * math.pi * ac.mount_freq_hz
-            psd = ac.mount_excitation * white_of[a] * (2 * ac.mount_damping * w * w) ** 2 if w > 0 else 0.0
-            self.parts[f"nmount_{a}"] = [WhiteNoise(shared or np.random.Generator(np.random.PCG64(mount_seeds[a])), psd, dt)]
+            psd = (
+                ac.mount_excitation * white_of[a] * (2 * ac.mount_damping * w * w) ** 2
+                if w > 0
+                else 0.0
+            )
+            self.parts[f"nmount_{a}"] = [
+                WhiteNoise(shared or np.random.Generator(np.random.PCG64(mount_seeds[a])), psd, dt)
+            ]
 
     #: Internal steps drawn ahead per input. Every part has its own stream and continues it
     #: exactly whatever the cut (``simhw.noise``), so drawing ahead changes no sample; it turns
@@ -207,7 +268,9 @@ class Sources:
 
     def take(self, name: str, n: int) -> np.ndarray:
         if self.spectral:
-            raise RuntimeError("these Sources were made for spectra (spectral=True): they draw no streams")
+            raise RuntimeError(
+                "these Sources were made for spectra (spectral=True): they draw no streams"
+            )
         buf = self._ahead.get(name)
         have = 0 if buf is None else len(buf)
         if have < n:
@@ -230,7 +293,9 @@ class Sources:
     def names(self) -> list[str]:
         return list(self.parts)
 
-    def spectrum(self, name: str, f: np.ndarray, cache: dict | None = None) -> dict[str, np.ndarray]:
+    def spectrum(
+        self, name: str, f: np.ndarray, cache: dict | None = None
+    ) -> dict[str, np.ndarray]:
         """One-sided PSD (units^2/Hz) of input ``name`` as the plant's ZOH model sees it, by kind
         of source ("WhiteNoise", "FlickerNoise", ...), without deterministic lines: |H|^2 times
         their sum is the output's PSD (the model-gap workflow's expected spectra). With
@@ -251,7 +316,9 @@ class Sources:
 
     def lines(self, name: str) -> list[tuple[float, float]]:
         """Deterministic sinusoids of input ``name``: (frequency Hz, amplitude)."""
-        return [ln for part in self.parts[name] if hasattr(part, "lines") for ln in part.lines(self.dt)]
+        return [
+            ln for part in self.parts[name] if hasattr(part, "lines") for ln in part.lines(self.dt)
+        ]
 
 
 class Simulator:
@@ -273,16 +340,26 @@ class Simulator:
         single-axis record drops the other axes, their gyros and their noise).
     """
 
-    def __init__(self, cfg: SimConfig | None = None, rate_hz: float = 1000.0, seed: int = 0,
-                 mode: int = 3, spin: float | None = None, truth: bool = False,
-                 clock: VirtualClock | None = None, channels: Sequence[str] | None = None) -> None:
+    def __init__(
+        self,
+        cfg: SimConfig | None = None,
+        rate_hz: float = 1000.0,
+        seed: int = 0,
+        mode: int = 3,
+        spin: float | None = None,
+        truth: bool = False,
+        clock: VirtualClock | None = None,
+        channels: Sequence[str] | None = None,
+    ) -> None:
         self.cfg = cfg = (cfg or SimConfig()).copy()
         validate(cfg)  # a config built in code has not been through from_dict's checks
         self.channels: tuple[str, ...] = CHANNELS if channels is None else tuple(channels)
         bad = [c for c in self.channels if c not in CHANNELS]
         if bad or not self.channels or len(set(self.channels)) != len(self.channels):
-            raise ValueError(f"channels {list(self.channels)} must be distinct recorded channels, at least one "
-                             f"(the channels are {', '.join(CHANNELS)})")
+            raise ValueError(
+                f"channels {list(self.channels)} must be distinct recorded channels, at least one "
+                f"(the channels are {', '.join(CHANNELS)})"
+            )
         #: the outputs the kernel computes, in the order of the columns it returns
         self._outputs = self.channels + (TRUTH_CHANNELS if truth else ())
         self._keep: Kept | None = None if channels is None else kept(cfg, self._outputs)
@@ -297,14 +374,18 @@ class Simulator:
         self._t_base = 0.0  # time of the last rate change
         self._rate_changes = 0
         self._set_timebase(rate_hz)
-        self.relays = RelayState(mode=mode, spin=(1.0 if mode >= 2 else 0.0) if spin is None else spin)
+        self.relays = RelayState(
+            mode=mode, spin=(1.0 if mode >= 2 else 0.0) if spin is None else spin
+        )
         self._spin = self.relays.spin  # exact wheel speed; the relay state holds it rounded
         self.vtd = dict.fromkeys(AXES, 0.0)
         self.gamma_c = dict.fromkeys(AXES, 0.0)
         self.bias = dict.fromkeys(GYRO_CHANNELS, 0.0)
         for p in cfg.pickup:
             if p.channel not in CHANNELS:
-                raise ValueError(f"pickup channel {p.channel!r} is not a recorded channel ({', '.join(CHANNELS)})")
+                raise ValueError(
+                    f"pickup channel {p.channel!r} is not a recorded channel ({', '.join(CHANNELS)})"
+                )
         self._set_sampling()
         self._cache: dict[RelayState, CompiledPlant] = {}
         self._compiled = self._compile(self.relays)
@@ -331,13 +412,26 @@ class Simulator:
         # Each time base gets its own streams, derived from the one seed.
         seed = self.seed if self._rate_changes == 0 else (self.seed, self._rate_changes)
         self.sources = Sources(self.cfg, seed, self.dt)
-        self.chain = SamplingChain(self.channels, self.rate_hz, self.oversample, s.anti_alias_fraction,
-                                   s.anti_alias_poles, s.adc_bits, s.default_range_V)
+        self.chain = SamplingChain(
+            self.channels,
+            self.rate_hz,
+            self.oversample,
+            s.anti_alias_fraction,
+            s.anti_alias_poles,
+            s.adc_bits,
+            s.default_range_V,
+        )
         for c, r in (ranges or {}).items():
             self.chain.set_range(c, r)
         # Electrical pickup: phase zero at the start of the time base, on the plant's step count.
-        self._pickup = [(self.channels.index(p.channel), Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0))
-                        for p in self.cfg.pickup if p.channel in self.channels]
+        self._pickup = [
+            (
+                self.channels.index(p.channel),
+                Lines(None, [(p.freq_hz, p.amplitude_V)], self.dt, phase=0.0),
+            )
+            for p in self.cfg.pickup
+            if p.channel in self.channels
+        ]
 
     def set_rate(self, rate_hz: float) -> None:
         """Change the output sample rate now (the ADC was reconfigured).
@@ -450,8 +544,15 @@ class Simulator:
     def _slow_inputs(self, plant: Plant | None = None) -> np.ndarray:
         """The values of ``plant``'s slow inputs (default: the compiled plant's), in its order."""
         cfg = self.cfg
-        w, f = self._table_geometry((cfg.table.tilt_deg, cfg.table.spindle_deg, cfg.table.base_azimuth_offset_deg,
-                                     cfg.site.latitude_deg, cfg.site.earth_rate_rad_per_s))
+        w, f = self._table_geometry(
+            (
+                cfg.table.tilt_deg,
+                cfg.table.spindle_deg,
+                cfg.table.base_azimuth_offset_deg,
+                cfg.site.latitude_deg,
+                cfg.site.earth_rate_rad_per_s,
+            )
+        )
         axis_i = {"X": 0, "Y": 1, "Z": 2, "XRD": 0}
         values = {}
         for a in AXES:
@@ -459,20 +560,31 @@ class Simulator:
             values[f"gc_{a}"] = self.gamma_c[a]
         for c in GYRO_CHANNELS:
             g = cfg.gyro[c]
-            drift = (g.fixed_drift_urad_per_s + g.g_drift_x_urad_per_s_per_g * f[0]
-                     + g.g_drift_y_urad_per_s_per_g * f[1] + g.g_drift_z_urad_per_s_per_g * f[2]) * URAD
+            drift = (
+                g.fixed_drift_urad_per_s
+                + g.g_drift_x_urad_per_s_per_g * f[0]
+                + g.g_drift_y_urad_per_s_per_g * f[1]
+                + g.g_drift_z_urad_per_s_per_g * f[2]
+            ) * URAD
             values[f"vb_{c}"] = self.bias[c]
             values[f"wconst_{c}"] = w[axis_i[c]] + drift
         return np.array([values[s] for s in (plant or self._compiled.disc.plant).slow_inputs])
 
-    def _table_geometry(self, key: tuple[float, float, float, float, float]) -> tuple[np.ndarray, np.ndarray]:
+    def _table_geometry(
+        self, key: tuple[float, float, float, float, float]
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Earth rate and specific force on the platform axes for (tilt, spindle, azimuth offset
         deg, latitude deg, earth rate): asked for every block, changed by a table move."""
         if self._geometry is None or self._geometry[0] != key:
             tilt, spindle, offset, lat, rate = key
-            axes = geometry.platform_axes_enu(math.radians(tilt), math.radians(spindle), math.radians(offset))
-            self._geometry = (key, geometry.earth_rate_platform(math.radians(lat), rate, axes),
-                              geometry.specific_force_platform(axes))
+            axes = geometry.platform_axes_enu(
+                math.radians(tilt), math.radians(spindle), math.radians(offset)
+            )
+            self._geometry = (
+                key,
+                geometry.earth_rate_platform(math.radians(lat), rate, axes),
+                geometry.specific_force_platform(axes),
+            )
         return self._geometry[1], self._geometry[2]
 
     def _settle(self) -> None:
@@ -483,7 +595,9 @@ class Simulator:
         solves the whole rig and keeps its part: a smaller LU would round differently, and the
         reduced run would no longer be the full run's to the bit.
         """
-        plant = self._compiled.disc.plant if self._keep is None else build_plant(self.cfg, self.relays)
+        plant = (
+            self._compiled.disc.plant if self._keep is None else build_plant(self.cfg, self.relays)
+        )
         slow = self._slow_inputs(plant)
         rhs = -plant.B[:, [plant.inputs.index(s) for s in plant.slow_inputs]] @ slow
         # The slow noise (offset jumps, 1/f, disturbance) already has a value at t = 0: the
@@ -542,7 +656,8 @@ class Simulator:
             raise SimulationDiverged(
                 f"the simulation diverged at t = {t0 + i * self.dt:.6g} s: {self.channels[j]} = {analog[i, j]:.3g} V "
                 f"(beyond {DIVERGED_V:g} V or not a number); the configuration makes the plant unstable or "
-                f"the step too coarse for it - check the values changed from the defaults")
+                f"the step too coarse for it - check the values changed from the defaults"
+            )
 
     def _spin_transient(self) -> bool:
         return abs(self._spin - self._spin_target()) > 1e-6
@@ -591,8 +706,11 @@ class Simulator:
         (asked for every block; the last plant's kept)."""
         if self._last_layout is None or self._last_layout[0] is not cp:
             plant = cp.disc.plant
-            fast = [(j, plant.inputs[i]) for j, i in enumerate(cp.fast_cols)
-                    if not plant.inputs[i].startswith("corr_")]
+            fast = [
+                (j, plant.inputs[i])
+                for j, i in enumerate(cp.fast_cols)
+                if not plant.inputs[i].startswith("corr_")
+            ]
             self._last_layout = (cp, fast, [plant.outputs.index(c) for c in self._outputs])
         return self._last_layout[1], self._last_layout[2]
 

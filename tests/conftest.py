@@ -24,20 +24,29 @@ def pytest_collection_modifyitems(config, items):
     fixture is made once): the files with end-to-end runs on the sim rig (``slow``) first, so
     the long ones start at once and the short ones fill in around them, instead of one long
     file starting last and running alone. Within a file, the order is the file's."""
-    slow_files = {item.nodeid.split("::", 1)[0] for item in items if item.get_closest_marker("slow")}
+    slow_files = {
+        item.nodeid.split("::", 1)[0] for item in items if item.get_closest_marker("slow")
+    }
 
     def rank(item) -> tuple[int, int]:
         f = item.nodeid.split("::", 1)[0]
-        longest = next((i for i, name in enumerate(LONGEST_FILES) if f.endswith(name)), len(LONGEST_FILES))
+        longest = next(
+            (i for i, name in enumerate(LONGEST_FILES) if f.endswith(name)), len(LONGEST_FILES)
+        )
         return (f not in slow_files, longest)
 
-    items.sort(key=rank)   # stable: within a file, the file's order
+    items.sort(key=rank)  # stable: within a file, the file's order
 
 
 #: the files with the most work (a fresh-clone run's durations): they start first, so no long one
 #: starts last and runs alone (the unit-variation fixture, 6 min, once ended a run 8 min late)
-LONGEST_FILES = ("gap/test_unit_variation.py", "gap/test_hidden_effects.py", "procedures/test_excitation.py",
-                 "procedures/test_earth_rate_stopwatch.py", "procedures/test_excitation_modes.py")
+LONGEST_FILES = (
+    "gap/test_unit_variation.py",
+    "gap/test_hidden_effects.py",
+    "procedures/test_excitation.py",
+    "procedures/test_earth_rate_stopwatch.py",
+    "procedures/test_excitation_modes.py",
+)
 
 
 @pytest.fixture
@@ -72,9 +81,9 @@ class SmallDisk:
             block = bytes(1 << 16)
             while want > 0:
                 try:
-                    want -= fh.write(block[:min(want, len(block))])
+                    want -= fh.write(block[: min(want, len(block))])
                     fh.flush()
-                except OSError:       # what is left is smaller than a block: full is full
+                except OSError:  # what is left is smaller than a block: full is full
                     break
 
 
@@ -86,12 +95,21 @@ def small_disk(tmp_path):
     mounted: list[Path] = []
 
     def make(size_bytes: int) -> SmallDisk:
-        if not sys.platform.startswith("linux") or os.geteuid() != 0 or shutil.which("mount") is None:
-            pytest.skip("mounting a small tmpfs needs Linux, root and mount(8); this machine has not all three")
+        if (
+            not sys.platform.startswith("linux")
+            or os.geteuid() != 0
+            or shutil.which("mount") is None
+        ):
+            pytest.skip(
+                "mounting a small tmpfs needs Linux, root and mount(8); this machine has not all three"
+            )
         d = tmp_path / f"disk{len(mounted)}"
         d.mkdir()
-        p = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={int(size_bytes)},mode=1777", "tmpfs", str(d)],
-                           capture_output=True, text=True)
+        p = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={int(size_bytes)},mode=1777", "tmpfs", str(d)],
+            capture_output=True,
+            text=True,
+        )
         if p.returncode:
             pytest.skip(f"cannot mount a small tmpfs here: {p.stderr.strip() or p.returncode}")
         mounted.append(d)

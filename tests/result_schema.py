@@ -23,11 +23,11 @@ def validator() -> jsonschema.Draft202012Validator:
 
 def assert_valid_result(out: dict[str, Any]) -> None:
     """``out`` (a parsed ``--json`` object) follows the schema; per-channel shapes agree."""
-    out = json.loads(json.dumps(out, allow_nan=False))   # strict JSON: no NaN, only JSON types
+    out = json.loads(json.dumps(out, allow_nan=False))  # strict JSON: no NaN, only JSON types
     errors = sorted(validator().iter_errors(out), key=lambda e: list(e.absolute_path))
     assert not errors, "\n".join(f"{list(e.absolute_path)}: {e.message}" for e in errors[:10])
     for key, by_channel in (out.get("resolved") or {}).items():
         assert set(out[key]) == set(out[f"{key}_ci95"]) == set(by_channel), key
         for ch, ok in by_channel.items():
-            assert not ok or out[key][ch] is not None, (key, ch)   # resolved, never a null
+            assert not ok or out[key][ch] is not None, (key, ch)  # resolved, never a null
     assert out["rig"] and "simulated" in out and out["verdict"]

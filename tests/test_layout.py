@@ -15,10 +15,14 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_the_packages_import_from_any_directory_as_themselves(tmp_path):
-    code = ("import drivers.rig, daq.runfile, simhw.plant, procedures.runner, console.app, fbs.cli\n"
-            "import drivers.errors as e\n"
-            "print(drivers.rig.__file__); print(e.DriverError.__module__)")
-    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, check=True)
+    code = (
+        "import drivers.rig, daq.runfile, simhw.plant, procedures.runner, console.app, fbs.cli\n"
+        "import drivers.errors as e\n"
+        "print(drivers.rig.__file__); print(e.DriverError.__module__)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, check=True
+    )
     path, module = out.stdout.split()
     assert Path(path) == ROOT / "drivers" / "rig.py" and module == "drivers.errors"
 
@@ -28,9 +32,11 @@ def test_a_static_resolver_finds_open_rig_in_drivers_rig(tmp_path):
     code = 'from drivers.rig import open_rig\nopen_rig("sim")\n'
     env = jedi.create_environment(sys.executable, safe=False)
     found = jedi.Script(code, path=script, project=jedi.Project(tmp_path), environment=env).goto(
-        2, 2, follow_imports=True)
-    assert [(Path(d.module_path), d.type, d.name) for d in found] == [(ROOT / "drivers" / "rig.py", "function",
-                                                                      "open_rig")]
+        2, 2, follow_imports=True
+    )
+    assert [(Path(d.module_path), d.type, d.name) for d in found] == [
+        (ROOT / "drivers" / "rig.py", "function", "open_rig")
+    ]
     line = (ROOT / "drivers" / "rig.py").read_text().splitlines()[found[0].line - 1]
     assert line.startswith("def open_rig(")
 

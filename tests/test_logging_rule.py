@@ -31,7 +31,7 @@ def test_the_filter_keeps_ours_from_info_and_others_from_warning():
     assert not f.filter(_record("canopen.sdo.client", logging.INFO, upload))
     assert f.filter(_record("canopen.sdo.client", logging.WARNING, "timeout"))
     assert f.filter(_record("drivers.rig", logging.INFO, "rig open"))
-    assert f.filter(_record("console.app", logging.DEBUG, "x"))       # ours: the levels decide
+    assert f.filter(_record("console.app", logging.DEBUG, "x"))  # ours: the levels decide
     assert not f.filter(_record("driversx", logging.INFO, "not ours"))
 
 
@@ -61,7 +61,7 @@ def test_a_file_handler_like_console_log_gets_no_third_party_info(levels_restore
     stream = io.StringIO()
     logging.getLogger().addHandler(ruled(logging.StreamHandler(stream)))
     restore = set_levels()
-    logging.getLogger("canopen").setLevel(logging.INFO)      # a library (or a host) asked for INFO
+    logging.getLogger("canopen").setLevel(logging.INFO)  # a library (or a host) asked for INFO
     try:
         _emit_three()
     finally:
@@ -74,7 +74,7 @@ def test_a_file_handler_like_console_log_gets_no_third_party_info(levels_restore
 def test_the_consoles_live_log_gets_no_third_party_info(levels_restored):
     feed: Feed[str] = Feed()
     logging.getLogger().addHandler(FeedHandler(feed))
-    logging.getLogger().setLevel(logging.DEBUG)       # the old console's root level, or lower
+    logging.getLogger().setLevel(logging.DEBUG)  # the old console's root level, or lower
     _emit_three()
     assert feed.drain() == [f"{k[0]} {rest}" for k, rest in (ln.split(" ", 1) for ln in KEPT)]
 

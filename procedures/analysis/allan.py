@@ -57,7 +57,7 @@ import numpy as np
 import scipy.stats
 
 #: IEEE 952 Annex C: the Allan floor of flicker rate noise is sqrt(2 ln 2 / pi) B
-FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)   # 0.6643
+FLICKER_FLOOR = math.sqrt(2.0 * math.log(2.0) / math.pi)  # 0.6643
 #: one-sigma confidence (68.27 %), as allantools' default
 ONE_SIGMA = float(allantools.ci.ONE_SIGMA_CI)
 #: averages the lag-1 autocorrelation noise ID needs (Riley and Greenhall 2004)
@@ -70,14 +70,14 @@ class AllanResult:
 
     tau_s: np.ndarray
     dev: np.ndarray
-    lo: np.ndarray               # lower and upper confidence limits (``ci`` level)
+    lo: np.ndarray  # lower and upper confidence limits (``ci`` level)
     hi: np.ndarray
-    edf: np.ndarray              # equivalent degrees of freedom
-    n_terms: np.ndarray          # second differences summed (all segments)
-    alpha: np.ndarray            # power-law noise exponent used for the EDF (S_y ~ f^alpha)
+    edf: np.ndarray  # equivalent degrees of freedom
+    n_terms: np.ndarray  # second differences summed (all segments)
+    alpha: np.ndarray  # power-law noise exponent used for the EDF (S_y ~ f^alpha)
     alpha_identified: np.ndarray  # True where alpha was identified at that tau (not carried over)
     rate_hz: float
-    n_samples: int               # samples in all segments
+    n_samples: int  # samples in all segments
     ci: float = ONE_SIGMA
     overlapping: bool = True
     segment_lengths: tuple[int, ...] = ()
@@ -87,8 +87,12 @@ class AllanResult:
 
     def edf_for(self, alpha: int) -> np.ndarray:
         """Greenhall EDF at every tau had the noise been of type ``alpha`` throughout."""
-        return np.array([_edf(alpha, int(round(t * self.rate_hz)), self.segment_lengths, self.overlapping)
-                         for t in self.tau_s])
+        return np.array(
+            [
+                _edf(alpha, int(round(t * self.rate_hz)), self.segment_lengths, self.overlapping)
+                for t in self.tau_s
+            ]
+        )
 
     def interval(self, i: int, edf: float, ci: float | None = None) -> tuple[float, float]:
         """The interval (default: the result's ``ci`` level) of the deviation at index ``i``
@@ -101,13 +105,25 @@ def _edf(alpha: int, m: int, lengths: Sequence[int], overlapping: bool) -> float
     """Greenhall's EDF (``allantools.edf_greenhall``, d = 2) summed over independent segments.
     allantools lacks the white-phase (alpha = 2) case of a segment under 4 m + 1 points; there
     the flicker-phase (alpha = 1) EDF stands in."""
+
     def one(n: int) -> float:
         try:
-            return float(allantools.edf_greenhall(alpha=int(alpha), d=2, m=int(m), N=int(n) + 1,
-                                                  overlapping=overlapping, modified=False))
+            return float(
+                allantools.edf_greenhall(
+                    alpha=int(alpha),
+                    d=2,
+                    m=int(m),
+                    N=int(n) + 1,
+                    overlapping=overlapping,
+                    modified=False,
+                )
+            )
         except NotImplementedError:
-            return float(allantools.edf_greenhall(alpha=1, d=2, m=int(m), N=int(n) + 1,
-                                                  overlapping=overlapping, modified=False))
+            return float(
+                allantools.edf_greenhall(
+                    alpha=1, d=2, m=int(m), N=int(n) + 1, overlapping=overlapping, modified=False
+                )
+            )
 
     return float(sum(one(n) for n in lengths if n + 1 > 2 * m))
 
@@ -128,9 +144,14 @@ def split_finite(x: np.ndarray, min_len: int = 3) -> list[np.ndarray]:
     return [x[a:b] for a, b in zip(edges[::2], edges[1::2]) if b - a >= min_len]
 
 
-def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
-                    taus: Sequence[float] | np.ndarray | None = None, *, ci: float = ONE_SIGMA,
-                    overlapping: bool = True) -> AllanResult:
+def allan_deviation(
+    segments: Sequence[np.ndarray] | np.ndarray,
+    rate_hz: float,
+    taus: Sequence[float] | np.ndarray | None = None,
+    *,
+    ci: float = ONE_SIGMA,
+    overlapping: bool = True,
+) -> AllanResult:
     """Overlapping Allan deviation (``allantools.oadev`` on rate ("freq") data) of one
     gap-free array or of several segments pooled, with confidence intervals;
     ``overlapping=False`` gives the classic non-overlapping one (``allantools.adev``).
@@ -144,7 +165,9 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
     if not segs:
         raise ValueError("no segment of at least 3 samples")
     if any(not np.all(np.isfinite(s)) for s in segs):
-        raise ValueError("a segment holds NaN or inf: split the record at its gaps first (split_finite)")
+        raise ValueError(
+            "a segment holds NaN or inf: split the record at its gaps first (split_finite)"
+        )
     longest = max(segs, key=len)
     if taus is None:
         taus = octave_taus(len(longest), rate_hz)
@@ -153,7 +176,7 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
     sumsq = np.zeros(len(m_all))
     count = np.zeros(len(m_all), dtype=np.int64)
     for s in segs:
-        fit = m_all[2 * m_all < len(s)]   # oadev needs N_phase = len + 1 > 2 m
+        fit = m_all[2 * m_all < len(s)]  # oadev needs N_phase = len + 1 > 2 m
         if len(fit) == 0:
             continue
         t, dev, _err, ns = dev_fn(s, rate=rate_hz, data_type="freq", taus=fit / rate_hz)
@@ -172,8 +195,10 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
     last = 0  # white rate noise until something is identified
     for i, m in enumerate(m_all):
         if len(longest) // m >= NOISE_ID_MIN_POINTS:
-            last = int(allantools.autocorr_noise_id(longest, int(m), data_type="freq", dmin=0, dmax=2)[0])
-            last = min(2, max(-2, last))   # the Allan variance converges for alpha > -3
+            last = int(
+                allantools.autocorr_noise_id(longest, int(m), data_type="freq", dmin=0, dmax=2)[0]
+            )
+            last = min(2, max(-2, last))  # the Allan variance converges for alpha > -3
             identified[i] = True
         alpha[i] = last
     lengths = tuple(len(s) for s in segs)
@@ -182,8 +207,21 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
     hi = np.full(len(m_all), np.nan)
     for k in np.flatnonzero(edf > 0):
         lo[k], hi[k] = allantools.confidence_interval(dev[k], edf[k], ci)
-    return AllanResult(m_all / rate_hz, dev, lo, hi, edf, count, alpha, identified, rate_hz,
-                       sum(lengths), ci, overlapping, lengths)
+    return AllanResult(
+        m_all / rate_hz,
+        dev,
+        lo,
+        hi,
+        edf,
+        count,
+        alpha,
+        identified,
+        rate_hz,
+        sum(lengths),
+        ci,
+        overlapping,
+        lengths,
+    )
 
 
 # ---------------------------------------------------------------------------- read-offs
@@ -191,28 +229,35 @@ def allan_deviation(segments: Sequence[np.ndarray] | np.ndarray, rate_hz: float,
 class ArwReadoff:
     """White-rate (angle random walk) coefficient from the tau^-1/2 line."""
 
-    N: float                       # units / sqrt(s): sigma(1 s) of the -1/2 line
-    lo: float                      # confidence limits (from the best-determined point in range)
+    N: float  # units / sqrt(s): sigma(1 s) of the -1/2 line
+    lo: float  # confidence limits (from the best-determined point in range)
     hi: float
     tau_range_s: tuple[float, float]  # averaging times actually used
     n_points: int
-    slope: float                   # log-log slope fitted freely over the same points
-    white_region: bool             # |slope + 1/2| <= slope_tol: a tau^-1/2 region
+    slope: float  # log-log slope fitted freely over the same points
+    white_region: bool  # |slope + 1/2| <= slope_tol: a tau^-1/2 region
 
     @property
     def stderr(self) -> float:
         return (self.hi - self.lo) / 2
 
 
-def read_arw(res: AllanResult, tau_range_s: tuple[float, float], *, min_edf: float = 10.0,
-             slope_tol: float = 0.15) -> ArwReadoff:
+def read_arw(
+    res: AllanResult,
+    tau_range_s: tuple[float, float],
+    *,
+    min_edf: float = 10.0,
+    slope_tol: float = 0.15,
+) -> ArwReadoff:
     """N from the line sigma = N tau^-1/2 through the deviations with tau in ``tau_range_s``
     (IEEE 952 Annex C), fitted in log space with each point weighted by its EDF."""
     lo_t, hi_t = tau_range_s
     sel = (res.tau_s >= lo_t * (1 - 1e-9)) & (res.tau_s <= hi_t * (1 + 1e-9)) & res.usable(min_edf)
     if sel.sum() < 2:
-        raise ValueError(f"fewer than two usable Allan points in tau {lo_t:g}..{hi_t:g} s "
-                         f"(record too short, or the range misses the sample interval)")
+        raise ValueError(
+            f"fewer than two usable Allan points in tau {lo_t:g}..{hi_t:g} s "
+            f"(record too short, or the range misses the sample interval)"
+        )
     t, d, w = res.tau_s[sel], res.dev[sel], res.edf[sel]
     logn = np.log(d) + 0.5 * np.log(t)
     N = float(np.exp(np.average(logn, weights=w)))
@@ -221,29 +266,37 @@ def read_arw(res: AllanResult, tau_range_s: tuple[float, float], *, min_edf: flo
     # than its best point, whose relative interval is carried over
     best = int(np.argmax(w))
     rel_lo, rel_hi = res.lo[sel][best] / d[best], res.hi[sel][best] / d[best]
-    return ArwReadoff(N, N * rel_lo, N * rel_hi, (float(t.min()), float(t.max())), int(sel.sum()), slope,
-                      abs(slope + 0.5) <= slope_tol)
+    return ArwReadoff(
+        N,
+        N * rel_lo,
+        N * rel_hi,
+        (float(t.min()), float(t.max())),
+        int(sel.sum()),
+        slope,
+        abs(slope + 0.5) <= slope_tol,
+    )
 
 
 @dataclass
 class BiasInstabilityReadoff:
     """Bias instability from the flat minimum of the Allan deviation."""
 
-    B: float                       # units (of the rate): sigma_min / 0.664
+    B: float  # units (of the rate): sigma_min / 0.664
     lo: float
     hi: float
-    tau_min_s: float               # where the minimum is
+    tau_min_s: float  # where the minimum is
     sigma_min: float
-    floor_reached: bool            # False: the minimum is at the longest usable tau, still falling
-    tau_max_s: float               # longest usable tau
+    floor_reached: bool  # False: the minimum is at the longest usable tau, still falling
+    tau_max_s: float  # longest usable tau
 
     @property
     def stderr(self) -> float:
         return (self.hi - self.lo) / 2
 
 
-def read_bias_instability(res: AllanResult, *, min_edf: float = 10.0, min_tau_s: float = 0.0,
-                          back_octaves: int = 3) -> BiasInstabilityReadoff:
+def read_bias_instability(
+    res: AllanResult, *, min_edf: float = 10.0, min_tau_s: float = 0.0, back_octaves: int = 3
+) -> BiasInstabilityReadoff:
     """B = min sigma / 0.664 over the averaging times >= ``min_tau_s`` where the estimate
     has at least ``min_edf`` degrees of freedom (IEEE 952 Annex C). ``min_tau_s`` keeps the
     read-off beyond where the floor can be the quantity's own (e.g. a loop's time constants).
@@ -265,21 +318,30 @@ def read_bias_instability(res: AllanResult, *, min_edf: float = 10.0, min_tau_s:
     usable = np.isfinite(res.dev) & (edf >= min_edf)
     ok = usable & (res.tau_s >= min_tau_s)
     if not ok.any():
-        raise ValueError(f"no Allan point with EDF >= {min_edf:g} (flicker) at tau >= {min_tau_s:g} s "
-                         f"(record too short: the longest such tau is "
-                         f"{res.tau_s[usable].max() if usable.any() else 0:g} s)")
+        raise ValueError(
+            f"no Allan point with EDF >= {min_edf:g} (flicker) at tau >= {min_tau_s:g} s "
+            f"(record too short: the longest such tau is "
+            f"{res.tau_s[usable].max() if usable.any() else 0:g} s)"
+        )
     idx = np.flatnonzero(ok)
     i = idx[int(np.argmin(res.dev[idx]))]
     lo, hi = res.interval(i, edf[i])
     reached = True
     earlier = np.flatnonzero(usable & (res.tau_s < res.tau_s[i]))
     if i == idx[-1] and len(earlier):
-        target = res.tau_s[i] / 2 ** back_octaves
+        target = res.tau_s[i] / 2**back_octaves
         j = earlier[int(np.argmin(np.abs(np.log(res.tau_s[earlier] / target))))]
         reached = not res.interval(i, edf[i], 0.95)[1] < res.interval(j, edf[j], 0.95)[0]
     s = float(res.dev[i])
-    return BiasInstabilityReadoff(s / FLICKER_FLOOR, lo / FLICKER_FLOOR, hi / FLICKER_FLOOR, float(res.tau_s[i]), s,
-                                  reached, float(res.tau_s[idx[-1]]))
+    return BiasInstabilityReadoff(
+        s / FLICKER_FLOOR,
+        lo / FLICKER_FLOOR,
+        hi / FLICKER_FLOOR,
+        float(res.tau_s[i]),
+        s,
+        reached,
+        float(res.tau_s[idx[-1]]),
+    )
 
 
 # ---------------------------------------------------------------------------- null stability
@@ -303,9 +365,9 @@ def wander_variance(span_s: float, avg_s: float, sigma_at) -> float:
     if n < 2:
         return 0.0
     levels = int(math.floor(math.log2(n)))
-    var = sum(sigma_at(avg_s * 2 ** j) ** 2 for j in range(levels))
-    frac = math.log2(n) - levels   # a partial octave counts in proportion
-    var += frac * sigma_at(avg_s * 2 ** levels) ** 2
+    var = sum(sigma_at(avg_s * 2**j) ** 2 for j in range(levels))
+    frac = math.log2(n) - levels  # a partial octave counts in proportion
+    var += frac * sigma_at(avg_s * 2**levels) ** 2
     return 0.5 * var
 
 
@@ -314,20 +376,27 @@ class NullStability:
     """Peak-to-peak wander of ``avg_s`` averages (the thesis' strip-chart null stability)."""
 
     avg_s: float
-    record_s: float                  # span covered by the averages
+    record_s: float  # span covered by the averages
     n_averages: int
-    peak_to_peak: float              # over the record
-    span_s: float                    # the span the estimate is for (e.g. 24 h)
-    estimate: float                  # peak-to-peak expected over span_s
-    measured_over_span: bool         # the record covers span_s: the estimate is a measurement
-    ratio: float                     # sqrt(wander variance over span / over the record)
-    extrapolated_from_tau_s: float   # taus beyond this used the extrapolated Allan deviation
-    extrapolation_slope: float       # log-log slope used beyond it
+    peak_to_peak: float  # over the record
+    span_s: float  # the span the estimate is for (e.g. 24 h)
+    estimate: float  # peak-to-peak expected over span_s
+    measured_over_span: bool  # the record covers span_s: the estimate is a measurement
+    ratio: float  # sqrt(wander variance over span / over the record)
+    extrapolated_from_tau_s: float  # taus beyond this used the extrapolated Allan deviation
+    extrapolation_slope: float  # log-log slope used beyond it
     means: np.ndarray = field(repr=False, default_factory=lambda: np.zeros(0))
 
 
-def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanResult, *, avg_s: float = 100.0,
-                   span_s: float = 86400.0, min_edf: float = 10.0) -> NullStability:
+def null_stability(
+    segments: Sequence[np.ndarray],
+    rate_hz: float,
+    res: AllanResult,
+    *,
+    avg_s: float = 100.0,
+    span_s: float = 86400.0,
+    min_edf: float = 10.0,
+) -> NullStability:
     """Peak-to-peak of the ``avg_s`` means over the record, and an estimate for ``span_s``.
 
     If the record is shorter than ``span_s`` the peak-to-peak is scaled by the ratio of the
@@ -345,7 +414,7 @@ def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanRes
         raise ValueError(f"fewer than two {avg_s:g}-s averages in the record")
     p2p = float(means.max() - means.min())
     record_s = len(means) * avg_s
-    ok = np.isfinite(res.dev) & (res.edf_for(-1) >= min_edf)   # as read_bias_instability
+    ok = np.isfinite(res.dev) & (res.edf_for(-1) >= min_edf)  # as read_bias_instability
     t, d = res.tau_s[ok], res.dev[ok]
     if len(t) < 2:
         raise ValueError("too few usable Allan points for the null-stability estimate")
@@ -363,11 +432,15 @@ def null_stability(segments: Sequence[np.ndarray], rate_hz: float, res: AllanRes
         k = int(round(span_s / avg_s))
         win = np.lib.stride_tricks.sliding_window_view(means, k)
         est = float((win.max(axis=1) - win.min(axis=1)).max())
-        return NullStability(avg_s, record_s, len(means), p2p, span_s, est, True, 1.0, t_last, slope, means)
+        return NullStability(
+            avg_s, record_s, len(means), p2p, span_s, est, True, 1.0, t_last, slope, means
+        )
     v_rec = wander_variance(record_s, avg_s, sigma_at)
     v_span = wander_variance(span_s, avg_s, sigma_at)
     ratio = math.sqrt(v_span / v_rec) if v_rec > 0 else math.nan
-    return NullStability(avg_s, record_s, len(means), p2p, span_s, p2p * ratio, False, ratio, t_last, slope, means)
+    return NullStability(
+        avg_s, record_s, len(means), p2p, span_s, p2p * ratio, False, ratio, t_last, slope, means
+    )
 
 
 # ---------------------------------------------------------------------------- noise model
@@ -384,7 +457,7 @@ TERM_ALPHA = {"angle": 2, "flicker_angle": 1, "arw": 0, "bias": -1, "rrw": -2}
 #: points of one overlapping estimate are not, and on 30 synthetic 2-h records (white angle,
 #: white rate and flicker rate noise) the coefficients scattered 1.0..1.6 times the standard
 #: deviations it gives: the covariance is scaled by the square of the larger
-COV_INFLATION = 1.6 ** 2
+COV_INFLATION = 1.6**2
 #: a term is read where its share of the modelled variance is at least this fraction of its
 #: largest share (and, among those taus, where it is best determined: ``term_estimate``)
 SHARE_NEAR_MAX = 0.95
@@ -396,8 +469,15 @@ DROPPABLE = ("flicker_angle", "rrw")
 
 def _basis(tau: np.ndarray, tau0: float) -> np.ndarray:
     tau = np.asarray(tau, float)
-    return np.column_stack([3.0 / tau ** 2, np.log(tau / tau0) / tau ** 2, 1.0 / tau,
-                            np.full(len(tau), FLICKER_FLOOR ** 2), tau / 3.0])
+    return np.column_stack(
+        [
+            3.0 / tau**2,
+            np.log(tau / tau0) / tau**2,
+            1.0 / tau,
+            np.full(len(tau), FLICKER_FLOOR**2),
+            tau / 3.0,
+        ]
+    )
 
 
 @dataclass
@@ -408,7 +488,7 @@ class NoiseModel:
 
     coef: np.ndarray
     tau0_s: float
-    tau_fit_s: np.ndarray        # the averaging times fitted
+    tau_fit_s: np.ndarray  # the averaging times fitted
     #: covariance of ``coef`` (the weighted least squares' (A^T W A)^-1 over the terms fitted
     #: above zero and the non-droppable ones, times ``COV_INFLATION``; zero rows and columns
     #: for the dropped)
@@ -436,8 +516,9 @@ class NoiseModel:
         return np.where(total > 0, self.variance(tau, term) / np.where(total > 0, total, 1.0), 0.0)
 
 
-def _wnnls(a: np.ndarray, v: np.ndarray, nu: np.ndarray, use: np.ndarray, iterations: int
-           ) -> tuple[np.ndarray, np.ndarray, float]:
+def _wnnls(
+    a: np.ndarray, v: np.ndarray, nu: np.ndarray, use: np.ndarray, iterations: int
+) -> tuple[np.ndarray, np.ndarray, float]:
     """Iteratively reweighted non-negative least squares on the columns ``use``: the
     coefficients, the model values and the weighted sum of squares (chi-square units)."""
     from scipy.optimize import nnls
@@ -454,8 +535,14 @@ def _wnnls(a: np.ndarray, v: np.ndarray, nu: np.ndarray, use: np.ndarray, iterat
     return coef, m, float(np.sum(nu / 2.0 * ((v - m) / m) ** 2))
 
 
-def fit_noise_model(res: AllanResult, *, min_tau_s: float = 0.0, min_edf: float = 2.0,
-                    iterations: int = 4, keep_chi2: float = 3.84) -> NoiseModel:
+def fit_noise_model(
+    res: AllanResult,
+    *,
+    min_tau_s: float = 0.0,
+    min_edf: float = 2.0,
+    iterations: int = 4,
+    keep_chi2: float = 3.84,
+) -> NoiseModel:
     """Non-negative weighted least squares of the Allan variances at tau >= ``min_tau_s`` on the
     terms ``TERMS``. An Allan variance estimate with nu degrees of freedom has variance
     2 sigma^4 / nu (chi-square), so each point is weighted nu / (2 m^2), m the model's value
@@ -470,7 +557,9 @@ def fit_noise_model(res: AllanResult, *, min_tau_s: float = 0.0, min_edf: float 
     the variance and widen every other term's interval."""
     sel = np.isfinite(res.dev) & (res.edf >= min_edf) & (res.tau_s >= min_tau_s * (1 - 1e-9))
     if sel.sum() < len(TERMS):
-        raise ValueError(f"fewer than {len(TERMS)} usable Allan points at tau >= {min_tau_s:g} s for the noise model")
+        raise ValueError(
+            f"fewer than {len(TERMS)} usable Allan points at tau >= {min_tau_s:g} s for the noise model"
+        )
     tau, v, nu = res.tau_s[sel], res.dev[sel] ** 2, res.edf[sel]
     tau0 = 0.5 * float(tau.min())
     a = _basis(tau, tau0)
@@ -490,7 +579,7 @@ def fit_noise_model(res: AllanResult, *, min_tau_s: float = 0.0, min_edf: float 
         if (ssr2 - ssr) / COV_INFLATION >= keep_chi2:
             break
         coef, m, ssr, use = c2, m2, ssr2, u2 & (c2 > 0)
-    w = nu / (2.0 * m ** 2)
+    w = nu / (2.0 * m**2)
     # the covariance over the terms fitted above zero and the gyro's own terms even where they
     # sit at zero: a term the fit put at zero may still hold variance the others would then lose
     active = (coef > 0) | ~droppable
@@ -515,9 +604,9 @@ class TermEstimate:
     value: float
     lo: float
     hi: float
-    tau_s: float                 # the averaging time read (NaN: none)
-    share: float                 # the term's share of the modelled variance there
-    bound: float                 # the model-free upper bound (every other term adds variance)
+    tau_s: float  # the averaging time read (NaN: none)
+    share: float  # the term's share of the modelled variance there
+    bound: float  # the model-free upper bound (every other term adds variance)
     why: str = ""
 
 
@@ -528,14 +617,23 @@ def mixed_edf(res: AllanResult, model: NoiseModel) -> np.ndarray:
     the white-angle term's EDF stands for the flicker-angle term's too, which Greenhall's
     computation does not cover for d = 2 beyond alpha = 2)."""
     v = np.column_stack([model.variance(res.tau_s, t) for t in TERMS])
-    nus = np.column_stack([res.edf_for(min(TERM_ALPHA[t], 2) if t != "flicker_angle" else 2) for t in TERMS])
+    nus = np.column_stack(
+        [res.edf_for(min(TERM_ALPHA[t], 2) if t != "flicker_angle" else 2) for t in TERMS]
+    )
     num = v.sum(axis=1) ** 2
-    den = np.sum(np.where(v > 0, v ** 2 / np.where(nus > 0, nus, np.inf), 0.0), axis=1)
+    den = np.sum(np.where(v > 0, v**2 / np.where(nus > 0, nus, np.inf), 0.0), axis=1)
     return np.where(den > 0, num / np.where(den > 0, den, 1.0), res.edf)
 
 
-def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: float = 10.0,
-                  min_tau_s: float = 0.0, level: float = 0.95) -> TermEstimate:
+def term_estimate(
+    res: AllanResult,
+    model: NoiseModel,
+    term: str,
+    *,
+    min_edf: float = 10.0,
+    min_tau_s: float = 0.0,
+    level: float = 0.95,
+) -> TermEstimate:
     """The coefficient of ``term`` (``arw``: N, ``bias``: B) with a ``level`` interval for the
     gyro's parameter, not for the sample.
 
@@ -573,20 +671,31 @@ def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: fl
     upper = np.array([res.interval(i, edf_b[i], level_each)[1] ** 2 for i in idx.tolist()]) / basis
     bound_c = float(upper.min())
 
-    def coefficient(c: float) -> float:   # the figure from the model coefficient
+    def coefficient(c: float) -> float:  # the figure from the model coefficient
         return math.sqrt(max(c, 0.0))
 
     bound = coefficient(bound_c)
     shares = model.share(term, res.tau_s[idx])
     if model.coef[j] <= 0 or shares.max() <= 0:
-        return TermEstimate(term, math.nan, 0.0, bound, math.nan, 0.0, bound,
-                            "the fitted noise model has none of it: an upper bound only")
+        return TermEstimate(
+            term,
+            math.nan,
+            0.0,
+            bound,
+            math.nan,
+            0.0,
+            bound,
+            "the fitted noise model has none of it: an upper bound only",
+        )
     # the tau where the term's variance is best determined: the standard deviation of the
     # measured variance (sqrt(2 / nu) m, m the model's variance) and of the other terms' modelled
     # variance, in quadrature, relative to the term's variance
     m_all = model.variance(res.tau_s[idx])
     own = model.variance(res.tau_s[idx], term)
-    sd = np.sqrt(2.0 / edf[idx] * m_all ** 2 + np.array([model.others_sd(term, t) ** 2 for t in res.tau_s[idx]]))
+    sd = np.sqrt(
+        2.0 / edf[idx] * m_all**2
+        + np.array([model.others_sd(term, t) ** 2 for t in res.tau_s[idx]])
+    )
     # among the taus where the term has near its largest share (the model's shape is least
     # relied on there)
     near = shares >= SHARE_NEAR_MAX * shares.max()
@@ -600,14 +709,24 @@ def term_estimate(res: AllanResult, model: NoiseModel, term: str, *, min_edf: fl
     z = float(scipy.stats.norm.ppf(0.5 + level / 2))
     d_oth = z * model.others_sd(term, res.tau_s[i])
     c_val = (s2 - others) / basis[k]
-    c_lo = c_val - math.hypot(s2 - lo ** 2, d_oth) / basis[k]
-    c_hi = c_val + math.hypot(hi ** 2 - s2, d_oth) / basis[k]
-    if bound_c > c_val:   # the bound caps the interval, unless this point lies above it
+    c_lo = c_val - math.hypot(s2 - lo**2, d_oth) / basis[k]
+    c_hi = c_val + math.hypot(hi**2 - s2, d_oth) / basis[k]
+    if bound_c > c_val:  # the bound caps the interval, unless this point lies above it
         c_hi = min(c_hi, bound_c)
     tau = float(res.tau_s[i])
     if c_val <= 0:
         # nothing left once the others' modelled variance is off: only the model-free bound holds
         # (the others may be over-estimated there)
-        return TermEstimate(term, math.nan, 0.0, bound, tau, float(shares[k]), bound,
-                            f"at tau {tau:g} s the measured variance is all the other terms': an upper bound only")
-    return TermEstimate(term, coefficient(c_val), coefficient(c_lo), coefficient(c_hi), tau, float(shares[k]), bound)
+        return TermEstimate(
+            term,
+            math.nan,
+            0.0,
+            bound,
+            tau,
+            float(shares[k]),
+            bound,
+            f"at tau {tau:g} s the measured variance is all the other terms': an upper bound only",
+        )
+    return TermEstimate(
+        term, coefficient(c_val), coefficient(c_lo), coefficient(c_hi), tau, float(shares[k]), bound
+    )

@@ -42,7 +42,10 @@ from procedures.analysis.transfer import BlockCsd, jackknife_se, sensor_filter
 NEA_BAND_HZ = (0.1, 100.0)
 #: the pickoff's bands: 1-50 Hz beside the excitation's incoherent pickoff noise (no lines
 #: there), 0.1-200 Hz as Ch. V B quotes the pickoff noise (lines included)
-PICKOFF_BANDS_HZ: dict[str, tuple[float, float]] = {"1-50 Hz": (1.0, 50.0), "0.1-200 Hz": (0.1, 200.0)}
+PICKOFF_BANDS_HZ: dict[str, tuple[float, float]] = {
+    "1-50 Hz": (1.0, 50.0),
+    "0.1-200 Hz": (0.1, 200.0),
+}
 #: a pickoff line stands this far above the running median of the averaged PSD; an average of
 #: K Welch segments exceeds m times its mean with probability ~ exp(-K m): never at 20
 LINE_MIN_RATIO = 20.0
@@ -79,13 +82,26 @@ def _unreachable(blocks: BlockCsd, lo: float) -> Estimate | None:
     """An unresolved figure when the band starts below what the segments resolve."""
     if lo < blocks.lowest_fit_hz - 1e-9:
         nan = float("nan")
-        return Estimate(nan, nan, nan, False, f"the band starts at {lo:g} Hz, below the {blocks.lowest_fit_hz:.3g} Hz "
-                                              f"{blocks.seg_s:g} s Welch segments resolve (use segments >= {4 / lo:g} s)")
+        return Estimate(
+            nan,
+            nan,
+            nan,
+            False,
+            f"the band starts at {lo:g} Hz, below the {blocks.lowest_fit_hz:.3g} Hz "
+            f"{blocks.seg_s:g} s Welch segments resolve (use segments >= {4 / lo:g} s)",
+        )
     return None
 
 
-def band_rms(blocks: BlockCsd, channel: str, scale_V_per_urad: float, lo_hz: float, hi_hz: float, *,
-             anti_alias: bool = True) -> Estimate:
+def band_rms(
+    blocks: BlockCsd,
+    channel: str,
+    scale_V_per_urad: float,
+    lo_hz: float,
+    hi_hz: float,
+    *,
+    anti_alias: bool = True,
+) -> Estimate:
     """rms (urad) of ``channel`` in ``lo..hi`` Hz: sqrt of the PSD's sum over the band's bins
     times the bin width, over the channel's scale; with ``anti_alias`` the recorder's filter
     (``anti_alias_gain2``) divided out of each bin first, so the figure is the sensor's rms.
@@ -95,8 +111,13 @@ def band_rms(blocks: BlockCsd, channel: str, scale_V_per_urad: float, lo_hz: flo
         return bad
     if hi_hz > blocks.fs / 2:
         nan = float("nan")
-        return Estimate(nan, nan, nan, False, f"the band reaches {hi_hz:g} Hz, above the Nyquist frequency "
-                                              f"{blocks.fs / 2:g} Hz")
+        return Estimate(
+            nan,
+            nan,
+            nan,
+            False,
+            f"the band reaches {hi_hz:g} Hz, above the Nyquist frequency {blocks.fs / 2:g} Hz",
+        )
     i = blocks.index(channel)
     band = _band(blocks.f, lo_hz, hi_hz)
     df = float(blocks.f[1] - blocks.f[0])
@@ -107,7 +128,9 @@ def band_rms(blocks: BlockCsd, channel: str, scale_V_per_urad: float, lo_hz: flo
 
     def rms(leave_out: int | None, g2: np.ndarray | None = None) -> float:
         p = blocks.mean(leave_out)[band, i, i].real
-        return math.sqrt(float(np.sum(p / (gain(1.0) if g2 is None else g2))) * df) / scale_V_per_urad
+        return (
+            math.sqrt(float(np.sum(p / (gain(1.0) if g2 is None else g2))) * df) / scale_V_per_urad
+        )
 
     stat = _jackknifed(blocks, rms)
     if not anti_alias or not math.isfinite(stat.value):
@@ -158,7 +181,9 @@ HANN_BIN_FACTOR = 1.0 + 2.0 * ((2.0 / 3.0) ** 2 + (1.0 / 6.0) ** 2)
 _CORNER_GRID_POINTS = 64
 
 
-def knee_shape(f: np.ndarray, corner_hz: float | np.ndarray, knee: float, slope: float) -> np.ndarray:
+def knee_shape(
+    f: np.ndarray, corner_hz: float | np.ndarray, knee: float, slope: float
+) -> np.ndarray:
     """K(f) of the angle noise W K(f): r = (f_c / f)^slope, K = knee (1 + r) + (1 - knee) max(1, r)
     (DESIGN.md section 8: knee 1 is the thesis's 1 + f_c/f at slope 1, knee 0 the sharp corner).
     ``corner_hz`` may be a column of corners (one row of K each)."""
@@ -178,8 +203,13 @@ class FormFit:
     misfit: float
 
 
-def fit_form(f: np.ndarray, p: np.ndarray, knee: float, slope: float,
-             corner_range: tuple[float, float] | None = None) -> FormFit:
+def fit_form(
+    f: np.ndarray,
+    p: np.ndarray,
+    knee: float,
+    slope: float,
+    corner_range: tuple[float, float] | None = None,
+) -> FormFit:
     """W and f_c of p(f) = W K(f) (``knee_shape`` at ``knee``, ``slope``) by the Whittle
     likelihood (a Welch PSD bin is its mean times chi^2_nu / nu): for each f_c, W = mean(p / K)
     and L = n + n ln W + sum ln K; f_c on a grid in ln f_c (``corner_range``, default a fifth of
@@ -197,9 +227,13 @@ def fit_form(f: np.ndarray, p: np.ndarray, knee: float, slope: float,
     grid = np.linspace(math.log(lo), math.log(hi), _CORNER_GRID_POINTS)
     j = int(np.argmin(objective(grid)))
     a, b = grid[max(j - 1, 0)], grid[min(j + 1, len(grid) - 1)]
-    res = scipy.optimize.minimize_scalar(lambda x: float(objective(np.array([x]))[0]), bounds=(a, b),
-                                         method="bounded", options={"xatol": 1e-5})
-    ln_fc = float(res.x) if res.fun <= objective(grid[j:j + 1])[0] else float(grid[j])
+    res = scipy.optimize.minimize_scalar(
+        lambda x: float(objective(np.array([x]))[0]),
+        bounds=(a, b),
+        method="bounded",
+        options={"xatol": 1e-5},
+    )
+    ln_fc = float(res.x) if res.fun <= objective(grid[j : j + 1])[0] else float(grid[j])
     fc = math.exp(ln_fc)
     K = knee_shape(f, fc, knee, slope)
     W = float(np.mean(p / K))
@@ -224,8 +258,14 @@ def misfit_ratio(f: np.ndarray, rho: np.ndarray, bin_var: float, n_params: int) 
     return max(1.0, chi2 / max(used - n_params, 1))
 
 
-def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filter_gain2: np.ndarray,
-                  lo_hz: float, hi_hz: float) -> WhiteFlicker:
+def white_flicker(
+    blocks: BlockCsd,
+    channel: str,
+    scale_V_per_urad: float,
+    filter_gain2: np.ndarray,
+    lo_hz: float,
+    hi_hz: float,
+) -> WhiteFlicker:
     """Fit the angle noise of an autocollimator channel (``filter_gain2`` its filter's |H|^2 at
     ``blocks.f``; the recorder's anti-alias filter, ``anti_alias_gain2``, is divided out here
     too) over ``lo..hi`` Hz (the band where the filter passes, above the quantization floor:
@@ -257,7 +297,7 @@ def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filte
     gain2 = filter_gain2[band] * anti_alias_gain2(f, blocks.fs)
 
     def spectrum(leave_out: int | None) -> np.ndarray:
-        return blocks.mean(leave_out)[band, i, i].real / (scale_V_per_urad ** 2 * gain2)
+        return blocks.mean(leave_out)[band, i, i].real / (scale_V_per_urad**2 * gain2)
 
     p = spectrum(None)
     dof = blocks.n_blocks - 1
@@ -290,7 +330,10 @@ def white_flicker(blocks: BlockCsd, channel: str, scale_V_per_urad: float, filte
         hc = q * shrink * float(jackknife_se(np.log([x.corner_hz for x in loo])))
         w = math.sqrt(g.white)
         w_lo, w_hi = min(w_lo, w - hw), max(w_hi, w + hw)
-        fc_lo, fc_hi = min(fc_lo, g.corner_hz * math.exp(-hc)), max(fc_hi, g.corner_hz * math.exp(hc))
+        fc_lo, fc_hi = (
+            min(fc_lo, g.corner_hz * math.exp(-hc)),
+            max(fc_hi, g.corner_hz * math.exp(hc)),
+        )
     # the thesis form's own corner and jackknife interval, kept as a diagnostic
     loo_thesis = np.array([fit_white_flicker(f, s) for s in spectra])
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -307,17 +350,24 @@ class Line:
 
     freq_hz: float
     freq_sigma_hz: float
-    amplitude_urad: float       # peak amplitude (biased up by the noise in its bin)
-    ratio: float                # its averaged-PSD peak over the running median around it
+    amplitude_urad: float  # peak amplitude (biased up by the noise in its bin)
+    ratio: float  # its averaged-PSD peak over the running median around it
 
     @property
     def ci95_hz(self) -> tuple[float, float]:
         return self.freq_hz - 1.96 * self.freq_sigma_hz, self.freq_hz + 1.96 * self.freq_sigma_hz
 
 
-def line_peaks(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, *, min_ratio: float = LINE_MIN_RATIO,
-               median_hz: float = LINE_MEDIAN_HZ, min_separation_hz: float = LINE_MIN_SEPARATION_HZ
-               ) -> list[tuple[float, float, float]]:
+def line_peaks(
+    f: np.ndarray,
+    p: np.ndarray,
+    lo_hz: float,
+    hi_hz: float,
+    *,
+    min_ratio: float = LINE_MIN_RATIO,
+    median_hz: float = LINE_MEDIAN_HZ,
+    min_separation_hz: float = LINE_MIN_SEPARATION_HZ,
+) -> list[tuple[float, float, float]]:
     """(frequency, peak over running median, the median) of the peaks of an averaged PSD that
     stand at least ``min_ratio`` above the running median of ``median_hz`` around them, the
     strongest first, none closer than ``min_separation_hz`` to a stronger one (a Hann window's
@@ -337,14 +387,22 @@ def line_peaks(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, *, min_
     return out
 
 
-def pickoff_lines(x: np.ndarray, rate_hz: float, f: np.ndarray, p: np.ndarray, kg_V_per_urad: float,
-                  lo_hz: float, hi_hz: float, **kw) -> list[Line]:
+def pickoff_lines(
+    x: np.ndarray,
+    rate_hz: float,
+    f: np.ndarray,
+    p: np.ndarray,
+    kg_V_per_urad: float,
+    lo_hz: float,
+    hi_hz: float,
+    **kw,
+) -> list[Line]:
     """The lines of the pickoff record ``x`` (V) whose averaged PSD is ``p`` (V^2/Hz at ``f``):
     found by ``line_peaks``, each measured on the whole record within two Welch bins of its peak;
     in frequency order."""
     df = float(f[1] - f[0])
     x = np.asarray(x, float)
-    if not np.all(np.isfinite(x)):   # lost samples: the record's mean, so the time base holds
+    if not np.all(np.isfinite(x)):  # lost samples: the record's mean, so the time base holds
         x = np.where(np.isfinite(x), x, np.nanmean(x))
     out = []
     for f0, ratio, noise in line_peaks(f, p, lo_hz, hi_hz, **kw):
@@ -355,24 +413,35 @@ def pickoff_lines(x: np.ndarray, rate_hz: float, f: np.ndarray, p: np.ndarray, k
     return sorted(out, key=lambda ln: ln.freq_hz)
 
 
-def array_blocks(x: np.ndarray, rate_hz: float, channels: Sequence[str], seg_s: float, n_blocks: int) -> BlockCsd:
+def array_blocks(
+    x: np.ndarray, rate_hz: float, channels: Sequence[str], seg_s: float, n_blocks: int
+) -> BlockCsd:
     """``BlockCsd`` of an in-memory record ``x`` (samples x channels) as ``block_csd`` makes it
     of a file: ``n_blocks`` consecutive blocks, Welch (Hann, 50 % overlap, a line removed per
     segment) in each."""
     nperseg = int(round(seg_s * rate_hz))
     n = len(x)
     if n < nperseg * n_blocks or n_blocks < 3:
-        raise ValueError(f"{n / rate_hz:g} s of record holds fewer than {n_blocks} (>= 3) blocks of one {seg_s:g} s "
-                         f"segment")
+        raise ValueError(
+            f"{n / rate_hz:g} s of record holds fewer than {n_blocks} (>= 3) blocks of one {seg_s:g} s "
+            f"segment"
+        )
     edges = [(n * k) // n_blocks for k in range(n_blocks + 1)]
     S, w = [], []
     f = np.empty(0)
     for a, b in zip(edges[:-1], edges[1:]):
-        f, s = welch_csd_matrix(np.asarray(x[a:b], float).T, rate_hz, nperseg=nperseg, noverlap=nperseg // 2,
-                                detrend="linear")
+        f, s = welch_csd_matrix(
+            np.asarray(x[a:b], float).T,
+            rate_hz,
+            nperseg=nperseg,
+            noverlap=nperseg // 2,
+            detrend="linear",
+        )
         S.append(s)
         w.append(float(n_segments(b - a, nperseg, nperseg // 2)))
-    return BlockCsd(f, np.array(S), np.array(w), tuple(channels), float(rate_hz), seg_s, n / rate_hz)
+    return BlockCsd(
+        f, np.array(S), np.array(w), tuple(channels), float(rate_hz), seg_s, n / rate_hz
+    )
 
 
 def psd_of(blocks: BlockCsd, channel: str) -> np.ndarray:
@@ -381,8 +450,12 @@ def psd_of(blocks: BlockCsd, channel: str) -> np.ndarray:
     return blocks.mean()[:, i, i].real
 
 
-def nea_truth(f: np.ndarray, angle_psd: np.ndarray, filter_gain2: np.ndarray,
-              band: Sequence[float] = NEA_BAND_HZ) -> float:
+def nea_truth(
+    f: np.ndarray,
+    angle_psd: np.ndarray,
+    filter_gain2: np.ndarray,
+    band: Sequence[float] = NEA_BAND_HZ,
+) -> float:
     """rms (same units as sqrt(angle_psd x Hz)) of an angle noise of one-sided PSD
     ``angle_psd`` seen through a filter |H|^2 over ``band``: the NEA a model predicts."""
     sel = _band(f, band[0], band[1])
@@ -394,8 +467,12 @@ def nea_truth(f: np.ndarray, angle_psd: np.ndarray, filter_gain2: np.ndarray,
 WHITE_HI_HZ = {"ctl": 35.0, "inst": 80.0}
 
 
-def baseline_figures(blocks: BlockCsd, ac: AutocollimatorConstants, names: Mapping[str, str],
-                     scales_V_per_urad: Mapping[str, float]) -> dict[str, Estimate]:
+def baseline_figures(
+    blocks: BlockCsd,
+    ac: AutocollimatorConstants,
+    names: Mapping[str, str],
+    scales_V_per_urad: Mapping[str, float],
+) -> dict[str, Estimate]:
     """The baseline's figures of a clamped record's blocks, keyed ``figure.key``: the NEA of the
     control, instrumentation and azimuth channels (``names`` "ctl", "inst", "z"), the white level
     and 1/f corner of the first two (``ac``'s filters), the pickoff's (``names["gyro"]``) rms in
@@ -405,10 +482,18 @@ def baseline_figures(blocks: BlockCsd, ac: AutocollimatorConstants, names: Mappi
     for k in ("ctl", "inst", "z"):
         out[f"nea_urad.{k}"] = band_rms(blocks, names[k], scales_V_per_urad[k], *NEA_BAND_HZ)
     for k in ("ctl", "inst"):
-        fit = white_flicker(blocks, names[k], scales_V_per_urad[k], np.abs(sensor_filter(f, ac, names[k])) ** 2,
-                            NEA_BAND_HZ[0], WHITE_HI_HZ[k])
+        fit = white_flicker(
+            blocks,
+            names[k],
+            scales_V_per_urad[k],
+            np.abs(sensor_filter(f, ac, names[k])) ** 2,
+            NEA_BAND_HZ[0],
+            WHITE_HI_HZ[k],
+        )
         out[f"white_urad_per_rtHz.{k}"] = fit.white_urad_per_rtHz
         out[f"flicker_corner_hz.{k}"] = fit.corner_hz
     for band, (lo, hi) in PICKOFF_BANDS_HZ.items():
-        out[f"pickoff_rms_urad.{band}"] = band_rms(blocks, names["gyro"], scales_V_per_urad["gyro"], lo, hi)
+        out[f"pickoff_rms_urad.{band}"] = band_rms(
+            blocks, names["gyro"], scales_V_per_urad["gyro"], lo, hi
+        )
     return out

@@ -52,24 +52,30 @@ def _dahl_path(theta: np.ndarray, To: float, eta: float, T0: float) -> np.ndarra
     out[0] = T
     for k in range(1, theta.shape[0]):
         d = theta[k] - theta[k - 1]
-        if d > 0.0:      # eq. 5.3a: 1/(To - T) grows by eta d
+        if d > 0.0:  # eq. 5.3a: 1/(To - T) grows by eta d
             T = To if T >= To else To - 1.0 / (1.0 / (To - T) + eta * d)
-        elif d < 0.0:    # eq. 5.3b: 1/(To + T) grows by eta |d|
+        elif d < 0.0:  # eq. 5.3b: 1/(To + T) grows by eta |d|
             T = -To if T <= -To else 1.0 / (1.0 / (T + To) - eta * d) - To
         out[k] = T
     return out
 
 
-def dahl_torque(theta_rad: np.ndarray, To_Nm: float, eta_per_Nm: float, T0_Nm: float = 0.0) -> np.ndarray:
+def dahl_torque(
+    theta_rad: np.ndarray, To_Nm: float, eta_per_Nm: float, T0_Nm: float = 0.0
+) -> np.ndarray:
     """Dahl friction torque (N m) along a sampled angle path (rad), starting at ``T0_Nm``:
     eq. 5.2 integrated exactly (eq. 5.3) over each monotone step between samples."""
     theta = np.ascontiguousarray(theta_rad, dtype=float)
     if theta.ndim != 1 or len(theta) == 0:
         raise ValueError("dahl_torque: theta must be a non-empty 1-D array")
     if not (To_Nm > 0 and eta_per_Nm > 0):
-        raise ValueError(f"dahl_torque: To = {To_Nm!r} N m and eta = {eta_per_Nm!r} /N m must be > 0")
+        raise ValueError(
+            f"dahl_torque: To = {To_Nm!r} N m and eta = {eta_per_Nm!r} /N m must be > 0"
+        )
     if not abs(T0_Nm) <= To_Nm:
-        raise ValueError(f"dahl_torque: initial torque {T0_Nm!r} N m is outside +-To = {To_Nm!r} N m")
+        raise ValueError(
+            f"dahl_torque: initial torque {T0_Nm!r} N m is outside +-To = {To_Nm!r} N m"
+        )
     return _dahl_path(theta, float(To_Nm), float(eta_per_Nm), float(T0_Nm))
 
 
@@ -94,8 +100,8 @@ def loop_normalized(theta_o_bar: float, theta_bar: np.ndarray, increasing: bool)
     s = 1.0 - tm * tm
     th = np.asarray(theta_bar, dtype=float)
     if increasing:
-        return (tm * tm + s * th) / (1.0 + s * th)        # eq. 5.8a
-    return -(tm * tm - s * th) / (1.0 - s * th)          # eq. 5.8b
+        return (tm * tm + s * th) / (1.0 + s * th)  # eq. 5.8a
+    return -(tm * tm - s * th) / (1.0 - s * th)  # eq. 5.8b
 
 
 def describing_function(theta_o_bar: np.ndarray | float) -> np.ndarray | complex:
@@ -121,8 +127,9 @@ def describing_function(theta_o_bar: np.ndarray | float) -> np.ndarray | complex
     with np.errstate(divide="ignore", invalid="ignore"):
         re = np.where(small, 1.0 - 1.5 * x * x, 2.0 / (x * x) * inv_m1)
         log_term = np.log1p(tm) - np.log1p(-tm)
-        im = np.where(small, 8.0 / (3.0 * math.pi) * x,
-                      (4.0 / math.pi - 2.0 / (math.pi * x) * log_term) / x)
+        im = np.where(
+            small, 8.0 / (3.0 * math.pi) * x, (4.0 / math.pi - 2.0 / (math.pi * x) * log_term) / x
+        )
     out = re + 1j * im
     return out if out.ndim else complex(out)
 
@@ -131,8 +138,10 @@ def describing_function(theta_o_bar: np.ndarray | float) -> np.ndarray | complex
 def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, order: int = 4) -> np.ndarray:
     """Zero-phase Butterworth low-pass (forward and backward): no lag between channels."""
     if not 0 < cutoff_hz < 0.5 * fs_hz:
-        raise ValueError(f"low-pass cutoff {cutoff_hz:g} Hz must be between 0 and half the sample rate "
-                         f"({0.5 * fs_hz:g} Hz)")
+        raise ValueError(
+            f"low-pass cutoff {cutoff_hz:g} Hz must be between 0 and half the sample rate "
+            f"({0.5 * fs_hz:g} Hz)"
+        )
     sos = scipy.signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
     return scipy.signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=-1)
 
@@ -145,8 +154,15 @@ def shift(x: np.ndarray, fs_hz: float, advance_s: float) -> np.ndarray:
     return np.interp(n + advance_s * fs_hz, n, x)
 
 
-def bearing_torque(pa_V: np.ndarray, theta_rad: np.ndarray, fs_hz: float, *, torque_per_pa_Nm_per_V: float,
-                   viscous_Nms: float, inertia_kg_m2: float) -> np.ndarray:
+def bearing_torque(
+    pa_V: np.ndarray,
+    theta_rad: np.ndarray,
+    fs_hz: float,
+    *,
+    torque_per_pa_Nm_per_V: float,
+    viscous_Nms: float,
+    inertia_kg_m2: float,
+) -> np.ndarray:
     """The bearing's friction torque (N m) from the power-amplifier input and the angle:
 
         T = (Kp Km / Ra) V_pa - (D + Km Kb / Ra) thetadot - I thetaddot       (eq. 3.23-3.27)
@@ -168,7 +184,7 @@ class Segment:
     stop: int
     lead_start: int
     n_cycles: int
-    command_amplitude: float        # in the command's units (V)
+    command_amplitude: float  # in the command's units (V)
 
 
 def command_frequency(cmd: np.ndarray, fs_hz: float) -> float:
@@ -182,7 +198,7 @@ def command_frequency(cmd: np.ndarray, fs_hz: float) -> float:
     nfft = 1 << int(math.ceil(math.log2(4 * n)))
     spec = np.abs(np.fft.rfft(x, nfft))
     f = np.fft.rfftfreq(nfft, 1.0 / fs_hz)
-    lo = 2.0 / (n / fs_hz)            # at least two cycles in the record
+    lo = 2.0 / (n / fs_hz)  # at least two cycles in the record
     spec[f < lo] = 0.0
     k = int(np.argmax(spec))
     if spec[k] == 0.0:
@@ -192,7 +208,7 @@ def command_frequency(cmd: np.ndarray, fs_hz: float) -> float:
     # decimate for the fine search: a mean over blocks keeps the low frequencies
     step = max(1, int(fs_hz / (40.0 * f[k])))
     m = n // step
-    xd = x[:m * step].reshape(m, step).mean(axis=1)
+    xd = x[: m * step].reshape(m, step).mean(axis=1)
     td = (np.arange(m) * step + (step - 1) / 2) / fs_hz
     power = np.array([abs(np.dot(xd, np.exp(-2j * math.pi * g * td))) for g in grid])
     f0 = float(grid[int(np.argmax(power))])
@@ -213,7 +229,9 @@ def command_frequency(cmd: np.ndarray, fs_hz: float) -> float:
     return f0
 
 
-def cycle_fits(x: np.ndarray, fs_hz: float, freq_hz: float, start: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def cycle_fits(
+    x: np.ndarray, fs_hz: float, freq_hz: float, start: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Window boundaries (one period each, from ``start``) and per window the complex
     first-harmonic amplitude (x ~ Re(A e^{j w t}), t from sample 0) and residual rms."""
     per = fs_hz / freq_hz
@@ -232,8 +250,16 @@ def cycle_fits(x: np.ndarray, fs_hz: float, freq_hz: float, start: int = 0) -> t
     return bounds, amps, resid
 
 
-def find_segments(cmd: np.ndarray, fs_hz: float, freq_hz: float, *, settle_cycles: int = 1,
-                  min_cycles: int = 2, tolerance: float = 0.1, offsets: int = 16) -> list[Segment]:
+def find_segments(
+    cmd: np.ndarray,
+    fs_hz: float,
+    freq_hz: float,
+    *,
+    settle_cycles: int = 1,
+    min_cycles: int = 2,
+    tolerance: float = 0.1,
+    offsets: int = 16,
+) -> list[Segment]:
     """Runs of consecutive command cycles with the same amplitude (within ``tolerance``); the
     first ``settle_cycles`` of each run are left out of the kept cycles. The one-period windows
     are laid from each of ``offsets`` starting points within the first period; the grid that
@@ -244,16 +270,30 @@ def find_segments(cmd: np.ndarray, fs_hz: float, freq_hz: float, *, settle_cycle
     best: list[Segment] = []
     best_key = (0, 0.0)
     for k in range(max(1, offsets)):
-        segs, misfit = _segments_from(cmd, fs_hz, freq_hz, int(round(k * per / max(1, offsets))), settle_cycles,
-                                      min_cycles, tolerance)
+        segs, misfit = _segments_from(
+            cmd,
+            fs_hz,
+            freq_hz,
+            int(round(k * per / max(1, offsets))),
+            settle_cycles,
+            min_cycles,
+            tolerance,
+        )
         key = (sum(s.n_cycles for s in segs), -misfit)
         if key > best_key:
             best, best_key = segs, key
     return best
 
 
-def _segments_from(cmd: np.ndarray, fs_hz: float, freq_hz: float, start: int, settle_cycles: int,
-                   min_cycles: int, tolerance: float) -> tuple[list[Segment], float]:
+def _segments_from(
+    cmd: np.ndarray,
+    fs_hz: float,
+    freq_hz: float,
+    start: int,
+    settle_cycles: int,
+    min_cycles: int,
+    tolerance: float,
+) -> tuple[list[Segment], float]:
     """The segments on one window grid, and the worst relative sine-fit residual of their kept cycles."""
     bounds, amps, resid = cycle_fits(cmd, fs_hz, freq_hz, start)
     if len(amps) == 0:
@@ -272,15 +312,25 @@ def _segments_from(cmd: np.ndarray, fs_hz: float, freq_hz: float, start: int, se
             j += 1
         kept = j - i - settle_cycles
         if kept >= min_cycles:
-            segs.append(Segment(int(bounds[i + settle_cycles]), int(bounds[j]), int(bounds[i]), kept,
-                                float(np.median(mag[i:j]))))
-            misfit = max(misfit, float(np.max(resid[i + settle_cycles:j] / mag[i + settle_cycles:j])))
+            segs.append(
+                Segment(
+                    int(bounds[i + settle_cycles]),
+                    int(bounds[j]),
+                    int(bounds[i]),
+                    kept,
+                    float(np.median(mag[i:j])),
+                )
+            )
+            misfit = max(
+                misfit, float(np.max(resid[i + settle_cycles : j] / mag[i + settle_cycles : j]))
+            )
         i = j
     return segs, misfit
 
 
-def synchronous_average(x: np.ndarray, fs_hz: float, freq_hz: float, start: int, stop: int,
-                        bins: int = 200) -> np.ndarray:
+def synchronous_average(
+    x: np.ndarray, fs_hz: float, freq_hz: float, start: int, stop: int, bins: int = 200
+) -> np.ndarray:
     """The mean cycle of ``x[start:stop]`` in ``bins`` phase bins (phase from ``start``), so a
     period need not be a whole number of samples."""
     k = np.arange(start, stop)
@@ -288,7 +338,9 @@ def synchronous_average(x: np.ndarray, fs_hz: float, freq_hz: float, start: int,
     idx = np.minimum((phase * bins).astype(int), bins - 1)
     counts = np.bincount(idx, minlength=bins)
     if np.any(counts == 0):
-        raise ValueError(f"synchronous average: {stop - start} samples do not fill {bins} phase bins")
+        raise ValueError(
+            f"synchronous average: {stop - start} samples do not fill {bins} phase bins"
+        )
     return np.bincount(idx, weights=np.asarray(x, dtype=float)[start:stop], minlength=bins) / counts
 
 
@@ -309,15 +361,15 @@ class DahlFit:
     eta_se_per_Nm: float
     stiffness_Nm_per_rad: float
     stiffness_se_Nm_per_rad: float
-    correlation: float                 # of the To and eta estimates
-    offsets_Nm: list[float]            # the torque offset of each segment
-    residual_rms_Nm: list[float]       # of each segment's kept cycles
+    correlation: float  # of the To and eta estimates
+    offsets_Nm: list[float]  # the torque offset of each segment
+    residual_rms_Nm: list[float]  # of each segment's kept cycles
     residual_rms_total_Nm: float
-    model_Nm: np.ndarray = field(repr=False)   # fitted torque, offsets included, samples start..stop
+    model_Nm: np.ndarray = field(repr=False)  # fitted torque, offsets included, samples start..stop
     start: int = 0
     stop: int = 0
     path_cutoff_hz: float | None = None
-    n_independent: int = 0             # residual samples counted as independent for the errors
+    n_independent: int = 0  # residual samples counted as independent for the errors
     evaluations: int = 0
     #: covariance of (ln To, ln eta): cluster-robust over the analysed cycles (``fit_dahl``)
     cov_ln: np.ndarray = field(repr=False, default_factory=lambda: np.full((2, 2), np.nan))
@@ -337,23 +389,37 @@ class DahlFit:
     at_edge: list[str] = field(default_factory=list)
 
 
-def _initial_guess(th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]) -> tuple[float, float]:
+def _initial_guess(
+    th: np.ndarray, meas: list[np.ndarray], idx: list[np.ndarray]
+) -> tuple[float, float]:
     """To from the largest loop's torque half-range, eta To^2 from the smallest loop's slope."""
     spans = [float(np.ptp(th[i])) for i in idx]
     big, small = int(np.argmax(spans)), int(np.argmin(spans))
     To0 = 0.5 * float(np.ptp(meas[big]))
     if not To0 > 0:
-        raise ValueError("the measured torque does not change over the cycles (a flat power-amplifier input?)")
+        raise ValueError(
+            "the measured torque does not change over the cycles (a flat power-amplifier input?)"
+        )
     slope = float(np.polyfit(th[idx[small]], meas[small], 1)[0]) if spans[small] > 0 else 0.0
     # no usable slope (noise): a spring that reaches To over a tenth of the smallest amplitude
     k0 = slope if slope > 0 else To0 / max(0.05 * spans[small], 1e-12)
-    return To0, k0 / To0 ** 2
+    return To0, k0 / To0**2
 
 
-def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
-             smooth_hz: float | None = None, step: int = 1, independent_every: int = 1,
-             start: tuple[float, ...] | None = None, drop_cycle: int | None = None,
-             lag_term_Nm: np.ndarray | None = None, max_lag_s: float = 0.0) -> DahlFit:
+def fit_dahl(
+    path_rad: np.ndarray,
+    torque_Nm: np.ndarray,
+    segments: list[Segment],
+    fs_hz: float,
+    *,
+    smooth_hz: float | None = None,
+    step: int = 1,
+    independent_every: int = 1,
+    start: tuple[float, ...] | None = None,
+    drop_cycle: int | None = None,
+    lag_term_Nm: np.ndarray | None = None,
+    max_lag_s: float = 0.0,
+) -> DahlFit:
     """Least-squares To and eta of eq. 5.2 integrated along ``path_rad`` (the angle the bearing
     is taken to follow) against ``torque_Nm`` (the measured bearing torque, ``bearing_torque``).
 
@@ -387,10 +453,14 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     b0 = max(s.stop for s in segments)
     th = np.ascontiguousarray(theta[a0:b0])
     if not (np.all(np.isfinite(th)) and np.all(np.isfinite(torque[a0:b0]))):
-        raise ValueError("the angle or the torque has non-finite samples (lost data) in the cycles to fit")
+        raise ValueError(
+            "the angle or the torque has non-finite samples (lost data) in the cycles to fit"
+        )
     step = max(1, int(step))
     idx = [np.arange(s.start - a0, s.stop - a0, step) for s in segments]
-    if drop_cycle is not None:          # a jackknife replicate: the drop_cycle-th kept cycle of every segment out
+    if (
+        drop_cycle is not None
+    ):  # a jackknife replicate: the drop_cycle-th kept cycle of every segment out
         idx = [i[_cycle_labels(s, i + a0, 0) != drop_cycle] for s, i in zip(segments, idx)]
     meas = [torque[a0 + i] for i in idx]
     To0, eta0 = start[:2] if start is not None else _initial_guess(th, meas, idx)
@@ -415,7 +485,7 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
         if not fit_lag:
             return th, meas
         lag = p[2] * LAG_UNIT_S
-        path = path_adv(lag)[a0 - lo_w:b0 - lo_w]
+        path = path_adv(lag)[a0 - lo_w : b0 - lo_w]
         tq = base + term_adv(lag)[sel]
         return np.ascontiguousarray(path), [tq[x:y] for x, y in zip(bounds_i[:-1], bounds_i[1:])]
 
@@ -431,7 +501,7 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
         out = []
         for i, m in zip(idx, m_seg):
             r = T[i] - m
-            out.append(r - r.mean())     # the segment's offset, solved exactly
+            out.append(r - r.mean())  # the segment's offset, solved exactly
         return np.concatenate(out)
 
     span = math.log(1e3)
@@ -439,26 +509,42 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     lo_b = np.concatenate([p0[:2] - span, [-max_lag_s / LAG_UNIT_S] if fit_lag else []])
     hi_b = np.concatenate([p0[:2] + span, [max_lag_s / LAG_UNIT_S] if fit_lag else []])
     p0 = np.clip(p0, lo_b, hi_b)
-    sol = scipy.optimize.least_squares(residuals, p0, method="trf", bounds=(lo_b, hi_b),
-                                       diff_step=1e-4, x_scale=np.full(len(p0), 0.1), max_nfev=200)
+    sol = scipy.optimize.least_squares(
+        residuals,
+        p0,
+        method="trf",
+        bounds=(lo_b, hi_b),
+        diff_step=1e-4,
+        x_scale=np.full(len(p0), 0.1),
+        max_nfev=200,
+    )
     if not np.all(np.isfinite(sol.x)) or not np.all(np.isfinite(sol.fun)):
         raise ValueError("the Dahl fit did not converge (non-finite parameters or residuals)")
     To, eta = math.exp(sol.x[0]), math.exp(sol.x[1])
     # a parameter on the edge of the search (ln 1e3 either side of the start) is no estimate:
     # the torque does not follow eq. 5.2 there (no friction at all, or a spring that never slips)
-    edge = [name for name, x, lo_x, hi_x in zip(("To", "eta", "lag"), sol.x, lo_b, hi_b)
-            if min(x - lo_x, hi_x - x) < 1e-3 * max(1.0, hi_x - lo_x)]
+    edge = [
+        name
+        for name, x, lo_x, hi_x in zip(("To", "eta", "lag"), sol.x, lo_b, hi_b)
+        if min(x - lo_x, hi_x - x) < 1e-3 * max(1.0, hi_x - lo_x)
+    ]
     r = sol.fun
     n_ind = max(3, int(len(r) * step / max(1, independent_every)))
     # Cluster-robust ("sandwich") covariance with one cluster per analysed cycle: the residual
     # is correlated within a cycle (the low-pass, the platform's jitter, the bearing's memory of
     # it) but its score J_c^T r_c is nearly independent from cycle to cycle, so the spread of the
     # cycles' scores measures the estimate's error whatever the correlation inside a cycle.
-    labels = np.concatenate([_cycle_labels(s, i + a0, base_c) for s, i, base_c in
-                             zip(segments, idx, np.cumsum([0] + [s.n_cycles for s in segments[:-1]]))])
+    labels = np.concatenate(
+        [
+            _cycle_labels(s, i + a0, base_c)
+            for s, i, base_c in zip(
+                segments, idx, np.cumsum([0] + [s.n_cycles for s in segments[:-1]])
+            )
+        ]
+    )
     n_cl = int(labels.max()) + 1
     n_par = len(p0)
-    dof = max(1, n_cl - len(segments) - n_par)     # each segment's offset and the parameters
+    dof = max(1, n_cl - len(segments) - n_par)  # each segment's offset and the parameters
     J = sol.jac
     # the figures' gradients in the parameters: ln To, ln eta, ln k = 2 ln To + ln eta (the lag none)
     grad = np.zeros((n_par, 3))
@@ -471,7 +557,7 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     except np.linalg.LinAlgError:
         bread = cov_full = np.full((n_par, n_par), np.nan)
     cov = cov_full[:2, :2]
-    proj = J @ bread @ grad   # J c for ln To, ln eta, ln k
+    proj = J @ bread @ grad  # J c for ln To, ln eta, ln k
     bounds = np.cumsum([0] + [len(i) for i in idx])
     info = np.array([np.sum(proj[a:b] ** 2, axis=0) for a, b in zip(bounds[:-1], bounds[1:])])
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -479,11 +565,14 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
     leverage = [(float(x), float(y), float(z)) for x, y, z in shares]
     var = np.diag(cov)
     se_ln = np.sqrt(np.where(var >= 0, var, np.nan))
-    g = np.array([2.0, 1.0])                    # ln k = 2 ln To + ln eta
+    g = np.array([2.0, 1.0])  # ln k = 2 ln To + ln eta
     k = stiffness(To, eta)
     se_lnk = float(np.sqrt(max(float(g @ cov @ g), 0.0))) if np.all(np.isfinite(cov)) else math.nan
-    corr = float(cov[0, 1] / math.sqrt(var[0] * var[1])) if np.all(np.isfinite(cov)) and var[0] > 0 and var[1] > 0 \
+    corr = (
+        float(cov[0, 1] / math.sqrt(var[0] * var[1]))
+        if np.all(np.isfinite(cov)) and var[0] > 0 and var[1] > 0
         else math.nan
+    )
     path, m_seg = data(sol.x)
     T = model(sol.x, path)
     offsets, rms = [], []
@@ -493,12 +582,39 @@ def fit_dahl(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment
         rms.append(float(np.sqrt(np.mean((d - d.mean()) ** 2))))
     full = T.copy()
     for s, off in zip(segments, offsets):
-        full[s.lead_start - a0:s.stop - a0] += off
+        full[s.lead_start - a0 : s.stop - a0] += off
     lag_s = float(sol.x[2] * LAG_UNIT_S) if fit_lag else 0.0
-    lag_se = float(math.sqrt(cov_full[2, 2]) * LAG_UNIT_S) if fit_lag and cov_full[2, 2] >= 0 else math.nan
-    return DahlFit(To, eta, To * float(se_ln[0]), eta * float(se_ln[1]), k, k * se_lnk, corr, offsets, rms,
-                   float(np.sqrt(np.mean(r ** 2))), full, a0, b0, None, n_ind, evals, cov, dof, n_cl, leverage,
-                   lag_s, lag_se, fit_lag, edge)
+    lag_se = (
+        float(math.sqrt(cov_full[2, 2]) * LAG_UNIT_S)
+        if fit_lag and cov_full[2, 2] >= 0
+        else math.nan
+    )
+    return DahlFit(
+        To,
+        eta,
+        To * float(se_ln[0]),
+        eta * float(se_ln[1]),
+        k,
+        k * se_lnk,
+        corr,
+        offsets,
+        rms,
+        float(np.sqrt(np.mean(r**2))),
+        full,
+        a0,
+        b0,
+        None,
+        n_ind,
+        evals,
+        cov,
+        dof,
+        n_cl,
+        leverage,
+        lag_s,
+        lag_se,
+        fit_lag,
+        edge,
+    )
 
 
 #: the fitted lag's unit inside the least squares (its steps and scale are then like ln To's)
@@ -523,7 +639,7 @@ class Advance:
         self.w = 2 * math.pi * scipy.fft.rfftfreq(self.nfft, 1.0 / fs_hz)
 
     def __call__(self, advance_s: float) -> np.ndarray:
-        y = scipy.fft.irfft(self.spec * np.exp(1j * self.w * advance_s), self.nfft)[:self.n]
+        y = scipy.fft.irfft(self.spec * np.exp(1j * self.w * advance_s), self.nfft)[: self.n]
         return y + self.x0 + self.slope * (self.k + advance_s * self.fs)
 
 
@@ -549,8 +665,13 @@ class PathScan:
         choices the torque cannot tell from the best. Between grid points the residual and the
         estimates are interpolated linearly in ln cutoff. Returns (down, up), each >= 0."""
         r = np.asarray(self.residual_rms_Nm, float)
-        ln = np.column_stack([np.log(self.To_Nm), np.log(self.eta_per_Nm),
-                              2 * np.log(self.To_Nm) + np.log(self.eta_per_Nm)])
+        ln = np.column_stack(
+            [
+                np.log(self.To_Nm),
+                np.log(self.eta_per_Nm),
+                2 * np.log(self.To_Nm) + np.log(self.eta_per_Nm),
+            ]
+        )
         limit = r[self.best] * (1 + tolerance)
         reached = [ln[self.best]]
         for direction in (-1, 1):
@@ -567,11 +688,21 @@ class PathScan:
         return np.maximum(-v.min(axis=0), 0.0), np.maximum(v.max(axis=0), 0.0)
 
 
-def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[Segment], fs_hz: float, *,
-                  smooth_hz: float, cutoffs_hz: list[float], step: int = 1,
-                  independent_every: int = 1, drop_cycle: int | None = None,
-                  start: tuple[float, ...] | None = None, lag_term_Nm: np.ndarray | None = None,
-                  max_lag_s: float = 0.0) -> tuple[DahlFit, PathScan]:
+def fit_dahl_path(
+    theta_rad: np.ndarray,
+    torque_Nm: np.ndarray,
+    segments: list[Segment],
+    fs_hz: float,
+    *,
+    smooth_hz: float,
+    cutoffs_hz: list[float],
+    step: int = 1,
+    independent_every: int = 1,
+    drop_cycle: int | None = None,
+    start: tuple[float, ...] | None = None,
+    lag_term_Nm: np.ndarray | None = None,
+    max_lag_s: float = 0.0,
+) -> tuple[DahlFit, PathScan]:
     """``fit_dahl`` along the measured angle low-passed at each of ``cutoffs_hz``; the fit that
     explains the torque best (least residual) is returned, with the scan.
 
@@ -589,9 +720,19 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
     guess = start
     for fc in cutoffs_hz:
         path = lowpass(theta_rad, fs_hz, fc)
-        fit = fit_dahl(path, torque_Nm, segments, fs_hz, smooth_hz=smooth_hz, step=step,
-                       independent_every=independent_every, start=guess, drop_cycle=drop_cycle,
-                       lag_term_Nm=lag_term_Nm, max_lag_s=max_lag_s)
+        fit = fit_dahl(
+            path,
+            torque_Nm,
+            segments,
+            fs_hz,
+            smooth_hz=smooth_hz,
+            step=step,
+            independent_every=independent_every,
+            start=guess,
+            drop_cycle=drop_cycle,
+            lag_term_Nm=lag_term_Nm,
+            max_lag_s=max_lag_s,
+        )
         fit.path_cutoff_hz = float(fc)
         fits.append(fit)
         guess = (fit.To_Nm, fit.eta_per_Nm, fit.lag_s)
@@ -602,17 +743,27 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
         tried: dict[float, DahlFit] = {}
 
         def resid(x: float) -> float:
-            fit = fit_dahl(lowpass(theta_rad, fs_hz, math.exp(x)), torque_Nm, segments, fs_hz, smooth_hz=smooth_hz,
-                           step=step, independent_every=independent_every,
-                           start=(fits[best].To_Nm, fits[best].eta_per_Nm, fits[best].lag_s), drop_cycle=drop_cycle,
-                           lag_term_Nm=lag_term_Nm, max_lag_s=max_lag_s)
+            fit = fit_dahl(
+                lowpass(theta_rad, fs_hz, math.exp(x)),
+                torque_Nm,
+                segments,
+                fs_hz,
+                smooth_hz=smooth_hz,
+                step=step,
+                independent_every=independent_every,
+                start=(fits[best].To_Nm, fits[best].eta_per_Nm, fits[best].lag_s),
+                drop_cycle=drop_cycle,
+                lag_term_Nm=lag_term_Nm,
+                max_lag_s=max_lag_s,
+            )
             fit.path_cutoff_hz = math.exp(x)
             tried[x] = fit
             return fit.residual_rms_total_Nm
 
         lo, hi = math.log(cutoffs_hz[best - 1]), math.log(cutoffs_hz[best + 1])
-        opt = scipy.optimize.minimize_scalar(resid, bounds=(lo, hi), method="bounded",
-                                             options={"xatol": 0.01, "maxiter": 12})
+        opt = scipy.optimize.minimize_scalar(
+            resid, bounds=(lo, hi), method="bounded", options={"xatol": 0.01, "maxiter": 12}
+        )
         x = min(tried, key=lambda k: tried[k].residual_rms_total_Nm)
         fit = tried[x]
         del opt
@@ -622,8 +773,13 @@ def fit_dahl_path(theta_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[S
             cutoffs_hz = list(cutoffs_hz[:order]) + [fc] + list(cutoffs_hz[order:])
             fits.insert(order, fit)
             best = order
-    scan = PathScan([float(c) for c in cutoffs_hz], [f.residual_rms_total_Nm for f in fits],
-                    [f.To_Nm for f in fits], [f.eta_per_Nm for f in fits], best)
+    scan = PathScan(
+        [float(c) for c in cutoffs_hz],
+        [f.residual_rms_total_Nm for f in fits],
+        [f.To_Nm for f in fits],
+        [f.eta_per_Nm for f in fits],
+        best,
+    )
     return fits[best], scan
 
 
@@ -633,23 +789,36 @@ LINE_MIN = 1e-5
 #: ... and at least this many times the command's power in the bins around it (an isolated line)
 LINE_ISOLATION = 100.0
 
+
 @dataclass
 class LagMeasurement:
     """How far the recorded angle lags the recorded torque input (``measure_lag``)."""
 
     lag_s: float
     se_s: float
-    dof: int                           # cycles less one (the jackknife's)
-    frequencies_hz: list[float]        # the command's lines used
-    lags_s: list[float]                # the lag each line gives alone
+    dof: int  # cycles less one (the jackknife's)
+    frequencies_hz: list[float]  # the command's lines used
+    lags_s: list[float]  # the lag each line gives alone
     lag_se_s: list[float]
     n_cycles: int
 
 
-def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: float, freq_hz: float,
-                segments: list[Segment], response: Callable[[np.ndarray], np.ndarray], *, min_hz: float,
-                max_hz: float, max_lines: int = 8, max_se_rad: float = 0.1,
-                drop_cycle: int | None = None, lines_hz: list[float] | None = None) -> LagMeasurement:
+def measure_lag(
+    cmd: np.ndarray,
+    angle: np.ndarray,
+    drive: np.ndarray,
+    fs_hz: float,
+    freq_hz: float,
+    segments: list[Segment],
+    response: Callable[[np.ndarray], np.ndarray],
+    *,
+    min_hz: float,
+    max_hz: float,
+    max_lines: int = 8,
+    max_se_rad: float = 0.1,
+    drop_cycle: int | None = None,
+    lines_hz: list[float] | None = None,
+) -> LagMeasurement:
     """The lag (s) of the recorded ``angle`` behind the recorded ``drive`` (the power-amplifier
     input), measured at the command's lines between ``min_hz`` and ``max_hz``.
 
@@ -671,7 +840,12 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     ``lines_hz`` then names the lines to use (the full record's), none chosen or dropped."""
     per = fs_hz / freq_hz
     n_per = int(round(per))
-    starts = [int(round(s.start + c * per)) for s in segments for c in range(s.n_cycles) if c != drop_cycle]
+    starts = [
+        int(round(s.start + c * per))
+        for s in segments
+        for c in range(s.n_cycles)
+        if c != drop_cycle
+    ]
     starts = [a for a in starts if a + n_per <= len(cmd)]
     if len(starts) < 3:
         raise ValueError(f"{len(starts)} cycles are too few to measure the angle's lag")
@@ -684,8 +858,10 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     h_lo, h_hi = int(math.ceil(min_hz / f_bin)), int(math.floor(max_hz / f_bin))
     harm = np.arange(h_lo, h_hi + 1)
     sos = scipy.signal.butter(4, 0.5 * min_hz, btype="highpass", fs=fs_hz, output="sos")
-    c_hp, a_hp, d_hp = (scipy.signal.sosfiltfilt(sos, np.asarray(x, dtype=float)) for x in (cmd, angle, drive))
-    E = np.exp(-2j * math.pi * np.outer(np.arange(n_per), harm) / n_per)    # samples x lines
+    c_hp, a_hp, d_hp = (
+        scipy.signal.sosfiltfilt(sos, np.asarray(x, dtype=float)) for x in (cmd, angle, drive)
+    )
+    E = np.exp(-2j * math.pi * np.outer(np.arange(n_per), harm) / n_per)  # samples x lines
     blocks = np.array(starts)[:, None] + np.arange(n_per)[None, :]
     # the lines are chosen on the plain transform; measured through a Hann window, whose far
     # sidelobes fall fast (a transient of an amplitude step near a window's end stays out)
@@ -705,19 +881,28 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     x = np.asarray(cmd, dtype=float)[blocks]
     fund = float(np.mean(np.abs(x @ np.exp(-2j * math.pi * np.arange(n_per) / n_per)) ** 2))
     near = np.concatenate([np.arange(-10, -2), np.arange(3, 11)])
-    around = np.mean(np.abs(np.fft.rfft(c_hp[blocks], axis=1)) ** 2, axis=0)    # every bin of the window
-    local = np.array([float(np.median(around[np.clip(k + near, 1, len(around) - 1)])) for k in harm])
-    strong = [int(i) for i in order[:max_lines]
-              if power[i] > max(100.0 * floor, LINE_MIN ** 2 * fund, LINE_ISOLATION * local[i])]
+    around = np.mean(
+        np.abs(np.fft.rfft(c_hp[blocks], axis=1)) ** 2, axis=0
+    )  # every bin of the window
+    local = np.array(
+        [float(np.median(around[np.clip(k + near, 1, len(around) - 1)])) for k in harm]
+    )
+    strong = [
+        int(i)
+        for i in order[:max_lines]
+        if power[i] > max(100.0 * floor, LINE_MIN**2 * fund, LINE_ISOLATION * local[i])
+    ]
     if lines_hz is not None:
         strong = [int(np.argmin(np.abs(harm * f_bin - f))) for f in lines_hz]
         max_se_rad = math.inf
     if not strong:
-        raise ValueError(f"the command carries no line between {min_hz:g} and {max_hz:g} Hz to measure the "
-                         f"angle's lag at (a smooth drive: no DAC staircase in band)")
+        raise ValueError(
+            f"the command carries no line between {min_hz:g} and {max_hz:g} Hz to measure the "
+            f"angle's lag at (a smooth drive: no DAC staircase in band)"
+        )
     w = 2 * math.pi * harm[strong] * f_bin
     model = response(w)
-    num = A[:, strong] * np.conj(Ch[:, strong])                      # cycles x lines
+    num = A[:, strong] * np.conj(Ch[:, strong])  # cycles x lines
     den = D[:, strong] * np.conj(Ch[:, strong])
 
     def lags(keep: np.ndarray) -> np.ndarray:
@@ -735,8 +920,10 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     se_line = np.sqrt((n - 1) / n * np.sum((jack - jack.mean(axis=0)) ** 2, axis=0))
     good = se_line * w < max_se_rad
     if not np.any(good):
-        raise ValueError(f"the command's lines between {min_hz:g} and {max_hz:g} Hz are too weak in the angle and "
-                         f"the drive to measure the angle's lag (phase errors over {max_se_rad:g} rad)")
+        raise ValueError(
+            f"the command's lines between {min_hz:g} and {max_hz:g} Hz are too weak in the angle and "
+            f"the drive to measure the angle's lag (phase errors over {max_se_rad:g} rad)"
+        )
     wt = np.where(good, 1.0 / np.maximum(se_line, 1e-12) ** 2, 0.0)
     wt /= wt.sum()
     lag = float(wt @ full)
@@ -745,6 +932,13 @@ def measure_lag(cmd: np.ndarray, angle: np.ndarray, drive: np.ndarray, fs_hz: fl
     m = int(np.count_nonzero(good))
     if m > 1:
         chi2 = float(np.sum(((full - lag) / se_line)[good] ** 2))
-        se *= max(1.0, math.sqrt(chi2 / (m - 1)))      # the Birge ratio: lines that disagree
-    return LagMeasurement(lag, se, n - 1, [float(f) for f in harm[strong][good] * f_bin],
-                          [float(x) for x in full[good]], [float(x) for x in se_line[good]], n)
+        se *= max(1.0, math.sqrt(chi2 / (m - 1)))  # the Birge ratio: lines that disagree
+    return LagMeasurement(
+        lag,
+        se,
+        n - 1,
+        [float(f) for f in harm[strong][good] * f_bin],
+        [float(x) for x in full[good]],
+        [float(x) for x in se_line[good]],
+        n,
+    )

@@ -77,8 +77,9 @@ class DriftDataError(ValueError):
     """The record cannot be analysed: a channel has no gap-free data, or the files' sample rates differ."""
 
 
-def load_record(spans: Iterable[tuple[str | Path, int, int]], names: list[str], default_rate_hz: float
-                ) -> tuple[dict[str, list[np.ndarray]], int, int, float]:
+def load_record(
+    spans: Iterable[tuple[str | Path, int, int]], names: list[str], default_rate_hz: float
+) -> tuple[dict[str, list[np.ndarray]], int, int, float]:
     """Raw volts of the channels ``names`` per continuous stretch ((file, start, stop) samples;
     NaN where lost), samples, samples lost, and the sample rate (``default_rate_hz`` if no span)."""
     chunks: dict[str, list[np.ndarray]] = {n: [] for n in names}
@@ -87,7 +88,9 @@ def load_record(spans: Iterable[tuple[str | Path, int, int]], names: list[str], 
     for file, start, stop in spans:
         with RunFile(file) as rf:
             if rate is not None and rf.rate_hz != rate:
-                raise DriftDataError(f"{file} was recorded at {rf.rate_hz:g} Hz, the others at {rate:g} Hz")
+                raise DriftDataError(
+                    f"{file} was recorded at {rf.rate_hz:g} Hz, the others at {rate:g} Hz"
+                )
             rate = rf.rate_hz
             data = rf.read(names, start, stop)
         for n, row in zip(names, data):
@@ -101,15 +104,15 @@ def load_record(spans: Iterable[tuple[str | Path, int, int]], names: list[str], 
 class ChannelDrift:
     channel: str
     kto: float
-    mean_rate: float                          # urad/s (earth rate + drift)
-    adev: allan.AllanResult                   # of the reconstructed input rate
-    model: allan.NoiseModel | None            # IEEE 952 terms fitted to it
-    arw: allan.TermEstimate | None            # N (urad/sqrt(s)) with its 95 % interval
-    bi: allan.TermEstimate | None             # B (urad/s) with its 95 % interval
+    mean_rate: float  # urad/s (earth rate + drift)
+    adev: allan.AllanResult  # of the reconstructed input rate
+    model: allan.NoiseModel | None  # IEEE 952 terms fitted to it
+    arw: allan.TermEstimate | None  # N (urad/sqrt(s)) with its 95 % interval
+    bi: allan.TermEstimate | None  # B (urad/s) with its 95 % interval
     null: allan.NullStability | None
     problems: list[str]
     loop: LoopGain | None = None
-    adev_torquer: allan.AllanResult | None = None   # of -K_TO V_T alone (the loop's output)
+    adev_torquer: allan.AllanResult | None = None  # of -K_TO V_T alone (the loop's output)
     #: how far the K_TO and K_g used may lie from the unit's (relative, 95 %): 0 for a measured
     #: scale (earth-rate, stopwatch), the data sheet's tolerance for a nominal one
     scale_tol: tuple[float, float] = (0.0, 0.0)
@@ -144,14 +147,21 @@ class ChannelDrift:
     def _estimate(self, term: str) -> Estimate:
         t = self.arw if term == "arw" else self.bi
         if t is None:
-            return Estimate(math.nan, math.nan, math.nan, False, "; ".join(self.problems) or "not measured")
+            return Estimate(
+                math.nan, math.nan, math.nan, False, "; ".join(self.problems) or "not measured"
+            )
         if not math.isfinite(t.value):
             return Estimate(math.nan, t.lo, t.hi, False, t.why)
         if t.share < MIN_SHARE_TO_RESOLVE:
             # the model's apportioning is no evidence of the term: 0 .. the model-free bound
-            return Estimate(t.value, 0.0, max(t.bound, t.hi), False,
-                            f"it holds only {100 * t.share:.0f} % of the modelled Allan variance where it is read "
-                            f"(tau {t.tau_s:g} s): the model's shapes, not the data, apportion it")
+            return Estimate(
+                t.value,
+                0.0,
+                max(t.bound, t.hi),
+                False,
+                f"it holds only {100 * t.share:.0f} % of the modelled Allan variance where it is read "
+                f"(tau {t.tau_s:g} s): the model's shapes, not the data, apportion it",
+            )
         e = judged(t.value, t.lo, t.hi)
         if not e.resolved:
             # unresolved: only the upper limit is the data's; the lower one is the measured variance
@@ -169,9 +179,9 @@ class LoopGain:
     a filter of the pickoff voltage), so G_p = |S_ar / S_aa| there (H1). The pickoff's noise
     in that band, through G_p, is the torquer's white rate: N_loop = G_p sqrt(S_aa / 2)."""
 
-    gain_per_s: float            # G_p (urad/s per urad)
-    pickoff_asd: float           # sqrt(S_aa) in the band, urad/sqrt(Hz)
-    coherence: float             # mean magnitude-squared coherence in the band
+    gain_per_s: float  # G_p (urad/s per urad)
+    pickoff_asd: float  # sqrt(S_aa) in the band, urad/sqrt(Hz)
+    coherence: float  # mean magnitude-squared coherence in the band
     band_hz: tuple[float, float]
 
     @property
@@ -184,8 +194,13 @@ class LoopGain:
         return self.gain_per_s * self.pickoff_asd / math.sqrt(2.0)
 
 
-def measure_loop_gain(torq_segs: list[np.ndarray], pick_segs: list[np.ndarray], rate_hz: float,
-                      band_hz: tuple[float, float], max_samples: int = 2 ** 17) -> LoopGain | None:
+def measure_loop_gain(
+    torq_segs: list[np.ndarray],
+    pick_segs: list[np.ndarray],
+    rate_hz: float,
+    band_hz: tuple[float, float],
+    max_samples: int = 2**17,
+) -> LoopGain | None:
     """G_p from the longest common gap-free stretch (rate r, pickoff angle a); None if the
     stretch is too short for a spectrum resolving the band."""
     from scipy.signal import csd, welch
@@ -207,12 +222,22 @@ def measure_loop_gain(torq_segs: list[np.ndarray], pick_segs: list[np.ndarray], 
     _, s_ar = csd(a, r, rate_hz, nperseg=nper)
     h = s_ar[sel] / s_aa[sel]
     coh = np.abs(s_ar[sel]) ** 2 / (s_aa[sel] * s_rr[sel])
-    return LoopGain(float(np.median(np.abs(h))), float(np.sqrt(np.mean(s_aa[sel]))), float(np.mean(coh)),
-                    (float(f[sel][0]), float(f[sel][-1])))
+    return LoopGain(
+        float(np.median(np.abs(h))),
+        float(np.sqrt(np.mean(s_aa[sel]))),
+        float(np.mean(coh)),
+        (float(f[sel][0]), float(f[sel][-1])),
+    )
 
 
-def reconstruct_rate(r: np.ndarray, a: np.ndarray, rate_hz: float, restraint_s: float,
-                     a_other: np.ndarray | None = None, coupling: float = 0.0) -> np.ndarray:
+def reconstruct_rate(
+    r: np.ndarray,
+    a: np.ndarray,
+    rate_hz: float,
+    restraint_s: float,
+    a_other: np.ndarray | None = None,
+    coupling: float = 0.0,
+) -> np.ndarray:
     """The gyro's input rate (urad/s) from one gap-free stretch of the torquing rate
     ``r = -K_TO V_T`` (urad/s) and the pickoff angle ``a = V_g / K_g`` (urad), through the
     float's equation of motion (thesis II C.1.a(8) and III A, below the nutation; docs/simhw.md
@@ -252,10 +277,17 @@ def coupling_terms(channel: str, h_over_c: dict[str, float] | None) -> tuple[str
     return None, 0.0
 
 
-def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: dict[str, float],
-                     p: DriftSettings, kg_mV_per_urad: dict[str, float], restraint_s: dict[str, float],
-                     h_over_c: dict[str, float] | None = None, *,
-                     scale_tol: Mapping[str, tuple[float, float]] | None = None) -> dict[str, ChannelDrift]:
+def analyze_channels(
+    chunks: dict[str, list[np.ndarray]],
+    rate_hz: float,
+    kto: dict[str, float],
+    p: DriftSettings,
+    kg_mV_per_urad: dict[str, float],
+    restraint_s: dict[str, float],
+    h_over_c: dict[str, float] | None = None,
+    *,
+    scale_tol: Mapping[str, tuple[float, float]] | None = None,
+) -> dict[str, ChannelDrift]:
     """Per channel: the input rate reconstructed from the torquer and pickoff outputs
     (``reconstruct_rate``) split at gaps, its Allan deviation, the IEEE 952 noise model fitted to
     it and the terms read with their intervals (``allan.term_estimate``), the null stability,
@@ -268,16 +300,27 @@ def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: d
         other, coupling = coupling_terms(ch, h_over_c)
         rows = [-kto[ch] * chunks[torq(ch)][k] for k in range(len(chunks[torq(ch)]))]
         angle = [1e3 * g / kg_mV_per_urad[ch] for g in chunks[pickoff(ch)]]
-        angle_other = ([1e3 * g / kg_mV_per_urad[other] for g in chunks[pickoff(other)]] if other
-                       else [np.zeros_like(g) for g in angle])
+        angle_other = (
+            [1e3 * g / kg_mV_per_urad[other] for g in chunks[pickoff(other)]]
+            if other
+            else [np.zeros_like(g) for g in angle]
+        )
         # the same gap-free stretches of all channels used (a lost sample set is lost on all)
         both = [np.vstack([t, g, o]) for t, g, o in zip(rows, angle, angle_other)]
-        runs = [b[:, lo:hi] for b in both for lo, hi in _finite_runs(np.asarray(np.isfinite(b).all(axis=0)))
-                if hi - lo >= 4]
+        runs = [
+            b[:, lo:hi]
+            for b in both
+            for lo, hi in _finite_runs(np.asarray(np.isfinite(b).all(axis=0)))
+            if hi - lo >= 4
+        ]
         if not runs:
             raise DriftDataError(f"channel {ch}: no gap-free data in the record")
-        segs = [reconstruct_rate(b[0], b[1], rate_hz, restraint_s[ch], b[2] if other else None, coupling)
-                for b in runs]
+        segs = [
+            reconstruct_rate(
+                b[0], b[1], rate_hz, restraint_s[ch], b[2] if other else None, coupling
+            )
+            for b in runs
+        ]
         mean = float(np.average([s.mean() for s in segs], weights=[len(s) for s in segs]))
         res = allan.allan_deviation(segs, rate_hz)
         torq_res = allan.allan_deviation([b[0] for b in runs], rate_hz)
@@ -293,7 +336,9 @@ def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: d
         if model is not None:
             for term in ("arw", "bias"):
                 try:
-                    est = allan.term_estimate(res, model, term, min_edf=p.min_edf, min_tau_s=p.fit_tau_lo_s)
+                    est = allan.term_estimate(
+                        res, model, term, min_edf=p.min_edf, min_tau_s=p.fit_tau_lo_s
+                    )
                 except ValueError as exc:
                     problems.append(f"{'ARW' if term == 'arw' else 'bias instability'}: {exc}")
                     continue
@@ -302,12 +347,25 @@ def analyze_channels(chunks: dict[str, list[np.ndarray]], rate_hz: float, kto: d
                 else:
                     bi = est
         try:
-            null = allan.null_stability(segs, rate_hz, res, avg_s=p.average_s, span_s=p.null_span_s,
-                                        min_edf=p.min_edf)
+            null = allan.null_stability(
+                segs, rate_hz, res, avg_s=p.average_s, span_s=p.null_span_s, min_edf=p.min_edf
+            )
         except ValueError as exc:
             problems.append(f"null stability: {exc}")
-        out[ch] = ChannelDrift(ch, kto[ch], mean, res, model, arw, bi, null, problems, loop, torq_res,
-                               (scale_tol or {}).get(ch, (0.0, 0.0)))
+        out[ch] = ChannelDrift(
+            ch,
+            kto[ch],
+            mean,
+            res,
+            model,
+            arw,
+            bi,
+            null,
+            problems,
+            loop,
+            torq_res,
+            (scale_tol or {}).get(ch, (0.0, 0.0)),
+        )
     return out
 
 
@@ -316,7 +374,9 @@ def _finite_runs(ok: np.ndarray) -> list[tuple[int, int]]:
     return [(int(a), int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
-def pickoff_stats(chunks: dict[str, list[np.ndarray]], kg_mV_per_urad: dict[str, float]) -> dict[str, tuple[float, float]]:
+def pickoff_stats(
+    chunks: dict[str, list[np.ndarray]], kg_mV_per_urad: dict[str, float]
+) -> dict[str, tuple[float, float]]:
     """Per channel, the pickoff angle's mean and rms about it (urad) over the record's valid samples:
     the check that the loops held the pickoffs at null."""
     out = {}

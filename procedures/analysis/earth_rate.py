@@ -62,8 +62,9 @@ HORIZONTAL = ("X", "Y", "XRD")
 G_AXES = ("x", "y", "z")
 
 
-def platform_frame(tilt_deg: float, spindle_deg: float, offset_deg: float, latitude_deg: float,
-                   earth_rate: float) -> tuple[np.ndarray, np.ndarray]:
+def platform_frame(
+    tilt_deg: float, spindle_deg: float, offset_deg: float, latitude_deg: float, earth_rate: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(earth rate rad/s, specific force g) on the platform X, Y, Z axes (Ch. II C.4.b).
 
     Local east-north-up; the table base is turned ``offset`` from north; its east-west shaft
@@ -71,12 +72,18 @@ def platform_frame(tilt_deg: float, spindle_deg: float, offset_deg: float, latit
     platform by ``spindle``. At tilt 0 platform X points ``spindle - offset`` from north toward
     west. The specific force is the support's reaction, +1 g up."""
     t, s, a = math.radians(tilt_deg), math.radians(spindle_deg), -math.radians(offset_deg)
-    north, west, up = np.array([0.0, 1.0, 0.0]), np.array([-1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    north, west, up = (
+        np.array([0.0, 1.0, 0.0]),
+        np.array([-1.0, 0.0, 0.0]),
+        np.array([0.0, 0.0, 1.0]),
+    )
     xb = north * math.cos(a) + west * math.sin(a)
     yb = -north * math.sin(a) + west * math.cos(a)
     zt = up * math.cos(t) + xb * math.sin(t)
     xt = xb * math.cos(t) - up * math.sin(t)
-    axes = np.vstack([xt * math.cos(s) + yb * math.sin(s), -xt * math.sin(s) + yb * math.cos(s), zt])
+    axes = np.vstack(
+        [xt * math.cos(s) + yb * math.sin(s), -xt * math.sin(s) + yb * math.cos(s), zt]
+    )
     lat = math.radians(latitude_deg)
     return axes @ (earth_rate * np.array([0.0, math.cos(lat), math.sin(lat)])), axes @ up
 
@@ -84,18 +91,18 @@ def platform_frame(tilt_deg: float, spindle_deg: float, offset_deg: float, latit
 @dataclass
 class ChannelFit:
     channel: str
-    kto: Estimate                    # urad/s per V
-    drift: Estimate                  # fixed drift, urad/s
-    g_drift: dict[str, Estimate]     # g-sensitive drift along platform x, y, z, urad/s per g
-    psi0_deg: float | None           # the table base's azimuth offset this channel sees (horizontal ones)
-    correlation: dict[str, float]    # the largest |correlation| of each figure with another, signed
+    kto: Estimate  # urad/s per V
+    drift: Estimate  # fixed drift, urad/s
+    g_drift: dict[str, Estimate]  # g-sensitive drift along platform x, y, z, urad/s per g
+    psi0_deg: float | None  # the table base's azimuth offset this channel sees (horizontal ones)
+    correlation: dict[str, float]  # the largest |correlation| of each figure with another, signed
     tilt_deg: np.ndarray
     spindle_deg: np.ndarray
     volts: np.ndarray
     predicted: np.ndarray
     residual_rms_V: float
     dof: int
-    restraint_correction: float      # relative change of K_TO made by the standing-pickoff term
+    restraint_correction: float  # relative change of K_TO made by the standing-pickoff term
     figures: dict[str, Estimate] = field(default_factory=dict)
     psi0_sd_deg: float | None = None  # psi0's standard uncertainty (horizontal channels)
 
@@ -153,8 +160,11 @@ def ar1_gls(X: np.ndarray, v: np.ndarray) -> AR1Fit:
         coef, *_ = np.linalg.lstsq(Xw, vw, rcond=None)
         e = vw - Xw @ coef
         rss = float(e @ e)
-        ll.append(-0.5 * (n - p) * math.log(max(rss, 1e-300) / max(1, n - p)) + 0.5 * math.log(1.0 - r * r)
-                  - 0.5 * np.linalg.slogdet(Xw.T @ Xw)[1])
+        ll.append(
+            -0.5 * (n - p) * math.log(max(rss, 1e-300) / max(1, n - p))
+            + 0.5 * math.log(1.0 - r * r)
+            - 0.5 * np.linalg.slogdet(Xw.T @ Xw)[1]
+        )
         coefs.append(coef)
         covs.append(np.linalg.inv(Xw.T @ Xw) * rss / max(1, n - p - 1))
     ll_arr = np.array(ll)
@@ -162,12 +172,21 @@ def ar1_gls(X: np.ndarray, v: np.ndarray) -> AR1Fit:
     coef = coefs[k]
     w = np.exp(ll_arr - ll_arr[k])
     w /= w.sum()
-    cov = sum((wi * (c + np.outer(b - coef, b - coef)) for wi, c, b in zip(w, covs, coefs)), np.zeros((p, p)))
+    cov = sum(
+        (wi * (c + np.outer(b - coef, b - coef)) for wi, c, b in zip(w, covs, coefs)),
+        np.zeros((p, p)),
+    )
     return AR1Fit(coef, v - X @ coef, cov, float(RHO_GRID[k]))
 
 
-def _design(ch: str, tilt: np.ndarray, spindle: np.ndarray, latitude_deg: float, earth_rate: float,
-            order: np.ndarray) -> np.ndarray:
+def _design(
+    ch: str,
+    tilt: np.ndarray,
+    spindle: np.ndarray,
+    latitude_deg: float,
+    earth_rate: float,
+    order: np.ndarray,
+) -> np.ndarray:
     """Columns: P, Q (the earth rate's horizontal part on the input axis with the base at offset
     0 and at 90 deg: at offset o it is cos(o) P + sin(o) Q), 1, f_x, f_y, f_z (g), order.
 
@@ -218,7 +237,11 @@ def restraint_bound(pickoff_rel_uncertainty: float | None = None) -> float:
     (1 + e_h)) for relative errors e_K of K_g and e_h of h/k: at most 1 / ((1 - u_K)(1 - u_h)) - 1
     for bounds u_K (the stopwatch's relative half-width, or ``PICKOFF_DATASHEET_UNCERTAINTY`` for
     the data sheet's value) and u_h = ``RESTRAINT_UNCERTAINTY``."""
-    u_k = PICKOFF_DATASHEET_UNCERTAINTY if pickoff_rel_uncertainty is None else pickoff_rel_uncertainty
+    u_k = (
+        PICKOFF_DATASHEET_UNCERTAINTY
+        if pickoff_rel_uncertainty is None
+        else pickoff_rel_uncertainty
+    )
     return 1.0 / ((1.0 - min(u_k, 0.5)) * (1.0 - RESTRAINT_UNCERTAINTY)) - 1.0
 
 
@@ -240,17 +263,26 @@ def operating_instability(rate_resid: np.ndarray) -> float:
     c = np.concatenate([[0.0], np.cumsum(r)])
     best = 0.0
     for m in range(2, len(r) // 3 + 1):
-        y = (c[m:] - c[:-m]) / m                   # means of m consecutive stations
+        y = (c[m:] - c[:-m]) / m  # means of m consecutive stations
         d = y[m:] - y[:-m]
         if len(d):
             best = max(best, float(np.sqrt(0.5 * np.mean(d * d))))
     return best
 
 
-def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
-                restraint_s: float | None = None, pickoff_mV_per_urad: float | None = None,
-                offset_deg: float | None = None, offset_sd_deg: float = 0.0,
-                instability_urad_per_s: float = 0.0, pickoff_rel_uncertainty: float | None = None) -> ChannelFit:
+def fit_channel(
+    ch: str,
+    stations: list[dict],
+    *,
+    latitude_deg: float,
+    earth_rate_rad_per_s: float,
+    restraint_s: float | None = None,
+    pickoff_mV_per_urad: float | None = None,
+    offset_deg: float | None = None,
+    offset_sd_deg: float = 0.0,
+    instability_urad_per_s: float = 0.0,
+    pickoff_rel_uncertainty: float | None = None,
+) -> ChannelFit:
     """One channel's multi-position fit from the stations (``"tilt"``, ``"spindle"`` deg, the
     settled torquer means ``"V"`` and, for the restraint term, the pickoff means ``"pickoff_V"``,
     per channel, in visiting order).
@@ -273,15 +305,19 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     n = len(stations)
     restraint = np.zeros(n)
     if restraint_s and pickoff_mV_per_urad and all("pickoff_V" in s for s in stations):
-        sigma_rad = np.array([s["pickoff_V"][ch] for s in stations]) / (pickoff_mV_per_urad * 1e-3) * URAD
+        sigma_rad = (
+            np.array([s["pickoff_V"][ch] for s in stations]) / (pickoff_mV_per_urad * 1e-3) * URAD
+        )
         restraint = sigma_rad / restraint_s
     X_all = _design(ch, tilt, spindle, latitude_deg, earth_rate_rad_per_s, np.arange(n))
     keep = _identifiable(X_all)
     X = X_all[:, keep]
     col = {name: int(np.sum(keep[:j])) for j, name in enumerate(COLUMNS) if keep[j]}
     if "P" not in col:
-        raise ValueError(f"earth-rate {ch}: the stations do not turn the input axis through the earth rate's "
-                         f"horizontal part; add tilts or spindle angles")
+        raise ValueError(
+            f"earth-rate {ch}: the stations do not turn the input axis through the earth rate's "
+            f"horizontal part; add tilts or spindle angles"
+        )
     has_q = "Q" in col
     if not has_q and offset_deg is None:
         offset_deg = 0.0
@@ -299,7 +335,9 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
         out = {"K_TO": k / URAD, "psi0": math.degrees(o), "drift": -b[col["one"]] * k / URAD}
         for a, name in zip(G_AXES, ("x", "y", "z")):
             if name in col:
-                out[f"g_{a}"] = (-b[col[name]] * k - (omega_v if INPUT_AXIS[ch] == G_AXES.index(a) else 0.0)) / URAD
+                out[f"g_{a}"] = (
+                    -b[col[name]] * k - (omega_v if INPUT_AXIS[ch] == G_AXES.index(a) else 0.0)
+                ) / URAD
         return out
 
     fit = ar1_gls(X, v)
@@ -338,13 +376,17 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
     # the restraint term is good to +-restraint_bound of itself: a bound, so a rectangular
     # distribution's standard uncertainty, a / sqrt(3) (GUM 4.3.7)
     bound = restraint_bound(pickoff_rel_uncertainty)
-    C[keys.index("K_TO"), keys.index("K_TO")] += (bound / math.sqrt(3.0) * correction * vals["K_TO"]) ** 2
+    C[keys.index("K_TO"), keys.index("K_TO")] += (
+        bound / math.sqrt(3.0) * correction * vals["K_TO"]
+    ) ** 2
     if not has_q:
         # the base's azimuth offset is the horizontal channels' (Ch. II C.4.b: Z's input axis
         # leans toward the base's north by the tilt, so its earth rate is Omega (sin(lat) cos t
         # + cos(lat) cos(o) sin t)): K_TO = -cos(o)/b_P carries o's uncertainty as tan(o) d o
         o = math.radians(offset_deg or 0.0)
-        C[keys.index("K_TO"), keys.index("K_TO")] += (vals["K_TO"] * math.tan(o) * math.radians(offset_sd_deg)) ** 2
+        C[keys.index("K_TO"), keys.index("K_TO")] += (
+            vals["K_TO"] * math.tan(o) * math.radians(offset_sd_deg)
+        ) ** 2
     sd = np.sqrt(np.maximum(np.diag(C), 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):  # exact data: zero variances
         R = np.nan_to_num(C / np.outer(sd, sd))
@@ -362,36 +404,75 @@ def fit_channel(ch: str, stations: list[dict], *, latitude_deg: float, earth_rat
         correlation[k] = float(R[i, j]) if others else 0.0
         weaker = [idx[m] for m in names if m != k and rel[m] <= rel[k]]
         jw = max(weaker, key=lambda m: abs(R[i, m])) if weaker else i
-        figures[k] = judged(vals[k], vals[k] - q * sd[i], vals[k] + q * sd[i],
-                            correlation=float(R[i, jw]) if weaker else 0.0, with_=keys[jw])
+        figures[k] = judged(
+            vals[k],
+            vals[k] - q * sd[i],
+            vals[k] + q * sd[i],
+            correlation=float(R[i, jw]) if weaker else 0.0,
+            with_=keys[jw],
+        )
     for a in G_AXES:
         if f"g_{a}" not in figures:
-            figures[f"g_{a}"] = Estimate(math.nan, -math.inf, math.inf, False,
-                                         "the stations do not vary the specific force along this axis")
-    return ChannelFit(ch, figures["K_TO"], figures["drift"], {a: figures[f"g_{a}"] for a in G_AXES},
-                      vals["psi0"] if has_q else None, correlation, tilt, spindle, v, v - resid,
-                      float(np.sqrt(np.mean(resid**2))), dof, correction, figures,
-                      float(sd[idx["psi0"]]) if has_q else None)
+            figures[f"g_{a}"] = Estimate(
+                math.nan,
+                -math.inf,
+                math.inf,
+                False,
+                "the stations do not vary the specific force along this axis",
+            )
+    return ChannelFit(
+        ch,
+        figures["K_TO"],
+        figures["drift"],
+        {a: figures[f"g_{a}"] for a in G_AXES},
+        vals["psi0"] if has_q else None,
+        correlation,
+        tilt,
+        spindle,
+        v,
+        v - resid,
+        float(np.sqrt(np.mean(resid**2))),
+        dof,
+        correction,
+        figures,
+        float(sd[idx["psi0"]]) if has_q else None,
+    )
 
 
-def fit_earth_rate(stations: list[dict], *, latitude_deg: float, earth_rate_rad_per_s: float,
-                   restraint_s: dict[str, float] | None = None, pickoff_mV_per_urad: dict[str, float] | None = None,
-                   instability_urad_per_s: dict[str, float] | None = None,
-                   pickoff_rel_uncertainty: dict[str, float | None] | None = None) -> dict[str, ChannelFit]:
+def fit_earth_rate(
+    stations: list[dict],
+    *,
+    latitude_deg: float,
+    earth_rate_rad_per_s: float,
+    restraint_s: dict[str, float] | None = None,
+    pickoff_mV_per_urad: dict[str, float] | None = None,
+    instability_urad_per_s: dict[str, float] | None = None,
+    pickoff_rel_uncertainty: dict[str, float | None] | None = None,
+) -> dict[str, ChannelFit]:
     """Every channel's fit from the stations in visiting order: the horizontal channels first
     (each profiles the base's azimuth offset), then Z at their mean offset. That offset's
     uncertainty is the larger of the channels' own standard uncertainties and their spread (a
     gyro's input axis misaligned on the platform turns its psi0, not the table's): no credit
     for averaging them."""
+
     def one(ch: str, offset: float | None, offset_sd: float = 0.0) -> ChannelFit:
-        return fit_channel(ch, stations, latitude_deg=latitude_deg, earth_rate_rad_per_s=earth_rate_rad_per_s,
-                           restraint_s=(restraint_s or {}).get(ch), pickoff_mV_per_urad=(pickoff_mV_per_urad or {}).get(ch),
-                           offset_deg=offset, offset_sd_deg=offset_sd,
-                           instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0,
-                           pickoff_rel_uncertainty=(pickoff_rel_uncertainty or {}).get(ch))
+        return fit_channel(
+            ch,
+            stations,
+            latitude_deg=latitude_deg,
+            earth_rate_rad_per_s=earth_rate_rad_per_s,
+            restraint_s=(restraint_s or {}).get(ch),
+            pickoff_mV_per_urad=(pickoff_mV_per_urad or {}).get(ch),
+            offset_deg=offset,
+            offset_sd_deg=offset_sd,
+            instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0,
+            pickoff_rel_uncertainty=(pickoff_rel_uncertainty or {}).get(ch),
+        )
 
     fits = {ch: one(ch, None) for ch in HORIZONTAL}
     psi0 = [float(fits[c].psi0_deg or 0.0) for c in HORIZONTAL]
-    offset_sd = max(max(float(fits[c].psi0_sd_deg or 0.0) for c in HORIZONTAL), float(np.std(psi0, ddof=1)))
+    offset_sd = max(
+        max(float(fits[c].psi0_sd_deg or 0.0) for c in HORIZONTAL), float(np.std(psi0, ddof=1))
+    )
     fits["Z"] = one("Z", float(np.mean(psi0)), offset_sd)
     return {ch: fits[ch] for ch in GYRO_CHANNELS}

@@ -56,16 +56,16 @@ PATH_TOLERANCE = 0.10
 class Loop:
     """One amplitude: its synchronously averaged cycle and first harmonics."""
 
-    amplitude_urad: float              # of the angle's fundamental
+    amplitude_urad: float  # of the angle's fundamental
     command_amplitude_V: float
     n_cycles: int
     t0_s: float
     t1_s: float
-    theta_urad: np.ndarray = field(repr=False)     # averaged cycle, phase bins
-    torque_Nm: np.ndarray = field(repr=False)      # measured, less the segment's offset
-    model_Nm: np.ndarray = field(repr=False)       # Dahl along the measured angle, fitted parameters
-    describing_Nm_per_rad: complex = 0j            # measured first-harmonic torque / angle
-    model_describing_Nm_per_rad: complex = 0j      # eq. 5.12 at this amplitude, fitted parameters
+    theta_urad: np.ndarray = field(repr=False)  # averaged cycle, phase bins
+    torque_Nm: np.ndarray = field(repr=False)  # measured, less the segment's offset
+    model_Nm: np.ndarray = field(repr=False)  # Dahl along the measured angle, fitted parameters
+    describing_Nm_per_rad: complex = 0j  # measured first-harmonic torque / angle
+    model_describing_Nm_per_rad: complex = 0j  # eq. 5.12 at this amplitude, fitted parameters
     residual_rms_Nm: float = 0.0
     offset_Nm: float = 0.0
 
@@ -87,8 +87,8 @@ class HysteresisResult:
     scan: dahl.PathScan
     loops: list[Loop]
     residual_rms_Nm: float
-    relative_residual: float           # residual rms / largest loop's torque half-range
-    calibration_source: str            # "file" | "given" | "defaults"
+    relative_residual: float  # residual rms / largest loop's torque half-range
+    calibration_source: str  # "file" | "given" | "defaults"
     rate_hz: float
     #: a stretch of the largest loop for the time-history plot (Fig. 50): t, angle, torque, model
     history: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
@@ -139,7 +139,9 @@ def calibration_from_meta(data: Any) -> RigCalibration | None:
         if "platform" in kw:
             kw["platform"] = {a: _make(PlatformConstants, v) for a, v in kw["platform"].items()}
         if "autocollimator" in kw:
-            kw["autocollimator"] = {a: _make(AutocollimatorConstants, v) for a, v in kw["autocollimator"].items()}
+            kw["autocollimator"] = {
+                a: _make(AutocollimatorConstants, v) for a, v in kw["autocollimator"].items()
+            }
         cal = RigCalibration(**kw)
     except (TypeError, AttributeError, ValueError) as exc:
         raise ValueError(f"/meta/calibration is not a rig calibration ({exc})") from None
@@ -149,8 +151,10 @@ def calibration_from_meta(data: Any) -> RigCalibration | None:
                 v = getattr(consts, f.name)
                 ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
                 if not ok or v < 0 or (v == 0 and f.name != "damping_Nms"):
-                    raise ValueError(f"/meta/calibration: {where}.{axis}.{f.name} = {v!r} must be a finite positive "
-                                     "number")
+                    raise ValueError(
+                        f"/meta/calibration: {where}.{axis}.{f.name} = {v!r} must be a finite positive "
+                        "number"
+                    )
     return cal
 
 
@@ -164,8 +168,15 @@ def _make(cls: type, value: Any) -> Any:
 MAX_PLAUSIBLE_V = 1e6
 
 
-def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration | None = None, *,
-                 settle_cycles: int = 1, angle_lag_s: float | None = None, bins: int = 200) -> HysteresisResult:
+def analyze_file(
+    path: str | Path,
+    axis: str = "X",
+    calibration: RigCalibration | None = None,
+    *,
+    settle_cycles: int = 1,
+    angle_lag_s: float | None = None,
+    bins: int = 200,
+) -> HysteresisResult:
     """Dahl's To and eta, the loops and the describing function from any "fbs-run" file with
     ``cmd_<a>``, ``ac_<a>_inst`` and ``pa_<a>`` channels recorded during a sinusoidal command
     at one frequency and a ladder of amplitudes (``settle_cycles`` at each new amplitude are
@@ -183,16 +194,20 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     if a not in AXES:
         raise ValueError(f"unknown axis {axis!r} (the platform axes are {', '.join(AXES)})")
     if a not in AC_AXES:
-        raise ValueError(f"axis {a} has no instrumentation autocollimator channel (ac_{a.lower()}_inst) to measure "
-                         f"the angle with; the hysteresis analysis works on {' or '.join(AC_AXES)}")
+        raise ValueError(
+            f"axis {a} has no instrumentation autocollimator channel (ac_{a.lower()}_inst) to measure "
+            f"the angle with; the hysteresis analysis works on {' or '.join(AC_AXES)}"
+        )
     names = (f"cmd_{a.lower()}", f"ac_{a.lower()}_inst", f"pa_{a.lower()}")
     warnings: list[str] = []
     try:
         with RunFile(path) as rf:
             missing = [c for c in names if c not in rf.channels]
             if missing:
-                raise ValueError(f"{path}: no channel(s) {', '.join(missing)} for axis {a} "
-                                 f"(the file has {', '.join(rf.channels)})")
+                raise ValueError(
+                    f"{path}: no channel(s) {', '.join(missing)} for axis {a} "
+                    f"(the file has {', '.join(rf.channels)})"
+                )
             fs = rf.rate_hz
             data = rf.read(list(names))
             meta = rf.meta
@@ -205,20 +220,26 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         if calibration is None:
             calibration = RigCalibration()
             source = "defaults"
-            msg = (f"{path.name} records no rig calibration (/meta/calibration): using the data sheet's "
-                   f"default constants")
+            msg = (
+                f"{path.name} records no rig calibration (/meta/calibration): using the data sheet's "
+                f"default constants"
+            )
             log.warning(msg)
             warnings.append(msg)
     if a not in calibration.platform or a not in calibration.autocollimator:
-        raise ValueError(f"axis {a!r}: the rig calibration has no platform and instrumentation-autocollimator "
-                         f"constants for it (axes with both: "
-                         f"{', '.join(sorted(set(calibration.platform) & set(calibration.autocollimator)))})")
+        raise ValueError(
+            f"axis {a!r}: the rig calibration has no platform and instrumentation-autocollimator "
+            f"constants for it (axes with both: "
+            f"{', '.join(sorted(set(calibration.platform) & set(calibration.autocollimator)))})"
+        )
     plat, ac = calibration.platform[a], calibration.autocollimator[a]
     for name, x in zip(names, data):
         peak = float(np.nanmax(np.abs(x))) if np.isfinite(x).any() else 0.0
         if peak > MAX_PLAUSIBLE_V or np.isinf(x).any():
-            raise ValueError(f"{path}: {name} reaches {peak:.3g} V (or infinity): beyond the {MAX_PLAUSIBLE_V:g} V "
-                             "of any recorded voltage; the file is damaged or not a rig's record")
+            raise ValueError(
+                f"{path}: {name} reaches {peak:.3g} V (or infinity): beyond the {MAX_PLAUSIBLE_V:g} V "
+                "of any recorded voltage; the file is damaged or not a rig's record"
+            )
     cmd, inst, pa = data
     if len(cmd) < 16:
         raise ValueError(f"{path}: {len(cmd)} samples are too few for an analysis")
@@ -231,8 +252,10 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         raise ValueError(f"{exc}{lost_why}") from None
     segments = dahl.find_segments(np.nan_to_num(cmd), fs, freq, settle_cycles=settle_cycles)
     if not segments:
-        raise ValueError(f"{path}: {names[0]} has no run of at least {2 + settle_cycles} cycles at one amplitude "
-                         f"(a sinusoid near {freq:.4g} Hz); too short, or not a hysteresis sweep{lost_why}")
+        raise ValueError(
+            f"{path}: {names[0]} has no run of at least {2 + settle_cycles} cycles at one amplitude "
+            f"(a sinusoid near {freq:.4g} Hz); too short, or not a hysteresis sweep{lost_why}"
+        )
     # the torque band: the fundamental and its harmonics well into the loops' corners
     fc = min(12.5 * freq, 0.2 * fs)
     finite = np.isfinite(data).all(axis=0)
@@ -240,20 +263,26 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         # Lost samples (a dropped ADC frame): analysed around, never spliced over. The filters
         # run over the whole record, so the lost stretch is bridged by a straight line for them
         # alone, and every cycle within the filters' reach of it is left out (``_around_lost``).
-        lost_where = "; ".join(t for t in (lost_samples(n, x, fs) for n, x in zip(names, data)) if t)
+        lost_where = "; ".join(
+            t for t in (lost_samples(n, x, fs) for n, x in zip(names, data)) if t
+        )
         margin = int(math.ceil(LOST_MARGIN_CORNER_PERIODS * fs / fc)) + LOST_MARGIN_SAMPLES
         segments, left_out = _around_lost(segments, np.flatnonzero(~finite), margin, fs / freq)
         if not segments:
-            raise ValueError(f"{path}: {lost_where}; no run of at least 2 whole cycles at one amplitude is "
-                             f"{margin} samples clear of them ({LOST_SAMPLES_NOTE})")
+            raise ValueError(
+                f"{path}: {lost_where}; no run of at least 2 whole cycles at one amplitude is "
+                f"{margin} samples clear of them ({LOST_SAMPLES_NOTE})"
+            )
         good = np.flatnonzero(finite)
         data = np.array([np.interp(np.arange(data.shape[1]), good, x[good]) for x in data])
         cmd, inst, pa = data
-        msg = (f"{lost_where}: analysed around ({', '.join(left_out)}; cycles within {margin} samples of a lost "
-               f"one are left out)")
+        msg = (
+            f"{lost_where}: analysed around ({', '.join(left_out)}; cycles within {margin} samples of a lost "
+            f"one are left out)"
+        )
         log.warning(msg)
         warnings.append(msg)
-    ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD          # V per rad
+    ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD  # V per rad
     lag_meas: dahl.LagMeasurement | None = None
     kt, dv, inertia = plat.torque_per_pa_V, plat.viscous_Nms, plat.inertia_kg_m2
 
@@ -264,14 +293,25 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
 
     if angle_lag_s is None:
         try:
-            lag_meas = dahl.measure_lag(cmd, inst / ac_scale, pa, fs, freq, segments, rigid,
-                                        min_hz=LAG_MIN_FC * fc, max_hz=LAG_MAX_FS * fs)
+            lag_meas = dahl.measure_lag(
+                cmd,
+                inst / ac_scale,
+                pa,
+                fs,
+                freq,
+                segments,
+                rigid,
+                min_hz=LAG_MIN_FC * fc,
+                max_hz=LAG_MAX_FS * fs,
+            )
             lag_s, lag_se, lag_source = lag_meas.lag_s, lag_meas.se_s, "measured"
         except ValueError as exc:
             # no line to measure it at (a smooth command): the lag is fitted with To and eta
             # (``dahl.fit_dahl``), from the data sheet's filters and La/Ra as a start only
-            msg = (f"the angle's lag behind the power-amplifier input could not be measured at the command's lines "
-                   f"({exc}): it is fitted with To and eta")
+            msg = (
+                f"the angle's lag behind the power-amplifier input could not be measured at the command's lines "
+                f"({exc}): it is fitted with To and eta"
+            )
             log.info(msg)
             lag_s, lag_se, lag_source = datasheet_lag_s(plat, ac), math.nan, "fitted"
     else:
@@ -285,22 +325,45 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
     q = max(1, int(fs // (ANALYSIS_RATE_PER_FC * fc)))
     fs_a = fs / q
     angle_rad, pa_a, cmd_a = (_decimate(x, q) for x in (inst / ac_scale, pa, cmd))
-    seg_a = [dahl.Segment(int(round(sg.start / q)), int(round(sg.stop / q)), int(round(sg.lead_start / q)),
-                          sg.n_cycles, sg.command_amplitude) for sg in segments] if q > 1 else segments
+    seg_a = (
+        [
+            dahl.Segment(
+                int(round(sg.start / q)),
+                int(round(sg.stop / q)),
+                int(round(sg.lead_start / q)),
+                sg.n_cycles,
+                sg.command_amplitude,
+            )
+            for sg in segments
+        ]
+        if q > 1
+        else segments
+    )
     fit_lag = lag_source == "fitted"
     max_fit_lag = min(FIT_LAG_RANGE_S, 15.0 / fs) if fit_lag else 0.0
     theta, theta_f, torque, lag_term = _torque(angle_rad, pa_a, fs_a, fc, plat, lag_s)
     top = min(10.0 * fc, 0.35 * fs_a)
     cutoffs = [c for c in 1.25 * fc * 1.25 ** np.arange(20) if c <= top] or [fc]
     step = max(1, int(fs_a / (8.0 * fc)))
-    fit, scan = dahl.fit_dahl_path(theta, torque, seg_a, fs_a, smooth_hz=fc, cutoffs_hz=cutoffs, step=step,
-                                   independent_every=max(1, int(fs_a / (2.0 * fc))),
-                                   lag_term_Nm=lag_term if fit_lag else None, max_lag_s=max_fit_lag)
+    fit, scan = dahl.fit_dahl_path(
+        theta,
+        torque,
+        seg_a,
+        fs_a,
+        smooth_hz=fc,
+        cutoffs_hz=cutoffs,
+        step=step,
+        independent_every=max(1, int(fs_a / (2.0 * fc))),
+        lag_term_Nm=lag_term if fit_lag else None,
+        max_lag_s=max_fit_lag,
+    )
     path_cutoff_hz = fit.path_cutoff_hz
     assert path_cutoff_hz is not None  # fit_dahl_path sets it on the fit it returns
     if fit.path_cutoff_hz in (cutoffs[0], cutoffs[-1]) and len(cutoffs) > 1:
-        msg = (f"the angle-path bandwidth that fits best, {fit.path_cutoff_hz:.3g} Hz, is at the end of the "
-               f"range tried ({cutoffs[0]:.3g}..{cutoffs[-1]:.3g} Hz)")
+        msg = (
+            f"the angle-path bandwidth that fits best, {fit.path_cutoff_hz:.3g} Hz, is at the end of the "
+            f"range tried ({cutoffs[0]:.3g}..{cutoffs[-1]:.3g} Hz)"
+        )
         log.warning(msg)
         warnings.append(msg)
     base_lag = lag_s
@@ -308,10 +371,27 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         # the fitted lag taken out: the angle, its low-passed copy and the torque formed again
         lag_s = base_lag + fit.lag_s
         theta, theta_f, torque, _ = _torque(angle_rad, pa_a, fs_a, fc, plat, lag_s)
-    chain = _Chain(inst / ac_scale, pa, cmd, fs, freq, fc, segments, plat, step, cutoffs,
-                   rigid if lag_source == "measured" else None, lag_s,
-                   lag_meas.frequencies_hz if lag_meas is not None else None,
-                   angle_rad, pa_a, fs_a, seg_a, base_lag, max_fit_lag)
+    chain = _Chain(
+        inst / ac_scale,
+        pa,
+        cmd,
+        fs,
+        freq,
+        fc,
+        segments,
+        plat,
+        step,
+        cutoffs,
+        rigid if lag_source == "measured" else None,
+        lag_s,
+        lag_meas.frequencies_hz if lag_meas is not None else None,
+        angle_rad,
+        pa_a,
+        fs_a,
+        seg_a,
+        base_lag,
+        max_fit_lag,
+    )
     lag_choice = (np.zeros(3), np.zeros(3))
     if fit_lag:
         # The fitted lag takes up whatever of the model's error looks like a lag (the platform's
@@ -320,17 +400,33 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         # The data sheet's lag (its filters and La/Ra) is the other plausible choice: the
         # figures at it bound the lag's error (a rectangular bound, as the path's bandwidth)
         theta0, _, torque0, _ = _torque(angle_rad, pa_a, fs_a, fc, plat, base_lag)
-        at_sheet = dahl.fit_dahl(dahl.lowpass(theta0, fs_a, path_cutoff_hz), torque0, seg_a, fs_a, smooth_hz=fc,
-                                 step=step, start=(fit.To_Nm, fit.eta_per_Nm))
-        d = np.log([at_sheet.To_Nm / fit.To_Nm, at_sheet.eta_per_Nm / fit.eta_per_Nm,
-                    at_sheet.stiffness_Nm_per_rad / fit.stiffness_Nm_per_rad])
+        at_sheet = dahl.fit_dahl(
+            dahl.lowpass(theta0, fs_a, path_cutoff_hz),
+            torque0,
+            seg_a,
+            fs_a,
+            smooth_hz=fc,
+            step=step,
+            start=(fit.To_Nm, fit.eta_per_Nm),
+        )
+        d = np.log(
+            [
+                at_sheet.To_Nm / fit.To_Nm,
+                at_sheet.eta_per_Nm / fit.eta_per_Nm,
+                at_sheet.stiffness_Nm_per_rad / fit.stiffness_Nm_per_rad,
+            ]
+        )
         lag_choice = (np.maximum(-d, 0.0), np.maximum(d, 0.0))
-    estimates, ses, dof, lags = _jackknife(fit, chain, lag_source, scan.envelope(PATH_TOLERANCE), lag_choice)
+    estimates, ses, dof, lags = _jackknife(
+        fit, chain, lag_source, scan.envelope(PATH_TOLERANCE), lag_choice
+    )
     if fit_lag:
         G = len(lags)
-        lag_se = float(np.sqrt((G - 1) / G * np.sum((lags - lags.mean()) ** 2))) if G >= 2 else math.nan
+        lag_se = (
+            float(np.sqrt((G - 1) / G * np.sum((lags - lags.mean()) ** 2))) if G >= 2 else math.nan
+        )
     model = np.full(len(theta), np.nan)
-    model[fit.start:fit.stop] = fit.model_Nm
+    model[fit.start : fit.stop] = fit.model_Nm
     loops: list[Loop] = []
     k = fit.stiffness_Nm_per_rad
     for seg, off, rms in zip(seg_a, fit.offsets_Nm, fit.residual_rms_Nm):
@@ -341,22 +437,66 @@ def analyze_file(path: str | Path, axis: str = "X", calibration: RigCalibration 
         n_meas = dahl.first_harmonic(tq_c) / a1
         amp = abs(a1)
         n_model = complex(dahl.describing_function(fit.eta_per_Nm * fit.To_Nm * amp)) * k
-        loops.append(Loop(amp / URAD, seg.command_amplitude, seg.n_cycles, seg.start / fs_a, seg.stop / fs_a,
-                          th_c / URAD, tq_c, md_c, n_meas, n_model, rms, off))
+        loops.append(
+            Loop(
+                amp / URAD,
+                seg.command_amplitude,
+                seg.n_cycles,
+                seg.start / fs_a,
+                seg.stop / fs_a,
+                th_c / URAD,
+                tq_c,
+                md_c,
+                n_meas,
+                n_model,
+                rms,
+                off,
+            )
+        )
     big = max(range(len(loops)), key=lambda i: loops[i].amplitude_urad)
     half_range = 0.5 * float(np.ptp(loops[big].torque_Nm))
     relative = fit.residual_rms_total_Nm / half_range if half_range > 0 else math.inf
-    linear = linear_bearing_fit(dahl.lowpass(theta, fs_a, path_cutoff_hz), torque, seg_a, fs_a, fc, step)
+    linear = linear_bearing_fit(
+        dahl.lowpass(theta, fs_a, path_cutoff_hz), torque, seg_a, fs_a, fc, step
+    )
     estimates = _applicable(estimates, fit, loops, linear)
     s = seg_a[big]
     n_hist = min(s.stop - s.start, int(round(1.5 * fs_a / freq)))
     sl = slice(s.start, s.start + n_hist)
-    history = {"t_s": np.arange(sl.start, sl.stop) / fs_a, "theta_urad": theta_f[sl] / URAD,
-               "torque_Nm": torque[sl] - fit.offsets_Nm[big], "model_Nm": model[sl] - fit.offsets_Nm[big]}
-    return HysteresisResult(str(path), a, freq, fit.To_Nm, fit.eta_per_Nm, k, ses[0] * fit.To_Nm,
-                            ses[1] * fit.eta_per_Nm, ses[2] * k, fit.correlation, fc, float(path_cutoff_hz), scan,
-                            loops, fit.residual_rms_total_Nm, relative, source, fs, history, warnings, lag_s, lag_se,
-                            lag_source, lag_meas, estimates, dof)
+    history = {
+        "t_s": np.arange(sl.start, sl.stop) / fs_a,
+        "theta_urad": theta_f[sl] / URAD,
+        "torque_Nm": torque[sl] - fit.offsets_Nm[big],
+        "model_Nm": model[sl] - fit.offsets_Nm[big],
+    }
+    return HysteresisResult(
+        str(path),
+        a,
+        freq,
+        fit.To_Nm,
+        fit.eta_per_Nm,
+        k,
+        ses[0] * fit.To_Nm,
+        ses[1] * fit.eta_per_Nm,
+        ses[2] * k,
+        fit.correlation,
+        fc,
+        float(path_cutoff_hz),
+        scan,
+        loops,
+        fit.residual_rms_total_Nm,
+        relative,
+        source,
+        fs,
+        history,
+        warnings,
+        lag_s,
+        lag_se,
+        lag_source,
+        lag_meas,
+        estimates,
+        dof,
+    )
 
 
 #: the fit runs at about this many torque bandwidths' worth of sample rate (400 Hz for a 0.4 Hz
@@ -372,8 +512,11 @@ def datasheet_lag_s(plat: PlatformConstants, ac: AutocollimatorConstants) -> flo
     the group delays of the instrumentation channel's filters (eq. 3.22: 1/w1 for the first
     order, 2 zeta/w2 for the second) and of the motor's armature, La/Ra (eq. 3.25). Only the
     fitted lag's starting point: the record decides."""
-    return (1.0 / ac.inst_filter1_rad_per_s + 2.0 * ac.inst_filter2_zeta / ac.inst_filter2_rad_per_s
-            + plat.armature_H / plat.armature_ohm)
+    return (
+        1.0 / ac.inst_filter1_rad_per_s
+        + 2.0 * ac.inst_filter2_zeta / ac.inst_filter2_rad_per_s
+        + plat.armature_H / plat.armature_ohm
+    )
 
 
 def _decimate(x: np.ndarray, q: int) -> np.ndarray:
@@ -381,19 +524,33 @@ def _decimate(x: np.ndarray, q: int) -> np.ndarray:
     channel, so none lags another)."""
     if q <= 1:
         return np.asarray(x, dtype=float)
-    return np.asarray(scipy.signal.decimate(np.asarray(x, dtype=float), q, ftype="fir", zero_phase=True))
+    return np.asarray(
+        scipy.signal.decimate(np.asarray(x, dtype=float), q, ftype="fir", zero_phase=True)
+    )
 
 
-def _torque(angle_rad: np.ndarray, pa: np.ndarray, fs: float, fc: float, plat: PlatformConstants,
-            lag_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _torque(
+    angle_rad: np.ndarray,
+    pa: np.ndarray,
+    fs: float,
+    fc: float,
+    plat: PlatformConstants,
+    lag_s: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The angle advanced by ``lag_s``, its copy low-passed at ``fc``, the bearing torque
     (``dahl.bearing_torque``, eq. 3.23-3.27) and that torque's part formed from the angle
     (-D thetadot - I thetaddot, which a further lag would move)."""
     theta = dahl.shift(angle_rad, fs, lag_s)
     theta_f = dahl.lowpass(theta, fs, fc)
     drive = plat.torque_per_pa_V * dahl.lowpass(pa, fs, fc)
-    torque = dahl.bearing_torque(dahl.lowpass(pa, fs, fc), theta_f, fs, torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
-                                 viscous_Nms=plat.viscous_Nms, inertia_kg_m2=plat.inertia_kg_m2)
+    torque = dahl.bearing_torque(
+        dahl.lowpass(pa, fs, fc),
+        theta_f,
+        fs,
+        torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
+        viscous_Nms=plat.viscous_Nms,
+        inertia_kg_m2=plat.inertia_kg_m2,
+    )
     return theta, theta_f, torque, torque - drive
 
 
@@ -408,12 +565,21 @@ MIN_COULOMB_X = 1.0
 MAX_RESIDUAL_VS_LINEAR = 0.5
 
 
-def linear_bearing_fit(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: list[dahl.Segment], fs: float,
-                       smooth_hz: float, step: int) -> tuple[float, float, float]:
+def linear_bearing_fit(
+    path_rad: np.ndarray,
+    torque_Nm: np.ndarray,
+    segments: list[dahl.Segment],
+    fs: float,
+    smooth_hz: float,
+    step: int,
+) -> tuple[float, float, float]:
     """(k, c, residual rms) of the linear bearing T = k theta + c thetadot (a spring and a
     damper, Ch. III G) fitted like ``dahl.fit_dahl`` (the same samples, one offset per
     segment, the model low-passed alike): the alternative Dahl's model must beat."""
-    cols = [dahl.lowpass(path_rad, fs, smooth_hz), dahl.lowpass(np.gradient(path_rad) * fs, fs, smooth_hz)]
+    cols = [
+        dahl.lowpass(path_rad, fs, smooth_hz),
+        dahl.lowpass(np.gradient(path_rad) * fs, fs, smooth_hz),
+    ]
     rows, ys = [], []
     for sg in segments:
         i = np.arange(sg.start, sg.stop, max(1, step))
@@ -425,8 +591,12 @@ def linear_bearing_fit(path_rad: np.ndarray, torque_Nm: np.ndarray, segments: li
     return float(coef[0]), float(coef[1]), float(np.sqrt(np.mean((y - X @ coef) ** 2)))
 
 
-def _applicable(estimates: dict[str, Estimate], fit: dahl.DahlFit, loops: list[Loop],
-                linear: tuple[float, float, float]) -> dict[str, Estimate]:
+def _applicable(
+    estimates: dict[str, Estimate],
+    fit: dahl.DahlFit,
+    loops: list[Loop],
+    linear: tuple[float, float, float],
+) -> dict[str, Estimate]:
     """The estimates, with those whose model does not apply to the record unresolved and the
     reason stated (issue 38 item 1). Dahl's figures mean something only where the torque
     follows eq. 5.2: where the fit ends on the edge of its search, or explains the torque no
@@ -438,21 +608,29 @@ def _applicable(estimates: dict[str, Estimate], fit: dahl.DahlFit, loops: list[L
     k_lin, c_lin, r_lin = linear
     why_all = ""
     if fit.at_edge:
-        why_all = (f"the fit ran to the edge of its search ({', '.join(fit.at_edge)}): the torque does not follow "
-                   f"Dahl's model (eq. 5.2), no bearing friction it describes")
+        why_all = (
+            f"the fit ran to the edge of its search ({', '.join(fit.at_edge)}): the torque does not follow "
+            f"Dahl's model (eq. 5.2), no bearing friction it describes"
+        )
     elif not fit.residual_rms_total_Nm <= MAX_RESIDUAL_VS_LINEAR * r_lin:
-        why_all = (f"Dahl's model (eq. 5.2) explains the torque no better than a linear bearing (spring {k_lin:.3g} "
-                   f"N m/rad, damper {c_lin:.3g} N m s: residual {r_lin * 1e3:.3g} mN m against Dahl's "
-                   f"{fit.residual_rms_total_Nm * 1e3:.3g}): no friction of eq. 5.2 in the record (none, viscous, "
-                   f"or a spring)")
-    x_max = max((fit.eta_per_Nm * fit.To_Nm * lp.amplitude_urad * URAD for lp in loops), default=0.0)
+        why_all = (
+            f"Dahl's model (eq. 5.2) explains the torque no better than a linear bearing (spring {k_lin:.3g} "
+            f"N m/rad, damper {c_lin:.3g} N m s: residual {r_lin * 1e3:.3g} mN m against Dahl's "
+            f"{fit.residual_rms_total_Nm * 1e3:.3g}): no friction of eq. 5.2 in the record (none, viscous, "
+            f"or a spring)"
+        )
+    x_max = max(
+        (fit.eta_per_Nm * fit.To_Nm * lp.amplitude_urad * URAD for lp in loops), default=0.0
+    )
     out: dict[str, Estimate] = {}
     for key, e in estimates.items():
         why = why_all
         if not why and key != "stiffness_Nm_per_rad" and not x_max >= MIN_COULOMB_X:
-            why = (f"the largest loop reaches eta To theta_o = {x_max:.3g}, under {MIN_COULOMB_X:g}: the bearing never "
-                   f"slips (friction beyond the torques applied), so To and eta are not determined apart (eq. 5.9), "
-                   f"only eta To^2")
+            why = (
+                f"the largest loop reaches eta To theta_o = {x_max:.3g}, under {MIN_COULOMB_X:g}: the bearing never "
+                f"slips (friction beyond the torques applied), so To and eta are not determined apart (eq. 5.9), "
+                f"only eta To^2"
+            )
         out[key] = Estimate(e.value, 0.0, math.inf, False, why) if why else e
     return out
 
@@ -462,9 +640,11 @@ def _half_width(parts: list[tuple[float, float]]) -> float:
     of freedom): t at the Welch-Satterthwaite degrees of freedom times the combined
     uncertainty (GUM G.4.1)."""
     u2 = sum(u * u for u, _ in parts)
-    denom = sum(u ** 4 / dof for u, dof in parts if math.isfinite(dof) and dof > 0)
+    denom = sum(u**4 / dof for u, dof in parts if math.isfinite(dof) and dof > 0)
     nu = u2 * u2 / denom if denom > 0 else math.inf
-    return float(scipy.stats.t.ppf(0.975, nu) if math.isfinite(nu) else scipy.stats.norm.ppf(0.975)) * math.sqrt(u2)
+    return float(
+        scipy.stats.t.ppf(0.975, nu) if math.isfinite(nu) else scipy.stats.norm.ppf(0.975)
+    ) * math.sqrt(u2)
 
 
 #: how far (in periods of the torque band's corner, plus samples for the lag and derivatives) a
@@ -473,8 +653,9 @@ LOST_MARGIN_CORNER_PERIODS = 2.0
 LOST_MARGIN_SAMPLES = 25
 
 
-def _around_lost(segments: list[dahl.Segment], lost: np.ndarray, margin: int,
-                 per: float) -> tuple[list[dahl.Segment], list[str]]:
+def _around_lost(
+    segments: list[dahl.Segment], lost: np.ndarray, margin: int, per: float
+) -> tuple[list[dahl.Segment], list[str]]:
     """Each segment cut to its longest run of whole cycles none of which is within ``margin``
     samples of a ``lost`` sample (at least 2 cycles, else the amplitude is left out); and what
     was left out, in words."""
@@ -499,8 +680,15 @@ def _around_lost(segments: list[dahl.Segment], lost: np.ndarray, margin: int,
         label = f"{seg.command_amplitude:.4g} V amplitude"
         if n >= 2:
             start = int(round(seg.start + first * per_seg))
-            kept.append(dahl.Segment(start, int(round(seg.start + (first + n) * per_seg)), seg.lead_start, n,
-                                     seg.command_amplitude))
+            kept.append(
+                dahl.Segment(
+                    start,
+                    int(round(seg.start + (first + n) * per_seg)),
+                    seg.lead_start,
+                    n,
+                    seg.command_amplitude,
+                )
+            )
             said.append(f"{seg.n_cycles - n} of {seg.n_cycles} cycles at the {label}")
         else:
             said.append(f"every cycle at the {label}")
@@ -511,7 +699,7 @@ def _around_lost(segments: list[dahl.Segment], lost: np.ndarray, margin: int,
 class _Chain:
     """The whole determination (lag, torque, path scan, fit) again, for a jackknife replicate."""
 
-    angle_rad: np.ndarray          # the record at its own rate: the lag's lines are measured on it
+    angle_rad: np.ndarray  # the record at its own rate: the lag's lines are measured on it
     pa: np.ndarray
     cmd: np.ndarray
     fs: float
@@ -521,33 +709,67 @@ class _Chain:
     plat: PlatformConstants
     step: int
     cutoffs: list[float]
-    rigid: Callable[[np.ndarray], np.ndarray] | None     # None: the lag is not measured at lines
+    rigid: Callable[[np.ndarray], np.ndarray] | None  # None: the lag is not measured at lines
     lag_s: float
-    lines_hz: list[float] | None                         # the lines the full record's lag was measured at
-    angle_a: np.ndarray            # the record at the analysis rate (``ANALYSIS_RATE_PER_FC``): the fit's
+    lines_hz: list[float] | None  # the lines the full record's lag was measured at
+    angle_a: np.ndarray  # the record at the analysis rate (``ANALYSIS_RATE_PER_FC``): the fit's
     pa_a: np.ndarray
     fs_a: float
     seg_a: list[dahl.Segment]
-    base_lag_s: float              # a fitted lag: where its search starts (the data sheet's)
-    max_fit_lag_s: float           # > 0: the lag is fitted with To and eta
+    base_lag_s: float  # a fitted lag: where its search starts (the data sheet's)
+    max_fit_lag_s: float  # > 0: the lag is fitted with To and eta
 
     def __call__(self, drop: int, fit: dahl.DahlFit) -> tuple[float, float, float]:
         """(lag, ln To, ln eta) with the ``drop``-th kept cycle of every segment left out."""
         lag = self.lag_s
         if self.rigid is not None:
-            lag = dahl.measure_lag(self.cmd, self.angle_rad, self.pa, self.fs, self.freq, self.segments, self.rigid,
-                                   min_hz=LAG_MIN_FC * self.fc, max_hz=LAG_MAX_FS * self.fs, drop_cycle=drop,
-                                   lines_hz=self.lines_hz).lag_s
+            lag = dahl.measure_lag(
+                self.cmd,
+                self.angle_rad,
+                self.pa,
+                self.fs,
+                self.freq,
+                self.segments,
+                self.rigid,
+                min_hz=LAG_MIN_FC * self.fc,
+                max_hz=LAG_MAX_FS * self.fs,
+                drop_cycle=drop,
+                lines_hz=self.lines_hz,
+            ).lag_s
         fitted = self.max_fit_lag_s > 0
-        theta, _, torque, term = _torque(self.angle_a, self.pa_a, self.fs_a, self.fc, self.plat,
-                                         self.base_lag_s if fitted else lag)
+        theta, _, torque, term = _torque(
+            self.angle_a,
+            self.pa_a,
+            self.fs_a,
+            self.fc,
+            self.plat,
+            self.base_lag_s if fitted else lag,
+        )
         assert fit.path_cutoff_hz is not None
         # the path's bandwidth is chosen again, near the full record's choice
-        near = sorted({*(c for c in self.cutoffs if fit.path_cutoff_hz / 1.6 <= c <= fit.path_cutoff_hz * 1.6),
-                       fit.path_cutoff_hz})
-        f, _ = dahl.fit_dahl_path(theta, torque, self.seg_a, self.fs_a, smooth_hz=self.fc, cutoffs_hz=near,
-                                  step=self.step, drop_cycle=drop, start=(fit.To_Nm, fit.eta_per_Nm, fit.lag_s),
-                                  lag_term_Nm=term if fitted else None, max_lag_s=self.max_fit_lag_s)
+        near = sorted(
+            {
+                *(
+                    c
+                    for c in self.cutoffs
+                    if fit.path_cutoff_hz / 1.6 <= c <= fit.path_cutoff_hz * 1.6
+                ),
+                fit.path_cutoff_hz,
+            }
+        )
+        f, _ = dahl.fit_dahl_path(
+            theta,
+            torque,
+            self.seg_a,
+            self.fs_a,
+            smooth_hz=self.fc,
+            cutoffs_hz=near,
+            step=self.step,
+            drop_cycle=drop,
+            start=(fit.To_Nm, fit.eta_per_Nm, fit.lag_s),
+            lag_term_Nm=term if fitted else None,
+            max_lag_s=self.max_fit_lag_s,
+        )
         if fitted:
             lag = self.base_lag_s + f.lag_s
         return lag, math.log(f.To_Nm), math.log(f.eta_per_Nm)
@@ -557,20 +779,36 @@ class _Chain:
         record's angle-path bandwidth, and its lag unless the lag is fitted; the model still
         runs along the whole path)."""
         fitted = self.max_fit_lag_s > 0
-        theta, _, torque, term = _torque(self.angle_a, self.pa_a, self.fs_a, self.fc, self.plat,
-                                         self.base_lag_s if fitted else self.lag_s)
+        theta, _, torque, term = _torque(
+            self.angle_a,
+            self.pa_a,
+            self.fs_a,
+            self.fc,
+            self.plat,
+            self.base_lag_s if fitted else self.lag_s,
+        )
         assert fit.path_cutoff_hz is not None
-        f = dahl.fit_dahl(dahl.lowpass(theta, self.fs_a, fit.path_cutoff_hz), torque,
-                          [s for i, s in enumerate(self.seg_a) if i != j], self.fs_a, smooth_hz=self.fc,
-                          step=self.step, start=(fit.To_Nm, fit.eta_per_Nm, fit.lag_s),
-                          lag_term_Nm=term if fitted else None, max_lag_s=self.max_fit_lag_s)
+        f = dahl.fit_dahl(
+            dahl.lowpass(theta, self.fs_a, fit.path_cutoff_hz),
+            torque,
+            [s for i, s in enumerate(self.seg_a) if i != j],
+            self.fs_a,
+            smooth_hz=self.fc,
+            step=self.step,
+            start=(fit.To_Nm, fit.eta_per_Nm, fit.lag_s),
+            lag_term_Nm=term if fitted else None,
+            max_lag_s=self.max_fit_lag_s,
+        )
         return math.log(f.To_Nm), math.log(f.eta_per_Nm)
 
 
-def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
-               path_choice: tuple[np.ndarray, np.ndarray],
-               lag_choice: tuple[np.ndarray, np.ndarray] | None = None,
-               ) -> tuple[dict[str, Estimate], list[float], int, np.ndarray]:
+def _jackknife(
+    fit: dahl.DahlFit,
+    chain: _Chain,
+    lag_source: str,
+    path_choice: tuple[np.ndarray, np.ndarray],
+    lag_choice: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[dict[str, Estimate], list[float], int, np.ndarray]:
     """To, eta and eta To^2 with 95 % intervals from three standard uncertainties (in ln):
 
     * within amplitudes: the whole chain (the lag measured, the torque formed, the path's
@@ -606,16 +844,35 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
     A fitted lag (``lag_source`` "fitted") is fitted again in every replicate, so its error
     is in both terms. Also returned: the relative standard errors (To, eta, stiffness; the
     cycles'), the cycles' degrees of freedom and the replicates' lags."""
-    values = {"To_Nm": fit.To_Nm, "eta_per_Nm": fit.eta_per_Nm, "stiffness_Nm_per_rad": fit.stiffness_Nm_per_rad}
+    values = {
+        "To_Nm": fit.To_Nm,
+        "eta_per_Nm": fit.eta_per_Nm,
+        "stiffness_Nm_per_rad": fit.stiffness_Nm_per_rad,
+    }
     G = min(s.n_cycles for s in chain.segments)
     if G < 2:
-        return ({k: Estimate(v, math.nan, math.nan, False, f"{G} cycle per amplitude is too few for an interval")
-                 for k, v in values.items()}, [math.nan] * 3, max(0, G - 1), np.array([chain.lag_s]))
+        return (
+            {
+                k: Estimate(
+                    v,
+                    math.nan,
+                    math.nan,
+                    False,
+                    f"{G} cycle per amplitude is too few for an interval",
+                )
+                for k, v in values.items()
+            },
+            [math.nan] * 3,
+            max(0, G - 1),
+            np.array([chain.lag_s]),
+        )
 
     def with_stiffness(ln: np.ndarray) -> np.ndarray:
-        return np.column_stack([ln[:, 0], ln[:, 1], 2 * ln[:, 0] + ln[:, 1]])    # ln k = 2 ln To + ln eta
+        return np.column_stack(
+            [ln[:, 0], ln[:, 1], 2 * ln[:, 0] + ln[:, 1]]
+        )  # ln k = 2 ln To + ln eta
 
-    reps = np.array([chain(j, fit) for j in range(G)])            # G x (lag, ln To, ln eta)
+    reps = np.array([chain(j, fit) for j in range(G)])  # G x (lag, ln To, ln eta)
     lnc = with_stiffness(reps[:, 1:])
     se = np.sqrt((G - 1) / G * np.sum((lnc - lnc.mean(axis=0)) ** 2, axis=0))
     M = len(chain.seg_a)
@@ -623,10 +880,17 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
         ln_full = with_stiffness(np.log([[fit.To_Nm, fit.eta_per_Nm]]))[0]
         lna = with_stiffness(np.array([chain.without_amplitude(j, fit) for j in range(M)]))
         h = np.asarray(fit.leverage, dtype=float)
-        w = 1.0 - h if h.shape == (M, 3) and np.all(np.isfinite(h)) else np.full((M, 3), (M - 1) / M)
+        w = (
+            1.0 - h
+            if h.shape == (M, 3) and np.all(np.isfinite(h))
+            else np.full((M, 3), (M - 1) / M)
+        )
         se_amp = np.sqrt(np.sum(w * (lna - ln_full) ** 2, axis=0))
     else:
-        log.warning("%d amplitude(s): too few to judge the model by; the intervals hold the cycles' noise only", M)
+        log.warning(
+            "%d amplitude(s): too few to judge the model by; the intervals hold the cycles' noise only",
+            M,
+        )
         se_amp = np.zeros(3)
     down, up = path_choice
     lag_down, lag_up = lag_choice if lag_choice is not None else (np.zeros(3), np.zeros(3))
@@ -634,8 +898,16 @@ def _jackknife(fit: dahl.DahlFit, chain: _Chain, lag_source: str,
     for i, (key, v) in enumerate(values.items()):
         # the amplitudes' spread holds their noise too: the larger of the two, not their sum
         noise = (float(se[i]), G - 1) if se[i] >= se_amp[i] else (float(se_amp[i]), M - 1)
-        lo, hi = (v * math.exp(s * _half_width([noise, (a[i] / math.sqrt(3), math.inf), (b[i] / math.sqrt(3), math.inf)]))
-                  for s, a, b in ((-1, down, lag_down), (1, up, lag_up)))
+        lo, hi = (
+            v
+            * math.exp(
+                s
+                * _half_width(
+                    [noise, (a[i] / math.sqrt(3), math.inf), (b[i] / math.sqrt(3), math.inf)]
+                )
+            )
+            for s, a, b in ((-1, down, lag_down), (1, up, lag_up))
+        )
         # To and eta are told apart by the ladder reaching both regimes (the procedure's limits
         # on eta To theta_o, and ``_applicable``), not by their correlation: each is judged by
         # its own interval

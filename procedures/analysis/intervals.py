@@ -46,7 +46,9 @@ class Estimate:
         return self.lo <= truth <= self.hi
 
 
-def judged(value: float, lo: float, hi: float, *, correlation: float = 0.0, with_: str = "") -> Estimate:
+def judged(
+    value: float, lo: float, hi: float, *, correlation: float = 0.0, with_: str = ""
+) -> Estimate:
     """An estimate with its interval, resolved unless the interval is degenerate (not finite, of
     zero width, or not holding the value strictly inside), wider than the value's magnitude, or
     ``|correlation|`` (with the estimate named ``with_``) exceeds ``MAX_CORRELATION``."""
@@ -56,22 +58,39 @@ def judged(value: float, lo: float, hi: float, *, correlation: float = 0.0, with
     # a degenerate interval is no measured error (issue 38 item 1: a fit pinned to the edge of
     # its search gave [v, v], "relative standard error 0 ... pass")
     if not hi > lo:
-        return Estimate(value, lo, hi, False, "its 95 % interval has zero width: no error was measured")
+        return Estimate(
+            value, lo, hi, False, "its 95 % interval has zero width: no error was measured"
+        )
     if not lo < value < hi:
         where = "on" if value in (lo, hi) else "outside"
-        return Estimate(value, lo, hi, False, f"the value lies {where} the edge of its 95 % interval [{lo:.4g}, {hi:.4g}]")
+        return Estimate(
+            value,
+            lo,
+            hi,
+            False,
+            f"the value lies {where} the edge of its 95 % interval [{lo:.4g}, {hi:.4g}]",
+        )
     if abs(correlation) > MAX_CORRELATION:
-        return Estimate(value, lo, hi, False, f"correlates {correlation:+.3f} with {with_ or 'another figure'}")
+        return Estimate(
+            value, lo, hi, False, f"correlates {correlation:+.3f} with {with_ or 'another figure'}"
+        )
     if hi - lo > abs(value):
-        return Estimate(value, lo, hi, False, f"its 95 % interval ({hi - lo:.3g} wide) exceeds its magnitude")
+        return Estimate(
+            value, lo, hi, False, f"its 95 % interval ({hi - lo:.3g} wide) exceeds its magnitude"
+        )
     return Estimate(value, lo, hi, True)
 
 
-def from_stderr(value: float, se: float, *, dof: float | None = None, correlation: float = 0.0,
-                with_: str = "") -> Estimate:
+def from_stderr(
+    value: float, se: float, *, dof: float | None = None, correlation: float = 0.0, with_: str = ""
+) -> Estimate:
     """``value +- q se``, q the 97.5 % point of Student's t with ``dof`` degrees of freedom
     (the normal's without), then ``judged``."""
-    q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof)) if dof else float(scipy.stats.norm.ppf(0.5 + LEVEL / 2))
+    q = (
+        float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof))
+        if dof
+        else float(scipy.stats.norm.ppf(0.5 + LEVEL / 2))
+    )
     return judged(value, value - q * se, value + q * se, correlation=correlation, with_=with_)
 
 
@@ -87,9 +106,12 @@ def finite_json(obj: Any) -> Any:
     return obj
 
 
-def add_figure(values: dict[str, Any], key: str, per_channel: Mapping[str, Estimate], digits: int = 6) -> None:
+def add_figure(
+    values: dict[str, Any], key: str, per_channel: Mapping[str, Estimate], digits: int = 6
+) -> None:
     """Put figure ``key`` into a procedure's JSON ``values``: ``key`` ({channel: value, or None
     where unresolved}), ``key_ci95`` ({channel: [lo, hi]}) and ``resolved[key]``."""
+
     def r(v: float) -> float | None:
         return float(f"{v:.{digits}g}") if math.isfinite(v) else None
 

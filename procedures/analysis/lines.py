@@ -24,8 +24,10 @@ class MeasuredLine:
 
     freq_hz: float
     sigma_hz: float
-    amplitude: float      # in the record's units (biased up by the noise in its bin)
-    narrowness: float     # periodogram peak over its mean across the search span, as a share of a sinusoid's
+    amplitude: float  # in the record's units (biased up by the noise in its bin)
+    narrowness: (
+        float  # periodogram peak over its mean across the search span, as a share of a sinusoid's
+    )
 
     @property
     def is_line(self) -> bool:
@@ -33,7 +35,9 @@ class MeasuredLine:
         return self.narrowness >= LINE_NARROWNESS
 
 
-def refine_line(x: np.ndarray, rate_hz: float, f0: float, search_hz: float, noise_psd: float) -> MeasuredLine:
+def refine_line(
+    x: np.ndarray, rate_hz: float, f0: float, search_hz: float, noise_psd: float
+) -> MeasuredLine:
     """A sinusoid's frequency near ``f0`` measured on the whole record.
 
     A pickup line's frequency is exact to the record's resolution and far beyond: the
@@ -67,14 +71,26 @@ def refine_line(x: np.ndarray, rate_hz: float, f0: float, search_hz: float, nois
     powers = np.array([power(g) for g in grid])
     k = int(np.argmin(powers))
     step = grid[1] - grid[0]
-    res = scipy.optimize.minimize_scalar(power, bounds=(grid[k] - step, grid[k] + step), method="bounded",
-                                         options={"xatol": 1e-4 / T})
+    res = scipy.optimize.minimize_scalar(
+        power,
+        bounds=(grid[k] - step, grid[k] + step),
+        method="bounded",
+        options={"xatol": 1e-4 / T},
+    )
     df = float(res.x)
     amplitude = 2.0 * math.sqrt(-power(df)) / float(np.sum(w))
     tau = t - 0.5 * T
-    var_w = (2.0 * max(noise_psd, 0.0) * rate_hz / 2 * float(np.sum(w * w * tau * tau))
-             / max(amplitude**2 * float(np.sum(w * tau * tau)) ** 2, 1e-300))
+    var_w = (
+        2.0
+        * max(noise_psd, 0.0)
+        * rate_hz
+        / 2
+        * float(np.sum(w * w * tau * tau))
+        / max(amplitude**2 * float(np.sum(w * tau * tau)) ** 2, 1e-300)
+    )
     sigma = math.sqrt(var_w) / (2 * math.pi)
     span = grid[-1] - grid[0]
-    narrowness = float(powers[k] / np.mean(powers)) / (2.0 / 3.0 * span * T) if np.mean(powers) < 0 else 0.0
+    narrowness = (
+        float(powers[k] / np.mean(powers)) / (2.0 / 3.0 * span * T) if np.mean(powers) < 0 else 0.0
+    )
     return MeasuredLine(f0 + df, max(sigma, 0.01 / T), amplitude, narrowness)

@@ -73,7 +73,7 @@ from procedures.analysis.transfer import (
 
 #: the polynomials' variable is s / W_SCALE (rad/s)
 W_SCALE = 100.0
-_S = Polynomial([0.0, W_SCALE])          # s in the scaled variable
+_S = Polynomial([0.0, W_SCALE])  # s in the scaled variable
 
 
 def _lag(w: float) -> Polynomial:
@@ -84,15 +84,23 @@ def _lag(w: float) -> Polynomial:
 def network_poly(p: Mapping[str, float]) -> tuple[float, Polynomial, Polynomial]:
     """Eq. 3.28 as (g, N_c, D_c): C(s) = -g N_c / D_c."""
     num = _lag(p["w2_rad_per_s"]) * _lag(p["w3_rad_per_s"])
-    den = _lag(p["w1_rad_per_s"]) * _lag(p["w4_rad_per_s"]) * _lag(p["w5_rad_per_s"]) * _lag(p["w6_rad_per_s"])
+    den = (
+        _lag(p["w1_rad_per_s"])
+        * _lag(p["w4_rad_per_s"])
+        * _lag(p["w5_rad_per_s"])
+        * _lag(p["w6_rad_per_s"])
+    )
     return float(p["gain"]), num, den
 
 
-def platform_poly(J: float, D: float, k: float, pc: PlatformConstants) -> tuple[Polynomial, Polynomial]:
+def platform_poly(
+    J: float, D: float, k: float, pc: PlatformConstants
+) -> tuple[Polynomial, Polynomial]:
     """Amplifier input -> angle (rad/V), eqs. 3.23-3.27: Kp Km / ((La s + Ra)(J s^2 + D s + k) + Km Kb s)."""
     num = Polynomial([pc.amp_gain * pc.motor_Nm_per_A])
-    den = ((pc.armature_H * _S + pc.armature_ohm) * (J * _S * _S + D * _S + k)
-           + pc.motor_Nm_per_A * pc.back_emf_V_s * _S)
+    den = (pc.armature_H * _S + pc.armature_ohm) * (
+        J * _S * _S + D * _S + k
+    ) + pc.motor_Nm_per_A * pc.back_emf_V_s * _S
     return num, den
 
 
@@ -105,8 +113,9 @@ class GyroCaging:
     restraint_s: float
 
 
-def sensor_poly(kind: str, gain_V_per_rad: float, ac: AutocollimatorConstants,
-                caging: GyroCaging | None = None) -> tuple[Polynomial, Polynomial]:
+def sensor_poly(
+    kind: str, gain_V_per_rad: float, ac: AutocollimatorConstants, caging: GyroCaging | None = None
+) -> tuple[Polynomial, Polynomial]:
     """The loop's sensor as N_s / D_s (module docstring): the control channel's 2nd-order
     filter (eq. 3.21), or the gyro pickoff with its float caged through the autocollimator."""
     w, z = ac.control_filter_rad_per_s, ac.control_filter_zeta
@@ -123,8 +132,13 @@ def sensor_poly(kind: str, gain_V_per_rad: float, ac: AutocollimatorConstants,
     raise ValueError(f"sensor kind {kind!r}: 'ctl' or 'gyro'")
 
 
-def sensor_shape(f_hz: np.ndarray, kind: str, ac: AutocollimatorConstants, gain_V_per_rad: float = 1.0,
-                 caging: GyroCaging | None = None) -> np.ndarray:
+def sensor_shape(
+    f_hz: np.ndarray,
+    kind: str,
+    ac: AutocollimatorConstants,
+    gain_V_per_rad: float = 1.0,
+    caging: GyroCaging | None = None,
+) -> np.ndarray:
     """The sensor's response per unit of ``gain_V_per_rad`` (the caging term does not scale)."""
     f = np.asarray(f_hz, float)
     if kind == "ctl" or caging is None:
@@ -153,25 +167,40 @@ class LoopParts:
         char: Polynomial = dc * dp * ds + g * nc * np_ * ns
         return np.asarray(char.roots(), complex) * W_SCALE
 
-    def sensitivity(self, f_hz: np.ndarray, pc: PlatformConstants, ac: AutocollimatorConstants,
-                    kind: str) -> np.ndarray:
+    def sensitivity(
+        self, f_hz: np.ndarray, pc: PlatformConstants, ac: AutocollimatorConstants, kind: str
+    ) -> np.ndarray:
         """1 / (1 + L(j w)): the amplifier input per K_d V_Td."""
-        p = platform_response(f_hz, self.J, self.D, self.k, pc, ac, "ac_inst") / sensor_scale_V_per_rad(ac, "ac_inst")
-        p = p / sensor_filter(f_hz, ac, "ac_inst")        # amplifier input -> angle
-        loop = (-network_response(f_hz, self.network) * p * self.sensor_V_per_rad
-                * sensor_shape(f_hz, kind, ac, self.sensor_V_per_rad, self.caging))
+        p = platform_response(
+            f_hz, self.J, self.D, self.k, pc, ac, "ac_inst"
+        ) / sensor_scale_V_per_rad(ac, "ac_inst")
+        p = p / sensor_filter(f_hz, ac, "ac_inst")  # amplifier input -> angle
+        loop = (
+            -network_response(f_hz, self.network)
+            * p
+            * self.sensor_V_per_rad
+            * sensor_shape(f_hz, kind, ac, self.sensor_V_per_rad, self.caging)
+        )
         return 1.0 / (1.0 + loop)
 
 
-def sensor_gain(resp: Response, kind: str, ac: AutocollimatorConstants, lo_hz: float, hi_hz: float,
-                caging: GyroCaging | None = None) -> tuple[float, list[float]]:
+def sensor_gain(
+    resp: Response,
+    kind: str,
+    ac: AutocollimatorConstants,
+    lo_hz: float,
+    hi_hz: float,
+    caging: GyroCaging | None = None,
+) -> tuple[float, list[float]]:
     """K_s (V/rad) from the sensor per instrumentation-channel response through V_Td, and its
     leave-one-out replicates: the weighted mean of ln|H / model shape| over the usable band (the
     caged pickoff's shape depends on K_g a little below 1 Hz: two passes)."""
     ok = usable(resp, lo_hz, hi_hz)
     if ok.sum() < 6:
-        raise TransferError(f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
-                            f"with coherence >= 0.5; the sensor's gain needs 6")
+        raise TransferError(
+            f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
+            f"with coherence >= 0.5; the sensor's gain needs 6"
+        )
     f = resp.f[ok]
     inst = sensor_scale_V_per_rad(ac, "ac_inst") * sensor_filter(f, ac, "ac_inst")
     # a bin's weight from its neighbours' errors: 8 blocks give each bin's own error to +-25 %,
@@ -182,7 +211,7 @@ def sensor_gain(resp: Response, kind: str, ac: AutocollimatorConstants, lo_hz: f
         return float(np.exp(np.sum(w * np.log(np.abs(H / shape))) / np.sum(w)))
 
     def gain(H: np.ndarray) -> float:
-        k = fit(H, sensor_shape(f, kind, ac) / inst)      # the caging term left out, then put in
+        k = fit(H, sensor_shape(f, kind, ac) / inst)  # the caging term left out, then put in
         for _ in range(2 if caging is not None else 0):
             k = fit(H, sensor_shape(f, kind, ac, k, caging) / inst)
         return k
@@ -200,16 +229,22 @@ class Root:
     zeta: Estimate | None
 
     def values(self) -> dict[str, Any]:
-        out: dict[str, Any] = {"w_rad_per_s": _r(self.w.value) if self.w.resolved else None,
-                               "w_rad_per_s_ci95": [_r(self.w.lo), _r(self.w.hi)],
-                               "pole": [_r(self.pole.real), _r(self.pole.imag)]}
+        out: dict[str, Any] = {
+            "w_rad_per_s": _r(self.w.value) if self.w.resolved else None,
+            "w_rad_per_s_ci95": [_r(self.w.lo), _r(self.w.hi)],
+            "pole": [_r(self.pole.real), _r(self.pole.imag)],
+        }
         resolved = {"w_rad_per_s": self.w.resolved}
         if self.zeta is not None:
             out["zeta"] = _r(self.zeta.value) if self.zeta.resolved else None
             out["zeta_ci95"] = [_r(self.zeta.lo), _r(self.zeta.hi)]
             resolved["zeta"] = self.zeta.resolved
         out["resolved"] = resolved
-        why = {k: e.why for k, e in (("w_rad_per_s", self.w), ("zeta", self.zeta)) if e is not None and not e.resolved}
+        why = {
+            k: e.why
+            for k, e in (("w_rad_per_s", self.w), ("zeta", self.zeta))
+            if e is not None and not e.resolved
+        }
         if why:
             out["why_unresolved"] = why
         return out
@@ -262,18 +297,37 @@ class ClosedLoop:
 
     def values(self) -> dict[str, Any]:
         s = self.sensor_V_per_rad
-        return {"mode": self.mode, "sensor": self.sensor,
-                "roots": {k: r.values() for k, r in self.named.items()},
-                "all_roots": [[_r(p.real), _r(p.imag)] for p in sorted(self.roots, key=abs) if p.imag >= 0],
-                "sensor_mV_per_urad": _r(s.value * 1e-3), "sensor_mV_per_urad_ci95": [_r(s.lo * 1e-3), _r(s.hi * 1e-3)],
-                "check": {"band_hz": list(self.band_hz), "bins": self.check_bins, "db_rms": _r(self.check_db_rms),
-                          "deg_rms": _r(self.check_deg_rms), "normalized": _r(self.check_normalized)},
-                **({"notes": list(self.notes)} if self.notes else {})}
+        return {
+            "mode": self.mode,
+            "sensor": self.sensor,
+            "roots": {k: r.values() for k, r in self.named.items()},
+            "all_roots": [
+                [_r(p.real), _r(p.imag)] for p in sorted(self.roots, key=abs) if p.imag >= 0
+            ],
+            "sensor_mV_per_urad": _r(s.value * 1e-3),
+            "sensor_mV_per_urad_ci95": [_r(s.lo * 1e-3), _r(s.hi * 1e-3)],
+            "check": {
+                "band_hz": list(self.band_hz),
+                "bins": self.check_bins,
+                "db_rms": _r(self.check_db_rms),
+                "deg_rms": _r(self.check_deg_rms),
+                "normalized": _r(self.check_normalized),
+            },
+            **({"notes": list(self.notes)} if self.notes else {}),
+        }
 
 
-def close_loop(mode: int, parts: LoopParts, replicates: Sequence[LoopParts], pc: PlatformConstants,
-               ac: AutocollimatorConstants, sensitivity: Response, band_hz: tuple[float, float], dof: int,
-               sensor_replicates: Sequence[float]) -> ClosedLoop:
+def close_loop(
+    mode: int,
+    parts: LoopParts,
+    replicates: Sequence[LoopParts],
+    pc: PlatformConstants,
+    ac: AutocollimatorConstants,
+    sensitivity: Response,
+    band_hz: tuple[float, float],
+    dof: int,
+    sensor_replicates: Sequence[float],
+) -> ClosedLoop:
     """Close the loop over ``parts`` and each of ``replicates`` (module docstring)."""
     kind = "ctl" if mode == 3 else "gyro"
     roots = parts.roots(pc, ac, kind)
@@ -285,8 +339,12 @@ def close_loop(mode: int, parts: LoopParts, replicates: Sequence[LoopParts], pc:
         got = np.array([_wz(rr[np.argmin(np.abs(rr - p))]) for rr in rep_roots])
         se = jackknife_se(got)
         w, z = _wz(p)
-        named[name] = Root(name, p, from_stderr(w, float(se[0]), dof=dof),
-                           from_stderr(z, float(se[1]), dof=dof) if abs(p.imag) > 0 else None)
+        named[name] = Root(
+            name,
+            p,
+            from_stderr(w, float(se[0]), dof=dof),
+            from_stderr(z, float(se[1]), dof=dof) if abs(p.imag) > 0 else None,
+        )
     s_se = float(jackknife_se(np.asarray(sensor_replicates)))
     sensor = from_stderr(parts.sensor_V_per_rad, s_se, dof=dof)
     # the check: the closed model against the measured sensitivity
@@ -294,17 +352,35 @@ def close_loop(mode: int, parts: LoopParts, replicates: Sequence[LoopParts], pc:
     f = sensitivity.f[ok]
     q = np.log(parts.sensitivity(f, pc, ac, kind) / (sensitivity.H[ok] / pc.command_divider))
     db = float(np.sqrt(np.mean((q.real * 20 / np.log(10)) ** 2))) if f.size else float("nan")
-    deg = float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))) if f.size else float("nan")
-    norm = float(np.sqrt(np.mean(np.concatenate([q.real / sensitivity.log_se[ok],
-                                                   q.imag / sensitivity.phase_se_rad[ok]]) ** 2))) if f.size else float("nan")
+    deg = float(np.degrees(np.sqrt(np.mean(q.imag**2)))) if f.size else float("nan")
+    norm = (
+        float(
+            np.sqrt(
+                np.mean(
+                    np.concatenate(
+                        [q.real / sensitivity.log_se[ok], q.imag / sensitivity.phase_se_rad[ok]]
+                    )
+                    ** 2
+                )
+            )
+        )
+        if f.size
+        else float("nan")
+    )
     notes = []
     missing = [k for k in ("platform_pair", "c1", "c4") if k not in named]
     if missing:
         notes.append(f"not found: {', '.join(missing)}")
     if np.any(roots.real >= 0):
-        notes.append("the closed model has a root in the right half-plane: the identified parts do not make a "
-                     "stable loop, yet the rig recorded steadily - a part is wrong")
+        notes.append(
+            "the closed model has a root in the right half-plane: the identified parts do not make a "
+            "stable loop, yet the rig recorded steadily - a part is wrong"
+        )
     if norm > 3:
-        notes.append(f"the closed model misses the measured sensitivity by {norm:.3g} standard errors rms: the "
-                     f"loop is not the linear one of the parts (Dahl friction at this amplitude?)")
-    return ClosedLoop(mode, kind, roots, named, sensor, db, deg, norm, int(ok.sum()), band_hz, notes)
+        notes.append(
+            f"the closed model misses the measured sensitivity by {norm:.3g} standard errors rms: the "
+            f"loop is not the linear one of the parts (Dahl friction at this amplitude?)"
+        )
+    return ClosedLoop(
+        mode, kind, roots, named, sensor, db, deg, norm, int(ok.sum()), band_hz, notes
+    )

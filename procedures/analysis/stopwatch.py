@@ -24,8 +24,10 @@ import scipy.stats
 from procedures.analysis.intervals import Estimate, from_stderr, judged
 
 #: why h/k is never a resolved figure (measured by bench/stopwatch_coverage.py over 50 rigs)
-H_OVER_K_UNRESOLVED = ("not reported: the fit also carries the float partner's viscous coupling and the gyro's "
-                       "random drift (fitted h/k +2 to +13 % over 50 simulated rigs); its interval is for information")
+H_OVER_K_UNRESOLVED = (
+    "not reported: the fit also carries the float partner's viscous coupling and the gyro's "
+    "random drift (fitted h/k +2 to +13 % over 50 simulated rigs); its interval is for information"
+)
 
 
 class NoCrossing(ValueError):
@@ -51,8 +53,15 @@ def smooth(y: np.ndarray, n: int) -> np.ndarray:
     return (c[hi] - c[lo]) / (hi - lo)
 
 
-def crossing_times(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
-                   rate_hz: float) -> tuple[float, float]:
+def crossing_times(
+    t: np.ndarray,
+    vg: np.ndarray,
+    lo: float,
+    hi: float,
+    direction: int,
+    smooth_s: float,
+    rate_hz: float,
+) -> tuple[float, float]:
     """The times the smoothed pickoff crosses the ramp's first and second level (linear
     interpolation). Raises ``NoCrossing`` if it does not cross one of them."""
     s = smooth(vg, int(round(smooth_s * rate_hz)))
@@ -69,8 +78,15 @@ def crossing_times(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, directio
     return cross(first), cross(second)
 
 
-def crossing_interval(t: np.ndarray, vg: np.ndarray, lo: float, hi: float, direction: int, smooth_s: float,
-                      rate_hz: float) -> float:
+def crossing_interval(
+    t: np.ndarray,
+    vg: np.ndarray,
+    lo: float,
+    hi: float,
+    direction: int,
+    smooth_s: float,
+    rate_hz: float,
+) -> float:
     """One stopwatch reading: the time between the two level crossings (``crossing_times``)."""
     t1, t2 = crossing_times(t, vg, lo, hi, direction, smooth_s, rate_hz)
     return t2 - t1
@@ -91,9 +107,17 @@ PARTNER_MODEL_UNCERTAINTY = (0.3, 3e-4)
 PARTNER_TRANSIENT_BOUND = 0.0035
 
 
-def partner_factors(t: np.ndarray, rate: np.ndarray, windows: list[tuple[float, float]], *, h_over_c: float,
-                    partner_h_over_c: float, partner_wn: float, partner_zeta: float,
-                    partner_proportional: bool = False) -> list[float]:
+def partner_factors(
+    t: np.ndarray,
+    rate: np.ndarray,
+    windows: list[tuple[float, float]],
+    *,
+    h_over_c: float,
+    partner_h_over_c: float,
+    partner_wn: float,
+    partner_zeta: float,
+    partner_proportional: bool = False,
+) -> list[float]:
     """How much more (> 1) or less the uncaged float turns over each crossing window than
     ``rate`` (its torquer's rate, K_TO (V_T - V_T0), from rest at ``t[0]``) alone would turn it,
     because the float partner's caging loop answers the viscous cross-coupling (II C.4.d):
@@ -133,7 +157,7 @@ def partner_factors(t: np.ndarray, rate: np.ndarray, windows: list[tuple[float, 
     E = scipy.linalg.expm(M)
     Ad, Bd = E[:3, :3], E[:3, 3]
     x = np.zeros(3)
-    depart = np.zeros(len(ub) + 1)      # coupled minus alone at the block edges
+    depart = np.zeros(len(ub) + 1)  # coupled minus alone at the block edges
     for i, ui in enumerate(ub):
         x = Ad @ x + Bd * ui
         depart[i + 1] = x[0]
@@ -148,13 +172,23 @@ def partner_factors(t: np.ndarray, rate: np.ndarray, windows: list[tuple[float, 
         out.append(1.0 + extra / d_alone if d_alone else 1.0)
     return out
 
+
 #: the restraint fit's robust covariance takes the residuals of this many seconds together
 #: (the gyro's random drift is a slowly wandering rate: neighbouring increments share it)
 CLUSTER_S = 30.0
 
 
-def restraint_fit(t: np.ndarray, vg: np.ndarray, vt: np.ndarray, *, vt_null: float, vg0: float,
-                  dt_s: float, partner: np.ndarray | None = None, increment_s: float = 2.0) -> dict:
+def restraint_fit(
+    t: np.ndarray,
+    vg: np.ndarray,
+    vt: np.ndarray,
+    *,
+    vt_null: float,
+    vg0: float,
+    dt_s: float,
+    partner: np.ndarray | None = None,
+    increment_s: float = 2.0,
+) -> dict:
     """Least squares of the pickoff's increments over ``dt_s`` means,
 
         dV_g = a int(V_T - V_T0) + c dt - k int(V_g - V_g0) + b dV_gp,
@@ -198,9 +232,16 @@ def restraint_fit(t: np.ndarray, vg: np.ndarray, vt: np.ndarray, *, vt_null: flo
     groups = int(np.count_nonzero(np.any(scores != 0, axis=1)))
     cov = bread @ (scores.T @ scores) @ bread * groups / max(1, groups - 1)
     se = np.sqrt(np.diag(cov))
-    return {"a": float(coef[0]), "a_se": float(se[0]), "c": float(coef[1]), "k": float(coef[2]),
-            "k_se": float(se[2]), "b": float(coef[3]) if partner is not None else 0.0,
-            "dof": max(1, groups - 1), "rms": float(np.sqrt(np.mean(resid ** 2)))}
+    return {
+        "a": float(coef[0]),
+        "a_se": float(se[0]),
+        "c": float(coef[1]),
+        "k": float(coef[2]),
+        "k_se": float(se[2]),
+        "b": float(coef[3]) if partner is not None else 0.0,
+        "dof": max(1, groups - 1),
+        "rms": float(np.sqrt(np.mean(resid**2))),
+    }
 
 
 @dataclass
@@ -208,10 +249,10 @@ class ChannelResult:
     channel: str
     kto: float
     kto_from: str
-    readings: list[float]          # corrected stopwatch K_g per ramp, mV/urad
-    naive: list[float]             # uncorrected
-    repetitions: list[float]       # mean of each down-up pair
-    asymmetry: float               # (up - down) / mean: a rate offset during the ramps
+    readings: list[float]  # corrected stopwatch K_g per ramp, mV/urad
+    naive: list[float]  # uncorrected
+    repetitions: list[float]  # mean of each down-up pair
+    asymmetry: float  # (up - down) / mean: a rate offset during the ramps
     kg: float
     kg_se: float
     spread: float
@@ -219,10 +260,12 @@ class ChannelResult:
     kg_ls_se: float
     tau_s: float | None
     tau_se: float | None
-    correction: float              # mean (corrected / naive - 1)
+    correction: float  # mean (corrected / naive - 1)
     null_rate_urad_per_s: float
     restraint_dof: int = 1
-    partner_correction: float = 0.0   # mean (reading with / without the partner transient's factor - 1)
+    partner_correction: float = (
+        0.0  # mean (reading with / without the partner transient's factor - 1)
+    )
     partner_bound: float = PARTNER_TRANSIENT_BOUND  # relative bound on what is left of it
 
     def kg_estimate(self, kto_rel_half_width: float | None) -> Estimate:
@@ -234,21 +277,31 @@ class ChannelResult:
         interval (``None``: the data sheet's nominal value) K_g is not resolved."""
         n = len(self.repetitions)
         if n < 2:
-            return Estimate(self.kg, math.nan, math.nan, False, "one repetition gives no spread to judge it by")
+            return Estimate(
+                self.kg, math.nan, math.nan, False, "one repetition gives no spread to judge it by"
+            )
         q = float(scipy.stats.t.ppf(0.975, n - 1))
         rel = math.hypot(q * self.kg_se / self.kg, kto_rel_half_width or 0.0)
         rel += self.partner_bound
         e = judged(self.kg, self.kg * (1 - rel), self.kg * (1 + rel))
         if kto_rel_half_width is None:
-            return Estimate(e.value, e.lo, e.hi, False, "K_TO is the data sheet's nominal value, not a measurement")
+            return Estimate(
+                e.value,
+                e.lo,
+                e.hi,
+                False,
+                "K_TO is the data sheet's nominal value, not a measurement",
+            )
         return e
 
     def tau_estimate(self) -> Estimate:
         """h/k with its 95 % interval (1/k over k's t interval), never resolved
         (``H_OVER_K_UNRESOLVED``): it serves only the x coth x correction, a few 0.01 %."""
         if self.tau_s is None or self.tau_se is None:
-            return Estimate(math.nan, math.nan, math.inf, False, "the restraint is not resolved by the record")
-        k, k_se = 1.0 / self.tau_s, self.tau_se / self.tau_s ** 2
+            return Estimate(
+                math.nan, math.nan, math.inf, False, "the restraint is not resolved by the record"
+            )
+        k, k_se = 1.0 / self.tau_s, self.tau_se / self.tau_s**2
         ek = from_stderr(k, k_se, dof=self.restraint_dof)
         hi = 1.0 / ek.lo if ek.lo > 0 else math.inf
         return Estimate(self.tau_s, 1.0 / ek.hi, hi, False, H_OVER_K_UNRESOLVED)
@@ -264,26 +317,45 @@ def channel_result(r: dict) -> ChannelResult:
     naive, corrected, restraint = [], [], []
     # the float partner's transient over each window (``partner_factors``; absent in older results)
     factors = r.get("partner_factor")
-    partner = list(factors) if factors and len(factors) == len(r["ramps"]) else [1.0] * len(r["ramps"])
+    partner = (
+        list(factors) if factors and len(factors) == len(r["ramps"]) else [1.0] * len(r["ramps"])
+    )
     for (_direction, dt, dvt), pf in zip(r["ramps"], partner):
-        kg = r["dVg"] / (dt * abs(dvt) * kto) * 1e3                         # II C.1.a(6), V/urad -> mV/urad
+        kg = r["dVg"] / (dt * abs(dvt) * kto) * 1e3  # II C.1.a(6), V/urad -> mV/urad
         x = dt / (2 * tau) if tau else 0.0
         naive.append(kg)
         restraint.append(x / math.tanh(x) if x > 0 else 1.0)
         corrected.append(kg * restraint[-1] / pf)
-    reps = [float(np.mean(corrected[i:i + 2])) for i in range(0, len(corrected) - 1, 2)]
+    reps = [float(np.mean(corrected[i : i + 2])) for i in range(0, len(corrected) - 1, 2)]
     up = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d > 0]
     down = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d < 0]
     kg = float(np.mean(reps))
     spread = float(np.std(reps, ddof=1) / kg) if len(reps) > 1 else 0.0
     ls = r.get("slope_fit", fit)
     kg_ls = abs(ls["a"]) / kto * 1e3
-    return ChannelResult(r["ch"], kto, r["kto_from"], corrected, naive, reps,
-                         float((np.mean(up) - np.mean(down)) / kg) if up and down else 0.0, kg,
-                         kg * spread / math.sqrt(len(reps)) if len(reps) > 1 else float("nan"), spread,
-                         kg_ls, ls["a_se"] / kto * 1e3, tau, (k_se / k ** 2) if resolved else None,
-                         float(np.mean(restraint) - 1.0),
-                         r["null_slope"] / (kg * 1e-3), int(fit.get("dof", 1)),
-                         float(np.mean([1.0 / pf - 1.0 for pf in partner])),
-                         (float(np.mean([PARTNER_MODEL_UNCERTAINTY[0] * abs(1.0 / pf - 1.0) for pf in partner]))
-                          + PARTNER_MODEL_UNCERTAINTY[1]) if factors else PARTNER_TRANSIENT_BOUND)
+    return ChannelResult(
+        r["ch"],
+        kto,
+        r["kto_from"],
+        corrected,
+        naive,
+        reps,
+        float((np.mean(up) - np.mean(down)) / kg) if up and down else 0.0,
+        kg,
+        kg * spread / math.sqrt(len(reps)) if len(reps) > 1 else float("nan"),
+        spread,
+        kg_ls,
+        ls["a_se"] / kto * 1e3,
+        tau,
+        (k_se / k**2) if resolved else None,
+        float(np.mean(restraint) - 1.0),
+        r["null_slope"] / (kg * 1e-3),
+        int(fit.get("dof", 1)),
+        float(np.mean([1.0 / pf - 1.0 for pf in partner])),
+        (
+            float(np.mean([PARTNER_MODEL_UNCERTAINTY[0] * abs(1.0 / pf - 1.0) for pf in partner]))
+            + PARTNER_MODEL_UNCERTAINTY[1]
+        )
+        if factors
+        else PARTNER_TRANSIENT_BOUND,
+    )

@@ -81,9 +81,16 @@ def gyro(axis: str) -> str:
 
 
 #: the channels a survey records
-CHANNELS = tuple(ac_ctl(a) for a in AXES) + tuple(ac_inst(a) for a in AXES) + tuple(gyro(a) for a in AXES)
+CHANNELS = (
+    tuple(ac_ctl(a) for a in AXES) + tuple(ac_inst(a) for a in AXES) + tuple(gyro(a) for a in AXES)
+)
 #: the coherences plotted and summarized: control - gyro per axis, X - Y control, X - Y gyro
-COHERENCE_PAIRS = [(ac_ctl("X"), gyro("X")), (ac_ctl("Y"), gyro("Y")), (ac_ctl("X"), ac_ctl("Y")), (gyro("X"), gyro("Y"))]
+COHERENCE_PAIRS = [
+    (ac_ctl("X"), gyro("X")),
+    (ac_ctl("Y"), gyro("Y")),
+    (ac_ctl("X"), ac_ctl("Y")),
+    (gyro("X"), gyro("Y")),
+]
 
 
 class SurveySettings(Protocol):
@@ -112,8 +119,8 @@ class SpanError(ValueError):
 @dataclass(frozen=True)
 class Dip:
     freq_hz: float
-    depth_db: float          # prominence of the minimum in the smoothed dB spectrum
-    bin_hz: float            # the smoothed spectrum's lowest bin (before the parabola)
+    depth_db: float  # prominence of the minimum in the smoothed dB spectrum
+    bin_hz: float  # the smoothed spectrum's lowest bin (before the parabola)
 
 
 def smoothed_db(f: np.ndarray, p: np.ndarray, smooth_hz: float) -> np.ndarray:
@@ -125,7 +132,9 @@ def smoothed_db(f: np.ndarray, p: np.ndarray, smooth_hz: float) -> np.ndarray:
     return scipy.ndimage.uniform_filter1d(db, k, mode="nearest") if k > 1 else db
 
 
-def find_dip(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, smooth_hz: float) -> Dip | None:
+def find_dip(
+    f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, smooth_hz: float
+) -> Dip | None:
     """The most prominent notch of a PSD between ``lo_hz`` and ``hi_hz`` (module docstring);
     None when the smoothed spectrum has no local minimum there."""
     f = np.asarray(f, float)
@@ -143,10 +152,10 @@ def find_dip(f: np.ndarray, p: np.ndarray, lo_hz: float, hi_hz: float, smooth_hz
     df = float(f[1] - f[0])
     half = max(1, int(round(max(smooth_hz, df) / df)))
     a, b = max(sel[0], i - half), min(sel[-1], i + half)
-    x = f[a:b + 1] - f[i]
+    x = f[a : b + 1] - f[i]
     freq = float(f[i])
     if x.size >= 3:
-        c2, c1, _ = np.polyfit(x, db[a:b + 1], 2)
+        c2, c1, _ = np.polyfit(x, db[a : b + 1], 2)
         if c2 > 0:
             vertex = -c1 / (2 * c2)
             if abs(vertex) <= half * df:
@@ -176,7 +185,9 @@ class SpanCsd:
         return self.S[:, i, i].real.copy()
 
 
-def spans_csd(spans: Sequence[tuple[Path, int, int]], channels: Sequence[str], seg_s: float) -> SpanCsd:
+def spans_csd(
+    spans: Sequence[tuple[Path, int, int]], channels: Sequence[str], seg_s: float
+) -> SpanCsd:
     """Welch cross-spectral matrix over the given file spans (segments never straddle two
     spans; a span shorter than a segment, or a file that is gone, is left out with a note).
     Raises ``SpanError`` if no span can be analysed or their sample rates differ."""
@@ -189,23 +200,42 @@ def spans_csd(spans: Sequence[tuple[Path, int, int]], channels: Sequence[str], s
                 nperseg = int(round(seg_s * rf.rate_hz))
                 n = max(0, min(stop, rf.n_samples) - start)
                 if n < nperseg:
-                    notes.append(f"{Path(file).name} samples {start}..{stop}: shorter than one {seg_s:g} s segment, "
-                                 f"left out")
+                    notes.append(
+                        f"{Path(file).name} samples {start}..{stop}: shorter than one {seg_s:g} s segment, "
+                        f"left out"
+                    )
                     continue
                 parts.append(run_csd_matrix(rf, channels, nperseg=nperseg, start=start, stop=stop))
                 seconds += n / rf.rate_hz
-        except (OSError, ValueError) as exc:  # RunFileError is an OSError: a resumed piece's file may be gone
+        except (
+            OSError,
+            ValueError,
+        ) as exc:  # RunFileError is an OSError: a resumed piece's file may be gone
             notes.append(f"{Path(file).name} samples {start}..{stop}: not read ({exc})")
     if not parts:
-        raise SpanError("survey: no recorded span could be analysed: " + "; ".join(notes or ["nothing recorded"]))
+        raise SpanError(
+            "survey: no recorded span could be analysed: "
+            + "; ".join(notes or ["nothing recorded"])
+        )
     fs = {p.fs for p in parts}
     if len(fs) != 1:
         raise SpanError(f"survey: the recorded spans have different sample rates {sorted(fs)} Hz")
     k = np.array([p.segments_used for p in parts], float)
     S = sum(p.S * kk for p, kk in zip(parts, k)) / k.sum()
     first = parts[0]
-    return SpanCsd(first.f, S, tuple(channels), first.fs, first.nperseg, first.nfft, int(k.sum()),
-                   sum(p.segments_total for p in parts), float(sum(p.dof for p in parts)), seconds, notes)
+    return SpanCsd(
+        first.f,
+        S,
+        tuple(channels),
+        first.fs,
+        first.nperseg,
+        first.nfft,
+        int(k.sum()),
+        sum(p.segments_total for p in parts),
+        float(sum(p.dof for p in parts)),
+        seconds,
+        notes,
+    )
 
 
 # ---------------------------------------------------------------------------- the survey's figures
@@ -214,11 +244,11 @@ class SurveySpectra:
     """What the survey measures from one Welch matrix (module docstring)."""
 
     f: np.ndarray
-    psd_urad: dict[str, np.ndarray]               # per channel, urad^2/Hz
-    coh: np.ndarray                               # magnitude-squared coherence, (f, channel, channel)
-    dips: dict[str, Dip | None]                   # per axis, of the control channel
-    platform_rms_urad: dict[str, float]           # per axis, gyro-deduced, band_lo_hz..band_hi_hz
-    ac_ctl_rms_urad: dict[str, float]             # per axis, same band
+    psd_urad: dict[str, np.ndarray]  # per channel, urad^2/Hz
+    coh: np.ndarray  # magnitude-squared coherence, (f, channel, channel)
+    dips: dict[str, Dip | None]  # per axis, of the control channel
+    platform_rms_urad: dict[str, float]  # per axis, gyro-deduced, band_lo_hz..band_hi_hz
+    ac_ctl_rms_urad: dict[str, float]  # per axis, same band
     stiffness_Nm_per_rad: dict[str, float | None]  # per axis, I (2 pi f_dip)^2
     #: per pair of COHERENCE_PAIRS: (frequency, value) of the largest 1-Hz average in 1-30 Hz
     peak_coherence: dict[tuple[str, str], tuple[float, float]]
@@ -237,8 +267,14 @@ class CrossCoherence:
     significant: bool
 
     def values(self) -> dict[str, object]:
-        return {"pair": list(self.pair), "band_hz": list(self.band_hz), "mean": round(self.mean, 5),
-                "null_mean": round(self.null_mean, 5), "z": round(self.z, 2), "significant": self.significant}
+        return {
+            "pair": list(self.pair),
+            "band_hz": list(self.band_hz),
+            "mean": round(self.mean, 5),
+            "null_mean": round(self.null_mean, 5),
+            "z": round(self.z, 2),
+            "significant": self.significant,
+        }
 
 
 #: z of the band-mean coherence above its null mean at which it is called significant (one-sided
@@ -246,7 +282,9 @@ class CrossCoherence:
 CROSS_Z = 3.5
 
 
-def cross_axis_coherence(csd: SpanCsd, x: str, y: str, lo_hz: float = 1.0, hi_hz: float = 100.0) -> CrossCoherence:
+def cross_axis_coherence(
+    csd: SpanCsd, x: str, y: str, lo_hz: float = 1.0, hi_hz: float = 100.0
+) -> CrossCoherence:
     """Mean magnitude-squared coherence of ``x`` and ``y`` over ``lo..hi`` Hz and its significance.
 
     For independent Gaussian channels the coherence of one bin averaged over n effectively
@@ -266,8 +304,14 @@ def cross_axis_coherence(csd: SpanCsd, x: str, y: str, lo_hz: float = 1.0, hi_hz
     return CrossCoherence((x, y), (lo_hz, hi_hz), m, null_mean, z, bool(z > CROSS_Z))
 
 
-def coherent_platform_rms(blocks: BlockCsd, gyro_channel: str, ac_channel: str, kg_V_per_urad: float,
-                          lo_hz: float, hi_hz: float) -> Estimate:
+def coherent_platform_rms(
+    blocks: BlockCsd,
+    gyro_channel: str,
+    ac_channel: str,
+    kg_V_per_urad: float,
+    lo_hz: float,
+    hi_hz: float,
+) -> Estimate:
     """The platform's own rms (urad) in ``lo..hi`` Hz: the part of the gyro's spectrum coherent
     with the autocollimator, gamma^2 S_gg (the coherent output power, eq. 4.44-4.49; Ch. V C).
 
@@ -306,14 +350,23 @@ class BaselineMismatch(ValueError):
 class BaselineNet:
     """The platform's rms net of the baseline's pickoff noise, and the two band rms it is made of."""
 
-    estimate: Estimate          # urad; unresolved when the difference is not significantly above zero
-    survey_rms_urad: float      # the gyro's rms in the band in the survey (the thesis method on these blocks)
-    baseline_rms_urad: float    # the same pickoff's rms in the band with the platform clamped
-    dof: float                  # Welch-Satterthwaite degrees of freedom of the difference's interval
+    estimate: Estimate  # urad; unresolved when the difference is not significantly above zero
+    survey_rms_urad: (
+        float  # the gyro's rms in the band in the survey (the thesis method on these blocks)
+    )
+    baseline_rms_urad: float  # the same pickoff's rms in the band with the platform clamped
+    dof: float  # Welch-Satterthwaite degrees of freedom of the difference's interval
 
 
-def baseline_net_rms(survey: BlockCsd, survey_channel: str, baseline: BlockCsd, baseline_channel: str,
-                     kg_V_per_urad: float, lo_hz: float, hi_hz: float) -> BaselineNet:
+def baseline_net_rms(
+    survey: BlockCsd,
+    survey_channel: str,
+    baseline: BlockCsd,
+    baseline_channel: str,
+    kg_V_per_urad: float,
+    lo_hz: float,
+    hi_hz: float,
+) -> BaselineNet:
     """sqrt(max(0, integral over lo..hi Hz of (S_survey - S_baseline) / Kg^2 df)) in urad (Ch. V E.2
     with the open-loop pickoff spectrum of Ch. V B, Fig. 33, taken out bin by bin).
 
@@ -329,16 +382,18 @@ def baseline_net_rms(survey: BlockCsd, survey_channel: str, baseline: BlockCsd, 
     bs = (fs_ >= lo_hz) & (fs_ <= hi_hz)
     bb = (fb_ >= lo_hz) & (fb_ <= hi_hz)
     if bs.sum() != bb.sum() or not np.allclose(fs_[bs], fb_[bb], rtol=0, atol=1e-9):
-        raise BaselineMismatch(f"the baseline's Welch bins ({baseline.seg_s:g} s segments at {baseline.fs:g} Hz) "
-                               f"are not the survey's ({survey.seg_s:g} s at {survey.fs:g} Hz) in {lo_hz:g}-{hi_hz:g} Hz")
+        raise BaselineMismatch(
+            f"the baseline's Welch bins ({baseline.seg_s:g} s segments at {baseline.fs:g} Hz) "
+            f"are not the survey's ({survey.seg_s:g} s at {survey.fs:g} Hz) in {lo_hz:g}-{hi_hz:g} Hz"
+        )
     df = float(fs_[1] - fs_[0])
-    k2 = kg_V_per_urad ** 2
+    k2 = kg_V_per_urad**2
 
     def variance(blocks: BlockCsd, channel: str, band: np.ndarray) -> tuple[float, float, int]:
         i = blocks.index(channel)
 
         def v(leave_out: int | None) -> float:
-            return float(np.sum(blocks.mean(leave_out)[band, i, i].real)) * df / k2      # urad^2
+            return float(np.sum(blocks.mean(leave_out)[band, i, i].real)) * df / k2  # urad^2
 
         loo = np.array([v(b) for b in range(blocks.n_blocks)])
         return v(None), float(jackknife_se(loo)), blocks.n_blocks - 1
@@ -346,45 +401,66 @@ def baseline_net_rms(survey: BlockCsd, survey_channel: str, baseline: BlockCsd, 
     vs, ses, ns = variance(survey, survey_channel, bs)
     vb, seb, nb = variance(baseline, baseline_channel, bb)
     d = vs - vb
-    se2 = ses ** 2 + seb ** 2
-    quart = ses ** 4 / ns + seb ** 4 / nb
-    dof = se2 ** 2 / quart if quart > 0 else float(ns + nb)
+    se2 = ses**2 + seb**2
+    quart = ses**4 / ns + seb**4 / nb
+    dof = se2**2 / quart if quart > 0 else float(ns + nb)
     q = float(scipy.stats.t.ppf(0.5 + LEVEL / 2, dof))
     lo, hi = d - q * math.sqrt(se2), d + q * math.sqrt(se2)
     value = math.sqrt(max(0.0, d))
     rms_hi = math.sqrt(max(0.0, hi))
     if not lo > 0:
-        est = Estimate(value, 0.0, rms_hi, False,
-                       f"the survey's gyro variance in the band ({vs:.4g} urad²) is not significantly above the "
-                       f"baseline's pickoff noise ({vb:.4g} urad²): difference {d:+.3g} +- {q * math.sqrt(se2):.3g}")
+        est = Estimate(
+            value,
+            0.0,
+            rms_hi,
+            False,
+            f"the survey's gyro variance in the band ({vs:.4g} urad²) is not significantly above the "
+            f"baseline's pickoff noise ({vb:.4g} urad²): difference {d:+.3g} +- {q * math.sqrt(se2):.3g}",
+        )
     else:
         est = judged(value, math.sqrt(lo), rms_hi)
     return BaselineNet(est, math.sqrt(max(vs, 0.0)), math.sqrt(max(vb, 0.0)), dof)
 
 
-def survey_spectra(csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[str, float],
-                   p: SurveySettings) -> SurveySpectra:
+def survey_spectra(
+    csd: SpanCsd, cal: RigCalibration, kg_mV_per_urad: Mapping[str, float], p: SurveySettings
+) -> SurveySpectra:
     """The PSDs in urad^2/Hz (the autocollimators' scales from the data sheet ``cal``, the
     pickoffs' ``kg_mV_per_urad``), the dips, the band rms values and the coherences."""
     f = csd.f
-    kac = {a: cal.autocollimator[a].control_mV_per_urad * 1e-3 for a in AXES}     # V/urad
+    kac = {a: cal.autocollimator[a].control_mV_per_urad * 1e-3 for a in AXES}  # V/urad
     kai = {a: cal.autocollimator[a].inst_mV_per_urad * 1e-3 for a in AXES}
     kg = {a: kg_mV_per_urad[a] * 1e-3 for a in AXES}
-    scale = {ac_ctl(a): kac[a] for a in AXES} | {ac_inst(a): kai[a] for a in AXES} | {gyro(a): kg[a] for a in AXES}
-    psd_urad = {c: csd.psd(c) / scale[c] ** 2 for c in csd.channels}              # urad^2/Hz
+    scale = (
+        {ac_ctl(a): kac[a] for a in AXES}
+        | {ac_inst(a): kai[a] for a in AXES}
+        | {gyro(a): kg[a] for a in AXES}
+    )
+    psd_urad = {c: csd.psd(c) / scale[c] ** 2 for c in csd.channels}  # urad^2/Hz
     coh = coherence(csd.S)
 
-    dips = {a: find_dip(f, psd_urad[loop_sensor(a, p.mode)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz) for a in AXES}
+    dips = {
+        a: find_dip(f, psd_urad[loop_sensor(a, p.mode)], p.dip_lo_hz, p.dip_hi_hz, p.dip_smooth_hz)
+        for a in AXES
+    }
     rms = {a: band_rms(f, psd_urad[gyro(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
     ac_rms = {a: band_rms(f, psd_urad[ac_ctl(a)], p.band_lo_hz, p.band_hi_hz) for a in AXES}
-    stiffness = {a: (cal.platform[a].inertia_kg_m2 * (2 * math.pi * d.freq_hz) ** 2
-                     if (d := dips[a]) is not None else None) for a in AXES}
+    stiffness = {
+        a: (
+            cal.platform[a].inertia_kg_m2 * (2 * math.pi * d.freq_hz) ** 2
+            if (d := dips[a]) is not None
+            else None
+        )
+        for a in AXES
+    }
 
     idx = {c: i for i, c in enumerate(csd.channels)}
     peak_coh = {}
     for x, y in COHERENCE_PAIRS:
         band = (f >= 1.0) & (f <= 30.0)
-        smooth = scipy.ndimage.uniform_filter1d(coh[band, idx[x], idx[y]], max(1, int(round(1.0 / (f[1] - f[0])))))
+        smooth = scipy.ndimage.uniform_filter1d(
+            coh[band, idx[x], idx[y]], max(1, int(round(1.0 / (f[1] - f[0]))))
+        )
         k = int(np.argmax(smooth))
         peak_coh[(x, y)] = (float(f[band][k]), float(smooth[k]))
     return SurveySpectra(f, psd_urad, coh, dips, rms, ac_rms, stiffness, peak_coh)

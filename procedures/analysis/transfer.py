@@ -99,8 +99,8 @@ class BlockCsd:
     """The Welch cross-spectral matrix of each of ``n_blocks`` consecutive blocks of a record."""
 
     f: np.ndarray
-    S: np.ndarray            # (blocks, f, channel, channel)
-    weights: np.ndarray      # segments used per block
+    S: np.ndarray  # (blocks, f, channel, channel)
+    weights: np.ndarray  # segments used per block
     channels: tuple[str, ...]
     fs: float
     seg_s: float
@@ -122,12 +122,18 @@ class BlockCsd:
     def averages(self, leave_out: int | None = None) -> float:
         """The independent averages behind ``mean(leave_out)``: the periods themselves, or the
         Welch segments' equivalent degrees of freedom over 2 (overlapped segments are correlated)."""
-        segments = float(self.weights.sum() - (0.0 if leave_out is None else self.weights[leave_out]))
+        segments = float(
+            self.weights.sum() - (0.0 if leave_out is None else self.weights[leave_out])
+        )
         if self.periodic:
             return segments
         nperseg = int(round(self.seg_s * self.fs))
-        return equivalent_dof("hann", nperseg, nperseg // 2 if self.overlap else 0,
-                              max(int(round(segments)), 2)) / 2.0
+        return (
+            equivalent_dof(
+                "hann", nperseg, nperseg // 2 if self.overlap else 0, max(int(round(segments)), 2)
+            )
+            / 2.0
+        )
 
     def mean(self, leave_out: int | None = None) -> np.ndarray:
         w = self.weights.copy()
@@ -137,12 +143,19 @@ class BlockCsd:
 
     def index(self, name: str) -> int:
         if name not in self.channels:
-            raise TransferError(f"channel {name!r} was not analysed (have: {', '.join(self.channels)})")
+            raise TransferError(
+                f"channel {name!r} was not analysed (have: {', '.join(self.channels)})"
+            )
         return self.channels.index(name)
 
 
-def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[str], seg_s: float,
-              n_blocks: int = N_BLOCKS, overlap: bool = True) -> BlockCsd:
+def block_csd(
+    spans: Sequence[tuple[str | Path, int, int]],
+    channels: Sequence[str],
+    seg_s: float,
+    n_blocks: int = N_BLOCKS,
+    overlap: bool = True,
+) -> BlockCsd:
     """The Welch matrices (Hann, 50 % overlap or none, linear detrend) of ``n_blocks`` blocks of
     the given file spans, each block whole segments of one span. Raises ``TransferError`` when
     the spans hold fewer than ``n_blocks`` segments."""
@@ -160,9 +173,11 @@ def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[s
     nperseg = int(round(seg_s * fs))
     total = sum(max(0, stop - start) for _, start, stop, _ in pieces)
     if total < nperseg * n_blocks:
-        raise TransferError(f"{total / fs:.1f} s of record holds fewer than {n_blocks} blocks of one segment of "
-                            f"seg_s = {seg_s:g} s: record longer or shorten the segment (at most "
-                            f"{total / fs / n_blocks:.3g} s)")
+        raise TransferError(
+            f"{total / fs:.1f} s of record holds fewer than {n_blocks} blocks of one segment of "
+            f"seg_s = {seg_s:g} s: record longer or shorten the segment (at most "
+            f"{total / fs / n_blocks:.3g} s)"
+        )
     # about n_blocks blocks in all, each inside one span: a span gets its share of them
     bounds: list[tuple[Path, int, int]] = []
     for file, start, stop, _ in pieces:
@@ -175,18 +190,31 @@ def block_csd(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[s
     S, w = [], []
     f = np.empty(0)
     for file, start, stop in bounds:
-        c = run_csd_matrix(file, channels, nperseg=nperseg, noverlap=nperseg // 2 if overlap else 0,
-                           start=start, stop=stop)
+        c = run_csd_matrix(
+            file,
+            channels,
+            nperseg=nperseg,
+            noverlap=nperseg // 2 if overlap else 0,
+            start=start,
+            stop=stop,
+        )
         f = c.f
         S.append(c.S)
         w.append(float(c.segments_used))
     if len(S) < 3:
-        raise TransferError(f"only {len(S)} block(s) of whole {seg_s:g} s segments: a jackknife needs 3")
+        raise TransferError(
+            f"only {len(S)} block(s) of whole {seg_s:g} s segments: a jackknife needs 3"
+        )
     return BlockCsd(f, np.array(S), np.array(w), tuple(channels), fs, seg_s, total / fs, overlap)
 
 
-def periodic_blocks(spans: Sequence[tuple[str | Path, int, int]], channels: Sequence[str], period_s: float,
-                    n_blocks: int = N_BLOCKS, skip_periods: int = 1) -> BlockCsd:
+def periodic_blocks(
+    spans: Sequence[tuple[str | Path, int, int]],
+    channels: Sequence[str],
+    period_s: float,
+    n_blocks: int = N_BLOCKS,
+    skip_periods: int = 1,
+) -> BlockCsd:
     """The cross-spectral matrices of whole periods of a periodic excitation, grouped in
     ``n_blocks`` blocks: each period's DFT without a window (mean removed), so at the excited
     frequencies k / period there is no leakage at all (the periodic-excitation method of
@@ -206,38 +234,59 @@ def periodic_blocks(spans: Sequence[tuple[str | Path, int, int]], channels: Sequ
             fs = rate
             n = int(round(period_s * rate))
             if abs(n - period_s * rate) > 1e-6:
-                raise TransferError(f"a {period_s:g} s period is not a whole number of samples at {rate:g} Hz")
+                raise TransferError(
+                    f"a {period_s:g} s period is not a whole number of samples at {rate:g} Hz"
+                )
             stop = min(int(stop), rf.n_samples)
             k = (stop - start) // n - skip_periods
             if k <= 0:
                 continue
             x = rf.read(list(channels), start + skip_periods * n, start + (skip_periods + k) * n).T
         x = x.reshape(k, n, len(channels))
-        keep = np.all(np.isfinite(x), axis=(1, 2))            # a period with a lost sample is left out
+        keep = np.all(np.isfinite(x), axis=(1, 2))  # a period with a lost sample is left out
         x = x[keep] - x[keep].mean(axis=1, keepdims=True)
-        X = np.fft.rfft(x, axis=1) * math.sqrt(2.0 / (n * rate))   # one-sided density scaling
+        X = np.fft.rfft(x, axis=1) * math.sqrt(2.0 / (n * rate))  # one-sided density scaling
         per.append(np.einsum("pfi,pfj->pfij", X.conj(), X))
     if fs is None or not per or sum(len(p) for p in per) < n_blocks:
         got = sum(len(p) for p in per)
-        raise TransferError(f"{got} whole {period_s:g} s period(s) of excitation recorded (after {skip_periods} "
-                            f"left out as transient): a jackknife over {n_blocks} blocks needs {n_blocks}")
+        raise TransferError(
+            f"{got} whole {period_s:g} s period(s) of excitation recorded (after {skip_periods} "
+            f"left out as transient): a jackknife over {n_blocks} blocks needs {n_blocks}"
+        )
     allp = np.concatenate(per)
     groups = np.array_split(np.arange(len(allp)), n_blocks)
     S = np.array([allp[g].mean(axis=0) for g in groups])
     f = np.fft.rfftfreq(int(round(period_s * fs)), 1.0 / fs)
-    return BlockCsd(f, S, np.array([float(len(g)) for g in groups]), tuple(channels), fs, period_s,
-                    len(allp) * period_s, overlap=False, periodic=True)
+    return BlockCsd(
+        f,
+        S,
+        np.array([float(len(g)) for g in groups]),
+        tuple(channels),
+        fs,
+        period_s,
+        len(allp) * period_s,
+        overlap=False,
+        periodic=True,
+    )
 
 
-def file_blocks(path: str | Path, channels: Sequence[str], seg_s: float, n_blocks: int = N_BLOCKS,
-                start_s: float = 0.0, stop_s: float | None = None) -> BlockCsd:
+def file_blocks(
+    path: str | Path,
+    channels: Sequence[str],
+    seg_s: float,
+    n_blocks: int = N_BLOCKS,
+    start_s: float = 0.0,
+    stop_s: float | None = None,
+) -> BlockCsd:
     """``block_csd`` of one file (seconds ``start_s .. stop_s``, default all)."""
     with RunFile(path) as rf:
         fs = rf.rate_hz
         stop = rf.n_samples if stop_s is None else min(rf.n_samples, int(round(stop_s * fs)))
         missing = [c for c in channels if c not in rf.channels]
         if missing:
-            raise TransferError(f"{path} has no channel {', '.join(missing)} (its channels: {', '.join(rf.channels)})")
+            raise TransferError(
+                f"{path} has no channel {', '.join(missing)} (its channels: {', '.join(rf.channels)})"
+            )
     return block_csd([(path, int(round(start_s * fs)), stop)], channels, seg_s, n_blocks)
 
 
@@ -250,12 +299,12 @@ class Response:
     target: str
     via: str | None
     f: np.ndarray
-    H: np.ndarray                     # complex, target per source
-    coherence: np.ndarray             # source-target (H1) or via-target
-    log_se: np.ndarray                # jackknife standard error of ln|H|
-    phase_se_rad: np.ndarray          # jackknife standard error of the phase
-    H_blocks: np.ndarray              # leave-one-out estimates (blocks, f)
-    dof: int                          # n_blocks - 1
+    H: np.ndarray  # complex, target per source
+    coherence: np.ndarray  # source-target (H1) or via-target
+    log_se: np.ndarray  # jackknife standard error of ln|H|
+    phase_se_rad: np.ndarray  # jackknife standard error of the phase
+    H_blocks: np.ndarray  # leave-one-out estimates (blocks, f)
+    dof: int  # n_blocks - 1
 
     @property
     def gain_db(self) -> np.ndarray:
@@ -279,8 +328,8 @@ class Response:
 
 def _h(S: np.ndarray, i: int, j: int, r: int | None) -> np.ndarray:
     if r is None:
-        return S[:, i, j] / S[:, i, i].real          # eq. 4.36: S_xy / S_xx
-    return S[:, r, j] / S[:, r, i]                   # S_ry / S_rx (closed loop, injected r)
+        return S[:, i, j] / S[:, i, i].real  # eq. 4.36: S_xy / S_xx
+    return S[:, r, j] / S[:, r, i]  # S_ry / S_rx (closed loop, injected r)
 
 
 def jackknife_se(values: np.ndarray) -> np.ndarray:
@@ -293,11 +342,17 @@ def response(blocks: BlockCsd, source: str, target: str, via: str | None = None)
     i, j = blocks.index(source), blocks.index(target)
     r = None if via is None else blocks.index(via)
     if len({i, j} | ({r} if r is not None else set())) < (2 if r is None else 3):
-        raise TransferError(f"source {source!r}, target {target!r} and via {via!r} must be different channels")
-    return _jackknifed(blocks, source, target, via, lambda S: _h(S, i, j, r), r if r is not None else i, j)
+        raise TransferError(
+            f"source {source!r}, target {target!r} and via {via!r} must be different channels"
+        )
+    return _jackknifed(
+        blocks, source, target, via, lambda S: _h(S, i, j, r), r if r is not None else i, j
+    )
 
 
-def network_in_loop(blocks: BlockCsd, source: str, amplifier: str, via: str, divider: float) -> Response:
+def network_in_loop(
+    blocks: BlockCsd, source: str, amplifier: str, via: str, divider: float
+) -> Response:
     """The compensation network inside the excited loop: its output v_c = pa - K_d V_Td
     (eq. 3.27) per its input, both through the injected V_Td, (S_r,pa - K_d S_r,r) / S_r,x.
     Unlike H1 on a quiet record it is free of the network's memory: at a periodic excitation's
@@ -305,13 +360,29 @@ def network_in_loop(blocks: BlockCsd, source: str, amplifier: str, via: str, div
     6.7 s holds response to input from before it (Bendat and Piersol's time-delay bias)."""
     i, j, r = blocks.index(source), blocks.index(amplifier), blocks.index(via)
     if len({i, j, r}) < 3:
-        raise TransferError(f"source {source!r}, amplifier {amplifier!r} and via {via!r} must be different channels")
-    return _jackknifed(blocks, source, f"{amplifier} - {divider:g} {via}", via,
-                       lambda S: (S[:, r, j] - divider * S[:, r, r]) / S[:, r, i], r, i)
+        raise TransferError(
+            f"source {source!r}, amplifier {amplifier!r} and via {via!r} must be different channels"
+        )
+    return _jackknifed(
+        blocks,
+        source,
+        f"{amplifier} - {divider:g} {via}",
+        via,
+        lambda S: (S[:, r, j] - divider * S[:, r, r]) / S[:, r, i],
+        r,
+        i,
+    )
 
 
-def _jackknifed(blocks: BlockCsd, source: str, target: str, via: str | None,
-                h: Callable[[np.ndarray], np.ndarray], ci: int, cj: int) -> Response:
+def _jackknifed(
+    blocks: BlockCsd,
+    source: str,
+    target: str,
+    via: str | None,
+    h: Callable[[np.ndarray], np.ndarray],
+    ci: int,
+    cj: int,
+) -> Response:
     """``h`` of the blocks' mean matrix, with the leave-one-out replicates and their errors;
     the coherence reported is that of channels ``ci`` and ``cj``."""
     S = blocks.mean()
@@ -322,7 +393,9 @@ def _jackknifed(blocks: BlockCsd, source: str, target: str, via: str | None,
         log_se = jackknife_se(np.log(np.abs(ratio)))
         phase_se = jackknife_se(np.angle(ratio))
         coh = coherence(S)[:, ci, cj]
-    return Response(source, target, via, blocks.f, H, coh, log_se, phase_se, Hb, blocks.n_blocks - 1)
+    return Response(
+        source, target, via, blocks.f, H, coh, log_se, phase_se, Hb, blocks.n_blocks - 1
+    )
 
 
 def unbiased_coherence(g2: np.ndarray, n: float) -> np.ndarray:
@@ -338,23 +411,43 @@ def usable(resp: Response, lo_hz: float, hi_hz: float, min_coherence: float = 0.
     """Bins in [lo, hi] with coherence above ``min_coherence`` and finite estimates."""
     f = resp.f
     ok = (f >= lo_hz) & (f <= hi_hz) & (resp.coherence >= min_coherence)
-    ok &= np.isfinite(resp.H) & np.isfinite(resp.log_se) & (resp.log_se > 0) & (resp.phase_se_rad > 0)
+    ok &= (
+        np.isfinite(resp.H) & np.isfinite(resp.log_se) & (resp.log_se > 0) & (resp.phase_se_rad > 0)
+    )
     return ok
 
 
 # ---------------------------------------------------------------------------- the compensation network
 #: eq. 3.28's corners (rad/s), the design values of Ch. III G (Fig. 22)
-NETWORK_CORNERS = ("w1_rad_per_s", "w2_rad_per_s", "w3_rad_per_s", "w4_rad_per_s", "w5_rad_per_s", "w6_rad_per_s")
-DESIGN_NETWORK: dict[str, float] = {"gain": 1.0, "w1_rad_per_s": 0.15, "w2_rad_per_s": 10.0, "w3_rad_per_s": 30.0,
-                                    "w4_rad_per_s": 200.0, "w5_rad_per_s": 1200.0, "w6_rad_per_s": 5000.0}
+NETWORK_CORNERS = (
+    "w1_rad_per_s",
+    "w2_rad_per_s",
+    "w3_rad_per_s",
+    "w4_rad_per_s",
+    "w5_rad_per_s",
+    "w6_rad_per_s",
+)
+DESIGN_NETWORK: dict[str, float] = {
+    "gain": 1.0,
+    "w1_rad_per_s": 0.15,
+    "w2_rad_per_s": 10.0,
+    "w3_rad_per_s": 30.0,
+    "w4_rad_per_s": 200.0,
+    "w5_rad_per_s": 1200.0,
+    "w6_rad_per_s": 5000.0,
+}
 
 
 def network_response(f_hz: np.ndarray, p: Mapping[str, float]) -> np.ndarray:
     """-g (s/w2+1)(s/w3+1) / ((s/w1+1)(s/w4+1)(s/w5+1)(s/w6+1)), eq. 3.28, inverted (pa per ac_ctl)."""
     s = 2j * np.pi * np.asarray(f_hz, float)
     num = (s / p["w2_rad_per_s"] + 1) * (s / p["w3_rad_per_s"] + 1)
-    den = ((s / p["w1_rad_per_s"] + 1) * (s / p["w4_rad_per_s"] + 1) * (s / p["w5_rad_per_s"] + 1)
-           * (s / p["w6_rad_per_s"] + 1))
+    den = (
+        (s / p["w1_rad_per_s"] + 1)
+        * (s / p["w4_rad_per_s"] + 1)
+        * (s / p["w5_rad_per_s"] + 1)
+        * (s / p["w6_rad_per_s"] + 1)
+    )
     return -p["gain"] * num / den
 
 
@@ -389,8 +482,13 @@ class ModelFit:
             out[f"{k}_ci95"] = [e.lo, e.hi]
         out["resolved"] = {k: e.resolved for k, e in self.estimates.items()}
         out["why_unresolved"] = {k: e.why for k, e in self.estimates.items() if not e.resolved}
-        out |= {"band_hz": list(self.band_hz), "bins": self.n_bins, "residual_db_rms": self.residual_db_rms,
-                "residual_deg_rms": self.residual_deg_rms, "residual_normalized": self.residual_normalized}
+        out |= {
+            "band_hz": list(self.band_hz),
+            "bins": self.n_bins,
+            "residual_db_rms": self.residual_db_rms,
+            "residual_deg_rms": self.residual_deg_rms,
+            "residual_normalized": self.residual_normalized,
+        }
         if self.notes:
             out["notes"] = list(self.notes)
         if self.table is not None:
@@ -398,21 +496,28 @@ class ModelFit:
         return out
 
 
-def _log_residual(model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray) -> np.ndarray:
+def _log_residual(
+    model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray
+) -> np.ndarray:
     q = np.log(model / H)
     return np.concatenate([q.real / log_se, q.imag / phase_se])
 
 
-def _residuals(model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray
-               ) -> tuple[float, float, float]:
+def _residuals(
+    model: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray
+) -> tuple[float, float, float]:
     """The fit's residual: rms dB, rms deg, and rms in units of each bin's standard error."""
     q = np.log(model / H)
-    return (float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))), float(np.degrees(np.sqrt(np.mean(q.imag ** 2)))),
-            float(np.sqrt(np.mean(_log_residual(model, H, log_se, phase_se) ** 2))))
+    return (
+        float(np.sqrt(np.mean((q.real * 20 / math.log(10)) ** 2))),
+        float(np.degrees(np.sqrt(np.mean(q.imag**2)))),
+        float(np.sqrt(np.mean(_log_residual(model, H, log_se, phase_se) ** 2))),
+    )
 
 
-def _fit_network_once(f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray,
-                      start: np.ndarray) -> np.ndarray:
+def _fit_network_once(
+    f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray, start: np.ndarray
+) -> np.ndarray:
     def resid(x: np.ndarray) -> np.ndarray:
         return _log_residual(network_response(f, _network_params(x)), H, log_se, phase_se)
 
@@ -425,16 +530,27 @@ def _fit_network_once(f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se
 def _network_params(x: np.ndarray) -> dict[str, float]:
     # x = ln(g w1), ln w1 .. ln w6: g w1 is what the band sees when w1 is below it
     w = np.exp(x[1:])
-    return {"gain": float(math.exp(x[0]) / w[0]), **{k: float(v) for k, v in zip(NETWORK_CORNERS, w)}}
+    return {
+        "gain": float(math.exp(x[0]) / w[0]),
+        **{k: float(v) for k, v in zip(NETWORK_CORNERS, w)},
+    }
 
 
-def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
-                start: Mapping[str, float] | None = None, min_coherence: float = 0.5) -> ModelFit:
+def fit_network(
+    resp: Response,
+    lo_hz: float = 0.3,
+    hi_hz: float = 100.0,
+    *,
+    start: Mapping[str, float] | None = None,
+    min_coherence: float = 0.5,
+) -> ModelFit:
     """Eq. 3.28 fitted to ``resp`` (control channel -> amplifier input) over ``lo..hi`` Hz."""
     ok = usable(resp, lo_hz, hi_hz, min_coherence)
     if ok.sum() < 12:
-        raise TransferError(f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
-                            f"with coherence >= {min_coherence:g}; a network fit needs 12")
+        raise TransferError(
+            f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
+            f"with coherence >= {min_coherence:g}; a network fit needs 12"
+        )
     p0 = dict(DESIGN_NETWORK if start is None else start)
     x0 = np.log([p0["gain"] * p0["w1_rad_per_s"], *(p0[k] for k in NETWORK_CORNERS)])
     # no bin weighs beyond the channels' match (SE_FLOOR): where the network's input is a line,
@@ -444,7 +560,12 @@ def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
     ls, ps = np.maximum(resp.log_se[ok], SE_FLOOR), np.maximum(resp.phase_se_rad[ok], SE_FLOOR)
     x = _fit_network_once(f, H, ls, ps, x0)
     # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
-    xb = np.array([_fit_network_once(f, resp.H_blocks[b][ok], ls, ps, x) for b in range(resp.H_blocks.shape[0])])
+    xb = np.array(
+        [
+            _fit_network_once(f, resp.H_blocks[b][ok], ls, ps, x)
+            for b in range(resp.H_blocks.shape[0])
+        ]
+    )
     se = jackknife_se(xb)
     corr = np.corrcoef(xb.T) if xb.shape[0] > 2 else np.eye(len(x))
     names = ["gain_times_w1_rad_per_s", *NETWORK_CORNERS]
@@ -462,22 +583,42 @@ def fit_network(resp: Response, lo_hz: float = 0.3, hi_hz: float = 100.0, *,
     # the gain alone: ln g = x0 - x1
     xg = xb[:, 0] - xb[:, 1]
     eg = from_stderr(x[0] - x[1], float(jackknife_se(xg)), dof=resp.dof)
-    cg = abs(float(np.corrcoef(xg, xb[:, 1])[0, 1])) if np.std(xg) > 0 and np.std(xb[:, 1]) > 0 else 0.0
+    cg = (
+        abs(float(np.corrcoef(xg, xb[:, 1])[0, 1]))
+        if np.std(xg) > 0 and np.std(xb[:, 1]) > 0
+        else 0.0
+    )
     est["gain"] = _exp_estimate(x[0] - x[1], eg, cg, "w1_rad_per_s")
     params = _network_params(x)
-    table = response_table(lambda ff: network_response(ff, params),
-                           [partial(network_response, p=_network_params(xx)) for xx in xb], resp.dof)
-    return ModelFit("network", est, (lo_hz, hi_hz), int(ok.sum()), *_residuals(network_response(f, params), H, ls, ps),
-                    correlations, curve=lambda ff: network_response(ff, params), table=table, params=params,
-                    replicates=[_network_params(xx) for xx in xb])
+    table = response_table(
+        lambda ff: network_response(ff, params),
+        [partial(network_response, p=_network_params(xx)) for xx in xb],
+        resp.dof,
+    )
+    return ModelFit(
+        "network",
+        est,
+        (lo_hz, hi_hz),
+        int(ok.sum()),
+        *_residuals(network_response(f, params), H, ls, ps),
+        correlations,
+        curve=lambda ff: network_response(ff, params),
+        table=table,
+        params=params,
+        replicates=[_network_params(xx) for xx in xb],
+    )
 
 
 #: where a fitted response is tabulated in the JSON: 0.3-100 Hz, 6 points a decade
 TABLE_HZ = tuple(float(f"{v:.3g}") for v in np.geomspace(0.3, 100.0, 16))
 
 
-def response_table(curve: Callable[[np.ndarray], np.ndarray], replicates: Sequence[Callable[[np.ndarray], np.ndarray]],
-                   dof: int, f_hz: Sequence[float] = TABLE_HZ) -> dict[str, list[Any]]:
+def response_table(
+    curve: Callable[[np.ndarray], np.ndarray],
+    replicates: Sequence[Callable[[np.ndarray], np.ndarray]],
+    dof: int,
+    f_hz: Sequence[float] = TABLE_HZ,
+) -> dict[str, list[Any]]:
     """A fitted response at ``f_hz``: gain (dB) and phase (deg) with 95 % intervals from the
     jackknife ``replicates`` (the same fit to each leave-one-out estimate)."""
     f = np.asarray(f_hz, float)
@@ -487,10 +628,17 @@ def response_table(curve: Callable[[np.ndarray], np.ndarray], replicates: Sequen
     g_se = jackknife_se(np.log(np.abs(hb / h))) * 20 / math.log(10)
     p_se = np.degrees(jackknife_se(np.angle(hb / h)))
     g, ph = 20 * np.log10(np.abs(h)), np.degrees(np.angle(h))
-    return {"f_hz": [float(v) for v in f], "gain_db": [round(float(v), 4) for v in g],
-            "gain_db_ci95": [[round(float(a - q * e), 4), round(float(a + q * e), 4)] for a, e in zip(g, g_se)],
-            "phase_deg": [round(float(v), 3) for v in ph],
-            "phase_deg_ci95": [[round(float(a - q * e), 3), round(float(a + q * e), 3)] for a, e in zip(ph, p_se)]}
+    return {
+        "f_hz": [float(v) for v in f],
+        "gain_db": [round(float(v), 4) for v in g],
+        "gain_db_ci95": [
+            [round(float(a - q * e), 4), round(float(a + q * e), 4)] for a, e in zip(g, g_se)
+        ],
+        "phase_deg": [round(float(v), 3) for v in ph],
+        "phase_deg_ci95": [
+            [round(float(a - q * e), 3), round(float(a + q * e), 3)] for a, e in zip(ph, p_se)
+        ],
+    }
 
 
 def _exp_estimate(x: float, e: Estimate, correlation: float, other: str) -> Estimate:
@@ -500,9 +648,13 @@ def _exp_estimate(x: float, e: Estimate, correlation: float, other: str) -> Esti
     if not all(math.isfinite(v) for v in (value, lo, hi)):
         return Estimate(value, lo, hi, False, "no finite interval")
     if correlation > MAX_CORRELATION:
-        return Estimate(value, lo, hi, False, f"correlates {correlation:.3f} with {other}: only known together")
+        return Estimate(
+            value, lo, hi, False, f"correlates {correlation:.3f} with {other}: only known together"
+        )
     if e.hi - e.lo > math.log(10.0):
-        return Estimate(value, lo, hi, False, f"its 95 % interval spans {hi / lo:.3g}x (more than a decade)")
+        return Estimate(
+            value, lo, hi, False, f"its 95 % interval spans {hi / lo:.3g}x (more than a decade)"
+        )
     return Estimate(value, lo, hi, True)
 
 
@@ -519,7 +671,9 @@ def sensor_filter(f_hz: np.ndarray, ac: AutocollimatorConstants, channel: str) -
     if channel.endswith("_inst"):
         w1 = ac.inst_filter1_rad_per_s
         return w1 / (s + w1) * second(ac.inst_filter2_rad_per_s, ac.inst_filter2_zeta)
-    raise TransferError(f"{channel!r} is not an autocollimator channel (ac_<axis>_ctl or ac_<axis>_inst)")
+    raise TransferError(
+        f"{channel!r} is not an autocollimator channel (ac_<axis>_ctl or ac_<axis>_inst)"
+    )
 
 
 def sensor_scale_V_per_rad(ac: AutocollimatorConstants, channel: str) -> float:
@@ -527,26 +681,44 @@ def sensor_scale_V_per_rad(ac: AutocollimatorConstants, channel: str) -> float:
     return mv * 1e-3 / URAD
 
 
-def platform_impedance(f_hz: np.ndarray, G: np.ndarray, pc: PlatformConstants, ac: AutocollimatorConstants,
-                       channel: str) -> np.ndarray:
+def platform_impedance(
+    f_hz: np.ndarray,
+    G: np.ndarray,
+    pc: PlatformConstants,
+    ac: AutocollimatorConstants,
+    channel: str,
+) -> np.ndarray:
     """Z = [Kp Km Kac F / G - Km Kb s] / (La s + Ra) = J s^2 + D s + k (eqs. 3.23-3.27)."""
     s = 2j * np.pi * np.asarray(f_hz, float)
     kac = sensor_scale_V_per_rad(ac, channel)
     drive = pc.amp_gain * pc.motor_Nm_per_A * kac * sensor_filter(f_hz, ac, channel)
-    return (drive / G - pc.motor_Nm_per_A * pc.back_emf_V_s * s) / (pc.armature_H * s + pc.armature_ohm)
+    return (drive / G - pc.motor_Nm_per_A * pc.back_emf_V_s * s) / (
+        pc.armature_H * s + pc.armature_ohm
+    )
 
 
-def platform_response(f_hz: np.ndarray, J: float, D: float, k: float, pc: PlatformConstants,
-                      ac: AutocollimatorConstants, channel: str) -> np.ndarray:
+def platform_response(
+    f_hz: np.ndarray,
+    J: float,
+    D: float,
+    k: float,
+    pc: PlatformConstants,
+    ac: AutocollimatorConstants,
+    channel: str,
+) -> np.ndarray:
     """G(s): autocollimator channel volts per amplifier-input volt (eqs. 3.21-3.27)."""
     s = 2j * np.pi * np.asarray(f_hz, float)
     kac = sensor_scale_V_per_rad(ac, channel)
     drive = pc.amp_gain * pc.motor_Nm_per_A * kac * sensor_filter(f_hz, ac, channel)
-    return drive / ((pc.armature_H * s + pc.armature_ohm) * (J * s * s + D * s + k)
-                    + pc.motor_Nm_per_A * pc.back_emf_V_s * s)
+    return drive / (
+        (pc.armature_H * s + pc.armature_ohm) * (J * s * s + D * s + k)
+        + pc.motor_Nm_per_A * pc.back_emf_V_s * s
+    )
 
 
-def _solve_jdk(f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, scale: np.ndarray | None = None) -> np.ndarray:
+def _solve_jdk(
+    f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, scale: np.ndarray | None = None
+) -> np.ndarray:
     """Weighted least squares of Re Z = k - J w^2, Im Z = D w, each bin weighted by
     1 / (``scale`` rel_se); ``scale`` is |Z| of the model when given (the data's own |Z| would
     weight a bin by its own error, a bias), else |Z| of the data. Returns (J, D, k)."""
@@ -554,14 +726,16 @@ def _solve_jdk(f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, scale: np.ndarr
     sig = (np.abs(Z) if scale is None else scale) * rel_se
     n = f.size
     A = np.zeros((2 * n, 3))
-    A[:n, 0] = -w * w / sig        # J
-    A[:n, 2] = 1.0 / sig           # k
-    A[n:, 1] = w / sig             # D
+    A[:n, 0] = -w * w / sig  # J
+    A[:n, 2] = 1.0 / sig  # k
+    A[n:, 1] = w / sig  # D
     b = np.concatenate([Z.real / sig, Z.imag / sig])
     return np.linalg.lstsq(A, b, rcond=None)[0]
 
 
-def _solve_jdk_irls(f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, iterations: int = 3) -> np.ndarray:
+def _solve_jdk_irls(
+    f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, iterations: int = 3
+) -> np.ndarray:
     """``_solve_jdk`` weighted by the data's |Z| once, then by the fitted model's |Z|."""
     x = _solve_jdk(f, Z, rel_se)
     s = 2j * np.pi * f
@@ -570,11 +744,15 @@ def _solve_jdk_irls(f: np.ndarray, Z: np.ndarray, rel_se: np.ndarray, iterations
     return x
 
 
-def fit_impedance(f_hz: np.ndarray, Z: np.ndarray, rel_se: np.ndarray | None = None) -> tuple[float, float, float]:
+def fit_impedance(
+    f_hz: np.ndarray, Z: np.ndarray, rel_se: np.ndarray | None = None
+) -> tuple[float, float, float]:
     """(J, D, k) of Z = J s^2 + D s + k fitted to ``Z`` at ``f_hz`` as ``fit_platform`` fits the
     measured one (each bin weighted by the model's |Z| times ``rel_se``, uniform when None)."""
     f = np.asarray(f_hz, float)
-    x = _solve_jdk_irls(f, np.asarray(Z), np.ones(f.size) if rel_se is None else np.asarray(rel_se, float))
+    x = _solve_jdk_irls(
+        f, np.asarray(Z), np.ones(f.size) if rel_se is None else np.asarray(rel_se, float)
+    )
     return float(x[0]), float(x[1]), float(x[2])
 
 
@@ -587,23 +765,41 @@ def smoothed(x: np.ndarray, half_width: int = 4) -> np.ndarray:
     return np.median(win, axis=1)
 
 
-def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConstants, lo_hz: float = 0.3,
-                 hi_hz: float = 50.0, min_coherence: float = 0.5) -> ModelFit:
+def fit_platform(
+    resp: Response,
+    pc: PlatformConstants,
+    ac: AutocollimatorConstants,
+    lo_hz: float = 0.3,
+    hi_hz: float = 50.0,
+    min_coherence: float = 0.5,
+) -> ModelFit:
     """Inertia J, viscous damping D and bearing stiffness k from ``resp`` (amplifier input ->
     autocollimator channel, best measured via the injected command torque)."""
     ok = usable(resp, lo_hz, hi_hz, min_coherence)
     if ok.sum() < 6:
-        raise TransferError(f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
-                            f"with coherence >= {min_coherence:g}; a platform fit needs 6")
+        raise TransferError(
+            f"{resp.source} -> {resp.target}: only {int(ok.sum())} bins in {lo_hz:g}-{hi_hz:g} Hz "
+            f"with coherence >= {min_coherence:g}; a platform fit needs 6"
+        )
     f = resp.f[ok]
     rel = smoothed(np.hypot(resp.log_se[ok], resp.phase_se_rad[ok]))
     Z = platform_impedance(f, resp.H[ok], pc, ac, resp.target)
     x = _solve_jdk_irls(f, Z, rel)
-    xb = np.array([_solve_jdk_irls(f, platform_impedance(f, resp.H_blocks[b][ok], pc, ac, resp.target), rel)
-                   for b in range(resp.H_blocks.shape[0])])
+    xb = np.array(
+        [
+            _solve_jdk_irls(
+                f, platform_impedance(f, resp.H_blocks[b][ok], pc, ac, resp.target), rel
+            )
+            for b in range(resp.H_blocks.shape[0])
+        ]
+    )
     J, D, kk = (float(v) for v in x)
-    res_db, res_deg, normalized = _residuals(platform_response(f, J, D, kk, pc, ac, resp.target), resp.H[ok],
-                                             resp.log_se[ok], resp.phase_se_rad[ok])
+    res_db, res_deg, normalized = _residuals(
+        platform_response(f, J, D, kk, pc, ac, resp.target),
+        resp.H[ok],
+        resp.log_se[ok],
+        resp.phase_se_rad[ok],
+    )
     # a fit worse than its bins' errors allow (the model misses something): widen by the Birge ratio
     se = jackknife_se(xb) * max(1.0, normalized)
     groups = local_damping(f, Z, np.abs(platform_z(f, J, D, kk)) * rel * max(1.0, normalized))
@@ -617,8 +813,10 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
         # each interval is the jackknife's marginal one: the trade-off between J and k (both pinned
         # by the resonance, sqrt(k / J)) is inside it, so their correlation is reported, not a verdict
         est[name] = from_stderr(float(x[k]), float(se[k]), dof=resp.dof)
-    notes = [f"viscous damping D includes the bearing's and the gyro gimbals'; the motor's back-EMF "
-             f"({pc.motor_Nm_per_A * pc.back_emf_V_s / pc.armature_ohm:.3g} N m s) is taken out"]
+    notes = [
+        f"viscous damping D includes the bearing's and the gyro gimbals'; the motor's back-EMF "
+        f"({pc.motor_Nm_per_A * pc.back_emf_V_s / pc.armature_ohm:.3g} N m s) is taken out"
+    ]
     dependent = groups.frequency_dependent()
     if dependent:
         # no single viscous D: reported unresolved, its interval the range the local dampings span
@@ -628,10 +826,21 @@ def fit_platform(resp: Response, pc: PlatformConstants, ac: AutocollimatorConsta
         hi = max(e.hi, *(d + q * s for d, s in zip(groups.D, groups.se)))
         est["damping_Nms"] = Estimate(e.value, lo, hi, False, dependent)
         notes.append(dependent)
-    return ModelFit("platform", est, (lo_hz, hi_hz), int(ok.sum()), res_db, res_deg, normalized, correlations, notes,
-                    curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target),
-                    params=dict(zip(names, (J, D, kk))), replicates=[dict(zip(names, map(float, v))) for v in xb],
-                    local_damping=groups)
+    return ModelFit(
+        "platform",
+        est,
+        (lo_hz, hi_hz),
+        int(ok.sum()),
+        res_db,
+        res_deg,
+        normalized,
+        correlations,
+        notes,
+        curve=lambda ff: platform_response(ff, J, D, kk, pc, ac, resp.target),
+        params=dict(zip(names, (J, D, kk))),
+        replicates=[dict(zip(names, map(float, v))) for v in xb],
+        local_damping=groups,
+    )
 
 
 def platform_z(f_hz: np.ndarray, J: float, D: float, k: float) -> np.ndarray:
@@ -665,17 +874,28 @@ class LocalDamping:
         mean = float(np.average(self.D, weights=1.0 / np.square(self.se)))
         if not (max(self.D) - min(self.D)) > DEPENDENCE_SPREAD * abs(mean):
             return ""
-        parts = ", ".join(f"{d:.3g} at {a:.3g}-{b:.3g} Hz" for (a, b), d in zip(self.bands_hz, self.D))
-        return (f"depends on frequency ({parts}; chi2 {self.chi2:.3g} on {len(self.D) - 1} dof): the axis is not the "
-                f"linear one of eqs. 3.23-3.27 at this amplitude (hysteretic friction, eq. 5.2, dissipates per "
-                f"cycle, not in proportion to speed), so no single viscous damping describes it")
+        parts = ", ".join(
+            f"{d:.3g} at {a:.3g}-{b:.3g} Hz" for (a, b), d in zip(self.bands_hz, self.D)
+        )
+        return (
+            f"depends on frequency ({parts}; chi2 {self.chi2:.3g} on {len(self.D) - 1} dof): the axis is not the "
+            f"linear one of eqs. 3.23-3.27 at this amplitude (hysteretic friction, eq. 5.2, dissipates per "
+            f"cycle, not in proportion to speed), so no single viscous damping describes it"
+        )
 
     def values(self) -> dict[str, Any]:
-        return {"bands_hz": [list(b) for b in self.bands_hz], "damping_Nms": [float(f"{d:.5g}") for d in self.D],
-                "se": [float(f"{s:.3g}") for s in self.se], "chi2": round(self.chi2, 3), "p": float(f"{self.p:.3g}")}
+        return {
+            "bands_hz": [list(b) for b in self.bands_hz],
+            "damping_Nms": [float(f"{d:.5g}") for d in self.D],
+            "se": [float(f"{s:.3g}") for s in self.se],
+            "chi2": round(self.chi2, 3),
+            "p": float(f"{self.p:.3g}"),
+        }
 
 
-def local_damping(f_hz: np.ndarray, Z: np.ndarray, sig: np.ndarray, groups: int = DAMPING_GROUPS) -> LocalDamping:
+def local_damping(
+    f_hz: np.ndarray, Z: np.ndarray, sig: np.ndarray, groups: int = DAMPING_GROUPS
+) -> LocalDamping:
     """The damping in consecutive bands. In the model Im Z = D w exactly (eqs. 3.23-3.27:
     the inertia and the stiffness are in Re Z), so each bin's Im Z / w is a local damping with
     standard error ``sig`` / w, whatever J and k are; the bins are cut into ``groups`` bands of
@@ -694,7 +914,7 @@ def local_damping(f_hz: np.ndarray, Z: np.ndarray, sig: np.ndarray, groups: int 
         D.append(float(np.sum(info[idx] * local[idx]) / np.sum(info[idx])))
         se.append(float(1.0 / math.sqrt(np.sum(info[idx]))))
     d, s = np.array(D), np.array(se)
-    mean = float(np.sum(d / s ** 2) / np.sum(1 / s ** 2))
+    mean = float(np.sum(d / s**2) / np.sum(1 / s**2))
     chi2 = float(np.sum(((d - mean) / s) ** 2))
     p = float(scipy.stats.chi2.sf(chi2, len(D) - 1)) if len(D) > 1 else 1.0
     return LocalDamping(bands, D, se, chi2, p)

@@ -11,7 +11,7 @@ import importlib
 import pkgutil
 from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:   # module_names() must not load the runner (numpy, h5py): fbs's parser calls it
+if TYPE_CHECKING:  # module_names() must not load the runner (numpy, h5py): fbs's parser calls it
     from procedures.runner import Procedure
 
 
@@ -37,7 +37,8 @@ def catalogue(package: str = __name__) -> dict[str, type[Procedure]]:
             raise CatalogueError(
                 f"{module.__file__}: its procedure is named {proc.name!r}, but a procedure's module is its "
                 f"name with '-' as '_' ({module_name(proc.name)}.py): rename one, or `fbs run {proc.name}` "
-                f"cannot find it")
+                f"cannot find it"
+            )
         found[proc.name] = proc
     return dict(sorted(found.items()))
 

@@ -48,7 +48,15 @@ from procedures.paramlimits import Range, above, at_least, check_limits, sample_
 from procedures.params import prior_values
 from procedures.reports.drift import hours, markdown, plot_allan, plot_null
 from procedures.rigsetup import bring_to_mode3, wait_settled
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import (
+    Analysis,
+    Context,
+    Figure,
+    Measurement,
+    Procedure,
+    ProcedureError,
+    Step,
+)
 
 #: the ADC's anti-alias filter is 3-pole at 0.3 fs (DESIGN.md section 5): the first few
 #: samples' Allan deviation is shaped by it, so the noise-model fit starts at this many samples
@@ -72,7 +80,9 @@ class DriftParams:
     #: band (Hz) where G_p is measured, well above the loop's bandwidth: from loop_band_lo_hz to
     #: loop_band_hi_frac x the sample rate (both channels pass the same anti-alias filter)
     loop_band_lo_hz: Annotated[float, above(0)] = 0.2
-    loop_band_hi_frac: Annotated[float, Range(0.0, 0.5, lo_open=True, note="of the sample rate: 0.5 is Nyquist")] = 0.2
+    loop_band_hi_frac: Annotated[
+        float, Range(0.0, 0.5, lo_open=True, note="of the sample rate: 0.5 is Nyquist")
+    ] = 0.2
     #: Allan points with fewer equivalent degrees of freedom (Greenhall's, for the term's own noise
     #: type) are not read for N or B (allan.term_estimate)
     min_edf: Annotated[float, at_least(1)] = 10.0
@@ -93,15 +103,21 @@ class DriftParams:
         check_limits(self, "drift")
         # what no one field can declare: limits that tie fields together
         if self.fit_tau_lo_s * self.rate_hz < MIN_FIT_SAMPLES - 1e-9:
-            raise ValueError(f"drift: fit_tau_lo_s = {self.fit_tau_lo_s:g} s is "
-                             f"{self.fit_tau_lo_s * self.rate_hz:g} samples at rate_hz = {self.rate_hz:g} Hz; it must "
-                             f"be >= {MIN_FIT_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)")
+            raise ValueError(
+                f"drift: fit_tau_lo_s = {self.fit_tau_lo_s:g} s is "
+                f"{self.fit_tau_lo_s * self.rate_hz:g} samples at rate_hz = {self.rate_hz:g} Hz; it must "
+                f"be >= {MIN_FIT_SAMPLES:g} samples (the anti-alias filter shapes shorter averages)"
+            )
         if not self.loop_band_lo_hz < self.loop_band_hi_frac * self.rate_hz:
-            raise ValueError(f"drift: loop-gain band {self.loop_band_lo_hz:g} .. "
-                             f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty: loop_band_lo_hz must be below "
-                             f"loop_band_hi_frac x rate_hz")
+            raise ValueError(
+                f"drift: loop-gain band {self.loop_band_lo_hz:g} .. "
+                f"{self.loop_band_hi_frac * self.rate_hz:g} Hz is empty: loop_band_lo_hz must be below "
+                f"loop_band_hi_frac x rate_hz"
+            )
         if not self.null_span_s >= self.average_s:
-            raise ValueError(f"drift: null_span_s = {self.null_span_s} must be >= average_s = {self.average_s}")
+            raise ValueError(
+                f"drift: null_span_s = {self.null_span_s} must be >= average_s = {self.average_s}"
+            )
 
 
 #: the name the module's functions and tests use
@@ -110,7 +126,7 @@ Params = DriftParams
 
 class Drift(Procedure[DriftParams]):
     name = "drift"
-    demo_order = 70   # with the earth-rate K_TO and the stopwatch K_g
+    demo_order = 70  # with the earth-rate K_TO and the stopwatch K_g
     title = "Gyro drift: Allan analysis of the rate from torquer and pickoff (Mode 3)"
     json_keys = ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file")
     Params = DriftParams
@@ -136,16 +152,27 @@ class Drift(Procedure[DriftParams]):
     def plan(self) -> list[Step]:
         p = self.params
         chunk_s = p.duration_s / int(p.n_chunks)
-        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                Step("settle", self.settle, expected_s=max(p.settle_min_s, p.settle_window_s) + 20.0, setup=True),
-                *(Step(name, partial(self.record, seconds=chunk_s), expected_s=chunk_s)
-                  for name in self.chunk_names())]
+        return [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step(
+                "settle",
+                self.settle,
+                expected_s=max(p.settle_min_s, p.settle_window_s) + 20.0,
+                setup=True,
+            ),
+            *(
+                Step(name, partial(self.record, seconds=chunk_s), expected_s=chunk_s)
+                for name in self.chunk_names()
+            ),
+        ]
 
     # ------------------------------------------------------------------ steps
     def kto_sources(self, ctx: Context) -> tuple[dict[str, float], dict[str, str]]:
         """K_TO per channel (urad/s/V) and, per channel, where it came from ("nominal" or the prior's)."""
         nominal = ctx.rig.calibration.torquer_scale_urad_per_s_per_V
-        return prior_values(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", GYRO_CHANNELS, nominal)
+        return prior_values(
+            self.prior, "earth-rate", "K_TO_urad_per_s_per_V", GYRO_CHANNELS, nominal
+        )
 
     def kto(self, ctx: Context) -> tuple[dict[str, float], str]:
         """K_TO per channel (urad/s/V) and where it came from."""
@@ -164,12 +191,18 @@ class Drift(Procedure[DriftParams]):
         kto, _ = self.kto(ctx)
         cols = [ctx.column(torq(c)) for c in GYRO_CHANNELS]
         tol_V = np.array([p.settle_tol_urad_per_s / abs(kto[c]) for c in GYRO_CHANNELS])
-        s = wait_settled(ctx, cols, tol_V=tol_V, window_s=p.settle_window_s, min_s=p.settle_min_s,
-                         timeout_s=p.settle_timeout_s)
+        s = wait_settled(
+            ctx,
+            cols,
+            tol_V=tol_V,
+            window_s=p.settle_window_s,
+            min_s=p.settle_min_s,
+            timeout_s=p.settle_timeout_s,
+        )
         return {"waited_s": round(s.waited_s, 1)}
 
     def record(self, ctx: Context, seconds: float) -> dict:
-        ctx.acquire(seconds, keep=False)   # where the samples are is the runner's record (ctx.spans)
+        ctx.acquire(seconds, keep=False)  # where the samples are is the runner's record (ctx.spans)
         return {"seconds": seconds}
 
     # ------------------------------------------------------------------ analysis
@@ -180,45 +213,84 @@ class Drift(Procedure[DriftParams]):
             raise ProcedureError("no record step was done: nothing to analyse")
         kto, kto_source = self.kto(ctx)
         try:
-            chunks, total, lost, rate = load_record([(s.file, s.start, s.stop) for s in spans], list(self.channels()),
-                                                    self.rate_hz)
+            chunks, total, lost, rate = load_record(
+                [(s.file, s.start, s.stop) for s in spans], list(self.channels()), self.rate_hz
+            )
         except DriftDataError as exc:
             raise ProcedureError(str(exc)) from None
         record_s = total / rate
         cal = ctx.rig.calibration
-        kg, kg_sources = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS,
-                                      cal.pickoff_scale_mV_per_urad)
+        kg, kg_sources = prior_values(
+            self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad
+        )
         # the float's restraint and viscous coupling are data-sheet constants (Table 3); the
         # coupling only where the rig's calibration carries it
         h_over_c = getattr(cal, "viscous_coupling_h_over_c", None)
         _, kto_sources = self.kto_sources(ctx)
-        tol = {ch: (p.nominal_kto_tol if kto_sources[ch] == "nominal" else 0.0,
-                    p.nominal_kg_tol if kg_sources[ch] == "nominal" else 0.0) for ch in GYRO_CHANNELS}
+        tol = {
+            ch: (
+                p.nominal_kto_tol if kto_sources[ch] == "nominal" else 0.0,
+                p.nominal_kg_tol if kg_sources[ch] == "nominal" else 0.0,
+            )
+            for ch in GYRO_CHANNELS
+        }
         try:
-            res = analyze_channels(chunks, rate, kto, p, kg, dict(cal.restraint_time_constant_s), h_over_c,
-                                   scale_tol=tol)
+            res = analyze_channels(
+                chunks,
+                rate,
+                kto,
+                p,
+                kg,
+                dict(cal.restraint_time_constant_s),
+                h_over_c,
+                scale_tol=tol,
+            )
         except DriftDataError as exc:
             raise ProcedureError(str(exc)) from None
         ms: list[Measurement] = [
-            Measurement("record length", record_s, "s", lo=p.min_record_s,
-                        note=f"{sum(1 for n in self.chunk_names() if n in ctx.spans)} of "
-                             f"{len(self.chunk_names())} chunks in {len(spans)} continuous stretch(es)"),
+            Measurement(
+                "record length",
+                record_s,
+                "s",
+                lo=p.min_record_s,
+                note=f"{sum(1 for n in self.chunk_names() if n in ctx.spans)} of "
+                f"{len(self.chunk_names())} chunks in {len(spans)} continuous stretch(es)",
+            ),
             Measurement("samples lost", lost / max(total, 1), "fraction", hi=p.max_lost_fraction),
         ]
         for r in res.values():
             ms += channel_measurements(r)
         values: dict = {}
-        add_figure(values, "bias_instability_urad_per_s", {ch: r.estimate("bias") for ch, r in res.items()})
+        add_figure(
+            values, "bias_instability_urad_per_s", {ch: r.estimate("bias") for ch, r in res.items()}
+        )
         add_figure(values, "arw_urad_per_sqrt_s", {ch: r.estimate("arw") for ch, r in res.items()})
-        md = markdown(res, p, kto, kto_source, record_s, lost, total, pickoff_stats(chunks, kg),
-                      any(src != "nominal" for src in kg_sources.values()), h_over_c is not None)
+        md = markdown(
+            res,
+            p,
+            kto,
+            kto_source,
+            record_s,
+            lost,
+            total,
+            pickoff_stats(chunks, kg),
+            any(src != "nominal" for src in kg_sources.values()),
+            h_over_c is not None,
+        )
         figures = [
-            Figure("allan", "Overlapping Allan deviation of the gyro's input rate reconstructed from torquer and "
-                   "pickoff, per channel, with 68 % confidence intervals (Greenhall EDF) and the fitted IEEE 952 "
-                   "noise model; thin: the torquing rate -K_TO V_T alone (the caging loop's output)",
-                   partial(plot_allan, res=res, p=p)),
-            Figure("null", f"Reconstructed input rate, {p.average_s:g}-s means, over the {hours(record_s)} record (mean "
-                   "removed): the null-stability wander", partial(plot_null, res=res, p=p)),
+            Figure(
+                "allan",
+                "Overlapping Allan deviation of the gyro's input rate reconstructed from torquer and "
+                "pickoff, per channel, with 68 % confidence intervals (Greenhall EDF) and the fitted IEEE 952 "
+                "noise model; thin: the torquing rate -K_TO V_T alone (the caging loop's output)",
+                partial(plot_allan, res=res, p=p),
+            ),
+            Figure(
+                "null",
+                f"Reconstructed input rate, {p.average_s:g}-s means, over the {hours(record_s)} record (mean "
+                "removed): the null-stability wander",
+                partial(plot_null, res=res, p=p),
+            ),
         ]
         return Analysis(values, ms, figures, md)
 
@@ -227,7 +299,10 @@ def channel_measurements(r: ChannelDrift) -> list[Measurement]:
     """A channel's read-offs as measurements, each noting how it was read (or why it was not)."""
     ch = r.channel
     out = []
-    for term, name, unit in (("arw", "ARW", "urad/sqrt(s)"), ("bias", "bias instability", "urad/s")):
+    for term, name, unit in (
+        ("arw", "ARW", "urad/sqrt(s)"),
+        ("bias", "bias instability", "urad/s"),
+    ):
         e = r.estimate(term)
         t = r.arw if term == "arw" else r.bi
         iv = f"95 % [{e.lo:.3g}, {e.hi:.3g}]"
@@ -240,23 +315,48 @@ def channel_measurements(r: ChannelDrift) -> list[Measurement]:
         else:
             note = f"not resolved ({e.why}): {iv}" + (f"; {how}" if t is not None else "")
         # a figure the record cannot give at all (too short) fails; an unresolved one is a result
-        out.append(Measurement(f"{name} {ch}", e.value if e.resolved else None, unit,
-                               lo=0.0 if t is None else None, note=note))
+        out.append(
+            Measurement(
+                f"{name} {ch}",
+                e.value if e.resolved else None,
+                unit,
+                lo=0.0 if t is None else None,
+                note=note,
+            )
+        )
     if r.loop is not None:
         lg = r.loop
-        out.append(Measurement(f"caging loop gain G_p {ch}", lg.gain_per_s, "1/s",
-                               note=f"torquing rate per pickoff angle, "
-                                    f"{lg.band_hz[0]:.3g}..{lg.band_hz[1]:.3g} Hz; "
-                                    f"pickoff output {lg.pickoff_asd:.3g} urad/sqrt(Hz) there, through it: "
-                                    f"N_loop {lg.white_rate:.3g} urad/sqrt(s)"))
+        out.append(
+            Measurement(
+                f"caging loop gain G_p {ch}",
+                lg.gain_per_s,
+                "1/s",
+                note=f"torquing rate per pickoff angle, "
+                f"{lg.band_hz[0]:.3g}..{lg.band_hz[1]:.3g} Hz; "
+                f"pickoff output {lg.pickoff_asd:.3g} urad/sqrt(Hz) there, through it: "
+                f"N_loop {lg.white_rate:.3g} urad/sqrt(s)",
+            )
+        )
     if r.null is not None:
         n = r.null
-        out.append(Measurement(f"null stability {ch}, p-p of {n.avg_s:g}-s means over {hours(n.record_s)}",
-                               n.peak_to_peak, "urad/s"))
-        how = ("measured" if n.measured_over_span else
-               f"estimated: x {n.ratio:.3g} from the Allan deviation, extrapolated beyond tau "
-               f"{n.extrapolated_from_tau_s:g} s with slope {n.extrapolation_slope:+.2f}")
-        out.append(Measurement(f"null stability {ch}, {hours(n.span_s)} p-p", n.estimate, "urad/s", note=how))
+        out.append(
+            Measurement(
+                f"null stability {ch}, p-p of {n.avg_s:g}-s means over {hours(n.record_s)}",
+                n.peak_to_peak,
+                "urad/s",
+            )
+        )
+        how = (
+            "measured"
+            if n.measured_over_span
+            else f"estimated: x {n.ratio:.3g} from the Allan deviation, extrapolated beyond tau "
+            f"{n.extrapolated_from_tau_s:g} s with slope {n.extrapolation_slope:+.2f}"
+        )
+        out.append(
+            Measurement(
+                f"null stability {ch}, {hours(n.span_s)} p-p", n.estimate, "urad/s", note=how
+            )
+        )
     return out
 
 

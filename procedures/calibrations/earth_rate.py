@@ -47,8 +47,9 @@ class EarthRateParams:
     #: table tilts (deg) in the order visited; at least three different ones, some above 0,
     #: separate the drifts. Not monotonic, so a slow trend over the run is not a tilt term
     #: (visited 0, 45, 90 the fixed drift and the g-drift along z correlate by -0.97).
-    tilts_deg: Annotated[list[float], Each(Range(0.0, 90.0, units="deg", note="the table's tilt range"))] = field(
-        default_factory=lambda: [0.0, 90.0, 45.0])
+    tilts_deg: Annotated[
+        list[float], Each(Range(0.0, 90.0, units="deg", note="the table's tilt range"))
+    ] = field(default_factory=lambda: [0.0, 90.0, 45.0])
     #: spindle angles per tilt, equally spaced
     n_spindle: Annotated[int, Range(4, 36, note="the spindle angles per tilt")] = 8
     average_s: Annotated[float, above(0)] = 60.0
@@ -64,7 +65,9 @@ class EarthRateParams:
     #: then carries a run's wander about the long-term fixed drift. An earlier drift run's figure
     #: (``--prior``, the same --out) is used before it. Without either, the interval is this
     #: run's bias and says so.
-    bias_instability_urad_per_s: Annotated[float | None, Range(0.0, 10.0, hi_open=True, units="urad/s")] = None
+    bias_instability_urad_per_s: Annotated[
+        float | None, Range(0.0, 10.0, hi_open=True, units="urad/s")
+    ] = None
     #: limits: K_TO within this fraction of the rig's nominal (data sheet) value, fit residual rms
     kto_tolerance: Annotated[float, fraction(note="of the nominal K_TO")] = 0.2
     max_residual_V: Annotated[float, above(0, units="V")] = 5e-3
@@ -73,11 +76,15 @@ class EarthRateParams:
         check_limits(self, "earth-rate")
         # what no one field can declare: the stations must separate the fit's unknowns
         if len(set(self.tilts_deg)) < 3 or max(self.tilts_deg) <= 0.0:
-            raise ValueError(f"earth-rate: tilts_deg {self.tilts_deg} needs at least 3 different tilts, some above 0 "
-                             f"(the fixed and g-sensitive drifts and Z's scale factor are separated by tilting)")
+            raise ValueError(
+                f"earth-rate: tilts_deg {self.tilts_deg} needs at least 3 different tilts, some above 0 "
+                f"(the fixed and g-sensitive drifts and Z's scale factor are separated by tilting)"
+            )
         if len(self.tilts_deg) * int(self.n_spindle) < 12:
-            raise ValueError(f"earth-rate: {len(self.tilts_deg)} tilts x {self.n_spindle} spindle angles is under 12 "
-                             f"stations (the fit has 7 unknowns and needs residuals for its intervals)")
+            raise ValueError(
+                f"earth-rate: {len(self.tilts_deg)} tilts x {self.n_spindle} spindle angles is under 12 "
+                f"stations (the fit has 7 unknowns and needs residuals for its intervals)"
+            )
 
 
 def _channel_column(ch: str) -> str:
@@ -92,8 +99,14 @@ class EarthRate(Procedure[EarthRateParams]):
     name = "earth-rate"
     demo_order = 10
     title = "Torquer scale factor and drift from earth rate (II C.1.a(1))"
-    json_keys = ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g",
-                 "g_drift_y_urad_per_s_per_g", "g_drift_z_urad_per_s_per_g", "file")
+    json_keys = (
+        "K_TO_urad_per_s_per_V",
+        "drift_urad_per_s",
+        "g_drift_x_urad_per_s_per_g",
+        "g_drift_y_urad_per_s_per_g",
+        "g_drift_z_urad_per_s_per_g",
+        "file",
+    )
     Params = EarthRateParams
     mode = 3
     block_s = 1.0
@@ -103,7 +116,9 @@ class EarthRate(Procedure[EarthRateParams]):
         self.rate_hz = self.params.rate_hz
 
     def channels(self) -> tuple[str, ...]:
-        return tuple(_channel_column(c) for c in GYRO_CHANNELS) + tuple(f"gyro_{c.lower()}" for c in GYRO_CHANNELS)
+        return tuple(_channel_column(c) for c in GYRO_CHANNELS) + tuple(
+            f"gyro_{c.lower()}" for c in GYRO_CHANNELS
+        )
 
     def headline(self) -> dict[str, tuple[str, ...]]:
         """The headline figures and their channels (``Procedure.headline``)."""
@@ -116,33 +131,55 @@ class EarthRate(Procedure[EarthRateParams]):
         spindles = list(np.arange(int(p.n_spindle)) * 360.0 / int(p.n_spindle))
         out = []
         for i, t in enumerate(p.tilts_deg):
-            for psi in (spindles if i % 2 == 0 else spindles[::-1]):
-                out.append((f"tilt {t:g} deg, spindle {psi:g} deg", float(t), float(psi), p.average_s))
+            for psi in spindles if i % 2 == 0 else spindles[::-1]:
+                out.append(
+                    (f"tilt {t:g} deg, spindle {psi:g} deg", float(t), float(psi), p.average_s)
+                )
         return out
 
     def plan(self) -> list[Step]:
-        stations = [Step(name, partial(self.station, tilt=tilt, spindle=spindle, average_s=avg),
-                         expected_s=avg + self.params.settle_min_s + 10.0)
-                    for name, tilt, spindle, avg in self.stations()]
-        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True), *stations,
-                Step("table home", self.home, expected_s=5.0, setup=True)]
+        stations = [
+            Step(
+                name,
+                partial(self.station, tilt=tilt, spindle=spindle, average_s=avg),
+                expected_s=avg + self.params.settle_min_s + 10.0,
+            )
+            for name, tilt, spindle, avg in self.stations()
+        ]
+        return [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            *stations,
+            Step("table home", self.home, expected_s=5.0, setup=True),
+        ]
 
     def station(self, ctx: Context, tilt: float, spindle: float, average_s: float) -> dict:
         p = self.params
-        pos = ctx.rig.move_table(tilt_deg=tilt, spindle_deg=spindle)  # a manual table asks the operator
+        pos = ctx.rig.move_table(
+            tilt_deg=tilt, spindle_deg=spindle
+        )  # a manual table asks the operator
         cols = [ctx.column(_channel_column(c)) for c in GYRO_CHANNELS]
         pick = [ctx.column(f"gyro_{c.lower()}") for c in GYRO_CHANNELS]
-        settled = wait_settled(ctx, cols, tol_V=p.settle_tol_V, window_s=p.settle_window_s,
-                               min_s=p.settle_min_s, timeout_s=p.settle_timeout_s)
+        settled = wait_settled(
+            ctx,
+            cols,
+            tol_V=p.settle_tol_V,
+            window_s=p.settle_window_s,
+            min_s=p.settle_min_s,
+            timeout_s=p.settle_timeout_s,
+        )
         t0 = ctx.time_s
         data = ctx.acquire(average_s)
         mean, se = mean_and_stderr(data[:, cols])
         pmean, _ = mean_and_stderr(data[:, pick])
-        return {"tilt": pos.tilt_deg, "spindle": pos.spindle_deg, "t": [round(t0, 3), round(ctx.time_s, 3)],
-                "settle_s": round(settled.waited_s, 1),
-                "V": {c: float(m) for c, m in zip(GYRO_CHANNELS, mean)},
-                "se": {c: float(s) for c, s in zip(GYRO_CHANNELS, se)},
-                "pickoff_V": {c: float(m) for c, m in zip(GYRO_CHANNELS, pmean)}}
+        return {
+            "tilt": pos.tilt_deg,
+            "spindle": pos.spindle_deg,
+            "t": [round(t0, 3), round(ctx.time_s, 3)],
+            "settle_s": round(settled.waited_s, 1),
+            "V": {c: float(m) for c, m in zip(GYRO_CHANNELS, mean)},
+            "se": {c: float(s) for c, s in zip(GYRO_CHANNELS, se)},
+            "pickoff_V": {c: float(m) for c, m in zip(GYRO_CHANNELS, pmean)},
+        }
 
     def _kg_rel_half_width(self, ch: str, source: str, kg: float) -> float | None:
         """The relative 95 % half-width of the stopwatch K_g in use, ``None`` for the data
@@ -166,39 +203,85 @@ class EarthRate(Procedure[EarthRateParams]):
         stations = [ctx.results[st[0]] for st in self.stations()]
         p = self.params
         # K_g for the standing pickoff: a stopwatch run's if at hand, else the data sheet's
-        kg, kg_from = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS,
-                                   cal.pickoff_scale_mV_per_urad)
+        kg, kg_from = prior_values(
+            self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad
+        )
         kg_rel = {ch: self._kg_rel_half_width(ch, kg_from[ch], kg[ch]) for ch in GYRO_CHANNELS}
         given = p.bias_instability_urad_per_s or 0.0
-        bi, self.instability_sources = prior_values(self.prior, "drift", "bias_instability_urad_per_s", GYRO_CHANNELS,
-                                                    {ch: given for ch in GYRO_CHANNELS})
-        fits = fit_earth_rate(stations, latitude_deg=cal.latitude_deg, earth_rate_rad_per_s=cal.earth_rate_rad_per_s,
-                              restraint_s=cal.restraint_time_constant_s, pickoff_mV_per_urad=kg,
-                              instability_urad_per_s=bi, pickoff_rel_uncertainty=kg_rel)
+        bi, self.instability_sources = prior_values(
+            self.prior,
+            "drift",
+            "bias_instability_urad_per_s",
+            GYRO_CHANNELS,
+            {ch: given for ch in GYRO_CHANNELS},
+        )
+        fits = fit_earth_rate(
+            stations,
+            latitude_deg=cal.latitude_deg,
+            earth_rate_rad_per_s=cal.earth_rate_rad_per_s,
+            restraint_s=cal.restraint_time_constant_s,
+            pickoff_mV_per_urad=kg,
+            instability_urad_per_s=bi,
+            pickoff_rel_uncertainty=kg_rel,
+        )
         ms: list[Measurement] = []
         for ch, f in fits.items():
             nominal = cal.torquer_scale_urad_per_s_per_V[ch]
-            ms.append(Measurement(f"K_TO {ch}", f.kto.value, "urad/s/V", nominal * (1 - p.kto_tolerance),
-                                  nominal * (1 + p.kto_tolerance), f.kto.half_width / 1.96,
-                                  note=f"95 % [{f.kto.lo:.6g}, {f.kto.hi:.6g}]"))
-            for label, e, unit in (("drift", f.drift, "urad/s"),
-                                   *((f"g-drift along {a}", f.g_drift[a], "urad/s/g") for a in G_AXES)):
-                ms.append(Measurement(f"{label} {ch}", e.value if e.resolved else None, unit,
-                                      stderr=e.half_width / 1.96 if math.isfinite(e.half_width) else None,
-                                      note=(f"95 % [{e.lo:.4g}, {e.hi:.4g}]" if e.resolved else f"not resolved: {e.why}"
-                                            + (f"; 95 % [{e.lo:.4g}, {e.hi:.4g}]" if math.isfinite(e.lo) else ""))))
+            ms.append(
+                Measurement(
+                    f"K_TO {ch}",
+                    f.kto.value,
+                    "urad/s/V",
+                    nominal * (1 - p.kto_tolerance),
+                    nominal * (1 + p.kto_tolerance),
+                    f.kto.half_width / 1.96,
+                    note=f"95 % [{f.kto.lo:.6g}, {f.kto.hi:.6g}]",
+                )
+            )
+            for label, e, unit in (
+                ("drift", f.drift, "urad/s"),
+                *((f"g-drift along {a}", f.g_drift[a], "urad/s/g") for a in G_AXES),
+            ):
+                ms.append(
+                    Measurement(
+                        f"{label} {ch}",
+                        e.value if e.resolved else None,
+                        unit,
+                        stderr=e.half_width / 1.96 if math.isfinite(e.half_width) else None,
+                        note=(
+                            f"95 % [{e.lo:.4g}, {e.hi:.4g}]"
+                            if e.resolved
+                            else f"not resolved: {e.why}"
+                            + (f"; 95 % [{e.lo:.4g}, {e.hi:.4g}]" if math.isfinite(e.lo) else "")
+                        ),
+                    )
+                )
             if f.psi0_deg is not None:
                 ms.append(Measurement(f"table azimuth misalignment psi0 ({ch})", f.psi0_deg, "deg"))
-            ms.append(Measurement(f"fit residual rms {ch}", f.residual_rms_V, "V", hi=p.max_residual_V))
+            ms.append(
+                Measurement(f"fit residual rms {ch}", f.residual_rms_V, "V", hi=p.max_residual_V)
+            )
         values: dict = {}
         add_figure(values, "K_TO_urad_per_s_per_V", {ch: f.kto for ch, f in fits.items()})
         add_figure(values, "drift_urad_per_s", {ch: f.drift for ch, f in fits.items()})
         for a in G_AXES:
-            add_figure(values, f"g_drift_{a}_urad_per_s_per_g", {ch: f.g_drift[a] for ch, f in fits.items()})
-        return Analysis(values, ms, [Figure("fit", "Torquer output at each station (tilt, spindle) against the "
-                                            "multi-position fit",
-                                            partial(plot_fits, fits=fits))],
-                        markdown=markdown(fits, stations, self.stations()))
+            add_figure(
+                values,
+                f"g_drift_{a}_urad_per_s_per_g",
+                {ch: f.g_drift[a] for ch, f in fits.items()},
+            )
+        return Analysis(
+            values,
+            ms,
+            [
+                Figure(
+                    "fit",
+                    "Torquer output at each station (tilt, spindle) against the multi-position fit",
+                    partial(plot_fits, fits=fits),
+                )
+            ],
+            markdown=markdown(fits, stations, self.stations()),
+        )
 
 
 PROCEDURE = EarthRate

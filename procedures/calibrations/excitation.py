@@ -68,12 +68,28 @@ from procedures.analysis.transfer import (
     sensor_scale_V_per_rad,
     unbiased_coherence,
 )
-from procedures.paramlimits import MAX_PROCEDURE_RATE_HZ, OneOf, Range, above, at_least, check_limits, sample_rate
+from procedures.paramlimits import (
+    MAX_PROCEDURE_RATE_HZ,
+    OneOf,
+    Range,
+    above,
+    at_least,
+    check_limits,
+    sample_rate,
+)
 from procedures.params import prior_values
 from procedures.reports.excitation import markdown, plot_response
 from procedures.reports.thesis import closed_loop_roots as thesis_roots
 from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import (
+    Analysis,
+    Context,
+    Figure,
+    Measurement,
+    Procedure,
+    ProcedureError,
+    Step,
+)
 
 URAD = 1e-6
 #: the recorded channels' ADC ranges (V): the amplifier input is millivolts, tens of them in the
@@ -87,7 +103,9 @@ GYRO_MODE_RANGES_V = {"gyro": 2.0, "pa": 0.2}
 class ExcitationParams:
     axis: Annotated[str, OneOf("X", "Y", note="Z has no primary autocollimator channel")] = "X"
     #: 3 autocollimator stabilization; 4 and 5 gyro stabilization (entered from caged Mode 3)
-    mode: Annotated[int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")] = 3
+    mode: Annotated[
+        int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")
+    ] = 3
     rate_hz: Annotated[float, sample_rate()] = 1000.0
     #: V_Td updates per second (a DAC set-point between ADC blocks); rate_hz / update_hz whole
     update_hz: Annotated[float, Range(1.0, MAX_PROCEDURE_RATE_HZ, units="Hz")] = 250.0
@@ -133,26 +151,43 @@ class ExcitationParams:
         check_limits(self, "excitation")
         per = self.rate_hz / self.update_hz
         if abs(per - round(per)) > 1e-9 or round(per) < 1:
-            raise ValueError(f"excitation: rate_hz / update_hz = {per:g} samples per V_Td update must be a whole "
-                             f"number >= 1")
+            raise ValueError(
+                f"excitation: rate_hz / update_hz = {per:g} samples per V_Td update must be a whole "
+                f"number >= 1"
+            )
         if not self.band_lo_hz < self.band_hi_hz <= self.update_hz / 2:
-            raise ValueError(f"excitation: band_lo_hz..band_hi_hz = {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must "
-                             f"lie below half the update rate (update_hz / 2 = {self.update_hz / 2:g} Hz), low below high")
+            raise ValueError(
+                f"excitation: band_lo_hz..band_hi_hz = {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must "
+                f"lie below half the update rate (update_hz / 2 = {self.update_hz / 2:g} Hz), low below high"
+            )
         if self.quiet_s < self.seg_s * self.n_blocks:
-            raise ValueError(f"excitation: quiet_s = {self.quiet_s:g} s holds fewer than n_blocks = {self.n_blocks} "
-                             f"segments of {self.seg_s:g} s")
+            raise ValueError(
+                f"excitation: quiet_s = {self.quiet_s:g} s holds fewer than n_blocks = {self.n_blocks} "
+                f"segments of {self.seg_s:g} s"
+            )
         if self.excite_s < self.period_s * (self.n_blocks + 1):
-            raise ValueError(f"excitation: excite_s = {self.excite_s:g} s holds fewer than n_blocks + 1 = "
-                             f"{self.n_blocks + 1} periods of {self.period_s:g} s (the first is the transient)")
-        for name, per in (("period_s", self.period_s * self.update_hz), ("period_s", self.period_s * self.rate_hz)):
+            raise ValueError(
+                f"excitation: excite_s = {self.excite_s:g} s holds fewer than n_blocks + 1 = "
+                f"{self.n_blocks + 1} periods of {self.period_s:g} s (the first is the transient)"
+            )
+        for name, per in (
+            ("period_s", self.period_s * self.update_hz),
+            ("period_s", self.period_s * self.rate_hz),
+        ):
             if abs(per - round(per)) > 1e-6:
-                raise ValueError(f"excitation: {name} = {self.period_s:g} s must be whole V_Td updates and samples")
-        if not (self.fit_lo_hz < min(self.network_hi_hz, self.platform_hi_hz) <= self.rate_hz * 0.3
-                and self.roots_lo_hz < self.roots_hi_hz <= self.rate_hz * 0.3):
-            raise ValueError(f"excitation: the fit bands fit_lo_hz..network_hi_hz / platform_hi_hz = "
-                             f"{self.fit_lo_hz:g}..{self.network_hi_hz:g} / {self.platform_hi_hz:g} Hz and "
-                             f"roots_lo_hz..roots_hi_hz = {self.roots_lo_hz:g}..{self.roots_hi_hz:g} Hz must lie below "
-                             f"the anti-alias filter (0.3 rate_hz = {self.rate_hz * 0.3:g} Hz), low below high")
+                raise ValueError(
+                    f"excitation: {name} = {self.period_s:g} s must be whole V_Td updates and samples"
+                )
+        if not (
+            self.fit_lo_hz < min(self.network_hi_hz, self.platform_hi_hz) <= self.rate_hz * 0.3
+            and self.roots_lo_hz < self.roots_hi_hz <= self.rate_hz * 0.3
+        ):
+            raise ValueError(
+                f"excitation: the fit bands fit_lo_hz..network_hi_hz / platform_hi_hz = "
+                f"{self.fit_lo_hz:g}..{self.network_hi_hz:g} / {self.platform_hi_hz:g} Hz and "
+                f"roots_lo_hz..roots_hi_hz = {self.roots_lo_hz:g}..{self.roots_hi_hz:g} Hz must lie below "
+                f"the anti-alias filter (0.3 rate_hz = {self.rate_hz * 0.3:g} Hz), low below high"
+            )
 
 
 Params = ExcitationParams
@@ -169,18 +204,25 @@ NONLINEAR_RESIDUAL = 3.0
 CREST = 4.5
 
 
-def coherent_rms(x: np.ndarray, y: np.ndarray, fs: float, band_hz: tuple[float, float], seg_s: float = 2.0) -> float:
+def coherent_rms(
+    x: np.ndarray, y: np.ndarray, fs: float, band_hz: tuple[float, float], seg_s: float = 2.0
+) -> float:
     """The rms of ``y``'s part coherent with ``x`` in ``band_hz``: the integral of
     gamma^2 S_yy, gamma^2 freed of its bias over the averaged segments (Ch. V C)."""
     nperseg = min(int(round(seg_s * fs)), len(x))
     f, S = welch_csd_matrix(np.vstack([x, y]), fs, nperseg=nperseg)
-    m = equivalent_dof("hann", nperseg, nperseg // 2, n_segments(len(x), nperseg, nperseg // 2)) / 2.0
+    m = (
+        equivalent_dof("hann", nperseg, nperseg // 2, n_segments(len(x), nperseg, nperseg // 2))
+        / 2.0
+    )
     g = unbiased_coherence(coherence(S)[:, 0, 1], m)
     band = (f >= band_hz[0]) & (f <= band_hz[1])
     return float(np.sqrt(np.sum((g * S[:, 1, 1].real)[band]) * (f[1] - f[0])))
 
 
-def excitation_signal(n: int, update_hz: float, lo_hz: float, hi_hz: float, seed: int) -> np.ndarray:
+def excitation_signal(
+    n: int, update_hz: float, lo_hz: float, hi_hz: float, seed: int
+) -> np.ndarray:
     """``n`` values of unit-rms noise, flat from ``lo_hz`` to ``hi_hz`` (random phases, equal
     amplitudes: a periodic multisine of period n / update_hz), one per V_Td update."""
     rng = np.random.default_rng(seed)
@@ -188,7 +230,9 @@ def excitation_signal(n: int, update_hz: float, lo_hz: float, hi_hz: float, seed
     spec = np.zeros(f.size, complex)
     band = (f >= lo_hz) & (f <= hi_hz)
     if not band.any():
-        raise ValueError(f"no frequency of a {n / update_hz:g} s excitation lies in {lo_hz:g}-{hi_hz:g} Hz")
+        raise ValueError(
+            f"no frequency of a {n / update_hz:g} s excitation lies in {lo_hz:g}-{hi_hz:g} Hz"
+        )
     spec[band] = np.exp(2j * np.pi * rng.random(int(band.sum())))
     x = np.fft.irfft(spec, n)
     return x / np.sqrt(np.mean(x * x))
@@ -199,10 +243,20 @@ class Excitation(Procedure[ExcitationParams]):
     demo_order = 60
     #: Mode 3, then Mode 4 with records shorter than a lab's (the roots need no more)
     demo_runs = (("X", ()), ("X", ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40")))
-    title = ("Coherent excitation through V_Td in Mode 3, 4 or 5: network, inertia, stiffness, closed-loop roots "
-             "(Ch. V C-D, Tables 5-6)")
-    json_keys = ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "excitation_amplitude_urad",
-                 "amplitude_dependent", "closed_loop", "file")
+    title = (
+        "Coherent excitation through V_Td in Mode 3, 4 or 5: network, inertia, stiffness, closed-loop roots "
+        "(Ch. V C-D, Tables 5-6)"
+    )
+    json_keys = (
+        "network",
+        "inertia_kg_m2",
+        "damping_Nms",
+        "stiffness_Nm_per_rad",
+        "excitation_amplitude_urad",
+        "amplitude_dependent",
+        "closed_loop",
+        "file",
+    )
     Params = ExcitationParams
     mode = 3
 
@@ -216,8 +270,13 @@ class Excitation(Procedure[ExcitationParams]):
         #: record and Mode 3's polls read in the default blocks, not a few samples at a time)
         self.update_s = 1.0 / p.update_hz
         a = p.axis.lower()
-        self.names = {"cmd": f"cmd_{a}", "ac_ctl": f"ac_{a}_ctl", "ac_inst": f"ac_{a}_inst", "gyro": f"gyro_{a}",
-                      "pa": f"pa_{a}"}
+        self.names = {
+            "cmd": f"cmd_{a}",
+            "ac_ctl": f"ac_{a}_ctl",
+            "ac_inst": f"ac_{a}_inst",
+            "gyro": f"gyro_{a}",
+            "pa": f"pa_{a}",
+        }
         # the network's input: the control channel in Mode 3, the axis gyro's pickoff in 4 and 5 (Fig. 27)
         self.network_input = self.names["ac_ctl"] if p.mode == 3 else self.names["gyro"]
         ranges = RANGES_V | (GYRO_MODE_RANGES_V if p.mode != 3 else {})
@@ -235,15 +294,25 @@ class Excitation(Procedure[ExcitationParams]):
 
     def plan(self) -> list[Step]:
         p = self.params
-        steps = [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                 Step("settle", self._settle, expected_s=p.settle_s, setup=True)]
+        steps = [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step("settle", self._settle, expected_s=p.settle_s, setup=True),
+        ]
         if p.mode != 3:
-            steps.append(Step(f"mode {p.mode}", partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
-                              expected_s=p.mode_settle_s, setup=True))
-        steps += [Step("quiet", self._quiet, expected_s=p.quiet_s),
-                  Step("probe", self._probe, expected_s=p.probe_s, setup=True),
-                  Step("excite", self._excite, expected_s=p.excite_s),
-                  Step("V_Td off", self._off, expected_s=2.0, setup=True)]
+            steps.append(
+                Step(
+                    f"mode {p.mode}",
+                    partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
+                    expected_s=p.mode_settle_s,
+                    setup=True,
+                )
+            )
+        steps += [
+            Step("quiet", self._quiet, expected_s=p.quiet_s),
+            Step("probe", self._probe, expected_s=p.probe_s, setup=True),
+            Step("excite", self._excite, expected_s=p.excite_s),
+            Step("V_Td off", self._off, expected_s=2.0, setup=True),
+        ]
         if p.mode != 3:
             steps.append(Step("back to mode 3", back_to_mode3, expected_s=2.0, setup=True))
         return steps
@@ -260,14 +329,17 @@ class Excitation(Procedure[ExcitationParams]):
     def _period(self) -> np.ndarray:
         """One period of the unit-rms multisine, a value per V_Td update."""
         p = self.params
-        return excitation_signal(int(round(p.period_s * p.update_hz)), p.update_hz, p.band_lo_hz, p.band_hi_hz,
-                                 p.seed)
+        return excitation_signal(
+            int(round(p.period_s * p.update_hz)), p.update_hz, p.band_lo_hz, p.band_hi_hz, p.seed
+        )
 
-    def _inject(self, ctx: Context, volts_rms: float, seconds: float, keep: bool) -> np.ndarray | None:
+    def _inject(
+        self, ctx: Context, volts_rms: float, seconds: float, keep: bool
+    ) -> np.ndarray | None:
         """``seconds`` of the excitation at ``volts_rms``: one V_Td set-point per ADC block."""
         p = self.params
         n = int(round(seconds * p.update_hz))
-        x = np.resize(self._period(), n) * volts_rms             # whole periods, repeated
+        x = np.resize(self._period(), n) * volts_rms  # whole periods, repeated
         blocks = []
 
         def step() -> None:
@@ -275,7 +347,7 @@ class Excitation(Procedure[ExcitationParams]):
             if keep:
                 blocks.append(got)
 
-        ctx.rig.stream_command_torque_V(p.axis, x, step)   # ends at 0 V, however it ends
+        ctx.rig.stream_command_torque_V(p.axis, x, step)  # ends at 0 V, however it ends
         return np.concatenate(blocks) if keep else None
 
     def _probe(self, ctx: Context) -> dict:
@@ -292,12 +364,14 @@ class Excitation(Procedure[ExcitationParams]):
         for k, name in self.names.items():
             col = quiet[:, cols[k]]
             if k != "cmd" and np.nanmax(np.abs(col)) >= 0.99 * self.channel_ranges_V[name]:
-                raise ProcedureError(f"excitation: {name} is at its full scale ({self.channel_ranges_V[name]:g} V) "
-                                     f"with nothing injected: the platform is not at rest in Mode {p.mode} (an "
-                                     f"unstable loop, or a gimbal on its stop); nothing was injected")
+                raise ProcedureError(
+                    f"excitation: {name} is at its full scale ({self.channel_ranges_V[name]:g} V) "
+                    f"with nothing injected: the platform is not at rest in Mode {p.mode} (an "
+                    f"unstable loop, or a gimbal on its stop); nothing was injected"
+                )
         crest = float(np.max(np.abs(self._period())))
         dac_max = 0.9 * min(cal.dac_range_V, self.channel_ranges_V[self.names["cmd"]]) / crest
-        skip = int(round(min(2.0, p.probe_s / 4) * p.rate_hz))         # the loop's transient
+        skip = int(round(min(2.0, p.probe_s / 4) * p.rate_hz))  # the loop's transient
         scale = cal.autocollimator[p.axis].control_mV_per_urad * 1e-3 / URAD
         rms_q = float(np.nanstd(quiet[:, cols["ac_ctl"]])) / scale / URAD
         target = max(p.target_urad, p.above_quiet * rms_q)
@@ -305,37 +379,57 @@ class Excitation(Procedure[ExcitationParams]):
         while True:
             data = self._inject(ctx, level, p.probe_s, keep=True)
             assert data is not None
-            moved = coherent_rms(data[skip:, cols["cmd"]], data[skip:, cols["ac_ctl"]], p.rate_hz,
-                                 (p.band_lo_hz, p.band_hi_hz)) / scale / URAD
+            moved = (
+                coherent_rms(
+                    data[skip:, cols["cmd"]],
+                    data[skip:, cols["ac_ctl"]],
+                    p.rate_hz,
+                    (p.band_lo_hz, p.band_hi_hz),
+                )
+                / scale
+                / URAD
+            )
             tries.append({"V_rms": round(level, 6), "moved_urad_rms": round(moved, 4)})
             if moved >= PROBE_ENOUGH * target or level >= dac_max or len(tries) >= PROBE_TRIES:
                 break
             level = min(level * PROBE_GROWTH, dac_max)
         if not moved > 0:
-            raise ProcedureError(f"excitation: probes up to {level:g} V rms did not move the platform measurably "
-                                 f"(no part of ac_{p.axis.lower()}_ctl coherent with V_Td; quiet {rms_q:.3g} urad "
-                                 f"rms): is the command-torque DAC connected?")
+            raise ProcedureError(
+                f"excitation: probes up to {level:g} V rms did not move the platform measurably "
+                f"(no part of ac_{p.axis.lower()}_ctl coherent with V_Td; quiet {rms_q:.3g} urad "
+                f"rms): is the command-torque DAC connected?"
+            )
         limits = {"target": level * target / moved}
         # each channel's peak: its quiet peak plus the excited part's, which scales with the level
         # (a channel's noise does not: in the gyro modes the pickoff noise fills half the range)
         for k, name in self.names.items():
             if k == "cmd":
                 continue
-            room = p.max_range_fraction * self.channel_ranges_V[name] - float(np.nanmax(np.abs(
-                quiet[:, cols[k]] - np.nanmean(quiet[:, cols[k]]))))
+            room = p.max_range_fraction * self.channel_ranges_V[name] - float(
+                np.nanmax(np.abs(quiet[:, cols[k]] - np.nanmean(quiet[:, cols[k]])))
+            )
             if room <= 0:
-                raise ProcedureError(f"excitation: {name}'s quiet peaks already exceed {p.max_range_fraction:g} of its "
-                                     f"{self.channel_ranges_V[name]:g} V range: no room to excite (raise "
-                                     f"max_range_fraction, or quieten the rig)")
+                raise ProcedureError(
+                    f"excitation: {name}'s quiet peaks already exceed {p.max_range_fraction:g} of its "
+                    f"{self.channel_ranges_V[name]:g} V range: no room to excite (raise "
+                    f"max_range_fraction, or quieten the rig)"
+                )
             var = float(np.nanvar(data[skip:, cols[k]]) - np.nanvar(quiet[:, cols[k]]))
             if var > 0:
-                limits[name] = level * room / (CREST * var ** 0.5)
+                limits[name] = level * room / (CREST * var**0.5)
         limits["V_Td DAC"] = dac_max
         by = min(limits, key=lambda k: limits[k])
         chosen = limits[by]
-        return {"probe_V_rms": round(level, 6), "probe_motion_urad_rms": round(moved, 4), "quiet_urad_rms": round(rms_q, 4),
-                "probes": tries, "target_urad_rms": round(target, 4), "level_V_rms": chosen, "limited_by": by,
-                "expected_motion_urad_rms": round(moved * chosen / level, 4)}
+        return {
+            "probe_V_rms": round(level, 6),
+            "probe_motion_urad_rms": round(moved, 4),
+            "quiet_urad_rms": round(rms_q, 4),
+            "probes": tries,
+            "target_urad_rms": round(target, 4),
+            "level_V_rms": chosen,
+            "limited_by": by,
+            "expected_motion_urad_rms": round(moved * chosen / level, 4),
+        }
 
     def _excite(self, ctx: Context) -> dict:
         level = float(ctx.results["probe"]["level_V_rms"])
@@ -353,57 +447,108 @@ class Excitation(Procedure[ExcitationParams]):
         cal = ctx.rig.calibration
         n = self.names
         try:
-            quiet = block_csd([(s.file, s.start, s.stop) for s in ctx.data_spans(["quiet"])],
-                              [self.network_input, n["pa"]], p.seg_s, p.n_blocks)
-            excited = periodic_blocks([(s.file, s.start, s.stop) for s in ctx.data_spans(["excite"])],
-                                      [n["cmd"], n["pa"], n["ac_ctl"], n["ac_inst"], n["gyro"]], p.period_s,
-                                      p.n_blocks)
+            quiet = block_csd(
+                [(s.file, s.start, s.stop) for s in ctx.data_spans(["quiet"])],
+                [self.network_input, n["pa"]],
+                p.seg_s,
+                p.n_blocks,
+            )
+            excited = periodic_blocks(
+                [(s.file, s.start, s.stop) for s in ctx.data_spans(["excite"])],
+                [n["cmd"], n["pa"], n["ac_ctl"], n["ac_inst"], n["gyro"]],
+                p.period_s,
+                p.n_blocks,
+            )
             net_resp = response(quiet, self.network_input, n["pa"])
-            quiet_net = fit_network(net_resp, max(p.fit_lo_hz, quiet.lowest_fit_hz), p.network_hi_hz)
+            quiet_net = fit_network(
+                net_resp, max(p.fit_lo_hz, quiet.lowest_fit_hz), p.network_hi_hz
+            )
             plat_resp = response(excited, n["pa"], n["ac_inst"], via=n["cmd"])
-            plat = fit_platform(plat_resp, cal.platform[p.axis], cal.autocollimator[p.axis],
-                                max(p.fit_lo_hz, excited.lowest_fit_hz), p.platform_hi_hz)
-            roots, loop_resp, net = closed_loop(excited, quiet_net, plat, cal, n, self.network_input, p)
+            plat = fit_platform(
+                plat_resp,
+                cal.platform[p.axis],
+                cal.autocollimator[p.axis],
+                max(p.fit_lo_hz, excited.lowest_fit_hz),
+                p.platform_hi_hz,
+            )
+            roots, loop_resp, net = closed_loop(
+                excited, quiet_net, plat, cal, n, self.network_input, p
+            )
         except TransferError as exc:
             raise ProcedureError(f"excitation: {exc}") from None
         values = analysis_values(net, plat, p.axis, cal.platform[p.axis].inertia_kg_m2)
-        amplitude = excited_amplitude_urad(excited, n["cmd"], n["ac_inst"], cal.autocollimator[p.axis],
-                                           (p.band_lo_hz, p.band_hi_hz))
+        amplitude = excited_amplitude_urad(
+            excited,
+            n["cmd"],
+            n["ac_inst"],
+            cal.autocollimator[p.axis],
+            (p.band_lo_hz, p.band_hi_hz),
+        )
         values |= amplitude_labels(plat, p.axis, amplitude)
         values["level_V_rms"] = ctx.results["probe"]["level_V_rms"]
         values["level_limited_by"] = ctx.results["probe"]["limited_by"]
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
-        kg, kg_src = prior_values(self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad)
+        kg, kg_src = prior_values(
+            self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad
+        )
         ac = cal.autocollimator[p.axis]
-        scales = {n["ac_ctl"]: ac.control_mV_per_urad * 1e-3, n["ac_inst"]: ac.inst_mV_per_urad * 1e-3,
-                  n["gyro"]: kg[p.axis] * 1e-3}
+        scales = {
+            n["ac_ctl"]: ac.control_mV_per_urad * 1e-3,
+            n["ac_inst"]: ac.inst_mV_per_urad * 1e-3,
+            n["gyro"]: kg[p.axis] * 1e-3,
+        }
         values["incoherent"] = incoherent_parts(excited, n, p, scales)
         if p.mode == 3:
             # the gyro's incoherent part is its pickoff noise (and the platform's unexcited motion,
             # ~0.4 urad rms on the thesis rig against ~2.7 urad of pickoff noise in 1-50 Hz). Not
             # in the gyro modes: there the loop closes on the pickoff and reshapes its noise
             values["pickoff_noise_urad_rms"] = {
-                p.axis: round(values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5)}
+                p.axis: round(
+                    values["incoherent"][n["gyro"]]["incoherent_rms_V"] / (kg[p.axis] * 1e-3), 5
+                )
+            }
             values["pickoff_noise_band_hz"] = [1.0, 50.0]
             values["pickoff_scale_source"] = kg_src
         ms = measurements(net, plat, values, p) + root_measurements(roots, p)
-        figures = [Figure("network", "Compensation network, control channel to amplifier input: the quiet record's "
-                          "H1 with 95 % intervals (cf. Fig. 40), the fit inside the excited loop and the design",
-                          partial(plot_response, resp=net_resp, fit=net,
-                                  design=lambda f: network_response(f, DESIGN_NETWORK))),
-                   Figure("platform", "Platform, amplifier input to instrumentation angle through V_Td: measured "
-                          "with 95 % intervals and the fit (cf. Fig. 52)",
-                          partial(plot_response, resp=plat_resp, fit=plat, design=None)),
-                   Figure("loop", f"Loop sensitivity in Mode {p.mode}, V_Td to amplifier input: measured with 95 % "
-                          f"intervals (the closed-loop roots' check, Tables 5-6)",
-                          partial(plot_response, resp=loop_resp, fit=None, design=None))]
+        figures = [
+            Figure(
+                "network",
+                "Compensation network, control channel to amplifier input: the quiet record's "
+                "H1 with 95 % intervals (cf. Fig. 40), the fit inside the excited loop and the design",
+                partial(
+                    plot_response,
+                    resp=net_resp,
+                    fit=net,
+                    design=lambda f: network_response(f, DESIGN_NETWORK),
+                ),
+            ),
+            Figure(
+                "platform",
+                "Platform, amplifier input to instrumentation angle through V_Td: measured "
+                "with 95 % intervals and the fit (cf. Fig. 52)",
+                partial(plot_response, resp=plat_resp, fit=plat, design=None),
+            ),
+            Figure(
+                "loop",
+                f"Loop sensitivity in Mode {p.mode}, V_Td to amplifier input: measured with 95 % "
+                f"intervals (the closed-loop roots' check, Tables 5-6)",
+                partial(plot_response, resp=loop_resp, fit=None, design=None),
+            ),
+        ]
         title = f"{Path(ctx.path).name}, axis {p.axis}, Mode {p.mode}"
         return Analysis(values, ms, figures, markdown(values, title))
 
 
-def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibration, n: Mapping[str, str],
-                network_input: str, p: ExcitationParams) -> tuple[ClosedLoop, Response, ModelFit]:
+def closed_loop(
+    excited: BlockCsd,
+    net: ModelFit,
+    plat: ModelFit,
+    cal: RigCalibration,
+    n: Mapping[str, str],
+    network_input: str,
+    p: ExcitationParams,
+) -> tuple[ClosedLoop, Response, ModelFit]:
     """The loop closed over the identified network, platform and sensor (``analysis.roots``),
     the measured sensitivity pa / V_Td it is checked against, and the network fitted inside the
     excited loop (``net``, the quiet record's fit, is only its start)."""
@@ -411,26 +556,62 @@ def closed_loop(excited: BlockCsd, net: ModelFit, plat: ModelFit, cal: RigCalibr
     pc, ac = cal.platform[p.axis], cal.autocollimator[p.axis]
     lo = max(p.roots_lo_hz, excited.lowest_fit_hz)
     ratio = response(excited, n["ac_inst"], network_input, via=n["cmd"])
-    caging = None if p.mode == 3 else GyroCaging(cal.caging_natural_rad_per_s[p.axis], cal.caging_zeta[p.axis],
-                                                  cal.restraint_time_constant_s[p.axis])
+    caging = (
+        None
+        if p.mode == 3
+        else GyroCaging(
+            cal.caging_natural_rad_per_s[p.axis],
+            cal.caging_zeta[p.axis],
+            cal.restraint_time_constant_s[p.axis],
+        )
+    )
     gain, gain_reps = sensor_gain(ratio, kind, ac, lo, p.platform_hi_hz, caging)
 
     # the network again, inside the excited loop: the quiet record's H1 is biased at the lowest
     # frequencies by the network's memory (``network_in_loop``), and c1 lives there
-    in_loop = fit_network(network_in_loop(excited, network_input, n["pa"], n["cmd"], pc.command_divider), lo,
-                          p.roots_hi_hz, start=net.params)
+    in_loop = fit_network(
+        network_in_loop(excited, network_input, n["pa"], n["cmd"], pc.command_divider),
+        lo,
+        p.roots_hi_hz,
+        start=net.params,
+    )
 
     def parts(netp: Mapping[str, float], platp: Mapping[str, float], g: float) -> LoopParts:
-        return LoopParts(netp, platp["inertia_kg_m2"], platp["damping_Nms"], platp["stiffness_Nm_per_rad"], g, caging)
+        return LoopParts(
+            netp,
+            platp["inertia_kg_m2"],
+            platp["damping_Nms"],
+            platp["stiffness_Nm_per_rad"],
+            g,
+            caging,
+        )
 
     reps = [parts(a, b, g) for a, b, g in zip(in_loop.replicates, plat.replicates, gain_reps)]
     sens = response(excited, n["cmd"], n["pa"])
-    return close_loop(p.mode, parts(in_loop.params, plat.params, gain), reps, pc, ac, sens, (lo, p.roots_hi_hz),
-                      len(reps) - 1, gain_reps), sens, in_loop
+    return (
+        close_loop(
+            p.mode,
+            parts(in_loop.params, plat.params, gain),
+            reps,
+            pc,
+            ac,
+            sens,
+            (lo, p.roots_hi_hz),
+            len(reps) - 1,
+            gain_reps,
+        ),
+        sens,
+        in_loop,
+    )
 
 
-def excited_amplitude_urad(excited: BlockCsd, cmd: str, angle: str, ac: AutocollimatorConstants,
-                           band_hz: tuple[float, float]) -> float:
+def excited_amplitude_urad(
+    excited: BlockCsd,
+    cmd: str,
+    angle: str,
+    ac: AutocollimatorConstants,
+    band_hz: tuple[float, float],
+) -> float:
     """The platform's excited motion, urad rms: the part of the instrumentation channel
     coherent with V_Td (gamma^2 S, Ch. V C; gamma^2 freed of its bias over the periods) over the
     excitation's band, with the channel's scale and filter (eq. 3.22) divided out. It is the
@@ -454,12 +635,18 @@ def amplitude_labels(plat: ModelFit, axis: str, amplitude_urad: float) -> dict[s
     a damping that depends on frequency (``transfer.local_damping``), or a fit that misses its
     bins by more than 3 standard errors, is an axis that is not linear at this amplitude; then
     ``amplitude_dependent`` is true for k and D (the inertia is a mass: never)."""
-    nonlinear = bool(plat.local_damping is not None and plat.local_damping.frequency_dependent()) \
+    nonlinear = (
+        bool(plat.local_damping is not None and plat.local_damping.frequency_dependent())
         or plat.residual_normalized > NONLINEAR_RESIDUAL
+    )
     out: dict[str, Any] = {
         "excitation_amplitude_urad": {axis: round(amplitude_urad, 4)},
-        "amplitude_dependent": {"inertia_kg_m2": {axis: False}, "damping_Nms": {axis: nonlinear},
-                                "stiffness_Nm_per_rad": {axis: nonlinear}}}
+        "amplitude_dependent": {
+            "inertia_kg_m2": {axis: False},
+            "damping_Nms": {axis: nonlinear},
+            "stiffness_Nm_per_rad": {axis: nonlinear},
+        },
+    }
     if plat.local_damping is not None:
         out["platform_fit_local_damping"] = plat.local_damping.values()
     return out
@@ -468,20 +655,48 @@ def amplitude_labels(plat: ModelFit, axis: str, amplitude_urad: float) -> dict[s
 def root_measurements(roots: ClosedLoop, p: ExcitationParams) -> list[Measurement]:
     ms = []
     for name, r in roots.named.items():
-        z = "" if r.zeta is None else (f", zeta {r.zeta.value:.3g} [{r.zeta.lo:.3g}, {r.zeta.hi:.3g}]"
-                                       if r.zeta.resolved else f", zeta not resolved: {r.zeta.why}")
-        ms.append(Measurement(f"closed-loop root {name} ({p.axis}, Mode {p.mode})", r.w.value if r.w.resolved else None,
-                              "rad/s", note=(f"95 % [{r.w.lo:.4g}, {r.w.hi:.4g}]" if r.w.resolved
-                                             else f"not resolved: {r.w.why}") + z))
-    ms.append(Measurement("closed model against the measured sensitivity / standard error", roots.check_normalized,
-                          "rms", note=f"{roots.check_db_rms:.3g} dB, {roots.check_deg_rms:.3g} deg rms unweighted"
-                          + "".join(f"; {x}" for x in roots.notes)))
+        z = (
+            ""
+            if r.zeta is None
+            else (
+                f", zeta {r.zeta.value:.3g} [{r.zeta.lo:.3g}, {r.zeta.hi:.3g}]"
+                if r.zeta.resolved
+                else f", zeta not resolved: {r.zeta.why}"
+            )
+        )
+        ms.append(
+            Measurement(
+                f"closed-loop root {name} ({p.axis}, Mode {p.mode})",
+                r.w.value if r.w.resolved else None,
+                "rad/s",
+                note=(
+                    f"95 % [{r.w.lo:.4g}, {r.w.hi:.4g}]"
+                    if r.w.resolved
+                    else f"not resolved: {r.w.why}"
+                )
+                + z,
+            )
+        )
+    ms.append(
+        Measurement(
+            "closed model against the measured sensitivity / standard error",
+            roots.check_normalized,
+            "rms",
+            note=f"{roots.check_db_rms:.3g} dB, {roots.check_deg_rms:.3g} deg rms unweighted"
+            + "".join(f"; {x}" for x in roots.notes),
+        )
+    )
     return ms
 
 
-def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia: float) -> dict[str, Any]:
-    values: dict[str, Any] = {"axis": axis, "network": net.values(),
-                              "network_design": {k: DESIGN_NETWORK[k] for k in ("gain", *NETWORK_CORNERS)}}
+def analysis_values(
+    net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia: float
+) -> dict[str, Any]:
+    values: dict[str, Any] = {
+        "axis": axis,
+        "network": net.values(),
+        "network_design": {k: DESIGN_NETWORK[k] for k in ("gain", *NETWORK_CORNERS)},
+    }
     f = np.geomspace(0.3, 50.0, 200)
     assert net.curve is not None
     d = net.curve(f) / network_response(f, DESIGN_NETWORK)
@@ -492,15 +707,29 @@ def analysis_values(net: ModelFit, plat: ModelFit, axis: str, datasheet_inertia:
     why = {k: e.why for k, e in plat.estimates.items() if not e.resolved}
     if why:
         values["platform_why_unresolved"] = why
-    values["platform_fit"] = {k: v for k, v in plat.values().items()
-                              if k in ("band_hz", "bins", "residual_db_rms", "residual_deg_rms", "residual_normalized",
-                                       "notes")}
+    values["platform_fit"] = {
+        k: v
+        for k, v in plat.values().items()
+        if k
+        in (
+            "band_hz",
+            "bins",
+            "residual_db_rms",
+            "residual_deg_rms",
+            "residual_normalized",
+            "notes",
+        )
+    }
     values["datasheet_inertia_kg_m2"] = datasheet_inertia
     return values
 
 
-def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams,
-                     scales_V_per_urad: Mapping[str, float] | None = None) -> dict[str, Any]:
+def incoherent_parts(
+    excited: Any,
+    n: Mapping[str, str],
+    p: ExcitationParams,
+    scales_V_per_urad: Mapping[str, float] | None = None,
+) -> dict[str, Any]:
     """Each sensor's spectrum split by its coherence with V_Td (Ch. V C): the rms (V) of the
     coherent part gamma^2 S and of the incoherent part (1 - gamma^2) S over 1-50 Hz. gamma^2 is
     first freed of its bias over m averaged periods, (m gamma^2 - 1) / (m - 1) (for no coherence
@@ -525,39 +754,91 @@ def incoherent_parts(excited: Any, n: Mapping[str, str], p: ExcitationParams,
         s = S[:, i, i].real
         g = unbiased_coherence(coh[:, r, i], m)
         incoherent = float(np.sqrt(np.sum(((1 - g) * s)[band]) * df))
-        part: dict[str, Any] = {"coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
-                                "incoherent_rms_V": incoherent, "band_hz": [1.0, 50.0],
-                                "in_loop": k == loop_sensor or (p.mode == 3 and k == "ac_inst")}
+        part: dict[str, Any] = {
+            "coherent_rms_V": float(np.sqrt(np.sum((g * s)[band]) * df)),
+            "incoherent_rms_V": incoherent,
+            "band_hz": [1.0, 50.0],
+            "in_loop": k == loop_sensor or (p.mode == 3 and k == "ac_inst"),
+        }
         if scales_V_per_urad and n[k] in scales_V_per_urad:
             sc = scales_V_per_urad[n[k]]
             part["incoherent_urad_rms"] = round(incoherent / sc, 5)
-            part["floor_urad_per_rtHz"] = round(float(np.sqrt(np.median(((1 - g) * s)[band]))) / sc, 6)
+            part["floor_urad_per_rtHz"] = round(
+                float(np.sqrt(np.median(((1 - g) * s)[band]))) / sc, 6
+            )
         out[n[k]] = part
     return out
 
 
-def measurements(net: ModelFit, plat: ModelFit, values: Mapping[str, Any], p: ExcitationParams) -> list[Measurement]:
+def measurements(
+    net: ModelFit, plat: ModelFit, values: Mapping[str, Any], p: ExcitationParams
+) -> list[Measurement]:
     ms = []
     amp = values["excitation_amplitude_urad"][p.axis]
-    for key, unit in (("inertia_kg_m2", "kg m^2"), ("damping_Nms", "N m s"), ("stiffness_Nm_per_rad", "N m/rad")):
+    for key, unit in (
+        ("inertia_kg_m2", "kg m^2"),
+        ("damping_Nms", "N m s"),
+        ("stiffness_Nm_per_rad", "N m/rad"),
+    ):
         e = plat.estimates[key]
-        label = f" (describing function at {amp:.3g} urad rms)" if values["amplitude_dependent"][key][p.axis] else ""
-        ms.append(Measurement(f"{key} ({p.axis}){label}", e.value if e.resolved else None, unit,
-                              note=(f"95 % [{e.lo:.4g}, {e.hi:.4g}]" if e.resolved
-                                    else f"not resolved, 95 % [{e.lo:.4g}, {e.hi:.4g}]: {e.why}")))
-    ms.append(Measurement(f"platform motion excited ({p.axis}), coherent with V_Td", amp, "urad rms",
-                          note=f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, the amplitude k and D are measured at"))
+        label = (
+            f" (describing function at {amp:.3g} urad rms)"
+            if values["amplitude_dependent"][key][p.axis]
+            else ""
+        )
+        ms.append(
+            Measurement(
+                f"{key} ({p.axis}){label}",
+                e.value if e.resolved else None,
+                unit,
+                note=(
+                    f"95 % [{e.lo:.4g}, {e.hi:.4g}]"
+                    if e.resolved
+                    else f"not resolved, 95 % [{e.lo:.4g}, {e.hi:.4g}]: {e.why}"
+                ),
+            )
+        )
+    ms.append(
+        Measurement(
+            f"platform motion excited ({p.axis}), coherent with V_Td",
+            amp,
+            "urad rms",
+            note=f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, the amplitude k and D are measured at",
+        )
+    )
     # residuals in units of each bin's own standard error: about 1 when the model fits. The
     # platform's is no limit: a Dahl bearing is not linear, and the intervals are widened by it
-    ms.append(Measurement("platform fit residual / standard error", plat.residual_normalized, "rms",
-                          note=f"{plat.residual_db_rms:.3g} dB, {plat.residual_deg_rms:.3g} deg rms unweighted"
-                          + ("; above 3: the axis is not linear at this amplitude (Dahl friction?), so k and D are "
-                             "its describing function there, intervals widened by the ratio"
-                             if plat.residual_normalized > 3 else "")))
-    ms.append(Measurement("network fit residual / standard error", net.residual_normalized, "rms", hi=3.0,
-                          note=f"{net.residual_db_rms:.3g} dB, {net.residual_deg_rms:.3g} deg rms unweighted"))
-    ms.append(Measurement("network against the design, worst over 0.3-50 Hz", values["network_vs_design_max_db"], "dB",
-                          note=f"{values['network_vs_design_max_deg']:.3g} deg (a comparison, not a limit)"))
+    ms.append(
+        Measurement(
+            "platform fit residual / standard error",
+            plat.residual_normalized,
+            "rms",
+            note=f"{plat.residual_db_rms:.3g} dB, {plat.residual_deg_rms:.3g} deg rms unweighted"
+            + (
+                "; above 3: the axis is not linear at this amplitude (Dahl friction?), so k and D are "
+                "its describing function there, intervals widened by the ratio"
+                if plat.residual_normalized > 3
+                else ""
+            ),
+        )
+    )
+    ms.append(
+        Measurement(
+            "network fit residual / standard error",
+            net.residual_normalized,
+            "rms",
+            hi=3.0,
+            note=f"{net.residual_db_rms:.3g} dB, {net.residual_deg_rms:.3g} deg rms unweighted",
+        )
+    )
+    ms.append(
+        Measurement(
+            "network against the design, worst over 0.3-50 Hz",
+            values["network_vs_design_max_db"],
+            "dB",
+            note=f"{values['network_vs_design_max_deg']:.3g} deg (a comparison, not a limit)",
+        )
+    )
     return ms
 
 

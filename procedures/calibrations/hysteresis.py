@@ -22,7 +22,13 @@ from typing import Annotated
 
 from procedures.analysis.hysteresis import AC_AXES, FIGURES, analyze_file
 from procedures.paramlimits import Each, OneOf, Range, above, at_least, check_limits, sample_rate
-from procedures.reports.hysteresis import markdown, plot_describing_function, plot_history, plot_loops, plot_scan
+from procedures.reports.hysteresis import (
+    markdown,
+    plot_describing_function,
+    plot_history,
+    plot_loops,
+    plot_scan,
+)
 from procedures.rigsetup import bring_to_mode3
 from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
 
@@ -33,11 +39,14 @@ JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "fil
 # ---------------------------------------------------------------------------- parameters
 @dataclass
 class HysteresisParams:
-    axis: Annotated[str, OneOf(*AC_AXES, note="the others have no instrumentation autocollimator channel")] = "X"
+    axis: Annotated[
+        str, OneOf(*AC_AXES, note="the others have no instrumentation autocollimator channel")
+    ] = "X"
     frequency_hz: Annotated[float, Range(0.001, 100.0, units="Hz")] = 0.4
     #: the ladder, large to small (a large first loop wipes out the bearing's earlier state)
-    amplitudes_urad: Annotated[list[float], Each(above(0, note="amplitudes are positive"), nonempty=True)] = field(
-        default_factory=lambda: [500.0, 250.0, 100.0, 50.0, 25.0, 10.0, 5.0])
+    amplitudes_urad: Annotated[
+        list[float], Each(above(0, note="amplitudes are positive"), nonempty=True)
+    ] = field(default_factory=lambda: [500.0, 250.0, 100.0, 50.0, 25.0, 10.0, 5.0])
     #: analysed cycles per amplitude, after ``settle_cycles`` left out
     cycles: Annotated[int, at_least(2)] = 6
     settle_cycles: Annotated[int, at_least(0)] = 1
@@ -59,11 +68,15 @@ class HysteresisParams:
         check_limits(self, "hysteresis")
         # what no one field can declare: limits that tie fields together
         if self.angle_lag_ms is not None and not (abs(self.angle_lag_ms) < 1e3 / self.rate_hz * 20):
-            raise ValueError(f"hysteresis: angle_lag_ms = {self.angle_lag_ms} must be a few samples at most")
+            raise ValueError(
+                f"hysteresis: angle_lag_ms = {self.angle_lag_ms} must be a few samples at most"
+            )
         per_update = self.rate_hz / (self.frequency_hz * self.updates_per_cycle)
         if abs(per_update - round(per_update)) > 1e-9 or round(per_update) < 1:
-            raise ValueError(f"hysteresis: rate_hz / (frequency_hz * updates_per_cycle) = {per_update:g} samples "
-                             f"per bias update must be a whole number >= 1")
+            raise ValueError(
+                f"hysteresis: rate_hz / (frequency_hz * updates_per_cycle) = {per_update:g} samples "
+                f"per bias update must be a whole number >= 1"
+            )
 
 
 #: the name the module's functions and tests use
@@ -107,10 +120,17 @@ class Hysteresis(Procedure[HysteresisParams]):
         # The sweep steps run again on --resume (setup=True) rather than being taken over: the
         # fit integrates eq. 5.2 along one continuous recording of the whole ladder, and the
         # bearing's state after an interruption is not the one the earlier steps left.
-        sweeps = [Step(f"{amp:g} urad", partial(self.sweep, amplitude_urad=amp), expected_s=per, setup=True)
-                  for amp in p.amplitudes_urad]
-        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True), *sweeps,
-                Step("bias off", self.bias_off, expected_s=1.0 / p.frequency_hz, setup=True)]
+        sweeps = [
+            Step(
+                f"{amp:g} urad", partial(self.sweep, amplitude_urad=amp), expected_s=per, setup=True
+            )
+            for amp in p.amplitudes_urad
+        ]
+        return [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            *sweeps,
+            Step("bias off", self.bias_off, expected_s=1.0 / p.frequency_hz, setup=True),
+        ]
 
     def sweep(self, ctx: Context, amplitude_urad: float) -> dict:
         """``settle_cycles + cycles`` cycles of the sinusoidal bias: theta ~ amplitude sin(w t)."""
@@ -121,11 +141,18 @@ class Hysteresis(Procedure[HysteresisParams]):
         t0 = ctx.time_s
         # mid-interval values of the sine; the platform goes to -gamma_c / scale. A stream: one
         # SDO round trip per value, the last read back at the end (``Rig.stream_ac_bias_V``)
-        values = (-amp_V * math.sin(2 * math.pi * (k + 0.5) / p.updates_per_cycle) for k in range(n))
-        ctx.rig.stream_ac_bias_V(p.axis, values, partial(ctx.acquire, self.update_s, keep=False,
-                                                         chunk_s=self.update_s))
-        return {"amplitude_urad": amplitude_urad, "bias_amplitude_V": round(amp_V, 6),
-                "t_s": [round(t0, 4), round(ctx.time_s, 4)], "cycles": p.settle_cycles + p.cycles}
+        values = (
+            -amp_V * math.sin(2 * math.pi * (k + 0.5) / p.updates_per_cycle) for k in range(n)
+        )
+        ctx.rig.stream_ac_bias_V(
+            p.axis, values, partial(ctx.acquire, self.update_s, keep=False, chunk_s=self.update_s)
+        )
+        return {
+            "amplitude_urad": amplitude_urad,
+            "bias_amplitude_V": round(amp_V, 6),
+            "t_s": [round(t0, 4), round(ctx.time_s, 4)],
+            "cycles": p.settle_cycles + p.cycles,
+        }
 
     def bias_off(self, ctx: Context) -> dict:
         ctx.rig.set_ac_bias_V(self.params.axis, 0.0)
@@ -134,45 +161,103 @@ class Hysteresis(Procedure[HysteresisParams]):
 
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
-        res = analyze_file(ctx.path, p.axis, ctx.rig.calibration, settle_cycles=p.settle_cycles,
-                           angle_lag_s=None if p.angle_lag_ms is None else p.angle_lag_ms * 1e-3)
+        res = analyze_file(
+            ctx.path,
+            p.axis,
+            ctx.rig.calibration,
+            settle_cycles=p.settle_cycles,
+            angle_lag_s=None if p.angle_lag_ms is None else p.angle_lag_ms * 1e-3,
+        )
         xs = [res.theta_o_bar(lp) for lp in res.loops]
         ms = []
         for key, label, unit, se, note in (
-                ("To_Nm", "To", "N m", res.To_se_Nm, "running (Coulomb) friction torque, eq. 5.2; "),
-                ("eta_per_Nm", "eta", "1/(N m)", res.eta_se_per_Nm, ""),
-                ("stiffness_Nm_per_rad", "stiffness eta To^2", "N m/rad", res.stiffness_se_Nm_per_rad, "")):
+            ("To_Nm", "To", "N m", res.To_se_Nm, "running (Coulomb) friction torque, eq. 5.2; "),
+            ("eta_per_Nm", "eta", "1/(N m)", res.eta_se_per_Nm, ""),
+            (
+                "stiffness_Nm_per_rad",
+                "stiffness eta To^2",
+                "N m/rad",
+                res.stiffness_se_Nm_per_rad,
+                "",
+            ),
+        ):
             e = res.estimates[key]
-            ms.append(Measurement(label, e.value if e.resolved else None, unit, lo=0.0, stderr=se,
-                                  note=note + (f"95 % [{e.lo:.5g}, {e.hi:.5g}]" if e.resolved
-                                               else f"not resolved: {e.why}")))
+            ms.append(
+                Measurement(
+                    label,
+                    e.value if e.resolved else None,
+                    unit,
+                    lo=0.0,
+                    stderr=se,
+                    note=note
+                    + (
+                        f"95 % [{e.lo:.5g}, {e.hi:.5g}]" if e.resolved else f"not resolved: {e.why}"
+                    ),
+                )
+            )
         if res.lag is not None:
-            lag_note = (f"measured at the command's lines ({', '.join(f'{f:.4g}' for f in res.lag.frequencies_hz)} Hz, "
-                        f"{res.lag.n_cycles} cycles), taken out")
+            lag_note = (
+                f"measured at the command's lines ({', '.join(f'{f:.4g}' for f in res.lag.frequencies_hz)} Hz, "
+                f"{res.lag.n_cycles} cycles), taken out"
+            )
         else:
-            lag_note = {"given": "given, taken out",
-                        "fitted": "fitted with To and eta (no line in the command), taken out"}.get(
-                res.lag_source, "not measured: the angle used as recorded")
-        ms.append(Measurement("angle lag behind the power-amplifier input", res.angle_lag_s * 1e3, "ms",
-                              stderr=res.angle_lag_se_s * 1e3 if math.isfinite(res.angle_lag_se_s) else None,
-                              note=lag_note))
-        ms += [Measurement("To relative standard error", res.To_se_Nm / res.To_Nm, "", hi=p.max_relative_se),
-              Measurement("eta relative standard error", res.eta_se_per_Nm / res.eta_per_Nm, "",
-                          hi=p.max_relative_se),
-              Measurement("fit residual rms / largest loop torque half-range", res.relative_residual, "",
-                          hi=p.max_relative_residual),
-              # the ladder must reach both regimes, or To and eta are not separable
-              Measurement("largest eta To theta_o (Coulomb regime)", max(xs), "", lo=2.0),
-              Measurement("smallest eta To theta_o (spring regime)", min(xs), "", hi=1.0),
-              Measurement("angle-path low-pass", res.path_cutoff_hz, "Hz")]
-        figures = [Figure("loops", "Bearing torque against angle at each amplitude: synchronous averages and the "
-                          "Dahl fit (cf. Figs. 51, 53, 54)", partial(plot_loops, res=res)),
-                   Figure("describing-function", "Describing function, measured first harmonics and eq. 5.12 "
-                          "(cf. Fig. 57)", partial(plot_describing_function, res=res)),
-                   Figure("history", "Angle and torque over the largest loop (cf. Fig. 50)",
-                          partial(plot_history, res=res)),
-                   Figure("path-scan", "Fit residual, To and eta against the angle path's bandwidth",
-                          partial(plot_scan, res=res))]
+            lag_note = {
+                "given": "given, taken out",
+                "fitted": "fitted with To and eta (no line in the command), taken out",
+            }.get(res.lag_source, "not measured: the angle used as recorded")
+        ms.append(
+            Measurement(
+                "angle lag behind the power-amplifier input",
+                res.angle_lag_s * 1e3,
+                "ms",
+                stderr=res.angle_lag_se_s * 1e3 if math.isfinite(res.angle_lag_se_s) else None,
+                note=lag_note,
+            )
+        )
+        ms += [
+            Measurement(
+                "To relative standard error", res.To_se_Nm / res.To_Nm, "", hi=p.max_relative_se
+            ),
+            Measurement(
+                "eta relative standard error",
+                res.eta_se_per_Nm / res.eta_per_Nm,
+                "",
+                hi=p.max_relative_se,
+            ),
+            Measurement(
+                "fit residual rms / largest loop torque half-range",
+                res.relative_residual,
+                "",
+                hi=p.max_relative_residual,
+            ),
+            # the ladder must reach both regimes, or To and eta are not separable
+            Measurement("largest eta To theta_o (Coulomb regime)", max(xs), "", lo=2.0),
+            Measurement("smallest eta To theta_o (spring regime)", min(xs), "", hi=1.0),
+            Measurement("angle-path low-pass", res.path_cutoff_hz, "Hz"),
+        ]
+        figures = [
+            Figure(
+                "loops",
+                "Bearing torque against angle at each amplitude: synchronous averages and the "
+                "Dahl fit (cf. Figs. 51, 53, 54)",
+                partial(plot_loops, res=res),
+            ),
+            Figure(
+                "describing-function",
+                "Describing function, measured first harmonics and eq. 5.12 (cf. Fig. 57)",
+                partial(plot_describing_function, res=res),
+            ),
+            Figure(
+                "history",
+                "Angle and torque over the largest loop (cf. Fig. 50)",
+                partial(plot_history, res=res),
+            ),
+            Figure(
+                "path-scan",
+                "Fit residual, To and eta against the angle path's bandwidth",
+                partial(plot_scan, res=res),
+            ),
+        ]
         return Analysis(res.values(), ms, figures, markdown(res))
 
 

@@ -81,19 +81,35 @@ from procedures.paramlimits import Each, OneOf, Range, above, check_limits, frac
 from procedures.params import prior_value
 from procedures.reports.stopwatch import markdown, plot_channel
 from procedures.rigsetup import bring_to_mode3, wait_settled
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import (
+    Analysis,
+    Context,
+    Figure,
+    Measurement,
+    Procedure,
+    ProcedureError,
+    Step,
+)
 
 #: the parameters' limits too long to read inline
 _CHANNEL = OneOf(*GYRO_CHANNELS)
-_KTO = Range(0, 1e3, lo_open=True, hi_open=True, units="urad/s/V", note="the data sheet's are 31-34")
+_KTO = Range(
+    0, 1e3, lo_open=True, hi_open=True, units="urad/s/V", note="the data sheet's are 31-34"
+)
 
 
 @dataclass
 class StopwatchParams:
-    channels: Annotated[list[str], Each(_CHANNEL, nonempty=True)] = field(default_factory=lambda: list(GYRO_CHANNELS))
+    channels: Annotated[list[str], Each(_CHANNEL, nonempty=True)] = field(
+        default_factory=lambda: list(GYRO_CHANNELS)
+    )
     #: K_TO per channel (urad/s/V); empty: the earth-rate result, else the data sheet's nominal
-    kto_urad_per_s_per_V: Annotated[dict[str, float], Each(_KTO, keys=_CHANNEL)] = field(default_factory=dict)
-    delta_pickoff_V: Annotated[float, Range(0.05, 8.0, units="V", note="the pickoff's linear range is about +-6 V")] = 2.0
+    kto_urad_per_s_per_V: Annotated[dict[str, float], Each(_KTO, keys=_CHANNEL)] = field(
+        default_factory=dict
+    )
+    delta_pickoff_V: Annotated[
+        float, Range(0.05, 8.0, units="V", note="the pickoff's linear range is about +-6 V")
+    ] = 2.0
     #: fast enough that the gyro's random drift (a few tenths of urad/s over minutes on Z) is a
     #: small part of the ramp rate; a down-up pair cancels what is left
     ramp_rate_urad_per_s: Annotated[float, Range(0.1, 100.0)] = 20.0
@@ -129,7 +145,7 @@ Params = StopwatchParams
 
 class Stopwatch(Procedure[StopwatchParams]):
     name = "stopwatch"
-    demo_order = 20   # with the earth-rate K_TO
+    demo_order = 20  # with the earth-rate K_TO
     title = "Pickoff scale factor by the stopwatch method (II C.1.a(6))"
     json_keys = ("K_g_mV_per_urad", "h_over_k_s", "file")
     Params = StopwatchParams
@@ -143,7 +159,9 @@ class Stopwatch(Procedure[StopwatchParams]):
             self.axis = self.params.channels[0]
 
     def channels(self) -> tuple[str, ...]:
-        return tuple(f"gyro_{c.lower()}" for c in GYRO_CHANNELS) + tuple(f"torq_{c.lower()}" for c in GYRO_CHANNELS)
+        return tuple(f"gyro_{c.lower()}" for c in GYRO_CHANNELS) + tuple(
+            f"torq_{c.lower()}" for c in GYRO_CHANNELS
+        )
 
     def headline(self) -> dict[str, tuple[str, ...]]:
         """The headline figures and their channels (``Procedure.headline``)."""
@@ -153,8 +171,13 @@ class Stopwatch(Procedure[StopwatchParams]):
     def kto(self, ctx: Context, ch: str) -> tuple[float, str]:
         if ch in self.params.kto_urad_per_s_per_V:
             return float(self.params.kto_urad_per_s_per_V[ch]), "given"
-        return prior_value(self.prior, "earth-rate", "K_TO_urad_per_s_per_V", ch,
-                           ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch])
+        return prior_value(
+            self.prior,
+            "earth-rate",
+            "K_TO_urad_per_s_per_V",
+            ch,
+            ctx.rig.calibration.torquer_scale_urad_per_s_per_V[ch],
+        )
 
     def kto_rel_half_width(self, ch: str, source: str, kto: float) -> float | None:
         """The relative 95 % half-width of the K_TO in use: 0 for a value given as a parameter
@@ -174,14 +197,21 @@ class Stopwatch(Procedure[StopwatchParams]):
     def plan(self) -> list[Step]:
         p = self.params
         per = 200.0 + p.null_s * 2 + (2 * p.repetitions + 1) * (p.hold_s + 45.0) + p.restore_s
-        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                *(Step(f"channel {ch}", partial(self.channel, ch=ch), expected_s=per) for ch in p.channels)]
+        return [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            *(
+                Step(f"channel {ch}", partial(self.channel, ch=ch), expected_s=per)
+                for ch in p.channels
+            ),
+        ]
 
     # ------------------------------------------------------------------ one channel
     def channel(self, ctx: Context, ch: str) -> dict:
         p, rig = self.params, ctx.rig
         kto, source = self.kto(ctx, ch)
-        kg_nom = rig.calibration.pickoff_scale_mV_per_urad[ch] * 1e-3      # V/urad, only to trim the null
+        kg_nom = (
+            rig.calibration.pickoff_scale_mV_per_urad[ch] * 1e-3
+        )  # V/urad, only to trim the null
         gcol, tcol = ctx.column(f"gyro_{ch.lower()}"), ctx.column(f"torq_{ch.lower()}")
         rec = _Record(gcol, tcol, ctx.column(f"torq_{FLOAT_PARTNER[ch].lower()}"))
 
@@ -199,15 +229,17 @@ class Stopwatch(Procedure[StopwatchParams]):
         # 2. open the loop, measure the bias gain, null the precession
         t_open = ctx.time_s
         rig.set_caging_inhibit(ch, True)
-        skip = max(10, int(0.05 * p.rate_hz))   # the ADC's anti-alias filter settling after a step
+        skip = max(10, int(0.05 * p.rate_hz))  # the ADC's anti-alias filter settling after a step
         m0 = float(np.nanmean(rec.take(ctx, 0.5)[skip:, 1]))
         probe = 0.5 if vt0 <= 0 else -0.5
         rig.set_torquer_bias_V(ch, probe)
         m1 = float(np.nanmean(rec.take(ctx, 0.5)[skip:, 1]))
         gain = (m1 - m0) / probe
         if not abs(gain) > 1e-3:
-            raise ProcedureError(f"stopwatch {ch}: the torquer output did not follow the bias (gain {gain:.3g} V/V); "
-                                 f"check the torquer bias wiring and the caging-inhibit switch")
+            raise ProcedureError(
+                f"stopwatch {ch}: the torquer output did not follow the bias (gain {gain:.3g} V/V); "
+                f"check the torquer bias wiring and the caging-inhibit switch"
+            )
         bias = rig.set_torquer_bias_V(ch, (vt0 - m0) / gain)
         tol = p.null_tolerance_urad_per_s * kg_nom
         for trim in range(5):
@@ -217,7 +249,7 @@ class Stopwatch(Procedure[StopwatchParams]):
                 break  # a residual beyond the tolerance fails its measurement; the down-up pairs cancel it
             bias = rig.set_torquer_bias_V(ch, bias - null_slope / (kg_nom * kto * gain))
         vt_null = float(np.nanmean(data[:, 1]))
-        vg0 = float(np.nanmean(data[-int(p.smooth_s * p.rate_hz):, 0]))
+        vg0 = float(np.nanmean(data[-int(p.smooth_s * p.rate_hz) :, 0]))
         t_null = ctx.time_s
 
         # 3. ramps between vg0 -+ dV_g/2
@@ -228,13 +260,31 @@ class Stopwatch(Procedure[StopwatchParams]):
         expected = p.delta_pickoff_V / (kg_nom * p.ramp_rate_urad_per_s)
         ramps, windows = [], []
         direction = +1
-        self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), hi + margin, direction, expected)
+        self._ramp(
+            ctx,
+            rec,
+            ch,
+            bias,
+            step_bias * direction * np.sign(gain),
+            hi + margin,
+            direction,
+            expected,
+        )
         rec.hold(ctx, ch, bias, p.hold_s)
         for _ in range(2 * p.repetitions):
             direction = -direction
             target = (lo - margin) if direction < 0 else (hi + margin)
             i0 = rec.n
-            self._ramp(ctx, rec, ch, bias, step_bias * direction * np.sign(gain), target, direction, 2 * expected)
+            self._ramp(
+                ctx,
+                rec,
+                ch,
+                bias,
+                step_bias * direction * np.sign(gain),
+                target,
+                direction,
+                2 * expected,
+            )
             t, vg, vt = rec.arrays(i0)
             try:
                 t1, t2 = crossing_times(t, vg, lo, hi, direction, p.smooth_s, p.rate_hz)
@@ -251,19 +301,30 @@ class Stopwatch(Procedure[StopwatchParams]):
         rig.set_torquer_bias_V(ch, bias)
         t_end = ctx.time_s
         t_fit, vg_fit, vt_fit = rec.arrays(rec.index_at(t_null))
-        fit = restraint_fit(t_fit, vg_fit, vt_fit, vt_null=vt_null, vg0=vg0, dt_s=0.5,
-                            partner=rec.partner(rec.index_at(t_null)))
+        fit = restraint_fit(
+            t_fit,
+            vg_fit,
+            vt_fit,
+            vt_null=vt_null,
+            vg0=vg0,
+            dt_s=0.5,
+            partner=rec.partner(rec.index_at(t_null)),
+        )
         # the ramp slope without the partner term, whose 1 / (1 + (c/h)_a (c/h)_b) it would carry
         slope_fit = restraint_fit(t_fit, vg_fit, vt_fit, vt_null=vt_null, vg0=vg0, dt_s=0.5)
         # the float partner's caging transient over each window (II C.4.d): the data sheet's h/c
         # and caging design, driven by this channel's torquer as recorded
         partner, cal = FLOAT_PARTNER[ch], rig.calibration
-        factors = partner_factors(t_fit, (vt_fit - vt_null) * kto, windows,
-                                  h_over_c=VISCOUS_COUPLING_H_OVER_C[ch],
-                                  partner_h_over_c=VISCOUS_COUPLING_H_OVER_C[partner],
-                                  partner_wn=cal.caging_natural_rad_per_s[partner],
-                                  partner_zeta=cal.caging_zeta[partner],
-                                  partner_proportional=partner in PROPORTIONAL_ONLY)
+        factors = partner_factors(
+            t_fit,
+            (vt_fit - vt_null) * kto,
+            windows,
+            h_over_c=VISCOUS_COUPLING_H_OVER_C[ch],
+            partner_h_over_c=VISCOUS_COUPLING_H_OVER_C[partner],
+            partner_wn=cal.caging_natural_rad_per_s[partner],
+            partner_zeta=cal.caging_zeta[partner],
+            partner_proportional=partner in PROPORTIONAL_ONLY,
+        )
 
         # 5. restore: the loop takes over from the bias
         rig.set_caging_inhibit(ch, False)
@@ -275,24 +336,45 @@ class Stopwatch(Procedure[StopwatchParams]):
         # a step result is one event of the run file (at most 1 KiB): its fits' figures to 7
         # significant digits, far finer than their standard errors (at 3 repetitions, 15-digit
         # floats made 1,030 bytes and aborted the run)
-        return {"ch": ch, "kto": kto, "kto_from": source,
-                "kto_rel_ci95": _sig(self.kto_rel_half_width(ch, source, kto)),
-                "gain": round(gain, 6), "vt_null": round(vt_null, 6), "vg0": round(vg0, 5),
-                "null_slope": _sig(null_slope), "caged_for_s": round(caged_for, 1),
-                "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)], "dVg": p.delta_pickoff_V, "ramps": ramps,
-                "fit": {k: _sig(v) for k, v in fit.items()}, "slope_fit": {k: _sig(v) for k, v in slope_fit.items()},
-                "partner_factor": [round(f, 7) for f in factors]}
+        return {
+            "ch": ch,
+            "kto": kto,
+            "kto_from": source,
+            "kto_rel_ci95": _sig(self.kto_rel_half_width(ch, source, kto)),
+            "gain": round(gain, 6),
+            "vt_null": round(vt_null, 6),
+            "vg0": round(vg0, 5),
+            "null_slope": _sig(null_slope),
+            "caged_for_s": round(caged_for, 1),
+            "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
+            "dVg": p.delta_pickoff_V,
+            "ramps": ramps,
+            "fit": {k: _sig(v) for k, v in fit.items()},
+            "slope_fit": {k: _sig(v) for k, v in slope_fit.items()},
+            "partner_factor": [round(f, 7) for f in factors],
+        }
 
-    def _ramp(self, ctx: Context, rec: _Record, ch: str, bias: float, step: float, target: float, direction: int,
-              expected_s: float) -> None:
+    def _ramp(
+        self,
+        ctx: Context,
+        rec: _Record,
+        ch: str,
+        bias: float,
+        step: float,
+        target: float,
+        direction: int,
+        expected_s: float,
+    ) -> None:
         """Bias step until the smoothed pickoff passes ``target`` in ``direction``."""
         ctx.rig.set_torquer_bias_V(ch, bias + step)
         t_end = ctx.time_s + 4 * expected_s + 10.0
         while (rec.last_vg() - target) * direction < 0:
             if ctx.time_s > t_end:
-                raise ProcedureError(f"stopwatch {ch}: the pickoff did not reach {target:+.3f} V within "
-                                     f"{4 * expected_s + 10:.0f} s of the bias step (now {rec.last_vg():+.3f} V); "
-                                     f"is the channel's caging inhibited and the gyro at speed?")
+                raise ProcedureError(
+                    f"stopwatch {ch}: the pickoff did not reach {target:+.3f} V within "
+                    f"{4 * expected_s + 10:.0f} s of the bias step (now {rec.last_vg():+.3f} V); "
+                    f"is the channel's caging inhibited and the gyro at speed?"
+                )
             rec.take(ctx, 0.5)
 
     # ------------------------------------------------------------------ analysis
@@ -314,23 +396,64 @@ class Stopwatch(Procedure[StopwatchParams]):
         for ch, r in per.items():
             nom = cal.pickoff_scale_mV_per_urad[ch]
             kg, tau = kg_est[ch], tau_est[ch]
-            ms.append(Measurement(f"K_g {ch} (stopwatch, mean of {len(r.repetitions)} repetitions)", r.kg, "mV/urad",
-                                  nom * (1 - p.kg_tolerance), nom * (1 + p.kg_tolerance), r.kg_se,
-                                  note=f"95 % [{kg.lo:.4f}, {kg.hi:.4f}]" + ("" if kg.resolved else f"; not resolved: {kg.why}")))
-            ms.append(Measurement(f"K_g {ch} repetition spread (std/mean)", r.spread, "", hi=p.max_spread))
-            ms.append(Measurement(f"K_g {ch} least-squares ramp slope", r.kg_ls, "mV/urad", stderr=r.kg_ls_se))
-            ms.append(Measurement(f"h/k {ch} (fitted)", tau.value if tau.resolved else None, "s",
-                                  note=f"95 % [{tau.lo:.0f}, {tau.hi:.0f}]" + ("" if tau.resolved else f"; {tau.why}")))
+            ms.append(
+                Measurement(
+                    f"K_g {ch} (stopwatch, mean of {len(r.repetitions)} repetitions)",
+                    r.kg,
+                    "mV/urad",
+                    nom * (1 - p.kg_tolerance),
+                    nom * (1 + p.kg_tolerance),
+                    r.kg_se,
+                    note=f"95 % [{kg.lo:.4f}, {kg.hi:.4f}]"
+                    + ("" if kg.resolved else f"; not resolved: {kg.why}"),
+                )
+            )
+            ms.append(
+                Measurement(f"K_g {ch} repetition spread (std/mean)", r.spread, "", hi=p.max_spread)
+            )
+            ms.append(
+                Measurement(
+                    f"K_g {ch} least-squares ramp slope", r.kg_ls, "mV/urad", stderr=r.kg_ls_se
+                )
+            )
+            ms.append(
+                Measurement(
+                    f"h/k {ch} (fitted)",
+                    tau.value if tau.resolved else None,
+                    "s",
+                    note=f"95 % [{tau.lo:.0f}, {tau.hi:.0f}]"
+                    + ("" if tau.resolved else f"; {tau.why}"),
+                )
+            )
             ms.append(Measurement(f"restraint correction {ch}", r.correction * 100, "%"))
-            ms.append(Measurement(f"float partner transient correction {ch}", r.partner_correction * 100, "%",
-                                  note=f"bound left +-{100 * r.partner_bound:.3f} % (II C.4.d)"))
-            ms.append(Measurement(f"residual null rate {ch}", r.null_rate_urad_per_s, "urad/s",
-                                  -p.max_null_rate_urad_per_s, p.max_null_rate_urad_per_s))
+            ms.append(
+                Measurement(
+                    f"float partner transient correction {ch}",
+                    r.partner_correction * 100,
+                    "%",
+                    note=f"bound left +-{100 * r.partner_bound:.3f} % (II C.4.d)",
+                )
+            )
+            ms.append(
+                Measurement(
+                    f"residual null rate {ch}",
+                    r.null_rate_urad_per_s,
+                    "urad/s",
+                    -p.max_null_rate_urad_per_s,
+                    p.max_null_rate_urad_per_s,
+                )
+            )
         values: dict = {}
         add_figure(values, "K_g_mV_per_urad", kg_est)
         add_figure(values, "h_over_k_s", tau_est, digits=4)
-        figs = [Figure(f"ramps-{ch.lower()}", f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
-                       partial(plot_channel, run=self._file_of(ctx, ch), ch=ch, r=results[ch])) for ch in p.channels]
+        figs = [
+            Figure(
+                f"ramps-{ch.lower()}",
+                f"Channel {ch}: pickoff and torquer output during the stopwatch ramps",
+                partial(plot_channel, run=self._file_of(ctx, ch), ch=ch, r=results[ch]),
+            )
+            for ch in p.channels
+        ]
         return Analysis(values, ms, figs, markdown=markdown(per, kg_est, tau_est))
 
 

@@ -63,12 +63,28 @@ from procedures.analysis.survey import (
 )
 from procedures.analysis.transfer import BlockCsd, TransferError, block_csd
 from procedures.calibrations.baseline import BaselineFileError, ClampedRecord, clamped_record
-from procedures.paramlimits import ExistingFile, OneOf, Range, above, at_least, check_limits, sample_rate
+from procedures.paramlimits import (
+    ExistingFile,
+    OneOf,
+    Range,
+    above,
+    at_least,
+    check_limits,
+    sample_rate,
+)
 from procedures.params import prior_values
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
 from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.runner import (
+    Analysis,
+    Context,
+    Figure,
+    Measurement,
+    Procedure,
+    ProcedureError,
+    Step,
+)
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +92,9 @@ log = logging.getLogger(__name__)
 @dataclass
 class SurveyParams:
     #: 3 autocollimator stabilization (the thesis's survey, Ch. V E); 4 and 5 gyro stabilization
-    mode: Annotated[int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")] = 3
+    mode: Annotated[
+        int, OneOf(3, 4, 5, note="the stabilized modes; the gyro modes need the gyros caged")
+    ] = 3
     duration_s: Annotated[float, above(0)] = 300.0
     rate_hz: Annotated[float, sample_rate()] = 1000.0
     #: record in steps of this length (the unit an aborted run can be resumed by)
@@ -113,21 +131,30 @@ class SurveyParams:
             usable_baseline(clamped_record(self.baseline_file, "survey: baseline_file"), self)
         # what no one field can declare: limits that tie fields together
         if self.coherent_seg_s * self.coherent_blocks > self.duration_s:
-            raise ValueError(f"survey: coherent_blocks = {self.coherent_blocks} segments of coherent_seg_s = "
-                             f"{self.coherent_seg_s:g} s must fit in duration_s = {self.duration_s:g} s")
+            raise ValueError(
+                f"survey: coherent_blocks = {self.coherent_blocks} segments of coherent_seg_s = "
+                f"{self.coherent_seg_s:g} s must fit in duration_s = {self.duration_s:g} s"
+            )
         if self.seg_s > self.duration_s:
-            raise ValueError(f"survey: seg_s = {self.seg_s:g} s must be at most duration_s = {self.duration_s:g} s")
+            raise ValueError(
+                f"survey: seg_s = {self.seg_s:g} s must be at most duration_s = {self.duration_s:g} s"
+            )
         nyq = self.rate_hz / 2
         if not 0 < self.band_lo_hz < self.band_hi_hz <= nyq:
-            raise ValueError(f"survey: band_lo_hz..band_hi_hz = {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must "
-                             f"lie in 0..{nyq:g} Hz (rate_hz / 2), low below high")
+            raise ValueError(
+                f"survey: band_lo_hz..band_hi_hz = {self.band_lo_hz:g}..{self.band_hi_hz:g} Hz must "
+                f"lie in 0..{nyq:g} Hz (rate_hz / 2), low below high"
+            )
         if not 0 < self.dip_lo_hz < self.dip_hi_hz <= nyq:
-            raise ValueError(f"survey: dip_lo_hz..dip_hi_hz = {self.dip_lo_hz:g}..{self.dip_hi_hz:g} Hz must lie in "
-                             f"0..{nyq:g} Hz (rate_hz / 2), low below high")
+            raise ValueError(
+                f"survey: dip_lo_hz..dip_hi_hz = {self.dip_lo_hz:g}..{self.dip_hi_hz:g} Hz must lie in "
+                f"0..{nyq:g} Hz (rate_hz / 2), low below high"
+            )
 
 
-def pickoff_scales(prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]
-                   ) -> tuple[dict[str, float], dict[str, str]]:
+def pickoff_scales(
+    prior: Mapping[str, Mapping[str, Any]], nominal: Mapping[str, float]
+) -> tuple[dict[str, float], dict[str, str]]:
     """Kg (mV/urad) per axis and where it came from: the stopwatch summary if given, else nominal."""
     return prior_values(prior, "stopwatch", "K_g_mV_per_urad", AXES, nominal)
 
@@ -137,20 +164,28 @@ class BaselineSettings(Protocol):
     baseline_blocks: int
 
 
-def usable_baseline(rec: ClampedRecord, p: BaselineSettings, what: str = "survey: baseline_file") -> ClampedRecord:
+def usable_baseline(
+    rec: ClampedRecord, p: BaselineSettings, what: str = "survey: baseline_file"
+) -> ClampedRecord:
     """``rec`` if the survey can set its pickoff spectrum against its own: a gyro channel of a
     survey axis, Welch bins on the survey's grid (whole samples per segment), enough record for
     the jackknife blocks. Raises ``BaselineFileError`` naming the file and what is wrong."""
     name = f"{what} {str(rec.source)!r}"
     if not any(gyro(a) in rec.channels for a in AXES):
-        raise BaselineFileError(f"{name}: holds neither {gyro('X')} nor {gyro('Y')} (has: {', '.join(rec.channels)})")
+        raise BaselineFileError(
+            f"{name}: holds neither {gyro('X')} nor {gyro('Y')} (has: {', '.join(rec.channels)})"
+        )
     nperseg = p.coherent_seg_s * rec.rate_hz
     if abs(nperseg - round(nperseg)) > 1e-6:
-        raise BaselineFileError(f"{name}: {p.coherent_seg_s:g} s segments at its {rec.rate_hz:g} Hz are not whole "
-                                f"samples, so its bins are not the survey's")
+        raise BaselineFileError(
+            f"{name}: {p.coherent_seg_s:g} s segments at its {rec.rate_hz:g} Hz are not whole "
+            f"samples, so its bins are not the survey's"
+        )
     if rec.seconds < p.coherent_seg_s * p.baseline_blocks:
-        raise BaselineFileError(f"{name}: its clamped record of {rec.seconds:.1f} s holds fewer than "
-                                f"baseline_blocks = {p.baseline_blocks} segments of {p.coherent_seg_s:g} s")
+        raise BaselineFileError(
+            f"{name}: its clamped record of {rec.seconds:.1f} s holds fewer than "
+            f"baseline_blocks = {p.baseline_blocks} segments of {p.coherent_seg_s:g} s"
+        )
     return rec
 
 
@@ -161,14 +196,20 @@ Params = SurveyParams
 
 class Survey(Procedure[SurveyParams]):
     name = "survey"
-    demo_order = 50   # it reads the baseline's record
+    demo_order = 50  # it reads the baseline's record
     title = "Closed-loop spectral survey in Mode 3, 4 or 5 (Ch. V E)"
     json_keys = ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file")
     Params = SurveyParams
     mode = 3
     block_s = 1.0
 
-    def __init__(self, params: SurveyParams | None = None, *, reference: Mapping[str, Any] | None = None, **kw) -> None:
+    def __init__(
+        self,
+        params: SurveyParams | None = None,
+        *,
+        reference: Mapping[str, Any] | None = None,
+        **kw,
+    ) -> None:
         super().__init__(params, **kw)
         self.rate_hz = self.params.rate_hz
         self.mode = self.params.mode
@@ -188,8 +229,11 @@ class Survey(Procedure[SurveyParams]):
         prior = self.prior.get("baseline") or {}
         path = prior.get("_file")
         if not path:
-            return None, ("no baseline run given (`--param baseline_file=...`, or run `baseline` first)" if not prior
-                          else "the prior baseline summary names no run file")
+            return None, (
+                "no baseline run given (`--param baseline_file=...`, or run `baseline` first)"
+                if not prior
+                else "the prior baseline summary names no run file"
+            )
         try:
             what = "survey: the prior baseline's file"
             rec = usable_baseline(clamped_record(path, what), p, what)
@@ -217,15 +261,25 @@ class Survey(Procedure[SurveyParams]):
         # the baseline is chosen before the first step records (and again on a resume)
         self.baseline, self.baseline_note = self.find_baseline()
         p = self.params
-        gyro_mode = [Step(f"mode {p.mode}", partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
-                          expected_s=p.mode_settle_s, setup=True)]
+        gyro_mode = [
+            Step(
+                f"mode {p.mode}",
+                partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
+                expected_s=p.mode_settle_s,
+                setup=True,
+            )
+        ]
         back = [Step("back to mode 3", back_to_mode3, expected_s=1.0, setup=True)]
-        return [Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-                Step("settle", self._settle, expected_s=p.settle_s, setup=True),
-                *(gyro_mode if p.mode != 3 else []),
-                *(Step(name, partial(self._record, seconds=seconds), expected_s=seconds)
-                  for name, seconds in self.pieces()),
-                *(back if p.mode != 3 else [])]
+        return [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step("settle", self._settle, expected_s=p.settle_s, setup=True),
+            *(gyro_mode if p.mode != 3 else []),
+            *(
+                Step(name, partial(self._record, seconds=seconds), expected_s=seconds)
+                for name, seconds in self.pieces()
+            ),
+            *(back if p.mode != 3 else []),
+        ]
 
     def _settle(self, ctx: Context) -> dict:
         already = bool((ctx.results.get("mode 3") or {}).get("already"))
@@ -234,7 +288,7 @@ class Survey(Procedure[SurveyParams]):
         return {"settle_s": seconds}
 
     def _record(self, ctx: Context, seconds: float) -> dict:
-        ctx.acquire(seconds, keep=False)   # where the samples are is the runner's record (ctx.spans)
+        ctx.acquire(seconds, keep=False)  # where the samples are is the runner's record (ctx.spans)
         return {"seconds": seconds}
 
     # ------------------------------------------------------------------ analysis
@@ -266,10 +320,18 @@ class Survey(Procedure[SurveyParams]):
         # the platform's own motion, net of pickoff noise: the gyro's part coherent with the
         # autocollimator (procedures.analysis.survey.coherent_platform_rms)
         try:
-            blocks = block_csd([(s.file, s.start, s.stop) for s in spans], self.channels(), p.coherent_seg_s,
-                               p.coherent_blocks)
-            net = {a: coherent_platform_rms(blocks, gyro(a), ac_inst(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz)
-                   for a in AXES}
+            blocks = block_csd(
+                [(s.file, s.start, s.stop) for s in spans],
+                self.channels(),
+                p.coherent_seg_s,
+                p.coherent_blocks,
+            )
+            net = {
+                a: coherent_platform_rms(
+                    blocks, gyro(a), ac_inst(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz
+                )
+                for a in AXES
+            }
         except TransferError as exc:
             raise ProcedureError(f"survey: {exc}") from None
         base = self._baseline_net(blocks, kg_mv)
@@ -277,24 +339,46 @@ class Survey(Procedure[SurveyParams]):
             # the pickoff is in the loop: the platform follows its noise, so neither its part
             # coherent with the autocollimator nor its spectrum less the clamped one is the
             # platform's; the out-of-loop autocollimator is (platform_rms_autocollimator_urad)
-            why = (f"in Mode {p.mode} the pickoff is in the loop and the platform follows its noise; see "
-                   f"platform_rms_autocollimator_urad")
+            why = (
+                f"in Mode {p.mode} the pickoff is in the loop and the platform follows its noise; see "
+                f"platform_rms_autocollimator_urad"
+            )
             net = {a: Estimate(e.value, e.lo, e.hi, False, why) for a, e in net.items()}
-            base = {a: dataclasses.replace(b, estimate=Estimate(b.estimate.value, b.estimate.lo, b.estimate.hi,
-                                                                 False, why)) for a, b in base.items()}
+            base = {
+                a: dataclasses.replace(
+                    b, estimate=Estimate(b.estimate.value, b.estimate.lo, b.estimate.hi, False, why)
+                )
+                for a, b in base.items()
+            }
             # in 4 and 5 the autocollimator is out of the loop: its band rms is the platform's,
             # with its own NEA (0.45 urad, Table 1) in quadrature
             values["platform_rms_autocollimator_urad"] = {
-                a: _r(band_rms(f, psd_urad[ac_inst(a)], p.band_lo_hz, p.band_hi_hz)) for a in AXES}
+                a: _r(band_rms(f, psd_urad[ac_inst(a)], p.band_lo_hz, p.band_hi_hz)) for a in AXES
+            }
         add_figure(values, "platform_rms_net_urad", net, digits=4)
         # Ch. V E.2 less the clamped platform's pickoff spectrum (Ch. V B, Fig. 33), bin by bin
-        add_figure(values, "platform_rms_baseline_net_urad", {a: b.estimate for a, b in base.items()}, digits=4)
-        values["baseline_pickoff_band_rms_urad"] = {a: _r(b.baseline_rms_urad) for a, b in base.items()}
+        add_figure(
+            values,
+            "platform_rms_baseline_net_urad",
+            {a: b.estimate for a, b in base.items()},
+            digits=4,
+        )
+        values["baseline_pickoff_band_rms_urad"] = {
+            a: _r(b.baseline_rms_urad) for a, b in base.items()
+        }
         values["gyro_band_rms_urad"] = {a: _r(b.survey_rms_urad) for a, b in base.items()}
         rec = self.baseline
-        values["baseline"] = ({"file": str(rec.source), "record_file": str(rec.file), "axis": rec.axis,
-                               "record_s": round(rec.seconds, 3), "from": self.baseline_note} if rec is not None
-                              else {"file": None, "from": self.baseline_note})
+        values["baseline"] = (
+            {
+                "file": str(rec.source),
+                "record_file": str(rec.file),
+                "axis": rec.axis,
+                "record_s": round(rec.seconds, 3),
+                "from": self.baseline_note,
+            }
+            if rec is not None
+            else {"file": None, "from": self.baseline_note}
+        )
         # Fig. 48: a noise common to the two autocollimator axes shows as coherence where the
         # sensors' own noise dominates; independent channels give about 1/n
         cross = cross_axis_coherence(csd, ac_ctl("X"), ac_ctl("Y"))
@@ -302,52 +386,148 @@ class Survey(Procedure[SurveyParams]):
         ms: list[Measurement] = []
         for a in AXES:
             d = dips[a]
-            ms.append(Measurement(f"dip {a} ({ac_ctl(a)})", d.freq_hz if d else None, "Hz",
-                                  note=f"searched {p.dip_lo_hz:g}-{p.dip_hi_hz:g} Hz"))
-            ms.append(Measurement(f"dip {a} depth (prominence)", d.depth_db if d else None, "dB",
-                                  lo=p.min_dip_depth_db, note="no notch: the dip frequency is meaningless"
-                                  if d is None or d.depth_db < p.min_dip_depth_db else ""))
-            ms.append(Measurement(f"platform rms {a}, gyro-deduced {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz",
-                                  sp.platform_rms_urad[a], "urad", note=f"Kg {kg_mv[a]:.4g} mV/urad ({kg_src[a]})"))
+            ms.append(
+                Measurement(
+                    f"dip {a} ({ac_ctl(a)})",
+                    d.freq_hz if d else None,
+                    "Hz",
+                    note=f"searched {p.dip_lo_hz:g}-{p.dip_hi_hz:g} Hz",
+                )
+            )
+            ms.append(
+                Measurement(
+                    f"dip {a} depth (prominence)",
+                    d.depth_db if d else None,
+                    "dB",
+                    lo=p.min_dip_depth_db,
+                    note="no notch: the dip frequency is meaningless"
+                    if d is None or d.depth_db < p.min_dip_depth_db
+                    else "",
+                )
+            )
+            ms.append(
+                Measurement(
+                    f"platform rms {a}, gyro-deduced {p.band_lo_hz:g}-{p.band_hi_hz:g} Hz",
+                    sp.platform_rms_urad[a],
+                    "urad",
+                    note=f"Kg {kg_mv[a]:.4g} mV/urad ({kg_src[a]})",
+                )
+            )
         for a in AXES:
             e = net[a]
-            ms.append(Measurement(f"platform rms {a} net of pickoff noise (gyro coherent with {ac_inst(a)})",
-                                  e.value if e.resolved else None, "urad",
-                                  note=f"95 % [{e.lo:.3g}, {e.hi:.3g}]" + ("" if e.resolved else f"; not resolved: {e.why}")))
+            ms.append(
+                Measurement(
+                    f"platform rms {a} net of pickoff noise (gyro coherent with {ac_inst(a)})",
+                    e.value if e.resolved else None,
+                    "urad",
+                    note=f"95 % [{e.lo:.3g}, {e.hi:.3g}]"
+                    + ("" if e.resolved else f"; not resolved: {e.why}"),
+                )
+            )
         for a in AXES:
             e = base[a].estimate
-            ms.append(Measurement(f"platform rms {a} net of the baseline's pickoff noise ({gyro(a)} clamped, "
-                                  f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz)", e.value if e.resolved else None, "urad",
-                                  note=(f"95 % [{e.lo:.3g}, {e.hi:.3g}]" if math.isfinite(e.lo) else "")
-                                  + ("" if e.resolved else f"{'; ' if math.isfinite(e.lo) else ''}not resolved: {e.why}")))
+            ms.append(
+                Measurement(
+                    f"platform rms {a} net of the baseline's pickoff noise ({gyro(a)} clamped, "
+                    f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz)",
+                    e.value if e.resolved else None,
+                    "urad",
+                    note=(f"95 % [{e.lo:.3g}, {e.hi:.3g}]" if math.isfinite(e.lo) else "")
+                    + (
+                        ""
+                        if e.resolved
+                        else f"{'; ' if math.isfinite(e.lo) else ''}not resolved: {e.why}"
+                    ),
+                )
+            )
         for a, v in (values.get("platform_rms_autocollimator_urad") or {}).items():
-            ms.append(Measurement(f"platform rms {a}, out-of-loop autocollimator ({ac_inst(a)}) "
-                                  f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, Mode {p.mode}", v, "urad",
-                                  note="the pickoff is in the loop here: the gyro-deduced figure is not the platform's"))
-        ms.append(Measurement(f"coherence {cross.pair[0]} - {cross.pair[1]}, mean {cross.band_hz[0]:g}-"
-                              f"{cross.band_hz[1]:g} Hz", cross.mean, "",
-                              note=f"{'significant' if cross.significant else 'not significant'}: {cross.z:.1f} "
-                                   f"standard deviations above independent channels' {cross.null_mean:.3g}"))
-        ms.append(Measurement("Welch segments usable (no lost samples)", used, "", lo=p.min_segments_used,
-                              note=f"{csd.segments_used} of {csd.segments_total}"))
+            ms.append(
+                Measurement(
+                    f"platform rms {a}, out-of-loop autocollimator ({ac_inst(a)}) "
+                    f"{p.band_lo_hz:g}-{p.band_hi_hz:g} Hz, Mode {p.mode}",
+                    v,
+                    "urad",
+                    note="the pickoff is in the loop here: the gyro-deduced figure is not the platform's",
+                )
+            )
+        ms.append(
+            Measurement(
+                f"coherence {cross.pair[0]} - {cross.pair[1]}, mean {cross.band_hz[0]:g}-"
+                f"{cross.band_hz[1]:g} Hz",
+                cross.mean,
+                "",
+                note=f"{'significant' if cross.significant else 'not significant'}: {cross.z:.1f} "
+                f"standard deviations above independent channels' {cross.null_mean:.3g}",
+            )
+        )
+        ms.append(
+            Measurement(
+                "Welch segments usable (no lost samples)",
+                used,
+                "",
+                lo=p.min_segments_used,
+                note=f"{csd.segments_used} of {csd.segments_total}",
+            )
+        )
 
-        title = f"{Path(ctx.path).name}, Mode {p.mode}, {csd.seconds:.0f} s at {csd.fs:g} Hz, {csd.segments_used} segments"
-        figures = [Figure("dip", "Autocollimator control-channel spectra (smoothed dB) over the dip search band, "
-                          "with the dips found", partial(plot_dips, f=f, psd_urad=psd_urad, dips=dips, p=p))]
+        title = (
+            f"{Path(ctx.path).name}, Mode {p.mode}, {csd.seconds:.0f} s at {csd.fs:g} Hz, "
+            f"{csd.segments_used} segments"
+        )
+        figures = [
+            Figure(
+                "dip",
+                "Autocollimator control-channel spectra (smoothed dB) over the dip search band, "
+                "with the dips found",
+                partial(plot_dips, f=f, psd_urad=psd_urad, dips=dips, p=p),
+            )
+        ]
         dof_bin = csd.dof
         for c in self.channels():
-            figures.append(Figure(f"psd-{c}", f"PSD of {c} in urad²/Hz (App. A.8 display)",
-                                  partial(plot_psd, f=f[1:-1], p=psd_urad[c][1:-1], channel=c, units="urad",
-                                          dof=dof_bin, nperseg=csd.nperseg, nfft=csd.nfft, title=title)))
+            figures.append(
+                Figure(
+                    f"psd-{c}",
+                    f"PSD of {c} in urad²/Hz (App. A.8 display)",
+                    partial(
+                        plot_psd,
+                        f=f[1:-1],
+                        p=psd_urad[c][1:-1],
+                        channel=c,
+                        units="urad",
+                        dof=dof_bin,
+                        nperseg=csd.nperseg,
+                        nfft=csd.nfft,
+                        title=title,
+                    ),
+                )
+            )
         idx = {c: i for i, c in enumerate(csd.channels)}
         for x, y in COHERENCE_PAIRS:
-            figures.append(Figure(f"coherence-{x}-{y}", f"Coherence {x} – {y}",
-                                  partial(plot_coherence, f=f[1:-1], coh=sp.coh[1:-1, idx[x], idx[y]], pair=(x, y),
-                                          n_segments=csd.segments_used, title=title)))
-        md = markdown(values, dips, kg_src, csd, sp.peak_coherence, p, self.reference,
-                      (self.prior.get("stopwatch") or {}).get("_from"))
+            figures.append(
+                Figure(
+                    f"coherence-{x}-{y}",
+                    f"Coherence {x} – {y}",
+                    partial(
+                        plot_coherence,
+                        f=f[1:-1],
+                        coh=sp.coh[1:-1, idx[x], idx[y]],
+                        pair=(x, y),
+                        n_segments=csd.segments_used,
+                        title=title,
+                    ),
+                )
+            )
+        md = markdown(
+            values,
+            dips,
+            kg_src,
+            csd,
+            sp.peak_coherence,
+            p,
+            self.reference,
+            (self.prior.get("stopwatch") or {}).get("_from"),
+        )
         return Analysis(values, ms, figures, md)
-
 
     def _baseline_net(self, blocks: BlockCsd, kg_mv: Mapping[str, float]) -> dict[str, BaselineNet]:
         """Per axis, the platform rms net of the baseline's pickoff noise; unresolved (with why)
@@ -362,9 +542,19 @@ class Survey(Procedure[SurveyParams]):
             return {a: none(self.baseline_note) for a in AXES}
         have = [gyro(a) for a in AXES if gyro(a) in rec.channels]
         try:
-            bb = block_csd([(rec.file, rec.start, rec.stop)], have, p.coherent_seg_s, p.baseline_blocks)
-            return {a: (baseline_net_rms(blocks, gyro(a), bb, gyro(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz)
-                        if gyro(a) in have else none(f"the baseline holds no {gyro(a)}")) for a in AXES}
+            bb = block_csd(
+                [(rec.file, rec.start, rec.stop)], have, p.coherent_seg_s, p.baseline_blocks
+            )
+            return {
+                a: (
+                    baseline_net_rms(
+                        blocks, gyro(a), bb, gyro(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz
+                    )
+                    if gyro(a) in have
+                    else none(f"the baseline holds no {gyro(a)}")
+                )
+                for a in AXES
+            }
         except (TransferError, BaselineMismatch, OSError) as exc:
             log.warning("survey: the baseline %s cannot be used: %s", rec.source, exc)
             return {a: none(f"the baseline's record cannot be used: {exc}") for a in AXES}

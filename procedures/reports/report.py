@@ -33,19 +33,30 @@ def stderr_text(se: float | None) -> str:
     return fmt(se, 3)
 
 
-def write_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None, path: Path) -> Path:
+def write_report(
+    proc: Procedure, summary: RunSummary, analysis: Analysis | None, path: Path
+) -> Path:
     stem = path.stem
-    lines = [f"# {proc.title}", "",
-             f"- procedure: `{proc.name}`",
-             f"- file: `{summary.file.name if summary.file else '-'}`",
-             f"- status: {summary.status}",
-             f"- verdict: **{summary.verdict}**",
-             *header_lines(summary.provenance)]
+    lines = [
+        f"# {proc.title}",
+        "",
+        f"- procedure: `{proc.name}`",
+        f"- file: `{summary.file.name if summary.file else '-'}`",
+        f"- status: {summary.status}",
+        f"- verdict: **{summary.verdict}**",
+        *header_lines(summary.provenance),
+    ]
     if summary.error:
         lines.append(f"- error: {summary.error}")
-    lines += [f"- steps done: {len(summary.steps_done)} of {len(summary.steps_planned)}"
-              + (f" ({len(summary.steps_resumed)} taken over from the resumed run)" if summary.steps_resumed else ""),
-              ""]
+    lines += [
+        f"- steps done: {len(summary.steps_done)} of {len(summary.steps_planned)}"
+        + (
+            f" ({len(summary.steps_resumed)} taken over from the resumed run)"
+            if summary.steps_resumed
+            else ""
+        ),
+        "",
+    ]
     if summary.steps_planned and len(summary.steps_done) < len(summary.steps_planned):
         left = [s for s in summary.steps_planned if s not in summary.steps_done]
         lines += ["Steps not done: " + ", ".join(left) + ".", ""]
@@ -53,12 +64,18 @@ def write_report(proc: Procedure, summary: RunSummary, analysis: Analysis | None
     lines += [f"| {k} | {fmt(v)} |" for k, v in summary.params.items()]
     lines.append("")
     if summary.measurements:
-        lines += ["## Measurements", "", "| measurement | value | std. error | units | limits | result |",
-                  "|---|---|---|---|---|---|"]
+        lines += [
+            "## Measurements",
+            "",
+            "| measurement | value | std. error | units | limits | result |",
+            "|---|---|---|---|---|---|",
+        ]
         for m in summary.measurements:
             verdict = {True: "pass", False: "**FAIL**", None: ""}[m.passed]
-            lines.append(f"| {m.name} | {fmt(m.value, 6)} | {stderr_text(m.stderr)} | {m.units} | "
-                         f"{m.limits_text()} | {verdict} |")
+            lines.append(
+                f"| {m.name} | {fmt(m.value, 6)} | {stderr_text(m.stderr)} | {m.units} | "
+                f"{m.limits_text()} | {verdict} |"
+            )
         lines.append("")
     if analysis is not None:
         if analysis.markdown:

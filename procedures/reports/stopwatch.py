@@ -22,29 +22,44 @@ def _interval(e: Estimate, fmt: str) -> str:
     return f"{e.value:{fmt}} {span}" if e.resolved else f"not resolved {span}"
 
 
-def markdown(per: dict[str, ChannelResult], kg: dict[str, Estimate], tau: dict[str, Estimate]) -> str:
-    lines = ["## Results", "",
-             "| channel | K_g stopwatch (mV/urad) [95 %] | spread | up - down | K_g least squares | h/k fitted (s) [95 %] | "
-             "restraint correction | residual null rate (urad/s) | K_TO used (urad/s/V) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+def markdown(
+    per: dict[str, ChannelResult], kg: dict[str, Estimate], tau: dict[str, Estimate]
+) -> str:
+    lines = [
+        "## Results",
+        "",
+        "| channel | K_g stopwatch (mV/urad) [95 %] | spread | up - down | K_g least squares | h/k fitted (s) [95 %] | "
+        "restraint correction | residual null rate (urad/s) | K_TO used (urad/s/V) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
     for ch, r in per.items():
-        lines.append(f"| {ch} | {_interval(kg[ch], '.4f')} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
-                     f"{r.kg_ls:.4f} ± "
-                     f"{r.kg_ls_se:.4f} | {_interval(tau[ch], '.0f')} | {100 * r.correction:+.3f} % | "
-                     f"{r.null_rate_urad_per_s:+.4f} | "
-                     f"{r.kto:.4g} ({r.kto_from}) |")
+        lines.append(
+            f"| {ch} | {_interval(kg[ch], '.4f')} | {100 * r.spread:.2f} % | {100 * r.asymmetry:+.2f} % | "
+            f"{r.kg_ls:.4f} ± "
+            f"{r.kg_ls_se:.4f} | {_interval(tau[ch], '.0f')} | {100 * r.correction:+.3f} % | "
+            f"{r.null_rate_urad_per_s:+.4f} | "
+            f"{r.kto:.4g} ({r.kto_from}) |"
+        )
     nominal = [ch for ch, r in per.items() if r.kto_from == "nominal"]
     if nominal:
-        lines += ["", f"**K_TO for {', '.join(nominal)} is the data sheet's nominal value**, not a measurement: "
-                  "run `fbs run earth-rate` first (same --out) for measured K_g."]
+        lines += [
+            "",
+            f"**K_TO for {', '.join(nominal)} is the data sheet's nominal value**, not a measurement: "
+            "run `fbs run earth-rate` first (same --out) for measured K_g.",
+        ]
     lines += ["", "Readings per ramp (corrected / uncorrected, mV/urad):", ""]
     for ch, r in per.items():
-        lines.append(f"- {ch}: " + ", ".join(f"{c:.4f} / {n:.4f}" for c, n in zip(r.readings, r.naive)))
-    lines += ["", "The ramps run between levels symmetric about the null position, so the elastic restraint's "
-              "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record "
-              "with the float partner's torquer as a regressor; it is shown with its interval but not reported as a "
-              "figure (the fit also carries the partner's viscous coupling). K_g's interval is Student's t over the "
-              "repetitions combined with the interval of the K_TO used."]
+        lines.append(
+            f"- {ch}: " + ", ".join(f"{c:.4f} / {n:.4f}" for c, n in zip(r.readings, r.naive))
+        )
+    lines += [
+        "",
+        "The ramps run between levels symmetric about the null position, so the elastic restraint's "
+        "effect is second order (x coth x, x = dt / 2 (h/k)); h/k is fitted from the whole open-loop record "
+        "with the float partner's torquer as a regressor; it is shown with its interval but not reported as a "
+        "figure (the fit also carries the partner's viscous coupling). K_g's interval is Student's t over the "
+        "repetitions combined with the interval of the K_TO used.",
+    ]
     return "\n".join(lines)
 
 

@@ -52,11 +52,15 @@ class Effect:
     key_param: str | None = None  # the parameter the gap workflow must recover
     fit: tuple[str, ...] | None = None  # parameters the spectra identify (None: all)
     guess: Callable[[Any], list[dict[str, float]]] | None = field(default=None, repr=False)
-    derive: Callable[[dict[str, float]], dict[str, float]] | None = field(default=None, repr=False)  # params as applied
+    derive: Callable[[dict[str, float]], dict[str, float]] | None = field(
+        default=None, repr=False
+    )  # params as applied
     #: 1-sigma of the parameters the spectra cannot see (held at a guess) as the evidence gives
     #: them: ``spread(evidence, params) -> {name: sigma}`` (a line's frequency from the time
     #: series, a jump's size from the steps' scatter)
-    spread: Callable[[Any, dict[str, float]], dict[str, float]] | None = field(default=None, repr=False)
+    spread: Callable[[Any, dict[str, float]], dict[str, float]] | None = field(
+        default=None, repr=False
+    )
     #: parts of the model-gap analysis's nuisance (``procedures.analysis.gap.model``) that this
     #: effect describes itself: held while the effect is fitted or in the model
     owns: tuple[str, ...] = ()
@@ -72,12 +76,16 @@ class Effect:
     def inject(self, cfg: SimConfig, axis: str = "X", **values: float) -> SimConfig:
         """A copy of ``cfg`` with this effect on ``axis``; unknown or out-of-prior values raise."""
         if axis not in AXES:
-            raise ValueError(f"effect {self.name}: unknown axis {axis!r} (one of {', '.join(AXES)})")
+            raise ValueError(
+                f"effect {self.name}: unknown axis {axis!r} (one of {', '.join(AXES)})"
+            )
         known = {p.name: p for p in self.params}
         for k, v in values.items():
             if k not in known:
-                raise ValueError(f"effect {self.name}: unknown parameter {k!r} "
-                                 f"(parameters: {', '.join(known) or 'none'})")
+                raise ValueError(
+                    f"effect {self.name}: unknown parameter {k!r} "
+                    f"(parameters: {', '.join(known) or 'none'})"
+                )
             p = known[k]
             if not p.lo <= v <= p.hi:
                 raise ValueError(f"effect {self.name}: {k} = {v} outside its range {p.lo}..{p.hi}")

@@ -29,9 +29,16 @@ def _derive(p: dict[str, float]) -> dict[str, float]:
 
 
 EFFECT = Effect(
-    "bearing_friction", __doc__.strip().splitlines()[0],
-    (Param("stiffness_Nm_per_rad", 410.0, 50.0, 3000.0, log=True),
-     # a large To is the loss-free spring limit (the hysteresis damping grows as k / To)
-     Param("To_Nm", 0.016, 0.002, 0.1, log=True, limit="hi"),
-     Param("eta_per_Nm", 1.6e6, 1e4, 1e8, log=True)),
-    _apply, key_param="stiffness_Nm_per_rad", fit=("stiffness_Nm_per_rad", "To_Nm"), derive=_derive)
+    "bearing_friction",
+    __doc__.strip().splitlines()[0],
+    (
+        Param("stiffness_Nm_per_rad", 410.0, 50.0, 3000.0, log=True),
+        # a large To is the loss-free spring limit (the hysteresis damping grows as k / To)
+        Param("To_Nm", 0.016, 0.002, 0.1, log=True, limit="hi"),
+        Param("eta_per_Nm", 1.6e6, 1e4, 1e8, log=True),
+    ),
+    _apply,
+    key_param="stiffness_Nm_per_rad",
+    fit=("stiffness_Nm_per_rad", "To_Nm"),
+    derive=_derive,
+)

@@ -9,5 +9,10 @@ def _apply(cfg, axis, damping_Nms):
     return cfg
 
 
-EFFECT = Effect("extra_damping", __doc__.strip().splitlines()[0],
-                (Param("damping_Nms", 2.0, 0.05, 50.0, log=True),), _apply, key_param="damping_Nms")
+EFFECT = Effect(
+    "extra_damping",
+    __doc__.strip().splitlines()[0],
+    (Param("damping_Nms", 2.0, 0.05, 50.0, log=True),),
+    _apply,
+    key_param="damping_Nms",
+)

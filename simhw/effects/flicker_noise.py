@@ -26,7 +26,20 @@ def _apply(cfg, axis, corner_hz):
     return cfg
 
 
-EFFECT = Effect("flicker_noise", __doc__.strip().splitlines()[0],
-                (Param("corner_hz", 10.0, 5.0, 100.0, log=True,
-                       doc="the 1/f corner (Hz) in place of the unit's; below 5 Hz is a nominal unit"),),
-                _apply, key_param="corner_hz", owns=("ac_flicker",))
+EFFECT = Effect(
+    "flicker_noise",
+    __doc__.strip().splitlines()[0],
+    (
+        Param(
+            "corner_hz",
+            10.0,
+            5.0,
+            100.0,
+            log=True,
+            doc="the 1/f corner (Hz) in place of the unit's; below 5 Hz is a nominal unit",
+        ),
+    ),
+    _apply,
+    key_param="corner_hz",
+    owns=("ac_flicker",),
+)

@@ -12,5 +12,10 @@ def _apply(cfg, axis, factor):
     return cfg
 
 
-EFFECT = Effect("gyro_cross_coupling", __doc__.strip().splitlines()[0],
-                (Param("factor", 2.0, 0.1, 20.0, log=True),), _apply, key_param="factor")
+EFFECT = Effect(
+    "gyro_cross_coupling",
+    __doc__.strip().splitlines()[0],
+    (Param("factor", 2.0, 0.1, 20.0, log=True),),
+    _apply,
+    key_param="factor",
+)

@@ -24,13 +24,29 @@ def _guess(evidence) -> list[dict[str, float]]:
     # with a strong and a weak floor excitation, each notch with a weak one.
     peaks = [f for f in evidence.peaks_hz[:4] if 10.0 <= f <= 300.0]
     dips = [f for f in evidence.dips_hz[:2] if 10.0 <= f <= 300.0]
-    return ([{"freq_hz": f, "excitation": e} for f in peaks for e in (10.0, 0.3)]
-            + [{"freq_hz": f, "excitation": 0.3} for f in dips])
+    return [{"freq_hz": f, "excitation": e} for f in peaks for e in (10.0, 0.3)] + [
+        {"freq_hz": f, "excitation": 0.3} for f in dips
+    ]
 
 
-EFFECT = Effect("mount_resonance", __doc__.strip().splitlines()[0],
-                (Param("freq_hz", 60.0, 10.0, 300.0, log=True), Param("damping", 0.05, 0.005, 0.5, log=True),
-                 Param("excitation", 10.0, 0.1, 1e4, log=True, limit="lo",
-                       doc="floor-driven peak PSD of the mount angle, in units of the sensor's white PSD "
-                           "(its lower bound is a mount the floor barely shakes: a physical limit)")),
-                _apply, key_param="freq_hz", guess=_guess)
+EFFECT = Effect(
+    "mount_resonance",
+    __doc__.strip().splitlines()[0],
+    (
+        Param("freq_hz", 60.0, 10.0, 300.0, log=True),
+        Param("damping", 0.05, 0.005, 0.5, log=True),
+        Param(
+            "excitation",
+            10.0,
+            0.1,
+            1e4,
+            log=True,
+            limit="lo",
+            doc="floor-driven peak PSD of the mount angle, in units of the sensor's white PSD "
+            "(its lower bound is a mount the floor barely shakes: a physical limit)",
+        ),
+    ),
+    _apply,
+    key_param="freq_hz",
+    guess=_guess,
+)

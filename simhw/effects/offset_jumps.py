@@ -27,7 +27,9 @@ def _guess(evidence) -> list[dict[str, float]]:
         return []
     amp = steps[len(steps) // 2] / 2
     interval = evidence.duration_s / len(steps)
-    return [{"amplitude_urad": min(max(amp, 0.2), 200.0), "interval_s": min(max(interval, 5.0), 1000.0)}]
+    return [
+        {"amplitude_urad": min(max(amp, 0.2), 200.0), "interval_s": min(max(interval, 5.0), 1000.0)}
+    ]
 
 
 #: The size of a step is read through the model's step response (``gap.steps.template_gain``):
@@ -47,7 +49,16 @@ def _spread(evidence, params: dict[str, float]) -> dict[str, float]:
     return {"amplitude_urad": math.hypot(stat, TEMPLATE_SYSTEMATIC * params["amplitude_urad"])}
 
 
-EFFECT = Effect("offset_jumps", __doc__.strip().splitlines()[0],
-                (Param("amplitude_urad", 5.0, 0.2, 200.0, log=True),
-                 Param("interval_s", 60.0, 5.0, 1000.0, log=True)),
-                _apply, key_param="amplitude_urad", fit=(), guess=_guess, spread=_spread)
+EFFECT = Effect(
+    "offset_jumps",
+    __doc__.strip().splitlines()[0],
+    (
+        Param("amplitude_urad", 5.0, 0.2, 200.0, log=True),
+        Param("interval_s", 60.0, 5.0, 1000.0, log=True),
+    ),
+    _apply,
+    key_param="amplitude_urad",
+    fit=(),
+    guess=_guess,
+    spread=_spread,
+)

@@ -24,11 +24,22 @@ def _guess(evidence) -> list[dict[str, float]]:
 
 def _spread(evidence, params: dict[str, float]) -> dict[str, float]:
     near = [(abs(f - params["freq_hz"]), s) for f, s in evidence.lines]
-    return {"freq_hz": min(near)[1]} if near and min(near)[0] < 1e-9 + 1e-6 * params["freq_hz"] else {}
+    return (
+        {"freq_hz": min(near)[1]} if near and min(near)[0] < 1e-9 + 1e-6 * params["freq_hz"] else {}
+    )
 
 
-EFFECT = Effect("pickup_line", __doc__.strip().splitlines()[0],
-                (Param("freq_hz", 200.0, 1.0, 450.0, log=True),
-                 Param("amplitude_V", 0.003, 1e-4, 0.1, log=True)),
-                _apply, key_param="freq_hz", fit=("amplitude_V",), guess=_guess, spread=_spread,
-                repeatable=True)
+EFFECT = Effect(
+    "pickup_line",
+    __doc__.strip().splitlines()[0],
+    (
+        Param("freq_hz", 200.0, 1.0, 450.0, log=True),
+        Param("amplitude_V", 0.003, 1e-4, 0.1, log=True),
+    ),
+    _apply,
+    key_param="freq_hz",
+    fit=("amplitude_V",),
+    guess=_guess,
+    spread=_spread,
+    repeatable=True,
+)

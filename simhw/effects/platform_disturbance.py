@@ -15,6 +15,13 @@ def _apply(cfg, axis, torque_rms_Nm, corner_hz):
     return cfg
 
 
-EFFECT = Effect("platform_disturbance", __doc__.strip().splitlines()[0],
-                (Param("torque_rms_Nm", 1e-3, 1e-6, 0.1, log=True), Param("corner_hz", 5.0, 0.1, 100.0, log=True)),
-                _apply, key_param="torque_rms_Nm")
+EFFECT = Effect(
+    "platform_disturbance",
+    __doc__.strip().splitlines()[0],
+    (
+        Param("torque_rms_Nm", 1e-3, 1e-6, 0.1, log=True),
+        Param("corner_hz", 5.0, 0.1, 100.0, log=True),
+    ),
+    _apply,
+    key_param="torque_rms_Nm",
+)

@@ -18,5 +18,10 @@ def _apply(cfg, axis, fraction):
     return cfg
 
 
-EFFECT = Effect("scale_factor_error", __doc__.strip().splitlines()[0],
-                (Param("fraction", 0.1, -0.5, 1.0),), _apply, key_param="fraction")
+EFFECT = Effect(
+    "scale_factor_error",
+    __doc__.strip().splitlines()[0],
+    (Param("fraction", 0.1, -0.5, 1.0),),
+    _apply,
+    key_param="fraction",
+)

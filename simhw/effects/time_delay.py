@@ -12,5 +12,10 @@ def _apply(cfg, axis, delay_s):
     return cfg
 
 
-EFFECT = Effect("time_delay", __doc__.strip().splitlines()[0],
-                (Param("delay_s", 0.002, 1e-4, 0.02, log=True),), _apply, key_param="delay_s")
+EFFECT = Effect(
+    "time_delay",
+    __doc__.strip().splitlines()[0],
+    (Param("delay_s", 0.002, 1e-4, 0.02, log=True),),
+    _apply,
+    key_param="delay_s",
+)

@@ -9,8 +9,8 @@ import time
 import pytest
 from textual.widgets import Input, Select
 
-WARM = "sim?warm=1&seed=3&watchdog=5"       # mode 3, caged, virtual time
-COLD = "sim?seed=3&watchdog=5"              # mode 1, wheels stopped, virtual time
+WARM = "sim?warm=1&seed=3&watchdog=5"  # mode 3, caged, virtual time
+COLD = "sim?seed=3&watchdog=5"  # mode 1, wheels stopped, virtual time
 
 
 #: A guard against a hang, never a deadline: the sim rig runs in virtual time, and on a busy
@@ -29,8 +29,15 @@ async def wait_for(pilot, predicate, what: str = "condition") -> None:
 
 async def rig_ready(pilot) -> None:
     app = pilot.app
-    await wait_for(pilot, lambda: app.worker_.state.get().relay is not None and app.limits is not None
-                   and bool(app.catalogue), what="the rig to open and the procedures to load")
+    await wait_for(
+        pilot,
+        lambda: (
+            app.worker_.state.get().relay is not None
+            and app.limits is not None
+            and bool(app.catalogue)
+        ),
+        what="the rig to open and the procedures to load",
+    )
     await pilot.pause(0.1)
 
 
@@ -49,8 +56,12 @@ def nodes_safe(emulator, timeout_s: float = 5.0) -> bool:
     nodes = emulator.nodes.nodes
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
-        if (nodes["relay"].mode == 1 and not any(nodes["torquer"].values.values())
-                and not any(nodes["command"].values.values()) and not any(nodes["caging"].inhibit.values())):
+        if (
+            nodes["relay"].mode == 1
+            and not any(nodes["torquer"].values.values())
+            and not any(nodes["command"].values.values())
+            and not any(nodes["caging"].inhibit.values())
+        ):
             return True
         time.sleep(0.05)
     return False
@@ -71,7 +82,9 @@ def out_dir(tmp_path):
 
 def run_async(fn):
     """Run an async test with asyncio (no async plugin is installed; Textual's Pilot is asyncio)."""
+
     @functools.wraps(fn)
     def wrapper(*args, **kwargs):
         return asyncio.run(fn(*args, **kwargs))
+
     return wrapper

@@ -7,8 +7,16 @@ from drivers.relay import RelayStatus
 
 
 def _status(clamped: bool) -> RelayStatus:
-    return RelayStatus(mode=3, selected=3, held=False, alarm=False, at_speed=dict.fromkeys(("X", "Y", "Z", "XRD"), True),
-                       caged=dict.fromkeys(("X", "Y", "Z", "XRD"), True), spin_fraction=1.0, clamped=clamped)
+    return RelayStatus(
+        mode=3,
+        selected=3,
+        held=False,
+        alarm=False,
+        at_speed=dict.fromkeys(("X", "Y", "Z", "XRD"), True),
+        caged=dict.fromkeys(("X", "Y", "Z", "XRD"), True),
+        spin_fraction=1.0,
+        clamped=clamped,
+    )
 
 
 def test_a_clamped_rig_says_so_and_refuses_the_gyro_modes():

@@ -24,7 +24,7 @@ SHORT = 'channels=["X"] repetitions=1 min_caged_s=10 hold_s=5 null_s=5 restore_s
 @run_async
 async def test_a_procedures_progress_never_goes_back_in_the_header_or_the_panel(out_dir):
     app = ConsoleApp(COLD, out_dir=out_dir)
-    published = []                       # every ProcedureInfo the rig thread sets
+    published = []  # every ProcedureInfo the rig thread sets
     state = app.worker_.state
     update = state.update
 

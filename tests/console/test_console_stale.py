@@ -16,9 +16,21 @@ from console.app import ConsoleApp
 from drivers.calibration import AXES, GYRO_CHANNELS
 from drivers.relay import MODES
 
-from .conftest import COLD, WARM, nodes_safe, outcome, rig_ready, run_async, start_procedure, wait_for
+from .conftest import (
+    COLD,
+    WARM,
+    nodes_safe,
+    outcome,
+    rig_ready,
+    run_async,
+    start_procedure,
+    wait_for,
+)
 
-SETPOINT_BOXES = (*(f"torq-{c}" for c in GYRO_CHANNELS), *(f"{k}-{a}" for k in ("gc", "vtd") for a in AXES))
+SETPOINT_BOXES = (
+    *(f"torq-{c}" for c in GYRO_CHANNELS),
+    *(f"{k}-{a}" for k in ("gc", "vtd") for a in AXES),
+)
 
 
 def text_of(app, selector: str) -> str:
@@ -45,13 +57,15 @@ def panels_show_the_read_back(app) -> list[str]:
     if "wheels at" in alarm:
         shown = int(re.search(r"wheels at (\d+) %", alarm).group(1))
         if abs(shown - 100 * st.spin_fraction) > 2:
-            wrong.append(f"alarm says wheels at {shown} % with the wheels at {100 * st.spin_fraction:.0f} %")
+            wrong.append(
+                f"alarm says wheels at {shown} % with the wheels at {100 * st.spin_fraction:.0f} %"
+            )
     for name, v in snap.readback.items():
         back = text_of(app, f"#back-{name.replace(' ', '-')}")
         if not back.startswith(f"{v:+.4f} V"):
             wrong.append(f"read-back column {name} shows {back!r}, read back {v:+.4f}")
     for box in SETPOINT_BOXES:
-        if (typed := app.query_one(f"#{box}", Input).value):
+        if typed := app.query_one(f"#{box}", Input).value:
             wrong.append(f"set-point box {box} still holds {typed!r}")
     for c, inhibited in snap.caging.items():
         cb = app.query_one(f"#cage-{c}", Checkbox)
@@ -68,7 +82,9 @@ async def settle(pilot) -> None:
     """The read-back polled once more (status 0.5 s, outputs 1 s) and drawn."""
     app = pilot.app
     t0 = app.worker_.state.get().rig_time_s
-    await wait_for(pilot, lambda: app.worker_.state.get().rig_time_s > t0 + 1.2, what="a fresh read-back")
+    await wait_for(
+        pilot, lambda: app.worker_.state.get().rig_time_s > t0 + 1.2, what="a fresh read-back"
+    )
     await pilot.pause(0.3)
 
 
@@ -83,20 +99,30 @@ async def dirty_the_panels(pilot, *, inhibit: bool = True) -> None:
     await pilot.press(*"0.25", "enter", "enter")
     app.query_one("#gc-X", Input).focus()
     await pilot.press(*"0.1", "enter", "enter")
-    await wait_for(pilot, lambda: abs(state.get().readback.get("torq X", 0) - 0.25) < 1e-3
-                   and abs(state.get().readback.get("gc X", 0) - 0.1) < 1e-3 and not state.get().slewing,
-                   what="the biases set")
+    await wait_for(
+        pilot,
+        lambda: (
+            abs(state.get().readback.get("torq X", 0) - 0.25) < 1e-3
+            and abs(state.get().readback.get("gc X", 0) - 0.1) < 1e-3
+            and not state.get().slewing
+        ),
+        what="the biases set",
+    )
     if inhibit:
         app.query_one("#cage-Y", Checkbox).focus()
         await pilot.press("space")
-        await wait_for(pilot, lambda: state.get().caging.get("Y") is True, what="caging Y inhibited")
+        await wait_for(
+            pilot, lambda: state.get().caging.get("Y") is True, what="caging Y inhibited"
+        )
         await pilot.pause(0.3)
         assert "caging Y inhibited" in text_of(app, "#sp-message")
     app.query_one("#torq-Y", Input).focus()
-    await pilot.press(*"0.1", "enter")                      # echoed, never sent
+    await pilot.press(*"0.1", "enter")  # echoed, never sent
     assert app.query_one("#torq-Y", Input).value == "+0.1"
     await pilot.press("f2", "h", "3", "r")
-    await wait_for(pilot, lambda: (o := outcome(app, "release")) is not None and o.ok, what="mode 3 in force")
+    await wait_for(
+        pilot, lambda: (o := outcome(app, "release")) is not None and o.ok, what="mode 3 in force"
+    )
     await pilot.pause(0.3)
     assert "mode 3 (autocollimator control) in force" in text_of(app, "#mode-last")
 
@@ -106,8 +132,11 @@ async def abort_a_stopwatch(pilot, *keys: str) -> None:
     app = pilot.app
     await dirty_the_panels(pilot, inhibit=False)
     await start_procedure(pilot, "stopwatch")
-    await wait_for(pilot, lambda: (p := app.worker_.state.get().procedure) is not None and p.index >= 1,
-                   what="the procedure's second step")
+    await wait_for(
+        pilot,
+        lambda: (p := app.worker_.state.get().procedure) is not None and p.index >= 1,
+        what="the procedure's second step",
+    )
     await pilot.press(*keys)
     await wait_for(pilot, lambda: app.last_summary is not None, what="the procedure to end")
 
@@ -123,7 +152,7 @@ async def test_after_an_f8_abort_every_panel_shows_the_read_back_state(out_dir):
         assert nodes_safe(app.worker_.rig.emulator)
         assert app.worker_.state.get().relay.mode == 1
         assert panels_show_the_read_back(app) == []
-        assert text_of(app, "#mode-last") == ""              # "mode 3 in force" went with mode 3
+        assert text_of(app, "#mode-last") == ""  # "mode 3 in force" went with mode 3
     # the run's log beside its file, as fbs run writes it: this program's records, none of canopen's INFO
     log = (out_dir / "stopwatch.log").read_text()
     assert "procedure stopwatch starting" in log and "stopwatch aborted" in log
@@ -155,25 +184,31 @@ async def test_the_safe_key_during_a_procedure_aborts_it_and_the_panels_follow(o
 
 
 @run_async
-async def test_a_refused_release_alarm_follows_the_wheels_and_goes_out_with_its_cause(out_dir, tmp_path):
+async def test_a_refused_release_alarm_follows_the_wheels_and_goes_out_with_its_cause(
+    out_dir, tmp_path
+):
     config = tmp_path / "fast.toml"
-    config.write_text("[gyros]\nspin_up_time_s = 6.0\n")    # the wheels reach speed in seconds
+    config.write_text("[gyros]\nspin_up_time_s = 6.0\n")  # the wheels reach speed in seconds
     app = ConsoleApp(COLD + f"&config={config}", out_dir=out_dir)
     async with app.run_test(size=(100, 40)) as pilot:
         await rig_ready(pilot)
         state = app.worker_.state
         await pilot.press("f2", "h", "2", "r")
         await wait_for(pilot, lambda: state.get().relay.mode == 2, what="mode 2")
-        await pilot.press("h", "4", "r")                        # refused: not at speed, not caged
-        await wait_for(pilot, lambda: outcome(app, "release") is not None and state.get().alarm, what="refusal")
+        await pilot.press("h", "4", "r")  # refused: not at speed, not caged
+        await wait_for(
+            pilot, lambda: outcome(app, "release") is not None and state.get().alarm, what="refusal"
+        )
         assert "gyros not at speed" in state.get().alarm
-        await wait_for(pilot, lambda: all(state.get().relay.at_speed.values()), what="the wheels at speed")
+        await wait_for(
+            pilot, lambda: all(state.get().relay.at_speed.values()), what="the wheels at speed"
+        )
         await settle(pilot)
         alarm = text_of(app, "#mode-alarm")
-        assert "ALARM" in alarm and "not caged" in alarm       # still refused, for what is still so
-        assert "not at speed" not in alarm                    # not for what was so a minute ago
+        assert "ALARM" in alarm and "not caged" in alarm  # still refused, for what is still so
+        assert "not at speed" not in alarm  # not for what was so a minute ago
         assert panels_show_the_read_back(app) == []
-        await pilot.press("s")                                  # the selection goes: so does the lamp
+        await pilot.press("s")  # the selection goes: so does the lamp
         await wait_for(pilot, lambda: outcome(app, "safe state") is not None, what="the safe state")
         await settle(pilot)
         assert "ALARM" not in text_of(app, "#mode-alarm") and panels_show_the_read_back(app) == []
@@ -192,15 +227,29 @@ async def test_a_burst_of_keys_with_backspace_sends_what_was_typed(out_dir):
         box = app.query_one("#torq-X", Input)
         box.focus()
         await pilot.pause()
-        for key, char in [("0", "0"), ("full_stop", "."), ("1", "1"), ("2", "2"), ("backspace", "\x7f"),
-                          ("backspace", "\x7f"), ("3", "3"), ("enter", "\r")]:
+        for key, char in [
+            ("0", "0"),
+            ("full_stop", "."),
+            ("1", "1"),
+            ("2", "2"),
+            ("backspace", "\x7f"),
+            ("backspace", "\x7f"),
+            ("3", "3"),
+            ("enter", "\r"),
+        ]:
             app.post_message(events.Key(key, char))
         await pilot.pause(0.5)
-        assert box.value == "+0.3"                              # the value that will be sent
-        assert outcome(app, "torquer bias X") is None            # not yet
+        assert box.value == "+0.3"  # the value that will be sent
+        assert outcome(app, "torquer bias X") is None  # not yet
         await pilot.press("enter")
-        await wait_for(pilot, lambda: abs(app.worker_.state.get().readback.get("torq X", 0) - 0.3) < 1e-3
-                       and not app.worker_.state.get().slewing, what="the bias at 0.3 V")
+        await wait_for(
+            pilot,
+            lambda: (
+                abs(app.worker_.state.get().readback.get("torq X", 0) - 0.3) < 1e-3
+                and not app.worker_.state.get().slewing
+            ),
+            what="the bias at 0.3 V",
+        )
         # an edited echo is cancelled: Enter checks it again and echoes it, it does not send
         n = len(app.outcomes)
         await pilot.press(*"0.2", "enter", "backspace", "5", "enter")

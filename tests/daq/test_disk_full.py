@@ -24,8 +24,8 @@ from daq.recover import recover
 from daq.runfile import RunFileError, RunWriter
 
 RATE = 400.0
-N_CH = 17            # as many channels as a rig records
-BLOCK = 400          # samples per append
+N_CH = 17  # as many channels as a rig records
+BLOCK = 400  # samples per append
 
 
 def _value(i: int) -> float:
@@ -37,7 +37,9 @@ def _sha(path) -> str:
 
 
 def _fbs(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "fbs.cli", *args], capture_output=True, text=True, timeout=300)
+    return subprocess.run(
+        [sys.executable, "-m", "fbs.cli", *args], capture_output=True, text=True, timeout=300
+    )
 
 
 def _check_samples(path, n: int) -> None:
@@ -52,9 +54,15 @@ def _check_samples(path, n: int) -> None:
 def test_a_writer_stops_before_the_full_disk_reaches_hdf5_and_the_file_opens(small_disk):
     disk = small_disk(2 << 20)
     p = disk.path / "run.h5"
-    w = RunWriter(p, rig="test", mode=3, rate_hz=RATE, channels={f"c{i}": "V" for i in range(N_CH)},
-                  clock=lambda: 0.0)
-    disk.fill(leave_bytes=900_000)                # another program takes the disk while we record
+    w = RunWriter(
+        p,
+        rig="test",
+        mode=3,
+        rate_hz=RATE,
+        channels={f"c{i}": "V" for i in range(N_CH)},
+        clock=lambda: 0.0,
+    )
+    disk.fill(leave_bytes=900_000)  # another program takes the disk while we record
     with pytest.raises(RunFileError) as err:
         for i in range(10_000):
             w.append(np.full((BLOCK, N_CH), _value(i)))
@@ -64,14 +72,17 @@ def test_a_writer_stops_before_the_full_disk_reaches_hdf5_and_the_file_opens(sma
     flushed = int(msg.split("Samples 0..")[1].split(" ")[0])
     assert flushed == w.flushed >= 2 * BLOCK
     with pytest.raises(RunFileError):
-        w.close()                                 # the failure is not forgotten at close
-    assert disk.free() < 400_000                  # still full: the close used the room it kept
-    with h5py.File(p, "r") as f:                  # plain h5py, no recovery needed
-        assert f.attrs["status"].startswith("aborted: writing") and "the disk is full" in f.attrs["status"]
+        w.close()  # the failure is not forgotten at close
+    assert disk.free() < 400_000  # still full: the close used the room it kept
+    with h5py.File(p, "r") as f:  # plain h5py, no recovery needed
+        assert (
+            f.attrs["status"].startswith("aborted: writing")
+            and "the disk is full" in f.attrs["status"]
+        )
         assert {len(f["channels"][c]) for c in f["channels"]} == {flushed}
     _check_samples(p, flushed)
     before = _sha(p)
-    rec = recover(p)                              # in place on the full disk: nothing to do
+    rec = recover(p)  # in place on the full disk: nothing to do
     assert not rec.was_open and _sha(p) == before
 
 
@@ -95,19 +106,26 @@ def test_a_disk_full_before_the_first_flush_still_closes_the_file_with_status(sm
     first write still gets the status and every metadata written, and no "recover later"."""
     disk = small_disk(2 << 20)
     p = disk.path / "run.h5"
-    w = RunWriter(p, rig="test", mode=3, rate_hz=RATE, channels=_CHANNELS,
-                  meta={"config": {"gain": 2}}, clock=lambda: 0.0)
+    w = RunWriter(
+        p,
+        rig="test",
+        mode=3,
+        rate_hz=RATE,
+        channels=_CHANNELS,
+        meta={"config": {"gain": 2}},
+        clock=lambda: 0.0,
+    )
     w.set_meta("acquisition", {"start_unix_s": 1.5})
-    disk.fill()                                   # all of it, before anything was written
+    disk.fill()  # all of it, before anything was written
     with caplog.at_level(logging.WARNING, logger="daq.runfile"):
         with pytest.raises(RunFileError, match="the disk is full") as err:
-            w.append(np.full((20 * BLOCK, N_CH), _value(0)))   # more than was reserved ahead
+            w.append(np.full((20 * BLOCK, N_CH), _value(0)))  # more than was reserved ahead
             w.flush()
         assert "Samples 0..0 (0.000 s) were flushed before" in str(err.value)
         with pytest.raises(RunFileError):
             w.close()
     assert not caplog.records, [r.getMessage() for r in caplog.records]
-    with h5py.File(p, "r") as f:                  # plain h5py, no recovery needed
+    with h5py.File(p, "r") as f:  # plain h5py, no recovery needed
         status = f.attrs["status"]
         assert status.startswith("aborted: writing") and "the disk is full" in status
         assert {len(f["channels"][c]) for c in f["channels"]} == {0}
@@ -130,8 +148,11 @@ _KILLED_WRITER = textwrap.dedent("""
 
 def _killed_writer(path, blocks: int) -> int:
     """A writer SIGKILLed after flushing ``blocks`` blocks; returns the samples it flushed."""
-    proc = subprocess.Popen([sys.executable, "-c", _KILLED_WRITER, str(path), str(blocks)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", _KILLED_WRITER, str(path), str(blocks)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout is not None
         flushed = int(proc.stdout.readline())
@@ -150,7 +171,9 @@ def test_recover_on_the_full_disk_refuses_writing_nothing_and_recovers_a_copy(sm
     before = _sha(p)
     done = _fbs("recover", str(p))
     assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
-    assert "Nothing was written; copy the file to a disk with room and recover the copy" in done.stderr
+    assert (
+        "Nothing was written; copy the file to a disk with room and recover the copy" in done.stderr
+    )
     assert _sha(p) == before
     copy = tmp_path / "copy.h5"
     shutil.copyfile(p, copy)
@@ -165,9 +188,11 @@ def test_recover_refuses_a_file_whose_metadata_a_failed_write_damaged(tmp_path):
     flushed = _killed_writer(p, 3)
     assert flushed == 3 * BLOCK
     raw = bytearray(p.read_bytes())
-    root = int.from_bytes(raw[raw.index(b"\x89HDF\r\n\x1a\n") + 36:][:8], "little")   # root object header
-    assert raw[root:root + 4] == b"OHDR"
-    raw[root + 8:root + 24] = bytes(16)                      # as a write cut short by a full disk
+    root = int.from_bytes(
+        raw[raw.index(b"\x89HDF\r\n\x1a\n") + 36 :][:8], "little"
+    )  # root object header
+    assert raw[root : root + 4] == b"OHDR"
+    raw[root + 8 : root + 24] = bytes(16)  # as a write cut short by a full disk
     p.write_bytes(bytes(raw))
     before = _sha(p)
     done = _fbs("recover", str(p))

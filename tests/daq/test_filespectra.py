@@ -21,7 +21,7 @@ from daq.spectra import equivalent_dof, n_segments, welch_csd_matrix
 
 FS = 250.0
 RTOL = 1e-12
-EMPTY = 1e-24   # bins below this fraction of the peak hold only rounding (see test_spectra)
+EMPTY = 1e-24  # bins below this fraction of the peak hold only rounding (see test_spectra)
 
 
 def _assert_close(S, ref, rtol=RTOL):
@@ -38,8 +38,14 @@ def _noise(n_ch, n, seed):
 
 
 def _write(path, x, names=("a", "b", "c")):
-    with RunWriter(path, rig="test", mode=3, rate_hz=FS, channels={c: "V" for c in names[:len(x)]},
-                   overwrite=True) as w:
+    with RunWriter(
+        path,
+        rig="test",
+        mode=3,
+        rate_hz=FS,
+        channels={c: "V" for c in names[: len(x)]},
+        overwrite=True,
+    ) as w:
         w.append(x.T)
     return path
 
@@ -50,14 +56,24 @@ def gap_free(tmp_path_factory):
     return _write(tmp_path_factory.mktemp("fs") / "gapfree.h5", x), x
 
 
-@pytest.mark.parametrize("nperseg, noverlap, detrend", [(1000, None, "linear"), (1024, 0, "constant"),
-                                                        (777, 600, False), (4096, 2048, "linear")])
+@pytest.mark.parametrize(
+    "nperseg, noverlap, detrend",
+    [(1000, None, "linear"), (1024, 0, "constant"), (777, 600, False), (4096, 2048, "linear")],
+)
 @pytest.mark.parametrize("read_bytes, batch_bytes", [(8 << 20, 1 << 20), (100_000, 30_000), (1, 1)])
-def test_gap_free_file_equals_welch_of_the_whole_record(gap_free, nperseg, noverlap, detrend, read_bytes,
-                                                        batch_bytes):
+def test_gap_free_file_equals_welch_of_the_whole_record(
+    gap_free, nperseg, noverlap, detrend, read_bytes, batch_bytes
+):
     path, x = gap_free
-    res = run_csd_matrix(path, ["a", "b", "c"], nperseg=nperseg, noverlap=noverlap, detrend=detrend,
-                         read_bytes=read_bytes, batch_bytes=batch_bytes)
+    res = run_csd_matrix(
+        path,
+        ["a", "b", "c"],
+        nperseg=nperseg,
+        noverlap=noverlap,
+        detrend=detrend,
+        read_bytes=read_bytes,
+        batch_bytes=batch_bytes,
+    )
     f, S = welch_csd_matrix(x, FS, nperseg=nperseg, noverlap=noverlap, detrend=detrend)
     np.testing.assert_array_equal(res.f, f)
     _assert_close(res.S, S)
@@ -80,8 +96,12 @@ def test_channel_order_and_subset(gap_free):
 
 def _by_hand(x, used, nperseg, step):
     """The average over the used segments of each one's own periodogram matrix."""
-    parts = [welch_csd_matrix(x[:, k * step:k * step + nperseg], FS, nperseg=nperseg, detrend="linear")[1]
-             for k in np.flatnonzero(used)]
+    parts = [
+        welch_csd_matrix(
+            x[:, k * step : k * step + nperseg], FS, nperseg=nperseg, detrend="linear"
+        )[1]
+        for k in np.flatnonzero(used)
+    ]
     return np.mean(parts, axis=0)
 
 
@@ -110,10 +130,10 @@ def test_segments_touching_a_gap_are_skipped_and_the_rest_averaged(tmp_path):
 
 def test_a_nan_in_one_channel_skips_the_segments_only_if_that_channel_is_asked_for(tmp_path):
     x = _noise(2, 5_000, seed=4)
-    x[1, 2_600] = np.nan                            # one lost sample in b only
+    x[1, 2_600] = np.nan  # one lost sample in b only
     path = _write(tmp_path / "nan_b.h5", x)
     both = run_csd_matrix(path, ["a", "b"], nperseg=1000)
-    assert both.segments_skipped == 2                # segments starting at 2000 and 2500
+    assert both.segments_skipped == 2  # segments starting at 2000 and 2500
     assert not both.used[4] and not both.used[5] and both.used[3] and both.used[6]
     only_a = run_csd_matrix(path, ["a"], nperseg=1000)
     assert only_a.segments_skipped == 0
@@ -124,11 +144,14 @@ def test_edof_of_separated_runs_of_segments():
     """Two runs of K1 and K2 consecutive segments far apart: the variances add with
     weights (K_i / K)^2, so nu = K^2 / (K1^2 / nu1 + K2^2 / nu2)."""
     nperseg, noverlap = 256, 128
-    win = np.hanning(nperseg + 1)[:-1]              # scipy's periodic Hann
+    win = np.hanning(nperseg + 1)[:-1]  # scipy's periodic Hann
     used = np.zeros(40, dtype=bool)
     used[:10] = True
     used[20:35] = True
-    nu1, nu2 = equivalent_dof(win, nperseg, noverlap, 10), equivalent_dof(win, nperseg, noverlap, 15)
+    nu1, nu2 = (
+        equivalent_dof(win, nperseg, noverlap, 10),
+        equivalent_dof(win, nperseg, noverlap, 15),
+    )
     expect = 25**2 / (10**2 / nu1 + 15**2 / nu2)
     assert used_segments_dof(win, nperseg, noverlap, used) == pytest.approx(expect, rel=1e-12)
     # and more than one run of 25 consecutive segments would have (fewer overlapping pairs)
@@ -144,14 +167,14 @@ def test_errors_are_clear(tmp_path, gap_free):
     with pytest.raises(ValueError, match="twice"):
         run_csd_matrix(path, ["a", "a"], nperseg=256)
     holes = _noise(1, 4_000, seed=5)
-    holes[0, ::700] = np.nan                         # every 1000-sample segment holds one
+    holes[0, ::700] = np.nan  # every 1000-sample segment holds one
     with pytest.raises(ValueError, match="every one of the 7 segments .* lost samples"):
         run_csd_matrix(_write(tmp_path / "holes.h5", holes), ["a"], nperseg=1000)
 
 
 def test_memory_stays_a_small_fraction_of_a_100_MB_file(tmp_path):
     path = tmp_path / "big.h5"
-    n, rng = 6_250_000, np.random.default_rng(6)     # 2 channels x 6.25 M samples x 8 B = 100 MB
+    n, rng = 6_250_000, np.random.default_rng(6)  # 2 channels x 6.25 M samples x 8 B = 100 MB
     with RunWriter(path, rig="test", mode=3, rate_hz=1000.0, channels={"a": "V", "b": "V"}) as w:
         for i in range(0, n, 1 << 20):
             w.append(rng.standard_normal((min(1 << 20, n - i), 2)))
@@ -165,7 +188,7 @@ def test_memory_stays_a_small_fraction_of_a_100_MB_file(tmp_path):
         finally:
             tracemalloc.stop()
     assert res.segments_used == n_segments(n, 4096, 2048)
-    assert np.median(res.psd("a")[1:-1]) == pytest.approx(2 / 1000.0, rel=0.02)   # unit white noise
+    assert np.median(res.psd("a")[1:-1]) == pytest.approx(2 / 1000.0, rel=0.02)  # unit white noise
     assert peak < 0.25 * size, f"peak {peak / 1e6:.1f} MB for a {size / 1e6:.0f} MB file"
 
 

@@ -32,25 +32,25 @@ def test_a_single_bin_line_survives_the_band_average():
     f = np.arange(1025) * df
     rng = np.random.default_rng(3)
     p = rng.uniform(0.8, 1.2, f.size)
-    p[300] = 50.0                                   # a line in band 8 (bins 256..511)
+    p[300] = 50.0  # a line in band 8 (bins 256..511)
     b = octave_bands(f, p)
     band = 8
     assert b.band_index[300] == band
     avg = np.mean(p[256:512])
     assert b.average[band] == pytest.approx(avg, rel=1e-12)
-    assert avg < 1.5                                # the average alone would hide the line...
-    np.testing.assert_array_equal(b.kept_f, [f[300]])   # ...the kept point shows it
+    assert avg < 1.5  # the average alone would hide the line...
+    np.testing.assert_array_equal(b.kept_f, [f[300]])  # ...the kept point shows it
     np.testing.assert_array_equal(b.kept_p, [50.0])
     np.testing.assert_array_equal(b.kept_band, [band])
 
 
 def test_bands_double_and_averages_are_the_mean_of_their_bins():
     df = 0.1220703125
-    n_bins = 1000                                   # last band partial: bins 512..999
+    n_bins = 1000  # last band partial: bins 512..999
     f = np.arange(n_bins) * df
     rng = np.random.default_rng(0)
     p = rng.exponential(1.0, n_bins) / np.maximum(f, df)
-    p[0] = 1e9                                      # DC: in no band, so it changes nothing
+    p[0] = 1e9  # DC: in no band, so it changes nothing
     b = octave_bands(f, p)
     ref = _reference_bands(n_bins)
     assert b.n_bands == len(ref) == 10
@@ -69,9 +69,9 @@ def test_bands_double_and_averages_are_the_mean_of_their_bins():
 def test_factor_is_configurable_and_nan_is_never_kept():
     f = np.arange(64) * 1.0
     p = np.ones(64)
-    p[40] = 2.5                                     # band 5: bins 32..63
+    p[40] = 2.5  # band 5: bins 32..63
     p[50] = np.nan
-    assert octave_bands(f, p).kept_f.size == 0      # 2.5 < 3 x ~1.05
+    assert octave_bands(f, p).kept_f.size == 0  # 2.5 < 3 x ~1.05
     b = octave_bands(f, p, factor=2.0)
     np.testing.assert_array_equal(b.kept_f, [40.0])
     assert b.count[5] == 32 and b.average[5] == pytest.approx((31 + 1.5) / 31)
@@ -87,11 +87,16 @@ def test_bad_input_is_refused():
 
 
 @settings(max_examples=150, deadline=None)
-@given(n_bins=st.integers(2, 5000), df=st.floats(1e-4, 1e4), seed=st.integers(0, 2**32 - 1),
-       factor=st.floats(1.1, 20.0), rfft_grid=st.booleans())
+@given(
+    n_bins=st.integers(2, 5000),
+    df=st.floats(1e-4, 1e4),
+    seed=st.integers(0, 2**32 - 1),
+    factor=st.floats(1.1, 20.0),
+    rfft_grid=st.booleans(),
+)
 def test_property_every_bin_in_one_band_and_kept_points_exceed(n_bins, df, seed, factor, rfft_grid):
     rng = np.random.default_rng(seed)
-    if rfft_grid:                                   # the grid as the estimators make it
+    if rfft_grid:  # the grid as the estimators make it
         nfft = 2 * (n_bins - 1)
         f = np.fft.rfftfreq(nfft, 1.0 / (df * nfft))
     else:
@@ -108,7 +113,7 @@ def test_property_every_bin_in_one_band_and_kept_points_exceed(n_bins, df, seed,
         assert b.average[k] == pytest.approx(members.mean(), rel=1e-9)
     above = np.zeros(n_bins, dtype=bool)
     above[1:] = p[1:] > factor * b.average[idx[1:]]
-    np.testing.assert_array_equal(b.kept_f, f[above])       # all of them, and only them
+    np.testing.assert_array_equal(b.kept_f, f[above])  # all of them, and only them
     assert np.all(b.kept_p > factor * b.average[b.kept_band])
 
 
@@ -127,12 +132,17 @@ def test_property_irregular_grid_bins_fall_inside_their_band(f, seed):
 
 def test_band_average_dof_closed_forms():
     # boxcar without zero padding: bins independent, the mean of m has m times the EDOF
-    np.testing.assert_allclose(band_average_dof(10.0, [1, 7, 1000], window="boxcar", nperseg=2048),
-                               [10.0, 70.0, 10000.0], rtol=1e-9)
+    np.testing.assert_allclose(
+        band_average_dof(10.0, [1, 7, 1000], window="boxcar", nperseg=2048),
+        [10.0, 70.0, 10000.0],
+        rtol=1e-9,
+    )
     # Hann: rho(1) = (2/3)^2 = 4/9, rho(2) = (1/6)^2 = 1/36, zero beyond
     m = 1000
     denom = m + 2 * ((m - 1) * 4 / 9 + (m - 2) / 36)
-    assert band_average_dof(10.0, m, window="hann", nperseg=4096) == pytest.approx(10 * m * m / denom, rel=1e-9)
+    assert band_average_dof(10.0, m, window="hann", nperseg=4096) == pytest.approx(
+        10 * m * m / denom, rel=1e-9
+    )
     assert band_average_dof(10.0, 1, window="hann", nperseg=512) == pytest.approx(10.0)
     with pytest.raises(ValueError, match="does not fit"):
         band_average_dof(10.0, 300, window="hann", nperseg=512)
@@ -144,9 +154,9 @@ def test_band_average_dof_matches_a_monte_carlo_of_welch_band_means():
     n = nperseg * (K + 1) // 2
     x = rng.standard_normal((trials, n))
     _, p = scipy.signal.welch(x, 1.0, "hann", nperseg, detrend=False)
-    means = p[:, 40:40 + m].mean(axis=1)            # a band well inside 0 .. Nyquist
+    means = p[:, 40 : 40 + m].mean(axis=1)  # a band well inside 0 .. Nyquist
     nu_mc = 2 * means.mean() ** 2 / means.var()
     nu_bin = equivalent_dof("hann", nperseg, nperseg // 2, K)
     nu = band_average_dof(nu_bin, m, window="hann", nperseg=nperseg)
     assert nu_mc == pytest.approx(nu, rel=0.1)
-    assert nu_mc < 0.7 * nu_bin * m                 # the correlation matters (m x nu_bin is wrong)
+    assert nu_mc < 0.7 * nu_bin * m  # the correlation matters (m x nu_bin is wrong)

@@ -28,7 +28,7 @@ def test_roll_off_and_resonance_are_kept_points_but_no_lines():
     b = octave_bands(f, p)
     kept = b.kept_f
     broad = kept[np.abs(kept - 71.0) > 0.5]
-    assert len(broad) > 0      # the App. A.8 rule keeps them (the side effect daq.octave describes)
+    assert len(broad) > 0  # the App. A.8 rule keeps them (the side effect daq.octave describes)
     line = narrow_lines(f, p, kept)
     assert list(kept[line]) == [71.0]
 
@@ -36,7 +36,7 @@ def test_roll_off_and_resonance_are_kept_points_but_no_lines():
 def test_a_line_on_a_resonance_is_still_a_line_and_the_plot_is_written(tmp_path):
     f, p = _spectrum()
     i = int(np.argmin(np.abs(f - 7.0)))
-    p[i] *= 40.0                                      # a line on top of the resonance
+    p[i] *= 40.0  # a line on top of the resonance
     assert list(np.asarray(f)[[i]][narrow_lines(f, p, [7.0])]) == [7.0]
     out = plot_psd(tmp_path / "p.png", f, p, channel="x", units="urad", dof=20.0, nperseg=8000)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -26,9 +26,9 @@ def test_reserve_keeps_the_size_steps_ahead_and_release_returns_the_rest(tmp_pat
         if not pre.enabled:
             pytest.skip("this filesystem cannot reserve space (fallocate)")
         assert os.fstat(fd).st_size == 10_000 and pre.reserved == MiB and _allocated(fd) >= MiB
-        pre.reserve(MiB - 10_000)                    # still inside: nothing to do
+        pre.reserve(MiB - 10_000)  # still inside: nothing to do
         assert pre.reserved == MiB
-        os.pwrite(fd, b"y" * (3 * MiB // 2), 10_000)    # the file grows past the reservation
+        os.pwrite(fd, b"y" * (3 * MiB // 2), 10_000)  # the file grows past the reservation
         pre.reserve(MiB)
         end = 10_000 + 3 * MiB // 2 + MiB
         assert pre.reserved == end and _allocated(fd) >= end
@@ -53,7 +53,7 @@ def test_after_the_owner_shrinks_the_file_what_it_returned_is_asked_for_again(tm
             pytest.skip("this filesystem cannot reserve space (fallocate)")
         assert pre.reserved == MiB and _allocated(fd) >= MiB
         os.ftruncate(fd, 10_000)
-        assert _allocated(fd) < 64 * 1024                 # what the reservation was counting on
+        assert _allocated(fd) < 64 * 1024  # what the reservation was counting on
         pre.truncated()
         assert pre.reserved == 10_000
         pre.reserve(0)
@@ -65,7 +65,7 @@ def test_after_the_owner_shrinks_the_file_what_it_returned_is_asked_for_again(tm
 def test_a_failing_fallocate_stops_reserving_and_says_why(tmp_path, caplog):
     p = tmp_path / "f.bin"
     p.write_bytes(b"x")
-    fd = os.open(p, os.O_RDONLY)         # fallocate on it: EBADF
+    fd = os.open(p, os.O_RDONLY)  # fallocate on it: EBADF
     try:
         pre = Preallocator(fd, MiB)
         if not pre.enabled:
@@ -75,7 +75,8 @@ def test_a_failing_fallocate_stops_reserving_and_says_why(tmp_path, caplog):
             pre.reserve(10)
         assert not pre.enabled and pre.reserved == 0
         assert [r.getMessage() for r in caplog.records] == [
-            "fallocate failed: Bad file descriptor; checking the free space instead of reserving it"]
+            "fallocate failed: Bad file descriptor; checking the free space instead of reserving it"
+        ]
     finally:
         os.close(fd)
 

@@ -16,7 +16,9 @@ FS = 200.0
 def record(n=4000, seed=0, offset=0.3, slope=-0.02, amp=2.0, freq=7.3, phase=0.4, noise=0.1):
     rng = np.random.default_rng(seed)
     t = np.arange(n) / FS
-    return t, offset + slope * t + amp * np.sin(2 * np.pi * freq * t + phase) + noise * rng.standard_normal(n)
+    return t, offset + slope * t + amp * np.sin(
+        2 * np.pi * freq * t + phase
+    ) + noise * rng.standard_normal(n)
 
 
 def test_line_and_sine_are_recovered_and_the_residual_is_the_noise():
@@ -25,7 +27,11 @@ def test_line_and_sine_are_recovered_and_the_residual_is_the_noise():
     off, slope = p.line
     f, a, ph = p.sine
     assert off == pytest.approx(0.3, abs=0.01) and slope == pytest.approx(-0.02, abs=0.001)
-    assert f == pytest.approx(7.3, abs=1e-3) and a == pytest.approx(2.0, rel=0.01) and ph == pytest.approx(0.4, abs=0.02)
+    assert (
+        f == pytest.approx(7.3, abs=1e-3)
+        and a == pytest.approx(2.0, rel=0.01)
+        and ph == pytest.approx(0.4, abs=0.02)
+    )
     assert np.std(p.residual) == pytest.approx(0.1, rel=0.05)
     assert abs(np.mean(p.residual)) < 0.01
 

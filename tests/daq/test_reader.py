@@ -19,8 +19,10 @@ FS = 50.0
 @pytest.fixture(scope="module")
 def run_path(tmp_path_factory):
     p = tmp_path_factory.mktemp("reader") / "r.h5"
-    x = np.arange(1000 * 3, dtype=float).reshape(1000, 3)   # sample k of channel j = 3k + j
-    with RunWriter(p, rig="test", mode=3, rate_hz=FS, channels={"a": "V", "b": "V", "c": "rad"}) as w:
+    x = np.arange(1000 * 3, dtype=float).reshape(1000, 3)  # sample k of channel j = 3k + j
+    with RunWriter(
+        p, rig="test", mode=3, rate_hz=FS, channels={"a": "V", "b": "V", "c": "rad"}
+    ) as w:
         w.append(x)
         w.event(2.5, "step", "bias 0.1 V")
     return p
@@ -49,18 +51,23 @@ def test_channels_are_lazy_arrays(run_path):
 
 def test_time_slices_follow_t_equals_index_over_rate(run_path):
     with RunFile(run_path) as run:
-        s = run.slice_s(1.0, 1.1, ["c"])           # t = 1.00, 1.02, ..., 1.08
+        s = run.slice_s(1.0, 1.1, ["c"])  # t = 1.00, 1.02, ..., 1.08
         assert (s.start, len(s)) == (50, 5)
         np.testing.assert_array_equal(s["c"], 3 * np.arange(50, 55) + 2)
         np.testing.assert_allclose(s.time_s, [1.0, 1.02, 1.04, 1.06, 1.08])
-        tail = run.slice_s(19.97, 99.0)           # clipped at the end: t = 19.98 only
+        tail = run.slice_s(19.97, 99.0)  # clipped at the end: t = 19.98 only
         assert (tail.start, tail.stop) == (999, 1000)
         with pytest.raises(ValueError, match="reversed"):
             run.slice_s(2.0, 1.0)
 
 
 @settings(max_examples=60, deadline=None)
-@given(size=st.integers(1, 400), overlap_frac=st.floats(0, 0.95), start=st.integers(0, 999), stop=st.integers(0, 1100))
+@given(
+    size=st.integers(1, 400),
+    overlap_frac=st.floats(0, 0.95),
+    start=st.integers(0, 999),
+    stop=st.integers(0, 1100),
+)
 def test_blocks_tile_the_range_exactly(run_path, size, overlap_frac, start, stop):
     overlap = min(size - 1, int(size * overlap_frac))
     with RunFile(run_path) as run:
@@ -101,15 +108,24 @@ def test_errors_name_the_problem(run_path, tmp_path):
 def test_a_minimal_contract_file_from_another_writer_is_read(tmp_path):
     """DESIGN section 6: analysis accepts any file that follows the contract, whoever wrote it."""
     p = tmp_path / "foreign.h5"
-    with h5py.File(p, "w") as f:            # plain h5py, default libver, variable-length strings
-        f.attrs.update({"format": "fbs-run", "format_version": 1, "created": "1974-06-01T00:00:00Z",
-                        "rig": b"FBS", "mode": 3})
+    with h5py.File(p, "w") as f:  # plain h5py, default libver, variable-length strings
+        f.attrs.update(
+            {
+                "format": "fbs-run",
+                "format_version": 1,
+                "created": "1974-06-01T00:00:00Z",
+                "rig": b"FBS",
+                "mode": 3,
+            }
+        )
         for name in ("gyro_x", "ac_x"):
             ds = f.create_dataset(f"channels/{name}", data=np.linspace(0, 1, 11), dtype="f4")
             ds.attrs["units"] = b"V"
             ds.attrs["sample_rate_hz"] = 10
-        ev = np.array([(0.5, "mode", "mode 3")],
-                      dtype=[("time", "f8"), ("kind", h5py.string_dtype()), ("text", h5py.string_dtype())])
+        ev = np.array(
+            [(0.5, "mode", "mode 3")],
+            dtype=[("time", "f8"), ("kind", h5py.string_dtype()), ("text", h5py.string_dtype())],
+        )
         f.create_dataset("events", data=ev)
     with RunFile(p) as run:
         assert run.attrs["rig"] == "FBS" and run.units["ac_x"] == "V" and run.rate_hz == 10.0
@@ -127,7 +143,9 @@ def test_block_iteration_memory_is_one_block_not_the_file(tmp_path):
     p = tmp_path / "big.h5"
     n, c = 500_000, 16
     chunk = np.random.default_rng(0).standard_normal((50_000, c))
-    with RunWriter(p, rig="test", mode=3, rate_hz=1e4, channels={f"ch{i}": "V" for i in range(c)}) as w:
+    with RunWriter(
+        p, rig="test", mode=3, rate_hz=1e4, channels={f"ch{i}": "V" for i in range(c)}
+    ) as w:
         for _ in range(n // len(chunk)):
             w.append(chunk)
     total = 0.0

@@ -57,7 +57,12 @@ def _allocated_past_end(path) -> int:
 
 
 def _run(script: str, path, *extra) -> None:
-    p = subprocess.run([sys.executable, "-c", script, str(path), *extra], capture_output=True, text=True, timeout=60)
+    p = subprocess.run(
+        [sys.executable, "-c", script, str(path), *extra],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert p.returncode == -9, p.stderr
 
 
@@ -72,7 +77,7 @@ def test_lookup3_matches_bob_jenkins_published_values_and_hdf5():
 def test_a_fresh_files_superblock_checksum_verifies(tmp_path):
     with h5py.File(tmp_path / "x.h5", "w", libver="latest") as f:
         f["x"] = np.zeros(3)
-    sb = read_superblock(tmp_path / "x.h5")        # raises on a checksum mismatch
+    sb = read_superblock(tmp_path / "x.h5")  # raises on a checksum mismatch
     assert sb.version >= 2 and sb.flags == 0
 
 
@@ -80,20 +85,20 @@ def test_a_killed_writers_file_keeps_every_flushed_sample_and_recovers(tmp_path)
     p = tmp_path / "killed.h5"
     _run(KILLED_WRITER, p)
     with pytest.raises(OSError, match="already open for write"):
-        h5py.File(p, "r")                            # what HDF5 says about a file left open
-    with h5py.File(p, "r", swmr=True) as f:          # plain h5py, SWMR-read
+        h5py.File(p, "r")  # what HDF5 says about a file left open
+    with h5py.File(p, "r", swmr=True) as f:  # plain h5py, SWMR-read
         np.testing.assert_array_equal(f["channels/a"][()], np.arange(0, 600, 2))
         assert f.attrs["status"] == "recording" and f.attrs["format"] == "fbs-run"
     with RunFile(p) as run:
         assert run.swmr and run.n_samples == 300
-        assert run.status.startswith("aborted: the writer died")   # its pid is gone
+        assert run.status.startswith("aborted: the writer died")  # its pid is gone
         assert [e.text for e in run.events] == ["before the kill"]
-    reserved = _allocated_past_end(p)                # the writer reserves space ahead (1 MiB here)
+    reserved = _allocated_past_end(p)  # the writer reserves space ahead (1 MiB here)
     rec = recover(p)
     assert rec.was_open and rec.samples == 300 and not rec.padded
     assert "300 samples (3.000 s)" in rec.status
-    assert _allocated_past_end(p) < min(reserved, 64 << 10) + 4096   # returned by recover
-    with h5py.File(p, "r") as f:                     # plain open works again
+    assert _allocated_past_end(p) < min(reserved, 64 << 10) + 4096  # returned by recover
+    with h5py.File(p, "r") as f:  # plain open works again
         np.testing.assert_array_equal(f["channels/b"][()], np.arange(1, 600, 2))
         assert f.attrs["status"] == rec.status
     assert read_superblock(p).flags == 0
@@ -115,13 +120,17 @@ def test_channels_cut_short_by_the_kill_are_padded_with_nan_not_truncated(tmp_pa
 
 def test_recover_refuses_while_the_writer_runs(tmp_path):
     p = tmp_path / "live.h5"
-    proc = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(p), "wait"], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILLED_WRITER, str(p), "wait"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == "flushed"
         with pytest.raises(RunFileError, match=f"pid {proc.pid} .* is still running"):
             recover(p)
-        assert read_superblock(p).flags != 0         # untouched
+        assert read_superblock(p).flags != 0  # untouched
     finally:
         proc.communicate("go\n", timeout=30)
     assert recover(p).samples == 300
@@ -131,14 +140,18 @@ def test_not_even_force_repairs_a_file_its_writer_holds_open(tmp_path):
     """Issue 19 item 6: ``recover --force`` under a live writer destroyed its file. force is for
     a pid that only looks alive (another process got the number), not for the writer itself."""
     p = tmp_path / "live.h5"
-    proc = subprocess.Popen([sys.executable, "-c", KILLED_WRITER, str(p), "wait"], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", KILLED_WRITER, str(p), "wait"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == "flushed"
         before = p.read_bytes()
         with pytest.raises(RunFileError, match="has the file open; stop it first"):
             recover(p, force=True)
-        assert p.read_bytes() == before              # untouched
+        assert p.read_bytes() == before  # untouched
     finally:
         proc.communicate("go\n", timeout=30)
     assert recover(p).samples == 300
@@ -155,7 +168,9 @@ def test_force_repairs_a_file_whose_writer_pid_now_names_another_process(tmp_pat
 
     writer = writer if isinstance(writer, str) else writer.decode()
     dead_pid = re.search(r"pid (\d+) on ", writer).group(1)
-    ours = str(os.getpid()).rjust(len(dead_pid), "0")       # same length: the attribute is patched in place
+    ours = str(os.getpid()).rjust(
+        len(dead_pid), "0"
+    )  # same length: the attribute is patched in place
     if len(ours) > len(dead_pid):
         pytest.skip(f"this process's pid {ours} is longer than the dead writer's {dead_pid}")
     _rewrite_writer(p, writer.replace(f"pid {dead_pid} on ", f"pid {ours} on "))
@@ -205,34 +220,35 @@ EARLY_KILLED_WRITER = textwrap.dedent("""
 
 
 @pytest.mark.parametrize("last", ["created", "meta"])
-def test_a_writer_killed_before_its_first_flush_leaves_a_file_recover_mends(tmp_path, capsys,
-                                                                            last):
+def test_a_writer_killed_before_its_first_flush_leaves_a_file_recover_mends(tmp_path, capsys, last):
     """It used to leave 48 bytes (a superblock, nothing else): neither inspect nor recover
     could read it. Now the file has its name only once its layout is on disk."""
     p = tmp_path / "early.h5"
     _run(EARLY_KILLED_WRITER, p, last)
-    assert sorted(tmp_path.iterdir()) == [p]             # no temporary file left beside it
-    assert main(["inspect", str(p)]) == 2                # not readable as it is; says what is
+    assert sorted(tmp_path.iterdir()) == [p]  # no temporary file left beside it
+    assert main(["inspect", str(p)]) == 2  # not readable as it is; says what is
     err = capsys.readouterr().err
     assert "left open for writing before its first flush" in err and f"`fbs recover {p}`" in err
     assert main(["recover", str(p)]) == 0
     out = capsys.readouterr().out
     assert "recovered; 0 samples per channel (0.000 s) kept" in out
-    with h5py.File(p, "r") as f:                         # plain h5py, the metadata all there
+    with h5py.File(p, "r") as f:  # plain h5py, the metadata all there
         a = dict(f.attrs)
         assert (a["format"], a["format_version"], a["rig"], a["mode"]) == ("fbs-run", 1, "test", 3)
         assert (a["axis"], a["procedure"]) == ("X", "survey") and "created" in a
         assert a["status"].startswith("aborted: not closed by its writer")
         assert "0 samples" in a["status"]
-        got = {c: (len(ds), ds.attrs["units"], ds.attrs["sample_rate_hz"])
-               for c, ds in f["channels"].items()}
+        got = {
+            c: (len(ds), ds.attrs["units"], ds.attrs["sample_rate_hz"])
+            for c, ds in f["channels"].items()
+        }
         assert got == {"a": (0, "V", 100.0), "b": (0, "rad", 100.0)}
         meta = {k: json.loads(v) for k, v in f["meta"].attrs.items()}
         assert meta["config"] == {"gain": 2} and "fbs-hil" in meta["software_version"]
         # a set_meta after creation reaches the disk with the first flush: lost here, or whole
         assert meta.get("acquisition", {"start_unix_s": 1.5}) == {"start_unix_s": 1.5}
         assert len(f["events"]) == 0
-    assert main(["inspect", str(p)]) == 2        # shown; a run with no samples breaks rule 7
+    assert main(["inspect", str(p)]) == 2  # shown; a run with no samples breaks rule 7
     out, err = capsys.readouterr()
     assert "rig 'test'" in out and "status 'aborted: not closed by its writer" in out
     assert "a  dataset float64 shape (0,); units 'V', sample_rate_hz 100.0" in out
@@ -254,10 +270,10 @@ def test_a_writer_killed_while_creating_leaves_no_file_and_its_leftover_is_remov
     _run(UNPUBLISHED_WRITER, p)
     assert not p.exists()
     left = list(tmp_path.iterdir())
-    assert len(left) == 1 and left[0].name.startswith(".r.h5.creating-")   # hidden, and not *.h5
+    assert len(left) == 1 and left[0].name.startswith(".r.h5.creating-")  # hidden, and not *.h5
     with RunWriter(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}) as w:
         w.append(np.ones((3, 1)))
-    assert sorted(tmp_path.iterdir()) == [p]             # the dead writer's leftover is gone
+    assert sorted(tmp_path.iterdir()) == [p]  # the dead writer's leftover is gone
     with h5py.File(p, "r") as f:
         assert f.attrs["status"] == "complete" and len(f["channels/a"]) == 3
 
@@ -275,15 +291,15 @@ def test_a_file_that_appears_while_the_writer_creates_is_never_overwritten(tmp_p
     with pytest.raises(RunFileError, match="exists .*never overwritten"):
         _RaceLoser(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"})
     assert p.read_bytes() == b"precious" and sorted(tmp_path.iterdir()) == [p]
-    with _RaceLoser(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"},
-                    overwrite=True) as w:
-        w.append(np.ones((2, 1)))                        # asked for: replaced whole
+    with _RaceLoser(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, overwrite=True) as w:
+        w.append(np.ones((2, 1)))  # asked for: replaced whole
     with h5py.File(p, "r") as f:
         assert len(f["channels/a"]) == 2 and sorted(tmp_path.iterdir()) == [p]
 
 
-def test_when_the_status_cannot_be_set_the_message_promises_what_recover_does(tmp_path, caplog,
-                                                                             monkeypatch):
+def test_when_the_status_cannot_be_set_the_message_promises_what_recover_does(
+    tmp_path, caplog, monkeypatch
+):
     p = tmp_path / "r.h5"
 
     def refuse(path, status):
@@ -298,5 +314,5 @@ def test_when_the_status_cannot_be_set_the_message_promises_what_recover_does(tm
     assert f"It still says 'recording'; `fbs recover {p}` marks it aborted, keeping" in msg
     with h5py.File(p, "r") as f:
         assert f.attrs["status"] == "recording"
-    rec = recover(p)                                     # and it does
+    rec = recover(p)  # and it does
     assert rec.samples == 7 and rec.status.startswith("aborted: ") and "7 samples" in rec.status

@@ -15,7 +15,15 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from daq.prealloc import Preallocator
-from daq.runfile import EVENT_DTYPE, TEXT_BYTES, RunFileError, RunWriter, check_new_path, chunk_samples, fit_utf8
+from daq.runfile import (
+    EVENT_DTYPE,
+    TEXT_BYTES,
+    RunFileError,
+    RunWriter,
+    check_new_path,
+    chunk_samples,
+    fit_utf8,
+)
 
 
 class Clock:
@@ -34,20 +42,33 @@ def _writer(path, clock=None, **kw) -> RunWriter:
 def test_a_closed_file_follows_the_layout_and_opens_with_plain_h5py(tmp_path):
     rng = np.random.default_rng(1)
     x = rng.standard_normal((250, 2))
-    with _writer(tmp_path / "r.h5", axis="X", procedure="unit", meta={"calibration": {"K": 1.5}}) as w:
+    with _writer(
+        tmp_path / "r.h5", axis="X", procedure="unit", meta={"calibration": {"K": 1.5}}
+    ) as w:
         w.set_meta("acquisition", {"start_rig_s": 2.0})
         w.append(x[:100])
         w.append({"a": x[100:200, 0], "b": x[100:200, 1]})
         w.append_missing(7)
         w.append(x[200:])
         w.event(1.0, "mode", "mode 3")
-    with h5py.File(tmp_path / "r.h5", "r") as f:   # plain: no SWMR flag, no recovery
+    with h5py.File(tmp_path / "r.h5", "r") as f:  # plain: no SWMR flag, no recovery
         a = f.attrs
-        assert (a["format"], a["format_version"], a["rig"], a["mode"], a["axis"], a["procedure"], a["status"]) == \
-            ("fbs-run", 1, "test", 3, "X", "unit", "complete")
+        assert (
+            a["format"],
+            a["format_version"],
+            a["rig"],
+            a["mode"],
+            a["axis"],
+            a["procedure"],
+            a["status"],
+        ) == ("fbs-run", 1, "test", 3, "X", "unit", "complete")
         assert a["created"].endswith("+00:00") and "pid" in a["writer"]
         ga, gb = f["channels/a"], f["channels/b"]
-        assert ga.attrs["units"] == "V" and gb.attrs["units"] == "rad" and ga.attrs["sample_rate_hz"] == 100.0
+        assert (
+            ga.attrs["units"] == "V"
+            and gb.attrs["units"] == "rad"
+            and ga.attrs["sample_rate_hz"] == 100.0
+        )
         assert ga.dtype == np.float64 and ga.ndim == 1 and ga.maxshape == (None,) and ga.chunks
         np.testing.assert_array_equal(ga[:200], x[:200, 0])
         assert np.isnan(gb[200:207]).all()
@@ -62,7 +83,10 @@ def test_the_writer_keeps_to_hdf5_1_10_format_bounds(tmp_path):
     """DESIGN.md section 6: encodings HDF5 1.10 reads (with "latest" the installed 2.x library
     chose newer ones for the events table, which h5dump 1.10.8 refused)."""
     with _writer(tmp_path / "r.h5") as w:
-        assert w.f.id.get_access_plist().get_libver_bounds() == (h5py.h5f.LIBVER_V110, h5py.h5f.LIBVER_V110)
+        assert w.f.id.get_access_plist().get_libver_bounds() == (
+            h5py.h5f.LIBVER_V110,
+            h5py.h5f.LIBVER_V110,
+        )
         w.append(np.zeros((10, 2)))
         w.event(0.5, "mode", "mode 3")
 
@@ -77,20 +101,29 @@ def _h5dump_1_10() -> str | None:
     return exe if "1.10." in out else None
 
 
-@pytest.mark.skipif(_h5dump_1_10() is None, reason="no HDF5 1.10 h5dump on PATH to read the file with")
+@pytest.mark.skipif(
+    _h5dump_1_10() is None, reason="no HDF5 1.10 h5dump on PATH to read the file with"
+)
 def test_a_run_file_opens_in_hdf5_1_10_h5dump(tmp_path):
     """Issue 19 acceptance E: the file, events table included, dumps with HDF5 1.10's tool."""
     with _writer(tmp_path / "r.h5", axis="X", procedure="unit") as w:
         w.append(np.zeros((10, 2)))
         w.event(0.5, "mode", "mode 3")
-    r = subprocess.run([str(_h5dump_1_10()), "-H", str(tmp_path / "r.h5")], capture_output=True, text=True, timeout=60)
+    r = subprocess.run(
+        [str(_h5dump_1_10()), "-H", str(tmp_path / "r.h5")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
     assert r.returncode == 0, r.stderr
     assert "events" in r.stdout
 
 
 def test_samples_are_written_when_the_buffer_fills_and_flushed_when_the_interval_passes(tmp_path):
     clock = Clock()
-    w = _writer(tmp_path / "r.h5", clock, flush_s=0.5, buffer_bytes=16 * 100)   # 100 samples of 2 channels
+    w = _writer(
+        tmp_path / "r.h5", clock, flush_s=0.5, buffer_bytes=16 * 100
+    )  # 100 samples of 2 channels
     w.append(np.zeros((30, 2)))
     w.sync()
     assert (w.flushed, w.samples) == (0, 30)
@@ -100,13 +133,13 @@ def test_samples_are_written_when_the_buffer_fills_and_flushed_when_the_interval
     assert w.flushed == 0
     clock.t = 0.5
     w.append(np.zeros((10, 2)))
-    w.sync()                                     # the write thread has done what was handed over
-    assert w.flushed == 70                       # the interval passed: everything went out
-    w.append(np.ones((250, 2)))                  # buffers fill within the interval, ending on
-    w.sync()                                     # multiples of their size: 70..100, 100..200, 200..300
-    assert (w.written, w.flushed, w.samples) == (300, 70, 320)   # written, not yet flushed
+    w.sync()  # the write thread has done what was handed over
+    assert w.flushed == 70  # the interval passed: everything went out
+    w.append(np.ones((250, 2)))  # buffers fill within the interval, ending on
+    w.sync()  # multiples of their size: 70..100, 100..200, 200..300
+    assert (w.written, w.flushed, w.samples) == (300, 70, 320)  # written, not yet flushed
     clock.t = 1.0
-    w.event(0.9, "note", "operator note")       # an event alone also flushes when due
+    w.event(0.9, "note", "operator note")  # an event alone also flushes when due
     w.sync()
     assert w.flushed == w.written == 320
     w.close()
@@ -120,10 +153,16 @@ def test_a_live_reader_does_not_keep_the_status_from_being_set(tmp_path):
     w = _writer(p)
     w.append(np.ones((5, 2)))
     w.flush()
-    code = ("import sys, time, h5py; f = h5py.File(sys.argv[1], 'r', swmr=True); print('open', flush=True); "
-            "sys.stdin.readline()")
-    reader = subprocess.Popen([sys.executable, "-c", code, str(p)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                              text=True)
+    code = (
+        "import sys, time, h5py; f = h5py.File(sys.argv[1], 'r', swmr=True); print('open', flush=True); "
+        "sys.stdin.readline()"
+    )
+    reader = subprocess.Popen(
+        [sys.executable, "-c", code, str(p)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert reader.stdout.readline().strip() == "open"
         w.close()
@@ -148,7 +187,7 @@ def test_an_existing_file_is_never_overwritten_unless_asked(tmp_path):
     with pytest.raises(RunFileError, match="exists; a recording is never overwritten"):
         _writer(p)
     with h5py.File(p) as f:
-        assert len(f["channels/a"]) == 5     # untouched
+        assert len(f["channels/a"]) == 5  # untouched
     with _writer(p, overwrite=True) as w:
         w.append(np.ones((2, 2)))
     with h5py.File(p) as f:
@@ -173,8 +212,14 @@ def test_an_exception_closes_the_file_aborted_with_the_reason(tmp_path):
         assert len(f["channels/a"]) == 3
 
 
-@pytest.mark.parametrize("block, match", [(np.zeros((3, 3)), r"\(n, 2\)"), ({"a": np.zeros(3)}, "exactly the channels"),
-                                          ({"a": np.zeros(3), "b": np.zeros(4)}, "different lengths")])
+@pytest.mark.parametrize(
+    "block, match",
+    [
+        (np.zeros((3, 3)), r"\(n, 2\)"),
+        ({"a": np.zeros(3)}, "exactly the channels"),
+        ({"a": np.zeros(3), "b": np.zeros(4)}, "different lengths"),
+    ],
+)
 def test_malformed_blocks_are_refused(tmp_path, block, match):
     with _writer(tmp_path / "r.h5") as w:
         with pytest.raises(ValueError, match=match):
@@ -182,8 +227,12 @@ def test_malformed_blocks_are_refused(tmp_path, block, match):
 
 
 def test_bad_construction_arguments_are_refused_before_a_file_exists(tmp_path):
-    for kw, match in [({"rate_hz": 0.0}, "sample rate"), ({"channels": {}}, "at least one channel"),
-                      ({"channels": {"a/b": "V"}}, "cannot name"), ({"flush_s": 0}, "flush interval")]:
+    for kw, match in [
+        ({"rate_hz": 0.0}, "sample rate"),
+        ({"channels": {}}, "at least one channel"),
+        ({"channels": {"a/b": "V"}}, "cannot name"),
+        ({"flush_s": 0}, "flush interval"),
+    ]:
         with pytest.raises(ValueError, match=match):
             _writer(tmp_path / "r.h5", **kw)
     assert not (tmp_path / "r.h5").exists()
@@ -199,11 +248,11 @@ def test_chunks_track_one_flush_of_samples():
 def test_fit_utf8_keeps_short_text_and_cuts_long_text_at_a_character(text, limit):
     out = fit_utf8(text, limit)
     assert len(out) <= limit
-    decoded = out.decode("utf-8")           # never a broken character
+    decoded = out.decode("utf-8")  # never a broken character
     if len(text.encode()) <= limit:
         assert decoded == text
     else:
-        assert decoded.endswith(" [cut]") and text.startswith(decoded[:-len(" [cut]")])
+        assert decoded.endswith(" [cut]") and text.startswith(decoded[: -len(" [cut]")])
 
 
 def test_a_long_event_text_is_cut_and_marked(tmp_path):
@@ -216,8 +265,10 @@ def test_a_long_event_text_is_cut_and_marked(tmp_path):
 
 
 @settings(max_examples=25, deadline=None)
-@given(st.lists(st.tuples(st.integers(1, 5000), st.booleans()), min_size=1, max_size=12),
-       st.integers(1000, 6000))
+@given(
+    st.lists(st.tuples(st.integers(1, 5000), st.booleans()), min_size=1, max_size=12),
+    st.integers(1000, 6000),
+)
 def test_any_sequence_of_appends_and_flushes_reads_back_exactly(tmp_path_factory, steps, cap):
     """Whole chunks (1024 samples here) go by H5Dwrite_chunk, partial ones by H5Dwrite, from any
     alignment a buffer of ``cap`` samples and flushes at any point leave them in."""
@@ -241,7 +292,9 @@ def test_any_sequence_of_appends_and_flushes_reads_back_exactly(tmp_path_factory
 
 class _LayoutFails(RunWriter):
     def _layout(self, *args) -> None:
-        raise OSError("Unable to create group (file write failed: errno = 28, error message = 'No space left')")
+        raise OSError(
+            "Unable to create group (file write failed: errno = 28, error message = 'No space left')"
+        )
 
 
 def test_a_layout_that_fails_is_a_clear_error_and_leaves_no_file(tmp_path):
@@ -249,21 +302,33 @@ def test_a_layout_that_fails_is_a_clear_error_and_leaves_no_file(tmp_path):
     with pytest.raises(RunFileError, match=r"cannot lay out run file .*r\.h5 \(the disk is full\)"):
         _LayoutFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock())
     assert not p.exists()
-    with _writer(p) as w:                  # and the name can be used again
+    with _writer(p) as w:  # and the name can be used again
         w.append(np.ones((2, 2)))
 
 
 class _WriteFails(RunWriter):
     def _write_channel(self, did, x, n0) -> None:
-        raise OSError("Can't write data (file write failed: errno = 28, error message = 'No space left')")
+        raise OSError(
+            "Can't write data (file write failed: errno = 28, error message = 'No space left')"
+        )
 
 
 def test_close_raises_a_write_failure_that_no_call_reported(tmp_path):
     p = tmp_path / "r.h5"
-    w = _WriteFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V"}, clock=Clock(), buffer_bytes=8 * 10)
-    w.append(np.zeros((10, 1)))          # a full buffer: handed to the write thread, which fails
-    deadline = time.monotonic() + 60     # a hang guard, not a timing assert
-    while w.failed is None and time.monotonic() < deadline:   # on the write thread; no call has seen it
+    w = _WriteFails(
+        p,
+        rig="test",
+        mode=3,
+        rate_hz=100.0,
+        channels={"a": "V"},
+        clock=Clock(),
+        buffer_bytes=8 * 10,
+    )
+    w.append(np.zeros((10, 1)))  # a full buffer: handed to the write thread, which fails
+    deadline = time.monotonic() + 60  # a hang guard, not a timing assert
+    while (
+        w.failed is None and time.monotonic() < deadline
+    ):  # on the write thread; no call has seen it
         time.sleep(0.001)
     assert w.failed is not None
     with pytest.raises(RunFileError, match="the disk is full"):
@@ -293,7 +358,7 @@ def test_disk_space_is_reserved_ahead_while_recording_and_returned_at_close(tmp_
     w.append(np.ones((100, 2)))
     w.flush()
     st = os.stat(p)
-    assert st.st_blocks * 512 - st.st_size > 512 << 10     # a 1 MiB step, the size unchanged by it
+    assert st.st_blocks * 512 - st.st_size > 512 << 10  # a 1 MiB step, the size unchanged by it
     w.close()
     st = os.stat(p)
     assert st.st_blocks * 512 < st.st_size + (64 << 10)
@@ -304,21 +369,26 @@ def test_disk_space_is_reserved_ahead_while_recording_and_returned_at_close(tmp_
 class _ThirdChannelFails(RunWriter):
     def _write_channel(self, did, x, n0) -> None:
         if n0 and h5py.h5i.get_name(did).endswith(b"/c"):
-            did.set_extent((n0 + len(x),))      # extended, then the disk refuses the data
-            raise OSError("Can't write data (file write failed: errno = 28, error message = 'No space left')")
+            did.set_extent((n0 + len(x),))  # extended, then the disk refuses the data
+            raise OSError(
+                "Can't write data (file write failed: errno = 28, error message = 'No space left')"
+            )
         super()._write_channel(did, x, n0)
 
 
 def test_a_failed_write_leaves_no_channel_claiming_samples_it_lacks(tmp_path):
     p = tmp_path / "r.h5"
-    w = _ThirdChannelFails(p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V", "c": "V"},
-                           clock=Clock())
+    w = _ThirdChannelFails(
+        p, rig="test", mode=3, rate_hz=100.0, channels={"a": "V", "b": "V", "c": "V"}, clock=Clock()
+    )
     w.append(np.ones((40, 3)))
     w.flush()
     w.append(np.full((25, 3), 2.0))
-    with pytest.raises(RunFileError, match=r"the disk is full.*Samples 0\.\.40 \(0\.400 s\) were flushed"):
+    with pytest.raises(
+        RunFileError, match=r"the disk is full.*Samples 0\.\.40 \(0\.400 s\) were flushed"
+    ):
         w.flush()
     w.close("aborted: disk full")
     with h5py.File(p) as f:
-        assert [len(f["channels"][c]) for c in "abc"] == [40, 40, 40]   # not 65 with zeros in c
+        assert [len(f["channels"][c]) for c in "abc"] == [40, 40, 40]  # not 65 with zeros in c
         assert (f["channels/c"][:] == 1.0).all()

@@ -67,7 +67,9 @@ def _assert_close(S, ref, rtol=RTOL):
 
 def _scipy_matrix(x, fs, sides, **kw):
     """scipy.signal.csd of every ordered pair, (n_freq, N, N): csd broadcasts rows i x j."""
-    f, R = scipy.signal.csd(x[:, None, :], x[None, :, :], fs, return_onesided=sides == "onesided", **kw)
+    f, R = scipy.signal.csd(
+        x[:, None, :], x[None, :, :], fs, return_onesided=sides == "onesided", **kw
+    )
     return f, np.moveaxis(R, -1, 0)
 
 
@@ -82,8 +84,13 @@ def test_psd_equals_scipy_welch(window, overlap, scaling, sides, detrend, nperse
     """psd (1-D and row-wise 2-D) equals scipy.signal.welch, frequencies exactly, values to
     1e-10 relative, for even and odd segments (the Nyquist bin is doubled only for odd)."""
     x = _noise(2, 1500, seed=nperseg)
-    kw = dict(window=window, nperseg=nperseg, noverlap=_noverlap(overlap, nperseg), detrend=detrend,
-              scaling=scaling)
+    kw = dict(
+        window=window,
+        nperseg=nperseg,
+        noverlap=_noverlap(overlap, nperseg),
+        detrend=detrend,
+        scaling=scaling,
+    )
     f_ref, p_ref = scipy.signal.welch(x, 50.0, return_onesided=sides == "onesided", **kw)
     f, p = psd(x, 50.0, sides=sides, **kw)
     np.testing.assert_array_equal(f, f_ref)
@@ -94,19 +101,52 @@ def test_psd_equals_scipy_welch(window, overlap, scaling, sides, detrend, nperse
 
 
 @settings(max_examples=25, deadline=None)
-@given(window=st.sampled_from(WINDOWS), detrend=st.sampled_from(DETRENDS),
-       scaling=st.sampled_from(["density", "spectrum"]), sides=st.sampled_from(["onesided", "twosided"]),
-       nperseg=st.integers(8, 160), overlap_frac=st.floats(0.0, 0.95), n_extra=st.integers(0, 400),
-       pad=st.sampled_from([0, 0, 1, 37]), seed=st.integers(0, 2**31))
+@given(
+    window=st.sampled_from(WINDOWS),
+    detrend=st.sampled_from(DETRENDS),
+    scaling=st.sampled_from(["density", "spectrum"]),
+    sides=st.sampled_from(["onesided", "twosided"]),
+    nperseg=st.integers(8, 160),
+    overlap_frac=st.floats(0.0, 0.95),
+    n_extra=st.integers(0, 400),
+    pad=st.sampled_from([0, 0, 1, 37]),
+    seed=st.integers(0, 2**31),
+)
 # rounding at the channels' scale (CROSS): a cross term cancelled to 2e-6 of it, a DC bin left at 1e-11
-@example(window="hann", detrend="linear", scaling="spectrum", sides="onesided", nperseg=93, overlap_frac=0.609375,
-         n_extra=357, pad=0, seed=7772727)
-@example(window="blackman", detrend="constant", scaling="density", sides="onesided", nperseg=8, overlap_frac=0.0,
-         n_extra=4, pad=1, seed=134217729)
-def _matrix_case(n_channels, window, detrend, scaling, sides, nperseg, overlap_frac, n_extra, pad, seed):
+@example(
+    window="hann",
+    detrend="linear",
+    scaling="spectrum",
+    sides="onesided",
+    nperseg=93,
+    overlap_frac=0.609375,
+    n_extra=357,
+    pad=0,
+    seed=7772727,
+)
+@example(
+    window="blackman",
+    detrend="constant",
+    scaling="density",
+    sides="onesided",
+    nperseg=8,
+    overlap_frac=0.0,
+    n_extra=4,
+    pad=1,
+    seed=134217729,
+)
+def _matrix_case(
+    n_channels, window, detrend, scaling, sides, nperseg, overlap_frac, n_extra, pad, seed
+):
     x = _noise(n_channels, nperseg + n_extra, seed=seed)
-    kw = dict(window=window, nperseg=nperseg, noverlap=min(nperseg - 1, int(overlap_frac * nperseg)),
-              nfft=nperseg + pad, detrend=detrend, scaling=scaling)
+    kw = dict(
+        window=window,
+        nperseg=nperseg,
+        noverlap=min(nperseg - 1, int(overlap_frac * nperseg)),
+        nfft=nperseg + pad,
+        detrend=detrend,
+        scaling=scaling,
+    )
     f_ref, R = _scipy_matrix(x, 20.0, sides, **kw)
     f, S = welch_csd_matrix(x, 20.0, sides=sides, **kw)
     np.testing.assert_array_equal(f, f_ref)
@@ -156,8 +196,10 @@ def _assert_matrix_close(S, ref, rtol=RTOL):
     peak = np.max(np.abs(np.einsum("fii->fi", ref)), axis=0)
     tol = rtol * np.abs(ref) + CROSS * np.sqrt(peak[:, None] * peak[None, :])[None, :, :]
     bad = np.abs(S - ref) > tol
-    assert not bad.any(), (f"{int(bad.sum())} entries differ beyond tolerance; worst excess "
-                           f"{float(np.max((np.abs(S - ref) - tol)[bad])):.3g} at {np.argwhere(bad)[:5].tolist()}")
+    assert not bad.any(), (
+        f"{int(bad.sum())} entries differ beyond tolerance; worst excess "
+        f"{float(np.max((np.abs(S - ref) - tol)[bad])):.3g} at {np.argwhere(bad)[:5].tolist()}"
+    )
 
 
 def test_complex_data_two_sided_equals_scipy():
@@ -183,7 +225,7 @@ def test_coherence_matrix_equals_scipy_coherence(window, overlap, detrend):
     f, S = welch_csd_matrix(x, 200.0, **kw)
     C = coherence(S)
     auto = np.real(np.diagonal(S, axis1=1, axis2=2))
-    live = np.all(auto > EMPTY * auto.max(axis=0), axis=1)   # bins not emptied by detrending
+    live = np.all(auto > EMPTY * auto.max(axis=0), axis=1)  # bins not emptied by detrending
     for i, j in itertools.combinations(range(4), 2):
         fr, cr = scipy.signal.coherence(x[i], x[j], 200.0, **kw)
         np.testing.assert_array_equal(f, fr)
@@ -198,7 +240,9 @@ def test_each_matrix_is_hermitian_and_positive_semidefinite():
     S_ii S_jj, the bound 0 <= gamma^2 <= 1 under eq. 4.44)."""
     x = _noise(8, 4000, seed=5)
     _, S = welch_csd_matrix(x, 1.0, nperseg=128)
-    np.testing.assert_allclose(S, np.conj(np.swapaxes(S, 1, 2)), rtol=0, atol=1e-14 * np.abs(S).max())
+    np.testing.assert_allclose(
+        S, np.conj(np.swapaxes(S, 1, 2)), rtol=0, atol=1e-14 * np.abs(S).max()
+    )
     ev = np.linalg.eigvalsh(S)
     assert ev.min() >= -1e-12 * ev.max()
 
@@ -259,9 +303,9 @@ def test_thesis_illustration_coherence_of_a_common_sinusoid():
     others = np.ones(len(f), bool)
     others[[0, -1, k - 1, k, k + 1]] = False
 
-    assert 0.25 < C[k] < 0.6                        # the thesis: 0.35; expected ~0.39
-    assert C[k] > 1.3 * C[others].max()             # clearly above every other bin
-    assert np.median(C[others]) < 0.04              # "near zero elsewhere" (Beta(1,39) median 0.018)
+    assert 0.25 < C[k] < 0.6  # the thesis: 0.35; expected ~0.39
+    assert C[k] > 1.3 * C[others].max()  # clearly above every other bin
+    assert np.median(C[others]) < 0.04  # "near zero elsewhere" (Beta(1,39) median 0.018)
     # Fig. 31d: the noise in the cross-spectrum is attenuated ~6.3x (E|gamma| ~ 0.14 for K = 40).
     cross = np.abs(S[others, 0, 1])
     auto = np.sqrt(S[others, 0, 0].real * S[others, 1, 1].real)
@@ -289,7 +333,9 @@ def _coverage(P, true_p, dof, level=0.95):
     return float(np.mean((lo <= true_p) & (true_p <= hi)))
 
 
-@pytest.mark.parametrize("window,nperseg,noverlap", [("hann", 64, 32), ("hann", 64, 48), ("boxcar", 64, 0)])
+@pytest.mark.parametrize(
+    "window,nperseg,noverlap", [("hann", 64, 32), ("hann", 64, 48), ("boxcar", 64, 0)]
+)
 def test_confidence_intervals_cover_the_true_psd_at_their_rate(window, nperseg, noverlap):
     """Over 2000 independent AR(1) records (a = 0.6: 12 dB of colour) and ten bins each, the
     95 % chi-square intervals with Welch's EDOF contain the analytic PSD in a fraction of the
@@ -314,8 +360,8 @@ def test_confidence_intervals_cover_the_true_psd_at_their_rate(window, nperseg, 
     band = (lo_n / trials, hi_n / trials)
     cov = _coverage(Psel, tsel, dof)
     assert band[0] <= cov <= band[1], (cov, band, dof)
-    assert _coverage(Psel, tsel, 2 * dof) < band[0] - 0.05        # doubled DOF: ~0.83
-    assert _coverage(Psel, tsel, dof / 2) > band[1] + 0.02        # halved DOF: ~0.99
+    assert _coverage(Psel, tsel, 2 * dof) < band[0] - 0.05  # doubled DOF: ~0.83
+    assert _coverage(Psel, tsel, dof / 2) > band[1] + 0.02  # halved DOF: ~0.99
 
 
 def test_equivalent_dof_matches_the_spread_of_overlapped_estimates():
@@ -389,7 +435,7 @@ def test_h1_recovers_gain_and_phase_of_a_known_filter():
     np.testing.assert_allclose(gain(H[high]), np.abs(Ht[high]), rtol=0.03)
     dphase = (phase_deg(H[high]) - np.degrees(np.angle(Ht[high])) + 180.0) % 360.0 - 180.0
     assert np.abs(dphase).max() < 2.0
-    assert phase_deg(H[high], unwrap=True)[-1] < -180.0      # past -180: unwrapped
+    assert phase_deg(H[high], unwrap=True)[-1] < -180.0  # past -180: unwrapped
 
     mid = (C > 0.3) & (C < 0.7)
     assert mid.sum() >= 5
@@ -415,7 +461,9 @@ def test_h1_for_several_outputs_at_once():
 def test_quantization_floor_value():
     """App. A.7: q = 2 range / 2^bits, two-sided P = q^2 dt / 12; one-sided twice that."""
     q = 20.0 / 65536
-    assert quantization_floor(10.0, 16, 1000.0, "twosided") == pytest.approx(q * q / 12 / 1000.0, rel=1e-15)
+    assert quantization_floor(10.0, 16, 1000.0, "twosided") == pytest.approx(
+        q * q / 12 / 1000.0, rel=1e-15
+    )
     assert quantization_floor(10.0, 16, 1000.0) == pytest.approx(q * q / 6 / 1000.0, rel=1e-15)
     # 16 bits on +-10 V at 1 kHz: 0.305 mV steps, 3.94 uV/sqrt(Hz) one-sided
     assert math.sqrt(quantization_floor(10.0, 16, 1000.0)) == pytest.approx(3.94e-6, rel=1e-3)

@@ -20,12 +20,19 @@ BOOT, STOPPED, OPERATIONAL, PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
 NMT_STATE = {0x01: OPERATIONAL, 0x02: STOPPED, 0x80: PRE_OPERATIONAL}
 #: CiA 401 analogue outputs, 4 channels (the torquer DACs): what the host reads and configures
 AO_401_OBJECTS: dict[tuple[int, int], tuple[int, int]] = {
-    (0x1000, 0): (0x00080191, 4), (0x1001, 0): (0, 1), (0x1018, 2): (0x13, 4),
-    (0x1016, 1): (0, 4), (0x1017, 0): (0, 2), (0x1029, 1): (0, 1),
-    **{(0x6411, s): (0, 2) for s in range(1, 5)}, **{(0x6443, s): (0, 1) for s in range(1, 5)},
+    (0x1000, 0): (0x00080191, 4),
+    (0x1001, 0): (0, 1),
+    (0x1018, 2): (0x13, 4),
+    (0x1016, 1): (0, 4),
+    (0x1017, 0): (0, 2),
+    (0x1029, 1): (0, 1),
+    **{(0x6411, s): (0, 2) for s in range(1, 5)},
+    **{(0x6443, s): (0, 1) for s in range(1, 5)},
     **{(0x6444, s): (0, 4) for s in range(1, 5)},
     # RPDO1 as the EDS has it: outputs 1-4 in order, on 0x200 + node id, acting on arrival
-    (0x1400, 1): (0x203, 4), (0x1400, 2): (255, 1), (0x1600, 0): (4, 1),
+    (0x1400, 1): (0x203, 4),
+    (0x1400, 2): (255, 1),
+    (0x1600, 0): (4, 1),
     **{(0x1600, s): (0x64110010 | (s << 8), 4) for s in range(1, 5)},
 }
 
@@ -34,10 +41,20 @@ class RawNode:
     """Node ``node_id`` on python-can channel ``channel`` (virtual), objects (index, sub) ->
     (value, size in bytes)."""
 
-    def __init__(self, channel: str, node_id: int, objects: dict[tuple[int, int], tuple[int, int]], *,
-                 boot_delay_s: float = 0.0, state: int = PRE_OPERATIONAL, sdo_delay_s: float = 0.0,
-                 short_sdo: bool = False, other_object: bool = False, mute_sdo: bool = False,
-                 read_only: set[int] = frozenset()) -> None:
+    def __init__(
+        self,
+        channel: str,
+        node_id: int,
+        objects: dict[tuple[int, int], tuple[int, int]],
+        *,
+        boot_delay_s: float = 0.0,
+        state: int = PRE_OPERATIONAL,
+        sdo_delay_s: float = 0.0,
+        short_sdo: bool = False,
+        other_object: bool = False,
+        mute_sdo: bool = False,
+        read_only: set[int] = frozenset(),
+    ) -> None:
         self.bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
         self.node_id = node_id
         self.objects = {k: list(v) for k, v in objects.items()}
@@ -86,18 +103,26 @@ class RawNode:
                 self._schedule_heartbeat(now)
             msg = self.bus.recv(timeout=0.005)
             if msg is None or not booted:
-                continue                      # powered off: deaf
+                continue  # powered off: deaf
             self.received.append(msg)
-            if msg.arbitration_id == 0x000 and len(msg.data) == 2 and msg.data[1] in (0, self.node_id):
+            if (
+                msg.arbitration_id == 0x000
+                and len(msg.data) == 2
+                and msg.data[1] in (0, self.node_id)
+            ):
                 self._nmt(msg.data[0])
-            elif msg.arbitration_id == 0x600 + self.node_id and self.state != STOPPED and not self.mute_sdo:
-                self._sdo(bytes(msg.data))    # CiA 301: a stopped node serves no SDO
+            elif (
+                msg.arbitration_id == 0x600 + self.node_id
+                and self.state != STOPPED
+                and not self.mute_sdo
+            ):
+                self._sdo(bytes(msg.data))  # CiA 301: a stopped node serves no SDO
             elif self.state == OPERATIONAL:
                 self._rpdo(msg)
 
     def _nmt(self, command: int) -> None:
         if command in NMT_STATE:
-            self.state = NMT_STATE[command]   # not answered: the next heartbeat says it
+            self.state = NMT_STATE[command]  # not answered: the next heartbeat says it
         elif command in (0x81, 0x82):
             self._boot(PRE_OPERATIONAL)
 
@@ -111,14 +136,17 @@ class RawNode:
         if key not in self.objects:
             return self._answer(struct.pack("<BHBI", 0x80, index, sub, 0x06020000))
         value, size = self.objects[key]
-        if ccs == 2:                          # upload: expedited, size given
+        if ccs == 2:  # upload: expedited, size given
             n = 4 - size
-            self._answer(struct.pack("<BHB", 0x43 | (n << 2), index, sub) + (value & 0xFFFFFFFF).to_bytes(4, "little"))
+            self._answer(
+                struct.pack("<BHB", 0x43 | (n << 2), index, sub)
+                + (value & 0xFFFFFFFF).to_bytes(4, "little")
+            )
         elif ccs == 1 and index in self.read_only:
             self._answer(struct.pack("<BHBI", 0x80, index, sub, 0x06010002))
-        elif ccs == 1 and req[0] & 0x02:      # expedited download
+        elif ccs == 1 and req[0] & 0x02:  # expedited download
             n = (req[0] >> 2) & 3 if req[0] & 0x01 else 0
-            raw = int.from_bytes(req[4:8 - n], "little")
+            raw = int.from_bytes(req[4 : 8 - n], "little")
             self.objects[key][0] = raw
             if key == (0x1017, 0):
                 self._schedule_heartbeat(time.monotonic())
@@ -137,7 +165,9 @@ class RawNode:
                 entry = self.objects[(0x1600 + n, s)][0]
                 key, nbytes = (entry >> 16, (entry >> 8) & 0xFF), (entry & 0xFF) // 8
                 if key in self.objects:
-                    self.objects[key][0] = int.from_bytes(msg.data[pos:pos + nbytes], "little", signed=True)
+                    self.objects[key][0] = int.from_bytes(
+                        msg.data[pos : pos + nbytes], "little", signed=True
+                    )
                 pos += nbytes
 
     def _answer(self, data: bytes) -> None:

@@ -37,8 +37,8 @@ pytestmark = pytest.mark.slow
 
 RATE = 1000.0
 FRAME = 10
-FIRST = ["gyro_x", "torq_x", "ac_x_ctl"]           # the abandoned host's stream
-SECOND = ["ac_y_ctl", "gyro_y", "torq_y", "pa_y"]    # the next host's: another frame width
+FIRST = ["gyro_x", "torq_x", "ac_x_ctl"]  # the abandoned host's stream
+SECOND = ["ac_y_ctl", "gyro_y", "torq_y", "pa_y"]  # the next host's: another frame width
 REPO = Path(__file__).resolve().parents[2]
 
 
@@ -64,7 +64,7 @@ def first_host(server: SimRigServer) -> SerialAdc:
     t0 = adc.start()
     b = adc.read(200)
     assert b.first_sample == 0 and len(b) == 200
-    server.wait_time(t0 + (200 + FRAME) / RATE)   # the frame read asks for ahead is made too
+    server.wait_time(t0 + (200 + FRAME) / RATE)  # the frame read asks for ahead is made too
     return adc
 
 
@@ -87,7 +87,7 @@ def second_host_streams(server: SimRigServer, n_reads: int = 3) -> None:
         adc.start()
         pos = 0
         for _ in range(n_reads):
-            b = adc.read(250)                # a SampleGap or an error here fails the test
+            b = adc.read(250)  # a SampleGap or an error here fails the test
             assert b.first_sample == pos and len(b) == 250 and b.channels == tuple(SECOND)
             assert np.all(np.isfinite(b.volts)) and np.abs(b.volts).max() <= 10.0
             pos = b.stop_sample
@@ -95,7 +95,7 @@ def second_host_streams(server: SimRigServer, n_reads: int = 3) -> None:
         while (b := adc.read_available()) is not None:
             assert b.first_sample == pos
             pos = b.stop_sample
-        assert status.samples == pos and status.overruns == 0   # every set from its START, once
+        assert status.samples == pos and status.overruns == 0  # every set from its START, once
         assert adc.faults.fault is None
     finally:
         adc.close()
@@ -128,9 +128,19 @@ def test_a_host_killed_mid_stream_leaves_an_adc_the_next_host_can_open():
     server = SimRigServer(rate_hz=RATE, realtime=True)
     child = None
     try:
-        child = subprocess.Popen([sys.executable, "-c", CHILD.format(chans=FIRST, rate=RATE, frame=FRAME),
-                                  server.adc_port], cwd=REPO, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                 stderr=subprocess.PIPE, text=True)
+        child = subprocess.Popen(
+            [
+                sys.executable,
+                "-c",
+                CHILD.format(chans=FIRST, rate=RATE, frame=FRAME),
+                server.adc_port,
+            ],
+            cwd=REPO,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         assert child.stdout is not None and child.stderr is not None
         # a guard against a hung child, not a timing check: the child needs well under a second
         ready, _, _ = select.select([child.stdout], [], [], 60.0)
@@ -140,10 +150,10 @@ def test_a_host_killed_mid_stream_leaves_an_adc_the_next_host_can_open():
             pytest.fail(f"the first host did not stream: {line!r} {child.stderr.read()}")
         child.send_signal(signal.SIGKILL)
         child.wait()
-        assert server.adc.streaming          # nobody said STOP
+        assert server.adc.streaming  # nobody said STOP
         # The port is closed now; what the device sends next stops half-way into a frame.
         server.adc.inject("hold", nbytes=frame_size(FRAME, len(FIRST)) // 2)
-        server.wait_time(server.time_s + 0.3)   # 30 more frames wait in the device
+        server.wait_time(server.time_s + 0.3)  # 30 more frames wait in the device
         assert server.adc.streaming
         second_host_streams(server)
     finally:
@@ -158,7 +168,9 @@ def test_next_host_opens_an_adc_left_mid_frame(server, cut):
     """The line starts with the tail of a frame (cut in the sync word, the header, the codes),
     then the frames the device made while nobody read."""
     host = first_host(server)
-    server.adc.inject("hold", nbytes=cut)   # the device's output stops `cut` bytes into its next frame
+    server.adc.inject(
+        "hold", nbytes=cut
+    )  # the device's output stops `cut` bytes into its next frame
     stream_on(server, 0.05)
     abandon(host)
     stream_on(server, 2.0)
@@ -172,7 +184,7 @@ def test_next_host_opens_an_adc_with_a_stale_reply_pending(server):
     # The output stops mid-frame; released by the line below and the next host's first line.
     server.adc.inject("hold", count=2, nbytes=30)
     stream_on(server, 0.2)
-    host.ser.write(b"STAT?\n")                     # sent; the host dies before the reply
+    host.ser.write(b"STAT?\n")  # sent; the host dies before the reply
     stream_on(server, 0.3)
     abandon(host)
     stream_on(server, 0.5)
@@ -185,7 +197,7 @@ def test_next_host_opens_an_adc_whose_stop_reply_was_never_read(server):
     host = first_host(server)
     server.adc.inject("hold", count=2, nbytes=30)
     stream_on(server, 0.2)
-    host.ser.write(b"STOP\n")                      # the device flushes its frames, then OK STOP
+    host.ser.write(b"STOP\n")  # the device flushes its frames, then OK STOP
     stream_on(server, 0.2)
     abandon(host)
     second_host_streams(server)
@@ -267,10 +279,16 @@ class ScriptedDevice(FakeDevice):
                 out = b""
 
 
-@pytest.mark.parametrize("lead", [
-    encode_frame(0, 0, np.zeros((10, 3), dtype="<i2"))[:30],        # replies follow within its length
-    encode_frame(0, 0, np.zeros((4096, 32), dtype="<i2"))[:30],     # claims 262 kB: given up when quiet
-], ids=["short-length", "huge-length"])
+@pytest.mark.parametrize(
+    "lead",
+    [
+        encode_frame(0, 0, np.zeros((10, 3), dtype="<i2"))[:30],  # replies follow within its length
+        encode_frame(0, 0, np.zeros((4096, 32), dtype="<i2"))[
+            :30
+        ],  # claims 262 kB: given up when quiet
+    ],
+    ids=["short-length", "huge-length"],
+)
 def test_the_head_of_a_frame_cut_short_does_not_swallow_the_stop_reply(lead):
     """A device reset mid-frame leaves the head of a frame: its length field claims bytes that
     are really the replies; the host still finds OK STOP in them and opens."""
@@ -287,10 +305,14 @@ NMEA = b"$GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,*47\r\n"
 FRAMES = b"".join(encode_frame(i, 10 * i, np.full((10, 3), i, dtype="<i2")) for i in range(50))
 
 
-@pytest.mark.parametrize("chunk, what", [
-    (NMEA, r"\$GPGGA,123519"),                  # another device on the port: named by what it sends
-    (FRAMES, r"[0-9]+ frames"),                 # an ADC that streams on and never answers STOP
-], ids=["another-device", "streams-on"])
+@pytest.mark.parametrize(
+    "chunk, what",
+    [
+        (NMEA, r"\$GPGGA,123519"),  # another device on the port: named by what it sends
+        (FRAMES, r"[0-9]+ frames"),  # an ADC that streams on and never answers STOP
+    ],
+    ids=["another-device", "streams-on"],
+)
 def test_a_device_that_never_answers_stop_is_refused_with_what_it_sent(chunk, what):
     dev = FakeDevice(chunk)
     try:
@@ -298,7 +320,7 @@ def test_a_device_that_never_answers_stop_is_refused_with_what_it_sent(chunk, wh
             SerialAdc(dev.port, resync_bytes=1 << 16)
         msg = str(err.value)
         assert dev.port in msg and re.search(what, msg), msg
-        assert "OK STOP" in msg and "power" in msg   # what was missing, and what to do
+        assert "OK STOP" in msg and "power" in msg  # what was missing, and what to do
     finally:
         dev.close()
 

@@ -37,7 +37,7 @@ def code_hash(fn) -> str:
     assert isinstance(node, ast.FunctionDef)
     body = node.body
     if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
-        node.body = body[1:] or [ast.Pass()]       # the docstring is not the code
+        node.body = body[1:] or [ast.Pass()]  # the docstring is not the code
     return hashlib.sha256(ast.dump(node, include_attributes=False).encode()).hexdigest()[:16]
 
 
@@ -52,7 +52,8 @@ def test_the_canopen_internals_we_override_are_the_ones_we_read(name):
     assert got == WRITTEN_AGAINST[name], (
         f"canopen {version('canopen')}: the code of {name} is not what drivers/canopen_client.py's "
         f"DeadlineSdoClient / RigRemoteNode were written against (canopen 2.4.1; AST hash {got}, was "
-        f"{WRITTEN_AGAINST[name]}). Re-read it, adapt the override, then record the new hash here.")
+        f"{WRITTEN_AGAINST[name]}). Re-read it, adapt the override, then record the new hash here."
+    )
 
 
 def test_the_overrides_still_override():

@@ -36,7 +36,7 @@ URL = "sim?warm=1"
 
 @pytest.fixture
 def rig():
-    r = open_rig(URL + "&watchdog=1")   # the watchdog tests: the real rig's 1 s
+    r = open_rig(URL + "&watchdog=1")  # the watchdog tests: the real rig's 1 s
     r.set_torquer_bias_V("X", 1.5)
     r.set_command_torque_V("Y", 0.5)
     r.set_caging_inhibit("Z", True)
@@ -50,16 +50,31 @@ def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
     default, except what the host set at connect (its heartbeat consumer time)."""
     rig = open_rig(URL)
     try:
-        sdo = {"torquer": rig.torquers, "command": rig.commands, "caging": rig.caging,
-               "relay": rig.relays, "table": rig.table}[name].node.node.sdo
+        sdo = {
+            "torquer": rig.torquers,
+            "command": rig.commands,
+            "caging": rig.caging,
+            "relay": rig.relays,
+            "table": rig.table,
+        }[name].node.node.sdo
         od = canopen.import_od(str(cf.eds_path(name)), rn.NODES[name])
         configured = {(0x1016, 1): (cf.HOST_NODE_ID << 16) | round(rig.link.node_timeout_s * 1000)}
-        if name == "relay":   # what the node computes: the register, the status word (a warm rig: mode 3)
-            configured |= {(0x2000, 0): 3, (0x2002, 0): 3, (0x2004, 0): rig.emulator.nodes.nodes["relay"].status_word()}
-        if name == "table":   # where the table is
+        if (
+            name == "relay"
+        ):  # what the node computes: the register, the status word (a warm rig: mode 3)
+            configured |= {
+                (0x2000, 0): 3,
+                (0x2002, 0): 3,
+                (0x2004, 0): rig.emulator.nodes.nodes["relay"].status_word(),
+            }
+        if name == "table":  # where the table is
             table = rig.emulator.nodes.nodes["table"]
-            configured |= {(0x2200, 0): table.tilt, (0x2201, 0): table.spindle, (0x2202, 0): table.tilt,
-                           (0x2203, 0): table.spindle}
+            configured |= {
+                (0x2200, 0): table.tilt,
+                (0x2201, 0): table.spindle,
+                (0x2202, 0): table.tilt,
+                (0x2203, 0): table.spindle,
+            }
         checked = 0
         for obj in od.values():
             for var in [obj] if isinstance(obj, ODVariable) else list(obj.values()):
@@ -67,10 +82,16 @@ def test_the_simulated_node_answers_every_object_as_its_eds_says(name):
                     continue
                 got = var.decode_raw(sdo.upload(var.index, var.subindex))
                 want = configured.get((var.index, var.subindex), var.default)
-                assert got == want, f"0x{var.index:04x}:{var.subindex} {var.name}: {got!r} != {want!r}"
+                assert got == want, (
+                    f"0x{var.index:04x}:{var.subindex} {var.name}: {got!r} != {want!r}"
+                )
                 checked += 1
-        assert checked == sum(1 for obj in od.values()
-                              for var in ([obj] if isinstance(obj, ODVariable) else obj.values()) if var.readable)
+        assert checked == sum(
+            1
+            for obj in od.values()
+            for var in ([obj] if isinstance(obj, ODVariable) else obj.values())
+            if var.readable
+        )
     finally:
         rig.close()
 
@@ -79,7 +100,7 @@ def test_set_points_reach_the_physics_and_read_back(rig):
     node = rig.emulator.nodes.nodes["torquer"]
     assert rig.set_torquer_bias_V("Y", -2.0) == pytest.approx(round(-2.0 / LSB) * LSB)
     assert node.counts(2) == round(-2.0 / LSB)
-    rig.wait(0.05)                                              # settings reach the physics at a block
+    rig.wait(0.05)  # settings reach the physics at a block
     assert rig.emulator.sim.bias["Y"] == pytest.approx(round(-2.0 / LSB) * LSB)
     assert rig.torquers.bias_V("X") == pytest.approx(round(1.5 / LSB) * LSB)
     report = rig.safe()
@@ -91,10 +112,12 @@ def test_command_dacs_and_the_clamp_interlock_that_senses_them(rig):
     node = rig.emulator.nodes.nodes["command"]
     assert rig.set_ac_bias_V("Z", 0.25) == pytest.approx(round(0.25 / LSB) * LSB)
     assert node.counts(6) == round(0.25 / LSB)
-    assert rig.commands.command_torque_V("Y") == pytest.approx(round(0.5 / LSB) * LSB)   # set by the fixture
+    assert rig.commands.command_torque_V("Y") == pytest.approx(
+        round(0.5 / LSB) * LSB
+    )  # set by the fixture
     rig.wait(0.05)
     assert rig.emulator.sim.vtd["Y"] == pytest.approx(round(0.5 / LSB) * LSB)
-    node.set(0x6411, 2, 0)                      # behind the host's back: the relay node still senses gamma_c
+    node.set(0x6411, 2, 0)  # behind the host's back: the relay node still senses gamma_c
     with pytest.raises(InterlockError, match="command input"):
         rig.relays._set_clamp(True)
     rig.commands.zero()
@@ -104,7 +127,7 @@ def test_command_dacs_and_the_clamp_interlock_that_senses_them(rig):
 
 def test_caging_switches_are_digital_outputs(rig):
     node = rig.emulator.nodes.nodes["caging"]
-    assert node.inhibit == {"X": False, "Y": False, "Z": True, "XRD": False}      # set by the fixture
+    assert node.inhibit == {"X": False, "Y": False, "Z": True, "XRD": False}  # set by the fixture
     assert rig.set_caging_inhibit("XRD", True) is True
     assert node.get(0x6200, 1) == 0b1100
     assert rig.caging.inhibited("XRD") and not rig.caging.inhibited("X")
@@ -114,7 +137,7 @@ def test_caging_switches_are_digital_outputs(rig):
         rig.set_caging_inhibit("X", 1)
     rig.caging.clear()
     assert node.get(0x6200, 1) == 0
-    node.set(0x6200, 1, 0b0001)                           # the host reads the module, not its memory
+    node.set(0x6200, 1, 0b0001)  # the host reads the module, not its memory
     assert rig.caging.inhibited("X")
     report = rig.safe()
     assert report.ok and node.get(0x6200, 1) == 0
@@ -128,17 +151,19 @@ def test_modes_and_their_interlocks_over_canopen():
         st = rig.relays.status()
         assert st.mode == 1 and not any(st.at_speed.values())
         with pytest.raises(InterlockError, match="not at speed"):
-            rig.set_mode(4)                                  # the driver's own check, nothing sent
+            rig.set_mode(4)  # the driver's own check, nothing sent
         rig.relays.hold()
         rig.relays.select(4)
-        with pytest.raises(InterlockError, match=r"interlock\) \(gyros not at speed; gyros not caged\)") as exc:
-            rig.relays.release()                             # the node's, whatever the host checked
+        with pytest.raises(
+            InterlockError, match=r"interlock\) \(gyros not at speed; gyros not caged\)"
+        ) as exc:
+            rig.relays.release()  # the node's, whatever the host checked
         assert exc.value.detail == 0x3
         with pytest.raises(InterlockError, match="mode switches not held"):
             rig.relays.select(2)
         rig.relays.hold()
         with pytest.raises(SetpointRangeError, match="0x2002:0"):
-            rig.relays.node.write(0x2002, 0, 7)               # mode 7: the node refuses it itself
+            rig.relays.node.write(0x2002, 0, 7)  # mode 7: the node refuses it itself
         assert rig.relays.status().alarm
         rig.relays.release()
         assert rig.set_mode(2) == 2 and rig.emulator.nodes.nodes["relay"].mode == 2
@@ -155,9 +180,9 @@ def test_the_motorized_table_over_canopen(rig):
     rig.wait(0.05)
     assert rig.emulator.sim.cfg.table.spindle_deg == pytest.approx(30.0)
     with pytest.raises(SetpointRangeError, match=r"91\.0 is outside 0\.\.90"):
-        rig.move_table(tilt_deg=91.0)                            # the host's check, nothing sent
+        rig.move_table(tilt_deg=91.0)  # the host's check, nothing sent
     with pytest.raises(SetpointRangeError, match="0x2200:0"):
-        rig.table.node.write(0x2200, 0, 91_000_000)              # the node's own
+        rig.table.node.write(0x2200, 0, 91_000_000)  # the node's own
     assert rig.table.position().tilt_deg == pytest.approx(12.5)
     assert rig.faults.fault is None
 
@@ -178,22 +203,28 @@ def test_a_bias_slew_goes_by_receive_pdo_and_is_read_back(rig, caplog):
     pdo_sent_s = (time.perf_counter() - t0) / len(steps)
     t_end = time.monotonic() + 5.0
     while node.counts(3) != round(steps[-1] / LSB) and time.monotonic() < t_end:
-        time.sleep(0)                                                  # until the last frame arrived
+        time.sleep(0)  # until the last frame arrived
     pdo_all_s = (time.perf_counter() - t0) / len(steps)
     rig.torquers.confirm()
-    assert node.counts(1) == round(1.5 / LSB)                          # the PDO carried X as it was
+    assert node.counts(1) == round(1.5 / LSB)  # the PDO carried X as it was
     logging.getLogger(__name__).warning(
         "set-point latency on the virtual bus: SDO download + read-back %.2f ms; receive PDO %.3f ms to send, "
-        "%.3f ms per set-point until the node had the last", sdo_s * 1e3, pdo_sent_s * 1e3, pdo_all_s * 1e3)
+        "%.3f ms per set-point until the node had the last",
+        sdo_s * 1e3,
+        pdo_sent_s * 1e3,
+        pdo_all_s * 1e3,
+    )
     with pytest.raises(SetpointRangeError):
-        rig.torquers.stream_bias_V("X", 8.2)                            # checked before any frame
+        rig.torquers.stream_bias_V("X", 8.2)  # checked before any frame
     assert rig.faults.fault is None
 
 
 def test_a_lost_stream_is_a_protocol_error_at_confirm(rig):
     node = rig.emulator.nodes.nodes["torquer"]
-    node.network.unsubscribe(0x203)              # RPDO1 frames are lost on the way
+    node.network.unsubscribe(0x203)  # RPDO1 frames are lost on the way
     rig.torquers.stream_bias_V("X", 0.7)
-    with pytest.raises(ProtocolError, match=r"output 1 reads back 4915 counts after the stream sent 2294"):
+    with pytest.raises(
+        ProtocolError, match=r"output 1 reads back 4915 counts after the stream sent 2294"
+    ):
         rig.torquers.confirm()
     assert isinstance(rig.faults.fault, ProtocolError)

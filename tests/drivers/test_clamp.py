@@ -77,6 +77,6 @@ def test_the_safe_state_never_moves_the_clamp(rig):
     assert report.ok and rig.is_safe()
     st = rig.relays.status()
     assert st.mode == 1 and st.clamped is True
-    rig.set_mode(2)                    # modes 1-3 stay allowed while clamped
+    rig.set_mode(2)  # modes 1-3 stay allowed while clamped
     rig.unclamp()
     assert rig.relays.status().clamped is False

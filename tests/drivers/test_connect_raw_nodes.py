@@ -39,7 +39,9 @@ def host(channel: str, **kw) -> tuple[CanLink, CanopenTorquerDac]:
 
 
 @contextmanager
-def module_and_host(channel: str, objects: dict = AO_401_OBJECTS, node_kw: dict | None = None, **host_kw):
+def module_and_host(
+    channel: str, objects: dict = AO_401_OBJECTS, node_kw: dict | None = None, **host_kw
+):
     """A raw module on ``channel`` and a host link with the torquer client; both closed after."""
     node = RawNode(channel, TORQUER, objects, **(node_kw or {}))
     try:
@@ -60,12 +62,15 @@ def connect(link: CanLink, dac: CanopenTorquerDac, window_s: float = 2.0) -> int
     return product
 
 
-@pytest.mark.parametrize("case, node_kw", [
-    ("heartbeat off at power-on (0x1017 = 0)", {}),
-    ("boots 1.1 s after the host", {"boot_delay_s": 1.1}),
-    ("left stopped by its last master", {"state": STOPPED}),
-    ("slow SDO answers (0.2 s)", {"sdo_delay_s": 0.2}),
-])
+@pytest.mark.parametrize(
+    "case, node_kw",
+    [
+        ("heartbeat off at power-on (0x1017 = 0)", {}),
+        ("boots 1.1 s after the host", {"boot_delay_s": 1.1}),
+        ("left stopped by its last master", {"state": STOPPED}),
+        ("slow SDO answers (0.2 s)", {"sdo_delay_s": 0.2}),
+    ],
+)
 def test_a_conforming_module_opens(channel, case, node_kw):
     with module_and_host(channel, node_kw=node_kw) as (node, link, dac):
         assert connect(link, dac) == 0x13, case
@@ -78,7 +83,10 @@ def test_a_conforming_module_opens(channel, case, node_kw):
 
 def test_a_module_that_never_answers_is_named_with_the_window(channel):
     with module_and_host(channel, node_kw={"boot_delay_s": 3600}) as (node, link, dac):
-        with pytest.raises(DeviceLost, match=r"'torquer' \(id 3\) did not answer within the connect window of 0.5 s"):
+        with pytest.raises(
+            DeviceLost,
+            match=r"'torquer' \(id 3\) did not answer within the connect window of 0.5 s",
+        ):
             dac.node.connect(link.monotonic() + 0.5, 0.5)
 
 
@@ -88,7 +96,7 @@ def test_a_stale_trip_emcy_during_connect_does_not_fail_the_open(channel):
         node.emcy(EMCY_TRIP)
         connect(link, dac)
         assert link.faults.fault is None
-        node.emcy(EMCY_TRIP)                            # after the start: this session's fault
+        node.emcy(EMCY_TRIP)  # after the start: this session's fault
         time.sleep(0.2)
         assert isinstance(link.faults.fault, NodeError)
 
@@ -99,7 +107,9 @@ def test_an_emcy_that_is_not_8_bytes_latches(channel):
         connect(link, dac)
         node.emcy(EMCY_TRIP, length=5)
         time.sleep(0.2)
-        assert isinstance(link.faults.fault, ProtocolError) and "expected 8" in str(link.faults.fault)
+        assert isinstance(link.faults.fault, ProtocolError) and "expected 8" in str(
+            link.faults.fault
+        )
 
 
 def test_a_7_byte_sdo_answer_fails_the_transfer_as_a_bad_answer(channel):
@@ -130,7 +140,11 @@ def test_the_hosts_abort_frame_names_the_transfers_object(channel):
         with pytest.raises(DeviceTimeout):
             dac.node.read(0x1018, 2, check_faults=False)
         time.sleep(0.1)
-        aborts = [m.data for m in node.received if m.arbitration_id == 0x600 + TORQUER and m.data[0] == 0x80]
+        aborts = [
+            m.data
+            for m in node.received
+            if m.arbitration_id == 0x600 + TORQUER and m.data[0] == 0x80
+        ]
         assert aborts and bytes(aborts[-1][1:4]) == bytes([0x18, 0x10, 2])
 
 
@@ -146,19 +160,32 @@ def test_a_module_whose_rpdo_swaps_x_and_y_is_mapped_per_the_eds_before_a_stream
         connect(link, dac)
         dac.read_scale()
         dac.configure_rpdos()
-        assert [node.objects[(0x1600, s)][0] for s in range(1, 5)] == [0x64110110, 0x64110210, 0x64110310,
-                                                                         0x64110410]
+        assert [node.objects[(0x1600, s)][0] for s in range(1, 5)] == [
+            0x64110110,
+            0x64110210,
+            0x64110310,
+            0x64110410,
+        ]
         dac.stream_bias_V("X", 2.5)
         time.sleep(0.1)
-        assert node.objects[(0x6411, 1)][0] == round(2.5 / (10 / 32768)) and node.objects[(0x6411, 2)][0] == 0
+        assert (
+            node.objects[(0x6411, 1)][0] == round(2.5 / (10 / 32768))
+            and node.objects[(0x6411, 2)][0] == 0
+        )
         dac.confirm()
 
 
 def test_a_module_that_keeps_another_mapping_is_refused_naming_it(channel):
-    with module_and_host(channel, swapped_xy(), node_kw={"read_only": {0x1600}}) as (node, link, dac):
+    with module_and_host(channel, swapped_xy(), node_kw={"read_only": {0x1600}}) as (
+        node,
+        link,
+        dac,
+    ):
         connect(link, dac)
         dac.read_scale()
-        with pytest.raises(ProtocolError, match=r"RPDO1 .*(refused|does not keep).*0x64110210, 0x64110110"):
+        with pytest.raises(
+            ProtocolError, match=r"RPDO1 .*(refused|does not keep).*0x64110210, 0x64110110"
+        ):
             dac.configure_rpdos()
 
 
@@ -166,7 +193,9 @@ def test_a_second_host_on_the_bus_is_refused_before_it_sends(channel):
     """B: another host's heartbeat on the bus: this one refuses and sends not one frame."""
     other = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
     spy = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
-    task = other.send_periodic(can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False), 0.1)
+    task = other.send_periodic(
+        can.Message(arbitration_id=0x77F, data=[5], is_extended_id=False), 0.1
+    )
     try:
         time.sleep(0.15)
         while spy.recv(timeout=0) is not None:
@@ -196,19 +225,27 @@ def test_a_rig_held_by_another_command_is_refused_naming_it(tmp_path, monkeypatc
     monkeypatch.setenv("FBS_LOCK_DIR", str(tmp_path / "locks"))
     port = tmp_path / "ttyX"
     port.touch()
-    holder = subprocess.Popen([sys.executable, "-c", HOLDER, str(port)], stdin=subprocess.PIPE,
-                              stdout=subprocess.PIPE, text=True, env=os.environ | {"PYTHONPATH": os.getcwd()})
+    holder = subprocess.Popen(
+        [sys.executable, "-c", HOLDER, str(port)],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        env=os.environ | {"PYTHONPATH": os.getcwd()},
+    )
     try:
         assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
         with pytest.raises(RigBusy) as err:
-            RigClaim("serial:///dev/ttyX?can=socketcan:can9", [("adc", str(port)), ("can", "socketcan:can9")])
+            RigClaim(
+                "serial:///dev/ttyX?can=socketcan:can9",
+                [("adc", str(port)), ("can", "socketcan:can9")],
+            )
         assert f"pid {holder.pid} (" in str(err.value) and "since 20" in str(err.value)
         assert "sent nothing" in str(err.value)
     finally:
-        holder.kill()                     # SIGKILL: no clean-up of its own
+        holder.kill()  # SIGKILL: no clean-up of its own
         holder.wait()
     with RigClaim("u", [("adc", str(port)), ("can", "socketcan:can9")]):
-        pass                              # the kernel dropped the dead holder's lock
+        pass  # the kernel dropped the dead holder's lock
 
 
 def test_the_adc_port_is_opened_exclusively(tmp_path):
@@ -225,7 +262,7 @@ def test_the_adc_port_is_opened_exclusively(tmp_path):
             SerialAdc(path)
         os.set_blocking(master, False)
         with pytest.raises(BlockingIOError):
-            os.read(master, 64)           # nothing reached the device
+            os.read(master, 64)  # nothing reached the device
     finally:
         first.close()
         os.close(master)

@@ -22,12 +22,12 @@ pytestmark = pytest.mark.slow
 
 FRAME = 10  # sample sets per frame in these tests
 URL = "sim?warm=1"
-LSB = 10.0 / 32768      # the DAC nodes' volts per count
+LSB = 10.0 / 32768  # the DAC nodes' volts per count
 
 
 @pytest.fixture
 def rig():
-    r = open_rig(URL + "&watchdog=1")   # the watchdog tests: the real rig's 1 s
+    r = open_rig(URL + "&watchdog=1")  # the watchdog tests: the real rig's 1 s
     r.set_torquer_bias_V("X", 1.5)
     r.set_command_torque_V("Y", 0.5)
     r.set_caging_inhibit("Z", True)
@@ -55,9 +55,15 @@ def wait_for(predicate, timeout_s: float = 5.0) -> bool:
 def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
     """The nodes' own objects (not the host's view): mode 1, outputs zero, caging released."""
     nodes = rig.emulator.nodes.nodes
-    return wait_for(lambda: nodes["relay"].mode == 1 and not any(nodes["torquer"].values.values())
-                    and not any(nodes["command"].values.values()) and not any(nodes["caging"].inhibit.values()),
-                    timeout_s)
+    return wait_for(
+        lambda: (
+            nodes["relay"].mode == 1
+            and not any(nodes["torquer"].values.values())
+            and not any(nodes["command"].values.values())
+            and not any(nodes["caging"].inhibit.values())
+        ),
+        timeout_s,
+    )
 
 
 def read_until_gap(rig, pos):
@@ -72,9 +78,10 @@ def read_until_gap(rig, pos):
     raise AssertionError("no gap reported")
 
 
-@pytest.mark.parametrize("fault, reason", [("drop", "missing (sequence counter)"),
-                                           ("corrupt", "bad CRC"),
-                                           ("bad_length", "bad length")])
+@pytest.mark.parametrize(
+    "fault, reason",
+    [("drop", "missing (sequence counter)"), ("corrupt", "bad CRC"), ("bad_length", "bad length")],
+)
 def test_lost_frame_is_a_gap_at_exact_positions(rig, fault, reason):
     pos = stream(rig)
     rig.emulator.inject("adc", fault)
@@ -86,7 +93,9 @@ def test_lost_frame_is_a_gap_at_exact_positions(rig, fault, reason):
     assert after.first_sample == gap.stop  # the stream goes on after the gap, never spliced over it
     # Samples lost are not a hazard: the rig keeps its mode and set-points, no fault is latched.
     assert rig.faults.fault is None
-    assert rig.relays.status().mode == 3 and rig.torquers.bias_V("X") == pytest.approx(1.5, abs=1e-3)
+    assert rig.relays.status().mode == 3 and rig.torquers.bias_V("X") == pytest.approx(
+        1.5, abs=1e-3
+    )
     status = rig.adc.stop()
     assert status.samples > gap.stop
 
@@ -112,7 +121,9 @@ def test_garbage_between_frames_costs_no_samples(rig):
 
 def test_unknown_reply_is_a_protocol_error_and_the_rig_goes_safe(rig):
     rig.emulator.inject("adc", "bad_reply")
-    with pytest.raises(ProtocolError, match=r"unexpected reply 'OK HELLO from a confused device' to 'STAT\?'"):
+    with pytest.raises(
+        ProtocolError, match=r"unexpected reply 'OK HELLO from a confused device' to 'STAT\?'"
+    ):
         rig.adc.status()
     assert emulated_nodes_safe(rig)
     assert rig.is_safe()
@@ -124,7 +135,9 @@ def test_adc_stall_is_a_device_timeout_and_the_rig_goes_safe(rig):
     stream(rig)
     rig.adc.stall_timeout_s = 0.5
     rig.emulator.inject("adc", "stall")
-    with pytest.raises(DeviceTimeout, match=r"stalled: no data for 0\.5 s while streaming at 1000 Hz"):
+    with pytest.raises(
+        DeviceTimeout, match=r"stalled: no data for 0\.5 s while streaming at 1000 Hz"
+    ):
         for _ in range(1000):
             rig.adc.read(100)
     assert emulated_nodes_safe(rig)
@@ -185,10 +198,12 @@ FAULTS = {  # node, what the host does next, the error it raises
 @pytest.mark.parametrize("name", list(FAULTS))
 def test_stalled_node_times_out_and_the_watchdogs_make_the_rig_safe(rig, name):
     rig.emulator.inject(name, "stall")
-    with pytest.raises(DeviceTimeout, match=rf"CAN node '{name}' \(id {rn.NODES[name]}\) object 0x\w+:\d: no SDO"):
+    with pytest.raises(
+        DeviceTimeout, match=rf"CAN node '{name}' \(id {rn.NODES[name]}\) object 0x\w+:\d: no SDO"
+    ):
         FAULTS[name](rig)
     assert emulated_nodes_safe(rig, timeout_s=5.0)
-    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)   # safe by its own watchdog
+    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)  # safe by its own watchdog
     assert rig.link.heartbeat_suspended
 
 
@@ -214,7 +229,9 @@ def test_any_malformed_answer_is_a_protocol_error(rig, name):
 
 def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
     rig.emulator.inject("torquer", "stall")
-    with pytest.raises(DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"):
+    with pytest.raises(
+        DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"
+    ):
         rig.set_torquer_bias_V("X", 0.2)
     assert emulated_nodes_safe(rig, timeout_s=5.0)
     assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)  # safe by its own watchdog
@@ -226,8 +243,10 @@ def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig, name):
     rig.emulator.inject(name, "disconnect")
     assert wait_for(lambda: rig.faults.fault is not None)
     assert isinstance(rig.faults.fault, DeviceLost)
-    assert f"CAN node '{name}' (id {rn.NODES[name]}) is silent: no heartbeat for" in str(rig.faults.fault)
-    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)   # its own watchdog, silently
+    assert f"CAN node '{name}' (id {rn.NODES[name]}) is silent: no heartbeat for" in str(
+        rig.faults.fault
+    )
+    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)  # its own watchdog, silently
     assert emulated_nodes_safe(rig)
 
 
@@ -235,7 +254,9 @@ def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
     rig.emulator.inject("torquer", "reset")
     assert wait_for(lambda: rig.faults.fault is not None, 3.0)
     assert isinstance(rig.faults.fault, NodeReset)
-    assert "CAN node 'torquer' (id 3) rebooted (CANopen boot-up) and lost its set-points" in str(rig.faults.fault)
+    assert "CAN node 'torquer' (id 3) rebooted (CANopen boot-up) and lost its set-points" in str(
+        rig.faults.fault
+    )
     assert emulated_nodes_safe(rig)
     with pytest.raises(NodeReset):
         rig.set_torquer_bias_V("X", 0.1)
@@ -267,7 +288,9 @@ def test_host_heartbeat_loss_trips_every_watchdog():
         rig.link.heartbeat_suspended = True
         assert emulated_nodes_safe(rig, timeout_s=5.0)
         nodes = rig.emulator.nodes.nodes
-        assert wait_for(lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command")))
+        assert wait_for(
+            lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command"))
+        )
         assert wait_for(lambda: rig.faults.fault is not None, 3.0)
         assert isinstance(rig.faults.fault, (NodeError, DeviceLost))
     finally:
@@ -303,7 +326,7 @@ def _record_with_a_set_point(hold: bool) -> np.ndarray:
         if hold:
             rig.emulator.inject("adc", "hold", count=1, nbytes=0)
         blocks.append(rig.adc.read(200).volts)
-        rig.set_command_torque_V("X", 0.5)     # lands at the rig time the reads alone decide
+        rig.set_command_torque_V("X", 0.5)  # lands at the rig time the reads alone decide
         blocks.append(rig.adc.read(400).volts)
         rig.adc.stop()
     finally:
@@ -319,7 +342,7 @@ def test_frames_that_are_slow_not_lost_leave_the_rig_time_of_a_set_point_alone()
     they did not) ask for more. Before: the held output was taken for lost frames."""
     quick, held = _record_with_a_set_point(hold=False), _record_with_a_set_point(hold=True)
     assert np.array_equal(quick, held)
-    assert np.ptp(quick[400:, 0]) > 0.4     # the set-point is in the record
+    assert np.ptp(quick[400:, 0]) > 0.4  # the set-point is in the record
 
 
 def test_a_device_stalled_for_good_ends_its_threads_when_the_rig_closes():

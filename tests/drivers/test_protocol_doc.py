@@ -14,7 +14,9 @@ DOC = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"
 
 def test_the_documented_torquer_limits_are_accepted_and_within_10_uV_of_the_limit():
     text = " ".join(DOC.read_text().split())
-    m = re.search(r"nominal K_TO that is X ([\d.]+) V, Y ([\d.]+) V, Z ([\d.]+) V and XRD ([\d.]+) V", text)
+    m = re.search(
+        r"nominal K_TO that is X ([\d.]+) V, Y ([\d.]+) V, Z ([\d.]+) V and XRD ([\d.]+) V", text
+    )
     assert m, "the torquer limits sentence moved: update this test with it"
     limits = SetpointLimits(RigCalibration())
     for channel, documented in zip(("X", "Y", "Z", "XRD"), map(float, m.groups())):

@@ -55,7 +55,9 @@ def test_adc_configure_stream_and_stop(rig):
     while pos < 6000:
         b = rig.adc.read(1500)
         assert b.first_sample == pos and b.channels == chans
-        assert b.volts.shape == (len(b), 16) and b.volts.T.flags.c_contiguous   # channel-major in memory
+        assert (
+            b.volts.shape == (len(b), 16) and b.volts.T.flags.c_contiguous
+        )  # channel-major in memory
         got.append(b.volts)
         pos = b.stop_sample
     status = rig.adc.stop()
@@ -69,12 +71,14 @@ def test_adc_configure_stream_and_stop(rig):
     v = np.concatenate(got)
     lsb = np.array([ranges[c] / 32768.0 for c in chans])
     codes = np.rint(v / lsb)
-    assert np.array_equal(codes * lsb, v) and codes.min() >= -32768 and codes.max() <= 32767   # each its own range
+    assert (
+        np.array_equal(codes * lsb, v) and codes.min() >= -32768 and codes.max() <= 32767
+    )  # each its own range
     # The autocollimator noise (NEA ~0.45 urad x 5.7 mV/urad) is resolved on the 0.1 V range.
     ac = v[:, chans.index("ac_x_ctl")]
     assert 1e-3 < np.std(ac) < 1e-2
     assert np.ptp(ac) / (0.2 / 65536) > 20  # many codes, not one
-    assert rig.now() - t0 >= 3.0 - 1e-9   # whole samples of sim time; allow an ulp
+    assert rig.now() - t0 >= 3.0 - 1e-9  # whole samples of sim time; allow an ulp
 
 
 def test_every_dac_reads_back_and_acts(rig):
@@ -99,7 +103,9 @@ def test_every_dac_reads_back_and_acts(rig):
     rig.adc.stop()
     tail = b.volts[-200:].mean(axis=0)
     for i, (ch, v) in enumerate(biases.items()):
-        assert tail[i] == pytest.approx(SENSE * v, abs=2e-3), ch  # mode 1: the bias drives the torquer
+        assert tail[i] == pytest.approx(SENSE * v, abs=2e-3), (
+            ch
+        )  # mode 1: the bias drives the torquer
     for i in range(3):
         assert tail[4 + i] == pytest.approx(0.1 * (i + 1) - 0.05, abs=2e-3)  # cmd = V_Td + gamma_c
     sim = rig.emulator.sim
@@ -114,13 +120,19 @@ def test_modes_1_2_3_4_with_spin_up_and_caging(rig):
         rig.set_mode(4)
     assert rig.relays.status().mode == 1
     assert rig.set_mode(2) == 2
-    t_ready = rig.wait_until(lambda: all(rig.relays.status().at_speed.values()), timeout_s=300, poll_s=2.0,
-                             what="wheels at speed")
+    t_ready = rig.wait_until(
+        lambda: all(rig.relays.status().at_speed.values()),
+        timeout_s=300,
+        poll_s=2.0,
+        what="wheels at speed",
+    )
     assert 100.0 < t_ready < 200.0  # 99 % in the configured 120 s, polled every 2 s
     assert rig.set_mode(3) == 3
     with pytest.raises(InterlockError, match="not caged"):
         rig.set_mode(4)  # the caging loops have only just closed
-    rig.wait_until(lambda: all(rig.relays.status().caged.values()), timeout_s=600, poll_s=2.0, what="caged")
+    rig.wait_until(
+        lambda: all(rig.relays.status().caged.values()), timeout_s=600, poll_s=2.0, what="caged"
+    )
     assert rig.set_mode(4) == 4
     st = rig.relays.status()
     assert st.mode == 4 and not st.held and not st.alarm
@@ -163,17 +175,26 @@ def test_setpoints_out_of_range_never_reach_the_bus(rig):
     spy = can.Bus(interface="virtual", channel=rig.emulator.can_channel)
     try:
         cases = [
-            (lambda: rig.set_torquer_bias_V("X", 8.1), r"8\.1 is outside \+-8\.0767.*3\.5 x earth-rate"),
+            (
+                lambda: rig.set_torquer_bias_V("X", 8.1),
+                r"8\.1 is outside \+-8\.0767.*3\.5 x earth-rate",
+            ),
             (lambda: rig.set_torquer_bias_V("Y", -7.7), r"-7\.7 is outside \+-7\.64"),
             (lambda: rig.set_torquer_bias_V("W", 1.0), r"gyro channel 'W' does not exist"),
             (lambda: rig.set_torquer_bias_V("X", float("nan")), r"nan is outside"),
-            (lambda: rig.set_command_torque_V("X", 10.5), r"10\.5 is outside \+-10 \(the DAC's range\)"),
+            (
+                lambda: rig.set_command_torque_V("X", 10.5),
+                r"10\.5 is outside \+-10 \(the DAC's range\)",
+            ),
             (lambda: rig.set_ac_bias_V("Q", 1.0), r"axis 'Q' does not exist"),
             (lambda: rig.set_caging_inhibit("X", 1), r"must be True or False"),
             (lambda: rig.move_table(tilt_deg=91.0), r"91\.0 is outside 0\.\.90"),
             (lambda: rig.adc.configure(["gyro_x", "nope"], 1000), r"channel 'nope' does not exist"),
             (lambda: rig.adc.configure(["gyro_x"], 3e6), r"outside 0 < rate <= 2e\+06"),
-            (lambda: rig.adc.configure(["gyro_x"], 1000, 3.0), r"range 3\.0 V for gyro_x is not available"),
+            (
+                lambda: rig.adc.configure(["gyro_x"], 1000, 3.0),
+                r"range 3\.0 V for gyro_x is not available",
+            ),
         ]
         for call, message in cases:
             with pytest.raises(SetpointRangeError, match=message):
@@ -202,11 +223,15 @@ def test_manual_table_asks_the_operator():
     table = ManualTable(operator)
     assert table.move_to(spindle_deg=60.0).spindle_deg == 60.0
     assert "spindle 60.0000 deg" in asked[0]
-    assert table.move_to(spindle_deg=30.0).spindle_deg == pytest.approx(30.01)  # the angle actually set
+    assert table.move_to(spindle_deg=30.0).spindle_deg == pytest.approx(
+        30.01
+    )  # the angle actually set
     with pytest.raises(OperatorAbort):
         table.move_to(spindle_deg=90.0)
     assert table.position().spindle_deg == pytest.approx(30.01)
-    assert table.move_to(spindle_deg=30.01).spindle_deg == pytest.approx(30.01)  # no move, no question
+    assert table.move_to(spindle_deg=30.01).spindle_deg == pytest.approx(
+        30.01
+    )  # no move, no question
     assert len(asked) == 3
 
 
@@ -251,6 +276,7 @@ def test_paced_rig_runs_by_itself():
 
 def test_terminal_operator_without_a_terminal_says_so(monkeypatch):
     import io
+
     monkeypatch.setattr("sys.stdin", io.StringIO(""))
     table = ManualTable()
     with pytest.raises(OperatorAbort, match="needs an operator, but there is no terminal"):

@@ -20,7 +20,7 @@ import pytest
 from drivers.runclock import RunningClock
 
 ROOT = Path(__file__).resolve().parents[2]
-HANG_GUARD_S = 300          # a bound on a hang, not a deadline
+HANG_GUARD_S = 300  # a bound on a hang, not a deadline
 
 _CHILD = """
 import sys, time
@@ -46,8 +46,13 @@ def test_the_clock_is_monotonic_and_runs_with_the_wall_when_nothing_pauses():
 
 @pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="no SIGSTOP on this system")
 def test_a_stopped_process_leaves_its_pause_out():
-    p = subprocess.Popen([sys.executable, "-c", _CHILD], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                         cwd=ROOT)
+    p = subprocess.Popen(
+        [sys.executable, "-c", _CHILD],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     try:
         assert p.stdout is not None and p.stdin is not None
         assert p.stdout.readline().strip() == "ready"
@@ -55,7 +60,7 @@ def test_a_stopped_process_leaves_its_pause_out():
         p.stdin.flush()
         time.sleep(0.3)
         os.kill(p.pid, signal.SIGSTOP)
-        time.sleep(2.0)                                  # the pause: at least this long
+        time.sleep(2.0)  # the pause: at least this long
         os.kill(p.pid, signal.SIGCONT)
         time.sleep(0.3)
         p.stdin.write("go\n")
@@ -77,13 +82,31 @@ sys.exit(main(sys.argv[1:]))
 
 @pytest.mark.slow
 @pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="no SIGSTOP on this system")
-def test_a_recording_on_the_sim_rig_survives_the_host_pausing_it_longer_than_every_watchdog(tmp_path):
+def test_a_recording_on_the_sim_rig_survives_the_host_pausing_it_longer_than_every_watchdog(
+    tmp_path,
+):
     """`fbs record` on the sim rig with 1-s watchdogs (node heartbeats, CAN replies); the process
     is stopped for 4 s mid-recording, as a busy host or a paused VM does. Before the devices'
     deadlines left the pause out, the recording aborted: "no heartbeat for 4.x s (limit 1 s)"."""
     out = tmp_path / "r.h5"
-    cmd = [sys.executable, "-c", _RECORDER, "record", "--rig", "sim?warm=1&watchdog=1&realtime=1",
-           "--mode", "3", "--duration", "12", "--rate", "200", "--channels", "gyro_x,ac_x_ctl", "--out", str(out)]
+    cmd = [
+        sys.executable,
+        "-c",
+        _RECORDER,
+        "record",
+        "--rig",
+        "sim?warm=1&watchdog=1&realtime=1",
+        "--mode",
+        "3",
+        "--duration",
+        "12",
+        "--rate",
+        "200",
+        "--channels",
+        "gyro_x,ac_x_ctl",
+        "--out",
+        str(out),
+    ]
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
     try:
         t_guard = time.monotonic() + HANG_GUARD_S

@@ -14,7 +14,11 @@ pytestmark = pytest.mark.slow
 def _outputs(rig) -> tuple[int, bool, bool]:
     """Mode, any torquer bias set, any caging inhibited: from the emulated nodes' registers."""
     nodes = rig.emulator.nodes.nodes
-    return nodes["relay"].mode, any(nodes["torquer"].values.values()), any(nodes["caging"].inhibit.values())
+    return (
+        nodes["relay"].mode,
+        any(nodes["torquer"].values.values()),
+        any(nodes["caging"].inhibit.values()),
+    )
 
 
 def test_an_exception_drives_the_rig_safe_reads_it_back_and_goes_on(go_safe_calls):
@@ -33,7 +37,9 @@ def test_a_clean_exit_leaves_the_rig_as_it_was(go_safe_calls):
     with open_rig("sim?warm=1&seed=2") as rig:
         with SafeOnAbort(rig, "a test run"):
             rig.set_torquer_bias_V("X", 0.2)
-        assert rig.relays.status().mode == 3 and rig.torquers.bias_V("X") == pytest.approx(0.2, abs=1e-3)
+        assert rig.relays.status().mode == 3 and rig.torquers.bias_V("X") == pytest.approx(
+            0.2, abs=1e-3
+        )
         assert go_safe_calls == []
 
 
@@ -43,7 +49,7 @@ def test_entered_twice_each_exception_is_handled_once_and_a_new_one_again(go_saf
         with pytest.raises(KeyboardInterrupt), guard, guard:
             raise KeyboardInterrupt
         assert go_safe_calls == ["run aborted (interrupted)"]
-        with pytest.raises(OSError), guard:   # what only the outer entry sees: closing failed
+        with pytest.raises(OSError), guard:  # what only the outer entry sees: closing failed
             with guard:
                 pass
             raise OSError(28, "No space left on device")

@@ -18,7 +18,18 @@ from drivers.faults import FaultLatch
 from drivers.rig import open_rig
 from drivers.supervision import HOLD_S, ModeSupervisor, SupervisionAlarm, longest_run, watches
 
-WATCHED = ["ac_x_ctl", "ac_y_ctl", "gyro_x", "gyro_y", "gyro_z", "gyro_xrd", "torq_x", "torq_y", "torq_z", "torq_xrd"]
+WATCHED = [
+    "ac_x_ctl",
+    "ac_y_ctl",
+    "gyro_x",
+    "gyro_y",
+    "gyro_z",
+    "gyro_xrd",
+    "torq_x",
+    "torq_y",
+    "torq_z",
+    "torq_xrd",
+]
 
 
 @given(st.lists(st.booleans(), max_size=60), st.integers(0, 50))
@@ -45,8 +56,8 @@ def test_each_gyro_mode_watches_its_caged_channels_and_mode_3_nothing():
     five = {w.channel for w in watches(cal, 5)}
     assert four == set(WATCHED) and five == set(WATCHED) - {"gyro_z", "torq_z"}
     lim = {w.channel: w.limit_V for w in watches(cal, 4)}
-    assert lim["gyro_xrd"] == pytest.approx(5.74)             # 1 mrad at 5.74 mV/urad
-    assert lim["ac_x_ctl"] == pytest.approx(13.11)             # 2.3 mrad: beyond the ADC, its rail counts
+    assert lim["gyro_xrd"] == pytest.approx(5.74)  # 1 mrad at 5.74 mV/urad
+    assert lim["ac_x_ctl"] == pytest.approx(13.11)  # 2.3 mrad: beyond the ADC, its rail counts
 
 
 def test_a_violation_shorter_than_the_hold_is_no_alarm_one_carried_across_blocks_is():
@@ -54,9 +65,9 @@ def test_a_violation_shorter_than_the_hold_is_no_alarm_one_carried_across_blocks
     sup = ModeSupervisor(RigCalibration(), faults)
     sup.mode = 4
     n = int(HOLD_S * 100)
-    quiet, high = np.zeros(n), np.full(n, 7.0)               # 7 V on gyro_x: 1.16 mrad
+    quiet, high = np.zeros(n), np.full(n, 7.0)  # 7 V on gyro_x: 1.16 mrad
     sup.observe(_block(0, {"gyro_x": np.r_[quiet, high[:-1]]}))
-    sup.observe(_block(2 * n - 1, {"gyro_x": quiet}))          # broken off one sample short
+    sup.observe(_block(2 * n - 1, {"gyro_x": quiet}))  # broken off one sample short
     assert faults.fault is None
     sup.observe(_block(3 * n - 1, {"gyro_x": high[: n // 2]}))
     sup.observe(_block(3 * n - 1 + n // 2, {"gyro_x": high[: n - n // 2]}))
@@ -85,7 +96,9 @@ def test_a_caging_inhibit_in_mode_4_alarms_and_the_rig_goes_safe():
         t_inhibit = rig.now()
         rig.set_caging_inhibit("XRD", True)
         beyond_at = None
-        with pytest.raises(SupervisionAlarm, match="mode 4 supervision.*gyro_xrd.*went safe") as alarm:
+        with pytest.raises(
+            SupervisionAlarm, match="mode 4 supervision.*gyro_xrd.*went safe"
+        ) as alarm:
             while rig.now() - t_inhibit < 120.0:
                 b = rig.adc.read(20)
                 over = np.abs(b["gyro_xrd"]) >= 5.74
@@ -94,11 +107,13 @@ def test_a_caging_inhibit_in_mode_4_alarms_and_the_rig_goes_safe():
         t_alarm = rig.now()
         assert rig._safe_thread is not None
         rig._safe_thread.join(timeout=30)
-        assert rig.is_safe()                                    # mode 1, outputs zero, read back
+        assert rig.is_safe()  # mode 1, outputs zero, read back
         assert rig.emulator.sim.mode == 1
     # the float ran to its stop in about 14 s; the alarm came the hold (0.5 s) after the pickoff
     # left its linear range, within the reading's granularity (a 0.1 s block and the ADC frames)
     assert beyond_at is not None, alarm.value
-    print(f"pickoff beyond its range {beyond_at - t_inhibit:.2f} s after the inhibit, alarm {t_alarm - beyond_at:.2f} s "
-          "later")
+    print(
+        f"pickoff beyond its range {beyond_at - t_inhibit:.2f} s after the inhibit, alarm {t_alarm - beyond_at:.2f} s "
+        "later"
+    )
     assert HOLD_S <= t_alarm - beyond_at <= HOLD_S + 0.3

@@ -38,8 +38,12 @@ def _wait_for(cond, what: str, guard_s: float = 120.0) -> None:
 @pytest.fixture
 def served_rig():
     group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
-    proc = subprocess.Popen([sys.executable, "-m", "simhw.serve", "--can", group, "--warm"],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "simhw.serve", "--can", group, "--warm"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline().split()
@@ -52,37 +56,66 @@ def served_rig():
 
 
 def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path):
-    first_out, second_out, third_out = tmp_path / "first.h5", tmp_path / "second.h5", tmp_path / "third.h5"
+    first_out, second_out, third_out = (
+        tmp_path / "first.h5",
+        tmp_path / "second.h5",
+        tmp_path / "third.h5",
+    )
     record = ["record", "--rig", served_rig, "--mode", "3", "--rate", "200", "--json"]
-    first = subprocess.Popen([*FBS, *record, "--duration", "8", "--out", str(first_out)],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = subprocess.Popen(
+        [*FBS, *record, "--duration", "8", "--out", str(first_out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         _wait_for(first_out.exists, "the first recording's file")
         # the same machine: the rig claim names the holder
-        second = subprocess.run([*FBS, *record, "--duration", "2", "--out", str(second_out)],
-                                capture_output=True, text=True, timeout=120)
+        second = subprocess.run(
+            [*FBS, *record, "--duration", "2", "--out", str(second_out)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         # another machine (a lock directory of its own): the first host's heartbeat is on the bus
         other = tmp_path / "other-host-locks"
         other.mkdir()
-        third = subprocess.run([*FBS, *record, "--duration", "2", "--out", str(third_out)],
-                               capture_output=True, text=True, timeout=120, env=os.environ | {"FBS_LOCK_DIR": str(other)})
+        third = subprocess.run(
+            [*FBS, *record, "--duration", "2", "--out", str(third_out)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+            env=os.environ | {"FBS_LOCK_DIR": str(other)},
+        )
         out, err = first.communicate(timeout=120)
     finally:
         if first.poll() is None:
             first.kill()
     assert second.returncode == 2, second.stderr
-    assert f"held by pid {first.pid}" in second.stderr and "sent nothing" in second.stderr, second.stderr
+    assert f"held by pid {first.pid}" in second.stderr and "sent nothing" in second.stderr, (
+        second.stderr
+    )
     assert third.returncode == 2, third.stderr
-    assert "another host is driving this bus" in third.stderr and "sent nothing" in third.stderr, third.stderr
+    assert "another host is driving this bus" in third.stderr and "sent nothing" in third.stderr, (
+        third.stderr
+    )
     assert not second_out.exists() and not third_out.exists()
     # the first: complete, every sample, no gap, safe at its close
     assert first.returncode == 0, err
     j = json.loads(out)
-    assert (j["status"], j["n_samples"], j["lost"], j["gaps"], j["rig_safe_at_close"]) == ("complete", 1600, 0, [],
-                                                                                          True)
+    assert (j["status"], j["n_samples"], j["lost"], j["gaps"], j["rig_safe_at_close"]) == (
+        "complete",
+        1600,
+        0,
+        [],
+        True,
+    )
     with h5py.File(first_out, "r") as f:
         assert f.attrs["status"] == "complete"
-        assert all(len(f["channels"][c]) == 1600 and np.all(np.isfinite(f["channels"][c][:])) for c in f["channels"])
+        assert all(
+            len(f["channels"][c]) == 1600 and np.all(np.isfinite(f["channels"][c][:]))
+            for c in f["channels"]
+        )
         kinds = [k.decode() if isinstance(k, bytes) else k for k in f["events"]["kind"][:]]
         texts = [t.decode() if isinstance(t, bytes) else t for t in f["events"]["text"][:]]
     # nothing happened to the rig while it recorded: no mode change, alarm, error or gap

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-HANG_S = 180                       # a hang guard, not a timing assertion
+HANG_S = 180  # a hang guard, not a timing assertion
 
 
 class Cluster:
@@ -28,21 +28,48 @@ class Cluster:
         pytest.importorskip("distributed")
         self.root, self.procs = root, []
         sched_file = root / "scheduler.json"
-        self._start("scheduler", "distributed.cli.dask_scheduler", "--host", "127.0.0.1", "--port", "0",
-                    "--no-dashboard", "--scheduler-file", str(sched_file))
+        self._start(
+            "scheduler",
+            "distributed.cli.dask_scheduler",
+            "--host",
+            "127.0.0.1",
+            "--port",
+            "0",
+            "--no-dashboard",
+            "--scheduler-file",
+            str(sched_file),
+        )
         t_end = time.monotonic() + HANG_S
         while not (sched_file.exists() and sched_file.read_text().strip().endswith("}")):
             assert time.monotonic() < t_end and self.procs[0].poll() is None, self.log("scheduler")
             time.sleep(0.1)
         self.address = json.loads(sched_file.read_text())["address"]
-        self.workers = [self._start(f"worker{i}", "distributed.cli.dask_worker", self.address, "--host", "127.0.0.1",
-                                    "--nthreads", "1", "--no-dashboard", "--name", f"w{i}") for i in (1, 2)]
+        self.workers = [
+            self._start(
+                f"worker{i}",
+                "distributed.cli.dask_worker",
+                self.address,
+                "--host",
+                "127.0.0.1",
+                "--nthreads",
+                "1",
+                "--no-dashboard",
+                "--name",
+                f"w{i}",
+            )
+            for i in (1, 2)
+        ]
         self.wait_for_workers(2)
 
     def _start(self, name: str, module: str, *args: str) -> subprocess.Popen:
         log = open(self.root / f"{name}.log", "w")
-        p = subprocess.Popen([sys.executable, "-m", module, *args], stdout=log, stderr=subprocess.STDOUT,
-                             cwd=self.root, start_new_session=True)
+        p = subprocess.Popen(
+            [sys.executable, "-m", module, *args],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            cwd=self.root,
+            start_new_session=True,
+        )
         log.close()
         self.procs.append(p)
         return p
@@ -70,7 +97,7 @@ class Cluster:
                 pass
 
     def close(self) -> None:
-        for p in reversed(self.procs):             # workers first, then the scheduler
+        for p in reversed(self.procs):  # workers first, then the scheduler
             self.kill(p, signal.SIGTERM)
         for p in reversed(self.procs):
             try:

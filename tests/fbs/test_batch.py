@@ -33,9 +33,9 @@ from tests.result_schema import assert_valid_result
 
 pytestmark = pytest.mark.slow
 FBS = [sys.executable, "-m", "fbs.cli"]
-HANG_S = 180                       # a hang guard, not a timing assertion
+HANG_S = 180  # a hang guard, not a timing assertion
 N_FILES = 8
-GAP_ARGS = ["--axis", "X"]         # simulate writes no axis attribute
+GAP_ARGS = ["--axis", "X"]  # simulate writes no axis attribute
 NOMINAL = '[bearing.X]\nmodel = "none"\n[bearing.Y]\nmodel = "none"\n[bearing.Z]\nmodel = "none"\n'
 
 
@@ -68,7 +68,9 @@ def wait_for_lines(out: Path, p: subprocess.Popen, n: int = 1) -> None:
         if out.exists() and out.read_bytes().count(b"\n") >= n:
             return
         if p.poll() is not None:
-            raise AssertionError(f"the batch ended (exit {p.returncode}) before {n} result(s): {p.stderr.read()}")
+            raise AssertionError(
+                f"the batch ended (exit {p.returncode}) before {n} result(s): {p.stderr.read()}"
+            )
         time.sleep(0.05)
     raise AssertionError(f"no result in {out} after {HANG_S} s")
 
@@ -81,8 +83,26 @@ def runs(tmp_path_factory) -> list[Path]:
     paths = []
     for seed in range(1, N_FILES + 1):
         p = d / f"run{seed}.h5"
-        assert main(["simulate", "--mode", "3", "--duration", "95", "--rate", "50", "--seed", str(seed),
-                     "--sim-config", str(d / "nominal.toml"), "--out", str(p)]) == 0
+        assert (
+            main(
+                [
+                    "simulate",
+                    "--mode",
+                    "3",
+                    "--duration",
+                    "95",
+                    "--rate",
+                    "50",
+                    "--seed",
+                    str(seed),
+                    "--sim-config",
+                    str(d / "nominal.toml"),
+                    "--out",
+                    str(p),
+                ]
+            )
+            == 0
+        )
         paths.append(p)
     return paths
 
@@ -100,7 +120,17 @@ def serial(runs) -> dict[str, tuple[int, str]]:
 @pytest.fixture(scope="module")
 def local(runs, tmp_path_factory) -> tuple[subprocess.CompletedProcess[str], Path]:
     out = tmp_path_factory.mktemp("local") / "results.jsonl"
-    return fbs("batch", "gap", *map(str, runs), "--jobs", "2", "--args", " ".join(GAP_ARGS), "--out", str(out)), out
+    return fbs(
+        "batch",
+        "gap",
+        *map(str, runs),
+        "--jobs",
+        "2",
+        "--args",
+        " ".join(GAP_ARGS),
+        "--out",
+        str(out),
+    ), out
 
 
 # ---------------------------------------------------------------------------- A: the same as serial runs
@@ -108,7 +138,7 @@ def test_batch_gap_gives_what_serial_runs_give(local, serial, runs):
     r, out = local
     assert r.returncode == 0, r.stderr
     recs = lines_of(out)
-    assert sorted(rec["file"] for rec in recs) == sorted(map(str, runs))      # each file once, absolute
+    assert sorted(rec["file"] for rec in recs) == sorted(map(str, runs))  # each file once, absolute
     for rec in recs:
         code, stdout = serial[rec["file"]]
         assert code == 0 and rec["exit"] == 0 and rec["error"] is None
@@ -119,10 +149,16 @@ def test_batch_gap_gives_what_serial_runs_give(local, serial, runs):
         assert json.dumps(batch_rec) == json.dumps(serial_rec)
         assert rec["result"]["file"] == rec["file"]
         assert isinstance(rec["elapsed_s"], float) and rec["elapsed_s"] >= 0
-    assert "0 already done" in r.stderr and f"[{N_FILES}/{N_FILES}]" in r.stderr and "exit 0" in r.stderr
+    assert (
+        "0 already done" in r.stderr
+        and f"[{N_FILES}/{N_FILES}]" in r.stderr
+        and "exit 0" in r.stderr
+    )
 
 
-def test_gap_json_says_what_ran_on_whose_data_and_an_interrupt_says_aborted(runs, serial, monkeypatch, capsys):
+def test_gap_json_says_what_ran_on_whose_data_and_an_interrupt_says_aborted(
+    runs, serial, monkeypatch, capsys
+):
     """Issue 37 acceptance A for ``fbs gap --json``: the schema's header (rig, simulated,
     software, verdict) and the workflow's keys, normally (exit 0, "pass") and interrupted (exit
     2, "aborted", every key present with nothing found)."""
@@ -141,15 +177,27 @@ def test_gap_json_says_what_ran_on_whose_data_and_an_interrupt_says_aborted(runs
     got = json.loads(capsys.readouterr().out)
     assert_valid_result(got)
     assert (got["verdict"], got["status"], got["effect"], got["explained"]) == (
-        "aborted", "aborted: interrupted", None, None)
+        "aborted",
+        "aborted: interrupted",
+        None,
+        None,
+    )
 
 
-@pytest.mark.parametrize("command, args", [("inspect", []), ("spectra", ["--channels", "ac_x_ctl,gyro_x"]),
-                                           ("analyze-transfer", ["--from", "ac_x_ctl", "--to", "pa_x"])])
+@pytest.mark.parametrize(
+    "command, args",
+    [
+        ("inspect", []),
+        ("spectra", ["--channels", "ac_x_ctl,gyro_x"]),
+        ("analyze-transfer", ["--from", "ac_x_ctl", "--to", "pa_x"]),
+    ],
+)
 def test_inspect_and_spectra_batches_give_what_serial_runs_give(runs, tmp_path, command, args):
     files = [str(p) for p in runs[:3]]
     out = tmp_path / "r.jsonl"
-    r = fbs("batch", command, *files, "--jobs", "2", "--args", " ".join(args) or "", "--out", str(out))
+    r = fbs(
+        "batch", command, *files, "--jobs", "2", "--args", " ".join(args) or "", "--out", str(out)
+    )
     assert r.returncode == 0, r.stderr
     got = by_file(lines_of(out))
     assert sorted(got) == sorted(files)
@@ -167,11 +215,24 @@ def test_inspect_and_spectra_batches_give_what_serial_runs_give(runs, tmp_path, 
 
 def test_a_refused_file_is_the_commands_exit_and_message(runs, tmp_path):
     short, junk = tmp_path / "short.h5", tmp_path / "junk.h5"
-    assert main(["simulate", "--mode", "3", "--duration", "5", "--rate", "50", "--out", str(short)]) == 0
+    assert (
+        main(["simulate", "--mode", "3", "--duration", "5", "--rate", "50", "--out", str(short)])
+        == 0
+    )
     junk.write_text("not HDF5\n")
     out = tmp_path / "r.jsonl"
-    r = fbs("batch", "gap", str(short), str(junk), str(runs[0]), "--args", " ".join(GAP_ARGS), "--out", str(out))
-    assert r.returncode == 2, r.stderr                      # some file failed
+    r = fbs(
+        "batch",
+        "gap",
+        str(short),
+        str(junk),
+        str(runs[0]),
+        "--args",
+        " ".join(GAP_ARGS),
+        "--out",
+        str(out),
+    )
+    assert r.returncode == 2, r.stderr  # some file failed
     got = by_file(lines_of(out))
     for f in (short, junk):
         s = fbs("gap", str(f), "--json", *GAP_ARGS)
@@ -185,7 +246,18 @@ def test_a_refused_file_is_the_commands_exit_and_message(runs, tmp_path):
 # ---------------------------------------------------------------------------- resume
 def test_an_interrupted_batch_keeps_its_results_and_resumes(runs, local, tmp_path):
     out = tmp_path / "r.jsonl"
-    argv = [*FBS, "batch", "gap", *map(str, runs), "--jobs", "1", "--args", " ".join(GAP_ARGS), "--out", str(out)]
+    argv = [
+        *FBS,
+        "batch",
+        "gap",
+        *map(str, runs),
+        "--jobs",
+        "1",
+        "--args",
+        " ".join(GAP_ARGS),
+        "--out",
+        str(out),
+    ]
     p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_for_lines(out, p)
@@ -195,18 +267,22 @@ def test_an_interrupted_batch_keeps_its_results_and_resumes(runs, local, tmp_pat
         p.kill()
     assert p.returncode == 2 and "interrupted" in err, err
     kept = out.read_bytes()
-    assert kept.endswith(b"\n")                             # whole lines only
+    assert kept.endswith(b"\n")  # whole lines only
     first = lines_of(out)
     assert 1 <= len(first) < N_FILES
 
     r = fbs(*argv[3:])
     assert r.returncode == 0, r.stderr
     assert f"{len(first)} already done in {out} (skipped)" in r.stderr
-    assert out.read_bytes().startswith(kept)                # nothing finished was lost or rewritten
-    assert by_file(lines_of(out)) == by_file(lines_of(local[1]))     # each file once, the same results
+    assert out.read_bytes().startswith(kept)  # nothing finished was lost or rewritten
+    assert by_file(lines_of(out)) == by_file(lines_of(local[1]))  # each file once, the same results
 
-    again = fbs(*argv[3:])                                 # all done: nothing to run, the same exit
-    assert again.returncode == 0 and f"{N_FILES} already done" in again.stderr and "nothing to run" in again.stderr
+    again = fbs(*argv[3:])  # all done: nothing to run, the same exit
+    assert (
+        again.returncode == 0
+        and f"{N_FILES} already done" in again.stderr
+        and "nothing to run" in again.stderr
+    )
     assert out.read_bytes().count(b"\n") == N_FILES
 
 
@@ -216,13 +292,31 @@ def _refused(capsys, argv: list[str]) -> str:
     return capsys.readouterr().err
 
 
-@pytest.mark.parametrize("case", ["command", "no-files", "missing", "fifo", "jobs-0", "jobs-word", "out-dir",
-                                  "out-missing-dir", "out-not-results", "out-other-command", "out-other-args",
-                                  "args-unknown", "args-shared-output"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "command",
+        "no-files",
+        "missing",
+        "fifo",
+        "jobs-0",
+        "jobs-word",
+        "out-dir",
+        "out-missing-dir",
+        "out-not-results",
+        "out-other-command",
+        "out-other-args",
+        "args-unknown",
+        "args-shared-output",
+    ],
+)
 def test_bad_inputs_are_refused_before_anything_is_written(runs, tmp_path, capsys, case):
     f = str(runs[0])
     out = tmp_path / "r.jsonl"
-    other = '{"file": "/x.h5", "command": "inspect", "args": [], "exit": 0, "result": {}, "error": null, "elapsed_s": 0.1}\n'
+    other = (
+        '{"file": "/x.h5", "command": "inspect", "args": [], "exit": 0, "result": {}, '
+        '"error": null, "elapsed_s": 0.1}\n'
+    )
     if case in ("out-not-results",):
         out.write_text("a,b,c\n1,2,3\n")
     if case in ("out-other-command",):
@@ -240,26 +334,40 @@ def test_bad_inputs_are_refused_before_anything_is_written(runs, tmp_path, capsy
         "jobs-0": (["gap", f, "--jobs", "0"], "--jobs '0' must be at least 1"),
         "jobs-word": (["gap", f, "--jobs", "two"], "--jobs 'two' is not a whole number"),
         "out-dir": (["gap", f, "--out", str(tmp_path)], f"--out {tmp_path} is not a regular file"),
-        "out-missing-dir": (["gap", f, "--out", str(tmp_path / "no" / "r.jsonl")], f"{tmp_path / 'no'} does not exist"),
+        "out-missing-dir": (
+            ["gap", f, "--out", str(tmp_path / "no" / "r.jsonl")],
+            f"{tmp_path / 'no'} does not exist",
+        ),
         "out-not-results": (["gap", f], "not a batch results file (line 1 is not JSON)"),
-        "out-other-command": (["gap", f], "holds results of `fbs batch inspect`, not `fbs batch gap`"),
+        "out-other-command": (
+            ["gap", f],
+            "holds results of `fbs batch inspect`, not `fbs batch gap`",
+        ),
         "out-other-args": (["gap", f, "--args", "--axis X"], "made with --args '', not '--axis X'"),
-        "args-unknown": (["gap", f, "--args", "--frobnicate 3"], "unrecognized arguments: --frobnicate 3"),
-        "args-shared-output": (["gap", f, "--args", f"--report {tmp_path / 'rep'}"], "--report would send"),
+        "args-unknown": (
+            ["gap", f, "--args", "--frobnicate 3"],
+            "unrecognized arguments: --frobnicate 3",
+        ),
+        "args-shared-output": (
+            ["gap", f, "--args", f"--report {tmp_path / 'rep'}"],
+            "--report would send",
+        ),
     }[case]
     if "--out" not in argv:
         argv += ["--out", str(out)]
     err = _refused(capsys, argv)
     assert err.startswith("fbs batch: error: ") and named in err, err
-    assert (out.read_bytes() if out.exists() else None) == before                 # nothing written
+    assert (out.read_bytes() if out.exists() else None) == before  # nothing written
     assert not (tmp_path / "rep").exists() and not (tmp_path / "no").exists()
 
 
 def test_scheduler_without_distributed_names_the_extra(runs, tmp_path):
     out = tmp_path / "r.jsonl"
-    code = ("import sys; sys.modules['distributed'] = None; from fbs.cli import main; "
-            f"sys.exit(main(['batch', 'inspect', {str(runs[0])!r}, '--scheduler', 'tcp://127.0.0.1:8786', "
-            f"'--out', {str(out)!r}]))")
+    code = (
+        "import sys; sys.modules['distributed'] = None; from fbs.cli import main; "
+        f"sys.exit(main(['batch', 'inspect', {str(runs[0])!r}, '--scheduler', 'tcp://127.0.0.1:8786', "
+        f"'--out', {str(out)!r}]))"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=HANG_S)
     assert r.returncode == 2, r.stderr
     assert "fbs-hil[cluster]" in r.stderr and "distributed" in r.stderr
@@ -270,8 +378,17 @@ def test_scheduler_without_distributed_names_the_extra(runs, tmp_path):
 # (the ``cluster`` fixture: tests/fbs/conftest.py)
 def test_b_a_dask_cluster_gives_the_local_results(runs, local, cluster, tmp_path):
     out = tmp_path / "r.jsonl"
-    r = fbs("batch", "gap", *map(str, runs), "--scheduler", cluster.address, "--args", " ".join(GAP_ARGS),
-            "--out", str(out))
+    r = fbs(
+        "batch",
+        "gap",
+        *map(str, runs),
+        "--scheduler",
+        cluster.address,
+        "--args",
+        " ".join(GAP_ARGS),
+        "--out",
+        str(out),
+    )
     assert r.returncode == 0, r.stderr
     assert f"Dask scheduler {cluster.address} (2 workers, 2 threads)" in r.stderr
     assert by_file(lines_of(out)) == by_file(lines_of(local[1]))
@@ -279,19 +396,29 @@ def test_b_a_dask_cluster_gives_the_local_results(runs, local, cluster, tmp_path
 
 def test_c_a_worker_killed_mid_batch_loses_nothing(runs, local, cluster, tmp_path):
     out = tmp_path / "r.jsonl"
-    argv = [*FBS, "batch", "gap", *map(str, runs), "--scheduler", cluster.address, "--args", " ".join(GAP_ARGS),
-            "--out", str(out)]
+    argv = [
+        *FBS,
+        "batch",
+        "gap",
+        *map(str, runs),
+        "--scheduler",
+        cluster.address,
+        "--args",
+        " ".join(GAP_ARGS),
+        "--out",
+        str(out),
+    ]
     p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         wait_for_lines(out, p)
         kept = out.read_bytes()
-        cluster.kill(cluster.workers[0])            # the worker and its nanny, without warning
+        cluster.kill(cluster.workers[0])  # the worker and its nanny, without warning
         _, err = p.communicate(timeout=HANG_S)
     finally:
         p.kill()
     assert p.returncode == 0, err
-    assert out.read_bytes().startswith(kept[:kept.rindex(b"\n") + 1])
-    assert by_file(lines_of(out)) == by_file(lines_of(local[1]))         # each file once, the same results
+    assert out.read_bytes().startswith(kept[: kept.rindex(b"\n") + 1])
+    assert by_file(lines_of(out)) == by_file(lines_of(local[1]))  # each file once, the same results
     assert cluster.n_workers() == 1
 
 

@@ -44,7 +44,7 @@ from fbs.cli import build_parser, main
 from simhw import effects
 
 FBS = [sys.executable, "-m", "fbs.cli"]
-HANG_S = 900                        # a hang guard for a whole campaign on a loaded machine, not a timing assertion
+HANG_S = 900  # a hang guard for a whole campaign on a loaded machine, not a timing assertion
 DURATION = "74"
 EFFECT = ["gap", "--effect", "pickup_line", "--duration", DURATION]
 REFERENCE = [*EFFECT, "--grid", "amplitude_V=0.0001:0.002:2", "--seeds", "2"]
@@ -78,7 +78,9 @@ def wait_for_lines(path: Path, p: subprocess.Popen, n: int = 1) -> None:
         if path.exists() and path.read_bytes().count(b"\n") >= n:
             return
         if p.poll() is not None:
-            raise AssertionError(f"the campaign ended (exit {p.returncode}) before {n} run(s): {p.stderr.read()}")
+            raise AssertionError(
+                f"the campaign ended (exit {p.returncode}) before {n} run(s): {p.stderr.read()}"
+            )
         time.sleep(0.1)
     raise AssertionError(f"no run in {path} after {HANG_S} s")
 
@@ -123,8 +125,10 @@ def reference(local) -> dict[tuple, dict]:
 @pytest.mark.slow
 def test_a_campaign_writes_its_runs_and_curves(local, reference):
     r, out = local
-    assert len(reference) == 6                                    # 2 values x 2 seeds + 2 nulls
-    assert {(k[0], k[2]) for k in reference} == {(e, s) for e in ("none", "pickup_line") for s in (1, 2)}
+    assert len(reference) == 6  # 2 values x 2 seeds + 2 nulls
+    assert {(k[0], k[2]) for k in reference} == {
+        (e, s) for e in ("none", "pickup_line") for s in (1, 2)
+    }
     for rec in reference.values():
         assert list(rec) == [k for k in campaign_task.RUN_KEYS if k != "elapsed_s"]
         assert rec["record"] == {"duration_s": 74.0, "rate_hz": 1000.0, "mode": 3, "axis": "X"}
@@ -140,22 +144,35 @@ def test_a_campaign_writes_its_runs_and_curves(local, reference):
         assert big["fitted"]["freq_hz"] == pytest.approx(200.0, rel=0.01)
 
     cv = json.loads((out / "curves.json").read_text())
-    assert json.loads(r.stdout) == cv                              # --json prints the curves
+    assert json.loads(r.stdout) == cv  # --json prints the curves
     assert cv["complete"] and cv["runs"] == cv["done"] == 6 and cv["errors"] == 0
     assert [pt["value"] for pt in cv["curve"]] == [0.0001, 0.002]
     top = cv["curve"][1]
     assert top["analysed"] == 2 and top["named_right"] == 2 and top["p_named"] == 1.0
     assert top["p_named_ci95"] == pytest.approx(list(wilson(2, 2)))
-    assert top["param_error"]["amplitude_V"]["n"] == 2 and abs(top["param_error"]["amplitude_V"]["median"]) < 0.15
+    assert (
+        top["param_error"]["amplitude_V"]["n"] == 2
+        and abs(top["param_error"]["amplitude_V"]["median"]) < 0.15
+    )
     assert cv["nulls"]["analysed"] == 2 and cv["nulls"]["false_alarms"] == sum(
-        1 for k, v in reference.items() if k[0] == "none" and (v["significant"] or v["named"]))
-    assert cv["campaign"]["command"].startswith("fbs campaign gap --effect pickup_line --grid "
-                                                "amplitude_V=0.0001:0.002:2 --seeds 2 --duration 74 --out ")
+        1 for k, v in reference.items() if k[0] == "none" and (v["significant"] or v["named"])
+    )
+    assert cv["campaign"]["command"].startswith(
+        "fbs campaign gap --effect pickup_line --grid "
+        "amplitude_V=0.0001:0.002:2 --seeds 2 --duration 74 --out "
+    )
     md = (out / "curves.md").read_text()
-    assert "| `amplitude_V` | runs | named right | P | 95 % |" in md and "| 0.002 | 2 | 2 | 1.00 |" in md
+    assert (
+        "| `amplitude_V` | runs | named right | P | 95 % |" in md
+        and "| 0.002 | 2 | 2 | 1.00 |" in md
+    )
     assert "False alarms on the null runs" in md
     assert (out / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert "6 run(s) (2 value(s) x 2 seed(s) + 2 null)" in r.stderr and "[6/6]" in r.stderr and "exit 0" in r.stderr
+    assert (
+        "6 run(s) (2 value(s) x 2 seed(s) + 2 null)" in r.stderr
+        and "[6/6]" in r.stderr
+        and "exit 0" in r.stderr
+    )
 
 
 # ---------------------------------------------------------------------------- B: a Dask cluster on localhost
@@ -172,40 +189,52 @@ def test_b_a_dask_cluster_gives_the_local_results(local, reference, cluster, tmp
 
 # ---------------------------------------------------------------------------- C: workers killed, campaigns interrupted
 def _subset(reference: dict[tuple, dict]) -> dict[tuple, dict]:
-    return {k: v for k, v in reference.items() if k[0] == "none" or dict(k[1])["amplitude_V"] == 0.002}
+    return {
+        k: v for k, v in reference.items() if k[0] == "none" or dict(k[1])["amplitude_V"] == 0.002
+    }
 
 
 @pytest.mark.slow
 def test_c_a_local_worker_killed_mid_campaign_loses_nothing(reference, tmp_path):
     out = tmp_path / "campaign"
     runs = out / "runs.jsonl"
-    p = subprocess.Popen([*FBS, "campaign", *SUBSET, "--jobs", "2", "--out", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [*FBS, "campaign", *SUBSET, "--jobs", "2", "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         wait_for_lines(runs, p)
         kept = runs.read_bytes()
         workers = pool_workers(p.pid)
         assert workers, "no pool worker found"
-        os.kill(workers[0], signal.SIGKILL)          # a worker this test's campaign spawned, without warning
+        os.kill(
+            workers[0], signal.SIGKILL
+        )  # a worker this test's campaign spawned, without warning
         _, err = p.communicate(timeout=HANG_S)
     finally:
         p.kill()
     assert p.returncode == 0, err
     assert "its worker process died" in err and "submitted again" in err
-    assert runs.read_bytes().startswith(kept)                      # nothing finished was lost or rewritten
-    assert by_run(lines_of(runs)) == _subset(reference)            # each run once, the same results
+    assert runs.read_bytes().startswith(kept)  # nothing finished was lost or rewritten
+    assert by_run(lines_of(runs)) == _subset(reference)  # each run once, the same results
 
 
 @pytest.mark.slow
 def test_c_a_dask_worker_killed_mid_campaign_loses_nothing(reference, cluster, tmp_path):
     out = tmp_path / "campaign"
     runs = out / "runs.jsonl"
-    p = subprocess.Popen([*FBS, "campaign", *SUBSET, "--scheduler", cluster.address, "--out", str(out)],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [*FBS, "campaign", *SUBSET, "--scheduler", cluster.address, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         wait_for_lines(runs, p)
         kept = runs.read_bytes()
-        cluster.kill(cluster.workers[0])            # the worker and its nanny, without warning
+        cluster.kill(cluster.workers[0])  # the worker and its nanny, without warning
         _, err = p.communicate(timeout=HANG_S)
     finally:
         p.kill()
@@ -234,7 +263,7 @@ def test_c_an_interrupted_campaign_keeps_its_runs_and_a_rerun_completes_it(refer
     done = kept.count(b"\n")
     assert 1 <= done < 4 and kept.endswith(b"\n")
     nulls = sum(r["effect"] == "none" for r in lines_of(runs))
-    cv = json.loads((out / "curves.json").read_text())            # the curves of what was done
+    cv = json.loads((out / "curves.json").read_text())  # the curves of what was done
     assert cv["complete"] is False and cv["done"] == done and cv["nulls"]["done"] == nulls
 
     r = fbs(*argv[3:])
@@ -253,16 +282,25 @@ def test_c_a_rerun_skips_finished_runs_retries_errors_and_drops_a_torn_line(refe
     subset = _subset(reference)
     nulls = [v for k, v in subset.items() if k[0] == "none"]
     failed = dict(subset[next(k for k in subset if k[0] != "none" and k[2] == 1)])
-    failed |= {"exit": 2, "error": "its worker process died (BrokenProcessPool: ...)", "named": [], "fitted": {}}
+    failed |= {
+        "exit": 2,
+        "error": "its worker process died (BrokenProcessPool: ...)",
+        "named": [],
+        "fitted": {},
+    }
     head = "".join(json.dumps(r | {"elapsed_s": 1.0}) + "\n" for r in [*nulls, failed]).encode()
-    runs.write_bytes(head + b'{"effect": "pickup_l')                # a writer killed mid-line
+    runs.write_bytes(head + b'{"effect": "pickup_l')  # a writer killed mid-line
     r = fbs("campaign", *SUBSET, "--jobs", "2", "--out", str(out))
     assert r.returncode == 0, r.stderr
     assert "dropped an unfinished last line" in r.stderr
-    assert "2 already done" in r.stderr and "1 earlier error(s) retried" in r.stderr and "2 to run" in r.stderr
+    assert (
+        "2 already done" in r.stderr
+        and "1 earlier error(s) retried" in r.stderr
+        and "2 to run" in r.stderr
+    )
     assert runs.read_bytes().startswith(head)
     recs = lines_of(runs)
-    assert len(recs) == 5                                           # 3 given + 2 run
+    assert len(recs) == 5  # 3 given + 2 run
     newest = {key(rec): {k: v for k, v in rec.items() if k != "elapsed_s"} for rec in recs}
     assert newest == subset
 
@@ -277,34 +315,67 @@ def _refused(capsys, argv: list[str]) -> str:
     return capsys.readouterr().err
 
 
-OTHER_RUN = {"effect": "bearing_friction", "grid": "stiffness_Nm_per_rad",
-             "params": {"stiffness_Nm_per_rad": 410.0, "To_Nm": 0.016, "eta_per_Nm": 1.6e6}, "seed": 1,
-             "record": {"duration_s": 74.0, "rate_hz": 1000.0, "mode": 3, "axis": "X"}, "exit": 0, "named": [],
-             "significant": False, "explained": True, "fitted": {}, "fitted_ci95": {}, "gap_before_db": 0.0,
-             "gap_after_db": 0.0, "warnings": [], "error": None, "elapsed_s": 1.0}
-NULL_300 = OTHER_RUN | {"effect": "none", "grid": None, "params": {},
-                        "record": OTHER_RUN["record"] | {"duration_s": 300.0}}
+OTHER_RUN = {
+    "effect": "bearing_friction",
+    "grid": "stiffness_Nm_per_rad",
+    "params": {"stiffness_Nm_per_rad": 410.0, "To_Nm": 0.016, "eta_per_Nm": 1.6e6},
+    "seed": 1,
+    "record": {"duration_s": 74.0, "rate_hz": 1000.0, "mode": 3, "axis": "X"},
+    "exit": 0,
+    "named": [],
+    "significant": False,
+    "explained": True,
+    "fitted": {},
+    "fitted_ci95": {},
+    "gap_before_db": 0.0,
+    "gap_after_db": 0.0,
+    "warnings": [],
+    "error": None,
+    "elapsed_s": 1.0,
+}
+NULL_300 = OTHER_RUN | {
+    "effect": "none",
+    "grid": None,
+    "params": {},
+    "record": OTHER_RUN["record"] | {"duration_s": 300.0},
+}
 
 BAD = {
     "workflow": (["gapp", "--effect", "pickup_line"], "unknown workflow 'gapp'"),
-    "effect": (["gap", "--effect", "pickup"], "unknown effect 'pickup'; the catalogue: bearing_friction, "),
+    "effect": (
+        ["gap", "--effect", "pickup"],
+        "unknown effect 'pickup'; the catalogue: bearing_friction, ",
+    ),
     "effect-none": (["gap", "--effect", "none"], "--effect none has nothing to detect"),
     "grid-form": (["gap", "--grid", "amplitude_V=0.001:0.002"], "expected PARAM=LO:HI:N"),
-    "grid-param": (["gap", "--grid", "amp=0.001:0.002:3"],
-                   "pickup_line has no parameter 'amp'; its parameters: freq_hz (1..450, default 200), amplitude_V"),
+    "grid-param": (
+        ["gap", "--grid", "amp=0.001:0.002:3"],
+        "pickup_line has no parameter 'amp'; its parameters: freq_hz (1..450, default 200), amplitude_V",
+    ),
     "grid-nan": (["gap", "--grid", "amplitude_V=nan:0.002:3"], "LO 'nan' is not a finite number"),
     "grid-inf": (["gap", "--grid", "amplitude_V=0.001:inf:3"], "HI 'inf' is not a finite number"),
     "grid-word": (["gap", "--grid", "amplitude_V=0.001:two:3"], "HI 'two' is not a number"),
     "grid-n0": (["gap", "--grid", "amplitude_V=0.001:0.002:0"], "N '0' must be 1 to 1000"),
-    "grid-n-frac": (["gap", "--grid", "amplitude_V=0.001:0.002:2.5"], "N '2.5' is not a whole number"),
+    "grid-n-frac": (
+        ["gap", "--grid", "amplitude_V=0.001:0.002:2.5"],
+        "N '2.5' is not a whole number",
+    ),
     "grid-n1": (["gap", "--grid", "amplitude_V=0.001:0.002:1"], "N = 1 is one value"),
     "grid-order": (["gap", "--grid", "amplitude_V=0.002:0.001:3"], "LO must be below HI"),
-    "grid-range": (["gap", "--grid", "amplitude_V=0.001:0.5:3"], "amplitude_V = 0.5 is outside the effect's range"),
-    "grid-log": (["gap", "--effect", "scale_factor_error", "--grid", "fraction=-0.1:0.5:3", "--log"],
-                 "LO must be above 0"),
+    "grid-range": (
+        ["gap", "--grid", "amplitude_V=0.001:0.5:3"],
+        "amplitude_V = 0.5 is outside the effect's range",
+    ),
+    "grid-log": (
+        ["gap", "--effect", "scale_factor_error", "--grid", "fraction=-0.1:0.5:3", "--log"],
+        "LO must be above 0",
+    ),
     "set-unknown": (["gap", "--set", "freq=50"], "pickup_line has no parameter 'freq'"),
     "set-grid": (["gap", "--set", "amplitude_V=0.001"], "amplitude_V is the --grid parameter"),
-    "set-range": (["gap", "--set", "freq_hz=900"], "freq_hz = 900 is outside the effect's range 1..450"),
+    "set-range": (
+        ["gap", "--set", "freq_hz=900"],
+        "freq_hz = 900 is outside the effect's range 1..450",
+    ),
     "set-twice": (["gap", "--set", "freq_hz=50,freq_hz=60"], "freq_hz is set twice"),
     "set-form": (["gap", "--set", "freq_hz"], "--set 'freq_hz': expected PARAM=VALUE"),
     "seeds-0": (["gap", "--seeds", "0"], "--seeds '0' must be 1 to 10000"),
@@ -315,10 +386,18 @@ BAD = {
     "out-file": (["gap"], "is not a directory"),
     "out-missing-parent": (["gap"], "does not exist"),
     "out-not-runs": (["gap"], "is not a campaign's runs file (line 1 is not JSON)"),
-    "out-other-effect": (["gap"], "holds runs of another campaign (line 1: bearing_friction over stiffness_Nm_per_rad"),
-    "out-other-record": (["gap"], "holds runs of another campaign (line 1: a null run, 300.0 s at 1000.0 Hz"),
-    "out-other-fixed": (["gap", "--set", "freq_hz=50"], "holds runs of another campaign (line 1: pickup_line over "
-                                                          "amplitude_V at freq_hz = 200.0"),
+    "out-other-effect": (
+        ["gap"],
+        "holds runs of another campaign (line 1: bearing_friction over stiffness_Nm_per_rad",
+    ),
+    "out-other-record": (
+        ["gap"],
+        "holds runs of another campaign (line 1: a null run, 300.0 s at 1000.0 Hz",
+    ),
+    "out-other-fixed": (
+        ["gap", "--set", "freq_hz=50"],
+        "holds runs of another campaign (line 1: pickup_line over amplitude_V at freq_hz = 200.0",
+    ),
 }
 
 
@@ -339,14 +418,24 @@ def test_bad_inputs_are_refused_before_anything_is_written(tmp_path, capsys, cas
         out = tmp_path / "no" / "camp"
     elif case.startswith("out-"):
         out.mkdir()
-        row = {"out-not-runs": None, "out-other-effect": OTHER_RUN, "out-other-record": NULL_300,
-               "out-other-fixed": OTHER_RUN | {"effect": "pickup_line", "grid": "amplitude_V",
-                                              "params": {"freq_hz": 200.0, "amplitude_V": 0.001}}}[case]
+        row = {
+            "out-not-runs": None,
+            "out-other-effect": OTHER_RUN,
+            "out-other-record": NULL_300,
+            "out-other-fixed": OTHER_RUN
+            | {
+                "effect": "pickup_line",
+                "grid": "amplitude_V",
+                "params": {"freq_hz": 200.0, "amplitude_V": 0.001},
+            },
+        }[case]
         (out / "runs.jsonl").write_text("not json\n" if row is None else json.dumps(row) + "\n")
     before = sorted((p.name, p.read_bytes()) for p in out.iterdir()) if out.is_dir() else None
     err = _refused(capsys, [*argv, "--out", str(out)])
     assert err.startswith("fbs campaign: error: ") and named in err, err
-    assert (sorted((p.name, p.read_bytes()) for p in out.iterdir()) if out.is_dir() else None) == before
+    assert (
+        sorted((p.name, p.read_bytes()) for p in out.iterdir()) if out.is_dir() else None
+    ) == before
     assert not (tmp_path / "no").exists() and (case.startswith("out-") or not out.exists())
 
 
@@ -369,12 +458,17 @@ def test_the_campaign_plan_resumes_runs_of_the_same_campaign_with_another_grid(t
     """Grid and seeds may change within a campaign: the runs already there are reused by key."""
     out = tmp_path / "camp"
     out.mkdir()
-    row = OTHER_RUN | {"effect": "pickup_line", "grid": "amplitude_V", "params": {"freq_hz": 200.0,
-                                                                                  "amplitude_V": 0.002}}
+    row = OTHER_RUN | {
+        "effect": "pickup_line",
+        "grid": "amplitude_V",
+        "params": {"freq_hz": 200.0, "amplitude_V": 0.002},
+    }
     (out / "runs.jsonl").write_text(json.dumps(row) + "\n" + json.dumps(row | {"seed": 7}) + "\n")
-    c = plan_of(_args(*EFFECT, "--grid", "amplitude_V=0.001:0.003:3", "--seeds", "3", "--out", str(out)))
+    c = plan_of(
+        _args(*EFFECT, "--grid", "amplitude_V=0.001:0.003:3", "--seeds", "3", "--out", str(out))
+    )
     assert c.grid.values == [0.001, 0.002, 0.003]
-    assert len(c.runs()) == 12 and len(c.todo()) == 11                    # seed 1 at 0.002 is done; seed 7 unused
+    assert len(c.runs()) == 12 and len(c.todo()) == 11  # seed 1 at 0.002 is done; seed 7 unused
     assert c.runs()[0][1] == ("none", None, {}, 1, 74.0)
 
 
@@ -394,9 +488,9 @@ def test_a_grid_is_n_distinct_values_from_lo_to_hi_or_refused(lo, hi, n, log):
         return
     v = g.values
     assert len(v) == n and v[0] == lo and v[-1] == hi
-    assert all(a < b for a, b in zip(v, v[1:]))                           # strictly increasing: distinct
+    assert all(a < b for a, b in zip(v, v[1:]))  # strictly increasing: distinct
     assert all(PICKUP.params[1].lo <= x <= PICKUP.params[1].hi for x in v)
-    assert v == parse_grid(text, PICKUP, log).values                       # the same text, the same values
+    assert v == parse_grid(text, PICKUP, log).values  # the same text, the same values
     if n > 2:
         steps = np.diff(np.log(v) if log else np.array(v))
         assert np.allclose(steps, steps[0], rtol=1e-6, atol=1e-12 * max(abs(hi), 1))
@@ -423,10 +517,17 @@ def test_grid_values_are_even_or_geometric_and_rounded():
 
 
 # ---------------------------------------------------------------------------- units: Wilson's interval
-@pytest.mark.parametrize("k, n, lo, hi", [          # Wilson (1927); values as scipy's binomtest gives them
-    (0, 10, 0.0, 0.27753), (10, 10, 0.72247, 1.0), (5, 10, 0.23659, 0.76341),
-    (1, 2, 0.09453, 0.90547), (81, 263, 0.25529, 0.36621), (0, 1, 0.0, 0.79345),
-])
+@pytest.mark.parametrize(
+    "k, n, lo, hi",
+    [  # Wilson (1927); values as scipy's binomtest gives them
+        (0, 10, 0.0, 0.27753),
+        (10, 10, 0.72247, 1.0),
+        (5, 10, 0.23659, 0.76341),
+        (1, 2, 0.09453, 0.90547),
+        (81, 263, 0.25529, 0.36621),
+        (0, 1, 0.0, 0.79345),
+    ],
+)
 def test_wilson_interval_known_values(k, n, lo, hi):
     got = wilson(k, n)
     assert got is not None
@@ -451,7 +552,9 @@ def test_wilson_interval_holds_the_estimate_and_narrows_with_n(n, data):
     assert 0.0 <= lo <= k / n <= hi <= 1.0
     lo4, hi4 = wilson(4 * k, 4 * n)
     assert hi4 - lo4 < hi - lo
-    assert wilson(n - k, n) == pytest.approx((1 - hi, 1 - lo), abs=1e-12)        # symmetric in k <-> n - k
+    assert wilson(n - k, n) == pytest.approx(
+        (1 - hi, 1 - lo), abs=1e-12
+    )  # symmetric in k <-> n - k
 
 
 def test_wilson_interval_of_nothing_is_none_and_of_impossible_counts_an_error():
@@ -461,13 +564,34 @@ def test_wilson_interval_of_nothing_is_none_and_of_impossible_counts_an_error():
 
 
 # ---------------------------------------------------------------------------- units: the curves
-def _row(effect: str, params: dict, seed: int, named: list[str], fitted: dict | None = None, *,
-         significant: bool | None = None, error: str | None = None) -> dict:
-    return {"effect": effect, "grid": "amplitude_V" if effect != "none" else None, "params": params, "seed": seed,
-            "record": campaign_task.record_spec(74.0), "exit": 0 if error is None else 2, "named": named,
-            "significant": bool(named) if significant is None else significant, "explained": True,
-            "fitted": fitted or {}, "fitted_ci95": {}, "gap_before_db": 1.0, "gap_after_db": 0.0, "warnings": [],
-            "error": error, "elapsed_s": 1.0}
+def _row(
+    effect: str,
+    params: dict,
+    seed: int,
+    named: list[str],
+    fitted: dict | None = None,
+    *,
+    significant: bool | None = None,
+    error: str | None = None,
+) -> dict:
+    return {
+        "effect": effect,
+        "grid": "amplitude_V" if effect != "none" else None,
+        "params": params,
+        "seed": seed,
+        "record": campaign_task.record_spec(74.0),
+        "exit": 0 if error is None else 2,
+        "named": named,
+        "significant": bool(named) if significant is None else significant,
+        "explained": True,
+        "fitted": fitted or {},
+        "fitted_ci95": {},
+        "gap_before_db": 1.0,
+        "gap_after_db": 0.0,
+        "warnings": [],
+        "error": error,
+        "elapsed_s": 1.0,
+    }
 
 
 def test_curves_of_synthetic_runs():
@@ -475,19 +599,36 @@ def test_curves_of_synthetic_runs():
 
     def params_at(v):
         return {"freq_hz": 200.0, "amplitude_V": v}
+
     lo, hi = params_at(0.001), params_at(0.002)
     rows = [
         # at 1 mV: seed 1 named right (+10 %), seed 2 named something else, seed 3 nothing, seed 4 an error
         _row("pickup_line", lo, 1, ["pickup_line"], {"amplitude_V": 0.0011, "freq_hz": 200.0}),
-        _row("pickup_line", lo, 2, ["flicker_noise", "pickup_line"], {"amplitude_V": 0.005, "freq_hz": 200.0}),
+        _row(
+            "pickup_line",
+            lo,
+            2,
+            ["flicker_noise", "pickup_line"],
+            {"amplitude_V": 0.005, "freq_hz": 200.0},
+        ),
         _row("pickup_line", lo, 3, []),
         _row("pickup_line", lo, 4, [], error="its worker process died"),
         # at 2 mV: all four right, errors -2 %, 0, +2 %, +4 %
-        *[_row("pickup_line", hi, s, ["pickup_line"], {"amplitude_V": 0.002 * (1 + e), "freq_hz": 200.0})
-          for s, e in zip((1, 2, 3, 4), (-0.02, 0.0, 0.02, 0.04))],
+        *[
+            _row(
+                "pickup_line",
+                hi,
+                s,
+                ["pickup_line"],
+                {"amplitude_V": 0.002 * (1 + e), "freq_hz": 200.0},
+            )
+            for s, e in zip((1, 2, 3, 4), (-0.02, 0.0, 0.02, 0.04))
+        ],
         # nulls: seed 1 significant with nothing named, seed 2 names an effect, seeds 3-4 quiet
-        _row("none", {}, 1, [], significant=True), _row("none", {}, 2, ["time_delay"]),
-        _row("none", {}, 3, []), _row("none", {}, 4, []),
+        _row("none", {}, 1, [], significant=True),
+        _row("none", {}, 2, ["time_delay"]),
+        _row("none", {}, 3, []),
+        _row("none", {}, 4, []),
     ]
     latest = {key(r): r for r in rows}
     cv = curves("pickup_line", grid, params_at, [1, 2, 3, 4], latest)
@@ -496,7 +637,7 @@ def test_curves_of_synthetic_runs():
     assert (p1["analysed"], p1["named_right"], p1["errors"]) == (3, 1, 1)
     assert p1["p_named"] == pytest.approx(1 / 3) and p1["p_named_ci95"] == wilson(1, 3)
     assert p1["first_named"] == {"pickup_line": 1, "flicker_noise": 1, "none": 1}
-    assert p1["param_error"]["amplitude_V"]["n"] == 1                      # only the run named right
+    assert p1["param_error"]["amplitude_V"]["n"] == 1  # only the run named right
     assert p1["param_error"]["amplitude_V"]["median"] == pytest.approx(0.1)
     assert (p2["analysed"], p2["named_right"], p2["p_named"]) == (4, 4, 1.0)
     e = p2["param_error"]["amplitude_V"]
@@ -506,7 +647,9 @@ def test_curves_of_synthetic_runs():
     assert p2["param_error"]["freq_hz"]["median"] == 0.0
     nl = cv["nulls"]
     assert (nl["analysed"], nl["false_alarms"], nl["significant"]) == (4, 2, 2)
-    assert nl["rate"] == 0.5 and nl["rate_ci95"] == wilson(2, 4) and nl["named"] == {"time_delay": 1}
+    assert (
+        nl["rate"] == 0.5 and nl["rate_ci95"] == wilson(2, 4) and nl["named"] == {"time_delay": 1}
+    )
 
     # a run not done yet leaves the curve incomplete, not wrong
     del latest[key(rows[-1])]
@@ -521,6 +664,7 @@ def test_curves_compare_a_derived_parameter_with_its_value_as_applied():
 
     def params_at(v):
         return {"stiffness_Nm_per_rad": v, "To_Nm": 0.02, "eta_per_Nm": 1.6e6}
+
     p = params_at(400.0)
     fitted = {"stiffness_Nm_per_rad": 440.0, "To_Nm": 0.02, "eta_per_Nm": 440.0 / 0.02**2}
     latest = {key(r): r for r in [_row("bearing_friction", p, 1, ["bearing_friction"], fitted)]}
@@ -532,30 +676,59 @@ def test_curves_compare_a_derived_parameter_with_its_value_as_applied():
 
 
 def test_curves_table_and_plot_of_synthetic_runs(tmp_path):
-    c = plan_of(_args(*EFFECT, "--grid", "amplitude_V=0.001:0.002:2", "--log", "--seeds", "2",
-                      "--set", "freq_hz=150", "--out", str(tmp_path / "camp")))
+    c = plan_of(
+        _args(
+            *EFFECT,
+            "--grid",
+            "amplitude_V=0.001:0.002:2",
+            "--log",
+            "--seeds",
+            "2",
+            "--set",
+            "freq_hz=150",
+            "--out",
+            str(tmp_path / "camp"),
+        )
+    )
     for s in (1, 2):
-        for r in (_row("none", {}, s, []),
-                  _row("pickup_line", c.params_at(0.002), s, ["pickup_line"], {"amplitude_V": 0.0021, "freq_hz": 150.0})):
+        for r in (
+            _row("none", {}, s, []),
+            _row(
+                "pickup_line",
+                c.params_at(0.002),
+                s,
+                ["pickup_line"],
+                {"amplitude_V": 0.0021, "freq_hz": 150.0},
+            ),
+        ):
             c.latest[key(r)] = r
     (tmp_path / "camp").mkdir()
     cv = campaign.compute_curves(c)
     campaign.write_curves(c, cv)
     md = (tmp_path / "camp" / "curves.md").read_text()
     assert "other parameters: freq_hz = 150" in md and "--set freq_hz=150 " in md and "--log" in md
-    assert "| 0.001 | 0 | 0 | - | - | - | - |" in md                      # not run yet
-    assert "| 0.002 | 2 | 2 | 1.00 | 0.34-1.00 | +5.0 % [+5.0 %, +5.0 %] | +0.0 % [+0.0 %, +0.0 %] |" in md
+    assert "| 0.001 | 0 | 0 | - | - | - | - |" in md  # not run yet
+    assert (
+        "| 0.002 | 2 | 2 | 1.00 | 0.34-1.00 | +5.0 % [+5.0 %, +5.0 %] | +0.0 % [+0.0 %, +0.0 %] |"
+        in md
+    )
     assert "0 of 2 (0.00, 95 % 0.00-0.66" in md
     assert "incomplete: 4 of 6 runs have a result" in md
     assert json.loads((tmp_path / "camp" / "curves.json").read_text()) == json.loads(json.dumps(cv))
     assert (tmp_path / "camp" / "curves.png").read_bytes()[:4] == b"\x89PNG"
-    assert sorted(p.name for p in (tmp_path / "camp").iterdir()) == ["curves.json", "curves.md", "curves.png"]
+    assert sorted(p.name for p in (tmp_path / "camp").iterdir()) == [
+        "curves.json",
+        "curves.md",
+        "curves.png",
+    ]
 
 
 # ---------------------------------------------------------------------------- units: the record
 def test_the_campaign_record_is_the_detection_limit_suites(tmp_path):
     """``campaign_task.simulate_record`` writes what the hidden-effect suite's ``make_hidden`` does."""
-    spec = importlib.util.spec_from_file_location("fbs_tests_gap_conftest_for_campaign", GAP_TESTS / "conftest.py")
+    spec = importlib.util.spec_from_file_location(
+        "fbs_tests_gap_conftest_for_campaign", GAP_TESTS / "conftest.py"
+    )
     suite = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(suite)
     kinds = {"ac_x_ctl": "ctl", "ac_x_inst": "inst", "gyro_x": "gyro", "pa_x": "pa"}
@@ -564,8 +737,12 @@ def test_the_campaign_record_is_the_detection_limit_suites(tmp_path):
 
     params = {"freq_hz": 120.0, "amplitude_V": 0.004}
     a = campaign_task.simulate_record(tmp_path / "a.h5", "pickup_line", params, 7, duration_s=5.0)
-    b = suite.make_hidden(tmp_path / "b.h5", ["pickup_line:" + ",".join(f"{k}={v!r}" for k, v in params.items())],
-                          seed=7, duration_s=5.0)
+    b = suite.make_hidden(
+        tmp_path / "b.h5",
+        ["pickup_line:" + ",".join(f"{k}={v!r}" for k, v in params.items())],
+        seed=7,
+        duration_s=5.0,
+    )
     with h5py.File(a) as fa, h5py.File(b) as fb:
         assert sorted(fa["channels"]) == sorted(fb["channels"]) == sorted(campaign_task.RANGES_V)
         for c in fa["channels"]:

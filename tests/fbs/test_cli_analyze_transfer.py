@@ -17,7 +17,11 @@ FS = 1000.0
 
 def _network(f):
     s = 2j * np.pi * f
-    return -(s / 10 + 1) * (s / 30 + 1) / ((s / 0.15 + 1) * (s / 200 + 1) * (s / 1200 + 1) * (s / 5000 + 1))
+    return (
+        -(s / 10 + 1)
+        * (s / 30 + 1)
+        / ((s / 0.15 + 1) * (s / 200 + 1) * (s / 1200 + 1) * (s / 5000 + 1))
+    )
 
 
 @pytest.fixture
@@ -25,15 +29,23 @@ def net_file(tmp_path):
     n = int(96 * FS)
     rng = np.random.default_rng(4)
     ac = rng.standard_normal(n) * 3e-3
-    pa = np.fft.irfft(np.fft.rfft(ac) * _network(np.fft.rfftfreq(n, 1 / FS)), n) + rng.standard_normal(n) * 1e-6
+    pa = (
+        np.fft.irfft(np.fft.rfft(ac) * _network(np.fft.rfftfreq(n, 1 / FS)), n)
+        + rng.standard_normal(n) * 1e-6
+    )
     path = tmp_path / "net.h5"
-    with RunWriter(path, rig="test", mode=3, rate_hz=FS, channels={"ac_x_ctl": "V", "pa_x": "V"}) as w:
+    with RunWriter(
+        path, rig="test", mode=3, rate_hz=FS, channels={"ac_x_ctl": "V", "pa_x": "V"}
+    ) as w:
         w.append({"ac_x_ctl": ac, "pa_x": pa})
     return path
 
 
 def test_transfer_json_has_the_measured_table_and_the_network_fit(net_file, capsys):
-    assert main(["analyze", "transfer", str(net_file), "--from", "ac_x_ctl", "--to", "pa_x", "--json"]) == 0
+    assert (
+        main(["analyze", "transfer", str(net_file), "--from", "ac_x_ctl", "--to", "pa_x", "--json"])
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["model"] == "network" and out["via"] is None and out["blocks"] == 8
     m = out["measured"]
@@ -48,19 +60,38 @@ def test_transfer_json_has_the_measured_table_and_the_network_fit(net_file, caps
 
 
 def test_transfer_text_and_plot(net_file, tmp_path, capsys):
-    assert main(["analyze", "transfer", str(net_file), "--from", "ac_x_ctl", "--to", "pa_x", "--fit", "none",
-                 "--out", str(tmp_path / "o")]) == 0
+    assert (
+        main(
+            [
+                "analyze",
+                "transfer",
+                str(net_file),
+                "--from",
+                "ac_x_ctl",
+                "--to",
+                "pa_x",
+                "--fit",
+                "none",
+                "--out",
+                str(tmp_path / "o"),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "ac_x_ctl -> pa_x" in text and "fit over" not in text
     assert (tmp_path / "o" / "net-ac_x_ctl-pa_x.png").stat().st_size > 0
 
 
-@pytest.mark.parametrize("extra, message", [
-    (["--to", "pa_q"], "no channel pa_q"),
-    (["--to", "pa_x", "--seg-s", "32"], "fewer than 8 blocks"),
-    (["--to", "pa_x", "--start", "200"], "leave no samples"),
-    (["--to", "pa_x", "--period", "16", "--blocks", "8"], "period"),
-])
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--to", "pa_q"], "no channel pa_q"),
+        (["--to", "pa_x", "--seg-s", "32"], "fewer than 8 blocks"),
+        (["--to", "pa_x", "--start", "200"], "leave no samples"),
+        (["--to", "pa_x", "--period", "16", "--blocks", "8"], "period"),
+    ],
+)
 def test_transfer_bad_input_is_exit_2_naming_it(net_file, capsys, extra, message):
     assert main(["analyze", "transfer", str(net_file), "--from", "ac_x_ctl", *extra]) == 2
     assert message in capsys.readouterr().err

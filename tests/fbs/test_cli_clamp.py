@@ -9,6 +9,9 @@ from fbs.cli import main
 
 def test_clamp_on_and_off_print_the_state(capsys):
     assert main(["clamp", "on", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1]) == {"clamped": True, "mode": 1}
+    assert json.loads(capsys.readouterr().out.strip().splitlines()[-1]) == {
+        "clamped": True,
+        "mode": 1,
+    }
     assert main(["clamp", "off"]) == 0
     assert "released" in capsys.readouterr().out

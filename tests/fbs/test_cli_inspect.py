@@ -15,8 +15,15 @@ from fbs.cli import main
 
 def test_inspect_prints_channels_units_rate_duration_status_and_events(tmp_path, capsys):
     p = tmp_path / "r.h5"
-    with RunWriter(p, rig="sim?warm=1", mode=3, rate_hz=200.0, channels={"gyro_x": "V", "theta_x": "rad"},
-                   axis="X", procedure="survey") as w:
+    with RunWriter(
+        p,
+        rig="sim?warm=1",
+        mode=3,
+        rate_hz=200.0,
+        channels={"gyro_x": "V", "theta_x": "rad"},
+        axis="X",
+        procedure="survey",
+    ) as w:
         w.append(np.zeros((1000, 2)))
         w.event(0.0, "mode", "mode 3")
         w.event(2.5, "gap", "ADC samples 500..509 lost (missing frame)")

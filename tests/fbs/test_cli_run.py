@@ -40,27 +40,56 @@ def test_bad_parameters_exit_2_before_the_rig_moves(tmp_path):
     assert r.returncode == 2 and "unknown parameter(s) nonsense" in r.stderr
     r = fbs("run", "earth-rate", "--out", str(tmp_path), "--axis", "X")
     assert r.returncode == 2 and "--axis does not apply" in r.stderr
-    r = fbs("run", "earth-rate", "--rig", "serial:///dev/null?can=virtual:x", "--sim-config", "a.toml")
+    r = fbs(
+        "run", "earth-rate", "--rig", "serial:///dev/null?can=virtual:x", "--sim-config", "a.toml"
+    )
     assert r.returncode == 2 and "--sim-config applies to the simulated rig only" in r.stderr
     assert not list(tmp_path.glob("*.h5"))
 
 
 @pytest.mark.slow
 def test_limits_failed_exits_1_with_the_json_keys(tmp_path):
-    r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--param", "n_spindle=4",
-            "--param", "tilts_deg=[0, 90, 45]", "--param", "average_s=20", "--param", "kto_tolerance=1e-6")
+    r = fbs(
+        "run",
+        "earth-rate",
+        "--rig",
+        RIG,
+        "--out",
+        str(tmp_path),
+        "--json",
+        "--param",
+        "n_spindle=4",
+        "--param",
+        "tilts_deg=[0, 90, 45]",
+        "--param",
+        "average_s=20",
+        "--param",
+        "kto_tolerance=1e-6",
+    )
     assert r.returncode == 1, r.stderr
     out = json.loads(r.stdout)
-    figures = ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g", "g_drift_y_urad_per_s_per_g",
-               "g_drift_z_urad_per_s_per_g"]
+    figures = [
+        "K_TO_urad_per_s_per_V",
+        "drift_urad_per_s",
+        "g_drift_x_urad_per_s_per_g",
+        "g_drift_y_urad_per_s_per_g",
+        "g_drift_z_urad_per_s_per_g",
+    ]
     assert list(out) == [*HEAD, *figures, "file", *(f"{k}_ci95" for k in figures), "resolved"]
     assert (out["procedure"], out["verdict"], out["status"]) == ("earth-rate", "fail", "complete")
     assert out["rig"] == RIG and out["simulated"] is True
     assert_valid_result(out)
     for k in figures:
-        assert set(out[f"{k}_ci95"]) == set(out[k]) == set(out["resolved"][k]) == {"X", "Y", "Z", "XRD"}
+        assert (
+            set(out[f"{k}_ci95"])
+            == set(out[k])
+            == set(out["resolved"][k])
+            == {"X", "Y", "Z", "XRD"}
+        )
         for ch, v in out[k].items():
-            assert (v is None) == (not out["resolved"][k][ch])  # an unresolved figure is no bare number
+            assert (v is None) == (
+                not out["resolved"][k][ch]
+            )  # an unresolved figure is no bare number
     assert Path(out["file"]).exists()
 
 
@@ -69,8 +98,13 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     """Ctrl-C mid-run -> exit 2, file aborted, rig safe; --resume completes it; K_TO within 0.5 %
     and (stopwatch, using that K_TO from --out) K_g within 2 % of the default rig's values."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    p = subprocess.Popen([*FBS, "run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    p = subprocess.Popen(
+        [*FBS, "run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+    )
     path = tmp_path / "earth-rate.h5"
     t_end = time.monotonic() + 300
     done = 0
@@ -86,8 +120,13 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     p.send_signal(signal.SIGINT)
     stdout, stderr = p.communicate(timeout=120)
     assert p.returncode == 2, stderr
-    figures = ["K_TO_urad_per_s_per_V", "drift_urad_per_s", "g_drift_x_urad_per_s_per_g", "g_drift_y_urad_per_s_per_g",
-               "g_drift_z_urad_per_s_per_g"]
+    figures = [
+        "K_TO_urad_per_s_per_V",
+        "drift_urad_per_s",
+        "g_drift_x_urad_per_s_per_g",
+        "g_drift_y_urad_per_s_per_g",
+        "g_drift_z_urad_per_s_per_g",
+    ]
     # an abort keeps every figure's shape: per channel, each None, unresolved (issue 37)
     out = json.loads(stdout)
     assert_valid_result(out)
@@ -104,27 +143,29 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     summary = json.loads((tmp_path / "earth-rate.json").read_text())
     assert summary["verdict"] == "aborted" and len(summary["steps_done"]) == n_done
 
-    r = fbs("run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--resume", str(path))
+    r = fbs(
+        "run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json", "--resume", str(path)
+    )
     assert r.returncode == 0, r.stderr
     er = json.loads(r.stdout)
     assert_valid_result(er)
-    assert list(er)[:len(HEAD) + len(figures) + 1] == [*HEAD, *figures, "file"]
+    assert list(er)[: len(HEAD) + len(figures) + 1] == [*HEAD, *figures, "file"]
     assert er["file"].endswith("earth-rate-2.h5")
     resumed = json.loads((tmp_path / "earth-rate-2.json").read_text())
-    assert len(resumed["steps_resumed"]) == n_done - 1   # every data step done before the abort
+    assert len(resumed["steps_resumed"]) == n_done - 1  # every data step done before the abort
     for ch, kto in KTO.items():
         assert er["K_TO_urad_per_s_per_V"][ch] == pytest.approx(kto, rel=5e-3)
 
     r = fbs("run", "stopwatch", "--rig", RIG, "--out", str(tmp_path), "--json")
     assert r.returncode == 0, r.stderr
     sw = json.loads(r.stdout)
-    assert list(sw)[len(HEAD):len(HEAD) + 3] == ["K_g_mV_per_urad", "h_over_k_s", "file"]
+    assert list(sw)[len(HEAD) : len(HEAD) + 3] == ["K_g_mV_per_urad", "h_over_k_s", "file"]
     assert_valid_result(sw)
     for ch, kg in KG.items():
         assert sw["K_g_mV_per_urad"][ch] == pytest.approx(kg, rel=2e-2)
         assert sw["K_g_mV_per_urad_ci95"][ch][0] <= kg <= sw["K_g_mV_per_urad_ci95"][ch][1]
         assert sw["resolved"]["K_g_mV_per_urad"][ch] and not sw["resolved"]["h_over_k_s"][ch]
-    assert "(earth-rate)" in (tmp_path / "stopwatch.md").read_text()   # the measured K_TO was used
+    assert "(earth-rate)" in (tmp_path / "stopwatch.md").read_text()  # the measured K_TO was used
 
 
 @pytest.mark.slow

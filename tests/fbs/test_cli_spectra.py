@@ -52,9 +52,9 @@ def _assert_png(path, min_bytes=15_000):
     raw = path.read_bytes()
     assert raw[:8] == PNG_MAGIC
     assert len(raw) > min_bytes, f"{path.name} is only {len(raw)} bytes"
-    img = matplotlib.image.imread(path)               # decodes the whole image
+    img = matplotlib.image.imread(path)  # decodes the whole image
     assert img.shape[0] > 400 and img.shape[1] > 600
-    assert img[..., :3].std() > 0.05                  # not a blank canvas
+    assert img[..., :3].std() > 0.05  # not a blank canvas
 
 
 def test_writes_psd_and_coherence_pngs(result):
@@ -62,8 +62,12 @@ def test_writes_psd_and_coherence_pngs(result):
     for p in [*result.psd_png.values(), *result.coherence_png.values()]:
         assert p.parent == result.out_dir
         _assert_png(p)
-    assert sorted(p.name for p in result.out_dir.iterdir()) == ["coherence_a_b.png", "psd_a.png", "psd_b.png",
-                                                                "spectra.csv"]
+    assert sorted(p.name for p in result.out_dir.iterdir()) == [
+        "coherence_a_b.png",
+        "psd_a.png",
+        "psd_b.png",
+        "spectra.csv",
+    ]
 
 
 def test_csv_has_the_columns_and_numbers_of_the_estimate(result):
@@ -85,7 +89,7 @@ def test_the_tone_survives_as_a_kept_point_and_noise_keeps_almost_nothing(result
     for ch in ("a", "b"):
         b = result.bands[ch]
         assert tone_bin in b.kept_f, f"{ch}: kept {b.kept_f}"
-        assert np.all(np.abs(b.kept_f - TONE_HZ) < 4 * c.resolution_hz)   # only the tone's main lobe
+        assert np.all(np.abs(b.kept_f - TONE_HZ) < 4 * c.resolution_hz)  # only the tone's main lobe
     coh = c.coherence()[:, 0, 1]
     assert coh[np.argmin(np.abs(c.f - TONE_HZ))] > 0.95
     # the defaults: 2048-sample (10.24 s) segments, 22 of them at 50 % overlap
@@ -124,19 +128,23 @@ def test_too_short_a_file_is_an_error(tmp_path):
 
 
 def test_segment_length_rule():
-    assert choose_nperseg(3_600_000, 1000.0) == 8192           # nearest 2^k to 10 s
-    assert choose_nperseg(30_000, 1000.0) == 4096              # 8192 gives only 6 segments
-    assert choose_nperseg(1_000, 1000.0) == 256                # never below 256
-    assert choose_nperseg(10**6, 1000.0, seg_s=2.5) == 2500    # --seg-s is taken as asked
+    assert choose_nperseg(3_600_000, 1000.0) == 8192  # nearest 2^k to 10 s
+    assert choose_nperseg(30_000, 1000.0) == 4096  # 8192 gives only 6 segments
+    assert choose_nperseg(1_000, 1000.0) == 256  # never below 256
+    assert choose_nperseg(10**6, 1000.0, seg_s=2.5) == 2500  # --seg-s is taken as asked
     with pytest.raises(ValueError):
         choose_nperseg(10**6, 1000.0, seg_s=0)
 
 
 def test_registered_in_fbs_main_exits_2_naming_channels(tone_file, tmp_path, capsys):
     from fbs import cli
+
     sub = next(a for a in cli.build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     assert "spectra" in sub.choices
-    assert cli.main(["spectra", str(tone_file), "--channels", "a,nope", "--out", str(tmp_path / "o")]) == 2
+    assert (
+        cli.main(["spectra", str(tone_file), "--channels", "a,nope", "--out", str(tmp_path / "o")])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "fbs spectra: error:" in err and "its channels are a, b" in err
 
@@ -146,11 +154,15 @@ def test_plots_leave_no_pyplot_state(tmp_path):
     figures = len(sys.modules["matplotlib._pylab_helpers"].Gcf.figs) if had_pyplot else 0
     f = np.arange(513) * 0.5
     p = 1.0 + np.random.default_rng(0).exponential(1.0, f.size)
-    _assert_png(plot_psd(tmp_path / "p.png", f, p, channel="x", units="m/s", dof=20.0, nperseg=1024),
-                min_bytes=10_000)
-    _assert_png(plot_coherence(tmp_path / "c.png", f, p / p.max(), pair=("x", "y"), n_segments=10),
-                min_bytes=10_000)
-    if had_pyplot:    # someone else imported it: at least no figure of ours is registered there
+    _assert_png(
+        plot_psd(tmp_path / "p.png", f, p, channel="x", units="m/s", dof=20.0, nperseg=1024),
+        min_bytes=10_000,
+    )
+    _assert_png(
+        plot_coherence(tmp_path / "c.png", f, p / p.max(), pair=("x", "y"), n_segments=10),
+        min_bytes=10_000,
+    )
+    if had_pyplot:  # someone else imported it: at least no figure of ours is registered there
         assert len(sys.modules["matplotlib._pylab_helpers"].Gcf.figs) == figures
     else:
         assert "matplotlib.pyplot" not in sys.modules

@@ -26,21 +26,40 @@ ROOT = Path(__file__).parents[2]
 FBS = [sys.executable, "-m", "fbs.cli"]
 #: what the parser must not load: numerics, HDF5, plots, CAN, the UI, the cluster, the plant,
 #: and this project's rig and runner (they load numpy and h5py)
-HEAVY_PACKAGES = {"numpy", "scipy", "numba", "h5py", "matplotlib", "can", "canopen", "textual",
-                  "dask", "distributed", "allantools", "simhw", "daq"}
+HEAVY_PACKAGES = {
+    "numpy",
+    "scipy",
+    "numba",
+    "h5py",
+    "matplotlib",
+    "can",
+    "canopen",
+    "textual",
+    "dask",
+    "distributed",
+    "allantools",
+    "simhw",
+    "daq",
+}
 HEAVY_MODULES = {"drivers.rig", "procedures.runner", "procedures.params", "console.app"}
 
 
 def _python(code: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True,
-                          text=True, timeout=600, cwd=ROOT)
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+    )
 
 
 USAGE_ERRORS = [["run", "stopwatch", "--no-such-option"], ["no-such-command"]]
 
 
-@pytest.mark.parametrize("argv", [["--version"], ["--help"], ["run", "--help"],
-                                  ["simulate", "--help"], *USAGE_ERRORS])
+@pytest.mark.parametrize(
+    "argv", [["--version"], ["--help"], ["run", "--help"], ["simulate", "--help"], *USAGE_ERRORS]
+)
 def test_the_parser_loads_no_heavy_module(argv):
     r = _python(f"""
         import sys
@@ -60,15 +79,20 @@ def test_the_parser_loads_no_heavy_module(argv):
 def test_the_registry_names_every_command_and_what_each_loads():
     sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
     assert list(sub.choices) == list(COMMANDS)
-    load(*COMMANDS)     # every module a command loads exists (the bench, batch workers load them)
-    assert "procedures.calibrations.stopwatch" in sys.modules   # "package.*": each of its modules
+    load(*COMMANDS)  # every module a command loads exists (the bench, batch workers load them)
+    assert "procedures.calibrations.stopwatch" in sys.modules  # "package.*": each of its modules
 
 
 def test_a_reader_that_leaves_early_ends_it_quietly_with_exit_2():
     """``fbs run stopwatch --help | head`` ended in a BrokenPipeError traceback, exit 1. The
     pipe's reading end is closed before the child writes: every write to it fails."""
-    p = subprocess.Popen([*FBS, "run", "stopwatch", "--help"], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    p = subprocess.Popen(
+        [*FBS, "run", "stopwatch", "--help"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        cwd=ROOT,
+    )
     assert p.stdout is not None and p.stderr is not None
     p.stdout.close()
     err = p.stderr.read()
@@ -95,8 +119,10 @@ def test_a_defect_is_one_line_and_its_traceback_is_shown_with_v(capsys, monkeypa
     """Without ``-v``: one line, "internal error", please report, how to see the traceback; with
     ``-v``: the traceback on stderr above that line. Exit 2 both ways."""
     rec = tmp_path / "r.h5"
-    assert main(["simulate", "--mode", "3", "--duration", "1", "--rate", "100",
-                 "--out", str(rec)]) == 0
+    assert (
+        main(["simulate", "--mode", "3", "--duration", "1", "--rate", "100", "--out", str(rec)])
+        == 0
+    )
     capsys.readouterr()
     monkeypatch.setattr(fbs.inspect, "describe", _defect)
     assert main(["inspect", str(rec)]) == EXIT_ERROR

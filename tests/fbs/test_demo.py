@@ -24,8 +24,15 @@ RECORDED = Path(__file__).resolve().parent.parent / "data" / "demo"
 
 
 def _summary(name: str, values: dict, **params) -> RunSummary:
-    return RunSummary(name, Path(f"{name}.h5"), "complete", Verdict.PASS, values=values, params=params,
-                      report=Path(f"{name}.md"))
+    return RunSummary(
+        name,
+        Path(f"{name}.h5"),
+        "complete",
+        Verdict.PASS,
+        values=values,
+        params=params,
+        report=Path(f"{name}.md"),
+    )
 
 
 def _row(text: str, quantity: str) -> list[str]:
@@ -40,13 +47,37 @@ def _row(text: str, quantity: str) -> list[str]:
 def test_report_sets_each_figure_beside_thesis_and_sim(tmp_path):
     cfg = SimConfig()
     cfg.gyro["X"].torquer_scale_urad_per_s_per_V = 30.0
-    runs = [_summary("earth-rate", {"K_TO_urad_per_s_per_V": {"X": 30.3}, "drift_urad_per_s": {"X": 0.3},
-                                    "K_TO_urad_per_s_per_V_ci95": {"X": [30.0, 30.6]}}),
-            _summary("hysteresis", {"To_Nm": {"Y": 0.0158}, "eta_per_Nm": {"Y": 1.7e6},
-                                    "stiffness_Nm_per_rad": {"Y": 424.0}}, axis="Y"),
-            _summary("survey", {"platform_rms_urad": {"X": 1.3}, "dip_hz": {"X": 3.84}})]
+    runs = [
+        _summary(
+            "earth-rate",
+            {
+                "K_TO_urad_per_s_per_V": {"X": 30.3},
+                "drift_urad_per_s": {"X": 0.3},
+                "K_TO_urad_per_s_per_V_ci95": {"X": [30.0, 30.6]},
+            },
+        ),
+        _summary(
+            "hysteresis",
+            {
+                "To_Nm": {"Y": 0.0158},
+                "eta_per_Nm": {"Y": 1.7e6},
+                "stiffness_Nm_per_rad": {"Y": 424.0},
+            },
+            axis="Y",
+        ),
+        _summary("survey", {"platform_rms_urad": {"X": 1.3}, "dip_hz": {"X": 3.84}}),
+    ]
     text = write_campaign_report(tmp_path, runs, SimTruth(cfg), 100.0, 0).read_text()
-    assert _row(text, "K_TO X")[:8] == ["K_TO X", "urad/s/V", "30.3", "[30, 30.6]", "31.6", "30", "+1.00 %", "yes"]
+    assert _row(text, "K_TO X")[:8] == [
+        "K_TO X",
+        "urad/s/V",
+        "30.3",
+        "[30, 30.6]",
+        "31.6",
+        "30",
+        "+1.00 %",
+        "yes",
+    ]
     assert _row(text, "To Y")[2:7] == ["0.0158", "-", "0.016", "0.016", "-1.25 %"]
     assert _row(text, "closed-loop dip X")[2:4] == ["3.84", "-"]
     assert _row(text, "closed-loop dip X")[4] == "3.5"
@@ -60,29 +91,56 @@ def test_campaign_covers_every_procedure_in_the_order_their_results_need():
     """Issue 40 item 1: the campaign is the catalogue's, each procedure saying its runs and its
     place (``demo_runs``, ``demo_order``); nothing else lists them."""
     from procedures.calibrations import catalogue
+
     runs = campaign()
     assert {name for name, _, _ in runs} == set(catalogue())
     order = [name for name, _, _ in runs]
-    assert order == ["earth-rate", "stopwatch", "hysteresis", "hysteresis", "baseline", "survey",
-                     "excitation", "excitation", "drift"]
-    assert runs[7] == ("excitation", "X", ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40"))
+    assert order == [
+        "earth-rate",
+        "stopwatch",
+        "hysteresis",
+        "hysteresis",
+        "baseline",
+        "survey",
+        "excitation",
+        "excitation",
+        "drift",
+    ]
+    assert runs[7] == (
+        "excitation",
+        "X",
+        ("mode=4", "quiet_s=64", "excite_s=160", "mode_settle_s=40"),
+    )
 
 
 def test_report_sets_the_baseline_beside_table_1(tmp_path):
     """Issue 37 item 11: the X instrumentation NEA's thesis value is Table 1's X figure (0.610),
     not its Y one (0.550, which Ch. V B.3 also gives for X: the report says so); the simulated
     instrumentation NEA is the rig's noise through that channel's filters."""
-    values = {"nea_urad": {"ctl": 0.447, "inst": 0.567, "z": 2.79},
-              "nea_urad_ci95": {"ctl": [0.443, 0.451], "inst": [0.56, 0.57], "z": [2.7, 2.9]},
-              "pickoff_lines_hz": [70.6, 71.4, 102.0, 187.0]}
-    text = write_campaign_report(tmp_path, [_summary("baseline", values, axis="X")], SimTruth(SimConfig()), 1.0,
-                                 0).read_text()
-    assert _row(text, "autocollimator NEA 0.1-100 Hz X ctl")[2:6] == ["0.447", "[0.443, 0.451]", "0.451", "0.451"]
+    values = {
+        "nea_urad": {"ctl": 0.447, "inst": 0.567, "z": 2.79},
+        "nea_urad_ci95": {"ctl": [0.443, 0.451], "inst": [0.56, 0.57], "z": [2.7, 2.9]},
+        "pickoff_lines_hz": [70.6, 71.4, 102.0, 187.0],
+    }
+    text = write_campaign_report(
+        tmp_path, [_summary("baseline", values, axis="X")], SimTruth(SimConfig()), 1.0, 0
+    ).read_text()
+    assert _row(text, "autocollimator NEA 0.1-100 Hz X ctl")[2:6] == [
+        "0.447",
+        "[0.443, 0.451]",
+        "0.451",
+        "0.451",
+    ]
     inst = _row(text, "autocollimator NEA 0.1-100 Hz X inst")
-    assert inst[4] == "0.61" and 0.55 < float(inst[5]) < 0.6      # wider filters than the control channel's
+    assert (
+        inst[4] == "0.61" and 0.55 < float(inst[5]) < 0.6
+    )  # wider filters than the control channel's
     assert "Table 1, p. 40" in text and "the thesis is inconsistent for X" in text
     assert "found 70.600, 71.400, 102.000, 187.000" in text
-    assert thesis.BASELINE["nea_urad"]["X"]["inst"] == 0.610 and thesis.BASELINE["nea_urad"]["Y"]["inst"] == 0.550
+    assert (
+        thesis.BASELINE["nea_urad"]["X"]["inst"] == 0.610
+        and thesis.BASELINE["nea_urad"]["Y"]["inst"] == 0.550
+    )
 
 
 def test_the_survey_runs_after_the_baseline_and_sets_its_net_figure_beside_the_thesis(tmp_path):
@@ -91,17 +149,25 @@ def test_the_survey_runs_after_the_baseline_and_sets_its_net_figure_beside_the_t
     beside the thesis's 1.6 / 3.6 urad, an unresolved one as such."""
     order = [name for name, _, _ in campaign()]
     assert order.index("baseline") < order.index("survey")
-    values = {"platform_rms_urad": {"X": 0.73, "Y": 3.21},
-              "platform_rms_baseline_net_urad": {"X": 0.447, "Y": None},
-              "platform_rms_baseline_net_urad_ci95": {"X": [0.42, 0.472], "Y": [0.0, 1.13]},
-              "resolved": {"platform_rms_baseline_net_urad": {"X": True, "Y": False}},
-              "baseline": {"file": "baseline.h5", "axis": "X"}, "record_s": 60.0}
-    text = write_campaign_report(tmp_path, [_summary("survey", values)], SimTruth(SimConfig()), 1.0, 0).read_text()
+    values = {
+        "platform_rms_urad": {"X": 0.73, "Y": 3.21},
+        "platform_rms_baseline_net_urad": {"X": 0.447, "Y": None},
+        "platform_rms_baseline_net_urad_ci95": {"X": [0.42, 0.472], "Y": [0.0, 1.13]},
+        "resolved": {"platform_rms_baseline_net_urad": {"X": True, "Y": False}},
+        "baseline": {"file": "baseline.h5", "axis": "X"},
+        "record_s": 60.0,
+    }
+    text = write_campaign_report(
+        tmp_path, [_summary("survey", values)], SimTruth(SimConfig()), 1.0, 0
+    ).read_text()
     assert _row(text, "gyro-deduced platform rms X (thesis method)")[2] == "0.73"
     net = _row(text, "platform rms X, net of the baseline's pickoff noise")
     assert net[2:5] == ["0.447", "[0.42, 0.472]", "1.6"]
-    assert _row(text, "platform rms Y, net of the baseline's pickoff noise")[2:5] == ["-", "not resolved: [0, 1.13]",
-                                                                                       "3.6"]
+    assert _row(text, "platform rms Y, net of the baseline's pickoff noise")[2:5] == [
+        "-",
+        "not resolved: [0, 1.13]",
+        "3.6",
+    ]
 
 
 def test_the_recorded_campaigns_intervals_cover_the_simulated_truth(tmp_path):
@@ -119,7 +185,10 @@ def test_the_recorded_campaigns_intervals_cover_the_simulated_truth(tmp_path):
     # the only rows with no truth are comparisons, not figures of the rig: the network against its
     # design, the cross-axis coherence
     untrue = [r.quantity for r in figures if r.simulated is None]
-    assert all(q.startswith(("compensation network vs design", "X-Y autocollimator coherence")) for q in untrue), untrue
+    assert all(
+        q.startswith(("compensation network vs design", "X-Y autocollimator coherence"))
+        for q in untrue
+    ), untrue
     assert all(r.simulated is not None for r in rows if "platform rms" in r.quantity)
     exact, missed, approx, _ = coverage(rows)
     n, k = len(exact), len(missed)
@@ -148,14 +217,21 @@ def test_amplitude_dependent_rows_take_the_bearing_at_the_test_amplitude():
     sim = SimTruth(SimConfig(), 0)
     excitation = [s for s in recorded if s.procedure == "excitation"]
     rows = {r.quantity: r for r in _rows(excitation, sim)}
-    k0 = 1.6e6 * 0.016 ** 2
+    k0 = 1.6e6 * 0.016**2
     # labelled with the motion the run measured (its ``excitation_amplitude_urad``)
-    stiff = next(r for q, r in rows.items() if q.startswith("bearing stiffness at ") and q.endswith(" urad rms X"))
+    stiff = next(
+        r
+        for q, r in rows.items()
+        if q.startswith("bearing stiffness at ") and q.endswith(" urad rms X")
+    )
     moved = excitation[0].values["excitation_amplitude_urad"]["X"]
     assert 1.0 < moved < 4.0 and "about" not in stiff.quantity
     assert stiff.truth is not None and stiff.truth.kind == "offline"
     eq = dahl_equivalent_linear(SimConfig(), "X", float(excitation[0].values["level_V_rms"]))
-    assert stiff.simulated == pytest.approx(eq.stiffness_Nm_per_rad) and eq.stiffness_Nm_per_rad < 0.995 * k0
+    assert (
+        stiff.simulated == pytest.approx(eq.stiffness_Nm_per_rad)
+        and eq.stiffness_Nm_per_rad < 0.995 * k0
+    )
     small = sorted(abs(p) for p in linearized_poles(SimConfig(), 3, "X") if 100 < abs(p) < 150)
     c4 = rows["closed-loop root c4 X (Mode 3)"].simulated
     assert c4 is not None and abs(c4 - small[0]) > 0.1

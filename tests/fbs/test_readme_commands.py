@@ -43,10 +43,12 @@ def test_every_command_is_in_the_readme_and_every_option_shown_is_real():
     for ln in lines:
         cmd = ln.split()[1]
         if cmd not in subs:
-            continue                                   # "fbs --version;  fbs -v COMMAND"
+            continue  # "fbs --version;  fbs -v COMMAND"
         parser = subs[cmd]
         options = {s for a in parser._actions for s in a.option_strings}
-        for nested in _subparsers(parser).values():    # fbs analyze hysteresis|transfer
+        for nested in _subparsers(parser).values():  # fbs analyze hysteresis|transfer
             options |= {s for a in nested._actions for s in a.option_strings}
         shown = set(re.findall(r"(?<![\w-])(--[a-z][a-z-]*)", ln))
-        assert shown <= options, f"README: {ln!r} shows {sorted(shown - options)}, which fbs {cmd} does not take"
+        assert shown <= options, (
+            f"README: {ln!r} shows {sorted(shown - options)}, which fbs {cmd} does not take"
+        )

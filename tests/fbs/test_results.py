@@ -27,9 +27,20 @@ ROOT = Path(__file__).parents[2]
 NAN = re.compile(r"\bnan\b")
 RIG = "sim?warm=1&seed=5&watchdog=5"
 #: stopwatch on one channel, one repetition (K_g not resolved: no spread), short holds
-ONE_REPETITION = ["--param", 'channels=["X"]', "--param", "repetitions=1",
-                  "--param", "min_caged_s=10", "--param", "hold_s=5", "--param", "null_s=5",
-                  "--param", "restore_s=10"]
+ONE_REPETITION = [
+    "--param",
+    'channels=["X"]',
+    "--param",
+    "repetitions=1",
+    "--param",
+    "min_caged_s=10",
+    "--param",
+    "hold_s=5",
+    "--param",
+    "null_s=5",
+    "--param",
+    "restore_s=10",
+]
 
 
 def fbs(*args: str) -> subprocess.CompletedProcess:
@@ -56,6 +67,7 @@ def test_the_rig_states_whether_it_is_simulated(tmp_path):
     import inspect
 
     from drivers.rig import assemble
+
     assert inspect.signature(Rig).parameters["simulated"].default is False
     assert inspect.signature(assemble).parameters["simulated"].default is False
 
@@ -65,10 +77,19 @@ def test_an_aborted_runs_json_keeps_every_figures_shape(name):
     """Item 3: before any analysis every headline figure is {channel: None}, its interval too,
     resolved {K: {channel: False}}; the object names the procedure, status and verdict."""
     proc = catalogue()[name]()
-    s = RunSummary(name, Path(f"/o/{name}.h5"), "aborted: interrupted", Verdict.ABORTED,
-                   provenance={"rig": "sim", "simulated": True, "sim_config": None,
-                               "software": {"name": "fbs-hil", "version": "0", "commit": None},
-                               "time": "2026-01-01T00:00:00+00:00"})
+    s = RunSummary(
+        name,
+        Path(f"/o/{name}.h5"),
+        "aborted: interrupted",
+        Verdict.ABORTED,
+        provenance={
+            "rig": "sim",
+            "simulated": True,
+            "sim_config": None,
+            "software": {"name": "fbs-hil", "version": "0", "commit": None},
+            "time": "2026-01-01T00:00:00+00:00",
+        },
+    )
     out = s.json_result(proc)
     assert_valid_result(out)
     assert (out["procedure"], out["status"]) == (name, "aborted: interrupted")
@@ -102,8 +123,18 @@ def test_provenance_verdict_and_every_commands_json_on_the_sim_rig(tmp_path, mon
     cfg = tmp_path / "site.toml"
     cfg.write_text("[site]\nlatitude_deg = 37.43\n")
     sha = hashlib.sha256(cfg.read_bytes()).hexdigest()
-    r = fbs("run", "stopwatch", "--rig", RIG, "--sim-config", str(cfg), "--out", str(tmp_path),
-            "--json", *ONE_REPETITION)
+    r = fbs(
+        "run",
+        "stopwatch",
+        "--rig",
+        RIG,
+        "--sim-config",
+        str(cfg),
+        "--out",
+        str(tmp_path),
+        "--json",
+        *ONE_REPETITION,
+    )
     assert r.returncode == 1, r.stderr
     out = json.loads(r.stdout)
     assert_valid_result(out)
@@ -116,10 +147,13 @@ def test_provenance_verdict_and_every_commands_json_on_the_sim_rig(tmp_path, mon
     assert out["time"].endswith("+00:00")
     run = tmp_path / "stopwatch.h5"
     summary = json.loads(run.with_suffix(".json").read_text())
-    assert {k: summary[k] for k in ("rig", "simulated", "sim_config", "software", "verdict")} == \
-        {k: out[k] for k in ("rig", "simulated", "sim_config", "software", "verdict")}
-    assert any(m["name"] == "headline figures measured" and m["passed"] is False
-               for m in summary["measurements"])
+    assert {k: summary[k] for k in ("rig", "simulated", "sim_config", "software", "verdict")} == {
+        k: out[k] for k in ("rig", "simulated", "sim_config", "software", "verdict")
+    }
+    assert any(
+        m["name"] == "headline figures measured" and m["passed"] is False
+        for m in summary["measurements"]
+    )
     report = run.with_suffix(".md").read_text()
     assert f"- rig: `{out['rig']}` (**simulated**)" in report and sha[:16] in report
     assert str(out["software"]["commit"]) in report and "**fail**" in report
@@ -140,8 +174,18 @@ def test_provenance_verdict_and_every_commands_json_on_the_sim_rig(tmp_path, mon
 
     # the analysis commands on the sim rig's file: the file's rig, simulated
     capsys.readouterr()
-    transfer = ["analyze", "transfer", str(run), "--from", "torq_x", "--to", "gyro_x", "--seg-s", "2",
-                "--json"]
+    transfer = [
+        "analyze",
+        "transfer",
+        str(run),
+        "--from",
+        "torq_x",
+        "--to",
+        "gyro_x",
+        "--seg-s",
+        "2",
+        "--json",
+    ]
     assert main(transfer) == 0
     got = json.loads(capsys.readouterr().out)
     assert_valid_result(got)

@@ -16,16 +16,33 @@ pytestmark = pytest.mark.slow
 
 FBS = [sys.executable, "-m", "fbs.cli"]
 #: one channel, one repetition, short holds: seconds; cold, so mode 3 takes rig time
-SHORT_COLD_STOPWATCH = ["--rig", "sim?seed=5&watchdog=5", "--param", 'channels=["X"]',
-                        "--param", "repetitions=1", "--param", "min_caged_s=10",
-                        "--param", "hold_s=5", "--param", "null_s=5", "--param", "restore_s=10"]
+SHORT_COLD_STOPWATCH = [
+    "--rig",
+    "sim?seed=5&watchdog=5",
+    "--param",
+    'channels=["X"]',
+    "--param",
+    "repetitions=1",
+    "--param",
+    "min_caged_s=10",
+    "--param",
+    "hold_s=5",
+    "--param",
+    "null_s=5",
+    "--param",
+    "restore_s=10",
+]
 LINE = re.compile(r"fbs\.progress: stopwatch: +(\d+) %, (.*)$")
 
 
 def test_the_progress_lines_of_a_run_never_go_back_and_show_the_analysis(tmp_path):
-    r = subprocess.run([*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_COLD_STOPWATCH],
-                       capture_output=True, text=True, timeout=600)
-    assert r.returncode in (0, 1), r.stderr               # stderr is a pipe: plain lines
+    r = subprocess.run(
+        [*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_COLD_STOPWATCH],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode in (0, 1), r.stderr  # stderr is a pipe: plain lines
     lines = [(int(m[1]), m[2]) for m in map(LINE.search, r.stderr.splitlines()) if m]
     percents = [p for p, _ in lines]
     assert len(lines) > 5 and all(b >= a for a, b in zip(percents, percents[1:])), lines

@@ -33,7 +33,7 @@ def _wait_for_samples(p: subprocess.Popen, path, events: int = 0, timeout_s: flo
                 if rf.n_samples > 0 and sum(e.kind == "step-done" for e in rf.events) >= events:
                     return
         except (OSError, ValueError):
-            pass          # not created or not yet flushed
+            pass  # not created or not yet flushed
     raise AssertionError(f"{path} never got going (exit {p.poll()})")
 
 
@@ -41,8 +41,14 @@ def _signalled(args: list[str], path, sig: signal.Signals, events: int = 0) -> s
     """Start ``fbs *args`` with SIGINT ignored, send ``sig`` once ``path`` has samples (and
     ``events`` steps done), and return its stderr once it has exited 2 with the file
     "aborted: interrupted" and the rig's "safe state reached" event."""
-    p = subprocess.Popen([*FBS, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         env=dict(os.environ, PYTHONUNBUFFERED="1"), preexec_fn=_ignore_sigint)
+    p = subprocess.Popen(
+        [*FBS, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        preexec_fn=_ignore_sigint,
+    )
     try:
         _wait_for_samples(p, path, events)
         p.send_signal(sig)
@@ -56,19 +62,40 @@ def _signalled(args: list[str], path, sig: signal.Signals, events: int = 0) -> s
     return stderr
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
+@pytest.mark.parametrize(
+    "sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name
+)
 def test_a_signal_aborts_a_recording_to_the_safe_state(tmp_path, sig):
     path = tmp_path / "r.h5"
-    err = _signalled(["record", "--rig", "sim", "--mode", "3", "--duration", "100000", "--rate", "100",
-                      "--out", str(path)], path, sig)
-    assert f"fbs record: interrupted ({sig.name})" in err, err   # the signal that came (issue 37)
+    err = _signalled(
+        [
+            "record",
+            "--rig",
+            "sim",
+            "--mode",
+            "3",
+            "--duration",
+            "100000",
+            "--rate",
+            "100",
+            "--out",
+            str(path),
+        ],
+        path,
+        sig,
+    )
+    assert f"fbs record: interrupted ({sig.name})" in err, err  # the signal that came (issue 37)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=lambda s: s.name)
 def test_a_signal_aborts_a_procedure_to_the_safe_state_naming_it(tmp_path, sig):
     """Issue 37 item 10: after SIGTERM ``fbs run`` said "interrupted (Ctrl-C)"."""
-    err = _signalled(["run", "stopwatch", "--rig", "sim?warm=1", "--out", str(tmp_path)],
-                     tmp_path / "stopwatch.h5", sig, events=1)
+    err = _signalled(
+        ["run", "stopwatch", "--rig", "sim?warm=1", "--out", str(tmp_path)],
+        tmp_path / "stopwatch.h5",
+        sig,
+        events=1,
+    )
     assert f"fbs run stopwatch: interrupted ({sig.name})" in err and "Ctrl-C" not in err, err
     summary = json.loads((tmp_path / "stopwatch.json").read_text())
     assert summary["error"] == f"interrupted ({sig.name})", summary
@@ -80,10 +107,26 @@ def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path)
     has its start-up handler (its caught-signal mask has SIGTERM), while it is loading."""
     import re as _re
 
-    proc = subprocess.Popen([sys.executable, "-m", "fbs", "simulate", "--mode", "3", "--duration", "1", "--rate",
-                             "100", "--out", str(tmp_path / "x.h5")], stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "fbs",
+            "simulate",
+            "--mode",
+            "3",
+            "--duration",
+            "1",
+            "--rate",
+            "100",
+            "--out",
+            str(tmp_path / "x.h5"),
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     status = Path(f"/proc/{proc.pid}/status")
-    t_end = time.monotonic() + 60                    # a hang guard
+    t_end = time.monotonic() + 60  # a hang guard
     while proc.poll() is None and time.monotonic() < t_end:
         m = _re.search(r"^SigCgt:\s*([0-9a-f]+)", status.read_text(), _re.M)
         if m and int(m.group(1), 16) >> (signal.SIGTERM - 1) & 1:
@@ -96,9 +139,21 @@ def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path)
 
 #: stopwatch on one channel, one repetition, short holds: seconds on the sim rig
 SW_RIG = ["--rig", "sim?warm=1&seed=5&watchdog=5"]
-SHORT_STOPWATCH = [*SW_RIG, "--param", 'channels=["X"]', "--param", "repetitions=1",
-                   "--param", "min_caged_s=10", "--param", "hold_s=5", "--param", "null_s=5",
-                   "--param", "restore_s=10"]
+SHORT_STOPWATCH = [
+    *SW_RIG,
+    "--param",
+    'channels=["X"]',
+    "--param",
+    "repetitions=1",
+    "--param",
+    "min_caged_s=10",
+    "--param",
+    "hold_s=5",
+    "--param",
+    "null_s=5",
+    "--param",
+    "restore_s=10",
+]
 
 
 def _main_thread_waits(pid: int, quiet_s: float = 0.5) -> bool:
@@ -107,9 +162,9 @@ def _main_thread_waits(pid: int, quiet_s: float = 0.5) -> bool:
     while time.monotonic() < t_end:
         try:
             if "wait_for_partner" in Path(f"/proc/{pid}/wchan").read_text():
-                return True                      # the kernel names it: blocked opening a FIFO
+                return True  # the kernel names it: blocked opening a FIFO
         except OSError:
-            pass                                 # not shown here: the thread's state alone
+            pass  # not shown here: the thread's state alone
         try:
             stat = Path(f"/proc/{pid}/task/{pid}/stat").read_text()
             if stat.rsplit(")", 1)[1].split()[0] != "S":
@@ -127,12 +182,16 @@ def test_sighup_while_the_report_is_written_then_resume_writes_it(tmp_path):
     run reaches it: the run, its acquisition and analysis done and its plot drawn, waits opening
     it, in the report, until SIGHUP comes. Then exit 2 and a summary saying so; ``--resume``
     analyses the complete file again, writing the report and a true summary."""
-    p = subprocess.Popen([*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_STOPWATCH],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    p = subprocess.Popen(
+        [*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_STOPWATCH],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     fifo = tmp_path / f".stopwatch.md.{p.pid}.tmp"
-    os.mkfifo(fifo)                              # before the child has even loaded (seconds)
+    os.mkfifo(fifo)  # before the child has even loaded (seconds)
     try:
-        t_end = time.monotonic() + 300           # a hang guard
+        t_end = time.monotonic() + 300  # a hang guard
         while not (list(tmp_path.glob("stopwatch-*.png")) and _main_thread_waits(p.pid)):
             assert p.poll() is None and time.monotonic() < t_end, p.communicate()
             time.sleep(0.1)
@@ -148,14 +207,27 @@ def test_sighup_while_the_report_is_written_then_resume_writes_it(tmp_path):
     assert "no report" in summary["error"]
     with RunFile(tmp_path / "stopwatch.h5") as rf:
         assert rf.status == "complete"
-    r = subprocess.run([*FBS, "run", "stopwatch", *SW_RIG, "--out", str(tmp_path),
-                        "--json", "--resume", str(tmp_path / "stopwatch.h5")],
-                       capture_output=True, text=True, timeout=300)
-    assert r.returncode == 1, r.stderr   # complete; one repetition resolves no K_g (issue 37)
+    r = subprocess.run(
+        [
+            *FBS,
+            "run",
+            "stopwatch",
+            *SW_RIG,
+            "--out",
+            str(tmp_path),
+            "--json",
+            "--resume",
+            str(tmp_path / "stopwatch.h5"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert r.returncode == 1, r.stderr  # complete; one repetition resolves no K_g (issue 37)
     assert json.loads(r.stdout)["file"] == str(tmp_path / "stopwatch.h5")
     summary = json.loads((tmp_path / "stopwatch.json").read_text())
     assert summary["verdict"] == "fail" and summary["status"] == "complete"
     assert summary["error"] is None and summary["report"] == str(tmp_path / "stopwatch.md")
     assert "**fail**" in (tmp_path / "stopwatch.md").read_text()
-    assert [f.name for f in tmp_path.glob("*.h5")] == ["stopwatch.h5"]   # nothing recorded again
-    assert "analysing it again" in (tmp_path / "stopwatch.log").read_text()     # the run's own log
+    assert [f.name for f in tmp_path.glob("*.h5")] == ["stopwatch.h5"]  # nothing recorded again
+    assert "analysing it again" in (tmp_path / "stopwatch.log").read_text()  # the run's own log

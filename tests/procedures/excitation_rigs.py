@@ -14,8 +14,14 @@ FAST = {"settle_s": 10.0, "quiet_s": 64.0, "excite_s": 160.0}
 
 
 def drawn_config(tmp_path, axis, inertia, stiffness, corners):
-    text = [f"[platform.{axis}]", f"inertia_kg_m2 = {inertia}", f"[bearing.{axis}]", 'model = "spring"',
-            f"stiffness_Nm_per_rad = {stiffness}", "[compensation]"]
+    text = [
+        f"[platform.{axis}]",
+        f"inertia_kg_m2 = {inertia}",
+        f"[bearing.{axis}]",
+        'model = "spring"',
+        f"stiffness_Nm_per_rad = {stiffness}",
+        "[compensation]",
+    ]
     text += [f"{k} = {v}" for k, v in corners.items()]
     path = tmp_path / "drawn.toml"
     path.write_text("\n".join(text) + "\n")
@@ -30,8 +36,10 @@ def assert_roots_near_the_linearized(cl, cfg, mode, axis, tol=0.10):
     for name, r in cl["roots"].items():
         p = complex(*r["pole"])
         q = lin[np.argmin(np.abs(lin - p))]
-        print(f"Mode {mode} {axis} {name}: {abs(p):.4g} rad/s {r['w_rad_per_s_ci95']}, linearized {abs(q):.4g} "
-              f"(zeta {-p.real / abs(p):.3f} / {-q.real / abs(q):.3f})")
+        print(
+            f"Mode {mode} {axis} {name}: {abs(p):.4g} rad/s {r['w_rad_per_s_ci95']}, linearized {abs(q):.4g} "
+            f"(zeta {-p.real / abs(p):.3f} / {-q.real / abs(q):.3f})"
+        )
         assert abs(p - q) / abs(q) < tol, (name, p, q)
         assert r["resolved"]["w_rad_per_s"], r
     pair = complex(*cl["roots"]["platform_pair"]["pole"])

@@ -29,20 +29,36 @@ from simhw.params import SimConfig
 from simhw.simulator import Simulator
 
 
-def write_smooth_sweep(path: str | Path, *, To_Nm: float = 0.016, eta_per_Nm: float = 1.6e6, axis: str = "X",
-                       freq_hz: float = 0.4, amplitudes_urad: Sequence[float] = (600, 300, 120, 60, 30, 12, 6),
-                       cycles: int = 6, rate_hz: float = 400.0, seed: int = 11, lead_s: float = 3.0,
-                       pa_range_V: float = 0.5, meta_calibration: bool = True, chunk: int = 3000,
-                       compression: str | None = "gzip", nea_scale: float = 1.0,
-                       inertia_scale: float = 1.0, bearing_model: str = "dahl", stiffness_Nm_per_rad: float = 410.0,
-                       damping_Nms: float = 0.05, updates_per_cycle: int = 0,
-                       internal_rate_hz: float | None = None) -> Path:
+def write_smooth_sweep(
+    path: str | Path,
+    *,
+    To_Nm: float = 0.016,
+    eta_per_Nm: float = 1.6e6,
+    axis: str = "X",
+    freq_hz: float = 0.4,
+    amplitudes_urad: Sequence[float] = (600, 300, 120, 60, 30, 12, 6),
+    cycles: int = 6,
+    rate_hz: float = 400.0,
+    seed: int = 11,
+    lead_s: float = 3.0,
+    pa_range_V: float = 0.5,
+    meta_calibration: bool = True,
+    chunk: int = 3000,
+    compression: str | None = "gzip",
+    nea_scale: float = 1.0,
+    inertia_scale: float = 1.0,
+    bearing_model: str = "dahl",
+    stiffness_Nm_per_rad: float = 410.0,
+    damping_Nms: float = 0.05,
+    updates_per_cycle: int = 0,
+    internal_rate_hz: float | None = None,
+) -> Path:
     """Write the sweep; return its path. ``bearing_model`` (DESIGN.md section 7's sim config:
     "dahl" with ``To_Nm``, ``eta_per_Nm``; "none"; "viscous" with ``damping_Nms``; "spring"
     with ``stiffness_Nm_per_rad``) is the swept axis's bearing. ``nea_scale`` scales the autocollimator's noise,
     ``inertia_scale`` the swept axis's inertia; ``updates_per_cycle`` > 0 makes the command a
-    DAC staircase of that many steps a cycle (as our procedure's), for comparison (the data sheet in ``/meta/calibration``
-    follows the rig)."""
+    DAC staircase of that many steps a cycle (as our procedure's), for comparison (the data sheet
+    in ``/meta/calibration`` follows the rig)."""
     a = axis.upper()
     cfg = SimConfig()
     cfg.bearing[a].model = bearing_model
@@ -64,9 +80,14 @@ def write_smooth_sweep(path: str | Path, *, To_Nm: float = 0.016, eta_per_Nm: fl
     t = (np.arange(n_sweep) + 0.5) / rate_hz
     step = np.minimum((t * freq_hz // cycles).astype(int), len(amplitudes_urad) - 1)
     phase = freq_hz * t
-    if updates_per_cycle:         # a DAC staircase instead (as our procedure drives), for comparison
+    if updates_per_cycle:  # a DAC staircase instead (as our procedure drives), for comparison
         phase = (np.floor(phase * updates_per_cycle) + 0.5) / updates_per_cycle
-    bias = -np.asarray(amplitudes_urad, float)[step] * 1e-6 * volts_per_rad * np.sin(2 * math.pi * phase)
+    bias = (
+        -np.asarray(amplitudes_urad, float)[step]
+        * 1e-6
+        * volts_per_rad
+        * np.sin(2 * math.pi * phase)
+    )
     bias = np.concatenate([np.zeros(n_lead), bias, np.zeros(int(round(rate_hz / freq_hz)))])
     out = np.empty((len(bias), len(names)))
     for k, v in enumerate(bias):
@@ -81,10 +102,16 @@ def write_smooth_sweep(path: str | Path, *, To_Nm: float = 0.016, eta_per_Nm: fl
         f.attrs["mode"] = 3
         g = f.create_group("channels")
         for j, name in enumerate(names):
-            d = g.create_dataset(name, data=out[:, j].astype(np.float32), chunks=(min(chunk, len(out)),),
-                                 compression=compression)
+            d = g.create_dataset(
+                name,
+                data=out[:, j].astype(np.float32),
+                chunks=(min(chunk, len(out)),),
+                compression=compression,
+            )
             d.attrs["units"] = "V"
             d.attrs["sample_rate_hz"] = float(rate_hz)
         if meta_calibration:
-            f.create_group("meta").attrs["calibration"] = json.dumps(dataclasses.asdict(rig_calibration(cfg)))
+            f.create_group("meta").attrs["calibration"] = json.dumps(
+                dataclasses.asdict(rig_calibration(cfg))
+            )
     return path

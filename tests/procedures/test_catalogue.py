@@ -25,5 +25,7 @@ def test_a_renamed_procedure_is_refused_by_name(tmp_path, monkeypatch):
     _package(tmp_path, "procs_ok", {"earth_rate": "earth-rate", "notes": "notes"})
     assert sorted(catalogue("procs_ok")) == ["earth-rate", "notes"]
     _package(tmp_path, "procs_renamed", {"earth_rate": "earth-rate", "old_name": "new-name"})
-    with pytest.raises(CatalogueError, match=r"old_name\.py: its procedure is named 'new-name'.*\(new_name\.py\)"):
+    with pytest.raises(
+        CatalogueError, match=r"old_name\.py: its procedure is named 'new-name'.*\(new_name\.py\)"
+    ):
         catalogue("procs_renamed")

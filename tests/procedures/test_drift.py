@@ -55,7 +55,9 @@ def test_kto_from_the_earth_rate_result_else_nominal():
     assert kto == measured and "NOMINAL" not in source
     kto, source = Drift().kto(_ctx(cal))
     assert kto == cal.torquer_scale_urad_per_s_per_V and "NOMINAL" in source
-    kto, source = Drift(prior={"earth-rate": {"K_TO_urad_per_s_per_V": {"X": 30.0, "Y": None}}}).kto(_ctx(cal))
+    kto, source = Drift(
+        prior={"earth-rate": {"K_TO_urad_per_s_per_V": {"X": 30.0, "Y": None}}}
+    ).kto(_ctx(cal))
     assert kto["X"] == 30.0 and kto["Y"] == cal.torquer_scale_urad_per_s_per_V["Y"]
     assert "NOMINAL data-sheet value for Y, Z, XRD" in source
 
@@ -71,9 +73,18 @@ def _flicker(rng: np.random.Generator, n: int, B: float) -> np.ndarray:
     return np.fft.irfft(np.fft.rfft(x) * np.fft.rfft(h))[:n]
 
 
-def _synthetic_chunks(seed: int, n: int, kto: dict[str, float], kg: dict[str, float], hk: dict[str, float],
-                      N: float = 0.03, B: float = 0.02, noise_urad: float = 0.01, gain_per_s: float = 0.14,
-                      fs: float = 10.0) -> dict[str, list[np.ndarray]]:
+def _synthetic_chunks(
+    seed: int,
+    n: int,
+    kto: dict[str, float],
+    kg: dict[str, float],
+    hk: dict[str, float],
+    N: float = 0.03,
+    B: float = 0.02,
+    noise_urad: float = 0.01,
+    gain_per_s: float = 0.14,
+    fs: float = 10.0,
+) -> dict[str, list[np.ndarray]]:
     """Torquer and pickoff volts of a caged float, one chunk per channel: input rate Omega (white N +
     flicker B, urad/s) into sigma' = Omega - r - sigma / (h/k) (forward Euler), the torquing rate
     r = G (sigma + n) of a proportional caging loop on the noisy pickoff angle sigma + n."""
@@ -85,7 +96,9 @@ def _synthetic_chunks(seed: int, n: int, kto: dict[str, float], kg: dict[str, fl
     for ch in CHANNELS:
         omega = rng.standard_normal(n) * N * math.sqrt(fs) + _flicker(rng, n, B)
         noise = rng.standard_normal(n) * noise_urad
-        sigma = lfilter([0.0, dt], [1.0, -(1.0 - dt * gain_per_s - dt / hk[ch])], omega - gain_per_s * noise)
+        sigma = lfilter(
+            [0.0, dt], [1.0, -(1.0 - dt * gain_per_s - dt / hk[ch])], omega - gain_per_s * noise
+        )
         r = gain_per_s * (sigma + noise)
         out[f"torq_{ch.lower()}"] = [-r / kto[ch]]
         out[f"gyro_{ch.lower()}"] = [(sigma + noise) * kg[ch] * 1e-3]
@@ -104,18 +117,24 @@ def test_the_input_rate_is_rebuilt_through_the_float_equation():
     coupled channel is off by c/h times the other float's rate."""
     fs, tau_a, ca, cb = 10.0, 424.0, 1 / 1.96, 1 / 21.0
     t = np.arange(0, 600.0, 1 / fs)
-    sa, sb = 30 * np.sin(0.05 * t), 20 * np.cos(0.03 * t) + 5.0          # float angles (urad)
+    sa, sb = 30 * np.sin(0.05 * t), 20 * np.cos(0.03 * t) + 5.0  # float angles (urad)
     dsa, dsb = 1.5 * np.cos(0.05 * t), -0.6 * np.sin(0.03 * t)
-    omega = 0.2 + 0.1 * np.sin(0.02 * t)                                  # input rate (urad/s)
-    f_a = dsa - cb * dsb                                                  # the inverse of the coupling
-    r = omega - f_a - sa / tau_a                                          # r = -K_TO V_T
+    omega = 0.2 + 0.1 * np.sin(0.02 * t)  # input rate (urad/s)
+    f_a = dsa - cb * dsb  # the inverse of the coupling
+    r = omega - f_a - sa / tau_a  # r = -K_TO V_T
     mid = 0.5 * (omega[1:] + omega[:-1])
     got = reconstruct_rate(r, sa, fs, tau_a, sb, -cb)
     assert np.max(np.abs(got - mid)) < 1e-4
     plain = reconstruct_rate(r, sa, fs, tau_a)
     assert np.max(np.abs(plain - mid)) == pytest.approx(cb * 0.6, rel=0.02)
-    assert coupling_terms("X", {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}) == ("Y", pytest.approx(-cb))
-    assert coupling_terms("Y", {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}) == ("X", pytest.approx(ca))
+    assert coupling_terms("X", {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}) == (
+        "Y",
+        pytest.approx(-cb),
+    )
+    assert coupling_terms("Y", {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}) == (
+        "X",
+        pytest.approx(ca),
+    )
     assert coupling_terms("Z", None) == (None, 0.0)
 
 
@@ -129,12 +148,15 @@ def test_the_gyro_terms_are_read_through_the_loop():
     for ch in CHANNELS:
         r = res[ch]
         n, b = r.estimate("arw"), r.estimate("bias")
-        assert n.resolved and n.value == pytest.approx(0.03, rel=0.15) and n.lo < n.value < n.hi, (ch, n)
+        assert n.resolved and n.value == pytest.approx(0.03, rel=0.15) and n.lo < n.value < n.hi, (
+            ch,
+            n,
+        )
         assert b.value == pytest.approx(0.02, rel=0.35) and b.lo < b.value < b.hi, (ch, b)
         covered += n.covers(0.03) + b.covers(0.02)
         assert r.adev_torquer is not None and r.adev_torquer.dev[2] < 0.5 * r.adev.dev[2]
         assert r.loop is not None and r.loop.gain_per_s == pytest.approx(0.14, rel=0.05)
-    assert covered >= 6          # of 8 95 % intervals (here: 7; Z's B 0.0149 [0.0121, 0.0192])
+    assert covered >= 6  # of 8 95 % intervals (here: 7; Z's B 0.0149 [0.0121, 0.0192])
 
 
 def test_a_gap_splits_the_record_and_the_rest_is_pooled():
@@ -142,10 +164,10 @@ def test_a_gap_splits_the_record_and_the_rest_is_pooled():
     p = Params()
     whole = analyze_channels(chunks, 10.0, KTO, p, KG, HK)
     gappy = {k: [v[0].copy()] for k, v in chunks.items()}
-    gappy["torq_x"][0][20000:20300] = np.nan          # 30 s lost on one channel: lost for the pair
+    gappy["torq_x"][0][20000:20300] = np.nan  # 30 s lost on one channel: lost for the pair
     cut = analyze_channels(gappy, 10.0, KTO, p, KG, HK)
-    assert cut["X"].adev.segment_lengths == (19999, 15699)   # one rate sample fewer per stretch
-    assert cut["Y"].adev.segment_lengths == (35999,)         # no coupling given: Y does not read X
+    assert cut["X"].adev.segment_lengths == (19999, 15699)  # one rate sample fewer per stretch
+    assert cut["Y"].adev.segment_lengths == (35999,)  # no coupling given: Y does not read X
     assert cut["X"].arw.value == pytest.approx(whole["X"].arw.value, rel=0.05)
     # the sign convention r = -K_TO V: the mean rate is the input's (plus the restraint's share)
     for ch in CHANNELS:
@@ -229,17 +251,21 @@ def test_default_rig(tmp_path):
     sim's, as earth-rate and stopwatch results); the data sheet's widen every interval by their
     tolerance (issue 38 item 6)."""
     cal = RigCalibration()
-    measured = _measured_scales(dict(cal.torquer_scale_urad_per_s_per_V), dict(cal.pickoff_scale_mV_per_urad))
-    s = _run(tmp_path, "sim?warm=1&watchdog=5&seed=3", prior=measured, duration_s=2400.0, n_chunks=4)
+    measured = _measured_scales(
+        dict(cal.torquer_scale_urad_per_s_per_V), dict(cal.pickoff_scale_mV_per_urad)
+    )
+    s = _run(
+        tmp_path, "sim?warm=1&watchdog=5&seed=3", prior=measured, duration_s=2400.0, n_chunks=4
+    )
     assert s.exit_code == 0, (s.error, [m for m in s.measurements if m.passed is False])
     assert set(s.json_values(Drift.json_keys)) >= set(Drift.json_keys) | {"resolved"}
-    assert_valid_result(s.json_result(Drift()))   # what `fbs run --json` prints (issue 37)
+    assert_valid_result(s.json_result(Drift()))  # what `fbs run --json` prints (issue 37)
     n_true, b_true = _sim_gyro("arw_urad_per_sqrt_s"), _sim_gyro("bias_instability_urad_per_s")
     arw, bi = _figure(s, "arw_urad_per_sqrt_s"), _figure(s, "bias_instability_urad_per_s")
     for ch in CHANNELS:
         value, lo, hi, resolved = arw[ch]
         assert value is None and not resolved, (ch, arw[ch])
-        assert lo <= n_true[ch] < hi < 1.0, (ch, arw[ch])           # a bound that holds it
+        assert lo <= n_true[ch] < hi < 1.0, (ch, arw[ch])  # a bound that holds it
         assert s.values["arw_urad_per_sqrt_s"][ch] is None
     # measured (seed 3, 2400 s): ARW bounds X 0.226, Y 0.437, Z 0.739, XRD 0.231; B X 0.0168
     # [0.0097, 0.0265], Y 0.0233 [0.0150, 0.0347], XRD 0.0238 [0.0154, 0.0381], Z (the platform's
@@ -261,14 +287,20 @@ def test_default_rig(tmp_path):
     for key, t in (("bias_instability_urad_per_s", 0.15), ("arw_urad_per_sqrt_s", 0.20)):
         for ch in CHANNELS:
             lo, hi = nominal.values[f"{key}_ci95"][ch]
-            assert hi == pytest.approx((1 + t) * s.values[f"{key}_ci95"][ch][1], rel=1e-4), (key, ch)
-            assert lo == pytest.approx((1 - t) * s.values[f"{key}_ci95"][ch][0], rel=1e-4) or lo == 0.0, (key, ch)
+            assert hi == pytest.approx((1 + t) * s.values[f"{key}_ci95"][ch][1], rel=1e-4), (
+                key,
+                ch,
+            )
+            assert (
+                lo == pytest.approx((1 - t) * s.values[f"{key}_ci95"][ch][0], rel=1e-4) or lo == 0.0
+            ), (key, ch)
     # K_TO and K_g are scales: an earth-rate K_TO of twice the nominal and a stopwatch K_g of half
     # doubles the torquing rate and the pickoff angle, so the reconstructed rate and every figure
     twice = {c: 2 * v for c, v in cal.torquer_scale_urad_per_s_per_V.items()}
     half_kg = {c: v / 2 for c, v in cal.pickoff_scale_mV_per_urad.items()}
-    again = Drift(Drift.Params(duration_s=2400.0, n_chunks=4),
-                  prior=_measured_scales(twice, half_kg)).analyze(_reanalysis_ctx(s.file))
+    again = Drift(
+        Drift.Params(duration_s=2400.0, n_chunks=4), prior=_measured_scales(twice, half_kg)
+    ).analyze(_reanalysis_ctx(s.file))
     for key in ("arw_urad_per_sqrt_s", "bias_instability_urad_per_s"):
         for ch in CHANNELS:
             got, was = again.values[f"{key}_ci95"][ch], s.values[f"{key}_ci95"][ch]
@@ -306,7 +338,12 @@ def test_bias_instability_follows_the_gyro_flicker(tmp_path):
     stays unresolved."""
     cfg = tmp_path / "b3.toml"
     cfg.write_text("".join(f"[gyro.{c}]\nbias_instability_urad_per_s = 0.06\n" for c in CHANNELS))
-    more = _run(tmp_path / "more", f"sim?warm=1&watchdog=5&seed=5&config={cfg}", duration_s=2400.0, n_chunks=2)
+    more = _run(
+        tmp_path / "more",
+        f"sim?warm=1&watchdog=5&seed=5&config={cfg}",
+        duration_s=2400.0,
+        n_chunks=2,
+    )
     assert more.exit_code == 0
     bi = _figure(more, "bias_instability_urad_per_s")
     # measured (seed 5): X 0.068 [0.048, 0.081], Y 0.059 [0.040, 0.094], Z 0.069 [0.039, 0.104],
@@ -333,25 +370,30 @@ def test_abort_and_resume_continue_the_record(tmp_path):
             stop.set()
 
     with open_rig("sim?warm=1&watchdog=5&seed=2") as rig:
-        first = run_procedure(Drift(Drift.Params(**params)), rig, tmp_path, progress=listener, abort=stop)
+        first = run_procedure(
+            Drift(Drift.Params(**params)), rig, tmp_path, progress=listener, abort=stop
+        )
         assert first.exit_code == 2 and first.status.startswith("aborted")
         assert first.steps_done == ["mode 3", "settle", "record 1/4", "record 2/4"]
         resumed = load_resume(first.file, "drift")
         second = run_procedure(Drift(Drift.Params(**resumed.params)), rig, tmp_path, resume=resumed)
     # 600 s resolves neither figure on any channel: complete, but no pass (issue 37, item 2)
     assert second.status == "complete" and second.error is None, second.error
-    assert [m.name for m in second.measurements if m.passed is False] == ["headline figures measured"]
+    assert [m.name for m in second.measurements if m.passed is False] == [
+        "headline figures measured"
+    ]
     assert second.exit_code == 1
     assert second.steps_resumed == ["record 1/4", "record 2/4"]
     assert second.file != first.file
     length = next(m for m in second.measurements if m.name == "record length")
     assert length.value == pytest.approx(600.0)
     assert "in 2 continuous stretch(es)" in length.note
-    assert_spans_are_the_record_steps(first, second, [f"record {i}/4" for i in (1, 2, 3, 4)], 2, 150.0)
+    assert_spans_are_the_record_steps(
+        first, second, [f"record {i}/4" for i in (1, 2, 3, 4)], 2, 150.0
+    )
     # every figure read (resolved or not: an interval with finite limits)
     for key in ("arw_urad_per_sqrt_s", "bias_instability_urad_per_s"):
         assert all(hi is not None for _, hi in second.values[f"{key}_ci95"].values()), key
-
 
 
 def test_a_term_the_model_apportions_is_not_resolved():
@@ -400,15 +442,28 @@ def test_nominal_scales_widen_the_intervals_by_their_tolerance():
     b, n = d.estimate("bias"), d.estimate("arw")
     assert b.resolved and (b.lo, b.hi) == pytest.approx((0.016 * 0.85, 0.025 * 1.15))
     assert n.resolved and (n.lo, n.hi) == pytest.approx((0.25 * 0.80, 0.36 * 1.20))
-    wide = ChannelDrift("X", 31.6, 0.0, None, None, TermEstimate("arw", 0.3, 0.2, 0.45, 12.8, 0.9, 0.6), None,
-                        None, [], scale_tol=(0.15, 0.20)).estimate("arw")
+    wide = ChannelDrift(
+        "X",
+        31.6,
+        0.0,
+        None,
+        None,
+        TermEstimate("arw", 0.3, 0.2, 0.45, 12.8, 0.9, 0.6),
+        None,
+        None,
+        [],
+        scale_tol=(0.15, 0.20),
+    ).estimate("arw")
     assert not wide.resolved and (wide.lo, wide.hi) == pytest.approx((0.0, 0.54))
     # through analyze_channels: the unit's K_TO is 1.12 x what the analysis is given
     chunks = _synthetic_chunks(4, 36000, {c: 1.12 * v for c, v in KTO.items()}, KG, HK)
     plain = analyze_channels(chunks, 10.0, KTO, Params(), KG, HK)
-    tol = analyze_channels(chunks, 10.0, KTO, Params(), KG, HK, scale_tol={c: (0.15, 0.20) for c in CHANNELS})
+    tol = analyze_channels(
+        chunks, 10.0, KTO, Params(), KG, HK, scale_tol={c: (0.15, 0.20) for c in CHANNELS}
+    )
     for ch in CHANNELS:
         p, t = plain[ch].estimate("bias"), tol[ch].estimate("bias")
         assert t.lo == pytest.approx(0.85 * p.lo) and t.hi == pytest.approx(1.15 * p.hi), ch
     assert sum(tol[ch].estimate("bias").covers(0.02) for ch in CHANNELS) >= sum(
-        plain[ch].estimate("bias").covers(0.02) for ch in CHANNELS)
+        plain[ch].estimate("bias").covers(0.02) for ch in CHANNELS
+    )

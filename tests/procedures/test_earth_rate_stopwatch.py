@@ -27,8 +27,14 @@ LAT = 37.43
 
 
 # ---------------------------------------------------------------------------- earth-rate numerics
-def _station(tilt: float, spindle: float, psi0: float, gyros: dict[str, dict], pickoff: dict[str, float] | None = None,
-             noise: dict[str, float] | None = None) -> dict:
+def _station(
+    tilt: float,
+    spindle: float,
+    psi0: float,
+    gyros: dict[str, dict],
+    pickoff: dict[str, float] | None = None,
+    noise: dict[str, float] | None = None,
+) -> dict:
     """A station's settled torquer means from simhw's own table geometry (independent of the fit):
     -K_TO V_T = Omega_i + d + g . f - sigma / (h/k)."""
     axes = platform_axes_enu(math.radians(tilt), math.radians(spindle), math.radians(psi0))
@@ -37,7 +43,7 @@ def _station(tilt: float, spindle: float, psi0: float, gyros: dict[str, dict], p
     v, pv = {}, {}
     for ch, g in gyros.items():
         w_i = w[{"X": 0, "XRD": 0, "Y": 1, "Z": 2}[ch]]
-        sigma = (pickoff or {}).get(ch, 0.0)          # standing pickoff angle, rad
+        sigma = (pickoff or {}).get(ch, 0.0)  # standing pickoff angle, rad
         rate = w_i + (g["d"] + g["g"] @ f) * 1e-6 - sigma / g.get("hk", 1.0)
         v[ch] = -rate / (g["kto"] * 1e-6) + (noise or {}).get(ch, 0.0)
         pv[ch] = sigma / 1e-6 * g.get("kg", 6.0) * 1e-3
@@ -45,7 +51,11 @@ def _station(tilt: float, spindle: float, psi0: float, gyros: dict[str, dict], p
 
 
 def _positions(tilts=(0.0, 90.0, 45.0), n=8):
-    return [(t, (p if i % 2 == 0 else (n - 1 - p)) * 360.0 / n) for i, t in enumerate(tilts) for p in range(n)]
+    return [
+        (t, (p if i % 2 == 0 else (n - 1 - p)) * 360.0 / n)
+        for i, t in enumerate(tilts)
+        for p in range(n)
+    ]
 
 
 def test_the_frame_is_the_table_geometry():
@@ -59,13 +69,23 @@ def test_the_frame_is_the_table_geometry():
 
 
 @settings(max_examples=25, deadline=None)
-@given(kto=st.floats(20, 50), drift=st.floats(-2, 2), psi0=st.floats(-3, 3),
-       g=st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3), ch=st.sampled_from(["X", "Y", "Z", "XRD"]))
+@given(
+    kto=st.floats(20, 50),
+    drift=st.floats(-2, 2),
+    psi0=st.floats(-3, 3),
+    g=st.lists(st.floats(-0.3, 0.3), min_size=3, max_size=3),
+    ch=st.sampled_from(["X", "Y", "Z", "XRD"]),
+)
 def test_the_multi_position_fit_recovers_scale_factor_and_every_drift(kto, drift, psi0, g, ch):
     gy = {ch: {"kto": kto, "d": drift, "g": np.array(g)}}
     stations = [_station(t, s, psi0, gy) for t, s in _positions()]
-    f = fit_channel(ch, stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA,
-                    offset_deg=None if ch != "Z" else psi0)
+    f = fit_channel(
+        ch,
+        stations,
+        latitude_deg=LAT,
+        earth_rate_rad_per_s=OMEGA,
+        offset_deg=None if ch != "Z" else psi0,
+    )
     assert f.kto.value == pytest.approx(kto, rel=1e-7)
     assert f.drift.value == pytest.approx(drift, abs=1e-5)
     for a, v in zip("xyz", g):
@@ -77,16 +97,29 @@ def test_the_multi_position_fit_recovers_scale_factor_and_every_drift(kto, drift
 def test_a_standing_pickoff_is_taken_out_of_the_scale_factor():
     """A proportional-only loop: the standing angle follows the torquer output, and its restraint
     share would read as K_TO (1 + 1/(G_p h/k)) without the term."""
-    gp, hk, kto, kg = 0.5, 515.0, 32.0, 5.74        # G_p in 1/s: sigma = rate / G_p
+    gp, hk, kto, kg = 0.5, 515.0, 32.0, 5.74  # G_p in 1/s: sigma = rate / G_p
     stations = []
     for t, s in _positions():
         clean = _station(t, s, 0.1, {"XRD": {"kto": kto, "d": 0.4, "g": np.zeros(3)}})
-        rate = -clean["V"]["XRD"] * kto * 1e-6     # what the torquer would balance alone
-        sigma = rate / (gp * hk + 1.0) * hk        # the float's share at equilibrium, rad
-        stations.append(_station(t, s, 0.1, {"XRD": {"kto": kto, "d": 0.4, "g": np.zeros(3), "hk": hk, "kg": kg}},
-                                 pickoff={"XRD": sigma}))
-    with_term = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, restraint_s=hk,
-                            pickoff_mV_per_urad=kg)
+        rate = -clean["V"]["XRD"] * kto * 1e-6  # what the torquer would balance alone
+        sigma = rate / (gp * hk + 1.0) * hk  # the float's share at equilibrium, rad
+        stations.append(
+            _station(
+                t,
+                s,
+                0.1,
+                {"XRD": {"kto": kto, "d": 0.4, "g": np.zeros(3), "hk": hk, "kg": kg}},
+                pickoff={"XRD": sigma},
+            )
+        )
+    with_term = fit_channel(
+        "XRD",
+        stations,
+        latitude_deg=LAT,
+        earth_rate_rad_per_s=OMEGA,
+        restraint_s=hk,
+        pickoff_mV_per_urad=kg,
+    )
     without = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA)
     assert with_term.kto.value == pytest.approx(kto, rel=1e-7)
     assert without.kto.value / kto - 1 == pytest.approx(1 / (gp * hk), rel=0.05)
@@ -110,13 +143,29 @@ def test_z_carries_the_table_offsets_uncertainty():
     truth = {"kto": 34.1, "d": 0.3, "g": np.array([0.02, -0.03, 0.05])}
     stations = [_station(t, s, 5.0, {"Z": truth}) for t, s in _positions()]
     exact = fit_channel("Z", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, offset_deg=4.0)
-    assert exact.kto.value == pytest.approx(34.1 * math.cos(math.radians(4)) / math.cos(math.radians(5)), rel=1e-6)
+    assert exact.kto.value == pytest.approx(
+        34.1 * math.cos(math.radians(4)) / math.cos(math.radians(5)), rel=1e-6
+    )
     assert not exact.kto.covers(34.1)
-    known = fit_channel("Z", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, offset_deg=4.0, offset_sd_deg=1.0)
+    known = fit_channel(
+        "Z",
+        stations,
+        latitude_deg=LAT,
+        earth_rate_rad_per_s=OMEGA,
+        offset_deg=4.0,
+        offset_sd_deg=1.0,
+    )
     assert known.kto.covers(34.1)
     assert known.kto.half_width == pytest.approx(
-        math.hypot(exact.kto.half_width, scipy.stats.t.ppf(0.975, exact.dof) * 34.1 * math.tan(math.radians(4))
-                   * math.radians(1.0)), rel=0.01)
+        math.hypot(
+            exact.kto.half_width,
+            scipy.stats.t.ppf(0.975, exact.dof)
+            * 34.1
+            * math.tan(math.radians(4))
+            * math.radians(1.0),
+        ),
+        rel=0.01,
+    )
 
 
 def test_the_restraint_term_carries_a_units_pickoff_scale():
@@ -130,15 +179,28 @@ def test_the_restraint_term_carries_a_units_pickoff_scale():
     stations = []
     for t, sp in _positions():
         w, _ = platform_frame(t, sp, 0.1, LAT, OMEGA)
-        sigma = (w[0] + 0.4e-6) / 1.0                   # the proportional loop's standing angle, 1 rad/s
+        sigma = (w[0] + 0.4e-6) / 1.0  # the proportional loop's standing angle, 1 rad/s
         stations.append(_station(t, sp, 0.1, {"XRD": truth}, pickoff={"XRD": sigma}))
-    f = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, restraint_s=hk,
-                    pickoff_mV_per_urad=5.74)
+    f = fit_channel(
+        "XRD",
+        stations,
+        latitude_deg=LAT,
+        earth_rate_rad_per_s=OMEGA,
+        restraint_s=hk,
+        pickoff_mV_per_urad=5.74,
+    )
     assert f.restraint_correction < -1e-3 and abs(f.kto.value / kto - 1) > 3e-4
     assert f.kto.covers(kto)
     # with the stopwatch's K_g (good to 0.3 %) the term is exact and the interval narrow again
-    g = fit_channel("XRD", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA, restraint_s=hk,
-                    pickoff_mV_per_urad=kg_true, pickoff_rel_uncertainty=0.003)
+    g = fit_channel(
+        "XRD",
+        stations,
+        latitude_deg=LAT,
+        earth_rate_rad_per_s=OMEGA,
+        restraint_s=hk,
+        pickoff_mV_per_urad=kg_true,
+        pickoff_rel_uncertainty=0.003,
+    )
     assert g.kto.covers(kto) and g.kto.half_width < f.kto.half_width
 
 
@@ -148,6 +210,7 @@ def _ar1(rho: float):
         for i in range(n):
             e[i] = (rho * e[i - 1] if i else 0.0) + rng.normal(0, 1e-3)
         return e
+
     return errors
 
 
@@ -160,7 +223,9 @@ def _flicker(rng: np.random.Generator, n: int, m: int = 16) -> np.ndarray:
     return 1e-3 * x / x.std()
 
 
-@pytest.mark.parametrize("errors", [_ar1(0.6), _ar1(0.9), _flicker], ids=["AR1-0.6", "AR1-0.9", "flicker"])
+@pytest.mark.parametrize(
+    "errors", [_ar1(0.6), _ar1(0.9), _flicker], ids=["AR1-0.6", "AR1-0.9", "flicker"]
+)
 def test_intervals_cover_under_correlated_station_noise(errors):
     """Station errors that wander (AR(1), as a gyro's flicker drift does from one station to the
     next, or 1/f itself, which no AR(1) is): the 95 % intervals cover K_TO and the drifts at
@@ -184,7 +249,7 @@ def test_intervals_cover_under_correlated_station_noise(errors):
 def test_crossing_interval_of_an_exact_ramp():
     rate = 200.0
     t = np.arange(0, 30, 1 / rate)
-    vg = -1.5 + 0.1 * t                       # crosses -1 at 5 s and +1 at 25 s
+    vg = -1.5 + 0.1 * t  # crosses -1 at 5 s and +1 at 25 s
     assert _crossing_interval(t, vg, -1.0, 1.0, +1, 1.0, rate) == pytest.approx(20.0, abs=1e-6)
     assert _crossing_interval(t, -vg, -1.0, 1.0, -1, 1.0, rate) == pytest.approx(20.0, abs=1e-6)
 
@@ -198,7 +263,9 @@ def test_restraint_fit_recovers_slope_and_h_over_k():
     """Exact solution of V_g' = a (V_T - V_T0) - k (V_g - V_g0) + c under bias steps and holds."""
     rate, a, k, c = 200.0, 0.19, 1 / 500.0, 2e-4
     t = np.arange(0, 400, 1 / rate)
-    vt = np.where((t % 100) < 30, 0.3, np.where((t % 100) < 50, 0.0, np.where((t % 100) < 80, -0.3, 0.0)))
+    vt = np.where(
+        (t % 100) < 30, 0.3, np.where((t % 100) < 50, 0.0, np.where((t % 100) < 80, -0.3, 0.0))
+    )
     vg = np.empty_like(t)
     vg[0] = 0.2
     for i in range(1, len(t)):  # exact per step for piecewise-constant input
@@ -243,15 +310,23 @@ def test_the_float_partners_loop_is_not_read_as_restraint():
 
 
 def test_k_g_interval_carries_the_k_to_interval():
-    r = {"ch": "X", "kto": 31.6, "kto_from": "earth-rate", "dVg": 2.0, "null_slope": 0.0,
-         "ramps": [[-1, 20.0, -0.3], [1, 20.2, 0.3], [-1, 19.9, -0.3], [1, 20.1, 0.3]],
-         "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / 400.0, "k_se": 8e-5, "dof": 9}}
+    r = {
+        "ch": "X",
+        "kto": 31.6,
+        "kto_from": "earth-rate",
+        "dVg": 2.0,
+        "null_slope": 0.0,
+        "ramps": [[-1, 20.0, -0.3], [1, 20.2, 0.3], [-1, 19.9, -0.3], [1, 20.1, 0.3]],
+        "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / 400.0, "k_se": 8e-5, "dof": 9},
+    }
     res = channel_result(r)
     alone, with_kto = res.kg_estimate(0.0), res.kg_estimate(0.01)
     assert alone.resolved and with_kto.resolved and alone.lo < res.kg < alone.hi
     # the K_TO's half-width in quadrature with the repetitions'; the partner transient's bound added
     bound = PARTNER_TRANSIENT_BOUND
-    assert (res.kg - with_kto.lo) / res.kg - bound == pytest.approx(math.hypot((res.kg - alone.lo) / res.kg - bound, 0.01))
+    assert (res.kg - with_kto.lo) / res.kg - bound == pytest.approx(
+        math.hypot((res.kg - alone.lo) / res.kg - bound, 0.01)
+    )
     nominal = res.kg_estimate(None)
     assert not nominal.resolved and "nominal" in nominal.why
     # h/k: an interval around the fitted value, never a resolved figure (acceptance B: not reported)
@@ -266,11 +341,19 @@ def test_a_result_without_partner_factors_carries_the_transients_bound():
     alone (7.50688 [7.50627, 7.50748]) missed 7.51. A result without ``partner_factor`` (an older
     run) carries the transient's span as a bound on each side."""
     truth, kto, dvt, dvg = 7.51, 34.1, 0.6, 2.0
-    dt = dvg / (truth * 1e-3 * kto * dvt)               # II C.1.a(6) at the true K_g
+    dt = dvg / (truth * 1e-3 * kto * dvt)  # II C.1.a(6) at the true K_g
     bias = [-0.000320, -0.000577, -0.000228, -0.000553, -0.000255, -0.000635]
-    r = {"ch": "Z", "kto": kto, "kto_from": "given", "dVg": dvg, "null_slope": 0.0,
-         "ramps": [[(-1) ** (i + 1), dt / (1 + b), (-1) ** (i + 1) * dvt] for i, b in enumerate(bias)],
-         "fit": {"a": 0.26, "a_se": 1e-4, "k": 1 / 1072.0, "k_se": 1e-3, "dof": 9}}
+    r = {
+        "ch": "Z",
+        "kto": kto,
+        "kto_from": "given",
+        "dVg": dvg,
+        "null_slope": 0.0,
+        "ramps": [
+            [(-1) ** (i + 1), dt / (1 + b), (-1) ** (i + 1) * dvt] for i, b in enumerate(bias)
+        ],
+        "fit": {"a": 0.26, "a_se": 1e-4, "k": 1 / 1072.0, "k_se": 1e-3, "dof": 9},
+    }
     res = channel_result(r)
     e = res.kg_estimate(0.0)
     assert e.resolved and e.covers(truth) and e.value < truth
@@ -290,7 +373,7 @@ def test_partner_factor_is_the_coupled_floats_answer():
     back what it took); a 15 s ramp from rest runs slow (-0.66 %: the transient's first part)."""
     fs = 200.0
     t = np.arange(0, 400, 1 / fs)
-    rate = np.where((t >= 10) & (t < 25), 20.0, 0.0)      # one 15 s ramp at 20 urad/s, then rest
+    rate = np.where((t >= 10) & (t < 25), 20.0, 0.0)  # one 15 s ramp at 20 urad/s, then rest
     hc = dict(h_over_c=1.96, partner_h_over_c=21.0, partner_wn=0.1, partner_zeta=0.7)
     kk = 1 / (1.96 * 21.0)
     start, whole, ramp = partner_factors(t, rate, [(10.0, 10.5), (5.0, 399.0), (11.0, 24.0)], **hc)
@@ -298,15 +381,30 @@ def test_partner_factor_is_the_coupled_floats_answer():
     assert whole == pytest.approx(1.0, abs=2e-4)
     assert 0.99 < ramp < 1.0
     # a proportional partner as fast as XRD's (1 rad/s) answers within a few seconds
-    fast = partner_factors(t, rate, [(15.0, 24.0)], h_over_c=35.7, partner_h_over_c=2.43, partner_wn=1.0,
-                           partner_zeta=1.0, partner_proportional=True)[0]
+    fast = partner_factors(
+        t,
+        rate,
+        [(15.0, 24.0)],
+        h_over_c=35.7,
+        partner_h_over_c=2.43,
+        partner_wn=1.0,
+        partner_zeta=1.0,
+        partner_proportional=True,
+    )[0]
     assert abs(fast - 1) < 5e-4
 
 
 def test_restraint_correction_is_x_coth_x():
     tau = 400.0
-    r = {"ch": "X", "kto": 31.6, "kto_from": "given", "dVg": 2.0, "null_slope": 0.0,
-         "ramps": [[-1, 20.0, -0.3], [1, 20.0, 0.3]], "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / tau, "k_se": 1e-5}}
+    r = {
+        "ch": "X",
+        "kto": 31.6,
+        "kto_from": "given",
+        "dVg": 2.0,
+        "null_slope": 0.0,
+        "ramps": [[-1, 20.0, -0.3], [1, 20.0, 0.3]],
+        "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / tau, "k_se": 1e-5},
+    }
     res = channel_result(r)
     naive = 2.0 / (20.0 * 0.3 * 31.6) * 1e3
     x = 20.0 / (2 * tau)
@@ -329,10 +427,17 @@ def _draw(seed: int) -> dict:
     """A sim rig with other torquer and pickoff scale factors, drifts and table offset."""
     rng = np.random.default_rng(seed)
     cfg = {"table": {"base_azimuth_offset_deg": float(rng.uniform(-1.0, 1.0))}}
-    for ch, kto, kg in (("X", 31.6, 6.03), ("Y", 33.4, 6.70), ("Z", 34.1, 7.51), ("XRD", 32.0, 5.74)):
-        cfg[f"gyro.{ch}"] = {"torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
-                             "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
-                             "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8))}
+    for ch, kto, kg in (
+        ("X", 31.6, 6.03),
+        ("Y", 33.4, 6.70),
+        ("Z", 34.1, 7.51),
+        ("XRD", 32.0, 5.74),
+    ):
+        cfg[f"gyro.{ch}"] = {
+            "torquer_scale_urad_per_s_per_V": float(kto * rng.uniform(0.88, 1.12)),
+            "pickoff_scale_mV_per_urad": float(kg * rng.uniform(0.85, 1.15)),
+            "fixed_drift_urad_per_s": float(rng.uniform(-0.8, 0.8)),
+        }
     return cfg
 
 
@@ -350,18 +455,32 @@ def test_earth_rate_and_stopwatch_find_a_random_rig(tmp_path, seed):
         assert sw.verdict == "pass", sw.error or [m for m in sw.measurements if m.passed is False]
     for ch in ("X", "Y", "Z", "XRD"):
         g = cfg[f"gyro.{ch}"]
-        assert er.values["K_TO_urad_per_s_per_V"][ch] == pytest.approx(g["torquer_scale_urad_per_s_per_V"], rel=5e-3)
-        assert sw.values["K_g_mV_per_urad"][ch] == pytest.approx(g["pickoff_scale_mV_per_urad"], rel=2e-2)
+        assert er.values["K_TO_urad_per_s_per_V"][ch] == pytest.approx(
+            g["torquer_scale_urad_per_s_per_V"], rel=5e-3
+        )
+        assert sw.values["K_g_mV_per_urad"][ch] == pytest.approx(
+            g["pickoff_scale_mV_per_urad"], rel=2e-2
+        )
     # the table's azimuth offset is found too (X, Y, XRD each see it)
     psi0 = [m.value for m in er.measurements if m.name.startswith("table azimuth misalignment")]
     assert np.allclose(psi0, cfg["table"]["base_azimuth_offset_deg"], atol=0.15)
 
 
 #: the gyros' random drift and every noise off: what is left is the method's own error
-_QUIET = {**{f"gyro.{ch}": {"arw_urad_per_sqrt_s": 0.0, "bias_instability_urad_per_s": 0.0,
-                            "rrw_urad_per_s_per_sqrt_s": 0.0, "pickoff_noise_rms_urad": 0.0}
-             for ch in ("X", "Y", "Z", "XRD")},
-          "autocollimator.X": {"nea_urad": 0.0}, "autocollimator.Y": {"nea_urad": 0.0}, "azimuth": {"nea_urad": 0.0}}
+_QUIET = {
+    **{
+        f"gyro.{ch}": {
+            "arw_urad_per_sqrt_s": 0.0,
+            "bias_instability_urad_per_s": 0.0,
+            "rrw_urad_per_s_per_sqrt_s": 0.0,
+            "pickoff_noise_rms_urad": 0.0,
+        }
+        for ch in ("X", "Y", "Z", "XRD")
+    },
+    "autocollimator.X": {"nea_urad": 0.0},
+    "autocollimator.Y": {"nea_urad": 0.0},
+    "azimuth": {"nea_urad": 0.0},
+}
 
 
 @pytest.mark.slow
@@ -378,7 +497,11 @@ def test_stopwatch_takes_the_float_partners_transient_out(tmp_path):
     path = tmp_path / "rig.toml"
     path.write_text(_toml(cfg))
     with open_rig(f"sim?warm=1&seed=1&watchdog=5&config={path}") as rig:
-        sw = run_procedure(Stopwatch(Stopwatch.Params(channels=["X"], kto_urad_per_s_per_V={"X": 31.6})), rig, tmp_path)
+        sw = run_procedure(
+            Stopwatch(Stopwatch.Params(channels=["X"], kto_urad_per_s_per_V={"X": 31.6})),
+            rig,
+            tmp_path,
+        )
     assert sw.verdict == "pass", sw.error
     kg, (lo, hi) = sw.values["K_g_mV_per_urad"]["X"], sw.values["K_g_mV_per_urad_ci95"]["X"]
     assert kg == pytest.approx(5.03, rel=5e-4)
@@ -395,8 +518,15 @@ def test_the_most_repetitions_allowed_fit_a_channels_result_in_its_event(tmp_pat
     with pytest.raises(ValueError, match="repetitions"):
         Stopwatch.Params(repetitions=most + 1)
     with open_rig("sim?warm=1&seed=7&watchdog=5") as rig:
-        sw = run_procedure(Stopwatch(Stopwatch.Params(channels=["XRD"], repetitions=most,
-                                                      kto_urad_per_s_per_V={"XRD": 32.0})), rig, tmp_path)
+        sw = run_procedure(
+            Stopwatch(
+                Stopwatch.Params(
+                    channels=["XRD"], repetitions=most, kto_urad_per_s_per_V={"XRD": 32.0}
+                )
+            ),
+            rig,
+            tmp_path,
+        )
     assert sw.verdict == "pass", sw.error
     assert sw.values["K_g_mV_per_urad"]["XRD"] == pytest.approx(5.74, rel=0.02)
 
@@ -406,12 +536,20 @@ def test_the_multi_position_test_separates_fixed_and_g_sensitive_drift(tmp_path)
     """Acceptance C (issue 18): fixed drifts of 0.5 urad/s and g-sensitive drifts of 0.1 urad/s/g
     on a rig the procedure is never told about: each separated, resolved where the design can
     (the horizontal channels), every interval covering its truth; Z's fixed drift unresolved."""
-    gyro = {"X": {"fixed_drift_urad_per_s": 0.5, "g_drift_x_urad_per_s_per_g": 0.1},
-            "Y": {"fixed_drift_urad_per_s": -0.5, "g_drift_y_urad_per_s_per_g": 0.1},
-            "Z": {"fixed_drift_urad_per_s": 0.5, "g_drift_x_urad_per_s_per_g": 0.1},
-            "XRD": {"fixed_drift_urad_per_s": 0.5, "g_drift_z_urad_per_s_per_g": 0.1}}
-    cfg = {f"gyro.{ch}": {"fixed_drift_urad_per_s": 0.0, **{f"g_drift_{a}_urad_per_s_per_g": 0.0 for a in "xyz"}, **v}
-           for ch, v in gyro.items()}
+    gyro = {
+        "X": {"fixed_drift_urad_per_s": 0.5, "g_drift_x_urad_per_s_per_g": 0.1},
+        "Y": {"fixed_drift_urad_per_s": -0.5, "g_drift_y_urad_per_s_per_g": 0.1},
+        "Z": {"fixed_drift_urad_per_s": 0.5, "g_drift_x_urad_per_s_per_g": 0.1},
+        "XRD": {"fixed_drift_urad_per_s": 0.5, "g_drift_z_urad_per_s_per_g": 0.1},
+    }
+    cfg = {
+        f"gyro.{ch}": {
+            "fixed_drift_urad_per_s": 0.0,
+            **{f"g_drift_{a}_urad_per_s_per_g": 0.0 for a in "xyz"},
+            **v,
+        }
+        for ch, v in gyro.items()
+    }
     path = tmp_path / "rig.toml"
     path.write_text(_toml(cfg))
     with open_rig(f"sim?warm=1&seed=5&watchdog=5&config={path}") as rig:
@@ -419,29 +557,44 @@ def test_the_multi_position_test_separates_fixed_and_g_sensitive_drift(tmp_path)
     assert er.verdict == "pass", er.error
     v = er.values
     for ch in ("X", "Y", "Z", "XRD"):
-        for key, cfg_key in (("drift_urad_per_s", "fixed_drift_urad_per_s"),
-                             *((f"g_drift_{a}_urad_per_s_per_g", f"g_drift_{a}_urad_per_s_per_g") for a in "xyz")):
+        for key, cfg_key in (
+            ("drift_urad_per_s", "fixed_drift_urad_per_s"),
+            *((f"g_drift_{a}_urad_per_s_per_g", f"g_drift_{a}_urad_per_s_per_g") for a in "xyz"),
+        ):
             lo, hi = v[f"{key}_ci95"][ch]
             assert lo <= cfg[f"gyro.{ch}"][cfg_key] <= hi, (ch, key, lo, hi)
     assert v["resolved"]["drift_urad_per_s"] == {"X": True, "Y": True, "Z": False, "XRD": True}
-    assert v["resolved"]["g_drift_x_urad_per_s_per_g"]["X"] and v["resolved"]["g_drift_y_urad_per_s_per_g"]["Y"]
+    assert (
+        v["resolved"]["g_drift_x_urad_per_s_per_g"]["X"]
+        and v["resolved"]["g_drift_y_urad_per_s_per_g"]["Y"]
+    )
     assert v["drift_urad_per_s"]["Z"] is None and v["K_TO_urad_per_s_per_V"]["Z"] is not None
 
 
 # ---------------------------------------------------------------------------- stopwatch resumed
-KTO_SIM = {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0}   # the default sim's: K_g's interval is then the method's
+KTO_SIM = {
+    "X": 31.6,
+    "Y": 33.4,
+    "Z": 34.1,
+    "XRD": 32.0,
+}  # the default sim's: K_g's interval is then the method's
 
 
 @pytest.fixture(scope="module")
 def uninterrupted_stopwatch(tmp_path_factory):
     with open_rig("sim?warm=1&seed=4&watchdog=5") as rig:
-        return run_procedure(Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=KTO_SIM)), rig,
-                             tmp_path_factory.mktemp("stopwatch"))
+        return run_procedure(
+            Stopwatch(Stopwatch.Params(kto_urad_per_s_per_V=KTO_SIM)),
+            rig,
+            tmp_path_factory.mktemp("stopwatch"),
+        )
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("ch", ["X", "Y", "Z", "XRD"])
-def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(tmp_path, uninterrupted_stopwatch, ch):
+def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(
+    tmp_path, uninterrupted_stopwatch, ch
+):
     """Acceptance E (issue 18): aborted in the middle of channel ``ch``'s step and resumed on a
     rig started cold (a new process after a power cut), the run passes, the resumed step waited
     the settle an uninterrupted run gives it, and every K_g agrees with the uninterrupted run's
@@ -464,12 +617,17 @@ def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(tmp_path, unin
     with open_rig("sim?warm=1&seed=4&watchdog=5") as rig:
         first = run_procedure(Stopwatch(params), rig, tmp_path, progress=listener, abort=stop)
     order = ["X", "Y", "Z", "XRD"]
-    assert first.status.startswith("aborted") and first.steps_done == ["mode 3"] + [f"channel {c}" for c in
-                                                                                     order[:order.index(ch)]]
+    assert first.status.startswith("aborted") and first.steps_done == ["mode 3"] + [
+        f"channel {c}" for c in order[: order.index(ch)]
+    ]
     resumed = load_resume(first.file, "stopwatch")
-    with open_rig("sim?seed=41&watchdog=5") as rig:                       # cold: the wheels spin up again
-        second = run_procedure(Stopwatch(Stopwatch.Params(**resumed.params)), rig, tmp_path, resume=resumed)
-    assert second.verdict == "pass", second.error or [m for m in second.measurements if m.passed is False]
+    with open_rig("sim?seed=41&watchdog=5") as rig:  # cold: the wheels spin up again
+        second = run_procedure(
+            Stopwatch(Stopwatch.Params(**resumed.params)), rig, tmp_path, resume=resumed
+        )
+    assert second.verdict == "pass", second.error or [
+        m for m in second.measurements if m.passed is False
+    ]
     assert second.steps_resumed == first.steps_done[1:]
     result = next(m for m in second.measurements if m.name.startswith(f"residual null rate {ch}"))
     assert abs(result.value) < params.max_null_rate_urad_per_s
@@ -479,6 +637,16 @@ def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(tmp_path, unin
     # at 1.96 each, one of the 16 fails more often than not on a correct procedure
     family = scipy.stats.norm.ppf(1 - 0.05 / (2 * 16)) / scipy.stats.norm.ppf(0.975)
     for c in order:
-        (lo, hi), (lo2, hi2) = ref.values["K_g_mV_per_urad_ci95"][c], second.values["K_g_mV_per_urad_ci95"][c]
+        (lo, hi), (lo2, hi2) = (
+            ref.values["K_g_mV_per_urad_ci95"][c],
+            second.values["K_g_mV_per_urad_ci95"][c],
+        )
         diff = second.values["K_g_mV_per_urad"][c] - ref.values["K_g_mV_per_urad"][c]
-        assert abs(diff) <= family * math.hypot((hi - lo) / 2, (hi2 - lo2) / 2), (c, diff, lo, hi, lo2, hi2)
+        assert abs(diff) <= family * math.hypot((hi - lo) / 2, (hi2 - lo2) / 2), (
+            c,
+            diff,
+            lo,
+            hi,
+            lo2,
+            hi2,
+        )

@@ -28,8 +28,15 @@ from tests.result_schema import assert_valid_result
 
 
 def _truth_network(corners):
-    p = {"gain": 1.0, "w1_rad_per_s": 0.15, "w2_rad_per_s": 10.0, "w3_rad_per_s": 30.0, "w4_rad_per_s": 200.0,
-         "w5_rad_per_s": 1200.0, "w6_rad_per_s": 5000.0}
+    p = {
+        "gain": 1.0,
+        "w1_rad_per_s": 0.15,
+        "w2_rad_per_s": 10.0,
+        "w3_rad_per_s": 30.0,
+        "w4_rad_per_s": 200.0,
+        "w5_rad_per_s": 1200.0,
+        "w6_rad_per_s": 5000.0,
+    }
     return p | corners
 
 
@@ -60,19 +67,23 @@ def test_excitation_signal_is_unit_rms_and_flat_in_its_band_only():
 def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, axis):
     rng = np.random.default_rng(220 + k)
     nominal_inertia = {"X": 0.70, "Y": 0.25}[axis]
-    while True:   # a rig whose Mode-3 loop is stable with margin (a lab's is); the draw is the test's
+    while (
+        True
+    ):  # a rig whose Mode-3 loop is stable with margin (a lab's is); the draw is the test's
         inertia = round(float(nominal_inertia * rng.uniform(0.7, 1.4)), 4)
         stiffness = round(float(rng.uniform(250, 700)), 1)
-        corners = {"w2_rad_per_s": round(float(rng.uniform(7, 14)), 3),
-                   "w3_rad_per_s": round(float(rng.uniform(22, 40)), 3),
-                   "w4_rad_per_s": round(float(rng.uniform(150, 260)), 2)}
+        corners = {
+            "w2_rad_per_s": round(float(rng.uniform(7, 14)), 3),
+            "w3_rad_per_s": round(float(rng.uniform(22, 40)), 3),
+            "w4_rad_per_s": round(float(rng.uniform(150, 260)), 2),
+        }
         cfg = drawn_config(tmp_path, axis, inertia, stiffness, corners)
         if np.max(linearized_poles(load_config(cfg), 3, axis).real) < -0.5:
             break
     with open_rig(f"sim?warm=1&seed={30 + k}&config={cfg}") as rig:
         s = run_procedure(Excitation(Params(axis=axis, **FAST)), rig, tmp_path / "out")
     assert s.exit_code == 0, s.error
-    printed = s.json_result(Excitation(Params(axis=axis, **FAST)))   # `fbs run --json` (issue 37)
+    printed = s.json_result(Excitation(Params(axis=axis, **FAST)))  # `fbs run --json` (issue 37)
     assert_valid_result(printed)
     assert printed["simulated"] is True and printed["sim_config"]["path"] == str(cfg.resolve())
     v = s.values
@@ -106,7 +117,9 @@ def test_excitation_identifies_drawn_network_inertia_and_stiffness(tmp_path, k, 
 
 
 @pytest.mark.slow
-def test_excitation_on_dahl_bearings_says_k_and_d_are_describing_functions_at_its_amplitude(tmp_path):
+def test_excitation_on_dahl_bearings_says_k_and_d_are_describing_functions_at_its_amplitude(
+    tmp_path,
+):
     """The thesis rig's Dahl bearings (issue 38 items 2 and 3). k and D are the bearing's
     describing function at the excited motion: the JSON carries that motion's rms and says
     which figures depend on it, the summary and the report say "describing function at X urad
@@ -130,16 +143,25 @@ def test_excitation_on_dahl_bearings_says_k_and_d_are_describing_functions_at_it
     amp = printed["excitation_amplitude_urad"]["X"]
     assert 1.0 < amp < 4.0, amp
     dep = printed["amplitude_dependent"]
-    assert dep["stiffness_Nm_per_rad"]["X"] and dep["damping_Nms"]["X"] and not dep["inertia_kg_m2"]["X"]
+    assert (
+        dep["stiffness_Nm_per_rad"]["X"]
+        and dep["damping_Nms"]["X"]
+        and not dep["inertia_kg_m2"]["X"]
+    )
     cfg = SimConfig()
     eq = dahl_equivalent_linear(cfg, "X", float(s.values["level_V_rms"]))
     k_df, d_df, _ = dahl_at_amplitude(cfg, "X", amp, (eq.stiffness_Nm_per_rad / 0.70) ** 0.5)
     d_df += cfg.platform["X"].gyro_damping_Nms
     k, k_ci = printed["stiffness_Nm_per_rad"]["X"], printed["stiffness_Nm_per_rad_ci95"]["X"]
     d_ci = printed["damping_Nms_ci95"]["X"]
-    print(f"amplitude {amp} urad rms; k {k} {k_ci}, equivalent linear {eq.stiffness_Nm_per_rad:.1f}, describing "
-          f"function {k_df:.1f}; D {d_ci}, equivalent linear {eq.damping_Nms:.3f}, describing function {d_df:.3f}")
-    assert printed["resolved"]["stiffness_Nm_per_rad"]["X"] and k_ci[0] <= eq.stiffness_Nm_per_rad <= k_ci[1]
+    print(
+        f"amplitude {amp} urad rms; k {k} {k_ci}, equivalent linear {eq.stiffness_Nm_per_rad:.1f}, describing "
+        f"function {k_df:.1f}; D {d_ci}, equivalent linear {eq.damping_Nms:.3f}, describing function {d_df:.3f}"
+    )
+    assert (
+        printed["resolved"]["stiffness_Nm_per_rad"]["X"]
+        and k_ci[0] <= eq.stiffness_Nm_per_rad <= k_ci[1]
+    )
     assert printed["damping_Nms"]["X"] is None and not printed["resolved"]["damping_Nms"]["X"]
     assert d_ci[0] <= d_df <= d_ci[1] and d_ci[0] <= eq.damping_Nms <= d_ci[1], (d_ci, d_df, eq)
     assert "depends on frequency" in s.values["platform_why_unresolved"]["damping_Nms"]
@@ -149,8 +171,12 @@ def test_excitation_on_dahl_bearings_says_k_and_d_are_describing_functions_at_it
     assert any(label in m.name for m in s.measurements if m.name.startswith("stiffness_Nm_per_rad"))
     assert label in (tmp_path / "excitation.md").read_text()
     net = printed["network"]
-    for corner, truth in (("w1_rad_per_s", 0.15), ("w2_rad_per_s", 10.0), ("w3_rad_per_s", 30.0),
-                          ("w4_rad_per_s", 200.0)):
+    for corner, truth in (
+        ("w1_rad_per_s", 0.15),
+        ("w2_rad_per_s", 10.0),
+        ("w3_rad_per_s", 30.0),
+        ("w4_rad_per_s", 200.0),
+    ):
         lo, hi = net[f"{corner}_ci95"]
         print(corner, net[corner], [lo, hi], net["resolved"][corner])
         assert not net["resolved"][corner] or lo <= truth <= hi, (corner, net[corner], lo, hi)
@@ -173,7 +199,7 @@ def test_excitation_pickoff_noise_is_the_simulated_within_20_percent(tmp_path):
     g = load_config(cfg_path).gyro["X"]
     assert g.pickoff_noise_rms_urad != SimConfig().gyro["X"].pickoff_noise_rms_urad
     white = pickoff_white_psd(g.pickoff_noise_rms_urad, g.pickoff_lines) * 1e12
-    lines = sum(a ** 2 / 2 for fl, a in g.pickoff_lines if 1.0 <= fl <= 50.0)
+    lines = sum(a**2 / 2 for fl, a in g.pickoff_lines if 1.0 <= fl <= 50.0)
     expected = (white * 49.0 + lines) ** 0.5
     got = s.values["pickoff_noise_urad_rms"]["X"]
     print(f"pickoff noise 1-50 Hz: measured {got:.4g} urad rms, simulated {expected:.4g}")
@@ -197,14 +223,18 @@ def test_an_aborted_excitation_leaves_the_rig_safe_and_resumes(tmp_path):
             stop.set()
 
     with open_rig("sim?warm=1&seed=44") as rig:
-        first = run_procedure(Excitation(Params(**FAST)), rig, tmp_path, progress=listener, abort=stop)
+        first = run_procedure(
+            Excitation(Params(**FAST)), rig, tmp_path, progress=listener, abort=stop
+        )
         assert first.verdict == "aborted"
         assert rig.is_safe()
         assert rig.commands.command_torque_V("X") == 0.0
         assert "quiet" in first.steps_done and "excite" not in first.steps_done
         with RunFile(first.file) as rf:
             assert rf.status.startswith("aborted")
-        second = run_procedure(Excitation(Params(**FAST)), rig, tmp_path, resume=load_resume(first.file, "excitation"))
+        second = run_procedure(
+            Excitation(Params(**FAST)), rig, tmp_path, resume=load_resume(first.file, "excitation")
+        )
     assert second.exit_code == 0, second.error
     assert second.steps_resumed == ["quiet"]
     assert abs(second.values["inertia_kg_m2"]["X"] / 0.70 - 1) < 0.05

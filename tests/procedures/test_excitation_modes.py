@@ -27,20 +27,27 @@ def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode
     while True:
         inertia = round(float(nominal_inertia * rng.uniform(0.8, 1.25)), 4)
         stiffness = round(float(rng.uniform(250, 600)), 1)
-        corners = {"w2_rad_per_s": round(float(rng.uniform(8, 12)), 3),
-                   "w3_rad_per_s": round(float(rng.uniform(25, 36)), 3),
-                   "w4_rad_per_s": round(float(rng.uniform(170, 240)), 2)}
+        corners = {
+            "w2_rad_per_s": round(float(rng.uniform(8, 12)), 3),
+            "w3_rad_per_s": round(float(rng.uniform(25, 36)), 3),
+            "w4_rad_per_s": round(float(rng.uniform(170, 240)), 2),
+        }
         cfg = drawn_config(tmp_path, axis, inertia, stiffness, corners)
         rms = round(float(rng.uniform(4.0, 12.0)), 2)
-        cfg.write_text(cfg.read_text() + f"[gyro.{axis}]\npickoff_scale_mV_per_urad = "
-                       f"{round(float(rng.uniform(5.5, 7.5)), 3)}\npickoff_noise_rms_urad = {rms}\n"
-                       f"pickoff_lines = {nominal_pickoff_lines(rms)!r}\n")
+        cfg.write_text(
+            cfg.read_text() + f"[gyro.{axis}]\npickoff_scale_mV_per_urad = "
+            f"{round(float(rng.uniform(5.5, 7.5)), 3)}\npickoff_noise_rms_urad = {rms}\n"
+            f"pickoff_lines = {nominal_pickoff_lines(rms)!r}\n"
+        )
         if np.max(linearized_poles(load_config(cfg), mode, axis).real) < -0.05:
             break
     with open_rig(f"sim?warm=1&seed={60 + k}&config={cfg}") as rig:
-        s = run_procedure(Excitation(Params(axis=axis, mode=mode, mode_settle_s=40.0, **FAST)), rig,
-                          tmp_path / "out")
-        assert rig.relays.status().mode == 3       # the procedure hands the rig back in Mode 3
+        s = run_procedure(
+            Excitation(Params(axis=axis, mode=mode, mode_settle_s=40.0, **FAST)),
+            rig,
+            tmp_path / "out",
+        )
+        assert rig.relays.status().mode == 3  # the procedure hands the rig back in Mode 3
     assert s.exit_code == 0, s.error
     cl = s.values["closed_loop"]
     assert_roots_near_the_linearized(cl, load_config(cfg), mode, axis)

@@ -24,17 +24,34 @@ from tests.procedures.test_hysteresis import cli
 KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad")
 
 
-@pytest.mark.parametrize("kw", [
-    # the hold-out's bearing and drive (DESIGN.md section 3 defaults, 0.4 Hz)
-    {"To_Nm": 0.016, "eta_per_Nm": 1.6e6},
-    # another bearing, drive, ladder, rate and recorder; no /meta/calibration (the data sheet's)
-    {"To_Nm": 0.009, "eta_per_Nm": 2.8e6, "freq_hz": 0.25, "amplitudes_urad": (900, 400, 150, 50, 20, 8),
-     "cycles": 5, "rate_hz": 500.0, "seed": 5, "meta_calibration": False, "chunk": 777, "compression": None},
-], ids=["holdout", "other-drive"])
+@pytest.mark.parametrize(
+    "kw",
+    [
+        # the hold-out's bearing and drive (DESIGN.md section 3 defaults, 0.4 Hz)
+        {"To_Nm": 0.016, "eta_per_Nm": 1.6e6},
+        # another bearing, drive, ladder, rate and recorder; no /meta/calibration (the data sheet's)
+        {
+            "To_Nm": 0.009,
+            "eta_per_Nm": 2.8e6,
+            "freq_hz": 0.25,
+            "amplitudes_urad": (900, 400, 150, 50, 20, 8),
+            "cycles": 5,
+            "rate_hz": 500.0,
+            "seed": 5,
+            "meta_calibration": False,
+            "chunk": 777,
+            "compression": None,
+        },
+    ],
+    ids=["holdout", "other-drive"],
+)
 def test_a_smooth_sweep_from_another_recorder_is_resolved(tmp_path, kw, capsys):
     path = write_smooth_sweep(tmp_path / "sweep.h5", **kw)
-    truth = {"To_Nm": kw["To_Nm"], "eta_per_Nm": kw["eta_per_Nm"],
-             "stiffness_Nm_per_rad": kw["eta_per_Nm"] * kw["To_Nm"] ** 2}
+    truth = {
+        "To_Nm": kw["To_Nm"],
+        "eta_per_Nm": kw["eta_per_Nm"],
+        "stiffness_Nm_per_rad": kw["eta_per_Nm"] * kw["To_Nm"] ** 2,
+    }
     res = analyze_file(path, "X")
     # no line in a smooth command: the lag is fitted with To and eta, near the instruments' own
     # (the filters' and La/Ra's 3.5 ms; the simulator's held friction torque adds ~0.5 ms)
@@ -61,23 +78,40 @@ def test_no_dahl_friction_resolves_nothing(tmp_path, model, extra, capsys):
     """A bearing without friction, or a viscous one, driven by our procedure's staircase (so
     the lag is measured at its lines): To, eta and eta To^2 unresolved, the reason given, the
     interval [0, inf] - never a figure at the edge of a zero-width interval."""
-    path = write_smooth_sweep(tmp_path / "sweep.h5", bearing_model=model, updates_per_cycle=100, cycles=4,
-                              amplitudes_urad=(500, 100, 20, 5), **extra)
+    path = write_smooth_sweep(
+        tmp_path / "sweep.h5",
+        bearing_model=model,
+        updates_per_cycle=100,
+        cycles=4,
+        amplitudes_urad=(500, 100, 20, 5),
+        **extra,
+    )
     res = analyze_file(path, "X")
     for key in KEYS:
         e = res.estimates[key]
-        assert not e.resolved and ("no friction of eq. 5.2" in e.why or "edge of its search" in e.why), (key, e)
+        assert not e.resolved and (
+            "no friction of eq. 5.2" in e.why or "edge of its search" in e.why
+        ), (key, e)
         assert e.lo == 0.0 and e.hi == math.inf
     v = res.values()
-    assert all(v[k] == {"X": None} for k in KEYS) and v["resolved"] == {k: {"X": False} for k in KEYS}
+    assert all(v[k] == {"X": None} for k in KEYS) and v["resolved"] == {
+        k: {"X": False} for k in KEYS
+    }
     capsys.readouterr()
     assert cli(["analyze", "hysteresis", str(path), "--json"]) == 1
     out = json.loads(capsys.readouterr().out)
     assert out["To_Nm_ci95"] == {"X": [0.0, None]}
 
 
-@pytest.mark.parametrize("lo, hi, why", [(2.0, 2.0, "zero width"), (2.0, 2.5, "on the edge"),
-                                         (1.0, 2.0, "on the edge"), (2.5, 3.0, "outside")])
+@pytest.mark.parametrize(
+    "lo, hi, why",
+    [
+        (2.0, 2.0, "zero width"),
+        (2.0, 2.5, "on the edge"),
+        (1.0, 2.0, "on the edge"),
+        (2.5, 3.0, "outside"),
+    ],
+)
 def test_a_degenerate_interval_is_never_resolved(lo, hi, why):
     """Issue 38 item 1: [v, v] passed the rule (its width 0 is under the magnitude)."""
     e = judged(2.0, lo, hi)

@@ -37,7 +37,7 @@ def assert_monotone_then_done(seen: list[Progress], caplog, *, report: bool) -> 
     assert not [r for r in caplog.records if "held back" in r.getMessage()]
     phases = [p.phase for p in seen]
     after = [ANALYSING, WRITING_REPORT, DONE] if report else [ANALYSING, DONE]
-    assert phases[-len(after):] == after and set(phases[:-len(after)]) == {STEPS}, phases
+    assert phases[-len(after) :] == after and set(phases[: -len(after)]) == {STEPS}, phases
     assert seen[-1].fraction == 1.0 and max(fractions[:-1]) < 1.0
 
 
@@ -58,21 +58,29 @@ def _drive(model: ProgressModel, actual_s: list[float | None], chunk_s: float = 
     model.phase(DONE, t)
 
 
-@pytest.mark.parametrize("actual", [
-    [25.0, 2.0, 90.0],      # overrun, undershoot, overrun: the bar waits, then jumps
-    [10.0, 20.0, 30.0],     # as expected
-    [None, 40.0, None],     # the first and last taken over (resume)
-    [0.0, 0.0, 0.0],        # steps that take no rig time (a mode already in force)
-], ids=["over-under", "exact", "resumed", "instant"])
+@pytest.mark.parametrize(
+    "actual",
+    [
+        [25.0, 2.0, 90.0],  # overrun, undershoot, overrun: the bar waits, then jumps
+        [10.0, 20.0, 30.0],  # as expected
+        [None, 40.0, None],  # the first and last taken over (resume)
+        [0.0, 0.0, 0.0],  # steps that take no rig time (a mode already in force)
+    ],
+    ids=["over-under", "exact", "resumed", "instant"],
+)
 def test_the_model_is_monotone_and_analyses_before_100(actual, caplog):
     seen: list[Progress] = []
-    model = ProgressModel("p", [("a", 10.0), ("b", 20.0), ("c", 30.0)], seen.append, analysis_share=0.1)
+    model = ProgressModel(
+        "p", [("a", 10.0), ("b", 20.0), ("c", 30.0)], seen.append, analysis_share=0.1
+    )
     with caplog.at_level(logging.WARNING, "procedures.progress"):
         _drive(model, actual)
     assert_monotone_then_done(seen, caplog, report=True)
     # a finished step counts its whole weight, however long it really took
     start_c = next(p for p in seen if p.step == "c")
-    assert start_c.fraction == pytest.approx(0.9 * 30 / 60) and start_c.remaining_rig_s == pytest.approx(30.0)
+    assert start_c.fraction == pytest.approx(
+        0.9 * 30 / 60
+    ) and start_c.remaining_rig_s == pytest.approx(30.0)
     assert next(p for p in seen if p.phase == ANALYSING).fraction == pytest.approx(0.9)
 
 
@@ -80,7 +88,7 @@ def test_an_overrun_holds_the_bar_within_its_step():
     seen: list[Progress] = []
     model = ProgressModel("p", [("settle", 10.0), ("data", 10.0)], seen.append, analysis_share=0.0)
     model.in_step(0, 5.0, 5.0)
-    model.in_step(0, 50.0, 50.0)     # a settle that waits five times longer
+    model.in_step(0, 50.0, 50.0)  # a settle that waits five times longer
     assert [p.fraction for p in seen] == [0.25, 0.5]
     model.step_done(0, 50.0)
     model.in_step(1, 0.0, 50.0)
@@ -99,7 +107,7 @@ def test_plans_without_weights_still_move_and_listeners_cannot_break_the_run(cap
     def broken(p: Progress) -> None:
         raise RuntimeError("listener bug")
 
-    ProgressModel("p", [("a", 1.0)], broken).in_step(0, 0.5, 0.5)   # logged, not raised
+    ProgressModel("p", [("a", 1.0)], broken).in_step(0, 0.5, 0.5)  # logged, not raised
     assert "progress listener failed" in caplog.text
 
 
@@ -107,7 +115,7 @@ def test_the_last_guard_holds_a_backward_step_and_says_so(caplog):
     seen: list[Progress] = []
     model = ProgressModel("p", [("a", 10.0), ("b", 10.0)], seen.append)
     model.step_done(1, 20.0)
-    model.in_step(0, 1.0, 21.0)      # misuse: an earlier step after a later one
+    model.in_step(0, 1.0, 21.0)  # misuse: an earlier step after a later one
     assert seen[-1].fraction == seen[-2].fraction
     assert "a bug in the progress rule" in caplog.text
 
@@ -145,37 +153,61 @@ def _takes(ctx, *, seconds: float) -> dict:
     return {}
 
 
-def _run_synthetic(name: str, factors: list[float], tmp_path: Path, caplog, *,
-                   taken_over: frozenset[str] | set[str] = frozenset()) -> list[Progress]:
+def _run_synthetic(
+    name: str,
+    factors: list[float],
+    tmp_path: Path,
+    caplog,
+    *,
+    taken_over: frozenset[str] | set[str] = frozenset(),
+) -> list[Progress]:
     proc = catalogue()[name]()
-    real = list(proc.plan())        # the procedure's own plan, default parameters, no rig
-    proc.plan = lambda: [Step(s.name, partial(_takes, seconds=f * s.expected_s), s.expected_s, s.setup)
-                         for s, f in zip(real, factors)]
+    real = list(proc.plan())  # the procedure's own plan, default parameters, no rig
+    proc.plan = lambda: [
+        Step(s.name, partial(_takes, seconds=f * s.expected_s), s.expected_s, s.setup)
+        for s, f in zip(real, factors)
+    ]
     proc.analyze = lambda ctx: Analysis({}, [])
-    resume = (Resumed(tmp_path / "earlier.h5", name, {}, {n: {} for n in taken_over})
-              if taken_over else None)
+    resume = (
+        Resumed(tmp_path / "earlier.h5", name, {}, {n: {} for n in taken_over})
+        if taken_over
+        else None
+    )
     seen: list[Progress] = []
-    rig = SimpleNamespace(calibration=RigCalibration(), check=lambda: None, url="stand-in", simulated=True,
-                          sim_config=None)
+    rig = SimpleNamespace(
+        calibration=RigCalibration(),
+        check=lambda: None,
+        url="stand-in",
+        simulated=True,
+        sim_config=None,
+    )
     caplog.clear()
     with caplog.at_level(logging.WARNING, "procedures.progress"):
         s = run_procedure(proc, rig, tmp_path, progress=seen.append, resume=resume, report=False)
-    assert s.status == "complete" and s.steps_resumed == [x.name for x in real if x.name in taken_over]
+    assert s.status == "complete" and s.steps_resumed == [
+        x.name for x in real if x.name in taken_over
+    ]
     assert_monotone_then_done(seen, caplog, report=False)
     return seen
 
 
 @pytest.mark.parametrize("name", sorted(catalogue()))
 def test_every_procedure_progresses_monotonically_however_long_its_steps_take(
-        name, tmp_path, monkeypatch, caplog):
+    name, tmp_path, monkeypatch, caplog
+):
     monkeypatch.setattr(runner, "Acquisition", StandInAcquisition)
     rng = random.Random(name)
     n = len(catalogue()[name]().plan())
-    orders = [rng.sample(FACTORS, 3) for _ in range(n)]   # each step takes each factor once
+    orders = [rng.sample(FACTORS, 3) for _ in range(n)]  # each step takes each factor once
     for trial in range(3):
         _run_synthetic(name, [o[trial] for o in orders], tmp_path / f"t{trial}", caplog)
     # a resume: some data steps taken over (their whole weight at once), the rest run
     data = [s.name for s in catalogue()[name]().plan() if not s.setup]
     taken = {d for d in data if rng.random() < 0.5} or set(data[:1])
-    _run_synthetic(name, [rng.choice(FACTORS) for _ in range(n)], tmp_path / "resumed", caplog,
-                   taken_over=taken)
+    _run_synthetic(
+        name,
+        [rng.choice(FACTORS) for _ in range(n)],
+        tmp_path / "resumed",
+        caplog,
+        taken_over=taken,
+    )

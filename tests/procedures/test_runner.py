@@ -59,9 +59,13 @@ class Toy(Procedure):
         return ("torq_x", "gyro_x")
 
     def plan(self):
-        return [Step("setup", self.setup, expected_s=1.0, setup=True),
-                *(Step(f"data {i}", lambda c, i=i: self.data(c, i), expected_s=self.params.step_s)
-                  for i in range(self.params.n_data_steps))]
+        return [
+            Step("setup", self.setup, expected_s=1.0, setup=True),
+            *(
+                Step(f"data {i}", lambda c, i=i: self.data(c, i), expected_s=self.params.step_s)
+                for i in range(self.params.n_data_steps)
+            ),
+        ]
 
     def setup(self, ctx):
         self.setup_runs += 1
@@ -84,7 +88,9 @@ class Toy(Procedure):
                 self.analysed[name] = (span, rf.read(["torq_x"], span.start, span.stop)[0])
         means = [ctx.results[f"data {i}"]["mean"] for i in range(self.params.n_data_steps)]
         m = float(np.mean(means))
-        return Analysis({"mean_V": m}, [Measurement("mean torquer X", m, "V", lo=self.params.limit_lo, hi=10.0)])
+        return Analysis(
+            {"mean_V": m}, [Measurement("mean torquer X", m, "V", lo=self.params.limit_lo, hi=10.0)]
+        )
 
 
 @pytest.fixture
@@ -143,7 +149,9 @@ def _assert_aborted_and_safe(rig, s, why: str) -> None:
 def test_ctrl_c_aborts_to_the_safe_state(rig, tmp_path):
     calls = []
 
-    def ctrl_c(p):  # the listener runs on the procedure's thread: a KeyboardInterrupt as from SIGINT
+    def ctrl_c(
+        p,
+    ):  # the listener runs on the procedure's thread: a KeyboardInterrupt as from SIGINT
         calls.append(p)
         if p.step == "data 1":
             raise KeyboardInterrupt
@@ -166,7 +174,7 @@ def test_the_runner_goes_safe_through_the_drivers_one_guard(rig, tmp_path, go_sa
     _assert_aborted_and_safe(rig, s, "toy failure in data 1")
     assert go_safe_calls == ["toy aborted (ProcedureError: toy failure in data 1)"]
     ok = run_procedure(Toy(ToyParams(n_data_steps=1)), rig, tmp_path)
-    assert ok.verdict == "pass" and len(go_safe_calls) == 1        # a clean run does not go safe
+    assert ok.verdict == "pass" and len(go_safe_calls) == 1  # a clean run does not go safe
 
 
 def test_a_device_fault_aborts(rig, tmp_path):
@@ -183,8 +191,13 @@ def test_a_device_fault_aborts(rig, tmp_path):
 
 def test_operator_abort_event(rig, tmp_path):
     stop = threading.Event()
-    s = run_procedure(Toy(), rig, tmp_path, abort=stop,
-                      progress=lambda p: stop.set() if p.step == "data 0" else None)
+    s = run_procedure(
+        Toy(),
+        rig,
+        tmp_path,
+        abort=stop,
+        progress=lambda p: stop.set() if p.step == "data 0" else None,
+    )
     _assert_aborted_and_safe(rig, s, "aborted by the operator")
 
 
@@ -199,7 +212,9 @@ def test_resume_takes_over_done_data_steps_and_reruns_setup(rig, tmp_path):
     assert s.steps_resumed == ["data 0", "data 1"] and toy.setup_runs == 1
     with RunFile(s.file) as rf:
         assert rf.meta["procedure"]["resumed_from"] == str(first.file)
-        taken = [json.loads(e.text) for e in rf.events if e.kind == "step-done" and "resumed" in e.text]
+        taken = [
+            json.loads(e.text) for e in rf.events if e.kind == "step-done" and "resumed" in e.text
+        ]
     assert [t["step"] for t in taken] == ["data 0", "data 1"]
     assert taken[0]["result"] == resumed.results["data 0"]
     # the aborted file is kept as it was
@@ -207,7 +222,9 @@ def test_resume_takes_over_done_data_steps_and_reruns_setup(rig, tmp_path):
         assert rf.status.startswith("aborted: ")
 
 
-def test_the_runner_hands_analyze_the_samples_each_data_step_recorded_across_a_resume(rig, tmp_path):
+def test_the_runner_hands_analyze_the_samples_each_data_step_recorded_across_a_resume(
+    rig, tmp_path
+):
     """Provenance is the runner's: a resumed run's analysis reads data 0-1 from the aborted
     file and data 2 from its own, exactly the samples each step took (their means are the
     step results), never the setup step's; the summary and the step-done events carry them."""
@@ -229,8 +246,12 @@ def test_the_runner_hands_analyze_the_samples_each_data_step_recorded_across_a_r
     summary = json.loads(s.file.with_suffix(".json").read_text())
     assert summary["spans"]["data 0"]["file"] == str(first.file.resolve())
     with RunFile(s.file) as rf:
-        done = {d["step"]: d for d in (json.loads(e.text) for e in rf.events if e.kind == "step-done")}
-    assert done["data 2"]["span"]["start"] == s.spans["data 2"].start and "span" not in done["setup"]
+        done = {
+            d["step"]: d for d in (json.loads(e.text) for e in rf.events if e.kind == "step-done")
+        }
+    assert (
+        done["data 2"]["span"]["start"] == s.spans["data 2"].start and "span" not in done["setup"]
+    )
 
 
 def ctx_mean(summary, step: str) -> float:
@@ -273,7 +294,8 @@ class _Interrupted(Toy):
 
 @pytest.mark.parametrize("stage", ["analysis", "report"])
 def test_a_signal_after_the_acquisition_leaves_a_true_summary_and_resume_analyses_again(
-        rig, tmp_path, stage):
+    rig, tmp_path, stage
+):
     """Issue 36 item 11: SIGHUP while the report was written left exit 2, a summary saying
     pass/complete and no report, and ``--resume`` refused the complete file. The summary is
     now written after the report and says the run was interrupted; a resume of the complete
@@ -281,18 +303,18 @@ def test_a_signal_after_the_acquisition_leaves_a_true_summary_and_resume_analyse
     toy, md = _Interrupted(stage), tmp_path / "toy.md"
     try:
         s = run_procedure(toy, rig, tmp_path)
-    except KeyboardInterrupt:   # would end the session: a failure of this test instead
+    except KeyboardInterrupt:  # would end the session: a failure of this test instead
         summary = (tmp_path / "toy.json").read_text()
         pytest.fail(f"the interruption escaped the runner; its summary: {summary}")
-    assert s.verdict == "aborted" and s.exit_code == 2 and s.status == "complete"   # the file is
+    assert s.verdict == "aborted" and s.exit_code == 2 and s.status == "complete"  # the file is
     summary = json.loads((tmp_path / "toy.json").read_text())
     assert summary["verdict"] == "aborted" and f"--resume {s.file}" in summary["error"]
     if stage == "report":
-        assert toy.summary_seen is False                        # the summary is written after it
+        assert toy.summary_seen is False  # the summary is written after it
         assert "interrupted while the report was written" in summary["error"]
         assert "no report" in summary["error"]
         assert s.report is None and summary["report"] is None and not md.exists()
-    else:   # a report of the aborted analysis, as of any aborted run
+    else:  # a report of the aborted analysis, as of any aborted run
         assert "interrupted during the analysis" in summary["error"]
         assert summary["report"] == str(md) and "**aborted**" in md.read_text()
     # the console's default: a complete run is refused
@@ -311,7 +333,7 @@ def test_a_signal_after_the_acquisition_leaves_a_true_summary_and_resume_analyse
     summary = json.loads((tmp_path / "toy.json").read_text())
     assert summary["verdict"] == "pass" and summary["report"] == str(tmp_path / "toy.md")
     assert [p.name for p in tmp_path.glob("*.h5")] == ["toy.h5"]
-    assert not (tmp_path / "elsewhere").exists()   # beside the run file, whatever out_dir
+    assert not (tmp_path / "elsewhere").exists()  # beside the run file, whatever out_dir
     with RunFile(s.file) as rf:
         assert rf.status == "complete"
 
@@ -324,9 +346,9 @@ def test_a_signal_while_the_summary_is_written_acts_after_it():
     with aborting_on_signals(), pytest.raises(KeyboardInterrupt):
         with _signals_held():
             os.kill(os.getpid(), signal.SIGHUP)
-            time.sleep(0.05)      # an unheld signal raises here
+            time.sleep(0.05)  # an unheld signal raises here
             reached = True
-        time.sleep(1.0)           # a hang guard: it has been raised before
+        time.sleep(1.0)  # a hang guard: it has been raised before
     assert reached
 
 
@@ -338,18 +360,26 @@ def test_next_free_never_reuses_a_name(tmp_path):
 
 
 def test_catalogue_finds_every_procedure_and_keys_are_design_section_7():
-    design = {"earth-rate": ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"),
-              "stopwatch": ("K_g_mV_per_urad", "file"),
-              "hysteresis": ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "file"),
-              # and the platform rms net of the baseline's pickoff noise: docs/procedures/survey.md
-              "survey": ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file"),
-              "drift": ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file"),
-              # not in DESIGN.md section 7 (which names `fbs run excitation` but not its keys):
-              # docs/procedures/excitation.md
-              "excitation": ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "file"),
-              # DESIGN.md section 7 names `fbs run baseline`; its keys: docs/procedures/baseline.md
-              "baseline": ("nea_urad", "white_urad_per_rtHz", "flicker_corner_hz", "pickoff_rms_urad",
-                           "pickoff_lines_hz", "file")}
+    design = {
+        "earth-rate": ("K_TO_urad_per_s_per_V", "drift_urad_per_s", "file"),
+        "stopwatch": ("K_g_mV_per_urad", "file"),
+        "hysteresis": ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "file"),
+        # and the platform rms net of the baseline's pickoff noise: docs/procedures/survey.md
+        "survey": ("platform_rms_urad", "platform_rms_baseline_net_urad", "dip_hz", "file"),
+        "drift": ("bias_instability_urad_per_s", "arw_urad_per_sqrt_s", "file"),
+        # not in DESIGN.md section 7 (which names `fbs run excitation` but not its keys):
+        # docs/procedures/excitation.md
+        "excitation": ("network", "inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad", "file"),
+        # DESIGN.md section 7 names `fbs run baseline`; its keys: docs/procedures/baseline.md
+        "baseline": (
+            "nea_urad",
+            "white_urad_per_rtHz",
+            "flicker_corner_hz",
+            "pickoff_rms_urad",
+            "pickoff_lines_hz",
+            "file",
+        ),
+    }
     procs = catalogue()
     assert set(procs) == set(design)
     for name, keys in design.items():

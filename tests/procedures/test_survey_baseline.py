@@ -27,7 +27,7 @@ from procedures.params import find_prior, parse_params
 from tests.result_schema import assert_valid_result
 
 FS = 200.0
-KG = 6.03e-3            # V/urad
+KG = 6.03e-3  # V/urad
 BAND = (0.4, 15.0)
 RMS_TOL = 0.20
 
@@ -45,11 +45,13 @@ _SEL = (_W >= BAND[0]) & (_W <= BAND[1])
 UNIT_BAND_VAR = float(np.trapezoid(np.abs(_H[_SEL]) ** 2 * 2 / FS, _W[_SEL]))
 
 
-def _draw(rng, platform_rms: float, noise_rms: float, survey_s: float = 300.0, baseline_s: float = 480.0):
+def _draw(
+    rng, platform_rms: float, noise_rms: float, survey_s: float = 300.0, baseline_s: float = 480.0
+):
     """One survey record (platform + pickoff noise + a 71 Hz line) and one baseline record (the
     pickoff alone), in volts; ``platform_rms`` and ``noise_rms`` are the band's (urad)."""
     sigma_p = platform_rms / math.sqrt(UNIT_BAND_VAR)
-    sigma_n = math.sqrt(noise_rms ** 2 / (BAND[1] - BAND[0]) * FS / 2)      # white: one-sided PSD * fs/2
+    sigma_n = math.sqrt(noise_rms**2 / (BAND[1] - BAND[0]) * FS / 2)  # white: one-sided PSD * fs/2
     ns, nb = int(survey_s * FS), int(baseline_s * FS)
     theta = scipy.signal.lfilter(B, A, rng.standard_normal(ns + 2000) * sigma_p)[2000:]
 
@@ -75,7 +77,7 @@ def test_generator_net_rms_within_20_percent_and_its_interval_covers():
         cover += e.covers(0.45)
     print(f"within 20 %: {within} of {n}; intervals covering: {cover} of {n}")
     assert within >= 0.97 * n
-    assert 0.92 * n <= cover <= 0.98 * n          # 95 % nominal; +-2.7 binomial sigma
+    assert 0.92 * n <= cover <= 0.98 * n  # 95 % nominal; +-2.7 binomial sigma
 
 
 def test_generator_without_platform_motion_is_unresolved_and_covers_zero():
@@ -91,17 +93,29 @@ def test_generator_without_platform_motion_is_unresolved_and_covers_zero():
 
 # ---------------------------------------------------------------------------- (b) the file's checks
 def _fake_run(path, procedure, channels=("gyro_x", "gyro_y")):
-    with RunWriter(path, rig="test", mode=3, rate_hz=100.0, channels=dict.fromkeys(channels, "V"),
-                   procedure=procedure, axis="X") as w:
+    with RunWriter(
+        path,
+        rig="test",
+        mode=3,
+        rate_hz=100.0,
+        channels=dict.fromkeys(channels, "V"),
+        procedure=procedure,
+        axis="X",
+    ) as w:
         w.append({c: np.zeros(100) for c in channels})
     return path
 
 
 def test_a_bad_baseline_file_is_refused_by_name_before_anything_is_recorded(tmp_path):
-    cases = [(tmp_path / "missing.h5", "no such file"),
-             (tmp_path / "notes.txt", "not a readable fbs-run file"),
-             (_fake_run(tmp_path / "survey.h5", "survey"), "a 'survey' run, not a 'baseline' run"),
-             (_fake_run(tmp_path / "baseline.h5", "baseline"), "holds no completed 'clamped record' step")]
+    cases = [
+        (tmp_path / "missing.h5", "no such file"),
+        (tmp_path / "notes.txt", "not a readable fbs-run file"),
+        (_fake_run(tmp_path / "survey.h5", "survey"), "a 'survey' run, not a 'baseline' run"),
+        (
+            _fake_run(tmp_path / "baseline.h5", "baseline"),
+            "holds no completed 'clamped record' step",
+        ),
+    ]
     (tmp_path / "notes.txt").write_text("not HDF5")
     for path, why in cases:
         # a missing file is refused by the parameter's declared limit (an existing regular file),
@@ -113,7 +127,9 @@ def test_a_bad_baseline_file_is_refused_by_name_before_anything_is_recorded(tmp_
             assert isinstance(exc.value, BaselineFileError)
             assert f"survey: baseline_file {str(path)!r}" in text and why in text, text
         else:
-            assert f"survey: baseline_file = {str(path)!r} must be" in text and why in text.lower(), text
+            assert (
+                f"survey: baseline_file = {str(path)!r} must be" in text and why in text.lower()
+            ), text
         # `fbs run survey --param baseline_file=...` refuses it the same way (a ValueError: exit 2)
         with pytest.raises(ValueError, match="baseline_file"):
             parse_params(Survey, [f"baseline_file={path}"], None)
@@ -145,26 +161,36 @@ def test_baseline_then_survey_on_one_drawn_rig_nets_the_true_platform_rms(tmp_pa
     from .test_survey import expected_values
 
     rng = np.random.default_rng(2260)
-    noise_x = round(float(rng.uniform(4.8, 5.6)), 3)      # 0.1-200 Hz; the lines hold 85 % of its rms^2
+    noise_x = round(float(rng.uniform(4.8, 5.6)), 3)  # 0.1-200 Hz; the lines hold 85 % of its rms^2
     cfg_path = tmp_path / "cfg.toml"
-    cfg_path.write_text(f"[gyro.X]\npickoff_noise_rms_urad = {noise_x}\npickoff_lines = {nominal_pickoff_lines(noise_x)!r}\n")
+    cfg_path.write_text(
+        f"[gyro.X]\npickoff_noise_rms_urad = {noise_x}\npickoff_lines = {nominal_pickoff_lines(noise_x)!r}\n"
+    )
     out = tmp_path / "out"
     params = Params()
     with open_rig(f"sim?warm=1&seed=50&config={cfg_path}") as rig:
-        b = run_procedure(Baseline(BaselineParams(axis="X", settle_s=5.0, record_s=320.0)), rig, out, report=False)
+        b = run_procedure(
+            Baseline(BaselineParams(axis="X", settle_s=5.0, record_s=320.0)), rig, out, report=False
+        )
         assert b.exit_code == 0, b.error
-        prior = find_prior(out)           # as `fbs run survey --out` finds it: the summary's run file
+        prior = find_prior(out)  # as `fbs run survey --out` finds it: the summary's run file
         assert prior["baseline"]["_file"] == str(b.file)
         s = run_procedure(Survey(params, prior=prior), rig, out)
     assert s.exit_code == 0, s.error
     exp = expected_values(load_config(cfg_path), params, seed=60)
     v = s.values
     assert v["baseline"]["file"] == str(b.file) and v["baseline"]["axis"] == "X"
-    net, ci, resolved = (v["platform_rms_baseline_net_urad"], v["platform_rms_baseline_net_urad_ci95"],
-                         v["resolved"]["platform_rms_baseline_net_urad"])
+    net, ci, resolved = (
+        v["platform_rms_baseline_net_urad"],
+        v["platform_rms_baseline_net_urad_ci95"],
+        v["resolved"]["platform_rms_baseline_net_urad"],
+    )
     for a in "XY":
-        print(f"{a}: net of baseline {net[a]} {ci[a]} (resolved {resolved[a]}), coherent {v['platform_rms_net_urad'][a]}, "
-              f"thesis method {v['platform_rms_urad'][a]:.4g}; true {exp['true_rms_urad'][a]:.4g}")
+        print(
+            f"{a}: net of baseline {net[a]} {ci[a]} (resolved {resolved[a]}), "
+            f"coherent {v['platform_rms_net_urad'][a]}, "
+            f"thesis method {v['platform_rms_urad'][a]:.4g}; true {exp['true_rms_urad'][a]:.4g}"
+        )
         assert ci[a][0] <= exp["true_rms_urad"][a] <= ci[a][1]
     assert resolved["X"] and abs(net["X"] / exp["true_rms_urad"]["X"] - 1) < RMS_TOL
     # the JSON `fbs run --json` prints carries it; the report sets the three beside the thesis
@@ -173,6 +199,8 @@ def test_baseline_then_survey_on_one_drawn_rig_nets_the_true_platform_rms(tmp_pa
     assert_valid_result(printed)
     md = (out / "survey.md").read_text()
     assert "net of the baseline's pickoff noise" in md and "| X | " in md and "| 1.6 |" in md
-    assert json.loads((out / "survey.json").read_text())["values"]["baseline"]["file"] == str(b.file)
+    assert json.loads((out / "survey.json").read_text())["values"]["baseline"]["file"] == str(
+        b.file
+    )
     # the same file named as the parameter passes its checks
     assert Params(baseline_file=str(b.file)).baseline_file == str(b.file)

@@ -27,14 +27,27 @@ def _h2_ctl(f, w, zeta):
 
 
 # --------------------------------------------------------------------------- white level from the NEA
-@pytest.mark.parametrize("corner, knee, slope", [(3.0, 1.0, 1.0), (3.0, 0.0, 1.0), (1.5, 0.0, 0.8),
-                                                 (5.0, 1.0, 1.2), (2.0, 0.4, 0.9), (10.0, 0.0, 1.2)])
+@pytest.mark.parametrize(
+    "corner, knee, slope",
+    [
+        (3.0, 1.0, 1.0),
+        (3.0, 0.0, 1.0),
+        (1.5, 0.0, 0.8),
+        (5.0, 1.0, 1.2),
+        (2.0, 0.4, 0.9),
+        (10.0, 0.0, 1.2),
+    ],
+)
 def test_white_level_makes_the_nea_in_0_1_100_hz_for_any_knee(corner, knee, slope):
     w, zeta, nea = 264.0, 0.71, 0.451
     white = ac_white_psd(nea, corner, w, zeta, knee=knee, slope=slope)
     # an independent quadrature, split at the knee's corner
-    var, _ = scipy.integrate.quad(lambda f: white * ac_knee(f, corner, knee, slope) * _h2_ctl(f, w, zeta),
-                                  *NEA_BAND_HZ, points=[corner], limit=400)
+    var, _ = scipy.integrate.quad(
+        lambda f: white * ac_knee(f, corner, knee, slope) * _h2_ctl(f, w, zeta),
+        *NEA_BAND_HZ,
+        points=[corner],
+        limit=400,
+    )
     assert math.sqrt(var) / URAD == pytest.approx(nea, rel=1e-4)
 
 
@@ -52,15 +65,26 @@ def test_a_sharper_knee_has_a_higher_white_level_for_the_same_nea():
 
 
 def test_sources_make_the_nac_spectrum_w_times_the_knee():
-    cfg = from_dict({"autocollimator": {"X": {"flicker_knee": 0.0, "flicker_slope": 1.2, "flicker_corner_hz": 2.0}}})
+    cfg = from_dict(
+        {
+            "autocollimator": {
+                "X": {"flicker_knee": 0.0, "flicker_slope": 1.2, "flicker_corner_hz": 2.0}
+            }
+        }
+    )
     ac = cfg.autocollimator["X"]
     src = Sources(cfg, 0, 1 / 2000)
-    white = ac_white_psd(ac.nea_urad, 2.0, ac.control_filter_rad_per_s, ac.control_filter_zeta, knee=0.0, slope=1.2)
+    white = ac_white_psd(
+        ac.nea_urad, 2.0, ac.control_filter_rad_per_s, ac.control_filter_zeta, knee=0.0, slope=1.2
+    )
     f = np.geomspace(1e-3, 50.0, 500)
     parts = src.spectrum("nac_X", f)
     np.testing.assert_allclose(parts["WhiteNoise"], white, rtol=1e-12)
     k = ac_knee(f, 2.0, 0.0, 1.2)
-    assert np.max(np.abs(parts["WhiteNoise"] + parts["FlickerNoise"] - white * k) / (white * k)) < 0.045
+    assert (
+        np.max(np.abs(parts["WhiteNoise"] + parts["FlickerNoise"] - white * k) / (white * k))
+        < 0.045
+    )
 
 
 @pytest.mark.parametrize("knee, slope", [(0.0, 1.2), (1.0, 0.8)])
@@ -75,8 +99,10 @@ def test_the_clamped_control_channel_shows_the_data_sheet_nea(knee, slope):
     sim.set_clamp(True)
     sim.advance(2000)
     x = np.concatenate([b["ac_x_ctl"] for b in sim.run(24 * nperseg / rate, block_s=60.0)])
-    x = x / (ac.control_scale_mV_per_urad * 1e-3)                     # urad
-    f, p = scipy.signal.welch(x, fs=rate, window="hann", nperseg=nperseg, noverlap=0, detrend="constant")
+    x = x / (ac.control_scale_mV_per_urad * 1e-3)  # urad
+    f, p = scipy.signal.welch(
+        x, fs=rate, window="hann", nperseg=nperseg, noverlap=0, detrend="constant"
+    )
     m = len(x) // nperseg
     band = (f >= NEA_BAND_HZ[0]) & (f <= NEA_BAND_HZ[1])
     df = f[1] - f[0]
@@ -84,7 +110,15 @@ def test_the_clamped_control_channel_shows_the_data_sheet_nea(knee, slope):
     w2 = scipy.signal.get_window("hann", nperseg) ** 2
     rho = np.abs(np.fft.rfft(w2)[:3]) ** 2 / w2.sum() ** 2
     pb = p[band]
-    var = (np.sum(pb**2) + 2 * rho[1] * np.sum(pb[1:] * pb[:-1]) + 2 * rho[2] * np.sum(pb[2:] * pb[:-2])) * df**2 / m
+    var = (
+        (
+            np.sum(pb**2)
+            + 2 * rho[1] * np.sum(pb[1:] * pb[:-1])
+            + 2 * rho[2] * np.sum(pb[2:] * pb[:-2])
+        )
+        * df**2
+        / m
+    )
     assert abs(power - ac.nea_urad**2) < 4 * math.sqrt(var)
 
 
@@ -101,7 +135,7 @@ def test_flicker_noise_replaces_the_corner_and_keeps_the_white_level_and_the_kne
     before = ac_white_psd(ac0.nea_urad, ac0.flicker_corner_hz, w, z, knee=knee, slope=slope)
     after = ac_white_psd(ac.nea_urad, 8.0, w, z, knee=knee, slope=slope)
     assert after == pytest.approx(before, rel=1e-12)
-    assert ac.nea_urad > ac0.nea_urad                    # more 1/f in the band, same white
+    assert ac.nea_urad > ac0.nea_urad  # more 1/f in the band, same white
     assert out.autocollimator["X"] == cfg.autocollimator["X"]
 
 
@@ -116,12 +150,16 @@ def test_flicker_noise_makes_the_unit_s_own_bank_reach_the_new_corner():
     out = get("flicker_noise").inject(SimConfig(), "X", corner_hz=20.0)
     src = Sources(out, 0, 1 / 2000)
     white, bank, excess = src.parts["nac_X"][:3]
-    assert isinstance(bank, FlickerNoise) and bank.level == pytest.approx(20.0 * white.sigma**2 * 2 / 2000)
+    assert isinstance(bank, FlickerNoise) and bank.level == pytest.approx(
+        20.0 * white.sigma**2 * 2 / 2000
+    )
     assert excess.level == 0.0
     f = np.array([1.0, 10.0, 100.0])
     k = ac_knee(f, 20.0, 1.0, 1.0)
     got = src.spectrum("nac_X", f)
-    assert (got["WhiteNoise"] + got["FlickerNoise"]) / (got["WhiteNoise"] * k) == pytest.approx(1.0, rel=0.03)
+    assert (got["WhiteNoise"] + got["FlickerNoise"]) / (got["WhiteNoise"] * k) == pytest.approx(
+        1.0, rel=0.03
+    )
 
 
 def test_an_old_config_s_extra_flicker_corner_still_adds_its_excess_1_over_f():
@@ -156,7 +194,9 @@ def test_floor_excitation_psd_puts_excitation_times_w_at_the_undisturbed_mount_s
     ac = cfg.autocollimator["X"]
     dt = 1 / 2000
     src = Sources(cfg, 0, dt)
-    white = ac_white_psd(ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s, ac.control_filter_zeta)
+    white = ac_white_psd(
+        ac.nea_urad, ac.flicker_corner_hz, ac.control_filter_rad_per_s, ac.control_filter_zeta
+    )
     w = 2 * math.pi * 80.0
     (nm,) = src.parts["nmount_X"]
     assert isinstance(nm, WhiteNoise)
@@ -201,8 +241,13 @@ def _predicted_psd(cfg, relays, channel, rate, f):
         if not np.any(s_in):
             continue
         col = plant.inputs.index(name)
-        h = np.array([plant.C[row] @ np.linalg.solve(zk * np.eye(len(disc.Ad)) - disc.Ad, disc.Bd[:, col])
-                      + plant.D[row, col] for zk in z])
+        h = np.array(
+            [
+                plant.C[row] @ np.linalg.solve(zk * np.eye(len(disc.Ad)) - disc.Ad, disc.Bd[:, col])
+                + plant.D[row, col]
+                for zk in z
+            ]
+        )
         total += np.abs(h) ** 2 * s_in
     sos = anti_alias_sos(cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction, rate, m)
     return total * np.abs(scipy.signal.sosfreqz(sos, worN=f, fs=rate * m)[1]) ** 2
@@ -232,7 +277,7 @@ def test_the_ac_channel_s_peak_at_the_mount_rises_as_the_model_predicts(clamped)
         assert abs(ratio - 1.0) < 4 * sigma, (excitation, ratio, sigma)
         measured[excitation], predicted[excitation] = np.mean(p[sel]), np.mean(pred)
     rise = measured[30.0] / measured[0.0]
-    assert predicted[30.0] / predicted[0.0] > 3.0                  # the floor shows at the mount
+    assert predicted[30.0] / predicted[0.0] > 3.0  # the floor shows at the mount
     assert rise == pytest.approx(predicted[30.0] / predicted[0.0], rel=6 * sigma)
 
 

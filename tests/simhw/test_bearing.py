@@ -21,7 +21,7 @@ FAST = settings(max_examples=100, deadline=None)
 
 To_s = st.floats(1e-3, 1.0)
 eta_s = st.floats(1e3, 1e8)
-Tbar_s = st.floats(-0.99, 0.99)             # T / To, inside the Coulomb limits
+Tbar_s = st.floats(-0.99, 0.99)  # T / To, inside the Coulomb limits
 # eta To |dtheta|: from the elastic (<< 1) to the fully slipping (>> 1) regime.
 slip_s = st.floats(1e-6, 30.0)
 
@@ -34,8 +34,16 @@ def _dahl_rhs(s, x, direction):
 def _integrate(T0, dtheta, To, eta):
     """Eq. 5.2 by numerical integration over theta in [0, dtheta]."""
     direction = 1.0 if dtheta > 0 else -1.0
-    sol = solve_ivp(_dahl_rhs, (0.0, eta * To * dtheta), [T0 / To], args=(direction,), method="DOP853",
-                    rtol=1e-12, atol=1e-14, max_step=0.25)
+    sol = solve_ivp(
+        _dahl_rhs,
+        (0.0, eta * To * dtheta),
+        [T0 / To],
+        args=(direction,),
+        method="DOP853",
+        rtol=1e-12,
+        atol=1e-14,
+        max_step=0.25,
+    )
     assert sol.success
     return To * sol.y[0, -1]
 
@@ -72,7 +80,9 @@ def test_torque_moves_with_the_angle(tbar, slip, To, eta):
 @given(Tbar_s, slip_s, st.sampled_from([1.0, -1.0]), To_s, eta_s)
 def test_reversing_the_motion_mirrors_the_torque(tbar, slip, sign, To, eta):
     d = sign * slip / (eta * To)
-    assert dahl_step(-tbar * To, -d, To, eta) == pytest.approx(-dahl_step(tbar * To, d, To, eta), abs=1e-12 * To)
+    assert dahl_step(-tbar * To, -d, To, eta) == pytest.approx(
+        -dahl_step(tbar * To, d, To, eta), abs=1e-12 * To
+    )
 
 
 @FAST
@@ -142,7 +152,7 @@ def test_sinusoidal_sweep_settles_to_the_hysteresis_loop_of_eq_5_9(theta0_bar):
     for d in np.diff(theta):
         T = dahl_step(T, float(d), To, eta)
         torque.append(T)
-    last = np.array(torque[-n_per_cycle - 1:])
+    last = np.array(torque[-n_per_cycle - 1 :])
     expected = To * _tm_over_to(theta0_bar)
     assert last.max() == pytest.approx(expected, rel=1e-4)
     assert -last.min() == pytest.approx(expected, rel=1e-4)
@@ -186,11 +196,15 @@ def test_linear_part_of_model_none_is_zero():
 
 
 def test_linear_part_of_model_viscous_is_its_damping():
-    assert linear_part(Bearing(model="viscous", damping_Nms=0.3)) == BearingLinearPart(0.0, 0.3, False)
+    assert linear_part(Bearing(model="viscous", damping_Nms=0.3)) == BearingLinearPart(
+        0.0, 0.3, False
+    )
 
 
 def test_linear_part_of_model_spring_is_its_stiffness():
-    assert linear_part(Bearing(model="spring", stiffness_Nm_per_rad=380.0)) == BearingLinearPart(380.0, 0.0, False)
+    assert linear_part(Bearing(model="spring", stiffness_Nm_per_rad=380.0)) == BearingLinearPart(
+        380.0, 0.0, False
+    )
 
 
 def test_linear_part_of_model_dahl_is_the_small_motion_stiffness_plus_a_residual():

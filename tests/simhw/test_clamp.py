@@ -20,7 +20,11 @@ def test_clamp_holds_every_axis_and_the_autocollimator_reads_its_noise():
     b = sim.advance(30000)
     for name in ("theta_x", "theta_y", "theta_z"):
         assert np.ptp(b[name]) == 0.0
-    f, p = psd(b["ac_x_ctl"] / (cfg.autocollimator["X"].control_scale_mV_per_urad * 1e-3), 1000.0, seg_s=10.0)
+    f, p = psd(
+        b["ac_x_ctl"] / (cfg.autocollimator["X"].control_scale_mV_per_urad * 1e-3),
+        1000.0,
+        seg_s=10.0,
+    )
     assert band_rms(f, p, 0.1, 100.0) == pytest.approx(cfg.autocollimator["X"].nea_urad, rel=0.1)
     # the network still answers the autocollimator (pa_* reads), the pickoff its own noise
     assert np.std(b["pa_x"]) > 0 and np.std(b["gyro_x"]) > 0
@@ -39,7 +43,7 @@ def test_release_gives_the_platform_back_to_the_loops():
 def test_a_rig_never_clamped_is_unchanged_by_a_release_request():
     a = Simulator(rate_hz=500.0, seed=6, mode=3, truth=True)
     b = Simulator(rate_hz=500.0, seed=6, mode=3, truth=True)
-    b.set_clamp(False)               # already released: nothing happens
+    b.set_clamp(False)  # already released: nothing happens
     ba, bb = a.advance(1500), b.advance(1500)
     assert np.array_equal(ba.volts, bb.volts) and np.array_equal(ba["theta_x"], bb["theta_x"])
 
@@ -51,4 +55,6 @@ def test_the_reduced_simulator_clamps_alike():
         s.advance(250)
         s.set_clamp(True)
     bf, bp = full.advance(1000), part.advance(1000)
-    assert np.array_equal(bf["ac_x_ctl"], bp["ac_x_ctl"]) and np.array_equal(bf["gyro_x"], bp["gyro_x"])
+    assert np.array_equal(bf["ac_x_ctl"], bp["ac_x_ctl"]) and np.array_equal(
+        bf["gyro_x"], bp["gyro_x"]
+    )

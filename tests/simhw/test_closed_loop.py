@@ -100,7 +100,10 @@ def test_linearized_closed_loop_poles_match_table5(axis):
 
 # Table 6: the gyro stabilization loops' low-frequency closed-loop roots (rad/s), read by the
 # thesis off a root locus (Fig. 28); the caging loop (0.1 rad/s, damping 0.7) is not in it.
-TABLE6 = {"X": {"c1": 5.0, "c4": 160.0, "p": (43.0, 0.24)}, "Y": {"c1": 5.0, "c4": 160.0, "p": (60.0, 0.27)}}
+TABLE6 = {
+    "X": {"c1": 5.0, "c4": 160.0, "p": (43.0, 0.24)},
+    "Y": {"c1": 5.0, "c4": 160.0, "p": (60.0, 0.27)},
+}
 
 
 @pytest.mark.parametrize("mode", [4, 5])
@@ -120,14 +123,20 @@ def test_linearized_gyro_mode_poles_beside_table6(axis, mode):
     assert -p.real / abs(p) == pytest.approx(z_p, abs=0.02)
     # the caging loop: natural frequency 0.1 rad/s, damping 0.7 (DESIGN.md section 3)
     cage = _pole(poles, 0.1)
-    assert abs(cage) == pytest.approx(0.1, rel=0.1) and -cage.real / abs(cage) == pytest.approx(0.7, abs=0.06)
+    assert abs(cage) == pytest.approx(0.1, rel=0.1) and -cage.real / abs(cage) == pytest.approx(
+        0.7, abs=0.06
+    )
 
 
 def test_open_loop_platform_poles_are_the_thesis_bearing_resonances():
     """Platform with bearing spring: X (-0.8 +- j24.2), Y (-1.1 +- j39.0) (Ch. III H.1)."""
     cfg = SimConfig()
     for axis, expected in (("X", complex(-0.73, 24.2)), ("Y", complex(-1.02, 39.0))):
-        i, k, d = cfg.platform[axis].inertia_kg_m2, cfg.bearing[axis], cfg.platform[axis].gyro_damping_Nms
+        i, k, d = (
+            cfg.platform[axis].inertia_kg_m2,
+            cfg.bearing[axis],
+            cfg.platform[axis].gyro_damping_Nms,
+        )
         stiffness = k.eta_per_Nm * k.To_Nm**2
         root = np.roots([i, d, stiffness])[0]
         assert abs(root.imag) == pytest.approx(expected.imag, rel=0.01)

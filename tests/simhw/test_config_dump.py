@@ -67,7 +67,10 @@ def refined_configs(draw: st.DrawFn) -> SimConfig:
         values = {p.name: _param_value(draw, p) for p in eff.params if draw(st.booleans())}
         try:
             cfg = eff.inject(cfg, axis, **values)
-        except (ValueError, ConfigError):  # an effect that axis has no place for (no autocollimator on Z)
+        except (
+            ValueError,
+            ConfigError,
+        ):  # an effect that axis has no place for (no autocollimator on Z)
             continue
     for ax in draw(st.lists(st.sampled_from(AC_AXES), max_size=2, unique=True)):
         ac = cfg.autocollimator[ax]
@@ -75,8 +78,13 @@ def refined_configs(draw: st.DrawFn) -> SimConfig:
         ac.flicker_corner_hz = draw(st.floats(1.5, 5.0))
     for ch in draw(st.lists(st.sampled_from(GYRO_CHANNELS), max_size=2, unique=True)):
         g = cfg.gyro[ch]
-        white = (g.pickoff_noise_rms_urad**2 - sum(a * a / 2 for _, a in g.pickoff_lines)) * draw(st.floats(0.25, 4.0))
-        lines = [[f + draw(st.floats(-1.0, 1.0)), a * draw(st.floats(0.5, 2.0))] for f, a in g.pickoff_lines]
+        white = (g.pickoff_noise_rms_urad**2 - sum(a * a / 2 for _, a in g.pickoff_lines)) * draw(
+            st.floats(0.25, 4.0)
+        )
+        lines = [
+            [f + draw(st.floats(-1.0, 1.0)), a * draw(st.floats(0.5, 2.0))]
+            for f, a in g.pickoff_lines
+        ]
         if draw(st.booleans()):
             lines = lines[: draw(st.integers(0, len(lines)))]
         g.pickoff_lines = lines
@@ -102,7 +110,9 @@ def test_the_thesis_rig_is_an_empty_file_and_only_changes_are_written():
     assert dump_config(SimConfig()) == ""
     cfg = effects.get("bearing_friction").inject(effects.nominal(), "X", stiffness_Nm_per_rad=600.0)
     data = tomllib.loads(dump_config(cfg))
-    assert data["bearing"]["X"] == {"eta_per_Nm": 600.0 / 0.016**2}  # model "dahl" as the data sheet
+    assert data["bearing"]["X"] == {
+        "eta_per_Nm": 600.0 / 0.016**2
+    }  # model "dahl" as the data sheet
     assert data["bearing"]["Y"] == {"model": "none"} and data["bearing"]["Z"] == {"model": "none"}
     assert set(data) == {"bearing"}
 
@@ -143,7 +153,7 @@ def test_removing_every_pickup_line_is_written_as_an_empty_array():
 @given(st.floats(allow_nan=False, allow_infinity=False), st.text(max_size=20))
 def test_any_float_and_any_string_read_back_exactly(x, text):
     cfg = SimConfig()
-    cfg.gyro["Z"].fixed_drift_urad_per_s = x   # no range: any finite float is valid
+    cfg.gyro["Z"].fixed_drift_urad_per_s = x  # no range: any finite float is valid
     cfg.pickup = [PickupLine(text, 1.5, 0.0)]  # the channel is free text to the config
     back = _round_trip(cfg)
     assert back.gyro["Z"].fixed_drift_urad_per_s == x
@@ -176,7 +186,9 @@ def _sections(cfg: SimConfig) -> list[tuple[tuple[str, ...], Any]]:
         elif isinstance(value, dict):
             out += [((f.name, k), v) for k, v in value.items() if dataclasses.is_dataclass(v)]
         elif isinstance(value, list):
-            out += [((f.name, str(i)), v) for i, v in enumerate(value) if dataclasses.is_dataclass(v)]
+            out += [
+                ((f.name, str(i)), v) for i, v in enumerate(value) if dataclasses.is_dataclass(v)
+            ]
     return out
 
 
@@ -190,12 +202,24 @@ def _another(f: dataclasses.Field, current: Any) -> Any:
     if isinstance(current, float):
         lo, hi = f.metadata.get("lo"), f.metadata.get("hi")
         if hi is not None:
-            return (current + hi) / 2 if current != hi else (current + (lo if lo is not None else hi - 1.0)) / 2
+            return (
+                (current + hi) / 2
+                if current != hi
+                else (current + (lo if lo is not None else hi - 1.0)) / 2
+            )
         return current * 1.25 + 0.5 if current >= 0 else current * 0.75
     if isinstance(current, str):
-        return next((m for m in BEARING_MODELS if m != current), "") if current in BEARING_MODELS else current + "-changed"
+        return (
+            next((m for m in BEARING_MODELS if m != current), "")
+            if current in BEARING_MODELS
+            else current + "-changed"
+        )
     if isinstance(current, list):
-        return [*current, [333.0, 0.5]] if all(isinstance(x, list) for x in current) else [*current, 1.0]
+        return (
+            [*current, [333.0, 0.5]]
+            if all(isinstance(x, list) for x in current)
+            else [*current, 1.0]
+        )
     raise AssertionError(f"a field of a type this test does not know: {f.name} = {current!r}")
 
 
@@ -205,8 +229,11 @@ def _fields_of_every_section() -> list[tuple[tuple[str, ...], str]]:
     return [(path, f.name) for path, obj in _sections(cfg) for f in dataclasses.fields(obj)]
 
 
-@pytest.mark.parametrize(("path", "name"), _fields_of_every_section(),
-                         ids=lambda v: ".".join(v) if isinstance(v, tuple) else v)
+@pytest.mark.parametrize(
+    ("path", "name"),
+    _fields_of_every_section(),
+    ids=lambda v: ".".join(v) if isinstance(v, tuple) else v,
+)
 def test_every_field_of_every_section_is_written_and_read_back(path, name):
     base = SimConfig()
     base.pickup = [PickupLine("ac_x_ctl", 200.0, 0.003)]
@@ -228,7 +255,9 @@ def test_every_field_of_every_section_is_written_and_read_back(path, name):
     try:
         validate(cfg)
     except ConfigError:
-        pytest.skip(f"{'.'.join(path)}.{name} = {new!r} is outside what validate allows; written and parsed only")
+        pytest.skip(
+            f"{'.'.join(path)}.{name} = {new!r} is outside what validate allows; written and parsed only"
+        )
     assert from_dict(data, base=base) == cfg
 
 
@@ -239,5 +268,9 @@ def test_every_float_field_keeps_repr_precision():
         for f in dataclasses.fields(obj):
             v, hi = getattr(obj, f.name), f.metadata.get("hi")
             if isinstance(v, float) and v != 0.0:
-                setattr(obj, f.name, math.nextafter(v, -math.inf if hi is not None and v >= hi else math.inf))
+                setattr(
+                    obj,
+                    f.name,
+                    math.nextafter(v, -math.inf if hi is not None and v >= hi else math.inf),
+                )
     assert _round_trip(cfg) == cfg

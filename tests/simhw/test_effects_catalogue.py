@@ -14,8 +14,18 @@ from simhw import effects
 from simhw.effects import Effect, catalogue, get, nominal, parse_spec
 from simhw.params import AXES, SimConfig, from_dict, to_dict, validate
 
-REQUIRED = {"none", "bearing_friction", "mount_resonance", "pickup_line", "flicker_noise", "offset_jumps",
-            "gyro_cross_coupling", "scale_factor_error", "time_delay", "extra_damping"}
+REQUIRED = {
+    "none",
+    "bearing_friction",
+    "mount_resonance",
+    "pickup_line",
+    "flicker_noise",
+    "offset_jumps",
+    "gyro_cross_coupling",
+    "scale_factor_error",
+    "time_delay",
+    "extra_damping",
+}
 #: Effects that act on a primary autocollimator, which only X and Y have.
 AC_ONLY = {"mount_resonance", "flicker_noise", "offset_jumps", "time_delay"}
 ALL = sorted(catalogue())
@@ -118,7 +128,9 @@ def test_bearing_friction_turns_the_nominal_bearing_into_a_dahl_spring_of_the_gi
 
 def test_pickup_line_adds_a_line_on_the_axis_control_channel():
     out = get("pickup_line").inject(SimConfig(), "Y", freq_hz=200.0, amplitude_V=0.003)
-    assert [(p.channel, p.freq_hz, p.amplitude_V) for p in out.pickup] == [("ac_y_ctl", 200.0, 0.003)]
+    assert [(p.channel, p.freq_hz, p.amplitude_V) for p in out.pickup] == [
+        ("ac_y_ctl", 200.0, 0.003)
+    ]
     out_z = get("pickup_line").inject(SimConfig(), "Z")
     assert out_z.pickup[0].channel == "ac_z"
 
@@ -133,7 +145,9 @@ def test_scale_factor_error_on_Z_scales_the_azimuth_unit():
 def test_gyro_cross_coupling_divides_h_over_c_by_the_factor():
     cfg = SimConfig()
     out = get("gyro_cross_coupling").inject(cfg, "Y", factor=4.0)
-    assert out.gyro["Y"].viscous_coupling_h_over_c == pytest.approx(cfg.gyro["Y"].viscous_coupling_h_over_c / 4)
+    assert out.gyro["Y"].viscous_coupling_h_over_c == pytest.approx(
+        cfg.gyro["Y"].viscous_coupling_h_over_c / 4
+    )
 
 
 @pytest.mark.parametrize("name", sorted(AC_ONLY))
@@ -161,7 +175,9 @@ def test_inject_rejects_unknown_parameter_naming_it(name):
 def test_inject_rejects_values_outside_the_prior_naming_parameter_and_range(name, where):
     eff = catalogue()[name]
     p = eff.params[0]
-    value = {"below": p.lo - abs(p.lo) - 1.0, "above": p.hi + abs(p.hi) + 1.0, "nan": math.nan}[where]
+    value = {"below": p.lo - abs(p.lo) - 1.0, "above": p.hi + abs(p.hi) + 1.0, "nan": math.nan}[
+        where
+    ]
     with pytest.raises(ValueError) as exc:
         eff.inject(SimConfig(), "X", **{p.name: value})
     msg = str(exc.value)
@@ -202,16 +218,22 @@ def test_parse_spec_without_values_uses_the_defaults(spec):
 def test_parsed_spec_injects():
     eff, values, axis = parse_spec("mount_resonance:freq_hz=80,damping=0.1,axis=Y")
     out = eff.inject(SimConfig(), axis, **values)
-    assert (out.autocollimator["Y"].mount_freq_hz, out.autocollimator["Y"].mount_damping) == (80.0, 0.1)
+    assert (out.autocollimator["Y"].mount_freq_hz, out.autocollimator["Y"].mount_damping) == (
+        80.0,
+        0.1,
+    )
 
 
-@pytest.mark.parametrize("spec, fragments", [
-    ("warp_drive:x=1", ["unknown effect", "'warp_drive'"]),
-    ("", ["unknown effect", "''"]),
-    ("pickup_line:freq_hz", ["pickup_line", "key=value", "'freq_hz'"]),
-    ("pickup_line:freq_hz=fast", ["pickup_line", "freq_hz", "'fast'", "not a number"]),
-    ("pickup_line:freq_hz=200;amplitude_V=1", ["pickup_line", "not a number"]),
-])
+@pytest.mark.parametrize(
+    "spec, fragments",
+    [
+        ("warp_drive:x=1", ["unknown effect", "'warp_drive'"]),
+        ("", ["unknown effect", "''"]),
+        ("pickup_line:freq_hz", ["pickup_line", "key=value", "'freq_hz'"]),
+        ("pickup_line:freq_hz=fast", ["pickup_line", "freq_hz", "'fast'", "not a number"]),
+        ("pickup_line:freq_hz=200;amplitude_V=1", ["pickup_line", "not a number"]),
+    ],
+)
 def test_bad_spec_raises_value_error_saying_what_is_wrong(spec, fragments):
     with pytest.raises(ValueError) as exc:
         parse_spec(spec)

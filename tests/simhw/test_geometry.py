@@ -35,8 +35,9 @@ def test_platform_axes_are_orthonormal_and_right_handed(tilt, spindle, offset):
 
 
 def test_zero_angles_put_X_north_Y_west_Z_up():
-    np.testing.assert_allclose(platform_axes_enu(0.0, 0.0, 0.0),
-                               [[0, 1, 0], [-1, 0, 0], [0, 0, 1]], atol=1e-15)
+    np.testing.assert_allclose(
+        platform_axes_enu(0.0, 0.0, 0.0), [[0, 1, 0], [-1, 0, 0], [0, 0, 1]], atol=1e-15
+    )
 
 
 @FAST
@@ -45,9 +46,16 @@ def test_level_table_earth_rate_follows_spindle_minus_offset(lat_deg, spindle, o
     lat = math.radians(lat_deg)
     w = earth_rate_platform(lat, OMEGA, platform_axes_enu(0.0, spindle, offset))
     a = spindle - offset
-    np.testing.assert_allclose(w, [OMEGA * math.cos(lat) * math.cos(a),
-                                   -OMEGA * math.cos(lat) * math.sin(a),
-                                   OMEGA * math.sin(lat)], rtol=0, atol=1e-12 * OMEGA)
+    np.testing.assert_allclose(
+        w,
+        [
+            OMEGA * math.cos(lat) * math.cos(a),
+            -OMEGA * math.cos(lat) * math.sin(a),
+            OMEGA * math.sin(lat),
+        ],
+        rtol=0,
+        atol=1e-12 * OMEGA,
+    )
 
 
 @FAST
@@ -68,8 +76,9 @@ def test_polar_tilt_puts_the_whole_earth_rate_on_Z_for_any_spindle_angle(lat_deg
 def test_polar_tilt_with_a_base_azimuth_error_leaks_earth_rate_into_X_and_Y():
     lat = 37.43
     offset = math.radians(0.12)
-    w0 = earth_rate_platform(math.radians(lat), OMEGA,
-                             platform_axes_enu(math.radians(polar_tilt_deg(lat)), 0.0, offset))
+    w0 = earth_rate_platform(
+        math.radians(lat), OMEGA, platform_axes_enu(math.radians(polar_tilt_deg(lat)), 0.0, offset)
+    )
     leak = math.hypot(w0[0], w0[1])
     # To first order the spindle misses the pole by offset * cos(lat) (rad).
     assert leak == pytest.approx(OMEGA * math.cos(math.radians(lat)) * offset, rel=1e-3)

@@ -69,8 +69,8 @@ def test_inhibited_channel_ramps_at_kg_kto_dvt_bent_by_the_elastic_restraint():
     t = np.arange(len(block)) / rate
     vg = block["gyro_x"] - block["gyro_x"][0]
     dvt = block["torq_x"].mean() - vt0
-    kg = cfg.gyro["X"].pickoff_scale_mV_per_urad * 1e-3 / 1e-6   # V/rad
-    kto = cfg.gyro["X"].torquer_scale_urad_per_s_per_V * 1e-6    # rad/s/V
+    kg = cfg.gyro["X"].pickoff_scale_mV_per_urad * 1e-3 / 1e-6  # V/rad
+    kto = cfg.gyro["X"].torquer_scale_urad_per_s_per_V * 1e-6  # rad/s/V
     tau = cfg.gyro["X"].restraint_time_s
     rate_v = kg * kto * dvt
     bent = rate_v * tau * (1 - np.exp(-t / tau))
@@ -106,7 +106,9 @@ def test_caging_loop_has_the_designed_natural_frequency_and_damping():
         wd = wn * np.sqrt(1 - zeta**2)
         return w / wd * np.exp(-zeta * wn * t) * np.sin(wd * t)
 
-    (w, wn, zeta), _ = scipy.optimize.curve_fit(response, t, vg, p0=(0.02, 0.2, 0.5), bounds=([-1, 0.01, 0.05], [1, 1.0, 0.99]))
+    (w, wn, zeta), _ = scipy.optimize.curve_fit(
+        response, t, vg, p0=(0.02, 0.2, 0.5), bounds=([-1, 0.01, 0.05], [1, 1.0, 0.99])
+    )
     assert wn == pytest.approx(0.1, rel=0.05)
     assert zeta == pytest.approx(0.7, abs=0.05)
     assert abs(vg[-20:].mean()) < 0.05 * np.abs(vg).max()  # the integrator cancels the bias

@@ -23,7 +23,9 @@ SOURCES = {
     "white": lambda rng: WhiteNoise(rng, 2.5, DT),
     "flicker": lambda rng: FlickerNoise(rng, 0.7, 1e-3, 80.0, DT),
     # a fitted bank with the sharp knee's low-pass (its filter state carries across blocks)
-    "flicker_knee": lambda rng: FlickerNoise(rng, 0.7, 1e-3, 80.0, DT, corner_hz=3.0, knee=0.2, slope=1.2),
+    "flicker_knee": lambda rng: FlickerNoise(
+        rng, 0.7, 1e-3, 80.0, DT, corner_hz=3.0, knee=0.2, slope=1.2
+    ),
     "random_walk": lambda rng: RandomWalk(rng, 0.3, DT),
     "lines": lambda rng: Lines(rng, PICKOFF_LINES, DT),
     "telegraph": lambda rng: TelegraphJumps(rng, 5.0, 0.05, DT),
@@ -40,9 +42,11 @@ def _welch(x, dt, nperseg):
 
 # --------------------------------------------------------------------------- block-size invariance
 @settings(max_examples=60, deadline=None)
-@given(name=st.sampled_from(sorted(SOURCES)),
-       sizes=st.lists(st.integers(1, 700), min_size=1, max_size=12),
-       seed=st.integers(0, 2**32 - 1))
+@given(
+    name=st.sampled_from(sorted(SOURCES)),
+    sizes=st.lists(st.integers(1, 700), min_size=1, max_size=12),
+    seed=st.integers(0, 2**32 - 1),
+)
 def test_samples_do_not_depend_on_how_the_run_is_cut_into_blocks(name, sizes, seed):
     whole = _make(name, seed).take(sum(sizes))
     src = _make(name, seed)
@@ -69,8 +73,9 @@ def test_an_empty_block_is_empty_and_changes_nothing(name):
     whole = _make(name).take(500)
     src = _make(name)
     assert src.take(0).shape == (0,)
-    np.testing.assert_allclose(np.concatenate([src.take(200), src.take(0), src.take(300)]), whole,
-                               rtol=0, atol=1e-12)
+    np.testing.assert_allclose(
+        np.concatenate([src.take(200), src.take(0), src.take(300)]), whole, rtol=0, atol=1e-12
+    )
 
 
 @pytest.mark.parametrize("name", ["random_walk", "telegraph"])
@@ -80,15 +85,31 @@ def test_an_empty_block_is_empty_for_stateful_sources(name):
     assert src.take(0).shape == (0,)
 
 
-@pytest.mark.parametrize("source", [
-    WhiteNoise(np.random.default_rng(0), 0.0, DT),
-    FlickerNoise(np.random.default_rng(0), 0.0, 1e-3, 10.0, DT),
-    FlickerNoise(np.random.default_rng(0), 0.0, 1e-3, 10.0, DT, corner_hz=3.0, knee=0.0, slope=0.8),
-    FlickerNoise(np.random.default_rng(0), 1.0, 1e-3, 10.0, DT, corner_hz=0.0, knee=0.0, slope=0.8),
-    RandomWalk(np.random.default_rng(0), 0.0, DT),
-    Lines(np.random.default_rng(0), [], DT),
-    TelegraphJumps(np.random.default_rng(0), 0.0, 10.0, DT),
-], ids=["white", "flicker", "flicker_knee", "flicker_no_corner", "random_walk", "lines", "telegraph"])
+@pytest.mark.parametrize(
+    "source",
+    [
+        WhiteNoise(np.random.default_rng(0), 0.0, DT),
+        FlickerNoise(np.random.default_rng(0), 0.0, 1e-3, 10.0, DT),
+        FlickerNoise(
+            np.random.default_rng(0), 0.0, 1e-3, 10.0, DT, corner_hz=3.0, knee=0.0, slope=0.8
+        ),
+        FlickerNoise(
+            np.random.default_rng(0), 1.0, 1e-3, 10.0, DT, corner_hz=0.0, knee=0.0, slope=0.8
+        ),
+        RandomWalk(np.random.default_rng(0), 0.0, DT),
+        Lines(np.random.default_rng(0), [], DT),
+        TelegraphJumps(np.random.default_rng(0), 0.0, 10.0, DT),
+    ],
+    ids=[
+        "white",
+        "flicker",
+        "flicker_knee",
+        "flicker_no_corner",
+        "random_walk",
+        "lines",
+        "telegraph",
+    ],
+)
 def test_zero_level_source_gives_zeros(source):
     np.testing.assert_array_equal(source.take(257), np.zeros(257))
 
@@ -164,15 +185,29 @@ def test_the_1_over_f_bank_is_pinned_and_the_plain_knee_takes_its_path():
         x = FlickerNoise(np.random.default_rng(2024), 2.0, 1e-3, 50.0, 1 / 200, **kw).take(10000)
         # to rounding: the filters' last bits move with the numpy/scipy build; another path or
         # seed differs in the first digit
-        np.testing.assert_allclose(x[[0, 1, 4095, 4096, 9999]],
-                                   [2.459735779625351, 2.332992001614816, -4.75557027865546,
-                                    -0.6456960629034945, -8.818697547440227], rtol=1e-9, atol=0)
+        np.testing.assert_allclose(
+            x[[0, 1, 4095, 4096, 9999]],
+            [
+                2.459735779625351,
+                2.332992001614816,
+                -4.75557027865546,
+                -0.6456960629034945,
+                -8.818697547440227,
+            ],
+            rtol=1e-9,
+            atol=0,
+        )
         assert float(np.sum(x)) == pytest.approx(-54509.16758902176, rel=1e-9)
 
 
 #: (f_lo, f_hi, dt) of the rig's 1/f banks (the autocollimators' at the 2 kHz internal rate, the
 #: azimuth's, the gyro's flicker drift) and of a band reaching a quarter of the step rate
-RIG_BANKS = [(1e-4, 100.0, 1 / 2000), (1e-4, 200.0, 1 / 2000), (1e-5, 1.0, 1 / 2000), (1e-4, 50.0, 1 / 2000)]
+RIG_BANKS = [
+    (1e-4, 100.0, 1 / 2000),
+    (1e-4, 200.0, 1 / 2000),
+    (1e-5, 1.0, 1 / 2000),
+    (1e-4, 50.0, 1 / 2000),
+]
 
 
 @pytest.mark.parametrize("f_lo, f_hi, dt", RIG_BANKS + [(1e-3, 50.0, 1 / 200)])
@@ -205,8 +240,9 @@ def test_a_long_simulation_of_the_1_over_f_bank_has_psd_level_over_f():
 @pytest.mark.parametrize("slope", [0.5, 0.8, 1.0, 1.2, 2.0])
 def test_knee_excess_is_ac_knee_less_one(knee, slope):
     f = np.geomspace(1e-3, 500.0, 300)
-    np.testing.assert_allclose(knee_excess(f, 3.0, knee, slope), ac_knee(f, 3.0, knee, slope) - 1.0,
-                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        knee_excess(f, 3.0, knee, slope), ac_knee(f, 3.0, knee, slope) - 1.0, rtol=1e-12, atol=1e-12
+    )
 
 
 def test_ac_knee_spans_the_nominal_envelope():
@@ -230,8 +266,16 @@ KNEE_ACCURACY = {0.0: 0.045, 0.5: 0.015, 1.0: 0.01}
 @pytest.mark.parametrize("corner", [1.5, 3.0, 5.0, 10.0, 50.0])
 def test_the_bank_s_exact_spectrum_follows_the_knee_from_1e_3_hz_to_its_top(knee, slope, corner):
     dt = 1 / 2000
-    src = FlickerNoise(np.random.default_rng(0), corner, 1e-4, max(50.0, 10 * corner), dt,
-                       corner_hz=corner, knee=knee, slope=slope)   # white level W = 1
+    src = FlickerNoise(
+        np.random.default_rng(0),
+        corner,
+        1e-4,
+        max(50.0, 10 * corner),
+        dt,
+        corner_hz=corner,
+        knee=knee,
+        slope=slope,
+    )  # white level W = 1
     f = np.geomspace(1e-3, min(src.f_hi, 0.2 / dt), 3000)
     k = ac_knee(f, corner, knee, slope)
     assert np.max(np.abs(src.spectrum(f, dt) - (k - 1.0)) / k) < KNEE_ACCURACY[knee]
@@ -269,10 +313,14 @@ def knee_records():
     for knee in (0.0, 1.0):
         for slope in (0.8, 1.2):
             rng = np.random.default_rng(int(100 * knee + 10 * slope))
-            bank = FlickerNoise(rng, corner, 1e-4, 50.0, dt, corner_hz=corner, knee=knee, slope=slope)
+            bank = FlickerNoise(
+                rng, corner, 1e-4, 50.0, dt, corner_hz=corner, knee=knee, slope=slope
+            )
             x = WhiteNoise(rng, 1.0, dt).take(n) + bank.take(n)
-            out[knee, slope] = (_welch_bands(x, dt, nperseg, edges),
-                                lambda f, bank=bank: 1.0 + bank.spectrum(f, dt))
+            out[knee, slope] = (
+                _welch_bands(x, dt, nperseg, edges),
+                lambda f, bank=bank: 1.0 + bank.spectrum(f, dt),
+            )
     return corner, out
 
 
@@ -281,8 +329,8 @@ def knee_records():
 def test_generated_noise_has_the_psd_w_times_the_knee(knee_records, knee, slope):
     corner, records = knee_records
     bands, made = records[knee, slope]
-    limit = scipy.stats.chi2.ppf(1 - 1e-4, len(bands))   # fails once in 10^4 seeds if right
-    assert _chi2(bands, made) < limit      # the bank's exact spectrum (what the model-gap reads)
+    limit = scipy.stats.chi2.ppf(1 - 1e-4, len(bands))  # fails once in 10^4 seeds if right
+    assert _chi2(bands, made) < limit  # the bank's exact spectrum (what the model-gap reads)
     assert _chi2(bands, lambda f: ac_knee(f, corner, knee, slope)) < limit
     # and the test tells the knees and the slopes apart
     assert _chi2(bands, lambda f: ac_knee(f, corner, 1.0 - knee, slope)) > 10 * limit

@@ -69,7 +69,9 @@ def test_default_spring_stiffness_agrees_with_dahl_small_motion_stiffness():
     cfg = SimConfig()
     for a in AXES:
         b = cfg.bearing[a]
-        assert b.stiffness_Nm_per_rad == pytest.approx(dahl_stiffness(b.To_Nm, b.eta_per_Nm), rel=0.01)
+        assert b.stiffness_Nm_per_rad == pytest.approx(
+            dahl_stiffness(b.To_Nm, b.eta_per_Nm), rel=0.01
+        )
 
 
 def test_default_redundant_channel_keeps_proportional_only_caging():
@@ -98,21 +100,31 @@ def test_default_pickoff_lines_carry_85_percent_of_the_variance_split_30_30_25_1
 def test_y_pickoff_lines_are_twice_x_s():
     cfg = SimConfig()
     assert [a for _, a in cfg.gyro["Y"].pickoff_lines] == pytest.approx(
-        [2 * a for _, a in cfg.gyro["X"].pickoff_lines], rel=1e-12)
+        [2 * a for _, a in cfg.gyro["X"].pickoff_lines], rel=1e-12
+    )
     assert P.GyroChannel().pickoff_lines == cfg.gyro["X"].pickoff_lines  # a bare channel is X's
 
 
 def test_a_config_lowering_the_pickoff_rms_below_the_default_lines_must_give_its_lines():
     with pytest.raises(ConfigError, match="gyro.Y.pickoff_lines carry 11.4 urad rms"):
         from_dict({"gyro": {"Y": {"pickoff_noise_rms_urad": 9.0}}})
-    cfg = from_dict({"gyro": {"Y": {"pickoff_noise_rms_urad": 9.0, "pickoff_lines": P.nominal_pickoff_lines(9.0)}}})
+    cfg = from_dict(
+        {
+            "gyro": {
+                "Y": {"pickoff_noise_rms_urad": 9.0, "pickoff_lines": P.nominal_pickoff_lines(9.0)}
+            }
+        }
+    )
     assert cfg.gyro["Y"].pickoff_lines == P.nominal_pickoff_lines(9.0)
 
 
 def test_default_pickoff_white_part_is_the_other_15_percent():
     from simhw.simulator import PICKOFF_BAND_HZ, pickoff_white_psd
+
     for ch in SimConfig().gyro.values():
-        white_var = pickoff_white_psd(ch.pickoff_noise_rms_urad, ch.pickoff_lines) * (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
+        white_var = pickoff_white_psd(ch.pickoff_noise_rms_urad, ch.pickoff_lines) * (
+            PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0]
+        )
         assert white_var == pytest.approx(0.15 * (ch.pickoff_noise_rms_urad * 1e-6) ** 2, rel=1e-9)
 
 
@@ -122,7 +134,13 @@ def test_autocollimator_knee_and_mount_excitation_default_to_the_plain_unit():
 
 
 def test_autocollimator_knee_slope_and_mount_excitation_are_read_from_a_config():
-    cfg = from_dict({"autocollimator": {"Y": {"flicker_knee": 0.0, "flicker_slope": 1.2, "mount_excitation": 30}}})
+    cfg = from_dict(
+        {
+            "autocollimator": {
+                "Y": {"flicker_knee": 0.0, "flicker_slope": 1.2, "mount_excitation": 30}
+            }
+        }
+    )
     ac = cfg.autocollimator["Y"]
     assert (ac.flicker_knee, ac.flicker_slope, ac.mount_excitation) == (0.0, 1.2, 30.0)
     assert cfg.autocollimator["X"].flicker_knee == 1.0
@@ -146,8 +164,9 @@ def test_from_dict_empty_gives_the_thesis_rig():
 
 
 def test_from_dict_overrides_only_the_named_fields():
-    cfg = from_dict({"gyro": {"Y": {"torquer_scale_urad_per_s_per_V": 30.0}},
-                     "site": {"latitude_deg": -12.5}})
+    cfg = from_dict(
+        {"gyro": {"Y": {"torquer_scale_urad_per_s_per_V": 30.0}}, "site": {"latitude_deg": -12.5}}
+    )
     assert cfg.gyro["Y"].torquer_scale_urad_per_s_per_V == 30.0
     assert cfg.site.latitude_deg == -12.5
     expected = SimConfig()
@@ -174,16 +193,19 @@ def test_from_dict_builds_pickup_lines():
     assert cfg.pickup == [P.PickupLine("ac_x_ctl", 200.0, 0.003)]
 
 
-@pytest.mark.parametrize("data, key", [
-    ({"nosuch": {}}, "'nosuch'"),
-    ({"gyro": {"W": {}}}, "'gyro.W'"),
-    ({"gyro": {"X": {"foo": 1.0}}}, "'gyro.X.foo'"),
-    ({"platform": {"XRD": {}}}, "'platform.XRD'"),
-    ({"autocollimator": {"Z": {}}}, "'autocollimator.Z'"),
-    ({"autocollimator": {"X": {"flicker_form": 0.5}}}, "'autocollimator.X.flicker_form'"),
-    ({"site": {"latitude": 10.0}}, "'site.latitude'"),
-    ({"pickup": [{"channel": "ac_x_ctl", "freq_hz": 1.0, "ampl": 1.0}]}, "'pickup[0].ampl'"),
-])
+@pytest.mark.parametrize(
+    "data, key",
+    [
+        ({"nosuch": {}}, "'nosuch'"),
+        ({"gyro": {"W": {}}}, "'gyro.W'"),
+        ({"gyro": {"X": {"foo": 1.0}}}, "'gyro.X.foo'"),
+        ({"platform": {"XRD": {}}}, "'platform.XRD'"),
+        ({"autocollimator": {"Z": {}}}, "'autocollimator.Z'"),
+        ({"autocollimator": {"X": {"flicker_form": 0.5}}}, "'autocollimator.X.flicker_form'"),
+        ({"site": {"latitude": 10.0}}, "'site.latitude'"),
+        ({"pickup": [{"channel": "ac_x_ctl", "freq_hz": 1.0, "ampl": 1.0}]}, "'pickup[0].ampl'"),
+    ],
+)
 def test_unknown_key_raises_config_error_naming_the_full_dotted_key(data, key):
     with pytest.raises(ConfigError, match="unknown key") as exc:
         from_dict(data)
@@ -196,22 +218,43 @@ def test_unknown_field_message_lists_the_known_fields():
     assert "latitude_deg" in str(exc.value)
 
 
-@pytest.mark.parametrize("data, fragments", [
-    ({"platform": {"X": {"inertia_kg_m2": -0.1}}}, ["platform.X.inertia_kg_m2", "-0.1", "> 0"]),
-    ({"platform": {"Y": {"inertia_kg_m2": 0.0}}}, ["platform.Y.inertia_kg_m2", "0.0", "> 0"]),
-    ({"site": {"latitude_deg": 91.0}}, ["site.latitude_deg", "91.0", "<= 90"]),
-    ({"table": {"tilt_deg": -1}}, ["table.tilt_deg", "-1", ">= 0"]),
-    ({"autocollimator": {"X": {"delay_s": 0.1}}}, ["autocollimator.X.delay_s", "0.1", "<= 0.05"]),
-    ({"autocollimator": {"X": {"flicker_knee": 1.5}}}, ["autocollimator.X.flicker_knee", "1.5", "<= 1.0"]),
-    ({"autocollimator": {"Y": {"flicker_knee": -0.1}}}, ["autocollimator.Y.flicker_knee", "-0.1", ">= 0.0"]),
-    ({"autocollimator": {"X": {"flicker_slope": 0.4}}}, ["autocollimator.X.flicker_slope", "0.4", ">= 0.5"]),
-    ({"autocollimator": {"X": {"flicker_slope": 2.5}}}, ["autocollimator.X.flicker_slope", "2.5", "<= 2.0"]),
-    ({"autocollimator": {"X": {"mount_excitation": -1.0}}}, ["autocollimator.X.mount_excitation", "-1.0", ">= 0.0"]),
-    ({"bearing": {"Z": {"damping_Nms": -1.0}}}, ["bearing.Z.damping_Nms", "-1.0", ">= 0"]),
-    ({"sampling": {"adc_bits": 30}}, ["sampling.adc_bits", "30", "8..24"]),
-    ({"sampling": {"oversample": 0}}, ["sampling.oversample", "0", "1..64"]),
-    ({"sampling": {"anti_alias_poles": 9}}, ["sampling.anti_alias_poles", "9", "1..8"]),
-])
+@pytest.mark.parametrize(
+    "data, fragments",
+    [
+        ({"platform": {"X": {"inertia_kg_m2": -0.1}}}, ["platform.X.inertia_kg_m2", "-0.1", "> 0"]),
+        ({"platform": {"Y": {"inertia_kg_m2": 0.0}}}, ["platform.Y.inertia_kg_m2", "0.0", "> 0"]),
+        ({"site": {"latitude_deg": 91.0}}, ["site.latitude_deg", "91.0", "<= 90"]),
+        ({"table": {"tilt_deg": -1}}, ["table.tilt_deg", "-1", ">= 0"]),
+        (
+            {"autocollimator": {"X": {"delay_s": 0.1}}},
+            ["autocollimator.X.delay_s", "0.1", "<= 0.05"],
+        ),
+        (
+            {"autocollimator": {"X": {"flicker_knee": 1.5}}},
+            ["autocollimator.X.flicker_knee", "1.5", "<= 1.0"],
+        ),
+        (
+            {"autocollimator": {"Y": {"flicker_knee": -0.1}}},
+            ["autocollimator.Y.flicker_knee", "-0.1", ">= 0.0"],
+        ),
+        (
+            {"autocollimator": {"X": {"flicker_slope": 0.4}}},
+            ["autocollimator.X.flicker_slope", "0.4", ">= 0.5"],
+        ),
+        (
+            {"autocollimator": {"X": {"flicker_slope": 2.5}}},
+            ["autocollimator.X.flicker_slope", "2.5", "<= 2.0"],
+        ),
+        (
+            {"autocollimator": {"X": {"mount_excitation": -1.0}}},
+            ["autocollimator.X.mount_excitation", "-1.0", ">= 0.0"],
+        ),
+        ({"bearing": {"Z": {"damping_Nms": -1.0}}}, ["bearing.Z.damping_Nms", "-1.0", ">= 0"]),
+        ({"sampling": {"adc_bits": 30}}, ["sampling.adc_bits", "30", "8..24"]),
+        ({"sampling": {"oversample": 0}}, ["sampling.oversample", "0", "1..64"]),
+        ({"sampling": {"anti_alias_poles": 9}}, ["sampling.anti_alias_poles", "9", "1..8"]),
+    ],
+)
 def test_out_of_range_value_raises_config_error_naming_key_value_and_limit(data, fragments):
     with pytest.raises(ConfigError) as exc:
         from_dict(data)
@@ -219,26 +262,56 @@ def test_out_of_range_value_raises_config_error_naming_key_value_and_limit(data,
         assert frag in str(exc.value)
 
 
-@pytest.mark.parametrize("data, fragments", [
-    ({"platform": {"X": {"inertia_kg_m2": "heavy"}}}, ["platform.X.inertia_kg_m2", "'heavy'", "number"]),
-    ({"platform": {"X": {"inertia_kg_m2": True}}}, ["platform.X.inertia_kg_m2", "True", "number"]),
-    ({"sampling": {"adc_bits": False}}, ["sampling.adc_bits", "False", "number"]),
-    ({"gyro": {"XRD": {"caging_proportional_only": 1}}}, ["gyro.XRD.caging_proportional_only", "1", "true or false"]),
-    ({"bearing": {"X": {"model": 3}}}, ["bearing.X.model", "3", "string"]),
-    ({"bearing": {"X": {"model": "coulomb"}}}, ["bearing.X.model", "'coulomb'", "none, viscous, spring, dahl"]),
-    ({"bearing": {"Y": {"model": "Dahl"}}}, ["bearing.Y.model", "'Dahl'"]),
-    ({"site": {"latitude_deg": math.nan}}, ["site.latitude_deg", "nan", "finite"]),
-    ({"gyro": {"Z": {"fixed_drift_urad_per_s": math.inf}}}, ["gyro.Z.fixed_drift_urad_per_s", "inf", "finite"]),
-    ({"compensation": {"w1_rad_per_s": -math.inf}}, ["compensation.w1_rad_per_s", "-inf", "finite"]),
-    ({"gyro": {"X": {"pickoff_lines": [[0.0, 1.0]]}}}, ["gyro.X.pickoff_lines[0]", "freq_hz > 0"]),
-    ({"gyro": {"X": {"pickoff_lines": [[70.0, 1.0, 2.0]]}}}, ["gyro.X.pickoff_lines[0]"]),
-    ({"gyro": {"X": {"pickoff_lines": [[70.0, 100.0]]}}}, ["gyro.X.pickoff_lines", "pickoff_noise_rms_urad"]),
-    ({"pickup": [{"channel": "ac_x_ctl", "freq_hz": 0.0, "amplitude_V": 1.0}]}, ["pickup[0].freq_hz", "> 0"]),
-    ({"pickup": {"channel": "ac_x_ctl"}}, ["[[pickup]]", "array"]),
-    ({"site": 3.0}, ["[site]", "table"]),
-    ({"gyro": [1, 2]}, ["[gyro]", "table"]),
-    ({"gyro": {"X": 5}}, ["[gyro.X]", "table"]),
-])
+@pytest.mark.parametrize(
+    "data, fragments",
+    [
+        (
+            {"platform": {"X": {"inertia_kg_m2": "heavy"}}},
+            ["platform.X.inertia_kg_m2", "'heavy'", "number"],
+        ),
+        (
+            {"platform": {"X": {"inertia_kg_m2": True}}},
+            ["platform.X.inertia_kg_m2", "True", "number"],
+        ),
+        ({"sampling": {"adc_bits": False}}, ["sampling.adc_bits", "False", "number"]),
+        (
+            {"gyro": {"XRD": {"caging_proportional_only": 1}}},
+            ["gyro.XRD.caging_proportional_only", "1", "true or false"],
+        ),
+        ({"bearing": {"X": {"model": 3}}}, ["bearing.X.model", "3", "string"]),
+        (
+            {"bearing": {"X": {"model": "coulomb"}}},
+            ["bearing.X.model", "'coulomb'", "none, viscous, spring, dahl"],
+        ),
+        ({"bearing": {"Y": {"model": "Dahl"}}}, ["bearing.Y.model", "'Dahl'"]),
+        ({"site": {"latitude_deg": math.nan}}, ["site.latitude_deg", "nan", "finite"]),
+        (
+            {"gyro": {"Z": {"fixed_drift_urad_per_s": math.inf}}},
+            ["gyro.Z.fixed_drift_urad_per_s", "inf", "finite"],
+        ),
+        (
+            {"compensation": {"w1_rad_per_s": -math.inf}},
+            ["compensation.w1_rad_per_s", "-inf", "finite"],
+        ),
+        (
+            {"gyro": {"X": {"pickoff_lines": [[0.0, 1.0]]}}},
+            ["gyro.X.pickoff_lines[0]", "freq_hz > 0"],
+        ),
+        ({"gyro": {"X": {"pickoff_lines": [[70.0, 1.0, 2.0]]}}}, ["gyro.X.pickoff_lines[0]"]),
+        (
+            {"gyro": {"X": {"pickoff_lines": [[70.0, 100.0]]}}},
+            ["gyro.X.pickoff_lines", "pickoff_noise_rms_urad"],
+        ),
+        (
+            {"pickup": [{"channel": "ac_x_ctl", "freq_hz": 0.0, "amplitude_V": 1.0}]},
+            ["pickup[0].freq_hz", "> 0"],
+        ),
+        ({"pickup": {"channel": "ac_x_ctl"}}, ["[[pickup]]", "array"]),
+        ({"site": 3.0}, ["[site]", "table"]),
+        ({"gyro": [1, 2]}, ["[gyro]", "table"]),
+        ({"gyro": {"X": 5}}, ["[gyro.X]", "table"]),
+    ],
+)
 def test_bad_value_raises_config_error_naming_key_and_value(data, fragments):
     with pytest.raises(ConfigError) as exc:
         from_dict(data)
@@ -273,7 +346,9 @@ def test_pickoff_lines_that_is_not_a_list_raises_config_error():
         from_dict({"gyro": {"X": {"pickoff_lines": 5}}})
 
 
-@pytest.mark.parametrize("field, value", [("freq_hz", math.nan), ("freq_hz", math.inf), ("amplitude_V", math.inf)])
+@pytest.mark.parametrize(
+    "field, value", [("freq_hz", math.nan), ("freq_hz", math.inf), ("amplitude_V", math.inf)]
+)
 def test_nonfinite_pickup_value_raises_config_error(field, value):
     item = {"channel": "ac_x_ctl", "freq_hz": 200.0, "amplitude_V": 0.003} | {field: value}
     with pytest.raises(ConfigError, match=f"pickup.0..{field}"):
@@ -288,15 +363,23 @@ def test_nonfinite_pickoff_line_raises_config_error(line):
 
 # --------------------------------------------------------------------------- from_dict: fuzz
 _SECTIONS = [f.name for f in dataclasses.fields(SimConfig)]
-_json_scalars = st.one_of(st.booleans(), st.integers(-10**6, 10**6), st.floats(allow_nan=True), st.text(max_size=8))
+_json_scalars = st.one_of(
+    st.booleans(), st.integers(-(10**6), 10**6), st.floats(allow_nan=True), st.text(max_size=8)
+)
 _str_or_section = st.one_of(st.text(max_size=12), st.sampled_from(_SECTIONS))
 
 
 @FAST
-@given(st.dictionaries(_str_or_section, st.one_of(st.text(max_size=12),
-                                                 st.dictionaries(st.text(max_size=8), st.text(max_size=8),
-                                                                 max_size=3)),
-                       max_size=4))
+@given(
+    st.dictionaries(
+        _str_or_section,
+        st.one_of(
+            st.text(max_size=12),
+            st.dictionaries(st.text(max_size=8), st.text(max_size=8), max_size=3),
+        ),
+        max_size=4,
+    )
+)
 def test_from_dict_on_random_string_mappings_returns_config_or_raises_config_error(data):
     try:
         cfg = from_dict(data)
@@ -309,8 +392,11 @@ def _fields(cls):
     return [f.name for f in dataclasses.fields(cls)]
 
 
-_value = st.one_of(_json_scalars, st.lists(_json_scalars, max_size=3),
-                   st.lists(st.lists(st.one_of(st.floats(), st.integers(-5, 500)), max_size=3), max_size=3))
+_value = st.one_of(
+    _json_scalars,
+    st.lists(_json_scalars, max_size=3),
+    st.lists(st.lists(st.one_of(st.floats(), st.integers(-5, 500)), max_size=3), max_size=3),
+)
 
 
 def _table(cls):
@@ -318,12 +404,25 @@ def _table(cls):
 
 
 _plain = ["site", "table", "compensation", "azimuth", "gyros", "sampling"]
-_toml_like_config = st.lists(st.one_of(
-    st.sampled_from(_plain).flatmap(lambda s: st.tuples(st.just(s), _table(type(getattr(SimConfig(), s))))),
-    st.sampled_from(sorted(P._KEYED)).flatmap(lambda s: st.tuples(
-        st.just(s), st.dictionaries(st.sampled_from(P._KEYED[s][1]), _table(P._KEYED[s][0]), max_size=2))),
-    st.tuples(st.just("pickup"), st.lists(st.one_of(_json_scalars, _table(P.PickupLine)), max_size=2)),
-), max_size=3).map(dict)
+_toml_like_config = st.lists(
+    st.one_of(
+        st.sampled_from(_plain).flatmap(
+            lambda s: st.tuples(st.just(s), _table(type(getattr(SimConfig(), s))))
+        ),
+        st.sampled_from(sorted(P._KEYED)).flatmap(
+            lambda s: st.tuples(
+                st.just(s),
+                st.dictionaries(
+                    st.sampled_from(P._KEYED[s][1]), _table(P._KEYED[s][0]), max_size=2
+                ),
+            )
+        ),
+        st.tuples(
+            st.just("pickup"), st.lists(st.one_of(_json_scalars, _table(P.PickupLine)), max_size=2)
+        ),
+    ),
+    max_size=3,
+).map(dict)
 
 
 @FAST
@@ -350,8 +449,9 @@ def test_load_config_reads_overrides_from_toml(tmp_path):
         "[site]\nlatitude_deg = 45.5\n\n"
         "[gyro.X]\ntorquer_scale_urad_per_s_per_V = 30.25\n\n"
         '[bearing.Y]\nmodel = "spring"\nstiffness_Nm_per_rad = 500\n\n'
-        "[[pickup]]\nchannel = \"ac_y_ctl\"\nfreq_hz = 60.0\namplitude_V = 0.01\n",
-        encoding="utf-8")
+        '[[pickup]]\nchannel = "ac_y_ctl"\nfreq_hz = 60.0\namplitude_V = 0.01\n',
+        encoding="utf-8",
+    )
     cfg = load_config(path)
     assert cfg.site.latitude_deg == 45.5
     assert cfg.gyro["X"].torquer_scale_urad_per_s_per_V == 30.25
@@ -423,7 +523,9 @@ def test_copy_is_equal_but_deep():
     cp.pickup[0].amplitude_V = 1.0
     cp.pickup.append(P.PickupLine("ac_y_ctl", 1.0, 1.0))
     cp.site.latitude_deg = 0.0
-    assert orig == from_dict({"pickup": [{"channel": "ac_x_ctl", "freq_hz": 200.0, "amplitude_V": 0.003}]})
+    assert orig == from_dict(
+        {"pickup": [{"channel": "ac_x_ctl", "freq_hz": 200.0, "amplitude_V": 0.003}]}
+    )
     assert orig.platform["X"].inertia_kg_m2 == 0.70
     assert orig.gyro["Z"].pickoff_lines[0][1] == SimConfig().gyro["Z"].pickoff_lines[0][1]
 
@@ -431,7 +533,11 @@ def test_copy_is_equal_but_deep():
 def test_without_random_drift_zeroes_only_the_random_drift_terms():
     cfg = SimConfig()
     quiet = cfg.without_random_drift()
-    random_fields = {"arw_urad_per_sqrt_s", "bias_instability_urad_per_s", "rrw_urad_per_s_per_sqrt_s"}
+    random_fields = {
+        "arw_urad_per_sqrt_s",
+        "bias_instability_urad_per_s",
+        "rrw_urad_per_s_per_sqrt_s",
+    }
     for c in GYRO_CHANNELS:
         for f in random_fields:
             assert getattr(quiet.gyro[c], f) == 0.0

@@ -11,12 +11,17 @@ from simhw.plant import CHANNELS
 from simhw.reduction import kept
 from simhw.simulator import Simulator
 
-AXIS_CHANNELS = {"X": ("ac_x_ctl", "ac_x_inst", "gyro_x", "pa_x"), "Y": ("ac_y_ctl", "ac_y_inst", "gyro_y", "pa_y")}
+AXIS_CHANNELS = {
+    "X": ("ac_x_ctl", "ac_x_inst", "gyro_x", "pa_x"),
+    "Y": ("ac_y_ctl", "ac_y_inst", "gyro_y", "pa_y"),
+}
 EFFECTS = sorted(n for n in effects.catalogue() if n != "none")
 
 
 def _pair(cfg, channels, **kw):
-    return Simulator(cfg, seed=kw.pop("seed", 7), channels=channels, **kw), Simulator(cfg, seed=7, **kw)
+    return Simulator(cfg, seed=kw.pop("seed", 7), channels=channels, **kw), Simulator(
+        cfg, seed=7, **kw
+    )
 
 
 def _same(reduced, full, sizes):
@@ -33,7 +38,10 @@ def _same(reduced, full, sizes):
 
 def _values(effect):
     """A mid-range value of each parameter: the effect is really there."""
-    return {p.name: float(np.sqrt(p.lo * p.hi)) if p.log and p.lo > 0 else 0.5 * (p.lo + p.hi) for p in effect.params}
+    return {
+        p.name: float(np.sqrt(p.lo * p.hi)) if p.log and p.lo > 0 else 0.5 * (p.lo + p.hi)
+        for p in effect.params
+    }
 
 
 @pytest.mark.parametrize("effect_axis", ["X", "Y"])

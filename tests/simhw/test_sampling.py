@@ -15,8 +15,11 @@ from simhw.sampling import ADC_RANGES_V, RangeError, SamplingChain, check_range,
 FAST = settings(max_examples=150, deadline=None)
 ranges_s = st.sampled_from(ADC_RANGES_V)
 bits_s = st.integers(8, 24)
-any_float_arrays = hnp.arrays(np.float64, st.integers(1, 40),
-                              elements=st.floats(allow_nan=True, allow_infinity=True, width=64))
+any_float_arrays = hnp.arrays(
+    np.float64,
+    st.integers(1, 40),
+    elements=st.floats(allow_nan=True, allow_infinity=True, width=64),
+)
 
 
 def _lsb(range_V, bits):
@@ -42,8 +45,9 @@ def test_quantized_values_lie_on_the_converter_grid_within_the_code_range(v, ran
 @given(st.data(), ranges_s, bits_s)
 def test_quantization_error_is_at_most_half_an_lsb_inside_the_range(data, range_V, bits):
     q = _lsb(range_V, bits)
-    v = data.draw(hnp.arrays(np.float64, st.integers(1, 40),
-                             elements=st.floats(-range_V, range_V - q / 2)))
+    v = data.draw(
+        hnp.arrays(np.float64, st.integers(1, 40), elements=st.floats(-range_V, range_V - q / 2))
+    )
     out, over = quantize(v, range_V, bits)
     assert np.all(np.abs(out - v) <= q / 2 * (1 + 1e-9))
     assert not over.any()
@@ -74,8 +78,15 @@ def test_overrange_is_flagged_exactly_when_beyond_full_scale_or_not_finite(v, ra
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 @FAST
-@given(st.lists(st.floats(allow_nan=False, allow_infinity=True) | st.sampled_from([1e308, -1e308, 1e30]),
-                min_size=1, max_size=30), ranges_s, bits_s)
+@given(
+    st.lists(
+        st.floats(allow_nan=False, allow_infinity=True) | st.sampled_from([1e308, -1e308, 1e30]),
+        min_size=1,
+        max_size=30,
+    ),
+    ranges_s,
+    bits_s,
+)
 def test_values_beyond_full_scale_clip_to_the_end_codes_never_wrap(values, range_V, bits):
     v = np.array(values, float)
     out, _ = quantize(v, range_V, bits)
@@ -145,8 +156,9 @@ def _tone_gain(freq_hz, rate_hz=1000.0, oversample=2, bits=16, range_V=1.0, amp=
     keep, volts, _ = chain.process((amp * np.sin(2 * math.pi * freq_hz * dt * k))[:, None])
     t = keep * dt
     settled = t > 0.5
-    basis = np.column_stack([np.sin(2 * math.pi * freq_hz * t), np.cos(2 * math.pi * freq_hz * t),
-                             np.ones_like(t)])[settled]
+    basis = np.column_stack(
+        [np.sin(2 * math.pi * freq_hz * t), np.cos(2 * math.pi * freq_hz * t), np.ones_like(t)]
+    )[settled]
     coef, *_ = np.linalg.lstsq(basis, volts[settled, 0], rcond=None)
     return math.hypot(coef[0], coef[1]) / amp
 
@@ -165,7 +177,7 @@ def _butterworth_db(f, fc, fs, poles):
 def test_dc_passes_with_unit_gain(oversample):
     chain = SamplingChain(("a", "b"), 500.0, oversample)
     keep, volts, over = chain.process(np.tile([0.7, -2.3], (3000, 1)))
-    settled = volts[len(volts) // 2:]
+    settled = volts[len(volts) // 2 :]
     q = _lsb(10.0, 16)
     np.testing.assert_allclose(settled[:, 0], 0.7, atol=q / 2 + 1e-12)
     np.testing.assert_allclose(settled[:, 1], -2.3, atol=q / 2 + 1e-12)
@@ -188,8 +200,9 @@ def test_tone_well_below_cutoff_passes_with_nearly_unit_gain():
 
 @pytest.mark.parametrize("poles", [1, 5])
 def test_pole_count_sets_the_rolloff(poles):
-    assert _db(_tone_gain(450.0, poles=poles)) == pytest.approx(_butterworth_db(450.0, 300.0, 2000.0, poles),
-                                                                abs=0.1)
+    assert _db(_tone_gain(450.0, poles=poles)) == pytest.approx(
+        _butterworth_db(450.0, 300.0, 2000.0, poles), abs=0.1
+    )
 
 
 def test_process_keeps_every_oversample_th_internal_sample():
@@ -200,8 +213,11 @@ def test_process_keeps_every_oversample_th_internal_sample():
 
 
 @settings(max_examples=60, deadline=None)
-@given(sizes=st.lists(st.integers(1, 120), min_size=1, max_size=10),
-       oversample=st.integers(1, 5), seed=st.integers(0, 2**32 - 1))
+@given(
+    sizes=st.lists(st.integers(1, 120), min_size=1, max_size=10),
+    oversample=st.integers(1, 5),
+    seed=st.integers(0, 2**32 - 1),
+)
 def test_chunked_processing_equals_one_call(sizes, oversample, seed):
     channels = ("a", "b", "c")
     x = np.random.default_rng(seed).normal(0.0, 3.0, (sum(sizes), len(channels)))
@@ -211,7 +227,7 @@ def test_chunked_processing_equals_one_call(sizes, oversample, seed):
     chain = SamplingChain(channels, 200.0, oversample)
     keeps, volts, overs, start = [], [], [], 0
     for n in sizes:
-        keep, v, o = chain.process(x[start:start + n])
+        keep, v, o = chain.process(x[start : start + n])
         keeps.append(keep + start)
         volts.append(v)
         overs.append(o)
@@ -244,9 +260,14 @@ def test_anti_alias_filter_starts_settled_on_the_first_sample():
 
 
 @settings(max_examples=40, deadline=None)
-@given(x=hnp.arrays(np.float64, st.tuples(st.integers(1, 60), st.integers(1, 5)),
-                    elements=st.floats(-20.0, 20.0, allow_nan=False)),
-       cut=st.integers(0, 60))
+@given(
+    x=hnp.arrays(
+        np.float64,
+        st.tuples(st.integers(1, 60), st.integers(1, 5)),
+        elements=st.floats(-20.0, 20.0, allow_nan=False),
+    ),
+    cut=st.integers(0, 60),
+)
 def test_the_chain_filters_as_scipy_sosfilt_does_to_the_bit(x, cut):
     """The chain's own filter loop (``_sosfilt_cols``) against ``scipy.signal.sosfilt``, the
     state carried over a cut of the block."""

@@ -62,9 +62,14 @@ class NuisanceFit:
     S: np.ndarray
 
 
-def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
-                 hold: frozenset[str] = frozenset(), start: dict[str, float] | None = None,
-                 pinned: dict[str, float] | None = None) -> NuisanceFit:
+def fit_nuisance(
+    P: np.ndarray,
+    dof: np.ndarray,
+    ms: ModelSpectrum,
+    hold: frozenset[str] = frozenset(),
+    start: dict[str, float] | None = None,
+    pinned: dict[str, float] | None = None,
+) -> NuisanceFit:
     """The nominal unit's noise that minimizes the Whittle likelihood (analytic gradient).
 
     Free within the nominal unit's envelope (DESIGN.md section 8): the power scale of the
@@ -79,7 +84,7 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
     """
     parts = {p: v for p, v in ms.parts.items() if p != "fixed" and np.any(v > 0)}
     fixed = ms.parts["fixed"]
-    names: list[str] = []          # free parameters, in the vector's order
+    names: list[str] = []  # free parameters, in the vector's order
     bounds: list[tuple[float, float]] = []
     x0: list[float] = []
 
@@ -104,10 +109,16 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
         assert ms.shape is not None
         fc0, form0, slope0 = ms.shape
         if "ac_flicker" not in hold and fc0 > 0:
-            free("ac_corner_hz", math.log(fc0 * CORNER_RANGE[0]), math.log(fc0 * CORNER_RANGE[1]),
-                 math.log(fc0))
-        knee_params = (("ac_knee", 0.0, 1.0, 0.5),
-                       ("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0))
+            free(
+                "ac_corner_hz",
+                math.log(fc0 * CORNER_RANGE[0]),
+                math.log(fc0 * CORNER_RANGE[1]),
+                math.log(fc0),
+            )
+        knee_params = (
+            ("ac_knee", 0.0, 1.0, 0.5),
+            ("ac_slope", slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN, slope0),
+        )
         for key, lo, hi, x_start in knee_params:
             if pinned and key in pinned:
                 lo = hi = x_start = pinned[key]
@@ -146,8 +157,9 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
         if "ac" in jac:
             jac["ac"] = terms["ac"] + terms.get("ac_excess", 0.0)
         if shaped:
-            d_fc, d_form, d_slope = knee_gradient(f_band, sc["ac_corner_hz"], sc["ac_knee"],
-                                                  sc["ac_slope"])
+            d_fc, d_form, d_slope = knee_gradient(
+                f_band, sc["ac_corner_hz"], sc["ac_knee"], sc["ac_slope"]
+            )
             base = parts["ac"] * sc["ac"]
             for key, d in (("ac_corner_hz", d_fc), ("ac_knee", d_form), ("ac_slope", d_slope)):
                 if key in names:
@@ -188,8 +200,7 @@ def fit_nuisance(P: np.ndarray, dof: np.ndarray, ms: ModelSpectrum,
                 if nll_n <= nll:
                     improved = True
                     lam = max(lam / 10.0, 1e-6)
-                    done = (nll - nll_n < 1e-9 * (1.0 + abs(nll))
-                            or np.max(np.abs(xn - x)) < 1e-7)
+                    done = nll - nll_n < 1e-9 * (1.0 + abs(nll)) or np.max(np.abs(xn - x)) < 1e-7
                     x, S, J, nll = xn, Sn, Jn, nll_n
                     break
                 lam *= 10.0
@@ -232,14 +243,16 @@ class EffectFit:
     """The best fit of one candidate effect on top of the base model."""
 
     effect: str
-    params: dict[str, float]           # every parameter of the effect (fitted or held)
-    errors: dict[str, float]           # 1-sigma of the fitted ones (``Fitter._errors``) and of held ones the data gave
+    params: dict[str, float]  # every parameter of the effect (fitted or held)
+    errors: dict[
+        str, float
+    ]  # 1-sigma of the fitted ones (``Fitter._errors``) and of held ones the data gave
     nll: float
     scales: dict[str, float]
     n_fitted: int
     cfg: SimConfig = field(repr=False)
     S: np.ndarray = field(repr=False)
-    score: float = 0.0                 # BIC improvement over the base model
+    score: float = 0.0  # BIC improvement over the base model
     #: 95 % intervals of the parameters with an error: (lo, hi), in the parameter's units
     intervals: dict[str, tuple[float, float]] = field(default_factory=dict)
 
@@ -274,8 +287,9 @@ Z95 = 1.959964
 class Fitter:
     """Profile-likelihood fits of catalogue effects on one measured spectrum."""
 
-    def __init__(self, model: SpectralModel, P: np.ndarray, dof: np.ndarray, axis: str,
-                 grid_points: int = 9) -> None:
+    def __init__(
+        self, model: SpectralModel, P: np.ndarray, dof: np.ndarray, axis: str, grid_points: int = 9
+    ) -> None:
         self.model, self.P, self.dof, self.axis = model, P, np.broadcast_to(dof, P.shape), axis
         self.grid_points = grid_points
         self.evaluations = 0
@@ -291,8 +305,16 @@ class Fitter:
         self.near = nf.scales
         return nf
 
-    def fit(self, effect: Effect, base_cfg: SimConfig, evidence: Any, *, refine: bool = True,
-            errors: bool = True, start: dict[str, float] | None = None) -> EffectFit | None:
+    def fit(
+        self,
+        effect: Effect,
+        base_cfg: SimConfig,
+        evidence: Any,
+        *,
+        refine: bool = True,
+        errors: bool = True,
+        start: dict[str, float] | None = None,
+    ) -> EffectFit | None:
         """The maximum-likelihood fit of ``effect`` on ``base_cfg``; None if it does not apply.
         Without ``refine``, the best of the starting points (a screening); without ``errors``,
         no curvature (NaN uncertainties). ``start``: begin from these values instead of the
@@ -308,21 +330,31 @@ class Fitter:
             log.debug("%s: no evidence for its held parameters", effect.name)
             return None
         held_sets: list[dict[str, float]] = []
-        for g in ([start] if start is not None else guesses):
+        for g in [start] if start is not None else guesses:
             h = defaults | {k: v for k, v in g.items() if k in defaults}
             if h not in held_sets:
                 held_sets.append(h)
         best: EffectFit | None = None
         for held in held_sets or [defaults]:
-            f = self._fit_held(effect, base_cfg, evidence, held, guesses, refine=refine, errors=errors,
-                               start=start)
+            f = self._fit_held(
+                effect, base_cfg, evidence, held, guesses, refine=refine, errors=errors, start=start
+            )
             if f is not None and (best is None or f.nll < best.nll):
                 best = f
         return best
 
-    def _fit_held(self, effect: Effect, base_cfg: SimConfig, evidence: Any, held: dict[str, float],
-                  guesses: list[dict[str, float]], *, refine: bool, errors: bool,
-                  start: dict[str, float] | None) -> EffectFit | None:
+    def _fit_held(
+        self,
+        effect: Effect,
+        base_cfg: SimConfig,
+        evidence: Any,
+        held: dict[str, float],
+        guesses: list[dict[str, float]],
+        *,
+        refine: bool,
+        errors: bool,
+        start: dict[str, float] | None,
+    ) -> EffectFit | None:
         fitted = effect.fit_params
         try:
             effect.inject(base_cfg, self.axis, **{p.name: p.default for p in fitted}, **held)
@@ -368,9 +400,18 @@ class Fitter:
             # Refine the best start with a small simplex, as it already sits in its basin.
             for t0 in scored[:1] if refine else []:
                 simplex = np.vstack([t0] + [t0 + 0.02 * np.eye(d)[i] for i in range(d)])
-                res = scipy.optimize.minimize(evaluate, t0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * d,
-                                              options={"initial_simplex": np.clip(simplex, 0, 1), "xatol": 2e-4,
-                                                       "fatol": 0.02, "maxfev": 40 * d})
+                res = scipy.optimize.minimize(
+                    evaluate,
+                    t0,
+                    method="Nelder-Mead",
+                    bounds=[(0.0, 1.0)] * d,
+                    options={
+                        "initial_simplex": np.clip(simplex, 0, 1),
+                        "xatol": 2e-4,
+                        "fatol": 0.02,
+                        "maxfev": 40 * d,
+                    },
+                )
                 if res.fun < best_v:
                     best_t, best_v = np.clip(res.x, 0, 1), res.fun
         nll, nf, cfg = cache[key_of(best_t)]
@@ -386,9 +427,13 @@ class Fitter:
                     if math.isfinite(sd) and sd > 0:
                         errs[k] = sd
                         intervals[k] = (params[k] - Z95 * sd, params[k] + Z95 * sd)
-        return EffectFit(effect.name, params, errs, nll, nf.scales, d, cfg, nf.S, intervals=intervals)
+        return EffectFit(
+            effect.name, params, errs, nll, nf.scales, d, cfg, nf.S, intervals=intervals
+        )
 
-    def held_envelope(self, effect: Effect, base_cfg: SimConfig, evidence: Any, found: EffectFit) -> EffectFit:
+    def held_envelope(
+        self, effect: Effect, base_cfg: SimConfig, evidence: Any, found: EffectFit
+    ) -> EffectFit:
         """``found`` with its intervals widened by what the unit's knee leaves open.
 
         An effect that sets the unit's 1/f corner (``flicker_noise``, which owns "ac_flicker")
@@ -407,7 +452,7 @@ class Fitter:
             for slope in (slope0 - SLOPE_SPAN, slope0 + SLOPE_SPAN):
                 self.pinned = {"ac_slope": slope}
                 alt = self.fit(effect, base_cfg, evidence, start=found.params)
-                for k, (a, b) in (alt.intervals.items() if alt is not None else ()):
+                for k, (a, b) in alt.intervals.items() if alt is not None else ():
                     if k in lo:
                         lo[k], hi[k] = min(lo[k], a), max(hi[k], b)
         finally:
@@ -415,8 +460,9 @@ class Fitter:
         found.intervals = {k: (lo[k], hi[k]) for k in lo}
         return found
 
-    def _errors(self, evaluate, spectrum, t: np.ndarray,
-                fitted: tuple[Param, ...]) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
+    def _errors(
+        self, evaluate, spectrum, t: np.ndarray, fitted: tuple[Param, ...]
+    ) -> tuple[dict[str, float], dict[str, tuple[float, float]]]:
         """1-sigma and 95 % intervals of the fitted parameters, from a robust covariance.
 
         The model-based covariance is the inverse curvature H^-1 of -l (central differences in
@@ -440,8 +486,12 @@ class Fitter:
                 if i == j:
                     v = (evaluate(t + ei) - 2 * f0 + evaluate(t - ei)) / h**2
                 else:
-                    v = (evaluate(t + ei + ej) - evaluate(t + ei - ej) - evaluate(t - ei + ej)
-                         + evaluate(t - ei - ej)) / (4 * h * h)
+                    v = (
+                        evaluate(t + ei + ej)
+                        - evaluate(t + ei - ej)
+                        - evaluate(t - ei + ej)
+                        + evaluate(t - ei - ej)
+                    ) / (4 * h * h)
                 Hm[i, j] = Hm[j, i] = v
         nb = self.P.shape[1]
         G = np.zeros((nb, d))

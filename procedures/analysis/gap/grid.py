@@ -39,13 +39,13 @@ class Grid:
     nperseg: int
     noverlap: int
     segments: int
-    bins: np.ndarray        # Welch bin indices analysed
+    bins: np.ndarray  # Welch bin indices analysed
     band_of_bin: np.ndarray  # band index of each analysed bin
     band_lo_hz: np.ndarray
     band_hi_hz: np.ndarray
-    dof: np.ndarray          # equivalent degrees of freedom of each band's estimate
-    eval_bins: np.ndarray    # positions (into ``bins``) where the model is evaluated
-    eval_band: np.ndarray    # band of each evaluation point
+    dof: np.ndarray  # equivalent degrees of freedom of each band's estimate
+    eval_bins: np.ndarray  # positions (into ``bins``) where the model is evaluated
+    eval_band: np.ndarray  # band of each evaluation point
 
     @property
     def df(self) -> float:
@@ -84,8 +84,9 @@ class Grid:
 def _averaging(group: np.ndarray, n: int) -> scipy.sparse.csr_matrix:
     """(n, len(group)): row b averages the points of group b."""
     counts = np.bincount(group, minlength=n).astype(float)
-    return scipy.sparse.csr_matrix((1.0 / counts[group], (group, np.arange(len(group)))),
-                                   shape=(n, len(group)))
+    return scipy.sparse.csr_matrix(
+        (1.0 / counts[group], (group, np.arange(len(group)))), shape=(n, len(group))
+    )
 
 
 def _group_mean(values: np.ndarray, averages: scipy.sparse.csr_matrix) -> np.ndarray:
@@ -101,8 +102,15 @@ def _bin_correlation(window: np.ndarray, max_lag: int = 4) -> np.ndarray:
     return np.abs(spec) ** 2 / float(w2.sum()) ** 2
 
 
-def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz: float = 0.25,
-              f_hi_fraction: float = 0.3, bands_per_octave: int = 24) -> Grid:
+def make_grid(
+    rate_hz: float,
+    n_samples: int,
+    *,
+    df_hz: float = 0.0625,
+    f_lo_hz: float = 0.25,
+    f_hi_fraction: float = 0.3,
+    bands_per_octave: int = 24,
+) -> Grid:
     """Bins from ``f_lo_hz`` (at least the 4th bin, clear of the detrend's leakage) to
     ``f_hi_fraction`` of the rate, in 1/``bands_per_octave``-octave bands."""
     if not (rate_hz > 0 and math.isfinite(rate_hz)):
@@ -114,7 +122,8 @@ def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz:
         raise GapInputError(
             f"record too short: {n_samples / rate_hz:.1f} s; the lowest band ({f_lo_hz:g} Hz, "
             f"{rate_hz / nperseg:.3f} Hz resolution) needs {MIN_SEGMENTS} segments of {nperseg / rate_hz:.1f} s, "
-            f"at least {need / rate_hz:.1f} s")
+            f"at least {need / rate_hz:.1f} s"
+        )
     K = n_segments(n_samples, nperseg, noverlap)
     df = rate_hz / nperseg
     k0 = max(4, math.ceil(f_lo_hz / df))
@@ -130,7 +139,9 @@ def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz:
     nu_bin = equivalent_dof(win, nperseg, noverlap, K)
     rho = _bin_correlation(win)
     counts = np.bincount(band)
-    inflation = np.array([1 + 2 * sum((1 - j / n) * rho[j] for j in range(1, min(n, len(rho)))) for n in counts])
+    inflation = np.array(
+        [1 + 2 * sum((1 - j / n) * rho[j] for j in range(1, min(n, len(rho)))) for n in counts]
+    )
     dof = nu_bin * counts / inflation
     eval_pos: list[int] = []
     for b in range(n_bands):
@@ -139,13 +150,21 @@ def make_grid(rate_hz: float, n_samples: int, *, df_hz: float = 0.0625, f_lo_hz:
             idx = idx[np.round(np.linspace(0, len(idx) - 1, MODEL_POINTS_PER_BAND)).astype(int)]
         eval_pos.extend(idx.tolist())
     eval_bins = np.array(eval_pos)
-    return Grid(float(rate_hz), nperseg, noverlap, K, bins, band, lo, hi, dof, eval_bins, band[eval_bins])
+    return Grid(
+        float(rate_hz), nperseg, noverlap, K, bins, band, lo, hi, dof, eval_bins, band[eval_bins]
+    )
 
 
 def bin_spectra(x: np.ndarray, grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """The analysed Welch bins: (f, p[n_channels, n_bins]), one-sided density."""
-    f, p = psd(np.atleast_2d(x), grid.rate_hz, nperseg=grid.nperseg, noverlap=grid.noverlap,
-               window="hann", detrend="linear")
+    f, p = psd(
+        np.atleast_2d(x),
+        grid.rate_hz,
+        nperseg=grid.nperseg,
+        noverlap=grid.noverlap,
+        window="hann",
+        detrend="linear",
+    )
     return f[grid.bins], p[..., grid.bins]
 
 
@@ -173,8 +192,14 @@ def channel_weights(x: np.ndarray, grid: Grid) -> np.ndarray:
     x = np.atleast_2d(x)
     if x.shape[0] == 1:
         return np.ones((1, grid.n_bands))
-    _, S = welch_csd_matrix(x, grid.rate_hz, window="hann", nperseg=grid.nperseg,
-                            noverlap=grid.noverlap, detrend="linear")
+    _, S = welch_csd_matrix(
+        x,
+        grid.rate_hz,
+        window="hann",
+        nperseg=grid.nperseg,
+        noverlap=grid.noverlap,
+        detrend="linear",
+    )
     S = S[grid.bins]
     n = x.shape[0]
     band = np.zeros((grid.n_bands, n, n), complex)

@@ -54,14 +54,15 @@ def _clusters(freqs: list[float]) -> list[list[int]]:
 
 def _peak(f: np.ndarray, p: np.ndarray, j: int, df: float) -> float:
     """The peak bin's frequency refined by Gaussian interpolation."""
-    y0, y1, y2 = np.log(p[j - 1:j + 2])
+    y0, y1, y2 = np.log(p[j - 1 : j + 2])
     curve = y0 - 2 * y1 + y2
     delta = float(np.clip(0.5 * (y0 - y2) / curve, -0.5, 0.5)) if curve < 0 else 0.0
     return float(f[j] + delta * df)
 
 
-def found_pickoff_lines(cfg: SimConfig, axis: str, channels: tuple[str, ...], p_bins: np.ndarray,
-                        grid: Grid) -> SimConfig:
+def found_pickoff_lines(
+    cfg: SimConfig, axis: str, channels: tuple[str, ...], p_bins: np.ndarray, grid: Grid
+) -> SimConfig:
     """A copy of ``cfg`` with the axis gyro's pickoff lines at the frequencies found in the
     measured ``gyro_<axis>`` channel's periodogram ``p_bins`` (bins of ``grid``); a line the
     data do not show (no gyro channel, beyond the analysed band, no prominent peak) keeps its
@@ -103,7 +104,11 @@ def found_pickoff_lines(cfg: SimConfig, axis: str, channels: tuple[str, ...], p_
                 free.remove(i)
     out = cfg.copy()
     out.gyro[axis].pickoff_lines = lines
-    moved = [f"{a[0]:.2f} -> {b[0]:.3f} Hz" for a, b in zip(cfg.gyro[axis].pickoff_lines, lines) if a[0] != b[0]]
+    moved = [
+        f"{a[0]:.2f} -> {b[0]:.3f} Hz"
+        for a, b in zip(cfg.gyro[axis].pickoff_lines, lines)
+        if a[0] != b[0]
+    ]
     if moved:
         log.info("pickoff lines of gyro %s found in the data: %s", axis, ", ".join(moved))
     return out

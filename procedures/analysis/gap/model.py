@@ -54,8 +54,9 @@ SHAPE_KEYS = ("ac_corner_hz", "ac_knee", "ac_slope")
 knee = ac_knee
 
 
-def knee_gradient(f: np.ndarray, corner_hz: float, form: float,
-                  slope: float) -> tuple[np.ndarray, ...]:
+def knee_gradient(
+    f: np.ndarray, corner_hz: float, form: float, slope: float
+) -> tuple[np.ndarray, ...]:
     """dK/d ln(corner), dK/d form, dK/d slope of :func:`knee` (K = form (1 + r) + (1 - form)
     max(1, r), r = (corner/f)^slope)."""
     ln = np.log(corner_hz / np.asarray(f, float))
@@ -110,8 +111,13 @@ def apply_nuisance(cfg: SimConfig, axis: str, scales: dict[str, float]) -> SimCo
     elif axis == "Z":
         cfg.azimuth.nea_urad *= math.sqrt(scales.get("ac_flicker", 1.0))
     g = cfg.gyro[axis]
-    white = max(s_np * (g.pickoff_noise_rms_urad**2 - sum(a * a / 2 for _, a in g.pickoff_lines)), 0.0)
-    g.pickoff_lines = [[f0, a * math.sqrt(scales.get(line_part(k), 1.0))] for k, (f0, a) in enumerate(g.pickoff_lines)]
+    white = max(
+        s_np * (g.pickoff_noise_rms_urad**2 - sum(a * a / 2 for _, a in g.pickoff_lines)), 0.0
+    )
+    g.pickoff_lines = [
+        [f0, a * math.sqrt(scales.get(line_part(k), 1.0))]
+        for k, (f0, a) in enumerate(g.pickoff_lines)
+    ]
     g.pickoff_noise_rms_urad = math.sqrt(white + sum(a * a / 2 for _, a in g.pickoff_lines))
     return cfg
 
@@ -194,7 +200,9 @@ def _aliases(f: np.ndarray, fs: float, m: int) -> list[np.ndarray]:
     return out
 
 
-def frequency_response(Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray) -> np.ndarray:
+def frequency_response(
+    Ad: np.ndarray, Bd: np.ndarray, C: np.ndarray, D: np.ndarray, z: np.ndarray
+) -> np.ndarray:
     """H(z) = C (zI - Ad)^-1 Bd + D at each z: (n_z, n_out, n_in), by a batched direct solve
     (for plants whose modes are too ill-conditioned for ``zoh_response_modal``)."""
     n = Ad.shape[0]
@@ -210,8 +218,15 @@ def _dirichlet(x: np.ndarray, n: int) -> np.ndarray:
     return np.exp(-1j * np.pi * x * (n - 1) / n) * ratio
 
 
-def zoh_response_modal(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, dt: float,
-                       z: np.ndarray, max_cond: float = 1e11) -> np.ndarray | None:
+def zoh_response_modal(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    D: np.ndarray,
+    dt: float,
+    z: np.ndarray,
+    max_cond: float = 1e11,
+) -> np.ndarray | None:
     """The exact ZOH discretization's frequency response from the continuous modes, without a
     matrix exponential: with A = V diag(l) V^-1, A_d = V diag(e^(l dt)) V^-1 and
     B_d = V diag((e^(l dt) - 1) / l) V^-1 B, so
@@ -259,8 +274,14 @@ class SpectralModel:
     change only noise sources (flicker, jumps, lines) cost no matrix work.
     """
 
-    def __init__(self, grid: Grid, channels: tuple[str, ...], mode: int, axis: str,
-                 quant_psd: np.ndarray | None = None) -> None:
+    def __init__(
+        self,
+        grid: Grid,
+        channels: tuple[str, ...],
+        mode: int,
+        axis: str,
+        quant_psd: np.ndarray | None = None,
+    ) -> None:
         self.grid, self.channels, self.mode, self.axis = grid, tuple(channels), mode, axis
         self.quant = np.zeros(len(channels)) if quant_psd is None else np.asarray(quant_psd, float)
         self._cache: dict[str, tuple] = {}
@@ -277,11 +298,17 @@ class SpectralModel:
         missing = [c for c in self.channels if c not in plant.outputs]
         if missing:
             raise ValueError(f"the model has no channel(s) {', '.join(missing)}")
-        key = hashlib.sha1(b"".join(np.ascontiguousarray(m).tobytes() for m in
-                                    (plant.A, plant.B, plant.C, plant.D)) + repr(dt).encode()).hexdigest()
+        key = hashlib.sha1(
+            b"".join(
+                np.ascontiguousarray(m).tobytes() for m in (plant.A, plant.B, plant.C, plant.D)
+            )
+            + repr(dt).encode()
+        ).hexdigest()
         return plant, key
 
-    def _responses(self, cfg: SimConfig, m: int, dt: float, inputs: list[str], line_freqs: np.ndarray):
+    def _responses(
+        self, cfg: SimConfig, m: int, dt: float, inputs: list[str], line_freqs: np.ndarray
+    ):
         plant, key = self._plant(cfg, dt)
         key += repr((inputs, line_freqs.tobytes()))
         hit = self._cache.get(key)
@@ -302,10 +329,12 @@ class SpectralModel:
             H = frequency_response(disc.Ad, disc.Bd[:, cols], C, D, z)
         n = len(f_eval)
         # |H|^2 per alias, (n_in, n_out, n_points): what the noise parts are weighted by
-        power = [np.ascontiguousarray(np.transpose(np.abs(H[i * n:(i + 1) * n]) ** 2, (2, 1, 0)))
-                 for i in range(len(aliases))]
+        power = [
+            np.ascontiguousarray(np.transpose(np.abs(H[i * n : (i + 1) * n]) ** 2, (2, 1, 0)))
+            for i in range(len(aliases))
+        ]
         stable = bool(np.max(np.linalg.eigvals(plant.A).real) < 0.0)
-        result = (aliases, power, H[len(aliases) * n:], stable)
+        result = (aliases, power, H[len(aliases) * n :], stable)
         if len(self._cache) > 256:
             self._cache.clear()
         self._cache[key] = result
@@ -315,8 +344,14 @@ class SpectralModel:
         """Each random input's spectrum at the alias frequencies, by part, and the deterministic
         lines. Each noise source's spectrum is cached on its own parameters."""
         sources = Sources(cfg, 0, dt, spectral=True)
-        whole_key = (m, dt, tuple((name, tuple(part.spectrum_key() for part in parts), tuple(sources.lines(name)))
-                                  for name, parts in sources.parts.items()))
+        whole_key = (
+            m,
+            dt,
+            tuple(
+                (name, tuple(part.spectrum_key() for part in parts), tuple(sources.lines(name)))
+                for name, parts in sources.parts.items()
+            ),
+        )
         whole = self._sources_cache.get(whole_key)
         if whole is not None:  # a trial that changes only the plant
             return whole
@@ -336,7 +371,12 @@ class SpectralModel:
                     acc = spectra.setdefault(name, {}).get(part)
                     spectra[name][part] = s if acc is None else [x + y for x, y in zip(acc, s)]
         fs = self.grid.rate_hz
-        lines = [(name, f0, a) for name in sources.names for f0, a in sources.lines(name) if 0 < f0 < fs * m / 2]
+        lines = [
+            (name, f0, a)
+            for name in sources.names
+            for f0, a in sources.lines(name)
+            if 0 < f0 < fs * m / 2
+        ]
         if len(self._sources_cache) > 256:
             self._sources_cache.clear()
         self._sources_cache[whole_key] = spectra, lines
@@ -349,10 +389,20 @@ class SpectralModel:
         key = (fs, m, s.anti_alias_poles, s.anti_alias_fraction)
         sos = self._aa_cache.get(key)
         if sos is None:
-            sos = self._aa_cache[key] = anti_alias_sos(s.anti_alias_poles, s.anti_alias_fraction, fs, m)
+            sos = self._aa_cache[key] = anti_alias_sos(
+                s.anti_alias_poles, s.anti_alias_fraction, fs, m
+            )
 
         def aa2(f: np.ndarray) -> np.ndarray:
-            return np.abs(scipy.signal.sosfreqz(sos, worN=np.nan_to_num(np.atleast_1d(f), nan=0.0), fs=fs * m)[1]) ** 2
+            return (
+                np.abs(
+                    scipy.signal.sosfreqz(
+                        sos, worN=np.nan_to_num(np.atleast_1d(f), nan=0.0), fs=fs * m
+                    )[1]
+                )
+                ** 2
+            )
+
         return aa2
 
     def __call__(self, cfg: SimConfig) -> ModelSpectrum:
@@ -371,7 +421,9 @@ class SpectralModel:
             aa_alias = self._aa_alias_cache[aa_key] = [aa2(a) for a in aliases]
 
         nch = len(self.channels)
-        per_part = {p: np.zeros((nch, len(f_eval))) for p in PARTS}  # band means taken once, at the end
+        per_part = {
+            p: np.zeros((nch, len(f_eval))) for p in PARTS
+        }  # band means taken once, at the end
         for j, name in enumerate(inputs):
             for part, spec in spectra.get(name, {}).items():
                 acc = per_part[part]
@@ -407,7 +459,9 @@ class SpectralModel:
         if hit is None:
             if len(self._aa_line_cache) > 256:
                 self._aa_line_cache.clear()
-            hit = self._aa_line_cache[key] = np.sqrt(aa2(line_freqs)) if len(line_freqs) else np.zeros(0)
+            hit = self._aa_line_cache[key] = (
+                np.sqrt(aa2(line_freqs)) if len(line_freqs) else np.zeros(0)
+            )
         return hit
 
     def _add_line(self, per_bin: np.ndarray, f0: float, amplitudes: np.ndarray) -> None:
@@ -441,8 +495,15 @@ def quantization_psd(q: float, rate_hz: float) -> float:
     return q * q / (6.0 * rate_hz)
 
 
-def step_response(cfg: SimConfig, mode: int, input_name: str, channels: tuple[str, ...], rate_hz: float,
-                  duration_s: float, t_step_s: float) -> np.ndarray:
+def step_response(
+    cfg: SimConfig,
+    mode: int,
+    input_name: str,
+    channels: tuple[str, ...],
+    rate_hz: float,
+    duration_s: float,
+    t_step_s: float,
+) -> np.ndarray:
     """Response of ``channels`` (n_channels, n) as recorded at ``rate_hz`` (anti-alias filter and
     decimation included) to a unit step of plant input ``input_name`` at ``t_step_s``, from rest."""
     m, dt = internal_rate(cfg.sampling, rate_hz)
@@ -456,12 +517,15 @@ def step_response(cfg: SimConfig, mode: int, input_name: str, channels: tuple[st
     k_step = min(int(round(t_step_s * rate_hz)) * m, n)
     y = np.zeros((n, len(rows)))
     y[k_step:] = _unit_step(disc.Ad, b, C, d, n - k_step)
-    sos = anti_alias_sos(cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction, rate_hz, m)
+    sos = anti_alias_sos(
+        cfg.sampling.anti_alias_poles, cfg.sampling.anti_alias_fraction, rate_hz, m
+    )
     return scipy.signal.sosfilt(sos, y, axis=0)[::m].T
 
 
-def _unit_step(Ad: np.ndarray, b: np.ndarray, C: np.ndarray, d: np.ndarray, n: int,
-               block: int = 256) -> np.ndarray:
+def _unit_step(
+    Ad: np.ndarray, b: np.ndarray, C: np.ndarray, d: np.ndarray, n: int, block: int = 256
+) -> np.ndarray:
     """y_j = C s_j + d, s_0 = 0, s_(j+1) = Ad s_j + b: the unit-step response (n, n_out) a block
     of ``block`` steps at a time. In a block from state s, s_(j0+i) = Ad^i s + sum_(l<i) Ad^l b,
     so each block is one product with the stacked powers of Ad (no per-sample loop)."""
@@ -470,12 +534,14 @@ def _unit_step(Ad: np.ndarray, b: np.ndarray, C: np.ndarray, d: np.ndarray, n: i
     powers[0] = np.eye(ns)
     for i in range(1, block + 1):
         powers[i] = Ad @ powers[i - 1]
-    sums = np.concatenate([np.zeros((1, ns)), np.cumsum(powers[:-1] @ b, axis=0)])  # sum_(l<i) Ad^l b
+    sums = np.concatenate(
+        [np.zeros((1, ns)), np.cumsum(powers[:-1] @ b, axis=0)]
+    )  # sum_(l<i) Ad^l b
     CP, CG = C @ powers[:-1], sums[:-1] @ C.T + d
     y = np.empty((n, len(d)))
     s = np.zeros(ns)
     for j0 in range(0, n, block):
         k = min(block, n - j0)
-        y[j0:j0 + k] = (CP[:k] @ s) + CG[:k]
+        y[j0 : j0 + k] = (CP[:k] @ s) + CG[:k]
         s = powers[block] @ s + sums[block]
     return y

@@ -23,8 +23,8 @@ import numpy as np
 @dataclass(frozen=True)
 class Step:
     time_s: float
-    size: float      # in the units of the data given (divide by the template gain for the input)
-    z: float         # |D| over its robust scale
+    size: float  # in the units of the data given (divide by the template gain for the input)
+    z: float  # |D| over its robust scale
 
 
 def window_difference(x: np.ndarray, n_win: int, hop: int) -> tuple[np.ndarray, np.ndarray]:
@@ -40,8 +40,16 @@ def robust_scale(d: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))))
 
 
-def find_steps(x: np.ndarray, rate_hz: float, *, template: np.ndarray | None = None, step_at: int = 0,
-               window_s: float = 2.0, z: float = 6.0, max_steps: int = 200) -> tuple[list[Step], float]:
+def find_steps(
+    x: np.ndarray,
+    rate_hz: float,
+    *,
+    template: np.ndarray | None = None,
+    step_at: int = 0,
+    window_s: float = 2.0,
+    z: float = 6.0,
+    max_steps: int = 200,
+) -> tuple[list[Step], float]:
     """Steps in ``x`` and the robust scale of D. One at a time, largest first, each found step's
     response is subtracted before looking again (CLEAN), so a response that is not a pure step
     (the gyro's caging loop pulls it back) leaves no ghosts. ``template`` is the channel's
@@ -54,7 +62,11 @@ def find_steps(x: np.ndarray, rate_hz: float, *, template: np.ndarray | None = N
     hop = max(1, n_win // 20)
     if template is None:
         template, step_at = np.array([0.0, 1.0]), 1
-    gain = template_gain(template, rate_hz, step_at=step_at, window_s=window_s) if len(template) > 2 else 1.0
+    gain = (
+        template_gain(template, rate_hz, step_at=step_at, window_s=window_s)
+        if len(template) > 2
+        else 1.0
+    )
     x = x - x.mean()
     pos, d = window_difference(x, n_win, hop)
     sigma = robust_scale(d)
@@ -78,13 +90,14 @@ def _subtract(x: np.ndarray, k: int, size: float, template: np.ndarray, step_at:
     a = k - step_at
     lo, hi = max(0, a), min(len(x), a + len(template))
     if hi > lo:
-        x[lo:hi] -= size * template[lo - a: hi - a]
+        x[lo:hi] -= size * template[lo - a : hi - a]
     if a + len(template) < len(x):
-        x[max(0, a + len(template)):] -= size * template[-1]
+        x[max(0, a + len(template)) :] -= size * template[-1]
 
 
-def template_gain(response: np.ndarray, rate_hz: float, *, step_at: int | None = None,
-                  window_s: float = 2.0) -> float:
+def template_gain(
+    response: np.ndarray, rate_hz: float, *, step_at: int | None = None, window_s: float = 2.0
+) -> float:
     """D of a channel's response to a unit step, at the step (sample ``step_at``; default the
     peak of |D|)."""
     n_win = max(2, int(round(window_s * rate_hz)))

@@ -46,7 +46,14 @@ from procedures.analysis.gap.model import (
     quantization_psd,
     step_response,
 )
-from procedures.analysis.gap.steps import Step, find_steps, robust_scale, step_like, template_gain, window_difference
+from procedures.analysis.gap.steps import (
+    Step,
+    find_steps,
+    robust_scale,
+    step_like,
+    template_gain,
+    window_difference,
+)
 from simhw import effects as catalogue
 from simhw.params import Sampling, SimConfig, load_config, to_dict
 from simhw.plant import AXIS_OF_CHANNEL, CHANNELS
@@ -71,11 +78,15 @@ def channel_axis(name: str) -> str | None:
 
 @dataclass
 class GapOptions:
-    alpha: float = 0.01        # family-wise false-departure probability per file
-    tol_db: float = 0.5        # model tolerance: smaller departures are not gaps
-    min_score: float = 10.0    # BIC improvement for an effect to be named ("very strong", Kass-Raftery)
-    max_effects: int = 4       # three mains harmonics are three pickup lines
-    refine_top: int = 3        # candidates refined after the screening (the rest keep their screened score)
+    alpha: float = 0.01  # family-wise false-departure probability per file
+    tol_db: float = 0.5  # model tolerance: smaller departures are not gaps
+    min_score: float = (
+        10.0  # BIC improvement for an effect to be named ("very strong", Kass-Raftery)
+    )
+    max_effects: int = 4  # three mains harmonics are three pickup lines
+    refine_top: int = (
+        3  # candidates refined after the screening (the rest keep their screened score)
+    )
     # A named effect must close a material share of the gap where it acts, not only win on the
     # score (a small systematic improvement over thousands of bands always "wins"): at least
     # this share of the gap on its cells, and at least this many dB.
@@ -86,7 +97,7 @@ class GapOptions:
     #: where no single candidate closes its share, pairs of the leading this many are fitted
     #: together (``_pair_that_closes``)
     pair_top: int = 3
-    seed: int = 1              # of the model simulations
+    seed: int = 1  # of the model simulations
     sim_config: str | Path | None = None
 
 
@@ -97,7 +108,7 @@ class Record:
     mode: int
     rate_hz: float
     channels: tuple[str, ...]
-    data: np.ndarray           # (n_channels, n) volts
+    data: np.ndarray  # (n_channels, n) volts
     lsb_V: np.ndarray
     warnings: list[str] = field(default_factory=list)
 
@@ -117,29 +128,37 @@ def load_record(path: str | Path, axis: str | None = None) -> Record:
         raise GapInputError(f"{path}: not a readable fbs-run file ({e})") from None
     with run:
         attrs = run.attrs
-        ax = (axis or attrs.get("axis") or "")
+        ax = axis or attrs.get("axis") or ""
         ax = ax.decode() if isinstance(ax, bytes) else str(ax)
         if not ax:
-            raise GapInputError(f"{path}: the file has no 'axis' attribute; give the axis (--axis X, Y or Z)")
+            raise GapInputError(
+                f"{path}: the file has no 'axis' attribute; give the axis (--axis X, Y or Z)"
+            )
         ax = ax.strip().upper()
         if ax not in AXES:
             raise GapInputError(f"{path}: unknown axis {ax!r}; the platform axes are X, Y and Z")
         try:
             mode = int(attrs["mode"])
         except (KeyError, TypeError, ValueError):
-            raise GapInputError(f"{path}: root attribute 'mode' is {attrs.get('mode')!r}, not a mode 1..6") from None
+            raise GapInputError(
+                f"{path}: root attribute 'mode' is {attrs.get('mode')!r}, not a mode 1..6"
+            ) from None
         if mode not in range(1, 7):
             raise GapInputError(f"{path}: mode {mode} cannot be modelled (modes 1..6)")
         changes = [e for e in run.events if e.kind == "mode" and e.time_s > 0]
         if changes:
-            raise GapInputError(f"{path}: the mode changes during the record (at {changes[0].time_s:.3f} s: "
-                                f"{changes[0].text}); the gap workflow needs one steady mode — cut the record")
+            raise GapInputError(
+                f"{path}: the mode changes during the record (at {changes[0].time_s:.3f} s: "
+                f"{changes[0].text}); the gap workflow needs one steady mode — cut the record"
+            )
         present = list(run.lengths)
         wanted = [c for c in present if c in CHANNELS and channel_axis(c) == ax]
         if not wanted:
             need = [c for c in CHANNELS if channel_axis(c) == ax]
-            raise GapInputError(f"{path}: missing channels: none of axis {ax}'s channels ({', '.join(need)}) is in "
-                                f"the file (it has {', '.join(present) or 'none'})")
+            raise GapInputError(
+                f"{path}: missing channels: none of axis {ax}'s channels ({', '.join(need)}) is in "
+                f"the file (it has {', '.join(present) or 'none'})"
+            )
         rate = float(run.rate_hz)
         data = run.read(wanted)
         status = run.status
@@ -149,19 +168,25 @@ def load_record(path: str | Path, axis: str | None = None) -> Record:
     for c, x in zip(wanted, data):
         lost = lost_samples(c, x, rate)
         if lost:
-            raise GapInputError(f"{path}: channel {lost} ({LOST_SAMPLES_NOTE}); the gap workflow needs every sample: "
-                                f"analyse a clean span (cut the record) or re-record")
+            raise GapInputError(
+                f"{path}: channel {lost} ({LOST_SAMPLES_NOTE}); the gap workflow needs every sample: "
+                f"analyse a clean span (cut the record) or re-record"
+            )
     steps = np.array([lsb(x) for x in data])
     keep = []
     for c, x, q in zip(wanted, data, steps):
         full = _range_from_lsb(q, Sampling().adc_bits)
         clipped = int(np.sum(np.abs(x) >= full - 1.5 * q)) if full else 0
         if clipped:
-            warnings.append(f"{c} excluded: {clipped} samples at the ADC's full scale (+-{full:g} V): clipped "
-                            f"spectra are not the rig's; record it on a wider range")
+            warnings.append(
+                f"{c} excluded: {clipped} samples at the ADC's full scale (+-{full:g} V): clipped "
+                f"spectra are not the rig's; record it on a wider range"
+            )
         elif q > 0 and np.std(x) < 3 * q:
-            warnings.append(f"{c} excluded: its signal ({np.std(x):.3g} V rms) is within 3 LSB ({q:.3g} V) of "
-                            f"the ADC; record it on a finer range")
+            warnings.append(
+                f"{c} excluded: its signal ({np.std(x):.3g} V rms) is within 3 LSB ({q:.3g} V) of "
+                f"the ADC; record it on a finer range"
+            )
         elif np.std(x) == 0:
             warnings.append(f"{c} excluded: constant")
         else:
@@ -181,19 +206,23 @@ class Finding:
     uncertainties: dict[str, float]
     score: float
     runner_up: str
-    margin: float               # score over the runner-up's
-    gap_before_db: float        # on the bands located at this step, model expectation
+    margin: float  # score over the runner-up's
+    gap_before_db: float  # on the bands located at this step, model expectation
     gap_after_db: float
     located: list[Band]
     candidates: list[dict[str, Any]]
-    intervals: dict[str, tuple[float, float]] = field(default_factory=dict)  # 95 %, ``fit.Fitter._errors``
+    intervals: dict[str, tuple[float, float]] = field(
+        default_factory=dict
+    )  # 95 %, ``fit.Fitter._errors``
     at_bound: list[str] = field(default_factory=list)  # fitted parameters at a bound of their prior
 
     def parameter_text(self, sep: str = ", ") -> str:
         """``name = value [lo, hi]`` per parameter, with its 95 % interval where it has one."""
+
         def one(k: str, v: float) -> str:
             iv = self.intervals.get(k)
             return f"{k} = {v:.4g}" + (f" [{iv[0]:.4g}, {iv[1]:.4g}]" if iv else "")
+
         return sep.join(one(k, v) for k, v in self.parameters.items())
 
 
@@ -216,7 +245,7 @@ class GapResult:
     scales_before: dict[str, float]
     scales_after: dict[str, float]
     warnings: list[str]
-    unexplained: bool            # a departure remains that no catalogue effect explains
+    unexplained: bool  # a departure remains that no catalogue effect explains
     grid: Grid = field(repr=False)
     spectra: dict[str, np.ndarray] = field(repr=False, default_factory=dict)
     cfg_before: SimConfig | None = field(repr=False, default=None)
@@ -246,14 +275,31 @@ class GapResult:
             "gap_before_db": round(self.gap_before_db, 3),
             "gap_after_db": round(self.gap_after_db, 3),
             "candidates": self.candidates,
-            "effects": [{"effect": f.effect, "parameters": _rounded(f.parameters),
-                         "parameters_ci95": _rounded_intervals(f.intervals),
-                         "gap_closed_db": round(f.gap_before_db - f.gap_after_db, 3)} for f in self.findings],
+            "effects": [
+                {
+                    "effect": f.effect,
+                    "parameters": _rounded(f.parameters),
+                    "parameters_ci95": _rounded_intervals(f.intervals),
+                    "gap_closed_db": round(f.gap_before_db - f.gap_after_db, 3),
+                }
+                for f in self.findings
+            ],
             "explained": not self.unexplained,
-            "unexplained": ([{"channel": b.channel, "f_lo_hz": round(b.f_lo_hz, 4), "f_hi_hz": round(b.f_hi_hz, 4),
-                              "deviation_db": round(b.deviation_db, 2)} for b in self.remaining]
-                            + [{"time_s": round(s.time_s, 3), "step_urad": round(s.size / URAD, 3)}
-                               for s in self.remaining_steps]),
+            "unexplained": (
+                [
+                    {
+                        "channel": b.channel,
+                        "f_lo_hz": round(b.f_lo_hz, 4),
+                        "f_hi_hz": round(b.f_hi_hz, 4),
+                        "deviation_db": round(b.deviation_db, 2),
+                    }
+                    for b in self.remaining
+                ]
+                + [
+                    {"time_s": round(s.time_s, 3), "step_urad": round(s.size / URAD, 3)}
+                    for s in self.remaining_steps
+                ]
+            ),
             "partial": self.partial,
             "file": self.file,
         }
@@ -263,16 +309,25 @@ def _rounded(d: dict[str, float]) -> dict[str, float | None]:
     return {k: (float(f"{v:.5g}") if math.isfinite(v) else None) for k, v in d.items()}
 
 
-def _with_effects(cfg0: SimConfig, axis: str, fits: list[tuple[catalogue.Effect, EffectFit]]) -> SimConfig:
+def _with_effects(
+    cfg0: SimConfig, axis: str, fits: list[tuple[catalogue.Effect, EffectFit]]
+) -> SimConfig:
     """The nominal configuration with these effects at their fitted values."""
     cfg = cfg0
     for eff, f in fits:
-        cfg = eff.inject(cfg, axis, **{p.name: min(max(f.params[p.name], p.lo), p.hi) for p in eff.params})
+        cfg = eff.inject(
+            cfg, axis, **{p.name: min(max(f.params[p.name], p.lo), p.hi) for p in eff.params}
+        )
     return cfg
 
 
-def _without(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[catalogue.Effect, EffectFit]],
-             i: int) -> NuisanceFit:
+def _without(
+    fitter: Fitter,
+    cfg0: SimConfig,
+    axis: str,
+    in_model: list[tuple[catalogue.Effect, EffectFit]],
+    i: int,
+) -> NuisanceFit:
     """The model with every effect in it but the ``i``-th, its noise levels fitted (the nuisance
     parts the others own held)."""
     rest = [x for j, x in enumerate(in_model) if j != i]
@@ -283,9 +338,16 @@ def _without(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[ca
         fitter.hold = held
 
 
-def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tuple[catalogue.Effect, EffectFit]],
-                   findings: list[Finding], evidence: Evidence, n_obs: int,
-                   opt: GapOptions) -> tuple[SimConfig, NuisanceFit]:
+def _refit_jointly(
+    fitter: Fitter,
+    cfg0: SimConfig,
+    axis: str,
+    in_model: list[tuple[catalogue.Effect, EffectFit]],
+    findings: list[Finding],
+    evidence: Evidence,
+    n_obs: int,
+    opt: GapOptions,
+) -> tuple[SimConfig, NuisanceFit]:
     """After an addition, each earlier effect re-fitted with all the others in the model, then
     the new one with the earlier ones as re-fitted (one pass, each from its values: two effects
     that overlap pull on each other, and the first fit of the new one was made beside the
@@ -302,11 +364,19 @@ def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tu
             # no longer a departure now that the effect is in the model): it stays
             again.errors = f.errors | again.errors
             again.intervals = f.intervals | again.intervals
-            log.info("re-fitted %s with %s: %s", eff.name, ", ".join(e.name for j, (e, _) in enumerate(in_model)
-                                                                       if j != i), again.params)
+            log.info(
+                "re-fitted %s with %s: %s",
+                eff.name,
+                ", ".join(e.name for j, (e, _) in enumerate(in_model) if j != i),
+                again.params,
+            )
             in_model[i] = (eff, again)
             fd = findings[i]
-            fd.parameters, fd.uncertainties, fd.intervals = again.params, again.errors, again.intervals
+            fd.parameters, fd.uncertainties, fd.intervals = (
+                again.params,
+                again.errors,
+                again.intervals,
+            )
     cfg = _with_effects(cfg0, axis, in_model)
     cur = fitter.base(cfg)
     for i in reversed(range(len(in_model))):
@@ -314,25 +384,42 @@ def _refit_jointly(fitter: Fitter, cfg0: SimConfig, axis: str, in_model: list[tu
         without = _without(fitter, cfg0, axis, in_model, i)
         earns = 2.0 * (without.nll - cur.nll) - f.n_fitted * math.log(n_obs)
         if earns < opt.min_score:
-            log.info("%s no longer earns its place beside %s (BIC %.1f): dropped", eff.name,
-                     ", ".join(e.name for j, (e, _) in enumerate(in_model) if j != i), earns)
+            log.info(
+                "%s no longer earns its place beside %s (BIC %.1f): dropped",
+                eff.name,
+                ", ".join(e.name for j, (e, _) in enumerate(in_model) if j != i),
+                earns,
+            )
             del in_model[i], findings[i]
             fitter.hold = frozenset(p for e, _ in in_model for p in e.owns)
             cfg, cur = _with_effects(cfg0, axis, in_model), without
     return cfg, cur
 
 
-def _order_by_gap_closed(fitter: Fitter, cfg0: SimConfig, axis: str,
-                         in_model: list[tuple[catalogue.Effect, EffectFit]], findings: list[Finding],
-                         P: np.ndarray, cells: np.ndarray, dof: np.ndarray, gap_all: float) -> None:
+def _order_by_gap_closed(
+    fitter: Fitter,
+    cfg0: SimConfig,
+    axis: str,
+    in_model: list[tuple[catalogue.Effect, EffectFit]],
+    findings: list[Finding],
+    P: np.ndarray,
+    cells: np.ndarray,
+    dof: np.ndarray,
+    gap_all: float,
+) -> None:
     """Several effects are reported in the order of the gap each closes on the same cells (all
     the gap's): the refined model's gap against the gap without that effect, the others and
     the noise levels staying fitted. Each finding's ``gap_before_db`` / ``gap_after_db``
     become those two."""
     for i in range(len(in_model)):
         without = _without(fitter, cfg0, axis, in_model, i)
-        findings[i].gap_before_db, findings[i].gap_after_db = gap_db(P, without.S, cells, dof), gap_all
-    order = sorted(range(len(findings)), key=lambda i: -(findings[i].gap_before_db - findings[i].gap_after_db))
+        findings[i].gap_before_db, findings[i].gap_after_db = (
+            gap_db(P, without.S, cells, dof),
+            gap_all,
+        )
+    order = sorted(
+        range(len(findings)), key=lambda i: -(findings[i].gap_before_db - findings[i].gap_after_db)
+    )
     findings[:] = [findings[i] for i in order]
     in_model[:] = [in_model[i] for i in order]
 
@@ -358,13 +445,22 @@ def _at_bound(effect: catalogue.Effect, params: dict[str, float]) -> list[str]:
             continue
         t = to_unit(p, v)
         if (t <= BOUND_SHARE and p.limit != "lo") or (t >= 1 - BOUND_SHARE and p.limit != "hi"):
-            out.append(f"{p.name} = {v:.4g} at {'lower' if t <= BOUND_SHARE else 'upper'} bound "
-                       f"{p.lo if t <= BOUND_SHARE else p.hi:g}")
+            out.append(
+                f"{p.name} = {v:.4g} at {'lower' if t <= BOUND_SHARE else 'upper'} bound "
+                f"{p.lo if t <= BOUND_SHARE else p.hi:g}"
+            )
     return out
 
 
-def _final_fit(fitter: Fitter, effect: catalogue.Effect, cfg: SimConfig, evidence: Evidence, f: EffectFit,
-               base_nll: float, n_obs: int) -> EffectFit:
+def _final_fit(
+    fitter: Fitter,
+    effect: catalogue.Effect,
+    cfg: SimConfig,
+    evidence: Evidence,
+    f: EffectFit,
+    base_nll: float,
+    n_obs: int,
+) -> EffectFit:
     """``f`` refined again with its uncertainties (and the knee's envelope), scored against
     ``base_nll``; ``f`` itself where the refinement finds nothing better."""
     final = fitter.fit(effect, cfg, evidence, start=f.params)
@@ -374,7 +470,9 @@ def _final_fit(fitter: Fitter, effect: catalogue.Effect, cfg: SimConfig, evidenc
     return fitter.held_envelope(effect, cfg, evidence, final)
 
 
-def _moved(S: np.ndarray, scales: dict[str, float], cur: NuisanceFit, base_ms: Any, tol_db: float) -> np.ndarray:
+def _moved(
+    S: np.ndarray, scales: dict[str, float], cur: NuisanceFit, base_ms: Any, tol_db: float
+) -> np.ndarray:
     """The cells an effect's model ``S`` moves by more than ``tol_db``: against the model without
     it at the same noise levels ``scales`` (a refitted noise level moves every band a little, and
     is no effect's doing), with the unit's knee as fitted without it (``cur``: an effect that
@@ -383,9 +481,19 @@ def _moved(S: np.ndarray, scales: dict[str, float], cur: NuisanceFit, base_ms: A
     return np.abs(10.0 * np.log10(S / base_ms.total(same))) > tol_db
 
 
-def _pair_that_closes(fitter: Fitter, cfg: SimConfig, cur: NuisanceFit, fits: list[EffectFit], evidence: Evidence,
-                      flags: np.ndarray, base_ms: Any, n_obs: int, opt: GapOptions, P: np.ndarray,
-                      dof: np.ndarray) -> list[tuple[EffectFit, np.ndarray, float, float]]:
+def _pair_that_closes(
+    fitter: Fitter,
+    cfg: SimConfig,
+    cur: NuisanceFit,
+    fits: list[EffectFit],
+    evidence: Evidence,
+    flags: np.ndarray,
+    base_ms: Any,
+    n_obs: int,
+    opt: GapOptions,
+    P: np.ndarray,
+    dof: np.ndarray,
+) -> list[tuple[EffectFit, np.ndarray, float, float]]:
     """Two effects that together close what neither closes alone, or nothing.
 
     Where two effects overlap in frequency (a pickup line inside a loop peak that a delay
@@ -398,12 +506,12 @@ def _pair_that_closes(fitter: Fitter, cfg: SimConfig, cur: NuisanceFit, fits: li
     re-fit that follows (``_refit_jointly``) re-fits the first beside the second and drops
     either one that no longer earns its place. Returns the two as (fit, moved cells, gap
     before, gap after) for the caller to name, or []."""
-    leaders = [f for f in fits if f.score >= opt.min_score][:opt.pair_top]
+    leaders = [f for f in fits if f.score >= opt.min_score][: opt.pair_top]
     best: tuple[float, list[tuple[EffectFit, np.ndarray, float, float]]] | None = None
     held = fitter.hold
     for i, a in enumerate(leaders):
         eff_a = catalogue.get(a.effect)
-        for b in leaders[i + 1:]:
+        for b in leaders[i + 1 :]:
             eff_b = catalogue.get(b.effect)
             fitter.hold = held | frozenset(eff_a.owns)
             try:
@@ -416,10 +524,20 @@ def _pair_that_closes(fitter: Fitter, cfg: SimConfig, cur: NuisanceFit, fits: li
                 continue
             moved = _moved(fb.S, fb.scales, cur, base_ms, opt.tol_db)
             where = _where_it_acts(flags, moved)
-            g0, g_a, g2 = gap_db(P, cur.S, where, dof), gap_db(P, a.S, where, dof), gap_db(P, fb.S, where, dof)
+            g0, g_a, g2 = (
+                gap_db(P, cur.S, where, dof),
+                gap_db(P, a.S, where, dof),
+                gap_db(P, fb.S, where, dof),
+            )
             need = max(opt.min_closed_db, opt.min_closed_share * g0)
-            log.info("pair %s + %s closes %.2f of %.2f dB where it acts (%d cells)", a.effect, b.effect,
-                     g0 - g2, g0, int(where.sum()))
+            log.info(
+                "pair %s + %s closes %.2f of %.2f dB where it acts (%d cells)",
+                a.effect,
+                b.effect,
+                g0 - g2,
+                g0,
+                int(where.sum()),
+            )
             if g0 - g2 >= need and (best is None or g2 < best[0]):
                 fa = _final_fit(fitter, eff_a, cfg, evidence, a, cur.nll, n_obs)
                 fb.score = bic_score(fb, fa.nll, n_obs)
@@ -437,7 +555,7 @@ def _where_it_acts(flags: np.ndarray, moved: np.ndarray) -> np.ndarray:
     if len(cols) == 0:
         return flags.copy()
     span = np.zeros(moved.shape[1], bool)
-    span[cols[0]:cols[-1] + 1] = True
+    span[cols[0] : cols[-1] + 1] = True
     return moved | (flags & span[None, :])
 
 
@@ -450,26 +568,40 @@ def _rounded_intervals(d: dict[str, tuple[float, float]]) -> dict[str, list[floa
 MAX_LINES, LINE_SEARCH_BINS = 6, 1.5
 
 
-def _measured_lines(rec: Record, grid: Grid, S: np.ndarray, located: list[Band]) -> list[MeasuredLine]:
+def _measured_lines(
+    rec: Record, grid: Grid, S: np.ndarray, located: list[Band]
+) -> list[MeasuredLine]:
     """Each excess (largest first) measured as a sinusoid on its channel's record
     (``lines.refine_line``), the model's level in its band as the noise around it."""
     out = []
     for b in [b for b in located if b.deviation_db > 0][:MAX_LINES]:
         i = rec.channels.index(b.channel)
         band = int(np.clip(np.searchsorted(grid.band_hi_hz, b.peak_hz), 0, grid.n_bands - 1))
-        out.append(refine_line(rec.data[i], rec.rate_hz, b.peak_hz, LINE_SEARCH_BINS * grid.df, float(S[i, band])))
+        out.append(
+            refine_line(
+                rec.data[i], rec.rate_hz, b.peak_hz, LINE_SEARCH_BINS * grid.df, float(S[i, band])
+            )
+        )
     return out
 
 
-def _detect_steps(rec: Record, cfg: SimConfig, window_s: float = 2.0,
-                  template_s: float = 60.0) -> tuple[list[Step], str | None]:
+def _detect_steps(
+    rec: Record, cfg: SimConfig, window_s: float = 2.0, template_s: float = 60.0
+) -> tuple[list[Step], str | None]:
     """Steps in the channel that shows a unit autocollimator-offset step best (its D over its
     noise), among channels where that step reads as a step; sizes in radians of the offset."""
     if rec.duration_s < 8 * window_s:
         return [], None
     step_at = int(round(window_s * rec.rate_hz))
-    resp = step_response(cfg, rec.mode, f"nac_{rec.axis}", rec.channels, rec.rate_hz,
-                         min(template_s, rec.duration_s / 2) + window_s, window_s)
+    resp = step_response(
+        cfg,
+        rec.mode,
+        f"nac_{rec.axis}",
+        rec.channels,
+        rec.rate_hz,
+        min(template_s, rec.duration_s / 2) + window_s,
+        window_s,
+    )
     best: tuple[float, str, np.ndarray, np.ndarray] | None = None
     for c, x, r in zip(rec.channels, rec.data, resp):
         if not step_like(r, rec.rate_hz, step_at, window_s=window_s):
@@ -491,8 +623,9 @@ def _model_makes_steps(cfg: SimConfig, axis: str) -> bool:
     return bool(ac and ac.offset_jump_urad > 0)
 
 
-def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = None,
-                    note: str = "") -> np.ndarray:
+def simulate_record(
+    cfg: SimConfig, rec: Record, seed: int, out: Path | None = None, note: str = ""
+) -> np.ndarray:
     """The model with the measured run's channels, rate, duration and ADC ranges; written to
     ``out`` as an fbs-run file when given. Returns (n_channels, n) volts."""
     # only the recorded channels: the part of the rig they depend on, the same numbers (simhw.reduction)
@@ -502,11 +635,24 @@ def simulate_record(cfg: SimConfig, rec: Record, seed: int, out: Path | None = N
     n = rec.data.shape[1]
     writer = None
     if out is not None:
-        meta = {"configuration": to_dict(cfg), "seed": seed, "source": f"fbs gap: {note}",
-                "measured_file": str(rec.path), "calibration": {},
-                "provenance": provenance.offline("fbs-gap-model", None)}
-        writer = RunWriter(out, rig="fbs-gap-model", mode=rec.mode, rate_hz=rec.rate_hz,
-                           channels={c: "V" for c in rec.channels}, axis=rec.axis, meta=meta, overwrite=True)
+        meta = {
+            "configuration": to_dict(cfg),
+            "seed": seed,
+            "source": f"fbs gap: {note}",
+            "measured_file": str(rec.path),
+            "calibration": {},
+            "provenance": provenance.offline("fbs-gap-model", None),
+        }
+        writer = RunWriter(
+            out,
+            rig="fbs-gap-model",
+            mode=rec.mode,
+            rate_hz=rec.rate_hz,
+            channels={c: "V" for c in rec.channels},
+            axis=rec.axis,
+            meta=meta,
+            overwrite=True,
+        )
     try:
         chunks = []
         per = int(round(10 * rec.rate_hz))
@@ -545,8 +691,13 @@ def _adc_range(q: float, peak: float, bits: int) -> float:
     return _range_from_lsb(q, bits) or (min(fits) if fits else max(ADC_RANGES_V))
 
 
-def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | None = None,
-            report_dir: str | Path | None = None) -> GapResult:
+def analyse(
+    path: str | Path,
+    *,
+    axis: str | None = None,
+    options: GapOptions | None = None,
+    report_dir: str | Path | None = None,
+) -> GapResult:
     """Run the whole workflow on one file; with ``report_dir`` also write the model files and plots."""
     t_start = time.perf_counter()
     opt = options or GapOptions()
@@ -604,10 +755,14 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         # as the window makes a sinusoid are lines, their frequency measured on the record.
         measured = _measured_lines(rec, grid, cur.S, located)
         peaks = [b.peak_hz for b in located if b.deviation_db > 0]
-        peaks[:len(measured)] = [m.freq_hz if m.is_line else p for m, p in zip(measured, peaks)]
-        evidence = Evidence(rec.duration_s, peaks, [s.size / URAD for s in steps],
-                            [b.peak_hz for b in located if b.deviation_db < 0],
-                            [(m.freq_hz, m.sigma_hz) for m in measured if m.is_line])
+        peaks[: len(measured)] = [m.freq_hz if m.is_line else p for m, p in zip(measured, peaks)]
+        evidence = Evidence(
+            rec.duration_s,
+            peaks,
+            [s.size / URAD for s in steps],
+            [b.peak_hz for b in located if b.deviation_db < 0],
+            [(m.freq_hz, m.sigma_hz) for m in measured if m.is_line],
+        )
         # Screen every effect at its starting points, refine the leaders, then the winner's errors.
         screened: list[tuple[EffectFit, Any]] = []
         for eff in catalogue.catalogue().values():
@@ -615,8 +770,12 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
                 continue
             t0, n0 = time.perf_counter(), fitter.evaluations
             f = fitter.fit(eff, cfg, evidence, refine=False, errors=False)
-            log.debug("screened %s: %d evaluations, %.2f s", eff.name, fitter.evaluations - n0,
-                      time.perf_counter() - t0)
+            log.debug(
+                "screened %s: %d evaluations, %.2f s",
+                eff.name,
+                fitter.evaluations - n0,
+                time.perf_counter() - t0,
+            )
             if f is not None:
                 screened.append((f, eff))
         screened.sort(key=lambda fe: fe[0].nll)
@@ -645,12 +804,16 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
         # Steps in the time domain are a shape no spectrum-only effect has: while the model makes
         # none, the candidates that make them are judged first (a broad noise can mimic their
         # spectrum, never their steps).
-        order = sorted(fits, key=lambda f: not (unexplained_steps and _model_makes_steps(f.cfg, rec.axis)))
+        order = sorted(
+            fits, key=lambda f: not (unexplained_steps and _model_makes_steps(f.cfg, rec.axis))
+        )
         for f in order:
             if f.score < opt.min_score:
                 continue
-            if quiet and (f.score < QUIET_SCORE_FACTOR * opt.min_score
-                          or _at_bound(catalogue.get(f.effect), f.params)):
+            if quiet and (
+                f.score < QUIET_SCORE_FACTOR * opt.min_score
+                or _at_bound(catalogue.get(f.effect), f.params)
+            ):
                 # where nothing departs, the evidence must be strong, and a form that reaches the
                 # data only at its extreme is no finding
                 continue
@@ -666,36 +829,77 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
             if explains_steps or g0 - g1 >= need:
                 chosen = (f, moved, g0, g1)
                 break
-            log.info("%s %s wins on the score (%.1f) but closes only %.2f of %.2f dB where it acts (%d cells): "
-                     "not named", f.effect, f.params, f.score, g0 - g1, g0, int(where.sum()))
-            partial.append({"effect": f.effect, "score": round(f.score, 2), "gap_closed_db": round(g0 - g1, 3),
-                            "of_db": round(g0, 3)})
+            log.info(
+                "%s %s wins on the score (%.1f) but closes only %.2f of %.2f dB where it acts (%d cells): "
+                "not named",
+                f.effect,
+                f.params,
+                f.score,
+                g0 - g1,
+                g0,
+                int(where.sum()),
+            )
+            partial.append(
+                {
+                    "effect": f.effect,
+                    "score": round(f.score, 2),
+                    "gap_closed_db": round(g0 - g1, 3),
+                    "of_db": round(g0, 3),
+                }
+            )
         if chosen is None and quiet:
             partial = []
             break
         accepted = [chosen] if chosen is not None else []
         if not accepted:
-            accepted = _pair_that_closes(fitter, cfg, cur, fits, evidence, flags, base_ms, n_obs, opt, P, grid.dof)
+            accepted = _pair_that_closes(
+                fitter, cfg, cur, fits, evidence, flags, base_ms, n_obs, opt, P, grid.dof
+            )
         if not accepted:
-            partial = partial or [{"effect": f.effect, "score": round(f.score, 2)} for f in fits[:2] if f.score > 0]
+            partial = partial or [
+                {"effect": f.effect, "score": round(f.score, 2)} for f in fits[:2] if f.score > 0
+            ]
             unexplained = True
             break
         partial = []
         for best, moved, g0, g1 in accepted:
             winner = catalogue.get(best.effect)
-            runner: dict[str, Any] = next((c for c in candidates if c["effect"] != best.effect),
-                                          {"effect": "none", "score": 0.0})
+            runner: dict[str, Any] = next(
+                (c for c in candidates if c["effect"] != best.effect),
+                {"effect": "none", "score": 0.0},
+            )
             cells |= moved
-            findings.append(Finding(best.effect, best.params, best.errors, best.score, runner["effect"],
-                                    best.score - runner["score"], g0, g1, located, candidates, best.intervals))
-            log.info("named %s (score %.1f, %.1f over %s): %s", best.effect, best.score,
-                     best.score - runner["score"], runner["effect"], best.params)
+            findings.append(
+                Finding(
+                    best.effect,
+                    best.params,
+                    best.errors,
+                    best.score,
+                    runner["effect"],
+                    best.score - runner["score"],
+                    g0,
+                    g1,
+                    located,
+                    candidates,
+                    best.intervals,
+                )
+            )
+            log.info(
+                "named %s (score %.1f, %.1f over %s): %s",
+                best.effect,
+                best.score,
+                best.score - runner["score"],
+                runner["effect"],
+                best.params,
+            )
             named.add(best.effect)
             fitter.hold |= frozenset(winner.owns)
             cfg, cur = best.cfg, NuisanceFit(best.scales, best.nll, best.S)
             in_model.append((winner, best))
         if len(in_model) > 1:
-            cfg, cur = _refit_jointly(fitter, cfg0, rec.axis, in_model, findings, evidence, n_obs, opt)
+            cfg, cur = _refit_jointly(
+                fitter, cfg0, rec.axis, in_model, findings, evidence, n_obs, opt
+            )
 
     # A parameter fitted at a bound of its prior (not one that is a physical limit) says the
     # effect's form does not reach the data: it is kept as the best partial candidate, and the
@@ -703,13 +907,18 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
     for fd in findings:
         fd.at_bound = _at_bound(catalogue.get(fd.effect), fd.parameters)
         if fd.at_bound:
-            log.info("%s is fitted at the bound of its prior (%s): not an explanation", fd.effect,
-                     ", ".join(fd.at_bound))
+            log.info(
+                "%s is fitted at the bound of its prior (%s): not an explanation",
+                fd.effect,
+                ", ".join(fd.at_bound),
+            )
             if not unexplained:
                 unexplained = True
                 remaining = first_located
                 remaining_steps = steps if (steps and not _model_makes_steps(cfg, rec.axis)) else []
-            partial.append({"effect": fd.effect, "score": round(fd.score, 2), "at_bound": fd.at_bound})
+            partial.append(
+                {"effect": fd.effect, "score": round(fd.score, 2), "at_bound": fd.at_bound}
+            )
     cfg_before = apply_nuisance(cfg0, rec.axis, base.scales)
     cfg_after = apply_nuisance(cfg, rec.axis, cur.scales)
     spectra = {"measured": P, "model_before_expected": base.S, "model_after_expected": cur.S}
@@ -719,31 +928,69 @@ def analyse(path: str | Path, *, axis: str | None = None, options: GapOptions | 
     gap_before = gap_db(P, base.S, cells, grid.dof)
     gap_after = gap_db(P, cur.S, cells, grid.dof)
     if len(in_model) > 1:
-        _order_by_gap_closed(fitter, cfg0, rec.axis, in_model, findings, P, cells, grid.dof, gap_after)
+        _order_by_gap_closed(
+            fitter, cfg0, rec.axis, in_model, findings, P, cells, grid.dof, gap_after
+        )
     sim_gaps: tuple[float, float] | None = None
     if report_dir is not None:
         out = Path(report_dir)
         make_folder(out)
-        sim_b = simulate_record(cfg_before, rec, opt.seed, out / "model_before.h5", "nominal model, noise levels fitted")
-        sim_a = simulate_record(cfg_after, rec, opt.seed + 1, out / "model_after.h5",
-                                "refined model: " + (", ".join(f.effect for f in findings) or "nothing added"))
+        sim_b = simulate_record(
+            cfg_before, rec, opt.seed, out / "model_before.h5", "nominal model, noise levels fitted"
+        )
+        sim_a = simulate_record(
+            cfg_after,
+            rec,
+            opt.seed + 1,
+            out / "model_after.h5",
+            "refined model: " + (", ".join(f.effect for f in findings) or "nothing added"),
+        )
         spectra["model_before"] = band_spectra(sim_b, grid)
         spectra["model_after"] = band_spectra(sim_a, grid)
-        sim_gaps = (gap_db(P, spectra["model_before"], cells), gap_db(P, spectra["model_after"], cells))
+        sim_gaps = (
+            gap_db(P, spectra["model_before"], cells),
+            gap_db(P, spectra["model_after"], cells),
+        )
         # The two measures must agree: the expected spectrum is what the simulation converges to,
         # so a simulated run far from it (beyond one realization's scatter, ~1 dB) says the
         # expected spectrum is no prediction of that model (a loop on the edge of stability).
         if sim_gaps[1] > gap_after + SIM_AGREEMENT_DB:
-            rec.warnings.append(f"the refined model's simulated run is {sim_gaps[1]:.1f} dB from the "
-                                f"record where its expected spectrum is {gap_after:.1f} dB: its "
-                                "figures are not to be trusted")
-    result = GapResult(str(rec.path), rec.axis, rec.mode, rec.rate_hz, rec.duration_s, rec.channels, significant,
-                       findings, first_located, steps, step_channel, gap_before, gap_after, first_candidates,
-                       base.scales, cur.scales, rec.warnings, unexplained, grid, spectra, cfg_before, cfg_after,
-                       sim_gaps=sim_gaps, remaining=remaining if unexplained else [],
-                       remaining_steps=remaining_steps if unexplained else [], partial=partial if unexplained else [])
+            rec.warnings.append(
+                f"the refined model's simulated run is {sim_gaps[1]:.1f} dB from the "
+                f"record where its expected spectrum is {gap_after:.1f} dB: its "
+                "figures are not to be trusted"
+            )
+    result = GapResult(
+        str(rec.path),
+        rec.axis,
+        rec.mode,
+        rec.rate_hz,
+        rec.duration_s,
+        rec.channels,
+        significant,
+        findings,
+        first_located,
+        steps,
+        step_channel,
+        gap_before,
+        gap_after,
+        first_candidates,
+        base.scales,
+        cur.scales,
+        rec.warnings,
+        unexplained,
+        grid,
+        spectra,
+        cfg_before,
+        cfg_after,
+        sim_gaps=sim_gaps,
+        remaining=remaining if unexplained else [],
+        remaining_steps=remaining_steps if unexplained else [],
+        partial=partial if unexplained else [],
+    )
     result.elapsed_s = time.perf_counter() - t_start
     if report_dir is not None:
         from procedures.analysis.gap.report import write_report
+
         write_report(result, Path(report_dir))
     return result

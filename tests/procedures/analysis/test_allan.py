@@ -22,8 +22,10 @@ NBS14_10_FREQ = [892.0, 809.0, 823.0, 798.0, 671.0, 644.0, 883.0, 903.0, 677.0]
 NBS14_10 = {"adev": (91.22945, 115.8082), "oadev": (91.22945, 85.95287)}
 
 #: published deviations of the 1000-point set at averaging factors 1, 10, 100
-NBS14_1000 = {"adev": (2.922319e-01, 9.965736e-02, 3.897804e-02),
-              "oadev": (2.922319e-01, 9.159953e-02, 3.241343e-02)}
+NBS14_1000 = {
+    "adev": (2.922319e-01, 9.965736e-02, 3.897804e-02),
+    "oadev": (2.922319e-01, 9.159953e-02, 3.241343e-02),
+}
 
 
 def nbs14_1000() -> np.ndarray:
@@ -121,10 +123,10 @@ def test_segments_are_pooled_without_straddling_the_gap():
         terms = []
         for s in (a, b):
             phase = np.concatenate([[0.0], np.cumsum(s)]) / 10.0
-            terms.append(phase[2 * m:] - 2 * phase[m:-m] + phase[:-2 * m])
+            terms.append(phase[2 * m :] - 2 * phase[m:-m] + phase[: -2 * m])
         d2 = np.concatenate(terms)
         assert count == len(d2)
-        assert dev == pytest.approx(math.sqrt(np.mean(d2 ** 2) / (2 * tau ** 2)), rel=1e-12)
+        assert dev == pytest.approx(math.sqrt(np.mean(d2**2) / (2 * tau**2)), rel=1e-12)
     # a NaN-marked gap splits a record into its finite runs
     y = x.copy()
     y[3000:3005] = np.nan
@@ -154,7 +156,7 @@ def test_read_offs_recover_N_and_B(seed):
     assert arw.white_region and arw.lo < arw.N < arw.hi
     bi = allan.read_bias_instability(res)
     assert bi.B == pytest.approx(B_TRUE, rel=0.40)
-    assert bi.floor_reached and bi.tau_min_s > 5.0   # past the white/flicker crossover (5 s)
+    assert bi.floor_reached and bi.tau_min_s > 5.0  # past the white/flicker crossover (5 s)
 
 
 def test_read_offs_scale_and_separate():
@@ -166,7 +168,7 @@ def test_read_offs_scale_and_separate():
     r1 = allan.allan_deviation(w + f, FS)
     r3 = allan.allan_deviation(w + 3 * f, FS)
     ratio = allan.read_bias_instability(r3).B / allan.read_bias_instability(r1).B
-    assert 2.6 < ratio < 3.4   # measured over seeds 1..20: 2.80 .. 3.06
+    assert 2.6 < ratio < 3.4  # measured over seeds 1..20: 2.80 .. 3.06
     flat = allan.read_arw(r3, (51.2, 409.6))
     assert not flat.white_region and flat.slope > -0.25
 
@@ -190,13 +192,13 @@ def test_wander_variance_is_the_sample_variance_of_white_averages():
     is s^2 (1 - 1/n): the expected sample variance (about the mean) of n = 2^J averages."""
     s2 = 4.0
     for J in (1, 3, 6):
-        n = 2 ** J
+        n = 2**J
         v = allan.wander_variance(n * 100.0, 100.0, lambda tau: math.sqrt(s2 * 100.0 / tau))
         assert v == pytest.approx(s2 * (1 - 1 / n), rel=1e-12)
 
 
 def test_null_stability_peak_to_peak_and_estimate():
-    x = _synthetic(9, 36000)                      # 1 h at 10 Hz
+    x = _synthetic(9, 36000)  # 1 h at 10 Hz
     res = allan.allan_deviation(x, FS)
     ns = allan.null_stability([x], FS, res, avg_s=100.0, span_s=86400.0)
     means = x[:36000].reshape(36, 1000).mean(axis=1)
@@ -210,7 +212,9 @@ def test_null_stability_peak_to_peak_and_estimate():
 
 
 # ---------------------------------------------------------------------------- noise model, term estimates
-def _angle_rate_flicker(seed: int, s_angle: float, N: float, B: float, n: int = 72000) -> np.ndarray:
+def _angle_rate_flicker(
+    seed: int, s_angle: float, N: float, B: float, n: int = 72000
+) -> np.ndarray:
     """A rate record of white angle noise (rms ``s_angle`` per sample, differentiated: the
     pickoff's noise in a reconstructed input rate), white rate N and flicker rate B."""
     rng = np.random.default_rng(seed)
@@ -221,8 +225,11 @@ def _angle_rate_flicker(seed: int, s_angle: float, N: float, B: float, n: int = 
 def _estimates(y: np.ndarray) -> tuple[allan.NoiseModel, allan.TermEstimate, allan.TermEstimate]:
     res = allan.allan_deviation(y, FS)
     model = allan.fit_noise_model(res, min_tau_s=0.2)
-    return (model, allan.term_estimate(res, model, "arw", min_tau_s=0.2),
-            allan.term_estimate(res, model, "bias", min_tau_s=0.2))
+    return (
+        model,
+        allan.term_estimate(res, model, "arw", min_tau_s=0.2),
+        allan.term_estimate(res, model, "bias", min_tau_s=0.2),
+    )
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -232,10 +239,10 @@ def test_terms_where_the_data_show_them(seed):
     Coverage over seeds 1..30: N's 95 % interval 25/30, B's 29/30 (bench/drift_coverage.py)."""
     model, arw, bi = _estimates(_angle_rate_flicker(seed, 0.01, N_TRUE, B_TRUE))
     assert arw.value == pytest.approx(N_TRUE, rel=0.10) and arw.lo < arw.value < arw.hi
-    assert 0.5 < arw.share and 0.2 <= arw.tau_s < 5.0           # below the white/flicker crossover
+    assert 0.5 < arw.share and 0.2 <= arw.tau_s < 5.0  # below the white/flicker crossover
     assert bi.value == pytest.approx(B_TRUE, rel=0.30) and bi.lo < bi.value < bi.hi
     assert 0.9 < bi.share and bi.tau_s > 50.0
-    assert model.coef[allan.TERMS.index("angle")] == pytest.approx(0.01 ** 2, rel=0.1)
+    assert model.coef[allan.TERMS.index("angle")] == pytest.approx(0.01**2, rel=0.1)
     assert arw.hi <= arw.bound and bi.hi <= bi.bound
 
 
@@ -245,9 +252,9 @@ def test_a_term_under_the_others_is_only_bounded(seed):
     below the angle noise and the flicker floor at every tau, so N has no value, only 0 .. a bound
     that holds the truth; B is still read."""
     _, arw, bi = _estimates(_angle_rate_flicker(seed, 0.6, 0.005, B_TRUE))
-    assert math.isnan(arw.value) or arw.hi - arw.lo > arw.value      # not resolved (intervals.judged)
+    assert math.isnan(arw.value) or arw.hi - arw.lo > arw.value  # not resolved (intervals.judged)
     assert arw.lo <= 0.005 < arw.hi <= arw.bound
-    assert arw.bound < 0.3                                           # a bound, not "anything"
+    assert arw.bound < 0.3  # a bound, not "anything"
     assert bi.value == pytest.approx(B_TRUE, rel=0.35) and bi.lo < B_TRUE < bi.hi
 
 
@@ -262,5 +269,7 @@ def test_the_model_free_bound_holds_without_the_model():
     assert arw.lo < N_TRUE < arw.hi
     assert bi.lo == 0.0 and bi.hi == bi.bound > 0 and (math.isnan(bi.value) or bi.value < bi.hi)
     with pytest.raises(ValueError, match="usable Allan points"):
-        allan.fit_noise_model(allan.allan_deviation(white_rate(np.random.default_rng(5), 40, N_TRUE, FS), FS),
-                              min_tau_s=0.2)
+        allan.fit_noise_model(
+            allan.allan_deviation(white_rate(np.random.default_rng(5), 40, N_TRUE, FS), FS),
+            min_tau_s=0.2,
+        )

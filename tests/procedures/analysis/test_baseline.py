@@ -28,7 +28,10 @@ SEG_S = 40.0
 N_BLOCKS = 8
 T_S = 400.0
 AC = AutocollimatorConstants(5.70, 5.63)
-SCALE = {"ac_x_ctl": AC.control_mV_per_urad * 1e-3, "ac_x_inst": AC.inst_mV_per_urad * 1e-3}  # V/urad
+SCALE = {
+    "ac_x_ctl": AC.control_mV_per_urad * 1e-3,
+    "ac_x_inst": AC.inst_mV_per_urad * 1e-3,
+}  # V/urad
 
 
 def angle_noise_through_filters(rng, white_urad2_per_hz, corner_hz, n, knee=1.0, slope=1.0):
@@ -59,7 +62,7 @@ def test_nea_within_ten_percent_and_its_interval_covers_over_many_draws():
     n = int(T_S * FS)
     draws, covered, worst = 40, {c: 0 for c in SCALE}, 0.0
     for _ in range(draws):
-        nea = rng.uniform(0.3, 0.8)            # urad in 0.1-100 Hz on the control channel
+        nea = rng.uniform(0.3, 0.8)  # urad in 0.1-100 Hz on the control channel
         corner = rng.uniform(1.0, 6.0)
         fg = np.geomspace(*NEA_BAND_HZ, 4000)
         unit = nea_truth(fg, 1 + corner / fg, np.abs(sensor_filter(fg, AC, "ac_x_ctl")) ** 2)
@@ -84,7 +87,7 @@ def test_white_level_and_corner_are_found_with_intervals():
     hits_w = hits_c = 0
     draws = 12
     for _ in range(draws):
-        white = rng.uniform(1e-3, 4e-3)           # urad^2/Hz
+        white = rng.uniform(1e-3, 4e-3)  # urad^2/Hz
         corner = rng.uniform(1.5, 5.0)
         f, S, out = angle_noise_through_filters(rng, white, corner, n)
         blocks = array_blocks(out["ac_x_ctl"][:, None], FS, ("ac_x_ctl",), SEG_S, N_BLOCKS)
@@ -109,7 +112,7 @@ def test_white_level_and_corner_cover_the_truth_on_every_knee_a_nominal_unit_all
     hits_w = hits_c = 0
     forms = [(0.0, 1.2), (0.0, 0.8), (0.3, 1.15), (0.0, 1.0), (0.6, 0.85), (0.0, 1.1)] * 2
     for knee, slope in forms:
-        white = rng.uniform(1e-3, 4e-3)           # urad^2/Hz
+        white = rng.uniform(1e-3, 4e-3)  # urad^2/Hz
         corner = rng.uniform(1.5, 5.0)
         f, S, out = angle_noise_through_filters(rng, white, corner, n, knee, slope)
         blocks = array_blocks(out["ac_x_ctl"][:, None], FS, ("ac_x_ctl",), SEG_S, N_BLOCKS)
@@ -134,16 +137,20 @@ def test_a_band_the_segments_cannot_reach_is_unresolved():
 
 def test_pickoff_band_rms_and_lines_where_they_were_put():
     rng = np.random.default_rng(2203)
-    kg = 6.03e-3                                  # V/urad
+    kg = 6.03e-3  # V/urad
     fs, T = 1000.0, 240.0
     n = int(fs * T)
     t = np.arange(n) / fs
     hits = 0
     for _ in range(6):
-        white = rng.uniform(0.05, 0.3)            # urad^2/Hz one-sided
+        white = rng.uniform(0.05, 0.3)  # urad^2/Hz one-sided
         f71 = rng.uniform(70.3, 71.0)
-        lines = [(f71, rng.uniform(2, 4)), (f71 + rng.uniform(0.7, 0.9), rng.uniform(2, 4)),
-                 (rng.uniform(101.5, 102.5), rng.uniform(3, 5)), (rng.uniform(186.5, 187.5), rng.uniform(1.5, 3))]
+        lines = [
+            (f71, rng.uniform(2, 4)),
+            (f71 + rng.uniform(0.7, 0.9), rng.uniform(2, 4)),
+            (rng.uniform(101.5, 102.5), rng.uniform(3, 5)),
+            (rng.uniform(186.5, 187.5), rng.uniform(1.5, 3)),
+        ]
         x = rng.standard_normal(n) * math.sqrt(white * fs / 2)
         for fl, a in lines:
             x += a * np.sin(2 * np.pi * fl * t + rng.uniform(0, 2 * np.pi))
@@ -170,12 +177,16 @@ def test_the_pickoff_rms_divides_out_the_recorder_s_anti_alias_filter():
     fs, n = 1000.0, int(480 * 1000)
     rng = np.random.default_rng(3801)
     f = np.fft.rfftfreq(n, 1 / fs)
-    white = 0.04                                     # urad^2/Hz
-    X = (rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f))) * np.sqrt(white * fs * n / 4)
+    white = 0.04  # urad^2/Hz
+    X = (rng.standard_normal(len(f)) + 1j * rng.standard_normal(len(f))) * np.sqrt(
+        white * fs * n / 4
+    )
     X[0] = 0.0
     t = np.arange(n) / fs
     lines = [(71.0, 4.0), (71.8, 4.0), (102.0, 3.0), (187.0, 5.0)]
-    x = np.fft.irfft(X, n) + sum(a * np.sin(2 * np.pi * fl * t + k) for k, (fl, a) in enumerate(lines))
+    x = np.fft.irfft(X, n) + sum(
+        a * np.sin(2 * np.pi * fl * t + k) for k, (fl, a) in enumerate(lines)
+    )
     # the filter applied to the whole record, lines included, in the frequency domain
     x = np.fft.irfft(np.fft.rfft(x) * _aa(f, fs), n)
     truth = math.sqrt(white * (200.0 - 0.1) + sum(a * a / 2 for _, a in lines))

@@ -31,32 +31,47 @@ def ode_dahl(theta: np.ndarray, To: float, eta: float, T0: float = 0.0) -> np.nd
         while j < n - 1 and np.sign(theta[j + 1] - theta[j]) == d:
             j += 1
         if d == 0:
-            out[i + 1:j + 1] = T
+            out[i + 1 : j + 1] = T
         else:
             sgn = 1.0 if d > 0 else -1.0
-            sol = scipy.integrate.solve_ivp(lambda th, y, s=sgn: eta * (y - s * To) ** 2, (theta[i], theta[j]), [T],
-                                            t_eval=theta[i + 1:j + 1], rtol=1e-11, atol=1e-14, method="DOP853")
+            sol = scipy.integrate.solve_ivp(
+                lambda th, y, s=sgn: eta * (y - s * To) ** 2,
+                (theta[i], theta[j]),
+                [T],
+                t_eval=theta[i + 1 : j + 1],
+                rtol=1e-11,
+                atol=1e-14,
+                method="DOP853",
+            )
             assert sol.success
-            out[i + 1:j + 1] = sol.y[0]
+            out[i + 1 : j + 1] = sol.y[0]
             T = float(sol.y[0, -1])
         i = j
     return out
 
 
-def ladder(amplitudes_rad: list[float], cycles: int, fs: float = FS, f0: float = F0, lead_s: float = 0.0):
+def ladder(
+    amplitudes_rad: list[float], cycles: int, fs: float = FS, f0: float = F0, lead_s: float = 0.0
+):
     """theta = A_k sin(w t) with A stepping at zero crossings, each held ``cycles`` periods."""
     n_per = int(round(fs / f0))
     t = np.arange(n_per * cycles * len(amplitudes_rad)) / fs
     amp = np.repeat(amplitudes_rad, n_per * cycles)
     theta = amp * np.sin(2 * math.pi * f0 * t)
     lead = np.zeros(int(round(lead_s * fs)))
-    return np.concatenate([lead, theta]), np.concatenate([lead, -amp * np.sin(2 * math.pi * f0 * t)])
+    return np.concatenate([lead, theta]), np.concatenate(
+        [lead, -amp * np.sin(2 * math.pi * f0 * t)]
+    )
 
 
 # ---------------------------------------------------------------------------- the model
 @settings(max_examples=12, deadline=None)
-@given(To=st.floats(0.005, 0.05), eta_To=st.floats(2e3, 1e5), amp_urad=st.floats(2.0, 800.0),
-       T0_frac=st.floats(-0.9, 0.9))
+@given(
+    To=st.floats(0.005, 0.05),
+    eta_To=st.floats(2e3, 1e5),
+    amp_urad=st.floats(2.0, 800.0),
+    T0_frac=st.floats(-0.9, 0.9),
+)
 def test_closed_form_matches_an_ode_solver(To, eta_To, amp_urad, T0_frac):
     """dahl_torque (eq. 5.3 per monotone step) agrees with solve_ivp of eq. 5.2, whatever the
     step size, starting torque and amplitude (noise-like reversals included)."""
@@ -64,7 +79,9 @@ def test_closed_form_matches_an_ode_solver(To, eta_To, amp_urad, T0_frac):
     rng = np.random.default_rng(int(amp_urad * 1000) % 2**32)
     t = np.arange(300) / FS
     # a sine with noise-like reversals near its peaks and steps of every size
-    theta = amp_urad * 1e-6 * (np.sin(2 * math.pi * F0 * t * 5) + 0.02 * rng.standard_normal(len(t)))
+    theta = (
+        amp_urad * 1e-6 * (np.sin(2 * math.pi * F0 * t * 5) + 0.02 * rng.standard_normal(len(t)))
+    )
     got = dahl.dahl_torque(theta, To, eta, T0_frac * To)
     ref = ode_dahl(theta, To, eta, T0_frac * To)
     assert np.max(np.abs(got - ref)) < 1e-6 * To
@@ -83,7 +100,7 @@ def test_steady_loop_is_eq_5_8_with_peak_eq_5_9():
     To, eta, amp = 0.016, 1.6e6, 60e-6
     n_per = 2000
     psi = np.arange(6 * n_per + 1) * 2 * math.pi / n_per
-    theta = amp * np.cos(psi + math.pi)                 # starts at -amp, increasing
+    theta = amp * np.cos(psi + math.pi)  # starts at -amp, increasing
     T = dahl.dahl_torque(theta, To, eta)
     x = eta * To * amp
     last = slice(5 * n_per, 6 * n_per + 1)
@@ -92,7 +109,9 @@ def test_steady_loop_is_eq_5_8_with_peak_eq_5_9():
     assert -T[last].min() / To == pytest.approx(tm, rel=1e-6)
     th_bar = eta * To * theta[last]
     up = np.r_[np.diff(theta[last]) > 0, False]
-    model = np.where(up, dahl.loop_normalized(x, th_bar, True), dahl.loop_normalized(x, th_bar, False))
+    model = np.where(
+        up, dahl.loop_normalized(x, th_bar, True), dahl.loop_normalized(x, th_bar, False)
+    )
     assert np.max(np.abs(T[last][:-1] / To - model[:-1])) < 1e-6
 
 
@@ -106,7 +125,7 @@ def test_small_motion_is_a_spring_of_stiffness_eta_To2():
 
 def test_large_motion_is_coulomb_friction():
     To, eta = 0.016, 1.6e6
-    theta = np.linspace(0.0, 0.05, 500)      # eta To theta = 1280: To - T = 1 / (eta theta)
+    theta = np.linspace(0.0, 0.05, 500)  # eta To theta = 1280: To - T = 1 / (eta theta)
     T = dahl.dahl_torque(theta, To, eta)
     assert T[-1] == pytest.approx(To, rel=1e-3)
     assert To - T[-1] == pytest.approx(1.0 / (1.0 / To + eta * 0.05), rel=1e-6)
@@ -125,10 +144,10 @@ def test_describing_function_is_the_first_harmonic_of_the_loop(x):
     ps = -math.pi / 2 + np.arange(n_per + 1) * 2 * math.pi / n_per
     theta = amp * np.sin(ps)
     T = dahl.dahl_torque(theta, To, eta, -dahl.peak_torque_normalized(x) * To)
-    assert T[-1] == pytest.approx(T[0], rel=1e-9, abs=1e-15)       # a closed loop
+    assert T[-1] == pytest.approx(T[0], rel=1e-9, abs=1e-15)  # a closed loop
     T, theta, ps = T[:-1], theta[:-1], ps[:-1]
-    b1 = 2 / n_per * np.sum(T * np.sin(ps))             # in phase with the angle
-    a1 = 2 / n_per * np.sum(T * np.cos(ps))             # in quadrature, leading
+    b1 = 2 / n_per * np.sum(T * np.sin(ps))  # in phase with the angle
+    a1 = 2 / n_per * np.sum(T * np.cos(ps))  # in quadrature, leading
     numeric = (b1 + 1j * a1) / amp / (eta * To * To)
     closed = dahl.describing_function(x)
     assert abs(closed - numeric) < 1e-4 * abs(numeric)
@@ -139,11 +158,11 @@ def test_describing_function_is_the_first_harmonic_of_the_loop(x):
 
 def test_describing_function_limits_and_array_form():
     assert dahl.describing_function(1e-6) == pytest.approx(1.0, abs=1e-6)
-    x = 1e6       # the in-phase part falls as 2 x^-1.5, the quadrature part as 4 / (pi x)
+    x = 1e6  # the in-phase part falls as 2 x^-1.5, the quadrature part as 4 / (pi x)
     assert dahl.describing_function(x) == pytest.approx(4j / (math.pi * x), rel=3e-3)
     arr = dahl.describing_function(np.array([0.1, 1.0, 10.0]))
-    assert arr.shape == (3,) and np.all(np.diff(np.abs(arr)) < 0)   # gain falls with amplitude
-    assert np.all(np.diff(np.angle(arr)) > 0)                       # and the phase lead grows
+    assert arr.shape == (3,) and np.all(np.diff(np.abs(arr)) < 0)  # gain falls with amplitude
+    assert np.all(np.diff(np.angle(arr)) > 0)  # and the phase lead grows
     # continuous across the small-x series branch
     assert abs(dahl.describing_function(0.999e-3) - dahl.describing_function(1.001e-3)) < 1e-5
     with pytest.raises(ValueError):
@@ -170,7 +189,9 @@ def test_bearing_torque_removes_inertial_and_viscous_torques():
     friction = 0.01 * np.tanh(np.cos(w * t) * 5)
     I, c, kpa = 0.7, 1.03, 6.96
     pa = (friction + c * 300e-6 * w * np.cos(w * t) - I * 300e-6 * w * w * np.sin(w * t)) / kpa
-    T = dahl.bearing_torque(pa, theta, fs, torque_per_pa_Nm_per_V=kpa, viscous_Nms=c, inertia_kg_m2=I)
+    T = dahl.bearing_torque(
+        pa, theta, fs, torque_per_pa_Nm_per_V=kpa, viscous_Nms=c, inertia_kg_m2=I
+    )
     assert np.max(np.abs(T - friction)[5:-5]) < 1e-3 * 0.01
 
 
@@ -182,16 +203,31 @@ def test_command_frequency_and_segments_of_a_ladder():
     segs = dahl.find_segments(cmd, fs, f, settle_cycles=1)
     # the one-period windows line up with the amplitude steps wherever they fall
     assert [s.n_cycles for s in segs] == [4, 4, 4, 4]
-    assert [s.n_cycles for s in dahl.find_segments(cmd, fs, f, settle_cycles=1, offsets=1)] == [3, 3, 3, 3]
+    assert [s.n_cycles for s in dahl.find_segments(cmd, fs, f, settle_cycles=1, offsets=1)] == [
+        3,
+        3,
+        3,
+        3,
+    ]
     _, aligned = ladder([500e-6, 100e-6, 20e-6, 5e-6], cycles=5)
-    assert [s.n_cycles for s in dahl.find_segments(aligned, fs, F0, settle_cycles=1)] == [4, 4, 4, 4]
-    assert [s.n_cycles for s in dahl.find_segments(aligned, fs, F0, settle_cycles=2)] == [3, 3, 3, 3]
+    assert [s.n_cycles for s in dahl.find_segments(aligned, fs, F0, settle_cycles=1)] == [
+        4,
+        4,
+        4,
+        4,
+    ]
+    assert [s.n_cycles for s in dahl.find_segments(aligned, fs, F0, settle_cycles=2)] == [
+        3,
+        3,
+        3,
+        3,
+    ]
     amps = [s.command_amplitude for s in segs]
     assert amps == sorted(amps, reverse=True)
     assert amps[0] == pytest.approx(500e-6, rel=0.02) and amps[-1] == pytest.approx(5e-6, rel=0.02)
     per = fs / F0
     for s in segs:
-        assert s.start - s.lead_start == pytest.approx(per, abs=1)       # one settling cycle left out
+        assert s.start - s.lead_start == pytest.approx(per, abs=1)  # one settling cycle left out
         assert (s.stop - s.start) == pytest.approx(s.n_cycles * per, abs=1)
     # segments do not overlap and follow the ladder in time
     assert all(a.stop <= b.lead_start for a, b in zip(segs, segs[1:]))
@@ -205,19 +241,23 @@ def test_segments_need_enough_cycles_and_a_sinusoid():
 
 
 def test_synchronous_average_and_first_harmonic():
-    fs, f = 100.0, 0.3      # 333.3 samples a period: not whole
+    fs, f = 100.0, 0.3  # 333.3 samples a period: not whole
     k = np.arange(int(fs / f * 10))
     x = 2.0 * np.cos(2 * math.pi * f * k / fs + 0.7) + 0.5
     cyc = dahl.synchronous_average(x, fs, f, 0, len(k) - 50, bins=100)
     a = dahl.first_harmonic(cyc)
     assert abs(a) == pytest.approx(2.0, rel=2e-3)
-    assert np.angle(a) == pytest.approx(0.7 + math.pi / 100, abs=5e-3)   # phase of the first bin's centre
+    assert np.angle(a) == pytest.approx(
+        0.7 + math.pi / 100, abs=5e-3
+    )  # phase of the first bin's centre
     with pytest.raises(ValueError, match="phase bins"):
         dahl.synchronous_average(x, fs, f, 0, 50, bins=100)
 
 
 # ---------------------------------------------------------------------------- the fit
-def synthetic(To: float, eta: float, noise_Nm: float, seed: int = 0, amplitudes_urad=(500, 150, 40, 10, 4)):
+def synthetic(
+    To: float, eta: float, noise_Nm: float, seed: int = 0, amplitudes_urad=(500, 150, 40, 10, 4)
+):
     theta, cmd = ladder([a * 1e-6 for a in amplitudes_urad], cycles=4)
     T = ode_dahl(theta, To, eta)
     rng = np.random.default_rng(seed)
@@ -230,7 +270,7 @@ def test_fit_recovers_To_and_eta_from_an_independent_integration(To, eta, seed):
     """Loops from solve_ivp of eq. 5.2 with 1 % noise and a torque offset: the fit (closed form
     along the angle, offsets per amplitude) recovers To, eta and eta To^2 to ~1 %."""
     theta, cmd, T = synthetic(To, eta, 0.01 * To, seed)
-    T = T + 0.1 * To                   # an amplifier offset
+    T = T + 0.1 * To  # an amplifier offset
     segs = dahl.find_segments(cmd, FS, F0, settle_cycles=1)
     assert len(segs) == 5
     fit = dahl.fit_dahl(theta, T, segs, FS)
@@ -245,7 +285,9 @@ def test_fit_recovers_To_and_eta_from_an_independent_integration(To, eta, seed):
     # each amplitude's leverage on each figure: its share of what the fit knows of it
     lev = np.array(fit.leverage)
     assert lev.shape == (5, 3) and np.all(lev >= 0) and np.allclose(lev.sum(axis=0), 1.0)
-    assert np.argmax(lev[:, 0]) == np.argmax([s.command_amplitude for s in segs])   # the largest loop fixes To
+    assert np.argmax(lev[:, 0]) == np.argmax(
+        [s.command_amplitude for s in segs]
+    )  # the largest loop fixes To
 
 
 def test_fit_with_smoothing_and_the_path_scan():
@@ -254,11 +296,21 @@ def test_fit_with_smoothing_and_the_path_scan():
     fc = 12.5 * F0
     torque = dahl.lowpass(T, FS, fc)
     segs = dahl.find_segments(cmd, FS, F0)
-    fit, scan = dahl.fit_dahl_path(theta, torque, segs, FS, smooth_hz=fc, cutoffs_hz=[6.0, 9.0, 14.0, 20.0],
-                                   step=5, independent_every=20)
+    fit, scan = dahl.fit_dahl_path(
+        theta,
+        torque,
+        segs,
+        FS,
+        smooth_hz=fc,
+        cutoffs_hz=[6.0, 9.0, 14.0, 20.0],
+        step=5,
+        independent_every=20,
+    )
     assert fit.To_Nm == pytest.approx(To, rel=0.01)
     assert fit.eta_per_Nm == pytest.approx(eta, rel=0.03)
-    assert scan.cutoff_hz == sorted(scan.cutoff_hz) and fit.path_cutoff_hz == scan.cutoff_hz[scan.best]
+    assert (
+        scan.cutoff_hz == sorted(scan.cutoff_hz) and fit.path_cutoff_hz == scan.cutoff_hz[scan.best]
+    )
     assert scan.residual_rms_Nm[scan.best] == min(scan.residual_rms_Nm)
     assert len(fit.model_Nm) == fit.stop - fit.start
 
@@ -300,14 +352,16 @@ def test_measure_lag_uses_the_command_as_instrument():
     n = n_per * cycles
     t = np.arange(n) / fs
     stair = 1e-3 * np.sin(2 * math.pi * (np.floor(t * f0 * ups) + 0.5) / ups)
-    noise = 1e-9 * rng.standard_normal(n)                          # the sensor's noise (rad)
-    drive = stair - 2e4 * noise                                    # the servo feeds the noise in
+    noise = 1e-9 * rng.standard_normal(n)  # the sensor's noise (rad)
+    drive = stair - 2e4 * noise  # the servo feeds the noise in
     f = np.fft.rfftfreq(n, 1 / fs)
     w = 2 * math.pi * f
     with np.errstate(divide="ignore", invalid="ignore"):
         plant = np.where(w > 0, kt / (-inertia * w * w + 1j * visc * w), 0.0)
     theta = np.fft.irfft(np.fft.rfft(drive) * plant, n)
-    seen = np.fft.irfft(np.fft.rfft(theta + noise) * np.exp(-1j * w * lag), n)    # the instrument's lag
+    seen = np.fft.irfft(
+        np.fft.rfft(theta + noise) * np.exp(-1j * w * lag), n
+    )  # the instrument's lag
     segs = [dahl.Segment(n_per, n, 0, cycles - 1, 1e-3)]
 
     def rigid(x):
@@ -325,7 +379,9 @@ def test_measure_lag_uses_the_command_as_instrument():
     naive = np.sum(A * np.conj(D)) / np.sum(np.abs(D) ** 2)
     wk = 2 * math.pi * k * fs / n_per
     naive_lag = -np.angle(naive / rigid(np.array([wk]))[0]) / wk
-    print(f"lag {m.lag_s * 1e3:.4f} +- {m.se_s * 1e3:.4f} ms, H1 {naive_lag * 1e3:.4f} ms, true {lag * 1e3} ms")
+    print(
+        f"lag {m.lag_s * 1e3:.4f} +- {m.se_s * 1e3:.4f} ms, H1 {naive_lag * 1e3:.4f} ms, true {lag * 1e3} ms"
+    )
     assert abs(naive_lag - lag) > 5 * m.se_s
 
 
@@ -335,19 +391,26 @@ def test_measure_lag_refuses_a_smooth_command():
     cmd = np.sin(2 * math.pi * f0 * t)
     segs = [dahl.Segment(n_per, 6 * n_per, 0, 5, 1.0)]
     with pytest.raises(ValueError, match="no line"):
-        dahl.measure_lag(cmd, cmd, cmd, fs, f0, segs, lambda x: 1.0 / (-x * x), min_hz=10.0, max_hz=180.0)
+        dahl.measure_lag(
+            cmd, cmd, cmd, fs, f0, segs, lambda x: 1.0 / (-x * x), min_hz=10.0, max_hz=180.0
+        )
 
 
 def test_path_envelope_spans_the_bandwidths_the_residual_cannot_tell_apart():
     """The scan's estimates over the stretch whose residual is within the tolerance of the
     least, interpolated in ln cutoff at the ends; nothing beyond it."""
     cut = [10.0, 12.5, 15.625, 19.53]
-    scan = dahl.PathScan(cut, [2.0, 1.05, 1.0, 1.5], [1.0, 1.0, 1.0, 1.0], [math.e ** -0.2, math.e ** -0.1, 1.0,
-                                                                           math.e ** 0.1], best=2)
+    scan = dahl.PathScan(
+        cut,
+        [2.0, 1.05, 1.0, 1.5],
+        [1.0, 1.0, 1.0, 1.0],
+        [math.e**-0.2, math.e**-0.1, 1.0, math.e**0.1],
+        best=2,
+    )
     down, up = scan.envelope(0.10)
     # left: 12.5 is within 10 % (ln eta -0.1); on to 10.0 the limit 1.1 is reached a twentieth of the way
     assert down[1] == pytest.approx(0.1 + (1.1 - 1.05) / (2.0 - 1.05) * 0.1)
     # right: the limit is reached a fifth of the way to 19.53 (ln eta +0.1)
     assert up[1] == pytest.approx(0.2 * 0.1)
-    assert down[0] == up[0] == 0.0                      # To the same everywhere
+    assert down[0] == up[0] == 0.0  # To the same everywhere
     assert all(np.allclose(side, 0.0) for side in scan.envelope(0.0))

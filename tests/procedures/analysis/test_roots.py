@@ -29,18 +29,53 @@ def _drawn(rng, axis):
 
 def _parts(cfg, axis, mode, cage=True):
     p, comp, ac = cfg.platform[axis], cfg.compensation, cfg.autocollimator[axis]
-    pc = PlatformConstants(p.inertia_kg_m2, p.gyro_damping_Nms, p.amp_gain, p.motor_torque_Nm_per_A,
-                           p.back_emf_V_s, p.armature_ohm, p.armature_H, p.command_divider)
-    acc = AutocollimatorConstants(ac.control_scale_mV_per_urad, ac.inst_scale_mV_per_urad,
-                                  ac.control_filter_rad_per_s, ac.control_filter_zeta)
-    net = {"gain": 1.0, **{k: getattr(comp, k) for k in ("w1_rad_per_s", "w2_rad_per_s", "w3_rad_per_s",
-                                                          "w4_rad_per_s", "w5_rad_per_s", "w6_rad_per_s")}}
-    sensor = (ac.control_scale_mV_per_urad if mode == 3 else cfg.gyro[axis].pickoff_scale_mV_per_urad) * 1e3
+    pc = PlatformConstants(
+        p.inertia_kg_m2,
+        p.gyro_damping_Nms,
+        p.amp_gain,
+        p.motor_torque_Nm_per_A,
+        p.back_emf_V_s,
+        p.armature_ohm,
+        p.armature_H,
+        p.command_divider,
+    )
+    acc = AutocollimatorConstants(
+        ac.control_scale_mV_per_urad,
+        ac.inst_scale_mV_per_urad,
+        ac.control_filter_rad_per_s,
+        ac.control_filter_zeta,
+    )
+    net = {
+        "gain": 1.0,
+        **{
+            k: getattr(comp, k)
+            for k in (
+                "w1_rad_per_s",
+                "w2_rad_per_s",
+                "w3_rad_per_s",
+                "w4_rad_per_s",
+                "w5_rad_per_s",
+                "w6_rad_per_s",
+            )
+        },
+    }
+    sensor = (
+        ac.control_scale_mV_per_urad if mode == 3 else cfg.gyro[axis].pickoff_scale_mV_per_urad
+    ) * 1e3
     g = cfg.gyro[axis]
-    caging = None if mode == 3 or not cage else GyroCaging(g.caging_natural_freq_rad_per_s, g.caging_zeta,
-                                                           g.restraint_time_s)
-    parts = LoopParts(net, p.inertia_kg_m2, p.gyro_damping_Nms, cfg.bearing[axis].stiffness_Nm_per_rad, sensor,
-                      caging)
+    caging = (
+        None
+        if mode == 3 or not cage
+        else GyroCaging(g.caging_natural_freq_rad_per_s, g.caging_zeta, g.restraint_time_s)
+    )
+    parts = LoopParts(
+        net,
+        p.inertia_kg_m2,
+        p.gyro_damping_Nms,
+        cfg.bearing[axis].stiffness_Nm_per_rad,
+        sensor,
+        caging,
+    )
     return parts.roots(pc, acc, "ctl" if mode == 3 else "gyro")
 
 
@@ -78,8 +113,14 @@ def test_gyro_mode_closure_with_the_caged_float_is_the_state_space_model(seed, a
 
 
 def test_roots_are_named_by_their_place_in_the_loop():
-    roots = np.array([-0.2, -5.5, -10 + 43j, -10 - 43j, -190 + 186j, -190 - 186j, -161.0, -1070.0, -5000.0])
+    roots = np.array(
+        [-0.2, -5.5, -10 + 43j, -10 - 43j, -190 + 186j, -190 - 186j, -161.0, -1070.0, -5000.0]
+    )
     named = name_roots(roots, *BAND)
-    assert named == {"platform_pair": complex(-10, 43), "c1": complex(-5.5, 0), "c4": complex(-161.0, 0)}
+    assert named == {
+        "platform_pair": complex(-10, 43),
+        "c1": complex(-5.5, 0),
+        "c4": complex(-161.0, 0),
+    }
     # an unstable root is never named; no pair in the band, nothing named
     assert name_roots(np.array([2.0 + 40j, 2.0 - 40j, -5.0]), *BAND) == {}

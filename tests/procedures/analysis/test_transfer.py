@@ -41,8 +41,12 @@ def _network(f, p):
     """eq. 3.28 written again here (not imported), inverted."""
     s = 2j * np.pi * f
     w = [p[f"w{i}_rad_per_s"] for i in range(1, 7)]
-    return -p["gain"] * (s / w[1] + 1) * (s / w[2] + 1) / ((s / w[0] + 1) * (s / w[3] + 1) * (s / w[4] + 1)
-                                                          * (s / w[5] + 1))
+    return (
+        -p["gain"]
+        * (s / w[1] + 1)
+        * (s / w[2] + 1)
+        / ((s / w[0] + 1) * (s / w[3] + 1) * (s / w[4] + 1) * (s / w[5] + 1))
+    )
 
 
 def _colored(rng, n, white, corner_hz=2.0):
@@ -56,31 +60,40 @@ def _colored(rng, n, white, corner_hz=2.0):
 
 
 def _write(path: Path, data: dict[str, np.ndarray]) -> Path:
-    with RunWriter(path, rig="test-generator", mode=3, rate_hz=FS, channels=dict.fromkeys(data, "V")) as w:
+    with RunWriter(
+        path, rig="test-generator", mode=3, rate_hz=FS, channels=dict.fromkeys(data, "V")
+    ) as w:
         w.append(data)
     return path
 
 
 def _quantize(x, range_V, bits=16):
-    q = 2 * range_V / 2 ** bits
+    q = 2 * range_V / 2**bits
     return np.clip(np.round(x / q) * q, -range_V, range_V - q)
 
 
 # ---------------------------------------------------------------------------- the network
 def draw_network(rng):
-    return {"gain": float(rng.uniform(0.5, 2.0)), "w1_rad_per_s": float(rng.uniform(0.08, 0.3)),
-            "w2_rad_per_s": float(rng.uniform(6, 16)), "w3_rad_per_s": float(rng.uniform(20, 50)),
-            "w4_rad_per_s": float(rng.uniform(120, 320)), "w5_rad_per_s": float(rng.uniform(800, 1800)),
-            "w6_rad_per_s": float(rng.uniform(3000, 8000))}
+    return {
+        "gain": float(rng.uniform(0.5, 2.0)),
+        "w1_rad_per_s": float(rng.uniform(0.08, 0.3)),
+        "w2_rad_per_s": float(rng.uniform(6, 16)),
+        "w3_rad_per_s": float(rng.uniform(20, 50)),
+        "w4_rad_per_s": float(rng.uniform(120, 320)),
+        "w5_rad_per_s": float(rng.uniform(800, 1800)),
+        "w6_rad_per_s": float(rng.uniform(3000, 8000)),
+    }
 
 
 def network_file(tmp_path, rng, p, seconds=160.0):
     n = int(seconds * FS)
-    ac = _colored(rng, n, (3e-3) ** 2 / 100, corner_hz=3.0)            # ~3 mV rms control channel
+    ac = _colored(rng, n, (3e-3) ** 2 / 100, corner_hz=3.0)  # ~3 mV rms control channel
     f = np.fft.rfftfreq(n, 1 / FS)
     pa = np.fft.irfft(np.fft.rfft(ac) * _network(f, p), n)
-    pa += _colored(rng, n, (2e-6) ** 2)                                  # electronic noise after the network
-    return _write(tmp_path / "net.h5", {"ac_x_ctl": _quantize(ac, 1.0), "pa_x": _quantize(pa, 0.05)})
+    pa += _colored(rng, n, (2e-6) ** 2)  # electronic noise after the network
+    return _write(
+        tmp_path / "net.h5", {"ac_x_ctl": _quantize(ac, 1.0), "pa_x": _quantize(pa, 0.05)}
+    )
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
@@ -113,7 +126,7 @@ def test_h1_intervals_cover_the_truth_in_most_bins(tmp_path):
     lo, hi = resp.gain_db_ci()
     g = 20 * np.log10(np.abs(truth))
     covered = np.mean((lo[sel] <= g) & (g <= hi[sel]))
-    assert covered > 0.88, covered        # 95 % intervals from 7 degrees of freedom: about 0.95
+    assert covered > 0.88, covered  # 95 % intervals from 7 degrees of freedom: about 0.95
 
 
 def test_response_refuses_one_channel_twice_and_unknown_channels(tmp_path):
@@ -129,22 +142,34 @@ def test_response_refuses_one_channel_twice_and_unknown_channels(tmp_path):
 
 
 # ---------------------------------------------------------------------------- the platform
-PC = PlatformConstants(0.70, 1.02, 302.0, 0.53, 0.53, 23.0, armature_H=0.023, command_divider=0.0075)
+PC = PlatformConstants(
+    0.70, 1.02, 302.0, 0.53, 0.53, 23.0, armature_H=0.023, command_divider=0.0075
+)
 AC = AutocollimatorConstants(5.70, 5.63)
 
 
 def _plant(f, J, D, k, pc=PC, ac=AC):
     """theta per amplifier-input volt, then the instrumentation channel's filters and scale."""
     s = 2j * np.pi * f
-    D = D(2 * np.pi * np.asarray(f, float)) if callable(D) else D     # a damping that depends on frequency
-    motor = pc.amp_gain * pc.motor_Nm_per_A / ((pc.armature_H * s + pc.armature_ohm) * (J * s * s + D * s + k)
-                                               + pc.motor_Nm_per_A * pc.back_emf_V_s * s)
+    D = (
+        D(2 * np.pi * np.asarray(f, float)) if callable(D) else D
+    )  # a damping that depends on frequency
+    motor = (
+        pc.amp_gain
+        * pc.motor_Nm_per_A
+        / (
+            (pc.armature_H * s + pc.armature_ohm) * (J * s * s + D * s + k)
+            + pc.motor_Nm_per_A * pc.back_emf_V_s * s
+        )
+    )
     w1, w2, z2 = ac.inst_filter1_rad_per_s, ac.inst_filter2_rad_per_s, ac.inst_filter2_zeta
     filt = w1 / (s + w1) * w2 * w2 / (s * s + 2 * z2 * w2 * s + w2 * w2)
     return motor * filt * ac.inst_mV_per_urad * 1e-3 / URAD
 
 
-def platform_file(tmp_path, rng, J, D, k, *, period_s=16.0, periods=12, level_V=0.2, update_hz=250.0):
+def platform_file(
+    tmp_path, rng, J, D, k, *, period_s=16.0, periods=12, level_V=0.2, update_hz=250.0
+):
     n = int(period_s * periods * FS)
     per = int(period_s * update_hz)
     spec = np.zeros(per // 2 + 1, complex)
@@ -153,29 +178,37 @@ def platform_file(tmp_path, rng, J, D, k, *, period_s=16.0, periods=12, level_V=
     spec[band] = np.exp(2j * np.pi * rng.random(band.sum()))
     one = np.fft.irfft(spec, per)
     one *= level_V / one.std()
-    r = np.repeat(np.tile(one, periods), int(FS / update_hz))          # the DAC's ZOH
+    r = np.repeat(np.tile(one, periods), int(FS / update_hz))  # the DAC's ZOH
     f = np.fft.rfftfreq(n, 1 / FS)
-    G = _plant(f, J, D, k)                                             # pa -> ac_inst (V/V)
-    Gctl = G                                                           # the control path: same plant
+    G = _plant(f, J, D, k)  # pa -> ac_inst (V/V)
+    Gctl = G  # the control path: same plant
     C = _network(f, DESIGN_NETWORK)
     nac = _colored(rng, n, (0.45 * URAD * 5.7e-3 / URAD) ** 2 / 100, corner_hz=3.0)
     R, N = np.fft.rfft(r), np.fft.rfft(nac)
-    PA = (PC.command_divider * R + C * N) / (1 - C * Gctl)            # pa = Kd r + C (ac + n); C is inverted
+    PA = (PC.command_divider * R + C * N) / (1 - C * Gctl)  # pa = Kd r + C (ac + n); C is inverted
     AC_ = G * PA + N
     pa = np.fft.irfft(PA, n) + _colored(rng, n, (1e-6) ** 2)
     ac = np.fft.irfft(AC_, n)
-    return _write(tmp_path / "plat.h5", {"cmd_x": _quantize(r, 10.0), "pa_x": _quantize(pa, 0.05),
-                                         "ac_x_inst": _quantize(ac, 1.0)})
+    return _write(
+        tmp_path / "plat.h5",
+        {"cmd_x": _quantize(r, 10.0), "pa_x": _quantize(pa, 0.05), "ac_x_inst": _quantize(ac, 1.0)},
+    )
 
 
 @pytest.mark.parametrize("seed", [11, 12, 13, 14])
 def test_platform_fit_recovers_drawn_inertia_and_stiffness_with_covering_intervals(tmp_path, seed):
     rng = np.random.default_rng(seed)
-    J, D, k = float(rng.uniform(0.3, 1.2)), float(rng.uniform(0.4, 2.0)), float(rng.uniform(150, 900))
+    J, D, k = (
+        float(rng.uniform(0.3, 1.2)),
+        float(rng.uniform(0.4, 2.0)),
+        float(rng.uniform(150, 900)),
+    )
     path = platform_file(tmp_path, rng, J, D, k)
-    b = periodic_blocks([(path, 0, 10 ** 9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
+    b = periodic_blocks([(path, 0, 10**9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
     fit = fit_platform(response(b, "pa_x", "ac_x_inst", via="cmd_x"), PC, AC, 0.2, 50.0)
-    ej, ek, ed = (fit.estimates[n] for n in ("inertia_kg_m2", "stiffness_Nm_per_rad", "damping_Nms"))
+    ej, ek, ed = (
+        fit.estimates[n] for n in ("inertia_kg_m2", "stiffness_Nm_per_rad", "damping_Nms")
+    )
     assert abs(ej.value / J - 1) < 0.05 and ej.covers(J), (ej, J)
     assert abs(ek.value / k - 1) < 0.10 and ek.covers(k), (ek, k)
     assert ed.covers(D), (ed, D)
@@ -192,15 +225,17 @@ def test_a_damping_that_depends_on_frequency_is_not_resolved_and_a_viscous_one_i
     J, k, D0, h = 0.7, 400.0, 1.0, 60.0
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    path = platform_file(tmp_path / "a", np.random.default_rng(31), J, lambda w: D0 + h / np.maximum(w, 1e-9), k)
-    b = periodic_blocks([(path, 0, 10 ** 9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
+    path = platform_file(
+        tmp_path / "a", np.random.default_rng(31), J, lambda w: D0 + h / np.maximum(w, 1e-9), k
+    )
+    b = periodic_blocks([(path, 0, 10**9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
     fit = fit_platform(response(b, "pa_x", "ac_x_inst", via="cmd_x"), PC, AC, 0.5, 50.0)
     ed = fit.estimates["damping_Nms"]
     assert not ed.resolved and "depends on frequency" in ed.why, ed
     assert ed.covers(D0 + h / math.sqrt(k / J)), ed
     assert fit.local_damping is not None and fit.local_damping.frequency_dependent()
     path = platform_file(tmp_path / "b", np.random.default_rng(32), J, D0 + h / math.sqrt(k / J), k)
-    b = periodic_blocks([(path, 0, 10 ** 9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
+    b = periodic_blocks([(path, 0, 10**9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
     fit = fit_platform(response(b, "pa_x", "ac_x_inst", via="cmd_x"), PC, AC, 0.5, 50.0)
     ed = fit.estimates["damping_Nms"]
     assert ed.resolved and ed.covers(D0 + h / math.sqrt(k / J)), ed
@@ -210,11 +245,13 @@ def test_a_damping_that_depends_on_frequency_is_not_resolved_and_a_viscous_one_i
 def test_platform_fit_does_not_use_the_data_sheet_inertia(tmp_path):
     rng = np.random.default_rng(21)
     path = platform_file(tmp_path, rng, 0.55, 1.0, 400.0)
-    b = periodic_blocks([(path, 0, 10 ** 9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
+    b = periodic_blocks([(path, 0, 10**9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
     resp = response(b, "pa_x", "ac_x_inst", via="cmd_x")
     wrong = PlatformConstants(2.0, 5.0, 302.0, 0.53, 0.53, 23.0)
     a = fit_platform(resp, PC, AC).estimates["inertia_kg_m2"].value
-    assert fit_platform(resp, wrong, AC).estimates["inertia_kg_m2"].value == pytest.approx(a, rel=1e-12)
+    assert fit_platform(resp, wrong, AC).estimates["inertia_kg_m2"].value == pytest.approx(
+        a, rel=1e-12
+    )
 
 
 def test_h1_inside_the_loop_is_biased_and_the_injected_signal_removes_it(tmp_path):
@@ -222,7 +259,7 @@ def test_h1_inside_the_loop_is_biased_and_the_injected_signal_removes_it(tmp_pat
     of the controller where the noise dominates; the cross-spectra with V_Td do not."""
     rng = np.random.default_rng(5)
     path = platform_file(tmp_path, rng, 0.7, 1.02, 410.0, level_V=0.02)
-    b = periodic_blocks([(path, 0, 10 ** 9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
+    b = periodic_blocks([(path, 0, 10**9)], ["cmd_x", "pa_x", "ac_x_inst"], 16.0)
     f = b.f
     sel = (f > 2) & (f < 20)
     truth = _plant(f[sel], 0.7, 1.02, 410.0)
@@ -238,8 +275,8 @@ def test_periodic_blocks_leaves_out_periods_with_lost_samples(tmp_path):
     y = x.copy()
     y[16000 * 4 + 3] = np.nan
     path = _write(tmp_path / "lost.h5", {"a": x, "b": y})
-    b = periodic_blocks([(path, 0, 10 ** 9)], ["a", "b"], 16.0, n_blocks=4)
-    assert b.weights.sum() == 8          # 10 periods, 1 transient, 1 with the lost sample
+    b = periodic_blocks([(path, 0, 10**9)], ["a", "b"], 16.0, n_blocks=4)
+    assert b.weights.sum() == 8  # 10 periods, 1 transient, 1 with the lost sample
     with pytest.raises(TransferError, match="whole 16 s period"):
         periodic_blocks([(path, 0, 16000 * 4)], ["a", "b"], 16.0, n_blocks=4)
 

@@ -48,8 +48,15 @@ def independent():
 HIDDEN_RANGES_V = {"ctl": 1.0, "inst": 1.0, "gyro": 1.0, "pa": 0.05}
 
 
-def make_hidden(path: Path, specs: list[str] | tuple[str, ...] = (), *, seed: int = 0, axis: str = "X",
-                duration_s: float = 300.0, rate_hz: float = 1000.0) -> Path:
+def make_hidden(
+    path: Path,
+    specs: list[str] | tuple[str, ...] = (),
+    *,
+    seed: int = 0,
+    axis: str = "X",
+    duration_s: float = 300.0,
+    rate_hz: float = 1000.0,
+) -> Path:
     """A Mode-3 run of the axis's four channels from ``simhw``, nominal (no bearing torque)
     plus the effects ``specs`` (``name:k=v,...`` as ``fbs simulate --effect``), written as an
     fbs-run file with the axis attribute."""
@@ -66,8 +73,16 @@ def make_hidden(path: Path, specs: list[str] | tuple[str, ...] = (), *, seed: in
     sim = Simulator(cfg, rate_hz, seed=seed, mode=3)
     for c, kind in channels.items():
         sim.set_range(c, HIDDEN_RANGES_V[kind])
-    with RunWriter(path, rig="sim-offline", mode=3, rate_hz=rate_hz, channels=dict.fromkeys(channels, "V"),
-                   axis=axis, meta={"effects": list(specs), "seed": seed}, overwrite=True) as w:
+    with RunWriter(
+        path,
+        rig="sim-offline",
+        mode=3,
+        rate_hz=rate_hz,
+        channels=dict.fromkeys(channels, "V"),
+        axis=axis,
+        meta={"effects": list(specs), "seed": seed},
+        overwrite=True,
+    ) as w:
         for block in sim.run(duration_s, 10.0):
             w.append({c: block[c] for c in channels})
     return Path(path)

@@ -47,7 +47,11 @@ def score(t: dict[str, Any], res: dict[str, Any]) -> tuple[bool, str, list[bool]
         return (not res["significant"], f"significant={res['significant']} named={named}", [])
     if t["effect"] == "unknown":
         ok = res["significant"] and not res["explained"]
-        return ok, f"significant={res['significant']} explained={res['explained']} named={named}", []
+        return (
+            ok,
+            f"significant={res['significant']} explained={res['explained']} named={named}",
+            [],
+        )
     want = truth_effects(t)
     covers: list[bool] = []
     why = []

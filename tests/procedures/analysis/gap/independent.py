@@ -161,11 +161,11 @@ __all__ = [
 
 # --------------------------------------------------------------------------- parameters
 # Thesis values (Klinger 1974; DESIGN.md section 3). Angles in urad, rates in urad/s.
-EARTH_RATE = 7.292115e-5          # rad/s
+EARTH_RATE = 7.292115e-5  # rad/s
 LATITUDE_DEG = 37.43
 MOTOR = dict(Km=0.53, Kb=0.53, Ra=23.0, La=0.023)
-COMP_ZEROS = (10.0, 30.0)                    # rad/s, eq. 3.28 numerator
-COMP_POLES = (0.15, 200.0, 1200.0, 5000.0)   # rad/s, eq. 3.28 denominator
+COMP_ZEROS = (10.0, 30.0)  # rad/s, eq. 3.28 numerator
+COMP_POLES = (0.15, 200.0, 1200.0, 5000.0)  # rad/s, eq. 3.28 denominator
 AC_CTL = dict(w=264.0, zeta=0.71)
 AC_INST = dict(w1=755.0, w2=1250.0, zeta=0.71)
 AC_FLICKER_CORNER_HZ = 3.0
@@ -181,9 +181,12 @@ PICKOFF_RMS_URAD = {"X": 6.2, "Y": 12.4}
 #: The data sheet's lines per axis, ``(freq_hz, amplitude_urad)``: amplitude
 #: sqrt(2 share 0.85 rms^2) (X 4.43, 4.43, 4.04, 3.13 urad; Y twice that).
 PICKOFF_LINES_URAD = {
-    ax: tuple((f, math.sqrt(2.0 * share * PICKOFF_LINES_FRACTION * rms**2))
-              for f, share in zip(PICKOFF_LINE_FREQS_HZ, PICKOFF_LINE_SHARES))
-    for ax, rms in PICKOFF_RMS_URAD.items()}
+    ax: tuple(
+        (f, math.sqrt(2.0 * share * PICKOFF_LINES_FRACTION * rms**2))
+        for f, share in zip(PICKOFF_LINE_FREQS_HZ, PICKOFF_LINE_SHARES)
+    )
+    for ax, rms in PICKOFF_RMS_URAD.items()
+}
 SENSE_OHM = 92.1
 KTC_A_PER_V = -6.04e-3
 CAGING_WN, CAGING_ZETA = 0.1, 0.7
@@ -194,12 +197,32 @@ ANTI_ALIAS_FRACTION, ANTI_ALIAS_POLES = 0.3, 3
 AXES = {
     # I kg m^2, D N m s (2 Do on X, Do on Y), Kp, autocollimator mV/urad, NEA urad,
     # gyro channel: h/k s, KTO urad/s/V, Kg mV/urad, pickoff rms urad, constant rate urad/s
-    "X": dict(I=0.70, D=1.02, Kp=302.0, K_ctl=5.70, K_inst=5.63, nea=0.451,
-              tau_r=424.0, KTO=31.6, Kg=6.03, pickoff_rms=PICKOFF_RMS_URAD["X"],
-              omega_const=(EARTH_RATE * math.cos(math.radians(LATITUDE_DEG))) * 1e6 + 0.35),
-    "Y": dict(I=0.25, D=0.51, Kp=164.0, K_ctl=5.99, K_inst=5.92, nea=0.506,
-              tau_r=708.0, KTO=33.4, Kg=6.70, pickoff_rms=PICKOFF_RMS_URAD["Y"],
-              omega_const=-0.22),
+    "X": dict(
+        I=0.70,
+        D=1.02,
+        Kp=302.0,
+        K_ctl=5.70,
+        K_inst=5.63,
+        nea=0.451,
+        tau_r=424.0,
+        KTO=31.6,
+        Kg=6.03,
+        pickoff_rms=PICKOFF_RMS_URAD["X"],
+        omega_const=(EARTH_RATE * math.cos(math.radians(LATITUDE_DEG))) * 1e6 + 0.35,
+    ),
+    "Y": dict(
+        I=0.25,
+        D=0.51,
+        Kp=164.0,
+        K_ctl=5.99,
+        K_inst=5.92,
+        nea=0.506,
+        tau_r=708.0,
+        KTO=33.4,
+        Kg=6.70,
+        pickoff_rms=PICKOFF_RMS_URAD["Y"],
+        omega_const=-0.22,
+    ),
 }
 #: Output order of the state-space model (and of the channels written).
 OUTPUTS = ("ctl", "inst", "gyro", "pa")
@@ -222,7 +245,9 @@ def _compensation_residues(zeros=COMP_ZEROS, poles=COMP_POLES) -> np.ndarray:
     z1, z2 = zeros
     p = np.array(poles, dtype=float)
     if p.shape != (4,) or len(set(p.tolist())) != 4 or np.any(p <= 0) or min(zeros) <= 0:
-        raise ValueError(f"compensation: two positive zeros and four distinct positive poles, not {zeros}, {poles}")
+        raise ValueError(
+            f"compensation: two positive zeros and four distinct positive poles, not {zeros}, {poles}"
+        )
     gain = np.prod(p) / (z1 * z2)  # C(s) = gain (s + z1)(s + z2) / prod(s + p_j)
     r = np.empty(4)
     for j in range(4):
@@ -236,15 +261,26 @@ def caging_gains(m: dict) -> tuple[float, float]:
     2 zeta omega_n = K_T K_g C1, K_T = 92.1 ohm x KTO x KTC (urad/s per V of V_F).
     K_T is negative (KTC < 0), so both gains come out negative: that is what makes the loop
     s^2 + (2 zeta wn + k/h) s + wn^2 stable with V_F = -(C1 e + C2 int e)."""
-    kt = SENSE_OHM * m["KTO"] * KTC_A_PER_V         # urad/s per V
-    kg = m["Kg"] * 1e-3                              # V per urad
+    kt = SENSE_OHM * m["KTO"] * KTC_A_PER_V  # urad/s per V
+    kg = m["Kg"] * 1e-3  # V per urad
     return 2 * CAGING_ZETA * CAGING_WN / (kt * kg), CAGING_WN**2 / (kt * kg)
 
 
-def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_freq_hz: float = 0.0,
-                     mount_damping: float = 0.05, *, extra_damping_Nms: float = 0.0, scale_factor_error: float = 0.0,
-                     comp_zeros_rad_s=None, comp_poles_rad_s=None, amp_gain_factor: float = 1.0,
-                     amp_input: bool = False, delayed_sensor: bool = False, mount_input: bool = False):
+def continuous_model(
+    axis: str = "X",
+    stiffness_Nm_per_rad: float = 0.0,
+    mount_freq_hz: float = 0.0,
+    mount_damping: float = 0.05,
+    *,
+    extra_damping_Nms: float = 0.0,
+    scale_factor_error: float = 0.0,
+    comp_zeros_rad_s=None,
+    comp_poles_rad_s=None,
+    amp_gain_factor: float = 1.0,
+    amp_input: bool = False,
+    delayed_sensor: bool = False,
+    mount_input: bool = False,
+):
     """(A, B, C, D, x0, names) of one axis in Mode 3.
 
     Inputs: autocollimator angle noise n_ac (urad), pickoff angle noise n_p (urad), constant
@@ -305,7 +341,7 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
         A[m1, m2] = w
         A[m2, th], A[m2, m1], A[m2, m2] = w, -w, -2 * mount_damping * w
         if mount_input:
-            B[m2, MNT] = 1.0 / w          # mount1'' = w mount2' gets the acceleration
+            B[m2, MNT] = 1.0 / w  # mount1'' = w mount2' gets the acceleration
         s_x[m1] = 1.0
     # What the filters see: the sensed angle, or (delayed_sensor) the input column SD.
     f_x, f_u = s_x, s_u
@@ -320,7 +356,7 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
     A[a2, a1] += -w
     A[a2, a2] += -2 * z * w
     gamma = np.zeros(n)
-    gamma[a1] = m["K_ctl"] * (1.0 + scale_factor_error) * 1e-3          # V
+    gamma[a1] = m["K_ctl"] * (1.0 + scale_factor_error) * 1e-3  # V
     # Instrumentation (eq. 3.22): w1/(s + w1) then w2^2/(s^2 + 2 zeta w2 s + w2^2).
     w1, w2, z2 = AC_INST["w1"], AC_INST["w2"], AC_INST["zeta"]
     A[b0] += w1 * f_x
@@ -369,7 +405,7 @@ def continuous_model(axis: str = "X", stiffness_Nm_per_rad: float = 0.0, mount_f
     if delayed_sensor:
         C[4], D[4] = s_x, s_u
     x0 = np.zeros(n)
-    x0[q] = m["omega_const"] / (kt * c2)   # caged: K_T V_F = -Omega, sigma = 0
+    x0[q] = m["omega_const"] / (kt * c2)  # caged: K_T V_F = -Omega, sigma = 0
     return A, B, C, D, x0, names
 
 
@@ -383,8 +419,14 @@ def white_level_ac(axis: str = "X") -> float:
         h2 = 1.0 / ((1 - x * x) ** 2 + (2 * z * x) ** 2)
         return (f + AC_FLICKER_CORNER_HZ) * h2
 
-    val, _ = scipy.integrate.quad(integrand, math.log(NEA_BAND_HZ[0]), math.log(NEA_BAND_HZ[1]),
-                                  epsabs=0, epsrel=1e-10, limit=200)
+    val, _ = scipy.integrate.quad(
+        integrand,
+        math.log(NEA_BAND_HZ[0]),
+        math.log(NEA_BAND_HZ[1]),
+        epsabs=0,
+        epsrel=1e-10,
+        limit=200,
+    )
     return axis_model(axis)["nea"] ** 2 / val
 
 
@@ -392,12 +434,18 @@ def white_level_pickoff(axis: str = "X") -> float:
     """White pickoff PSD (urad^2/Hz) that with the axis's data-sheet lines gives the rms in
     0.1-200 Hz: 15 % of the variance (X 0.0288, Y 0.115 urad^2/Hz: 1.7 / 3.4 urad in 0.1-100 Hz)."""
     m = axis_model(axis)
-    lines_var = sum(a * a / 2 for f, a in PICKOFF_LINES_URAD[axis] if PICKOFF_BAND_HZ[0] <= f <= PICKOFF_BAND_HZ[1])
+    lines_var = sum(
+        a * a / 2
+        for f, a in PICKOFF_LINES_URAD[axis]
+        if PICKOFF_BAND_HZ[0] <= f <= PICKOFF_BAND_HZ[1]
+    )
     return (m["pickoff_rms"] ** 2 - lines_var) / (PICKOFF_BAND_HZ[1] - PICKOFF_BAND_HZ[0])
 
 
 def anti_alias_sos(rate_hz: float, fs_int: float) -> np.ndarray:
-    return scipy.signal.butter(ANTI_ALIAS_POLES, ANTI_ALIAS_FRACTION * rate_hz, fs=fs_int, output="sos")
+    return scipy.signal.butter(
+        ANTI_ALIAS_POLES, ANTI_ALIAS_FRACTION * rate_hz, fs=fs_int, output="sos"
+    )
 
 
 # --------------------------------------------------------------------------- time stepping
@@ -440,11 +488,13 @@ def _shaped_noise(rng: np.random.Generator, n: int, fs: float, psd) -> np.ndarra
     spec = scipy.fft.rfft(rng.standard_normal(n))
     f = np.arange(len(spec)) * (fs / n)
     gain = np.zeros(len(spec))
-    gain[1:] = np.sqrt(psd(f[1:]) * fs / 2.0)   # a unit-variance sequence has PSD 2/fs
+    gain[1:] = np.sqrt(psd(f[1:]) * fs / 2.0)  # a unit-variance sequence has PSD 2/fs
     return scipy.fft.irfft(spec * gain, n=n)
 
 
-def _telegraph(rng: np.random.Generator, n: int, fs: float, amplitude: float, mean_interval_s: float) -> np.ndarray:
+def _telegraph(
+    rng: np.random.Generator, n: int, fs: float, amplitude: float, mean_interval_s: float
+) -> np.ndarray:
     """+-amplitude, switching sign at Poisson times of mean interval ``mean_interval_s``."""
     t_end = n / fs
     times = []
@@ -473,19 +523,28 @@ def _settle_time(A: np.ndarray, names: list[str]) -> float:
 #: (:data:`NUISANCE_LOG_UNIFORM`), the rest uniform; the ADC ranges uniform among those listed.
 NUISANCE_RANGES = dict(
     ac_white_scale=(0.6, 1.6),
-    ac_knee=(0.0, 1.0),               # a third each: 0 (max), 1 (sum), uniform in between
+    ac_knee=(0.0, 1.0),  # a third each: 0 (max), 1 (sum), uniform in between
     ac_flicker_corner_hz=(1.5, 5.0),
     ac_flicker_slope=(0.8, 1.2),
     pickoff_white_scale=(0.5, 2.0),
-    line_shift_hz=(-1.0, 1.0),        # each line's move: the common shift and its own jitter
+    line_shift_hz=(-1.0, 1.0),  # each line's move: the common shift and its own jitter
     line_common_shift_hz=(-0.8, 0.8),  # the whole set, the 71 Hz pair's centre with it
-    line_jitter_hz=(-0.2, 0.2),       # 102 and 187 Hz each, beyond the common shift
-    pair_spacing_hz=(0.7, 0.9),       # the 71 Hz pair stays a pair
+    line_jitter_hz=(-0.2, 0.2),  # 102 and 187 Hz each, beyond the common shift
+    pair_spacing_hz=(0.7, 0.9),  # the 71 Hz pair stays a pair
     line_amplitude_scale=(0.5, 2.0),
-    adc_range_V={"ctl": (1.0, 2.0, 5.0, 10.0), "inst": (1.0, 2.0, 5.0, 10.0), "gyro": (1.0, 2.0, 5.0, 10.0),
-                 "pa": (0.05, 0.1, 0.2, 0.5)},
+    adc_range_V={
+        "ctl": (1.0, 2.0, 5.0, 10.0),
+        "inst": (1.0, 2.0, 5.0, 10.0),
+        "gyro": (1.0, 2.0, 5.0, 10.0),
+        "pa": (0.05, 0.1, 0.2, 0.5),
+    },
 )
-NUISANCE_LOG_UNIFORM = ("ac_white_scale", "ac_flicker_corner_hz", "pickoff_white_scale", "line_amplitude_scale")
+NUISANCE_LOG_UNIFORM = (
+    "ac_white_scale",
+    "ac_flicker_corner_hz",
+    "pickoff_white_scale",
+    "line_amplitude_scale",
+)
 _KINDS = ("ctl", "inst", "gyro", "pa")
 
 
@@ -521,13 +580,21 @@ def draw_nuisance(rng: np.random.Generator) -> dict:
     scales = [draw("line_amplitude_scale") for _ in PICKOFF_LINE_FREQS_HZ]
     adc = {k: float(rng.choice(R["adc_range_V"][k])) for k in _KINDS}
     slope = draw("ac_flicker_slope")
-    return {"ac_white_scale": white, "ac_knee": knee, "ac_flicker_corner_hz": corner, "ac_flicker_slope": slope,
-            "pickoff_white_scale": pickoff_white, "pickoff_line_freqs_hz": [round(f, 4) for f in freqs],
-            "pickoff_line_scales": [round(a, 4) for a in scales], "adc_range_V": adc}
+    return {
+        "ac_white_scale": white,
+        "ac_knee": knee,
+        "ac_flicker_corner_hz": corner,
+        "ac_flicker_slope": slope,
+        "pickoff_white_scale": pickoff_white,
+        "pickoff_line_freqs_hz": [round(f, 4) for f in freqs],
+        "pickoff_line_scales": [round(a, 4) for a in scales],
+        "adc_range_V": adc,
+    }
 
 
-def unit_pickoff_lines(axis: str = "X", pickoff_line_freqs_hz=None, pickoff_line_scales=None,
-                       pickoff_lines=None) -> list[tuple[float, float]]:
+def unit_pickoff_lines(
+    axis: str = "X", pickoff_line_freqs_hz=None, pickoff_line_scales=None, pickoff_lines=None
+) -> list[tuple[float, float]]:
     """The unit's pickoff lines ``[(freq_hz, amplitude_urad), ...]``: ``pickoff_lines`` if given,
     else the axis's data-sheet lines (:data:`PICKOFF_LINES_URAD`) moved to
     ``pickoff_line_freqs_hz`` and scaled by ``pickoff_line_scales`` (each one per line)."""
@@ -535,39 +602,68 @@ def unit_pickoff_lines(axis: str = "X", pickoff_line_freqs_hz=None, pickoff_line
     axis_model(axis)
     if pickoff_lines is not None:
         if pickoff_line_freqs_hz is not None or pickoff_line_scales is not None:
-            raise ValueError("pickoff_lines replaces the data sheet's lines: not together with "
-                             "pickoff_line_freqs_hz / pickoff_line_scales")
+            raise ValueError(
+                "pickoff_lines replaces the data sheet's lines: not together with "
+                "pickoff_line_freqs_hz / pickoff_line_scales"
+            )
         return [(float(f), float(a)) for f, a in pickoff_lines]
     sheet = PICKOFF_LINES_URAD[axis]
-    freqs = [f for f, _ in sheet] if pickoff_line_freqs_hz is None else [float(f) for f in pickoff_line_freqs_hz]
-    scales = [1.0] * len(sheet) if pickoff_line_scales is None else [float(a) for a in pickoff_line_scales]
+    freqs = (
+        [f for f, _ in sheet]
+        if pickoff_line_freqs_hz is None
+        else [float(f) for f in pickoff_line_freqs_hz]
+    )
+    scales = (
+        [1.0] * len(sheet)
+        if pickoff_line_scales is None
+        else [float(a) for a in pickoff_line_scales]
+    )
     if len(freqs) != len(sheet) or len(scales) != len(sheet):
-        raise ValueError(f"pickoff_line_freqs_hz / pickoff_line_scales: one per data-sheet line ({len(sheet)})")
+        raise ValueError(
+            f"pickoff_line_freqs_hz / pickoff_line_scales: one per data-sheet line ({len(sheet)})"
+        )
     if min(freqs) <= 0 or min(scales) < 0:
         raise ValueError(f"pickoff lines: frequencies > 0 and scales >= 0, not {freqs}, {scales}")
     return [(f, a * k) for f, (_, a), k in zip(freqs, sheet, scales)]
 
 
-def ac_noise_psd(f, axis: str = "X", *, ac_white_scale=1.0, ac_flicker_scale=None,
-                 ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ, ac_knee=1.0, ac_flicker_slope=1.0,
-                 flicker_corner_hz=0.0, extra_flicker_corner_hz=0.0) -> np.ndarray:
+def ac_noise_psd(
+    f,
+    axis: str = "X",
+    *,
+    ac_white_scale=1.0,
+    ac_flicker_scale=None,
+    ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
+    ac_knee=1.0,
+    ac_flicker_slope=1.0,
+    flicker_corner_hz=0.0,
+    extra_flicker_corner_hz=0.0,
+) -> np.ndarray:
     """One-sided PSD (urad^2/Hz) of the autocollimator angle noise at ``f`` (> 0):
     ``S_w (a_w^2 K(f) + a_w^2 extra / f)``, ``K = knee (1 + r) + (1 - knee) max(1, r)``,
     ``r = (f_c / f)^a`` (the module docstring; ``f_c`` = ``flicker_corner_hz`` if given, else
     the unit's own corner). At the data sheet: ``S_w (1 + 3 / f)``."""
-    for name, v in (("ac_white_scale", ac_white_scale), ("ac_flicker_corner_hz", ac_flicker_corner_hz),
-                    ("flicker_corner_hz", flicker_corner_hz), ("extra_flicker_corner_hz", extra_flicker_corner_hz)):
+    for name, v in (
+        ("ac_white_scale", ac_white_scale),
+        ("ac_flicker_corner_hz", ac_flicker_corner_hz),
+        ("flicker_corner_hz", flicker_corner_hz),
+        ("extra_flicker_corner_hz", extra_flicker_corner_hz),
+    ):
         if not (v >= 0 and math.isfinite(v)):
             raise ValueError(f"{name} must be finite and >= 0, not {v!r}")
-    if ac_flicker_scale is not None and not (ac_flicker_scale >= 0 and math.isfinite(ac_flicker_scale)):
-        raise ValueError(f"ac_flicker_scale must be None or finite and >= 0, not {ac_flicker_scale!r}")
+    if ac_flicker_scale is not None and not (
+        ac_flicker_scale >= 0 and math.isfinite(ac_flicker_scale)
+    ):
+        raise ValueError(
+            f"ac_flicker_scale must be None or finite and >= 0, not {ac_flicker_scale!r}"
+        )
     if not 0.0 <= ac_knee <= 1.0:
         raise ValueError(f"ac_knee must be within 0 (max form) .. 1 (sum form), not {ac_knee!r}")
     if not (ac_flicker_slope > 0 and math.isfinite(ac_flicker_slope)):
         raise ValueError(f"ac_flicker_slope must be finite and > 0, not {ac_flicker_slope!r}")
     f = np.asarray(f, dtype=float)
     sw = white_level_ac(axis)
-    white = ac_white_scale ** 2
+    white = ac_white_scale**2
     # The 1/f's level at 1 Hz in units of S_w (slope 1): where it meets the unit's white is the
     # unit's corner. The old ac_flicker_scale ties it to the data sheet's white instead.
     if flicker_corner_hz > 0:
@@ -575,16 +671,18 @@ def ac_noise_psd(f, axis: str = "X", *, ac_white_scale=1.0, ac_flicker_scale=Non
     elif ac_flicker_scale is None:
         level = white * ac_flicker_corner_hz
     else:
-        level = ac_flicker_scale ** 2 * ac_flicker_corner_hz
+        level = ac_flicker_scale**2 * ac_flicker_corner_hz
     extra = white * extra_flicker_corner_hz
-    if ac_knee == 1.0 and ac_flicker_slope == 1.0:   # the sum form, slope 1: the old expression
+    if ac_knee == 1.0 and ac_flicker_slope == 1.0:  # the sum form, slope 1: the old expression
         return sw * (white + (level + extra) / f)
     if ac_flicker_slope == 1.0:
         flick = level / f
     elif white > 0:
         flick = white * ((level / white) / f) ** ac_flicker_slope
     elif level > 0:
-        raise ValueError("a 1/f slope other than 1 needs a white level to meet (ac_white_scale > 0)")
+        raise ValueError(
+            "a 1/f slope other than 1 needs a white level to meet (ac_white_scale > 0)"
+        )
     else:
         flick = np.zeros_like(f)
     k = ac_knee * (white + flick) + (1.0 - ac_knee) * np.maximum(white, flick)
@@ -600,7 +698,9 @@ def _adc_ranges(adc_range_V, axis: str) -> np.ndarray:
         given = dict(adc_range_V)
         unknown = set(given) - set(names) - set(_KINDS)
         if unknown:
-            raise ValueError(f"adc_range_V: unknown channel(s) {sorted(unknown)}; use {names} or {_KINDS}")
+            raise ValueError(
+                f"adc_range_V: unknown channel(s) {sorted(unknown)}; use {names} or {_KINDS}"
+            )
         ranges = [float(given.get(c, given.get(k, ADC_RANGE_V))) for c, k in zip(names, _KINDS)]
     if min(ranges) <= 0:
         raise ValueError(f"adc_range_V must be positive, not {ranges}")
@@ -624,7 +724,25 @@ def _amp_out(v, dead_zone, limit):
 
 
 @numba.njit(cache=_CACHE, nogil=True)
-def _loop_run(Ad, Bd, Cd, Dd, bconst, dconst, x, u, y, col_amp, row_vc, kp, dead_zone, limit, col_sd, row_s, buf):
+def _loop_run(
+    Ad,
+    Bd,
+    Cd,
+    Dd,
+    bconst,
+    dconst,
+    x,
+    u,
+    y,
+    col_amp,
+    row_vc,
+    kp,
+    dead_zone,
+    limit,
+    col_sd,
+    row_s,
+    buf,
+):
     """The Tustin loop of :func:`_tustin_run` with the elements outside the linear model.
 
     Inputs ``u[k]`` fill the first columns; column ``col_amp`` (if >= 0) is the power
@@ -678,33 +796,67 @@ def _loop_run(Ad, Bd, Cd, Dd, bconst, dconst, x, u, y, col_amp, row_vc, kp, dead
             x[i] = xn[i]
 
 
-def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm_per_rad=0.0,
-             mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
-             offset_jump_urad=0.0, offset_jump_interval_s=60.0,
-             extra_damping_Nms=0.0, scale_factor_error=0.0, time_delay_s=0.0,
-             ac_white_scale=1.0, ac_flicker_scale=None, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
-             ac_knee=1.0, ac_flicker_slope=1.0, flicker_corner_hz=0.0, mount_excitation=0.0,
-             pickoff_white_scale=1.0, pickoff_lines=None, pickoff_line_freqs_hz=None, pickoff_line_scales=None,
-             adc_range_V=ADC_RANGE_V, amp_dead_zone_V=0.0, amp_limit_V=math.inf, amp_gain_factor=1.0,
-             comp_zeros_rad_s=None, comp_poles_rad_s=None) -> dict[str, np.ndarray]:
+def simulate(
+    *,
+    axis="X",
+    duration_s=300.0,
+    rate_hz=1000.0,
+    seed=0,
+    stiffness_Nm_per_rad=0.0,
+    mount_freq_hz=0.0,
+    mount_damping=0.05,
+    pickup=None,
+    extra_flicker_corner_hz=0.0,
+    offset_jump_urad=0.0,
+    offset_jump_interval_s=60.0,
+    extra_damping_Nms=0.0,
+    scale_factor_error=0.0,
+    time_delay_s=0.0,
+    ac_white_scale=1.0,
+    ac_flicker_scale=None,
+    ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
+    ac_knee=1.0,
+    ac_flicker_slope=1.0,
+    flicker_corner_hz=0.0,
+    mount_excitation=0.0,
+    pickoff_white_scale=1.0,
+    pickoff_lines=None,
+    pickoff_line_freqs_hz=None,
+    pickoff_line_scales=None,
+    adc_range_V=ADC_RANGE_V,
+    amp_dead_zone_V=0.0,
+    amp_limit_V=math.inf,
+    amp_gain_factor=1.0,
+    comp_zeros_rad_s=None,
+    comp_poles_rad_s=None,
+) -> dict[str, np.ndarray]:
     """The recorded channels (volts, ADC-quantized) as a dict, without writing a file.
     Keywords: see the module docstring."""
     axis = axis.upper()
     m = axis_model(axis)
     if not (rate_hz > 0 and duration_s > 0):
         raise ValueError("rate_hz and duration_s must be positive")
-    for name, v in (("pickoff_white_scale", pickoff_white_scale), ("amp_gain_factor", amp_gain_factor),
-                    ("mount_excitation", mount_excitation)):
+    for name, v in (
+        ("pickoff_white_scale", pickoff_white_scale),
+        ("amp_gain_factor", amp_gain_factor),
+        ("mount_excitation", mount_excitation),
+    ):
         if not (v >= 0 and math.isfinite(v)):
             raise ValueError(f"{name} must be finite and >= 0, not {v!r}")
     if mount_excitation > 0 and not mount_freq_hz > 0:
         raise ValueError("mount_excitation shakes a mount mode: it needs mount_freq_hz > 0")
     if amp_dead_zone_V < 0 or not amp_limit_V > 0 or time_delay_s < 0:
         raise ValueError("amp_dead_zone_V and time_delay_s must be >= 0, amp_limit_V > 0")
-    ac_noise = dict(ac_white_scale=ac_white_scale, ac_flicker_scale=ac_flicker_scale,
-                    ac_flicker_corner_hz=ac_flicker_corner_hz, ac_knee=ac_knee, ac_flicker_slope=ac_flicker_slope,
-                    flicker_corner_hz=flicker_corner_hz, extra_flicker_corner_hz=max(extra_flicker_corner_hz, 0.0))
-    ac_noise_psd(1.0, axis, **ac_noise)        # checks the keywords before the long part
+    ac_noise = dict(
+        ac_white_scale=ac_white_scale,
+        ac_flicker_scale=ac_flicker_scale,
+        ac_flicker_corner_hz=ac_flicker_corner_hz,
+        ac_knee=ac_knee,
+        ac_flicker_slope=ac_flicker_slope,
+        flicker_corner_hz=flicker_corner_hz,
+        extra_flicker_corner_hz=max(extra_flicker_corner_hz, 0.0),
+    )
+    ac_noise_psd(1.0, axis, **ac_noise)  # checks the keywords before the long part
     lines = unit_pickoff_lines(axis, pickoff_line_freqs_hz, pickoff_line_scales, pickoff_lines)
     mount_in = mount_excitation > 0
     ranges = _adc_ranges(adc_range_V, axis)
@@ -716,20 +868,30 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
     if time_delay_s > 0 and n_delay < 1:
         raise ValueError(f"time_delay_s {time_delay_s} is below the internal step {dt:.3g} s")
     nonlinear_amp = amp_dead_zone_V > 0 or math.isfinite(amp_limit_V)
-    loop = dict(extra_damping_Nms=extra_damping_Nms, scale_factor_error=scale_factor_error,
-                comp_zeros_rad_s=comp_zeros_rad_s, comp_poles_rad_s=comp_poles_rad_s, amp_gain_factor=amp_gain_factor)
+    loop = dict(
+        extra_damping_Nms=extra_damping_Nms,
+        scale_factor_error=scale_factor_error,
+        comp_zeros_rad_s=comp_zeros_rad_s,
+        comp_poles_rad_s=comp_poles_rad_s,
+        amp_gain_factor=amp_gain_factor,
+    )
 
-    A, B, C, D, x0, names = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping,
-                                             mount_input=mount_in, **loop)
+    A, B, C, D, x0, names = continuous_model(
+        axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping, mount_input=mount_in, **loop
+    )
     if np.max(np.linalg.eigvals(A).real) >= 0:
-        raise ValueError(f"the loop is unstable with these settings ({loop}): no steady run to record")
+        raise ValueError(
+            f"the loop is unstable with these settings ({loop}): no steady run to record"
+        )
     settle_out = int(math.ceil(_settle_time(A, names) * rate_hz))
     n_run = (n_out + settle_out) * over
     n_fft = scipy.fft.next_fast_len(n_run, real=True)
 
     ss = np.random.SeedSequence(seed)
     # spawn(5)'s first four are spawn(4)'s: the old streams keep their draws
-    rng_ac, rng_jump, rng_p, rng_lines, rng_mount = (np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(5))
+    rng_ac, rng_jump, rng_p, rng_lines, rng_mount = (
+        np.random.Generator(np.random.PCG64(s)) for s in ss.spawn(5)
+    )
 
     # Autocollimator angle noise (urad): S_w a_w^2 K(f) (ac_noise_psd), plus offset jumps. At
     # the data sheet (a_w = 1, f_c = 3, sum knee, slope 1) this is S_w (1 + (3 + extra)/f).
@@ -770,17 +932,33 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
         Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((A, B, C, D), dt, method="bilinear")
         bconst = np.ascontiguousarray(Bd[:, 2] * m["omega_const"])
         dconst = np.ascontiguousarray(Dd[:, 2] * m["omega_const"])
-        _tustin_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, noise_cols]), np.ascontiguousarray(Cd),
-                    np.ascontiguousarray(Dd[:, noise_cols]), bconst, dconst, x, u, y)
+        _tustin_run(
+            np.ascontiguousarray(Ad),
+            np.ascontiguousarray(Bd[:, noise_cols]),
+            np.ascontiguousarray(Cd),
+            np.ascontiguousarray(Dd[:, noise_cols]),
+            bconst,
+            dconst,
+            x,
+            u,
+            y,
+        )
     else:
         # The same states, the amplifier and/or the sensor path opened (continuous_model); the
         # kernel closes them with the dead zone / limit and the delay line.
-        Ao, Bo, Co, Do, _, names_o = continuous_model(axis, stiffness_Nm_per_rad, mount_freq_hz, mount_damping,
-                                                      amp_input=nonlinear_amp, delayed_sensor=bool(n_delay),
-                                                      mount_input=mount_in, **loop)
+        Ao, Bo, Co, Do, _, names_o = continuous_model(
+            axis,
+            stiffness_Nm_per_rad,
+            mount_freq_hz,
+            mount_damping,
+            amp_input=nonlinear_amp,
+            delayed_sensor=bool(n_delay),
+            mount_input=mount_in,
+            **loop,
+        )
         assert names_o == names
         Ad, Bd, Cd, Dd, _ = scipy.signal.cont2discrete((Ao, Bo, Co, Do), dt, method="bilinear")
-        keep = [j for j in range(Bd.shape[1]) if j != 2]          # Omega enters as a constant
+        keep = [j for j in range(Bd.shape[1]) if j != 2]  # Omega enters as a constant
         col_amp = keep.index(len(noise_cols) + 1) if nonlinear_amp else -1
         col_sd = keep.index(Bd.shape[1] - 1) if n_delay else -1
         # The delay line starts full of the steady sensed angle (the Tustin state's steady
@@ -788,20 +966,35 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
         buf = np.zeros(max(n_delay, 1))
         if n_delay:
             buf[:] = float(Co[4] @ x) + offset0
-        _loop_run(np.ascontiguousarray(Ad), np.ascontiguousarray(Bd[:, keep]), np.ascontiguousarray(Cd),
-                  np.ascontiguousarray(Dd[:, keep]), np.ascontiguousarray(Bd[:, 2] * m["omega_const"]),
-                  np.ascontiguousarray(Dd[:, 2] * m["omega_const"]), x, u, y, col_amp, 3,
-                  m["Kp"] * amp_gain_factor, float(amp_dead_zone_V), float(amp_limit_V), col_sd, 4, buf)
+        _loop_run(
+            np.ascontiguousarray(Ad),
+            np.ascontiguousarray(Bd[:, keep]),
+            np.ascontiguousarray(Cd),
+            np.ascontiguousarray(Dd[:, keep]),
+            np.ascontiguousarray(Bd[:, 2] * m["omega_const"]),
+            np.ascontiguousarray(Dd[:, 2] * m["omega_const"]),
+            x,
+            u,
+            y,
+            col_amp,
+            3,
+            m["Kp"] * amp_gain_factor,
+            float(amp_dead_zone_V),
+            float(amp_limit_V),
+            col_sd,
+            4,
+            buf,
+        )
     del u
 
     # Electrical pickup on the control channel, phase zero at the recording's t = 0.
     t_rec = t - settle_out * over * dt
-    for f_line, amp in (pickup or []):
+    for f_line, amp in pickup or []:
         y[:, 0] += amp * np.sin(2 * math.pi * f_line * t_rec)
     # Recording chain: 3-pole Butterworth at 0.3 fs, decimation, 16-bit ADC (+-10 V unless
     # adc_range_V says otherwise).
     y = scipy.signal.sosfilt(anti_alias_sos(rate_hz, fs), y, axis=0)
-    y = y[settle_out * over::over][:n_out]
+    y = y[settle_out * over :: over][:n_out]
     lsb = 2 * ranges / 2**ADC_BITS
     code = np.clip(np.rint(y / lsb), -(2 ** (ADC_BITS - 1)), 2 ** (ADC_BITS - 1) - 1)
     volts = code * lsb
@@ -810,17 +1003,46 @@ def simulate(*, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm
 
 #: generate()'s keywords beyond the original ones, with their defaults (written to the file's
 #: meta only when given otherwise, so an old call's file keeps its meta).
-_NEW_DEFAULTS = dict(extra_damping_Nms=0.0, scale_factor_error=0.0, time_delay_s=0.0, ac_white_scale=1.0,
-                     ac_flicker_scale=None, ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ, ac_knee=1.0,
-                     ac_flicker_slope=1.0, flicker_corner_hz=0.0, mount_excitation=0.0, pickoff_white_scale=1.0,
-                     pickoff_lines=None, pickoff_line_freqs_hz=None, pickoff_line_scales=None,
-                     adc_range_V=ADC_RANGE_V, amp_dead_zone_V=0.0, amp_limit_V=math.inf,
-                     amp_gain_factor=1.0, comp_zeros_rad_s=None, comp_poles_rad_s=None)
+_NEW_DEFAULTS = dict(
+    extra_damping_Nms=0.0,
+    scale_factor_error=0.0,
+    time_delay_s=0.0,
+    ac_white_scale=1.0,
+    ac_flicker_scale=None,
+    ac_flicker_corner_hz=AC_FLICKER_CORNER_HZ,
+    ac_knee=1.0,
+    ac_flicker_slope=1.0,
+    flicker_corner_hz=0.0,
+    mount_excitation=0.0,
+    pickoff_white_scale=1.0,
+    pickoff_lines=None,
+    pickoff_line_freqs_hz=None,
+    pickoff_line_scales=None,
+    adc_range_V=ADC_RANGE_V,
+    amp_dead_zone_V=0.0,
+    amp_limit_V=math.inf,
+    amp_gain_factor=1.0,
+    comp_zeros_rad_s=None,
+    comp_poles_rad_s=None,
+)
 
 
-def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffness_Nm_per_rad=0.0,
-             mount_freq_hz=0.0, mount_damping=0.05, pickup=None, extra_flicker_corner_hz=0.0,
-             offset_jump_urad=0.0, offset_jump_interval_s=60.0, **more) -> Path:
+def generate(
+    path,
+    *,
+    axis="X",
+    duration_s=300.0,
+    rate_hz=1000.0,
+    seed=0,
+    stiffness_Nm_per_rad=0.0,
+    mount_freq_hz=0.0,
+    mount_damping=0.05,
+    pickup=None,
+    extra_flicker_corner_hz=0.0,
+    offset_jump_urad=0.0,
+    offset_jump_interval_s=60.0,
+    **more,
+) -> Path:
     """Write a Mode-3 "fbs-run" file of one axis's four channels; return its path.
 
     ``pickup`` is a list of ``(freq_hz, amplitude_V)`` lines added to the control channel
@@ -832,12 +1054,19 @@ def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffn
     unknown = set(more) - set(_NEW_DEFAULTS)
     if unknown:
         raise TypeError(f"generate() got unexpected keyword(s) {sorted(unknown)}")
-    params = dict(axis=axis.upper(), duration_s=float(duration_s), rate_hz=float(rate_hz), seed=int(seed),
-                  stiffness_Nm_per_rad=float(stiffness_Nm_per_rad), mount_freq_hz=float(mount_freq_hz),
-                  mount_damping=float(mount_damping),
-                  pickup=[[float(f), float(a)] for f, a in (pickup or [])],
-                  extra_flicker_corner_hz=float(extra_flicker_corner_hz),
-                  offset_jump_urad=float(offset_jump_urad), offset_jump_interval_s=float(offset_jump_interval_s))
+    params = dict(
+        axis=axis.upper(),
+        duration_s=float(duration_s),
+        rate_hz=float(rate_hz),
+        seed=int(seed),
+        stiffness_Nm_per_rad=float(stiffness_Nm_per_rad),
+        mount_freq_hz=float(mount_freq_hz),
+        mount_damping=float(mount_damping),
+        pickup=[[float(f), float(a)] for f, a in (pickup or [])],
+        extra_flicker_corner_hz=float(extra_flicker_corner_hz),
+        offset_jump_urad=float(offset_jump_urad),
+        offset_jump_interval_s=float(offset_jump_interval_s),
+    )
     extra = {k: v for k, v in more.items() if not _same(v, _NEW_DEFAULTS[k])}
     data = simulate(**{**params, "pickup": [tuple(p) for p in params["pickup"]]}, **extra)
     path = Path(path)
@@ -845,7 +1074,9 @@ def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffn
     with h5py.File(path, "w") as f:
         f.attrs["format"] = "fbs-run"
         f.attrs["format_version"] = 1
-        f.attrs["created"] = _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+        f.attrs["created"] = (
+            _dt.datetime.now(_dt.UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
+        )
         f.attrs["rig"] = "independent-generator"
         f.attrs["mode"] = 3
         f.attrs["axis"] = params["axis"]
@@ -856,8 +1087,13 @@ def generate(path, *, axis="X", duration_s=300.0, rate_hz=1000.0, seed=0, stiffn
             ds.attrs["units"] = "V"
             ds.attrs["sample_rate_hz"] = float(rate_hz)
         meta = f.create_group("meta")
-        meta.attrs["generator"] = json.dumps({"name": "tests/procedures/analysis/gap/independent.py", **params,
-                                              **{k: _jsonable(v) for k, v in extra.items()}})
+        meta.attrs["generator"] = json.dumps(
+            {
+                "name": "tests/procedures/analysis/gap/independent.py",
+                **params,
+                **{k: _jsonable(v) for k, v in extra.items()},
+            }
+        )
     return path
 
 
@@ -896,24 +1132,31 @@ def _delay(rng):
 #: parameter names). Ranges: where the loop shows the effect and the generator stays stable on
 #: both axes (a 5 ms delay on Y is at the edge of stability).
 def draw_effect(name: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str, float]]:
-    if name == "bearing_friction":      # DESIGN.md: eta To^2 = 410 (X) / 380 (Y) N m/rad
+    if name == "bearing_friction":  # DESIGN.md: eta To^2 = 410 (X) / 380 (Y) N m/rad
         k = round(float(rng.uniform(300.0, 900.0)), 1)
         return {"stiffness_Nm_per_rad": k}, {"stiffness_Nm_per_rad": k}
-    if name == "mount_resonance":       # shaken by the floor too: peak x3-30 the unit's white (DESIGN.md 8)
+    if (
+        name == "mount_resonance"
+    ):  # shaken by the floor too: peak x3-30 the unit's white (DESIGN.md 8)
         f, z = round(float(rng.uniform(25.0, 80.0)), 2), round(float(rng.uniform(0.02, 0.06)), 4)
         e = round(_log_uniform(rng, 3.0, 30.0), 3)
-        return ({"mount_freq_hz": f, "mount_damping": z, "mount_excitation": e},
-                {"freq_hz": f, "damping": z, "excitation": e})
+        return (
+            {"mount_freq_hz": f, "mount_damping": z, "mount_excitation": e},
+            {"freq_hz": f, "damping": z, "excitation": e},
+        )
     if name == "pickup_line":
         f, a = round(float(rng.uniform(30.0, 250.0)), 2), round(_log_uniform(rng, 0.002, 0.006), 5)
         return {"pickup": [(f, a)]}, {"freq_hz": f, "amplitude_V": a}
-    if name == "flicker_noise":         # the unit's corner (1.5-5 Hz) replaced by one well above it
+    if name == "flicker_noise":  # the unit's corner (1.5-5 Hz) replaced by one well above it
         c = round(float(rng.uniform(12.0, 30.0)), 2)
         return {"flicker_corner_hz": c}, {"corner_hz": c}
-    if name == "offset_jumps":          # Ch. II B.10 saw ~100 urad every 40-400 s; smaller here
+    if name == "offset_jumps":  # Ch. II B.10 saw ~100 urad every 40-400 s; smaller here
         a, t = round(float(rng.uniform(8.0, 20.0)), 2), round(float(rng.uniform(30.0, 60.0)), 1)
-        return {"offset_jump_urad": a, "offset_jump_interval_s": t}, {"amplitude_urad": a, "interval_s": t}
-    if name == "extra_damping":         # the gyros give 1.02 (X) / 0.51 (Y) N m s
+        return {"offset_jump_urad": a, "offset_jump_interval_s": t}, {
+            "amplitude_urad": a,
+            "interval_s": t,
+        }
+    if name == "extra_damping":  # the gyros give 1.02 (X) / 0.51 (Y) N m s
         d = round(float(rng.uniform(2.0, 5.0)), 3)
         return {"extra_damping_Nms": d}, {"damping_Nms": d}
     if name == "scale_factor_error":
@@ -925,14 +1168,34 @@ def draw_effect(name: str, rng: np.random.Generator) -> tuple[dict[str, Any], di
     raise ValueError(name)
 
 
-HIDDEN_EFFECTS = ("bearing_friction", "mount_resonance", "pickup_line", "flicker_noise", "offset_jumps",
-           "extra_damping", "scale_factor_error", "time_delay")
-KEY_PARAM = {"bearing_friction": "stiffness_Nm_per_rad", "mount_resonance": "freq_hz", "pickup_line": "freq_hz",
-       "flicker_noise": "corner_hz", "offset_jumps": "amplitude_urad", "extra_damping": "damping_Nms",
-       "scale_factor_error": "fraction", "time_delay": "delay_s"}
-HIDDEN_PAIRS = (("bearing_friction", "pickup_line"), ("mount_resonance", "offset_jumps"),
-         ("bearing_friction", "flicker_noise"), ("time_delay", "pickup_line"),
-         ("extra_damping", "offset_jumps"), ("scale_factor_error", "mount_resonance"))
+HIDDEN_EFFECTS = (
+    "bearing_friction",
+    "mount_resonance",
+    "pickup_line",
+    "flicker_noise",
+    "offset_jumps",
+    "extra_damping",
+    "scale_factor_error",
+    "time_delay",
+)
+KEY_PARAM = {
+    "bearing_friction": "stiffness_Nm_per_rad",
+    "mount_resonance": "freq_hz",
+    "pickup_line": "freq_hz",
+    "flicker_noise": "corner_hz",
+    "offset_jumps": "amplitude_urad",
+    "extra_damping": "damping_Nms",
+    "scale_factor_error": "fraction",
+    "time_delay": "delay_s",
+}
+HIDDEN_PAIRS = (
+    ("bearing_friction", "pickup_line"),
+    ("mount_resonance", "offset_jumps"),
+    ("bearing_friction", "flicker_noise"),
+    ("time_delay", "pickup_line"),
+    ("extra_damping", "offset_jumps"),
+    ("scale_factor_error", "mount_resonance"),
+)
 
 
 def draw_outside(kind: str, rng: np.random.Generator) -> tuple[dict[str, Any], dict[str, float]]:

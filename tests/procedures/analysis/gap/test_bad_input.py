@@ -12,10 +12,24 @@ from procedures.analysis.gap.grid import GapInputError
 from procedures.analysis.gap.workflow import analyse
 
 
-def _write(path, channels: dict[str, np.ndarray], *, axis: str | None = "X", mode: int = 3, rate: float = 1000.0,
-           events: list[tuple[float, str, str]] = ()):
-    with RunWriter(path, rig="test", mode=mode, rate_hz=rate, channels=dict.fromkeys(channels, "V"),
-                   axis=axis, overwrite=True) as w:
+def _write(
+    path,
+    channels: dict[str, np.ndarray],
+    *,
+    axis: str | None = "X",
+    mode: int = 3,
+    rate: float = 1000.0,
+    events: list[tuple[float, str, str]] = (),
+):
+    with RunWriter(
+        path,
+        rig="test",
+        mode=mode,
+        rate_hz=rate,
+        channels=dict.fromkeys(channels, "V"),
+        axis=axis,
+        overwrite=True,
+    ) as w:
         for t, kind, text in events:
             w.event(t, kind, text)
         w.append(channels)
@@ -64,12 +78,20 @@ def test_nans_are_named_with_their_channel_count_and_time(tmp_path, capsys):
     x = _noise(100_000)
     x[12_345:12_355] = np.nan
     p = _write(tmp_path / "f.h5", {"ac_x_ctl": _noise(100_000, 1), "gyro_x": x})
-    _expect(p, "gyro_x has 10 lost (NaN) samples: samples 12345..12354", "(12.345..12.354 s)", capsys=capsys)
+    _expect(
+        p,
+        "gyro_x has 10 lost (NaN) samples: samples 12345..12354",
+        "(12.345..12.354 s)",
+        capsys=capsys,
+    )
 
 
 def test_a_mode_change_inside_the_record_is_refused(tmp_path):
-    p = _write(tmp_path / "f.h5", {"ac_x_ctl": _noise(100_000)}, events=[(0.0, "mode", "mode 3"),
-                                                                          (42.0, "mode", "mode 4")])
+    p = _write(
+        tmp_path / "f.h5",
+        {"ac_x_ctl": _noise(100_000)},
+        events=[(0.0, "mode", "mode 3"), (42.0, "mode", "mode 4")],
+    )
     _expect(p, "mode changes during the record", "42.000 s")
 
 

@@ -11,7 +11,15 @@ from fbs.cli import main
 
 pytestmark = pytest.mark.slow
 
-KEYS = {"effect", "parameters", "significant", "gap_before_db", "gap_after_db", "candidates", "file"}
+KEYS = {
+    "effect",
+    "parameters",
+    "significant",
+    "gap_before_db",
+    "gap_after_db",
+    "candidates",
+    "file",
+}
 
 
 def test_json_and_report(hidden, tmp_path, capsys):

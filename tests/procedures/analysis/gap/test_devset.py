@@ -29,7 +29,9 @@ def rules():
 
     name = "fbs_tests_gap_devset_rules"
     if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name("devset_rules.py"))
+        spec = importlib.util.spec_from_file_location(
+            name, Path(__file__).with_name("devset_rules.py")
+        )
         assert spec is not None and spec.loader is not None
         sys.modules[name] = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(sys.modules[name])

@@ -26,10 +26,21 @@ def _log_uniform(rng: np.random.Generator, lo: float, hi: float) -> float:
 
 DRAWS = {
     "bearing_friction": lambda r: {"stiffness_Nm_per_rad": _log_uniform(r, 200, 2000)},
-    "mount_resonance": lambda r: {"freq_hz": _log_uniform(r, 20, 80), "damping": _log_uniform(r, 0.01, 0.1)},
-    "pickup_line": lambda r: {"freq_hz": float(r.uniform(5, 280)), "amplitude_V": _log_uniform(r, 1e-3, 1e-2)},
-    "flicker_noise": lambda r: {"corner_hz": _log_uniform(r, 12, 50)},  # above the unit's own 1/f range
-    "offset_jumps": lambda r: {"amplitude_urad": _log_uniform(r, 3, 30), "interval_s": float(r.uniform(20, 80))},
+    "mount_resonance": lambda r: {
+        "freq_hz": _log_uniform(r, 20, 80),
+        "damping": _log_uniform(r, 0.01, 0.1),
+    },
+    "pickup_line": lambda r: {
+        "freq_hz": float(r.uniform(5, 280)),
+        "amplitude_V": _log_uniform(r, 1e-3, 1e-2),
+    },
+    "flicker_noise": lambda r: {
+        "corner_hz": _log_uniform(r, 12, 50)
+    },  # above the unit's own 1/f range
+    "offset_jumps": lambda r: {
+        "amplitude_urad": _log_uniform(r, 3, 30),
+        "interval_s": float(r.uniform(20, 80)),
+    },
 }
 DRAWS_PER_EFFECT = 3
 
@@ -47,8 +58,10 @@ def suite(hidden, tmp_path_factory):
             rows.append((name, p, analyse(path).to_json()))
     for name, p, j in rows:  # the table a reviewer wants when something fails (pytest -s)
         key = effects.get(name).key_param
-        print(f"{name:18s} {key}={p[key]:.4g} -> {j['effect']:18s} {j['parameters'].get(key)} "
-              f"gap {j['gap_before_db']:.2f} -> {j['gap_after_db']:.2f} dB")
+        print(
+            f"{name:18s} {key}={p[key]:.4g} -> {j['effect']:18s} {j['parameters'].get(key)} "
+            f"gap {j['gap_before_db']:.2f} -> {j['gap_after_db']:.2f} dB"
+        )
     return rows
 
 
@@ -82,7 +95,11 @@ def test_candidates_are_ranked_with_the_named_effect_first(suite):
         assert j["candidates"][0]["effect"] == j["effect"]
         # every spectral effect is a candidate; one whose unseen parameters come from evidence (a
         # pickup line's frequency, jumps' size) only where the record shows that evidence
-        assert {c["effect"] for c in j["candidates"]} >= {"none", "bearing_friction", "extra_damping"}
+        assert {c["effect"] for c in j["candidates"]} >= {
+            "none",
+            "bearing_friction",
+            "extra_damping",
+        }
 
 
 def test_nominal_runs_are_not_significant_in_19_of_20_seeds(hidden, tmp_path):
@@ -96,8 +113,11 @@ def test_nominal_runs_are_not_significant_in_19_of_20_seeds(hidden, tmp_path):
 
 
 def test_two_effects_of_different_size_are_both_named_largest_first(hidden, tmp_path):
-    path = hidden(tmp_path / "two.h5", ["bearing_friction:stiffness_Nm_per_rad=800",
-                                        "pickup_line:freq_hz=200,amplitude_V=0.003"], seed=77)
+    path = hidden(
+        tmp_path / "two.h5",
+        ["bearing_friction:stiffness_Nm_per_rad=800", "pickup_line:freq_hz=200,amplitude_V=0.003"],
+        seed=77,
+    )
     res = analyse(path)
     order = [f.effect for f in res.findings]
     assert order[:2] == ["bearing_friction", "pickup_line"], order

@@ -48,7 +48,9 @@ def _notch(x, lo=1.0, hi=12.0):
 
 # --------------------------------------------------------------------------- file and seeds
 def test_file_follows_the_fbs_run_contract(independent, tmp_path):
-    path = independent.generate(tmp_path / "run.h5", axis="Y", duration_s=5.0, rate_hz=500.0, seed=1)
+    path = independent.generate(
+        tmp_path / "run.h5", axis="Y", duration_s=5.0, rate_hz=500.0, seed=1
+    )
     assert path == tmp_path / "run.h5"
     with h5py.File(path, "r") as f:
         a = f.attrs
@@ -65,12 +67,15 @@ def test_file_follows_the_fbs_run_contract(independent, tmp_path):
             assert np.all(np.isfinite(ds[()])) and np.any(ds[()] != 0.0)
     # The project's reader accepts it, as the gap workflow will.
     from daq.reader import RunFile
+
     with RunFile(path) as run:
         assert run.rate_hz == 500.0 and run.n_samples == 2500
 
 
 def test_same_seed_same_samples_other_seed_differs(independent, tmp_path):
-    kw = dict(duration_s=10.0, offset_jump_urad=5.0, offset_jump_interval_s=2.0, pickup=[(50.0, 0.01)])
+    kw = dict(
+        duration_s=10.0, offset_jump_urad=5.0, offset_jump_interval_s=2.0, pickup=[(50.0, 0.01)]
+    )
     a = _read(independent.generate(tmp_path / "a.h5", seed=3, **kw))
     b = _read(independent.generate(tmp_path / "b.h5", seed=3, **kw))
     c = _read(independent.generate(tmp_path / "c.h5", seed=4, **kw))
@@ -88,7 +93,7 @@ def test_spring_bearing_puts_a_notch_at_the_platform_resonance(independent):
     assert depth > 12.0
     free = independent.simulate(duration_s=200.0, seed=5)
     f_dip, depth = _notch(free["ac_x_ctl"])
-    assert depth < 3.0            # the spectrum only slopes ...
+    assert depth < 3.0  # the spectrum only slopes ...
     assert f_dip < 1.5 or f_dip > 11.5  # ... and its minimum is a band edge
 
 
@@ -117,7 +122,7 @@ def test_pickup_line_appears_at_its_frequency_with_its_amplitude(independent):
 @pytest.mark.parametrize("axis, rms_urad, kg", [("X", 6.2, 6.03e-3), ("Y", 12.4, 6.70e-3)])
 def test_gyro_pickoff_noise_level(independent, axis, rms_urad, kg):
     d = independent.simulate(axis=axis, duration_s=120.0, seed=9)
-    f, p = _welch(d[f"gyro_{axis.lower()}"] / kg, 20.0)   # urad^2/Hz
+    f, p = _welch(d[f"gyro_{axis.lower()}"] / kg, 20.0)  # urad^2/Hz
     band = (f >= 0.1) & (f <= 200.0)
     rms = math.sqrt(np.sum(p[band]) * f[1])
     # white + lines (+ the sub-microradian platform motion), slightly cut by the anti-alias filter
@@ -125,7 +130,7 @@ def test_gyro_pickoff_noise_level(independent, axis, rms_urad, kg):
     # The white floor in a line-free band, with the anti-alias filter taken out.
     quiet = (f >= 110.0) & (f <= 180.0)
     aa2 = 1.0 / (1.0 + (f[quiet] / 300.0) ** 6)
-    lines_var = 0.85 * rms_urad**2          # DESIGN.md section 3: the lines carry 85 % of the variance
+    lines_var = 0.85 * rms_urad**2  # DESIGN.md section 3: the lines carry 85 % of the variance
     white = (rms_urad**2 - lines_var) / 199.9
     assert np.mean(p[quiet] / aa2) == pytest.approx(white, rel=0.05)
 
@@ -154,17 +159,21 @@ def test_offset_jumps_are_a_telegraph_signal_and_step_the_platform(independent):
     amp = 40.0
 
     def biggest_step(d):
-        g = d["gyro_x"] / 6.03e-3                                   # urad
-        smooth = np.convolve(g, np.ones(500) / 500, mode="valid")   # 0.5 s mean
-        return np.max(np.abs(smooth[1000:] - smooth[:-1000]))       # change over 1 s
+        g = d["gyro_x"] / 6.03e-3  # urad
+        smooth = np.convolve(g, np.ones(500) / 500, mode="valid")  # 0.5 s mean
+        return np.max(np.abs(smooth[1000:] - smooth[:-1000]))  # change over 1 s
 
-    jumpy = independent.simulate(duration_s=60.0, seed=6, offset_jump_urad=amp, offset_jump_interval_s=10.0)
+    jumpy = independent.simulate(
+        duration_s=60.0, seed=6, offset_jump_urad=amp, offset_jump_interval_s=10.0
+    )
     assert 0.8 * 2 * amp < biggest_step(jumpy) < 1.3 * 2 * amp
     assert biggest_step(independent.simulate(duration_s=60.0, seed=6)) < 0.1 * 2 * amp
     # The record opens in the steady state for the offset present then: no acquisition
     # transient that a step detector would count as a jump of A.
     for seed in (1, 2, 3):
-        d = independent.simulate(duration_s=5.0, seed=seed, offset_jump_urad=amp, offset_jump_interval_s=1e4)
+        d = independent.simulate(
+            duration_s=5.0, seed=seed, offset_jump_urad=amp, offset_jump_interval_s=1e4
+        )
         assert abs(np.mean(d["gyro_x"][:1000]) / 6.03e-3) < 0.05 * amp
         assert np.max(np.abs(d["ac_x_ctl"][:500])) < 0.2 * amp * 5.70e-3
 
@@ -179,7 +188,7 @@ def test_mount_resonance_adds_a_closed_loop_mode_near_the_mount_frequency(indepe
 
 
 # --------------------------------------------------------------------------- against simhw
-THIRD_OCTAVE_CENTRES = 10 ** (np.arange(-5, 24) / 10)   # 0.32 ... 200 Hz
+THIRD_OCTAVE_CENTRES = 10 ** (np.arange(-5, 24) / 10)  # 0.32 ... 200 Hz
 COMPARED = ("ac_x_ctl", "ac_x_inst", "gyro_x", "pa_x")
 
 
@@ -211,12 +220,18 @@ def test_closed_loop_spectra_match_the_project_simulator_in_third_octaves(indepe
     upper = THIRD_OCTAVE_CENTRES >= 2.0
     report = []
     for c in COMPARED:
-        dev = 10 * np.log10(_band_powers(ours[c], lo, hi) / _band_powers(np.concatenate(parts[c]), lo, hi))
+        dev = 10 * np.log10(
+            _band_powers(ours[c], lo, hi) / _band_powers(np.concatenate(parts[c]), lo, hi)
+        )
         worst = int(np.argmax(np.abs(dev)))
-        report.append(f"{c}: worst {dev[worst]:+.2f} dB at {THIRD_OCTAVE_CENTRES[worst]:.3g} Hz, "
-                      f"mean >= 2 Hz {np.mean(dev[upper]):+.2f} dB")
+        report.append(
+            f"{c}: worst {dev[worst]:+.2f} dB at {THIRD_OCTAVE_CENTRES[worst]:.3g} Hz, "
+            f"mean >= 2 Hz {np.mean(dev[upper]):+.2f} dB"
+        )
         bad = np.abs(dev) > tol
-        assert not bad.any(), (f"{c}: bands {THIRD_OCTAVE_CENTRES[bad].round(3)} Hz deviate "
-                               f"{dev[bad].round(2)} dB (allowed {tol[bad].round(2)})")
+        assert not bad.any(), (
+            f"{c}: bands {THIRD_OCTAVE_CENTRES[bad].round(3)} Hz deviate "
+            f"{dev[bad].round(2)} dB (allowed {tol[bad].round(2)})"
+        )
         assert abs(np.mean(dev[upper])) < 0.4, report[-1]
     print("\n".join(report))

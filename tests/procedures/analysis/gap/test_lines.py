@@ -18,7 +18,9 @@ FS, T = 1000.0, 60.0
 
 def _line(rng, f, a, noise_rms):
     t = np.arange(int(FS * T)) / FS
-    return a * np.sin(2 * math.pi * f * t + rng.uniform(0, 2 * math.pi)) + noise_rms * rng.standard_normal(len(t))
+    return a * np.sin(
+        2 * math.pi * f * t + rng.uniform(0, 2 * math.pi)
+    ) + noise_rms * rng.standard_normal(len(t))
 
 
 def test_the_sigma_is_the_scatter_and_the_interval_covers():

@@ -36,7 +36,9 @@ def nominal_run():
     sim = Simulator(cfg, 1000.0, seed=11, mode=3)
     for c, r in zip(CH, (0.1, 0.1, 1.0, 0.02)):
         sim.set_range(c, r)
-    data = np.concatenate([b.volts[:, [b.channels.index(c) for c in CH]] for b in sim.run(300, 10)]).T
+    data = np.concatenate(
+        [b.volts[:, [b.channels.index(c) for c in CH]] for b in sim.run(300, 10)]
+    ).T
     return cfg, data
 
 
@@ -54,11 +56,35 @@ def test_expected_spectra_match_the_simulator_to_chi_square_precision(nominal_ru
     assert not departures(P, S, g.dof).any()
 
 
-@pytest.mark.parametrize("unit", [
-    {"ac": 2.0, "ac_corner_hz": 4.0, "ac_knee": 0.3, "ac_slope": 1.1, "pickoff": 0.5, "line": 3.0},
-    {"ac": 0.5, "ac_corner_hz": 1.8, "ac_knee": 1.0, "ac_slope": 0.85, "pickoff": 2.5, "line": 0.4},
-    {"ac": 1.2, "ac_corner_hz": 3.0, "ac_knee": 0.0, "ac_slope": 1.0, "pickoff": 1.0, "line": 1.0},
-])
+@pytest.mark.parametrize(
+    "unit",
+    [
+        {
+            "ac": 2.0,
+            "ac_corner_hz": 4.0,
+            "ac_knee": 0.3,
+            "ac_slope": 1.1,
+            "pickoff": 0.5,
+            "line": 3.0,
+        },
+        {
+            "ac": 0.5,
+            "ac_corner_hz": 1.8,
+            "ac_knee": 1.0,
+            "ac_slope": 0.85,
+            "pickoff": 2.5,
+            "line": 0.4,
+        },
+        {
+            "ac": 1.2,
+            "ac_corner_hz": 3.0,
+            "ac_knee": 0.0,
+            "ac_slope": 1.0,
+            "pickoff": 1.0,
+            "line": 1.0,
+        },
+    ],
+)
 def test_nuisance_fit_recovers_a_nominal_unit(nominal_run, unit):
     """A unit anywhere in DESIGN.md's nominal envelope (white level, the 1/f knee's corner, form
     and slope, pickoff white and lines) comes back as its scales from its expected spectrum."""
@@ -75,7 +101,9 @@ def test_nuisance_fit_recovers_a_nominal_unit(nominal_run, unit):
     assert nf.scales["ac_knee"] == pytest.approx(unit["ac_knee"], abs=0.05)
     # the 71 Hz pair shares its bands, so only the lines' total power there is identified
     fitted = sum(nf.scales[p] * ms.parts[p] for p in line_parts)
-    assert fitted == pytest.approx(unit["line"] * sum(ms.parts[p] for p in line_parts), rel=2e-2, abs=1e-30)
+    assert fitted == pytest.approx(
+        unit["line"] * sum(ms.parts[p] for p in line_parts), rel=2e-2, abs=1e-30
+    )
     assert nf.nll <= whittle_nll(fake, ms.total(), g.dof)
     assert fit_nuisance(P, g.dof, ms).scales["ac"] == pytest.approx(1.0, abs=0.1)
 
@@ -91,9 +119,14 @@ def test_nuisance_fit_stays_in_the_nominal_envelope(nominal_run):
     assert nf.scales["ac_corner_hz"] <= 5.0 + 1e-9
 
 
-@pytest.mark.parametrize("effect, params", [("bearing_friction", {"stiffness_Nm_per_rad": 600}),
-                                            ("mount_resonance", {"freq_hz": 40, "damping": 0.02}),
-                                            ("time_delay", {"delay_s": 0.003})])
+@pytest.mark.parametrize(
+    "effect, params",
+    [
+        ("bearing_friction", {"stiffness_Nm_per_rad": 600}),
+        ("mount_resonance", {"freq_hz": 40, "damping": 0.02}),
+        ("time_delay", {"delay_s": 0.003}),
+    ],
+)
 def test_modal_zoh_response_equals_the_discretized_plant(effect, params):
     cfg = effects.get(effect).inject(effects.nominal(), "X", **params)
     plant = build_plant(cfg, RelayState(3))
@@ -118,11 +151,14 @@ def test_the_line_kernel_is_welchs_estimate_of_a_sinusoid(f0):
     assert k.sum() * g.df == pytest.approx(0.01**2 / 2, rel=0.02)  # the line's power
 
 
-@pytest.mark.parametrize("make", [
-    lambda rng, dt: FlickerNoise(rng, 1e-4, 1e-3, 50.0, dt),
-    lambda rng, dt: LagNoise(rng, 2e-3, 5.0, dt),
-    lambda rng, dt: TelegraphJumps(rng, 1.0, 2.0, dt),
-])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda rng, dt: FlickerNoise(rng, 1e-4, 1e-3, 50.0, dt),
+        lambda rng, dt: LagNoise(rng, 2e-3, 5.0, dt),
+        lambda rng, dt: TelegraphJumps(rng, 1.0, 2.0, dt),
+    ],
+)
 def test_noise_sources_report_the_spectrum_they_make(make):
     dt = 1 / 2000
     src = make(np.random.default_rng(5), dt)

@@ -52,7 +52,9 @@ def test_the_report_writes_a_sim_config_that_load_config_reads(case):
     b = cfg.bearing["X"]
     assert b.model == "dahl"
     assert b.eta_per_Nm * b.To_Nm**2 == pytest.approx(TRUE_K, rel=0.15)
-    assert cfg.bearing["Y"].model == cfg.bearing["Z"].model == "none"  # the nominal model's, as analysed
+    assert (
+        cfg.bearing["Y"].model == cfg.bearing["Z"].model == "none"
+    )  # the nominal model's, as analysed
     text = path.read_text()
     header = [line for line in text.splitlines() if line.startswith("#")]
     assert any(str(measured) in line for line in header)
@@ -83,8 +85,20 @@ def _gap_db(measured: dict[str, np.ndarray], simulated: dict[str, np.ndarray], f
 
 
 def _simulate(out: Path, mode: int, *extra: str) -> Path:
-    argv = ["simulate", "--mode", str(mode), "--duration", f"{DURATION_S:g}", "--rate", f"{RATE_HZ:g}",
-            "--seed", "7", "--out", str(out), *extra]
+    argv = [
+        "simulate",
+        "--mode",
+        str(mode),
+        "--duration",
+        f"{DURATION_S:g}",
+        "--rate",
+        f"{RATE_HZ:g}",
+        "--seed",
+        "7",
+        "--out",
+        str(out),
+        *extra,
+    ]
     assert main(argv) == 0
     return out
 
@@ -109,8 +123,10 @@ def test_simulating_the_refined_config_closes_the_gap(case, capsys):
     before = _gap_db({c: meas[c] for c in kept}, sims["nominal"], fs)
     after = _gap_db({c: meas[c] for c in kept}, sims["refined"], fs)
     with capsys.disabled():
-        print(f"\nWelch 1/6-octave gap on {', '.join(kept)}: fbs simulate (data sheet) {before:.2f} dB, "
-              f"--sim-config refined.toml {after:.2f} dB")
+        print(
+            f"\nWelch 1/6-octave gap on {', '.join(kept)}: fbs simulate (data sheet) {before:.2f} dB, "
+            f"--sim-config refined.toml {after:.2f} dB"
+        )
     assert after < 1.5
     assert after <= 0.5 * before
 
@@ -132,7 +148,9 @@ def test_the_json_names_the_refined_config(case, monkeypatch, capsys):
     assert str(report / REFINED_NAME) in capsys.readouterr().out
 
 
-def test_without_a_refined_model_nothing_is_written_and_gap_md_says_why(case, tmp_path, monkeypatch, capsys):
+def test_without_a_refined_model_nothing_is_written_and_gap_md_says_why(
+    case, tmp_path, monkeypatch, capsys
+):
     import fbs.gap
 
     _, measured, res = case
@@ -141,8 +159,10 @@ def test_without_a_refined_model_nothing_is_written_and_gap_md_says_why(case, tm
     written = write_report(bare, tmp_path)
     assert not (tmp_path / REFINED_NAME).exists()
     assert all(p.name != REFINED_NAME for p in written)
-    assert f"No `{REFINED_NAME}` was written: this result carries no refined model configuration" in (
-        tmp_path / "gap.md").read_text()
+    assert (
+        f"No `{REFINED_NAME}` was written: this result carries no refined model configuration"
+        in (tmp_path / "gap.md").read_text()
+    )
     monkeypatch.setattr(fbs.gap, "_analyse", lambda args: bare)
     assert main(["gap", str(measured), "--json", "--report", str(tmp_path)]) == 0
     assert json.loads(capsys.readouterr().out)["refined_config"] is None

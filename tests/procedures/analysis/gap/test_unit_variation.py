@@ -33,8 +33,15 @@ pytestmark = pytest.mark.slow
 
 def _run(independent, folder, axis: str, seed: int, hidden: dict[str, Any]) -> dict[str, Any]:
     nuisance = independent.draw_nuisance(np.random.default_rng([17, seed]))
-    path = independent.generate(folder / f"s{seed}.h5", axis=axis, seed=seed, duration_s=300.0,
-                                rate_hz=1000.0, **nuisance, **hidden)
+    path = independent.generate(
+        folder / f"s{seed}.h5",
+        axis=axis,
+        seed=seed,
+        duration_s=300.0,
+        rate_hz=1000.0,
+        **nuisance,
+        **hidden,
+    )
     try:
         return analyse(path).to_json()
     finally:
@@ -60,7 +67,9 @@ def runs(independent, tmp_path_factory):
         for i in range(2):
             seed = 2000 + 10 * e_idx + i
             kw, truth = independent.draw_effect(eff, np.random.default_rng([18, seed]))
-            out["B"].append((eff, truth, _run(independent, folder, "XY"[(i + e_idx) % 2], seed, kw)))
+            out["B"].append(
+                (eff, truth, _run(independent, folder, "XY"[(i + e_idx) % 2], seed, kw))
+            )
     for p_idx, pair in enumerate(independent.HIDDEN_PAIRS):
         for i in range(2):
             seed = 3000 + 10 * p_idx + i
@@ -70,9 +79,19 @@ def runs(independent, tmp_path_factory):
                 k, t = independent.draw_effect(eff, rng)
                 kw.update(k)
                 truth[eff] = t
-            out["C"].append((pair, truth, _run(independent, folder, "XY"[(i + p_idx) % 2], seed, kw)))
-    plan = [("dead_zone", "X"), ("dead_zone", "Y"), ("dead_zone", "X"), ("lead_zero", "Y"), ("lead_zero", "X"),
-            ("lead_zero", "Y"), ("lead_pole", "X"), ("lead_pole", "Y")]
+            out["C"].append(
+                (pair, truth, _run(independent, folder, "XY"[(i + p_idx) % 2], seed, kw))
+            )
+    plan = [
+        ("dead_zone", "X"),
+        ("dead_zone", "Y"),
+        ("dead_zone", "X"),
+        ("lead_zero", "Y"),
+        ("lead_zero", "X"),
+        ("lead_zero", "Y"),
+        ("lead_pole", "X"),
+        ("lead_pole", "Y"),
+    ]
     for i, (kind, axis) in enumerate(plan):
         kw, _ = independent.draw_outside(kind, np.random.default_rng([20, 4000 + i]))
         out["D"].append((kind, _run(independent, folder, axis, 4000 + i, kw)))
@@ -113,7 +132,9 @@ def test_c_two_effects_both_named_and_no_third(independent, runs):
     # pickoff pair's window, and a Y scale-factor error beside a floor-excited mount, are named
     # by neither alone (each leaves most of the gap where it acts): the pair search names them
     # together (measured 11 of 12 by bench/gap_holdout.py; one spurious 0.2 ms delay is left).
-    assert sum(clean) >= math.ceil(0.8 * n), [(pair, [e["effect"] for e in j["effects"]]) for pair, _, j in runs["C"]]
+    assert sum(clean) >= math.ceil(0.8 * n), [
+        (pair, [e["effect"] for e in j["effects"]]) for pair, _, j in runs["C"]
+    ]
     close = 0
     for pair, truth, j in runs["C"]:
         ok = True
