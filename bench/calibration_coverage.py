@@ -148,7 +148,7 @@ def truth_of(cfg: dict[str, dict[str, Any]], key: str, ch: str) -> float:
 
 def _steps(path: Path) -> dict[str, Any]:
     from daq.reader import RunFile
-    from procedures.runner import steps_done
+    from procedures.resume import steps_done
 
     with RunFile(path) as rf:
         events = rf.events

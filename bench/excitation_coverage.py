@@ -169,7 +169,8 @@ def run_case(case: int, n_defaults: int, keep: str, reanalyse: bool) -> dict[str
     logging.disable(logging.WARNING)
     from drivers.rig import open_rig
     from procedures.calibrations.excitation import Excitation, Params
-    from procedures.runner import load_resume, run_procedure
+    from procedures.resume import load_resume
+    from procedures.runner import run_procedure
 
     axis, cfg = draw(case, n_defaults)
     folder = Path(keep) / f"case{case:03d}"

@@ -54,7 +54,8 @@ from drivers.logrule import PROJECT_PACKAGES, ruled, set_levels
 from drivers.setpoints import SetpointLimits
 
 if TYPE_CHECKING:
-    from procedures.runner import Procedure, RunSummary
+    from procedures.procedure import Procedure
+    from procedures.runner import RunSummary
 
 log = logging.getLogger(__name__)
 

@@ -27,7 +27,8 @@ from console.state import ProcedureInfo
 from console.timefmt import duration
 
 if TYPE_CHECKING:
-    from procedures.runner import Measurement, Procedure, RunSummary
+    from procedures.procedure import Measurement, Procedure
+    from procedures.runner import RunSummary
 
 
 RESUME = "--resume"

@@ -166,6 +166,6 @@ def recording_path(typed: str, out_dir: Path) -> Path:
 
 def default_path(out_dir: Path) -> Path:
     """The next free ``recording.h5`` name in ``out_dir`` (a recording is never overwritten)."""
-    from procedures.runner import next_free
+    from procedures.resume import next_free
 
     return next_free(out_dir, "recording")

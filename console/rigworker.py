@@ -75,7 +75,8 @@ from drivers.setpoints import SetpointKind
 
 if TYPE_CHECKING:  # the analysis stack is imported when a recording or a procedure starts
     from daq.recorder import Acquisition
-    from procedures.runner import Procedure, Progress
+    from procedures.procedure import Procedure
+    from procedures.progress import Progress
 
 log = logging.getLogger(__name__)
 
@@ -518,7 +519,9 @@ class RigWorker:
         self, proc: Procedure, prev: Phase = Phase.READY, resume_from: Path | None = None
     ) -> str:
         from procedures.params import find_prior
-        from procedures.runner import ProcedureError, load_resume, run_procedure
+        from procedures.procedure import ProcedureError
+        from procedures.resume import load_resume
+        from procedures.runner import run_procedure
 
         try:
             if self._acq is not None:
@@ -539,8 +542,8 @@ class RigWorker:
             if self._stop.is_set():
                 raise Refused("the console is closing")
             from daq.runfile import make_folder
+            from procedures.resume import run_file_for
             from procedures.runlog import RunLog
-            from procedures.runner import run_file_for
 
             make_folder(self.out_dir)
             # the file run_procedure will pick (it takes the same next free name), shown while it runs

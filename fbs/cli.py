@@ -99,13 +99,13 @@ def load(*commands: str) -> None:
 
 def command_errors() -> tuple[type[Exception], ...]:
     """What a command reports as ``fbs CMD: error: ...`` and exit 2 (``fbs batch`` records the
-    same per file): bad input, a file or a device. ``procedures.runner.ProcedureError`` is one
-    once the runner is loaded; before, none can have been raised, and this loads nothing."""
+    same per file): bad input, a file or a device. ``procedures.procedure.ProcedureError`` is one
+    once procedures are loaded; before, none can have been raised, and this loads nothing."""
     # simhw.params.ConfigError is a ValueError
     errors: list[type[Exception]] = [ValueError, OSError, DriverError]
-    runner = sys.modules.get("procedures.runner")
-    if runner is not None:
-        errors.append(runner.ProcedureError)
+    procedure = sys.modules.get("procedures.procedure")
+    if procedure is not None:
+        errors.append(procedure.ProcedureError)
     return tuple(errors)
 
 

@@ -19,9 +19,11 @@ from typing import Any
 
 from drivers.rig import Rig
 from fbs.logsetup import StderrHandler, stderr_handler
+from procedures.procedure import Procedure
 from procedures.progress import STEPS, Progress
+from procedures.resume import Resumed, run_file_for
 from procedures.runlog import RunLog
-from procedures.runner import Procedure, Resumed, RunSummary, run_file_for, run_procedure
+from procedures.runner import RunSummary, run_procedure
 
 log = logging.getLogger("fbs.progress")
 
@@ -59,7 +61,7 @@ def bar(fraction: float, width: int = BAR_WIDTH) -> str:
 
 
 class ProgressReporter:
-    """A ``procedures.runner.ProgressListener`` for the command line. ``handler`` is the
+    """A ``procedures.progress.ProgressListener`` for the command line. ``handler`` is the
     command's stderr handler (``fbs.logsetup.stderr_handler()``); without one (or off a
     terminal) only the plain lines are written. ``close`` erases the live line."""
 

@@ -37,7 +37,7 @@ from procedures.calibrations import module_names
 from procedures.runlog import RunLog
 
 if TYPE_CHECKING:
-    from procedures.runner import Measurement
+    from procedures.procedure import Measurement
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +60,8 @@ def run_command(args: argparse.Namespace) -> int:
     from fbs.progress import run_with_progress
     from procedures.calibrations import get
     from procedures.params import find_prior, parse_params
-    from procedures.runner import ProcedureError, load_resume
+    from procedures.procedure import ProcedureError
+    from procedures.resume import load_resume
 
     with RunLog() as runlog:
         # the log's first line (held until the log is named; never on stderr)

@@ -15,7 +15,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from procedures.runner import Procedure
+from procedures.procedure import Procedure
 
 
 def prior_value(

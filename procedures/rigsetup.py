@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.errors import DeviceTimeout, PlatformClamped
-from procedures.runner import Context
+from procedures.procedure import Context
 
 
 def bring_to_mode3(

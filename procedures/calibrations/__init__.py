@@ -1,5 +1,5 @@
 """The scripted procedures, one module each; a module is a procedure if it defines
-``PROCEDURE`` (a ``procedures.runner.Procedure`` subclass). ``catalogue()`` finds them
+``PROCEDURE`` (a ``procedures.procedure.Procedure`` subclass). ``catalogue()`` finds them
 by scanning this package, so adding one touches nothing else. A procedure's module is named
 for it (``earth-rate`` in ``earth_rate.py``): the command line lists the procedures by module
 name without importing them (``module_names``), so ``catalogue()`` refuses a module whose
@@ -12,7 +12,7 @@ import pkgutil
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # module_names() must not load the runner (numpy, h5py): fbs's parser calls it
-    from procedures.runner import Procedure
+    from procedures.procedure import Procedure
 
 
 class CatalogueError(Exception):

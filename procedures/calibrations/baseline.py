@@ -45,10 +45,7 @@ from procedures.analysis.intervals import Estimate, add_figure
 from procedures.analysis.transfer import TransferError, block_csd
 from procedures.paramlimits import OneOf, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
-from procedures.reports import thesis
-from procedures.reports.baseline import markdown
-from procedures.rigsetup import bring_to_mode3
-from procedures.runner import (
+from procedures.procedure import (
     Analysis,
     Context,
     Figure,
@@ -56,8 +53,11 @@ from procedures.runner import (
     Procedure,
     ProcedureError,
     Step,
-    steps_done,
 )
+from procedures.reports import thesis
+from procedures.reports.baseline import markdown
+from procedures.resume import steps_done
+from procedures.rigsetup import bring_to_mode3
 
 log = logging.getLogger(__name__)
 

@@ -46,9 +46,7 @@ from procedures.analysis.drift import (
 from procedures.analysis.intervals import add_figure
 from procedures.paramlimits import Range, above, at_least, check_limits, sample_rate
 from procedures.params import prior_values
-from procedures.reports.drift import hours, markdown, plot_allan, plot_null
-from procedures.rigsetup import bring_to_mode3, wait_settled
-from procedures.runner import (
+from procedures.procedure import (
     Analysis,
     Context,
     Figure,
@@ -57,6 +55,8 @@ from procedures.runner import (
     ProcedureError,
     Step,
 )
+from procedures.reports.drift import hours, markdown, plot_allan, plot_null
+from procedures.rigsetup import bring_to_mode3, wait_settled
 
 #: the ADC's anti-alias filter is 3-pole at 0.3 fs (DESIGN.md section 5): the first few
 #: samples' Allan deviation is shaped by it, so the noise-model fit starts at this many samples

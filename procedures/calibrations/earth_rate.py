@@ -37,9 +37,9 @@ from procedures.analysis.earth_rate import G_AXES, fit_earth_rate
 from procedures.analysis.intervals import add_figure
 from procedures.paramlimits import Each, Range, above, at_least, check_limits, fraction, sample_rate
 from procedures.params import prior_values
+from procedures.procedure import Analysis, Context, Figure, Measurement, Procedure, Step
 from procedures.reports.earth_rate import markdown, plot_fits
 from procedures.rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
 
 
 @dataclass

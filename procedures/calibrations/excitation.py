@@ -78,10 +78,7 @@ from procedures.paramlimits import (
     sample_rate,
 )
 from procedures.params import prior_values
-from procedures.reports.excitation import markdown, plot_response
-from procedures.reports.thesis import closed_loop_roots as thesis_roots
-from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
-from procedures.runner import (
+from procedures.procedure import (
     Analysis,
     Context,
     Figure,
@@ -90,6 +87,9 @@ from procedures.runner import (
     ProcedureError,
     Step,
 )
+from procedures.reports.excitation import markdown, plot_response
+from procedures.reports.thesis import closed_loop_roots as thesis_roots
+from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
 
 URAD = 1e-6
 #: the recorded channels' ADC ranges (V): the amplifier input is millivolts, tens of them in the

@@ -22,6 +22,7 @@ from typing import Annotated
 
 from procedures.analysis.hysteresis import AC_AXES, FIGURES, analyze_file
 from procedures.paramlimits import Each, OneOf, Range, above, at_least, check_limits, sample_rate
+from procedures.procedure import Analysis, Context, Figure, Measurement, Procedure, Step
 from procedures.reports.hysteresis import (
     markdown,
     plot_describing_function,
@@ -30,7 +31,6 @@ from procedures.reports.hysteresis import (
     plot_scan,
 )
 from procedures.rigsetup import bring_to_mode3
-from procedures.runner import Analysis, Context, Figure, Measurement, Procedure, Step
 
 #: DESIGN.md section 7, and the angle lag the analysis measured and took out
 JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "file")

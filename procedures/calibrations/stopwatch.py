@@ -79,9 +79,7 @@ from procedures.analysis.stopwatch import (
 )
 from procedures.paramlimits import Each, OneOf, Range, above, check_limits, fraction, sample_rate
 from procedures.params import prior_value
-from procedures.reports.stopwatch import markdown, plot_channel
-from procedures.rigsetup import bring_to_mode3, wait_settled
-from procedures.runner import (
+from procedures.procedure import (
     Analysis,
     Context,
     Figure,
@@ -90,6 +88,8 @@ from procedures.runner import (
     ProcedureError,
     Step,
 )
+from procedures.reports.stopwatch import markdown, plot_channel
+from procedures.rigsetup import bring_to_mode3, wait_settled
 
 #: the parameters' limits too long to read inline
 _CHANNEL = OneOf(*GYRO_CHANNELS)

@@ -73,10 +73,7 @@ from procedures.paramlimits import (
     sample_rate,
 )
 from procedures.params import prior_values
-from procedures.reports import thesis
-from procedures.reports.survey import markdown, plot_dips
-from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
-from procedures.runner import (
+from procedures.procedure import (
     Analysis,
     Context,
     Figure,
@@ -85,6 +82,9 @@ from procedures.runner import (
     ProcedureError,
     Step,
 )
+from procedures.reports import thesis
+from procedures.reports.survey import markdown, plot_dips
+from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
 
 log = logging.getLogger(__name__)
 

@@ -11,7 +11,8 @@ from daq.provenance import header_lines
 from procedures.reports.textfile import write_text_atomic
 
 if TYPE_CHECKING:
-    from procedures.runner import Analysis, Procedure, RunSummary
+    from procedures.procedure import Analysis, Procedure
+    from procedures.runner import RunSummary
 
 log = logging.getLogger(__name__)
 

@@ -24,7 +24,8 @@ from console.meterdata import MeterSnapshot
 from console.quitscreen import QuitScreen, what_quit_closes
 from console.spectra import compute_view
 from console.state import Phase, RecordingInfo, RigEventItem
-from procedures.runner import Measurement, RunSummary, Verdict
+from procedures.procedure import Measurement, Verdict
+from procedures.runner import RunSummary
 
 from .conftest import WARM, rig_ready
 

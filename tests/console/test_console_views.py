@@ -20,7 +20,8 @@ from console.procedures import parse_run_text, result_text
 from console.spectra import decade_ticks
 from console.spinup import AT_SPEED, SpinUpEstimate
 from daq.reader import RunFile
-from procedures.runner import Measurement, RunSummary, Verdict
+from procedures.procedure import Measurement, Verdict
+from procedures.runner import RunSummary
 
 from .conftest import COLD, WARM, outcome, rig_ready, run_async, start_procedure, wait_for
 

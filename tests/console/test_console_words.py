@@ -98,7 +98,8 @@ def test_a_typed_recording_name_goes_into_out(tmp_path):
 
 
 def test_the_result_keeps_not_resolved():
-    from procedures.runner import Measurement, RunSummary, Verdict
+    from procedures.procedure import Measurement, Verdict
+    from procedures.runner import RunSummary
 
     ms = [
         Measurement(

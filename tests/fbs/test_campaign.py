@@ -39,8 +39,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fbs import campaign, campaign_task
-from fbs.campaign import CampaignError, Grid, curves, parse_grid, plan_of, wilson
+from fbs.campaign import CampaignError, Grid, parse_grid, plan_of
 from fbs.cli import build_parser, main
+from procedures.analysis.gap.detection import curves, wilson
 from simhw import effects
 
 FBS = [sys.executable, "-m", "fbs.cli"]

@@ -41,7 +41,13 @@ HEAVY_PACKAGES = {
     "simhw",
     "daq",
 }
-HEAVY_MODULES = {"drivers.rig", "procedures.runner", "procedures.params", "console.app"}
+HEAVY_MODULES = {
+    "drivers.rig",
+    "procedures.runner",
+    "procedures.procedure",
+    "procedures.params",
+    "console.app",
+}
 
 
 def _python(code: str) -> subprocess.CompletedProcess:

@@ -15,8 +15,9 @@ import pytest
 
 from fbs.demo import SimTruth, _rows, campaign, coverage, load_summaries, write_campaign_report
 from fbs.demo_truth import binomial_tail, dahl_equivalent_linear, max_misses
+from procedures.procedure import Verdict
 from procedures.reports import thesis
-from procedures.runner import RunSummary, Verdict
+from procedures.runner import RunSummary
 from simhw.params import SimConfig
 from simhw.plant import linearized_poles
 

@@ -19,7 +19,8 @@ from daq.reader import RunFile
 from drivers.rig import Rig, open_rig
 from fbs.cli import main
 from procedures.calibrations import catalogue
-from procedures.runner import RunSummary, Verdict, headline_measurement
+from procedures.procedure import Verdict
+from procedures.runner import RunSummary, headline_measurement
 from tests.result_schema import assert_valid_result
 
 FBS = [sys.executable, "-m", "fbs.cli"]

@@ -26,7 +26,8 @@ from procedures.analysis.baseline import NEA_BAND_HZ, nea_truth
 from procedures.analysis.transfer import sensor_filter
 from procedures.calibrations import catalogue, get
 from procedures.calibrations.baseline import Baseline, Params
-from procedures.runner import Verdict, run_procedure
+from procedures.procedure import Verdict
+from procedures.runner import run_procedure
 from simhw.params import load_config
 from simhw.simulator import Simulator
 from tests.result_schema import assert_valid_result

@@ -17,7 +17,9 @@ from drivers.calibration import RigCalibration
 from procedures.analysis.drift import analyze_channels, coupling_terms, reconstruct_rate
 from procedures.calibrations import catalogue
 from procedures.calibrations.drift import Drift, Params
-from procedures.runner import load_resume, merge_spans, run_procedure, steps_done
+from procedures.procedure import merge_spans
+from procedures.resume import load_resume, steps_done
+from procedures.runner import run_procedure
 from tests.result_schema import assert_valid_result
 
 from .conftest import assert_spans_are_the_record_steps

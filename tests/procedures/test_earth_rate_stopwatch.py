@@ -601,7 +601,7 @@ def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(
     within their 95 % intervals."""
     import threading
 
-    from procedures.runner import load_resume
+    from procedures.resume import load_resume
 
     ref = uninterrupted_stopwatch
     assert ref.verdict == "pass", ref.error

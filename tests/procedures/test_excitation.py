@@ -214,7 +214,7 @@ def test_an_aborted_excitation_leaves_the_rig_safe_and_resumes(tmp_path):
     import threading
 
     from daq.reader import RunFile
-    from procedures.runner import load_resume
+    from procedures.resume import load_resume
 
     stop = threading.Event()
 

@@ -561,7 +561,8 @@ def test_abort_and_resume_runs_the_whole_ladder_again(tmp_path):
     import threading
 
     from drivers.rig import open_rig
-    from procedures.runner import load_resume, run_procedure
+    from procedures.resume import load_resume
+    from procedures.runner import run_procedure
 
     params = Params(amplitudes_urad=[400, 40, 8], cycles=2)
     abort = threading.Event()

@@ -23,8 +23,10 @@ import pytest
 import procedures.runner as runner
 from drivers.calibration import RigCalibration
 from procedures.calibrations import catalogue
+from procedures.procedure import Analysis, Step
 from procedures.progress import ANALYSING, DONE, STEPS, WRITING_REPORT, Progress, ProgressModel
-from procedures.runner import Analysis, Resumed, Step, run_procedure
+from procedures.resume import Resumed
+from procedures.runner import run_procedure
 
 FACTORS = (0.5, 1.0, 3.0)
 

@@ -1,11 +1,11 @@
-"""The runner's provenance record (``procedures.runner.Span``): spans join only when back to
+"""The runner's provenance record (``procedures.procedure.Span``): spans join only when back to
 back in one file, and a span whose file moved is found beside the file that recorded it."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-from procedures.runner import Span, merge_spans
+from procedures.procedure import Span, merge_spans
 
 
 def test_merge_spans_joins_adjacent_pieces_of_one_file_only():

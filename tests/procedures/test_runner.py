@@ -18,17 +18,9 @@ from daq.reader import RunFile
 from drivers.rig import open_rig
 from fbs.signals import aborting_on_signals
 from procedures.calibrations import catalogue
-from procedures.runner import (
-    Analysis,
-    Figure,
-    Measurement,
-    Procedure,
-    ProcedureError,
-    Step,
-    load_resume,
-    next_free,
-    run_procedure,
-)
+from procedures.procedure import Analysis, Figure, Measurement, Procedure, ProcedureError, Step
+from procedures.resume import load_resume, next_free
+from procedures.runner import run_procedure
 
 pytestmark = pytest.mark.slow
 
@@ -390,7 +382,7 @@ def test_catalogue_finds_every_procedure_and_keys_are_design_section_7():
 def test_a_step_span_beside_its_run_file_is_named_by_its_name_and_read_back_whole(tmp_path):
     """A step's event holds its span; with the absolute path in it, a run directory deep enough
     (CI's temporary paths) pushed the event past its 1024 bytes and aborted the run."""
-    from procedures.runner import Span
+    from procedures.procedure import Span
 
     deep = tmp_path.joinpath(*["a-rather-long-directory-name"] * 30)
     deep.mkdir(parents=True)

@@ -21,7 +21,8 @@ from daq.spectra import band_rms, psd
 from procedures.analysis.survey import cross_axis_coherence, find_dip, spans_csd
 from procedures.calibrations import catalogue
 from procedures.calibrations.survey import Params, Survey, pickoff_scales
-from procedures.runner import load_resume, run_procedure
+from procedures.resume import load_resume
+from procedures.runner import run_procedure
 from simhw.params import SimConfig, load_config, nominal_pickoff_lines
 from simhw.simulator import Simulator, pickoff_white_psd
 from tests.result_schema import assert_valid_result
