@@ -25,6 +25,10 @@ Output in DIR:
   16th and 84th percentiles, over the runs named right); and over the null runs the false-alarm
   rate (a null run that is significant, or has an effect named), with its interval.
 
+This module is the command: its arguments, the plan and the resumable execution (which run on
+``fbs batch``'s machinery, so they live in the command-line layer). The curves' statistics are
+``procedures.analysis.gap.detection``'s, their table and plot ``procedures.reports.detection_curves``'s.
+
 Every argument is checked before any work starts (exit 2, ``fbs campaign: error: ...``).
 Exit 0: every run has a result; 2: some run's newest line is an error (run again to retry it),
 or interrupted (SIGINT, SIGTERM, SIGHUP: finished runs stay, the curves of what is done are
@@ -40,16 +44,15 @@ import os
 import shlex
 import sys
 import time
-from collections import Counter
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from fbs import batch_exec, campaign_task
+from procedures.analysis.gap.detection import curves, run_key
+from procedures.reports.detection_curves import curves_markdown, plot_curves
 
-#: the two-sided 95 % normal quantile
-Z95 = 1.959963984540054
 #: a grid's values are rounded to this many significant digits (they key the runs in runs.jsonl)
 GRID_DIGITS = 12
 MAX_GRID_POINTS = 1000
@@ -208,10 +211,6 @@ def parse_sets(items: Iterable[str], effect: Any, grid_param: str) -> dict[str, 
 
 
 # ---------------------------------------------------------------------------- the plan
-def run_key(effect: str, params: dict[str, float], seed: int) -> tuple[Any, ...]:
-    return effect, tuple(sorted(params.items())), seed
-
-
 @dataclass
 class Campaign:
     """What ``fbs campaign gap`` will do, every argument checked."""
@@ -443,51 +442,6 @@ def plan_of(args: argparse.Namespace) -> Campaign:
     return c
 
 
-# ---------------------------------------------------------------------------- the curves
-def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float] | None:
-    """Wilson's score interval of a binomial proportion k / n (None for n = 0)."""
-    if n <= 0:
-        return None
-    if not 0 <= k <= n:
-        raise ValueError(f"wilson: {k} successes of {n} trials")
-    p = k / n
-    z2 = z * z
-    centre = (p + z2 / (2 * n)) / (1 + z2 / n)
-    half = z / (1 + z2 / n) * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
-    # at k = 0 (k = n) the bound is 0 (1) exactly; the sum leaves a rounding error there
-    return (0.0 if k == 0 else max(0.0, centre - half)), (
-        1.0 if k == n else min(1.0, centre + half)
-    )
-
-
-def _quantile(xs: list[float], q: float) -> float:
-    """The q-quantile of sorted ``xs``, linearly interpolated (numpy's default)."""
-    pos = q * (len(xs) - 1)
-    i = int(math.floor(pos))
-    j = min(i + 1, len(xs) - 1)
-    return xs[i] + (xs[j] - xs[i]) * (pos - i)
-
-
-def _spread(xs: list[float]) -> dict[str, Any]:
-    xs = sorted(xs)
-    if not xs:
-        return {"n": 0, "median": None, "p16": None, "p84": None}
-    return {
-        "n": len(xs),
-        "median": _quantile(xs, 0.5),
-        "p16": _quantile(xs, 0.16),
-        "p84": _quantile(xs, 0.84),
-    }
-
-
-def _truth(effect: str, params: dict[str, float]) -> dict[str, float]:
-    """The parameters as applied (a bearing's eta follows from its stiffness and To)."""
-    from simhw import effects
-
-    e = effects.get(effect)
-    return dict(e.derive(dict(params))) if e.derive else dict(params)
-
-
 def compute_curves(c: Campaign) -> dict[str, Any]:
     """The detection curves of the runs of ``c`` done so far (its newest line per run)."""
     return curves(
@@ -512,224 +466,6 @@ def compute_curves(c: Campaign) -> dict[str, Any]:
             "command": c.command(),
         },
     )
-
-
-def curves(
-    effect: str,
-    grid: Grid,
-    params_at: Any,
-    seeds: list[int],
-    latest: dict[tuple[Any, ...], dict[str, Any]],
-    meta: dict[str, Any] | None = None,
-) -> dict[str, Any]:
-    """Per grid value: ``p_named`` (the effect named first, of the runs analysed) with
-    ``p_named_ci95`` (Wilson), ``first_named`` (what was named first, counted), and per parameter
-    ``param_error`` (fitted / true - 1 over the runs named right: n, median, p16, p84); over the
-    null runs the false-alarm rate (significant, or an effect named) with its interval."""
-    points = []
-    n_runs = n_done = n_err = 0
-    for v in grid.values:
-        params = params_at(v)
-        truth = _truth(effect, params)
-        rows = [r for s in seeds if (r := latest.get(run_key(effect, params, s))) is not None]
-        ok = [r for r in rows if r["error"] is None]
-        right = [r for r in ok if r["named"][:1] == [effect]]
-        errors: dict[str, dict[str, Any]] = {}
-        for k, t in truth.items():
-            rel = [
-                r["fitted"][k] / t - 1
-                for r in right
-                if isinstance(r["fitted"].get(k), int | float) and t != 0
-            ]
-            errors[k] = _spread(rel)
-        n_runs, n_done, n_err = n_runs + len(seeds), n_done + len(rows), n_err + len(rows) - len(ok)
-        points.append(
-            {
-                "value": v,
-                "params": params,
-                "runs": len(seeds),
-                "done": len(rows),
-                "errors": len(rows) - len(ok),
-                "analysed": len(ok),
-                "named_right": len(right),
-                "named_right_explained": sum(1 for r in right if r["explained"]),
-                "p_named": len(right) / len(ok) if ok else None,
-                "p_named_ci95": wilson(len(right), len(ok)),
-                "significant": sum(1 for r in ok if r["significant"]),
-                "first_named": dict(
-                    Counter(r["named"][0] if r["named"] else "none" for r in ok).most_common()
-                ),
-                "param_error": errors,
-            }
-        )
-    rows = [r for s in seeds if (r := latest.get(run_key("none", {}, s))) is not None]
-    ok = [r for r in rows if r["error"] is None]
-    alarms = [r for r in ok if r["significant"] or r["named"]]
-    n_runs, n_done, n_err = n_runs + len(seeds), n_done + len(rows), n_err + len(rows) - len(ok)
-    nulls = {
-        "runs": len(seeds),
-        "done": len(rows),
-        "errors": len(rows) - len(ok),
-        "analysed": len(ok),
-        "false_alarms": len(alarms),
-        "rate": len(alarms) / len(ok) if ok else None,
-        "rate_ci95": wilson(len(alarms), len(ok)),
-        "significant": sum(1 for r in ok if r["significant"]),
-        "named": dict(Counter(n for r in ok for n in r["named"]).most_common()),
-    }
-    return {
-        "campaign": meta or {"effect": effect, "grid": {"param": grid.param}},
-        "complete": n_done == n_runs and n_err == 0,
-        "runs": n_runs,
-        "done": n_done,
-        "errors": n_err,
-        "curve": points,
-        "nulls": nulls,
-    }
-
-
-# ---------------------------------------------------------------------------- writing the curves
-def _pct(x: float | None) -> str:
-    return "-" if x is None else f"{100 * x:+.1f} %"
-
-
-def _ci(iv: Any) -> str:
-    return "-" if iv is None else f"{iv[0]:.2f}-{iv[1]:.2f}"
-
-
-def curves_markdown(cv: dict[str, Any]) -> str:
-    meta = cv["campaign"]
-    effect, param = meta["effect"], meta["grid"]["param"]
-    shown = [param] + [
-        k for k in (cv["curve"][0]["param_error"] if cv["curve"] else {}) if k != param
-    ]
-    rec = meta.get("record", {})
-    chans = ", ".join(f"{k} {v:g} V" for k, v in meta.get("channels_V", {}).items())
-    fixed = ", ".join(f"{k} = {v:g}" for k, v in meta.get("fixed", {}).items()) or "none"
-    lines = [
-        f"# Detection curve: `{effect}` over `{param}`",
-        "",
-        f"Record: {rec.get('duration_s', 0):g} s at {rec.get('rate_hz', 0):g} Hz, Mode {rec.get('mode')}, "
-        f"axis {rec.get('axis')} ({chans}); other parameters: {fixed}; "
-        + ("seed 1." if meta.get("seeds") == 1 else f"seeds 1-{meta.get('seeds')}."),
-        f"Made by `{meta.get('command', '')}`"
-        + (
-            ""
-            if cv["complete"]
-            else f" (incomplete: {cv['done'] - cv['errors']} of {cv['runs']} runs have a result)"
-        )
-        + ".",
-        "",
-        "P: share of the runs analysed in which the workflow named the effect first, with its 95 % Wilson "
-        "interval; errors: fitted / true - 1 over those runs, median [16th, 84th percentile].",
-        "",
-        "| "
-        + " | ".join(
-            [f"`{param}`", "runs", "named right", "P", "95 %"] + [f"`{k}` error" for k in shown]
-        )
-        + " |",
-        "|" + "---|" * (5 + len(shown)),
-    ]
-    for pt in cv["curve"]:
-        errs = []
-        for k in shown:
-            e = pt["param_error"].get(k, {})
-            errs.append(
-                "-"
-                if not e.get("n")
-                else f"{_pct(e['median'])} [{_pct(e['p16'])}, {_pct(e['p84'])}]"
-            )
-        p = "-" if pt["p_named"] is None else f"{pt['p_named']:.2f}"
-        lines.append(
-            "| "
-            + " | ".join(
-                [
-                    f"{pt['value']:g}",
-                    str(pt["analysed"]),
-                    str(pt["named_right"]),
-                    p,
-                    _ci(pt["p_named_ci95"]),
-                    *errs,
-                ]
-            )
-            + " |"
-        )
-    nl = cv["nulls"]
-    rate = "-" if nl["rate"] is None else f"{nl['rate']:.2f}"
-    named = ", ".join(f"{k} {v}" for k, v in nl["named"].items()) or "nothing named"
-    lines += [
-        "",
-        f"False alarms on the null runs (no effect; significant, or an effect named): {nl['false_alarms']} "
-        f"of {nl['analysed']} ({rate}, 95 % {_ci(nl['rate_ci95'])}; {nl['significant']} significant; "
-        f"{named}).",
-        "",
-    ]
-    return "\n".join(lines)
-
-
-def plot_curves(cv: dict[str, Any], path: Path) -> Path:
-    """P(named right) with its intervals and the false-alarm rate (top); the parameter errors (bottom)."""
-    from daq.plots import new_figure, save_figure
-
-    meta = cv["campaign"]
-    param = meta["grid"]["param"]
-    fig, axes = new_figure(2, 1, figsize=(8.0, 7.0))
-    top, bottom = axes[0, 0], axes[1, 0]
-    xs = [pt["value"] for pt in cv["curve"]]
-    have = [pt for pt in cv["curve"] if pt["p_named"] is not None]
-    if have:
-        x = [pt["value"] for pt in have]
-        y = [pt["p_named"] for pt in have]
-        lo = [pt["p_named"] - pt["p_named_ci95"][0] for pt in have]
-        hi = [pt["p_named_ci95"][1] - pt["p_named"] for pt in have]
-        top.errorbar(
-            x, y, yerr=[lo, hi], fmt="o-", capsize=3, label=f"{meta['effect']} named (95 % Wilson)"
-        )
-    nl = cv["nulls"]
-    if nl["rate"] is not None and xs:
-        top.axhline(
-            nl["rate"],
-            color="C3",
-            ls="--",
-            label=f"false alarms on nulls: {nl['false_alarms']}/{nl['analysed']}",
-        )
-        top.axhspan(nl["rate_ci95"][0], nl["rate_ci95"][1], color="C3", alpha=0.12)
-    top.set_ylim(-0.03, 1.03)
-    top.set_ylabel("P(named right)")
-    top.legend(loc="best", fontsize=8)
-    top.set_title(
-        f"{meta['effect']}: {meta.get('record', {}).get('duration_s', 0):g} s records, "
-        f"{meta.get('seeds')} seed(s) per point",
-        fontsize=10,
-    )
-    names = list(cv["curve"][0]["param_error"]) if cv["curve"] else []
-    for i, k in enumerate(names):
-        pts = [pt for pt in cv["curve"] if pt["param_error"][k]["n"]]
-        if not pts:
-            continue
-        e = [pt["param_error"][k] for pt in pts]
-        med = [100 * q["median"] for q in e]
-        bottom.errorbar(
-            [pt["value"] for pt in pts],
-            med,
-            yerr=[
-                [m - 100 * q["p16"] for m, q in zip(med, e)],
-                [100 * q["p84"] - m for m, q in zip(med, e)],
-            ],
-            fmt="os^vd"[i % 5],
-            capsize=3,
-            label=k,
-        )
-    bottom.axhline(0.0, color="0.5", lw=0.8)
-    bottom.set_ylabel("fitted / true - 1 (%)\nmedian, 16-84 %")
-    bottom.set_xlabel(param)
-    if names:
-        bottom.legend(loc="best", fontsize=8)
-    for ax in (top, bottom):
-        if meta["grid"].get("log"):
-            ax.set_xscale("log")
-        ax.grid(True, alpha=0.3)
-    return save_figure(fig, path)
 
 
 def _write_atomically(path: Path, text: str) -> None:
