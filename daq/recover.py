@@ -41,8 +41,9 @@ from typing import Any
 import h5py
 import numpy as np
 
+from daq.contract import member_dataset
 from daq.prealloc import release
-from daq.reader import as_text, member_dataset, writer_alive
+from daq.reader import as_text, writer_alive
 from daq.runfile import (
     EVENT_DTYPE,
     KIND_BYTES,

@@ -239,7 +239,7 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    from daq.reader import ContractError
+    from daq.contract import ContractError
 
     if args.json:  # a broken file is only the error (exit 2), stdout stays empty
         print(json.dumps(json_result(args)))

@@ -16,11 +16,8 @@ import h5py
 import numpy as np
 import pytest
 
+from daq.contract import MAX_RATE_HZ, MIN_RATE_HZ, READABLE_VERSIONS, ContractError
 from daq.reader import (
-    MAX_RATE_HZ,
-    MIN_RATE_HZ,
-    READABLE_VERSIONS,
-    ContractError,
     RunFile,
     UnreadableRunFile,
     lost_samples,
