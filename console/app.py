@@ -36,7 +36,7 @@ from console.procedures import ProcedurePanel, parse_run_text
 from console.quitscreen import QuitScreen, what_quit_closes
 from console.recording import RecordingPanel, default_path, recording_path
 from console.rigworker import RigWorker
-from console.setpoints import SetpointPanel, state_key
+from console.setpoint_panel import SetpointPanel, state_key
 from console.spectra import SpectraPanel
 from console.state import (
     CommandOutcome,
