@@ -57,9 +57,12 @@ class CanLink:
         """``listen_s``: first listen that long, sending nothing, for another host's heartbeat
         (``0x77F``); one heard raises ``RigBusy`` (``drivers.claim``). A bus only this process
         can reach (the sim rig's) needs none."""
-        unknown = [n for n in nodes if n not in rn.NODES]
+        #: every node's id by name, the devices of ``drivers.devices`` included
+        self.ids = rn.node_ids()
+        self.names = {i: n for n, i in self.ids.items()}
+        unknown = [n for n in nodes if n not in self.ids]
         if unknown:
-            raise ValueError(f"unknown CAN node(s) {unknown}; known: {', '.join(rn.NODES)}")
+            raise ValueError(f"unknown CAN node(s) {unknown}; known: {', '.join(self.ids)}")
         self.bus = bus
         self.channel = channel or str(getattr(bus, "channel_info", "CAN"))
         self.faults = faults or FaultLatch()
@@ -82,7 +85,7 @@ class CanLink:
         self._operational: set[int] = set()
         self._lost: set[int] = set()
         #: every node id this rig uses
-        self._used_ids = {rn.NODES[n] for n in nodes}
+        self._used_ids = {self.ids[n] for n in nodes}
         self._foreign_seen: set[int] = set()
         #: SDO clients and NMT of the nodes live here
         self.network = canopen.Network(bus)
@@ -140,7 +143,7 @@ class CanLink:
             self.faults.report(
                 ProtocolError(
                     f"CAN {self.channel}: SDO answer 0x{msg.arbitration_id:03x} of node "
-                    f"'{rn.NODE_NAMES[node]}': {len(msg.data)} data bytes (expected 8)"
+                    f"'{self.names[node]}': {len(msg.data)} data bytes (expected 8)"
                 )
             )
             # passed on all the same: the transfer waiting for it fails now, not at its deadline
@@ -170,7 +173,7 @@ class CanLink:
         )
 
     def _on_heartbeat(self, m: cf.CoHeartbeat) -> None:
-        name = rn.NODE_NAMES[m.node]
+        name = self.names[m.node]
         self._last_hb[m.node] = self.monotonic()
         was_up = m.node in self._operational
         if m.state == cf.NMT_OPERATIONAL:
@@ -194,7 +197,7 @@ class CanLink:
             )
 
     def _on_emergency(self, m: cf.CoEmergency) -> None:
-        name = rn.NODE_NAMES[m.node]
+        name = self.names[m.node]
         if m.code == cf.EMCY_ERROR_RESET:
             log.info("CAN node '%s' (id %d): error reset (EMCY 0x0000)", name, m.node)
             return
@@ -230,7 +233,7 @@ class CanLink:
                 return
             now = self.monotonic()
             for name in self.nodes:
-                node = rn.NODES[name]
+                node = self.ids[name]
                 since = self._watched.get(node)
                 if since is None:
                     continue
@@ -250,11 +253,11 @@ class CanLink:
     def watch(self, name: str) -> None:
         """From now on node ``name``'s silence for longer than the node timeout is a fault
         (called once the host has set the node's heartbeat period)."""
-        self._watched.setdefault(rn.NODES[name], self.monotonic())
+        self._watched.setdefault(self.ids[name], self.monotonic())
 
     def started(self, name: str) -> None:
         """The host has NMT-started node ``name``: from now on its EMCY frames are faults."""
-        self._started.add(rn.NODES[name])
+        self._started.add(self.ids[name])
 
     def wait_for_nodes(self, timeout_s: float = 2.0) -> None:
         """Block until every node has sent a heartbeat; DeviceLost names the missing ones."""
@@ -280,9 +283,9 @@ class CanLink:
         """Wait until ``ready`` holds for each node of ``names``; '' or the ones it does not hold for."""
         deadline = self.monotonic() + timeout_s
         while True:
-            missing = [n for n in names if not ready(rn.NODES[n])]
+            missing = [n for n in names if not ready(self.ids[n])]
             if not missing or self.monotonic() > deadline:
-                return ", ".join(f"{n} (id {rn.NODES[n]})" for n in missing)
+                return ", ".join(f"{n} (id {self.ids[n]})" for n in missing)
             time.sleep(0.01)
 
     # ------------------------------------------------------------------ send

@@ -21,7 +21,6 @@ from canopen.sdo.constants import RESPONSE_ABORTED
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from drivers import canopen_frames as cf
-from drivers import rig_nodes as rn
 from drivers.can_link import CanLink
 from drivers.errors import (
     DeviceLost,
@@ -125,7 +124,7 @@ class RigRemoteNode(canopen.RemoteNode):
 
 
 class CanopenClient:
-    """Node ``name`` (an id of ``rig_nodes.NODES``) on ``link``, described by its EDS file."""
+    """Node ``name`` (one of ``link.ids``) on ``link``, described by its EDS file."""
 
     def __init__(
         self,
@@ -140,7 +139,7 @@ class CanopenClient:
     ) -> None:
         self.link = link
         self.name = name
-        self.node_id = rn.NODES[name]
+        self.node_id = link.ids[name]
         self.device_type = device_type
         #: what ``safe`` writes, in order; ``raw_get(i)`` reads ``(raw_index, i + 1)``, or with
         #: ``raw_bits`` bit i of ``(raw_index, 1)`` (a digital-output block)

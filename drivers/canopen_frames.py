@@ -50,8 +50,15 @@ _EMCY = struct.Struct("<HB5s")
 
 
 def eds_path(node: str) -> Path:
-    """The EDS file of the rig node ``node`` (its object dictionary)."""
-    return EDS_DIR / f"{node}.eds"
+    """The EDS file of the rig node ``node`` (its object dictionary): a core node's is in
+    ``drivers/eds``, a device's beside its module (``drivers.devices``)."""
+    core = EDS_DIR / f"{node}.eds"
+    if core.is_file():
+        return core
+    from drivers.devices import catalogue  # its modules import this one
+
+    device = catalogue().get(node)
+    return device.eds if device is not None else core
 
 
 @dataclass(frozen=True)

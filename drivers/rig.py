@@ -51,6 +51,7 @@ from drivers.canopen_client import CanopenClient
 from drivers.claim import RigClaim
 from drivers.clock import RigClock, WallClock
 from drivers.command import CanopenCommandDac, CommandDac
+from drivers.devices import catalogue as device_catalogue
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanopenRelayDriver, RelayDriver
@@ -103,6 +104,7 @@ class Rig:
         emulator: Any = None,
         simulated: bool = False,
         sim_config: Mapping[str, str] | None = None,
+        devices: Mapping[str, Any] | None = None,
     ) -> None:
         self.url = url
         #: what the rig states about itself, for every result's provenance: a simulated rig
@@ -118,6 +120,8 @@ class Rig:
         self.adc: Adc = SupervisedAdc(adc, self.supervisor)
         self.relays, self.torquers, self.commands = relays, torquers, commands
         self.caging, self.table, self.clock, self.faults = caging, table, clock, faults
+        #: the drivers of the rig's extra CAN devices (``drivers.devices``), by name
+        self.devices: dict[str, Any] = dict(devices or {})
         #: the simulated rig's server, for fault injection in tests; None on hardware
         self.emulator = emulator
         self.link = link
@@ -586,7 +590,9 @@ def assemble(
     ``sim_config``: what the rig states about itself (``Rig.simulated``)."""
     faults = FaultLatch()
     calibration = calibration or RigCalibration()
+    devices = device_catalogue()
     names = ["relay", "caging", "torquer", "command"] + (["table"] if table[0] == "can" else [])
+    names += list(devices)
     adc = None
     link = None
     try:
@@ -610,6 +616,8 @@ def assemble(
         clients: list[CanopenClient] = [relays.node, caging.node, torquers.node, commands.node]
         if isinstance(tab, CanopenTable):
             clients.append(tab.node)
+        extra = {name: d.driver(link) for name, d in devices.items()}
+        clients += [drv.node for drv in extra.values()]
         # every node brought up within one window: a rig powered up with its PC boots together
         deadline = link.monotonic() + max(connect_s, node_timeout_s)
         for c in clients:
@@ -645,6 +653,7 @@ def assemble(
             emulator=emulator,
             simulated=simulated,
             sim_config=sim_config,
+            devices=extra,
         )
     except BaseException:
         if adc is not None:

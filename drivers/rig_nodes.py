@@ -4,7 +4,8 @@ Every node is a CANopen device (CiA 301; ``docs/protocol.md`` section 2, ``docs/
 relay driver 1, caging switches 2, torquer DACs 3, command DACs 4, motorized table 5; the host
 is node 127 (``drivers.canopen_frames``). The relay node keeps the mode logic, the interlocks
 and the clamp; its status word (object 0x2004) and interlock reasons (0x2003) are laid out
-here, bit for bit, for the driver and the simulated node alike.
+here, bit for bit, for the driver and the simulated node alike. Any further CANopen device is a
+module of ``drivers.devices``: ``node_ids()`` and ``product_codes()`` hold the five and those.
 """
 
 from __future__ import annotations
@@ -14,6 +15,21 @@ NODES = {"relay": 1, "caging": 2, "torquer": 3, "command": 4, "table": 5}
 NODE_NAMES = {v: k for k, v in NODES.items()}
 #: product codes (0x1018 sub 2) of the rig's own nodes; a commercial module has its own
 PRODUCT_CODES = {"relay": 0x11, "caging": 0x12, "torquer": 0x13, "command": 0x14, "table": 0x15}
+
+
+def node_ids() -> dict[str, int]:
+    """Every node's id by name: the five above, then each device of ``drivers.devices``."""
+    from drivers.devices import catalogue  # its modules import this one
+
+    return NODES | {d.name: d.node_id for d in catalogue().values()}
+
+
+def product_codes() -> dict[str, int]:
+    """Every node's product code by name, as ``node_ids``."""
+    from drivers.devices import catalogue
+
+    return PRODUCT_CODES | {d.name: d.product_code for d in catalogue().values()}
+
 
 # Relay driver status word (0x2004) bits.
 ST_MODE_SHIFT, ST_SELECT_SHIFT = 0, 3

@@ -23,6 +23,7 @@ import canopen
 from drivers import canopen_frames as cf
 from drivers import rig_nodes as rn
 from simhw.canopen_nodes import CANOPEN_NODE_CLASSES, NOTIFIER_CYCLE_S, CanopenSimNode
+from simhw.devices import catalogue as device_nodes
 
 if TYPE_CHECKING:
     from simhw.rig_server import SimRigServer
@@ -31,8 +32,9 @@ NODE_FAULTS = ("stall", "disconnect", "reset", "error", "bad_response", "busy")
 
 
 class CanNodeHost:
-    """Every simulated node of the rig on the virtual channel ``channel``, but the ``external``
-    ones, which the caller runs there itself (a CiA 401 module written in a test)."""
+    """Every simulated node of the rig on the virtual channel ``channel`` (the core five and
+    each device's, ``simhw.devices``), but the ``external`` ones, which the caller runs there
+    itself (a CiA 401 module written in a test)."""
 
     def __init__(
         self,
@@ -52,11 +54,16 @@ class CanNodeHost:
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
         self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
         try:
-            for name in rn.NODES:
-                if name not in external:
-                    self.nodes[name] = CANOPEN_NODE_CLASSES[name](
-                        server, self.network, watchdog_s, monotonic
+            classes = CANOPEN_NODE_CLASSES | device_nodes()
+            for name in rn.node_ids():
+                if name in external:
+                    continue
+                if name not in classes:
+                    raise ValueError(
+                        f"the device {name!r} (drivers.devices) has no simulated node: "
+                        f"simhw/devices/{name}.py defines it"
                     )
+                self.nodes[name] = classes[name](server, self.network, watchdog_s, monotonic)
         except BaseException:
             self.close()
             raise

@@ -71,7 +71,7 @@ class CanopenSimNode:
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.server = server
-        self.node_id = rn.NODES[self.name]
+        self.node_id = rn.node_ids()[self.name]
         self._mono = monotonic
         self.watchdog_s = watchdog_s
         self.network = network

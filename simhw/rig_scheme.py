@@ -46,11 +46,12 @@ def sim_can(url: str, params: dict[str, str]) -> tuple[str | None, list[str]]:
                 f"virtual one, give can=virtual:NAME"
             )
     external = [n for n in params.get("external", "").split(",") if n]
-    bad = [n for n in external if n not in rn.NODES]
+    nodes = rn.node_ids()
+    bad = [n for n in external if n not in nodes]
     if bad:
         raise ValueError(
             f"rig URL {url!r}: external={params['external']!r}: unknown node(s) {', '.join(bad)} "
-            f"(nodes: {', '.join(rn.NODES)})"
+            f"(nodes: {', '.join(nodes)})"
         )
     return channel, external
 
