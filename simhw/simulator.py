@@ -19,7 +19,6 @@ import numpy as np
 import scipy.linalg
 
 from simhw import geometry
-from simhw.clock import VirtualClock
 from simhw.kernel import CompiledPlant
 from simhw.noise import (
     ExcessFlickerNoise,
@@ -43,6 +42,7 @@ from simhw.plant import (
 )
 from simhw.reduction import Kept, kept, reduce
 from simhw.sampling import SamplingChain, internal_rate
+from simhw.virtual_clock import VirtualClock
 
 log = logging.getLogger(__name__)
 

@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from simhw.clock import PacedClock
 from simhw.params import SimConfig
 from simhw.plant import CHANNELS, RelayState
 from simhw.simulator import Simulator
+from simhw.virtual_clock import PacedClock
 
 
 def _volts(sim, sizes):
