@@ -1,6 +1,6 @@
 """A sinusoid measured on a whole record: its frequency, amplitude and whether it is narrow as
 a line (``refine_line``). Pure numerics, no model: the model-gap workflow measures pickup lines
-with it (``procedures.analysis.gap.lines``), the open-loop baseline the pickoff's lines
+with it (``procedures.analysis.gap.pickoff_lines``), the open-loop baseline the pickoff's lines
 (``procedures.analysis.baseline``)."""
 
 from __future__ import annotations

@@ -36,7 +36,6 @@ from procedures.analysis.gap.grid import (
     channel_weights,
     make_grid,
 )
-from procedures.analysis.gap.lines import MeasuredLine, found_pickoff_lines, refine_line
 from procedures.analysis.gap.locate import Band, Evidence, bands, departures, gap_db
 from procedures.analysis.gap.model import (
     SHAPE_KEYS,
@@ -46,6 +45,7 @@ from procedures.analysis.gap.model import (
     quantization_psd,
     step_response,
 )
+from procedures.analysis.gap.pickoff_lines import MeasuredLine, found_pickoff_lines, refine_line
 from procedures.analysis.gap.steps import (
     Step,
     find_steps,

@@ -11,7 +11,7 @@ import scipy.signal
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from procedures.analysis.gap.lines import refine_line
+from procedures.analysis.gap.pickoff_lines import refine_line
 
 FS, T = 1000.0, 60.0
 
