@@ -37,7 +37,7 @@ from console.quitscreen import QuitScreen, what_quit_closes
 from console.recording import RecordingPanel, default_path, recording_path
 from console.rigworker import RigWorker
 from console.setpoint_panel import SetpointPanel, state_key
-from console.spectra import SpectraPanel
+from console.spectra_view import SpectraPanel
 from console.state import (
     CommandOutcome,
     ProcedureEnded,

@@ -22,7 +22,7 @@ from textual.widgets import RichLog
 from console.app import ConsoleApp
 from console.meterdata import MeterSnapshot
 from console.quitscreen import QuitScreen, what_quit_closes
-from console.spectra import compute_view
+from console.spectra_view import compute_view
 from console.state import Phase, RecordingInfo, RigEventItem
 from procedures.procedure import Measurement, Verdict
 from procedures.runner import RunSummary

@@ -17,7 +17,7 @@ from textual.widgets import Input, Static
 from console.app import MIN_SIZE, ConsoleApp
 from console.channels import meant, unknown_channels
 from console.procedures import parse_run_text, result_text
-from console.spectra import decade_ticks
+from console.spectra_view import decade_ticks
 from console.spinup import AT_SPEED, SpinUpEstimate
 from daq.reader import RunFile
 from procedures.procedure import Measurement, Verdict
