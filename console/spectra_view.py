@@ -66,7 +66,7 @@ def log_bands(f: np.ndarray, y: np.ndarray, n: int = POINTS) -> tuple[np.ndarray
 def compute_view(path: Path, channels: tuple[str, ...]) -> SpectraView:
     from daq.filespectra import run_csd_matrix
     from daq.reader import RunFile
-    from procedures.analysis.spectra import choose_nperseg
+    from procedures.analysis.channel_spectra import choose_nperseg
 
     with RunFile(path) as rf:
         why = unknown_channels(channels, rf.channels, str(path))

@@ -53,7 +53,7 @@ COMMANDS: dict[str, Command] = {
     "console": Command("fbs.console", ("console.app",)),
     "inspect": Command("fbs.inspect", ("daq.reader", "daq.recover")),
     "recover": Command("fbs.inspect", ("daq.recover",)),
-    "spectra": Command("fbs.spectra", ("procedures.analysis.spectra", "daq.plots")),
+    "spectra": Command("fbs.spectra", ("procedures.analysis.channel_spectra", "daq.plots")),
     "run": Command(
         "fbs.run", ("drivers.rig", "procedures.params", "procedures.calibrations.*", "fbs.progress")
     ),

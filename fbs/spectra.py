@@ -1,6 +1,6 @@
 """``fbs spectra FILE.h5 --channels a,b [--out DIR] [--seg-s S] [--json]`` (DESIGN.md section 7).
 
-The numerics and the files written are ``procedures.analysis.spectra``'s; this is the command line.
+The numerics and the files written are ``procedures.analysis.channel_spectra``'s; this is the command line.
 """
 
 from __future__ import annotations
@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from procedures.analysis.spectra import SpectraResult
+    from procedures.analysis.channel_spectra import SpectraResult
 
 
 def _compute(args: argparse.Namespace) -> SpectraResult:
     # the numerics load when the command runs, not with the parser (`fbs --version`)
-    from procedures.analysis.spectra import default_out_dir, spectra_command
+    from procedures.analysis.channel_spectra import default_out_dir, spectra_command
 
     channels = [c for c in args.channels.split(",") if c.strip()]
     out = Path(args.out) if args.out else default_out_dir(args.file)

@@ -21,7 +21,7 @@ import scipy.signal
 from daq.plots import plot_coherence, plot_psd
 from daq.runfile import RunWriter
 from fbs import spectra
-from procedures.analysis.spectra import choose_nperseg, spectra_command
+from procedures.analysis.channel_spectra import choose_nperseg, spectra_command
 
 FS = 200.0
 TONE_HZ = 3.5
