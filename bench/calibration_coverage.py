@@ -65,13 +65,17 @@ import math  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
 import tempfile  # noqa: E402
+import threading  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 from types import SimpleNamespace  # noqa: E402
-from typing import Any  # noqa: E402
+from typing import TYPE_CHECKING, Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 from coverage_pool import run_cases, toml_of  # noqa: E402
+
+if TYPE_CHECKING:
+    from procedures.procedure import Procedure
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -146,13 +150,12 @@ def truth_of(cfg: dict[str, dict[str, Any]], key: str, ch: str) -> float:
     return float(cfg[f"gyro.{ch}"][key])
 
 
-def _steps(path: Path) -> dict[str, Any]:
-    from daq.reader import RunFile
-    from procedures.resume import steps_done
+def _steps(path: Path, proc: type[Procedure[Any]]) -> dict[str, Any]:
+    """The steps' results the run file records, as JSON (a record's ``steps``)."""
+    from procedures.resume import load_resume
 
-    with RunFile(path) as rf:
-        events = rf.events
-    return steps_done(path, events)[0]
+    done = load_resume(path, proc, complete_ok=True)
+    return {name: r.to_json() for name, r in done.results.items()}
 
 
 def run_case(seed: int, keep: str | None = None, skip: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -177,8 +180,9 @@ def run_case(seed: int, keep: str | None = None, skip: tuple[str, ...] = ()) -> 
                 continue
             t0 = time.perf_counter()
             try:
+                proc = make()
                 with open_rig(f"sim?warm=1&seed={seed}&watchdog=5&config={path}") as rig:
-                    res = run_procedure(make(), rig, d, report=False)
+                    res = run_procedure(proc, rig, d, report=False)
             except Exception as e:  # reported, not fatal
                 rec[name] = {"error": f"{type(e).__name__}: {e}"}
                 continue
@@ -187,7 +191,7 @@ def run_case(seed: int, keep: str | None = None, skip: tuple[str, ...] = ()) -> 
                 "verdict": str(res.verdict),
                 "values": res.values,
                 "error": res.error,
-                "steps": _steps(res.file) if res.file and res.file.exists() else None,
+                "steps": _steps(res.file, type(proc)) if res.file and res.file.exists() else None,
             }
     rec["verdict"] = " ".join(
         f"{n} {rec[n].get('verdict', rec[n].get('error'))}"
@@ -201,6 +205,7 @@ def reanalyze(rec: dict[str, Any]) -> dict[str, Any]:
     """The record's figures from its steps' results by the analysis as it is now."""
     from procedures.calibrations.earth_rate import EarthRate
     from procedures.calibrations.stopwatch import Stopwatch
+    from procedures.procedure import Context
     from simhw.datasheet import rig_calibration
     from simhw.params import from_dict
 
@@ -221,10 +226,11 @@ def reanalyze(rec: dict[str, Any]) -> dict[str, Any]:
         r = rec.get(name) or {}
         if not r.get("steps"):
             continue
-        ctx = SimpleNamespace(
-            rig=SimpleNamespace(calibration=cal), results=r["steps"], spans={}, path="-"
-        )
-        r["values"] = proc.analyze(ctx).values  # type: ignore[arg-type]
+        rig = SimpleNamespace(calibration=cal)  # all the analysis asks of the rig
+        ctx = Context(proc, rig, None, progress=None, abort=threading.Event(), path=Path("-"))  # type: ignore[arg-type]
+        kinds = {s.name: s.result for s in proc.plan()}
+        ctx.results = {n: kinds[n].from_json(v) for n, v in r["steps"].items() if n in kinds}
+        r["values"] = proc.analyze(ctx).values
     return rec
 
 

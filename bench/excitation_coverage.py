@@ -190,7 +190,7 @@ def run_case(case: int, n_defaults: int, keep: str, reanalyse: bool) -> dict[str
                 proc,
                 rig,
                 folder,
-                resume=load_resume(files[-1], "excitation", complete_ok=True),
+                resume=load_resume(files[-1], Excitation, complete_ok=True),
                 report=False,
             )
         else:

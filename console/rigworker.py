@@ -531,7 +531,7 @@ class RigWorker:
             resume = None
             if resume_from is not None:
                 try:  # the file is read here, not on the UI thread
-                    resume = load_resume(resume_from, proc.name)
+                    resume = load_resume(resume_from, type(proc))
                     proc = type(proc)(type(proc).params_from(resume.params), prior=proc.prior)
                 except (ProcedureError, ValueError, OSError) as exc:
                     raise Refused(str(exc)) from None

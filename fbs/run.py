@@ -78,7 +78,7 @@ def run_command(args: argparse.Namespace) -> int:
         make_folder(out)  # a file in --out's way is refused before the rig opens
         resume = None
         if args.resume:
-            resume = load_resume(args.resume, proc_cls.name, complete_ok=True)
+            resume = load_resume(args.resume, proc_cls, complete_ok=True)
             if args.param or args.axis:
                 raise ValueError(
                     "--resume continues with the interrupted run's parameters; do not give --param/--axis"

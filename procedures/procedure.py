@@ -35,6 +35,7 @@ from drivers.rig import Rig
 from procedures import paramtypes
 from procedures.analysis.intervals import finite_json
 from procedures.progress import ANALYSIS_SHARE, ProgressListener, ProgressModel
+from procedures.stepresult import StepResult
 
 if TYPE_CHECKING:
     from _typeshed import DataclassInstance
@@ -50,6 +51,20 @@ class ProcedureAborted(Exception):
 
 class ProcedureError(Exception):
     """The procedure cannot go on: what happened and what to do, in words."""
+
+
+class StepResultTooLarge(ProcedureError):
+    """A step's result whose ``step-done`` event would not fit the run file's event text
+    (``daq.runfile.TEXT_BYTES``): a cut result could not be resumed from, so the run aborts
+    (to the safe state) rather than record it. A bug in the procedure: fewer fields, or fewer
+    ``StepResult.digits``."""
+
+    def __init__(self, procedure: str, step: str, size: int, limit: int) -> None:
+        self.procedure, self.step, self.size, self.limit = procedure, step, size, limit
+        super().__init__(
+            f"{procedure}: step {step!r}: its result is {size} bytes of JSON, more than an "
+            f"event holds ({limit}); keep step results small"
+        )
 
 
 class Verdict(StrEnum):
@@ -178,14 +193,22 @@ def merge_spans(spans: Iterable[Span]) -> list[Span]:
 
 
 # ---------------------------------------------------------------------------- steps, progress
+#: what a step returns
+R = TypeVar("R", bound=StepResult)
+
+
 @dataclass
-class Step:
+class Step(Generic[R]):
+    """One named step of a plan: ``run(ctx)`` returns its result, a ``result`` instance."""
+
     name: str
-    run: Callable[[Context], Any]
+    run: Callable[[Context], R]
     #: expected rig seconds, for progress and time remaining
     expected_s: float = 1.0
     #: a setup step puts the rig in a state and runs again on resume; a data step is taken over
     setup: bool = False
+    #: the type ``run`` returns: a resume reads the recorded result back as it
+    result: type[R] = field(kw_only=True)
 
 
 # ---------------------------------------------------------------------------- procedure
@@ -232,7 +255,7 @@ class Procedure(abc.ABC, Generic[P]):
     analysis_share: float = ANALYSIS_SHARE
 
     @abc.abstractmethod
-    def plan(self) -> Sequence[Step]:
+    def plan(self) -> Sequence[Step[Any]]:
         """The steps, in order: a plain list, made before step 1. A step that depends on an
         earlier one reads ``ctx.results`` when it runs."""
 
@@ -290,14 +313,14 @@ class Context:
         else:
             raise ValueError("a Context needs the recording or the finished run's path")
         self.params = proc.params
-        self.results: dict[str, Any] = {}
+        self.results: dict[str, StepResult] = {}
         #: where each data step's samples are (resumed steps: in the earlier file), by step name
         self.spans: dict[str, Span] = {}
         self._progress = progress
         self._abort = abort
-        self.step: Step | None = None
+        self.step: Step[Any] | None = None
         self.index = 0
-        self.steps: list[Step] = []
+        self.steps: list[Step[Any]] = []
         self._step_t0 = 0.0  # file time the current step began
         #: the run's progress, its weights fixed from the plan when the steps start
         self._model: ProgressModel | None = None
@@ -334,6 +357,15 @@ class Context:
             done += n
             self.report()
         return out
+
+    def result(self, step: str, kind: type[R]) -> R:
+        """The result of the step ``step`` done (run or taken over), as its type ``kind``."""
+        got = self.results.get(step)
+        if not isinstance(got, kind):
+            raise ProcedureError(
+                f"{self.proc.name}: step {step!r} has no {kind.__name__} result (got {got!r})"
+            )
+        return got
 
     def column(self, name: str) -> int:
         return self.acq.channels.index(name)

@@ -9,6 +9,25 @@ import numpy as np
 
 from drivers.errors import DeviceTimeout, PlatformClamped
 from procedures.procedure import Context
+from procedures.stepresult import StepResult
+
+
+@dataclass(frozen=True)
+class InMode3(StepResult):
+    """``bring_to_mode3``'s result: found there ``already`` or brought there in ``waited_s``;
+    every loop closed from rig time ``t_caged_s``."""
+
+    already: bool
+    waited_s: float
+    t_caged_s: float
+
+
+@dataclass(frozen=True)
+class ModeSet(StepResult):
+    """The mode the relay node reports after a mode change, and the settling time given it."""
+
+    mode: int
+    settle_s: float = 0.0
 
 
 def bring_to_mode3(
@@ -18,7 +37,7 @@ def bring_to_mode3(
     cage_timeout_s: float = 600.0,
     poll_s: float = 2.0,
     clamped_ok: bool = False,
-) -> dict:
+) -> InMode3:
     """Mode 3 with the wheels at speed and every channel caged (II D): spin up in mode 2 if
     needed, then mode 3, then wait for the relay driver's null detectors. ``t_caged_s`` is the
     rig time from which every loop is known closed (now, if the rig was found in mode 3): a step
@@ -35,7 +54,7 @@ def bring_to_mode3(
         )
     t0 = ctx.time_s
     if st.mode == 3 and all(st.at_speed.values()) and all(st.caged.values()):
-        return {"already": True, "waited_s": 0.0, "t_caged_s": round(ctx.time_s, 3)}
+        return InMode3(already=True, waited_s=0.0, t_caged_s=round(ctx.time_s, 3))
     if not all(st.at_speed.values()):
         if st.mode != 2:
             rig.set_mode(2)
@@ -51,25 +70,23 @@ def bring_to_mode3(
         poll_s,
         "every gyro channel caged in mode 3",
     )
-    return {
-        "already": False,
-        "waited_s": round(ctx.time_s - t0, 3),
-        "t_caged_s": round(ctx.time_s, 3),
-    }
+    return InMode3(
+        already=False, waited_s=round(ctx.time_s - t0, 3), t_caged_s=round(ctx.time_s, 3)
+    )
 
 
-def enter_gyro_mode(ctx: Context, mode: int, settle_s: float) -> dict:
+def enter_gyro_mode(ctx: Context, mode: int, settle_s: float) -> ModeSet:
     """Mode 4 or 5 from caged Mode 3 (the relay node refuses it otherwise, II D), then ``settle_s``
     for the network's and the caging loop's transients: the loop now closes through the gyro's
     float, and the caging through the autocollimator."""
     now = ctx.rig.set_mode(mode)
     ctx.acquire(settle_s, keep=False)
-    return {"mode": now, "settle_s": settle_s}
+    return ModeSet(mode=now, settle_s=settle_s)
 
 
-def back_to_mode3(ctx: Context) -> dict:
+def back_to_mode3(ctx: Context) -> ModeSet:
     """Hand the rig back in Mode 3, where the other procedures start."""
-    return {"mode": ctx.rig.set_mode(3)}
+    return ModeSet(mode=ctx.rig.set_mode(3))
 
 
 def _poll(ctx: Context, ok, timeout_s: float, poll_s: float, what: str) -> None:

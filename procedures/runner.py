@@ -51,6 +51,7 @@ from procedures.procedure import (
     Procedure,
     ProcedureError,
     Span,
+    StepResultTooLarge,
     Verdict,
 )
 from procedures.progress import ANALYSING, DONE, WRITING_REPORT, ProgressListener, ProgressModel
@@ -321,24 +322,32 @@ def _execute(ctx: Context, resume: Resumed | None, summary: RunSummary) -> None:
             beside = source.parent == Path(ctx.path).resolve().parent
             done: dict[str, Any] = {
                 "step": step.name,
-                "result": result,
+                "result": result.to_json(),
                 "resumed": source.name if beside else str(source),
             }
             if step.name in resume.spans:
                 ctx.spans[step.name] = resume.spans[step.name]
                 done["span"] = resume.spans[step.name].to_json()
-            acq.note(EVENT_STEP_DONE, _step_done_text(done))
+            acq.note(EVENT_STEP_DONE, step_done_text(proc.name, done))
             summary.steps_resumed.append(step.name)
         else:
             acq.note(EVENT_STEP, f"{i + 1}/{len(ctx.steps)} {step.name}")
             log.info("%s: step %d/%d: %s", proc.name, i + 1, len(ctx.steps), step.name)
             start = acq.pos
             result = step.run(ctx)
-            done = {"step": step.name, "result": result}
+            if not isinstance(result, step.result):
+                raise ProcedureError(
+                    f"{proc.name}: step {step.name!r} returned {type(result).__name__}, "
+                    f"not the {step.result.__name__} it names"
+                )
+            done = {"step": step.name, "result": result.to_json()}
             if not step.setup:
                 ctx.spans[step.name] = Span(Path(ctx.path).resolve(), start, acq.pos, acq.rate_hz)
                 done["span"] = ctx.spans[step.name].to_json(recorded_in=Path(ctx.path))
-            acq.note(EVENT_STEP_DONE, _step_done_text(done))
+            acq.note(EVENT_STEP_DONE, step_done_text(proc.name, done))
+            # what the event holds (floats to the result's digits): the analysis of this run
+            # and of a resume of it read the same result
+            result = step.result.from_json(done["result"])
         ctx.results[step.name] = result
         summary.steps_done.append(step.name)
         if ctx._model is not None:  # its whole weight, however long it took (or resumed)
@@ -371,15 +380,13 @@ def headline_measurement(proc: Procedure[Any], values: Mapping[str, Any]) -> Mea
     )
 
 
-def _step_done_text(done: Mapping[str, Any]) -> str:
+def step_done_text(procedure: str, done: Mapping[str, Any]) -> str:
+    """The ``step-done`` event's text; ``StepResultTooLarge`` if it would not fit the event
+    (raised inside the run's safe-state guard: the run aborts, the rig goes safe)."""
     text = json.dumps(done, default=_jsonable, separators=(",", ":"))
-    if (
-        len(text.encode()) > TEXT_BYTES
-    ):  # a cut result could not be resumed from: a bug in the procedure
-        raise ProcedureError(
-            f"step {done['step']!r}: its result is {len(text.encode())} bytes of JSON, more than "
-            f"an event holds ({TEXT_BYTES}); keep step results small"
-        )
+    size = len(text.encode())
+    if size > TEXT_BYTES:  # a cut result could not be resumed from: a bug in the procedure
+        raise StepResultTooLarge(procedure, str(done["step"]), size, TEXT_BYTES)
     return text
 
 
@@ -397,7 +404,7 @@ def _finish_report(
     out_dir: Path,
     report: bool,
 ) -> None:
-    from procedures.reports.report import write_report
+    from procedures.reports.procedure_report import write_report
     from procedures.reports.textfile import write_text_atomic
 
     stem = summary.file.stem if summary.file else next_free(out_dir, proc.name).stem

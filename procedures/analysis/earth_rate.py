@@ -52,6 +52,7 @@ import scipy.stats
 
 from drivers.calibration import GYRO_CHANNELS
 from procedures.analysis.intervals import Estimate, judged
+from procedures.stepresult import StepResult
 
 URAD = 1e-6
 RHO_GRID = np.linspace(0.0, 0.95, 39)
@@ -60,6 +61,21 @@ RHO_GRID = np.linspace(0.0, 0.95, 39)
 INPUT_AXIS = {"X": 0, "Y": 1, "Z": 2, "XRD": 0}
 HORIZONTAL = ("X", "Y", "XRD")
 G_AXES = ("x", "y", "z")
+
+
+@dataclass(frozen=True)
+class Station(StepResult):
+    """One station's step result: the table's position read back (deg), the settled torquer
+    means ``V`` (V) with their standard errors ``se`` and the pickoff means ``pickoff_V`` (for
+    the restraint term), per channel; its averaging window ``t`` and settling time (rig s)."""
+
+    tilt: float
+    spindle: float
+    V: dict[str, float]
+    pickoff_V: dict[str, float] | None = None
+    se: dict[str, float] = field(default_factory=dict)
+    t: tuple[float, float] | None = None
+    settle_s: float | None = None
 
 
 def platform_frame(
@@ -272,7 +288,7 @@ def operating_instability(rate_resid: np.ndarray) -> float:
 
 def fit_channel(
     ch: str,
-    stations: list[dict],
+    stations: list[Station],
     *,
     latitude_deg: float,
     earth_rate_rad_per_s: float,
@@ -283,9 +299,9 @@ def fit_channel(
     instability_urad_per_s: float = 0.0,
     pickoff_rel_uncertainty: float | None = None,
 ) -> ChannelFit:
-    """One channel's multi-position fit from the stations (``"tilt"``, ``"spindle"`` deg, the
-    settled torquer means ``"V"`` and, for the restraint term, the pickoff means ``"pickoff_V"``,
-    per channel, in visiting order).
+    """One channel's multi-position fit from the stations (``Station``: ``tilt``, ``spindle``
+    deg, the settled torquer means ``V`` and, for the restraint term, the pickoff means
+    ``pickoff_V``, per channel, in visiting order).
 
     Linear in the coefficients b of ``V = b_P P + b_Q Q + b_1 + b_x f_x + b_y f_y + b_z f_z
     [+ b_o order] - r / K_TO`` (``_design``; r the restraint rate sigma/(h/k), moved to the
@@ -299,14 +315,15 @@ def fit_channel(
     a data sheet): the fixed drift's interval then carries the run-to-run wander of a run's
     mean drift (``operating_instability``); the restraint term's own uncertainty (data-sheet
     h/k and K_g of ``pickoff_rel_uncertainty``, ``restraint_bound``) is carried by K_TO's."""
-    tilt = np.array([s["tilt"] for s in stations], float)
-    spindle = np.array([s["spindle"] for s in stations], float)
-    v = np.array([s["V"][ch] for s in stations], float)
+    tilt = np.array([s.tilt for s in stations], float)
+    spindle = np.array([s.spindle for s in stations], float)
+    v = np.array([s.V[ch] for s in stations], float)
     n = len(stations)
     restraint = np.zeros(n)
-    if restraint_s and pickoff_mV_per_urad and all("pickoff_V" in s for s in stations):
+    picked = [s.pickoff_V for s in stations]
+    if restraint_s and pickoff_mV_per_urad and all(p is not None for p in picked):
         sigma_rad = (
-            np.array([s["pickoff_V"][ch] for s in stations]) / (pickoff_mV_per_urad * 1e-3) * URAD
+            np.array([p[ch] for p in picked if p is not None]) / (pickoff_mV_per_urad * 1e-3) * URAD
         )
         restraint = sigma_rad / restraint_s
     X_all = _design(ch, tilt, spindle, latitude_deg, earth_rate_rad_per_s, np.arange(n))
@@ -440,7 +457,7 @@ def fit_channel(
 
 
 def fit_earth_rate(
-    stations: list[dict],
+    stations: list[Station],
     *,
     latitude_deg: float,
     earth_rate_rad_per_s: float,

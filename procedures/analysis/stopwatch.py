@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import scipy.linalg
 import scipy.stats
 
 from procedures.analysis.intervals import Estimate, from_stderr, judged
+from procedures.stepresult import StepResult
 
 #: why h/k is never a resolved figure (measured by bench/stopwatch_coverage.py over 50 rigs)
 H_OVER_K_UNRESOLVED = (
@@ -307,36 +309,64 @@ class ChannelResult:
         return Estimate(self.tau_s, 1.0 / ek.hi, hi, False, H_OVER_K_UNRESOLVED)
 
 
-def channel_result(r: dict) -> ChannelResult:
+@dataclass(frozen=True)
+class ChannelRun(StepResult):
+    """One channel's stopwatch step: the K_TO used (``kto`` urad/s/V, from ``kto_from``, its
+    relative 95 % half-width ``kto_rel_ci95``), the pickoff change timed ``dVg`` (V), the ramps
+    (direction, dt s, torquer step V), the restraint fits (``restraint_fit``: with the partner
+    term ``fit``, without it ``slope_fit``), the partner factor per ramp (``partner_factors``;
+    empty in older runs), the null's residual slope (V/s); and, for the report, the loop gain,
+    the null, the pickoff's centre ``vg0`` (V), how long the loops were caged and the times
+    (opened, nulled, end; rig s)."""
+
+    #: the fits' figures far finer than their standard errors; 15 digits did not fit the event
+    digits: ClassVar[int] = 7
+
+    ch: str
+    kto: float
+    kto_from: str
+    dVg: float
+    ramps: tuple[tuple[int, float, float], ...]
+    fit: dict[str, float]
+    null_slope: float = 0.0
+    slope_fit: dict[str, float] | None = None
+    partner_factor: tuple[float, ...] = ()
+    kto_rel_ci95: float | None = None
+    gain: float | None = None
+    vt_null: float | None = None
+    vg0: float = 0.0
+    caged_for_s: float | None = None
+    t: tuple[float, float, float] | None = None
+
+
+def channel_result(r: ChannelRun) -> ChannelResult:
     """Stopwatch readings (with the restraint correction x coth x) from a channel step's result."""
-    kto = r["kto"]
-    fit = r["fit"]
+    kto = r.kto
+    fit = r.fit
     k, k_se = fit["k"], fit["k_se"]
     resolved = k > 0 and k > 2 * k_se
     tau = 1.0 / k if resolved else None
     naive, corrected, restraint = [], [], []
     # the float partner's transient over each window (``partner_factors``; absent in older results)
-    factors = r.get("partner_factor")
-    partner = (
-        list(factors) if factors and len(factors) == len(r["ramps"]) else [1.0] * len(r["ramps"])
-    )
-    for (_direction, dt, dvt), pf in zip(r["ramps"], partner):
-        kg = r["dVg"] / (dt * abs(dvt) * kto) * 1e3  # II C.1.a(6), V/urad -> mV/urad
+    factors = r.partner_factor
+    partner = list(factors) if factors and len(factors) == len(r.ramps) else [1.0] * len(r.ramps)
+    for (_direction, dt, dvt), pf in zip(r.ramps, partner):
+        kg = r.dVg / (dt * abs(dvt) * kto) * 1e3  # II C.1.a(6), V/urad -> mV/urad
         x = dt / (2 * tau) if tau else 0.0
         naive.append(kg)
         restraint.append(x / math.tanh(x) if x > 0 else 1.0)
         corrected.append(kg * restraint[-1] / pf)
     reps = [float(np.mean(corrected[i : i + 2])) for i in range(0, len(corrected) - 1, 2)]
-    up = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d > 0]
-    down = [c for c, (d, *_) in zip(corrected, r["ramps"]) if d < 0]
+    up = [c for c, (d, *_) in zip(corrected, r.ramps) if d > 0]
+    down = [c for c, (d, *_) in zip(corrected, r.ramps) if d < 0]
     kg = float(np.mean(reps))
     spread = float(np.std(reps, ddof=1) / kg) if len(reps) > 1 else 0.0
-    ls = r.get("slope_fit", fit)
+    ls = r.slope_fit if r.slope_fit is not None else fit
     kg_ls = abs(ls["a"]) / kto * 1e3
     return ChannelResult(
-        r["ch"],
+        r.ch,
         kto,
-        r["kto_from"],
+        r.kto_from,
         corrected,
         naive,
         reps,
@@ -349,7 +379,7 @@ def channel_result(r: dict) -> ChannelResult:
         tau,
         (k_se / k**2) if resolved else None,
         float(np.mean(restraint) - 1.0),
-        r["null_slope"] / (kg * 1e-3),
+        r.null_slope / (kg * 1e-3),
         int(fit.get("dof", 1)),
         float(np.mean([1.0 / pf - 1.0 for pf in partner])),
         (

@@ -57,7 +57,8 @@ from procedures.procedure import (
 from procedures.reports import thesis
 from procedures.reports.baseline import markdown
 from procedures.resume import steps_done
-from procedures.rigsetup import bring_to_mode3
+from procedures.rigsetup import InMode3, bring_to_mode3
+from procedures.stepresult import StepResult
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +78,14 @@ CHANNELS = (
 #: of millivolts about their caged offsets (XRD's proportional loop stands at ~0.34 V)
 RANGES_V = {"ac": 1.0, "gyro": 2.0}
 STEP = "clamped record"
+
+
+@dataclass(frozen=True)
+class ClampedRecordDone(StepResult):
+    """The clamped record's step: its first ``settle_samples`` are the loops' transient."""
+
+    settle_samples: int
+    record_samples: int
 
 
 @dataclass
@@ -170,15 +179,26 @@ class Baseline(Procedure[BaselineParams]):
         a = self.params.axis.lower()
         return {"ctl": f"ac_{a}_ctl", "inst": f"ac_{a}_inst", "z": "ac_z", "gyro": f"gyro_{a}"}
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         p = self.params
         return [
-            Step("mode 3", partial(bring_to_mode3, clamped_ok=True), expected_s=300.0, setup=True),
-            Step(STEP, self._clamped_record, expected_s=p.settle_s + p.record_s),
+            Step(
+                "mode 3",
+                partial(bring_to_mode3, clamped_ok=True),
+                expected_s=300.0,
+                setup=True,
+                result=InMode3,
+            ),
+            Step(
+                STEP,
+                self._clamped_record,
+                expected_s=p.settle_s + p.record_s,
+                result=ClampedRecordDone,
+            ),
         ]
 
     # ------------------------------------------------------------------ the clamped record
-    def _clamped_record(self, ctx: Context) -> dict:
+    def _clamped_record(self, ctx: Context) -> ClampedRecordDone:
         """Clamp, settle, record, release: one step, so no abort can fall between the clamp and
         its release (the runner checks for an abort between steps, outside any step's hands)."""
         rig, p = ctx.rig, self.params
@@ -194,10 +214,9 @@ class Baseline(Procedure[BaselineParams]):
             raise
         rig.unclamp()
         ctx.note("platform released, loops closed")
-        return {
-            "settle_samples": int(settle),
-            "record_samples": int(round(p.record_s * ctx.acq.rate_hz)),
-        }
+        return ClampedRecordDone(
+            settle_samples=int(settle), record_samples=int(round(p.record_s * ctx.acq.rate_hz))
+        )
 
     @staticmethod
     def _release_after(ctx: Context, exc: BaseException) -> None:
@@ -218,7 +237,7 @@ class Baseline(Procedure[BaselineParams]):
         if not spans:
             raise ProcedureError("baseline: the clamped record was not taken")
         s = spans[0]
-        settle = int((ctx.results.get(STEP) or {}).get("settle_samples", 0))
+        settle = ctx.result(STEP, ClampedRecordDone).settle_samples
         return s.file, s.start + settle, s.stop
 
     def analyze(self, ctx: Context) -> Analysis:
@@ -389,7 +408,7 @@ def clamped_record(path: str | Path, what: str = "baseline file") -> ClampedReco
             f"written by `fbs run baseline`"
         )
     try:
-        results, spans = steps_done(path, events)
+        results, spans = steps_done(path, events, {STEP: ClampedRecordDone})
     except ProcedureError as exc:
         raise BaselineFileError(f"{name}: {exc}") from None
     if STEP not in spans:
@@ -397,7 +416,8 @@ def clamped_record(path: str | Path, what: str = "baseline file") -> ClampedReco
             f"{name}: holds no completed {STEP!r} step (status {attrs.get('status', '?')!r})"
         )
     span = spans[STEP]
-    settle = int((results.get(STEP) or {}).get("settle_samples", 0))
+    done = results.get(STEP)
+    settle = done.settle_samples if isinstance(done, ClampedRecordDone) else 0
     try:
         with RunFile(span.file) as rf:
             channels, rate, n = rf.channels, float(rf.rate_hz), rf.n_samples

@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import partial
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 
@@ -56,7 +56,8 @@ from procedures.procedure import (
     Step,
 )
 from procedures.reports.drift import hours, markdown, plot_allan, plot_null
-from procedures.rigsetup import bring_to_mode3, wait_settled
+from procedures.rigsetup import InMode3, bring_to_mode3, wait_settled
+from procedures.stepresult import Recorded, Waited
 
 #: the ADC's anti-alias filter is 3-pole at 0.3 fs (DESIGN.md section 5): the first few
 #: samples' Allan deviation is shaped by it, so the noise-model fit starts at this many samples
@@ -149,19 +150,22 @@ class Drift(Procedure[DriftParams]):
         n = int(self.params.n_chunks)
         return [f"record {i + 1}/{n}" for i in range(n)]
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         p = self.params
         chunk_s = p.duration_s / int(p.n_chunks)
         return [
-            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True, result=InMode3),
             Step(
                 "settle",
                 self.settle,
                 expected_s=max(p.settle_min_s, p.settle_window_s) + 20.0,
                 setup=True,
+                result=Waited,
             ),
             *(
-                Step(name, partial(self.record, seconds=chunk_s), expected_s=chunk_s)
+                Step(
+                    name, partial(self.record, seconds=chunk_s), expected_s=chunk_s, result=Recorded
+                )
                 for name in self.chunk_names()
             ),
         ]
@@ -186,7 +190,7 @@ class Drift(Procedure[DriftParams]):
             source = f"earth-rate result; NOMINAL data-sheet value for {', '.join(used_nominal)}"
         return out, source
 
-    def settle(self, ctx: Context) -> dict:
+    def settle(self, ctx: Context) -> Waited:
         p = self.params
         kto, _ = self.kto(ctx)
         cols = [ctx.column(torq(c)) for c in GYRO_CHANNELS]
@@ -199,11 +203,11 @@ class Drift(Procedure[DriftParams]):
             min_s=p.settle_min_s,
             timeout_s=p.settle_timeout_s,
         )
-        return {"waited_s": round(s.waited_s, 1)}
+        return Waited(seconds=round(s.waited_s, 1))
 
-    def record(self, ctx: Context, seconds: float) -> dict:
+    def record(self, ctx: Context, seconds: float) -> Recorded:
         ctx.acquire(seconds, keep=False)  # where the samples are is the runner's record (ctx.spans)
-        return {"seconds": seconds}
+        return Recorded(seconds=seconds)
 
     # ------------------------------------------------------------------ analysis
     def analyze(self, ctx: Context) -> Analysis:

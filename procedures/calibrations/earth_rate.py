@@ -28,18 +28,27 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 
 from drivers.calibration import GYRO_CHANNELS
-from procedures.analysis.earth_rate import G_AXES, fit_earth_rate
+from procedures.analysis.earth_rate import G_AXES, Station, fit_earth_rate
 from procedures.analysis.intervals import add_figure
 from procedures.paramlimits import Each, Range, above, at_least, check_limits, fraction, sample_rate
 from procedures.params import prior_values
 from procedures.procedure import Analysis, Context, Figure, Measurement, Procedure, Step
 from procedures.reports.earth_rate import markdown, plot_fits
-from procedures.rigsetup import bring_to_mode3, mean_and_stderr, wait_settled
+from procedures.rigsetup import InMode3, bring_to_mode3, mean_and_stderr, wait_settled
+from procedures.stepresult import StepResult
+
+
+@dataclass(frozen=True)
+class TableAt(StepResult):
+    """Where the table is, read back (deg)."""
+
+    tilt: float
+    spindle: float
 
 
 @dataclass
@@ -137,22 +146,23 @@ class EarthRate(Procedure[EarthRateParams]):
                 )
         return out
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         stations = [
             Step(
                 name,
                 partial(self.station, tilt=tilt, spindle=spindle, average_s=avg),
                 expected_s=avg + self.params.settle_min_s + 10.0,
+                result=Station,
             )
             for name, tilt, spindle, avg in self.stations()
         ]
         return [
-            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True, result=InMode3),
             *stations,
-            Step("table home", self.home, expected_s=5.0, setup=True),
+            Step("table home", self.home, expected_s=5.0, setup=True, result=TableAt),
         ]
 
-    def station(self, ctx: Context, tilt: float, spindle: float, average_s: float) -> dict:
+    def station(self, ctx: Context, tilt: float, spindle: float, average_s: float) -> Station:
         p = self.params
         pos = ctx.rig.move_table(
             tilt_deg=tilt, spindle_deg=spindle
@@ -171,15 +181,15 @@ class EarthRate(Procedure[EarthRateParams]):
         data = ctx.acquire(average_s)
         mean, se = mean_and_stderr(data[:, cols])
         pmean, _ = mean_and_stderr(data[:, pick])
-        return {
-            "tilt": pos.tilt_deg,
-            "spindle": pos.spindle_deg,
-            "t": [round(t0, 3), round(ctx.time_s, 3)],
-            "settle_s": round(settled.waited_s, 1),
-            "V": {c: float(m) for c, m in zip(GYRO_CHANNELS, mean)},
-            "se": {c: float(s) for c, s in zip(GYRO_CHANNELS, se)},
-            "pickoff_V": {c: float(m) for c, m in zip(GYRO_CHANNELS, pmean)},
-        }
+        return Station(
+            tilt=pos.tilt_deg,
+            spindle=pos.spindle_deg,
+            t=(round(t0, 3), round(ctx.time_s, 3)),
+            settle_s=round(settled.waited_s, 1),
+            V={c: float(m) for c, m in zip(GYRO_CHANNELS, mean)},
+            se={c: float(s) for c, s in zip(GYRO_CHANNELS, se)},
+            pickoff_V={c: float(m) for c, m in zip(GYRO_CHANNELS, pmean)},
+        )
 
     def _kg_rel_half_width(self, ch: str, source: str, kg: float) -> float | None:
         """The relative 95 % half-width of the stopwatch K_g in use, ``None`` for the data
@@ -193,14 +203,14 @@ class EarthRate(Procedure[EarthRateParams]):
             return None
         return max(abs(hi - kg), abs(kg - lo)) / kg if math.isfinite(hi - lo) and kg else None
 
-    def home(self, ctx: Context) -> dict:
+    def home(self, ctx: Context) -> TableAt:
         pos = ctx.rig.move_table(tilt_deg=0.0, spindle_deg=0.0)
-        return {"tilt": pos.tilt_deg, "spindle": pos.spindle_deg}
+        return TableAt(tilt=pos.tilt_deg, spindle=pos.spindle_deg)
 
     # ------------------------------------------------------------------ analysis
     def analyze(self, ctx: Context) -> Analysis:
         cal = ctx.rig.calibration
-        stations = [ctx.results[st[0]] for st in self.stations()]
+        stations = [ctx.result(st[0], Station) for st in self.stations()]
         p = self.params
         # K_g for the standing pickoff: a stopwatch run's if at hand, else the data sheet's
         kg, kg_from = prior_values(

@@ -89,7 +89,47 @@ from procedures.procedure import (
 )
 from procedures.reports.excitation import markdown, plot_response
 from procedures.reports.thesis import closed_loop_roots as thesis_roots
-from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
+from procedures.rigsetup import InMode3, ModeSet, back_to_mode3, bring_to_mode3, enter_gyro_mode
+from procedures.stepresult import Recorded, StepResult, Waited
+
+
+@dataclass(frozen=True)
+class ProbeTry(StepResult):
+    """One probe level (V_Td rms) and the platform motion it made (urad rms)."""
+
+    V_rms: float
+    moved_urad_rms: float
+
+
+@dataclass(frozen=True)
+class Probe(StepResult):
+    """The probe's outcome: the excitation level chosen (``level_V_rms``), the range that
+    limits it, and the probes that found it."""
+
+    probe_V_rms: float
+    probe_motion_urad_rms: float
+    quiet_urad_rms: float
+    probes: tuple[ProbeTry, ...]
+    target_urad_rms: float
+    level_V_rms: float
+    limited_by: str
+    expected_motion_urad_rms: float
+
+
+@dataclass(frozen=True)
+class Excited(StepResult):
+    """The multisine's record: ``seconds`` at ``level_V_rms`` (V_Td)."""
+
+    seconds: float
+    level_V_rms: float
+
+
+@dataclass(frozen=True)
+class TorqueOff(StepResult):
+    """The command torque set back to ``V_Td`` (0)."""
+
+    V_Td: float
+
 
 URAD = 1e-6
 #: the recorded channels' ADC ranges (V): the amplifier input is millivolts, tens of them in the
@@ -292,11 +332,11 @@ class Excitation(Procedure[ExcitationParams]):
         figures = ("inertia_kg_m2", "damping_Nms", "stiffness_Nm_per_rad")
         return dict.fromkeys(figures, (self.params.axis,))
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         p = self.params
-        steps = [
-            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-            Step("settle", self._settle, expected_s=p.settle_s, setup=True),
+        steps: list[Step[Any]] = [
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True, result=InMode3),
+            Step("settle", self._settle, expected_s=p.settle_s, setup=True, result=Waited),
         ]
         if p.mode != 3:
             steps.append(
@@ -305,26 +345,29 @@ class Excitation(Procedure[ExcitationParams]):
                     partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
                     expected_s=p.mode_settle_s,
                     setup=True,
+                    result=ModeSet,
                 )
             )
         steps += [
-            Step("quiet", self._quiet, expected_s=p.quiet_s),
-            Step("probe", self._probe, expected_s=p.probe_s, setup=True),
-            Step("excite", self._excite, expected_s=p.excite_s),
-            Step("V_Td off", self._off, expected_s=2.0, setup=True),
+            Step("quiet", self._quiet, expected_s=p.quiet_s, result=Recorded),
+            Step("probe", self._probe, expected_s=p.probe_s, setup=True, result=Probe),
+            Step("excite", self._excite, expected_s=p.excite_s, result=Excited),
+            Step("V_Td off", self._off, expected_s=2.0, setup=True, result=TorqueOff),
         ]
         if p.mode != 3:
-            steps.append(Step("back to mode 3", back_to_mode3, expected_s=2.0, setup=True))
+            steps.append(
+                Step("back to mode 3", back_to_mode3, expected_s=2.0, setup=True, result=ModeSet)
+            )
         return steps
 
-    def _settle(self, ctx: Context) -> dict:
+    def _settle(self, ctx: Context) -> Waited:
         ctx.rig.set_command_torque_V(self.params.axis, 0.0)
         ctx.acquire(self.params.settle_s, keep=False)
-        return {"settle_s": self.params.settle_s}
+        return Waited(seconds=self.params.settle_s)
 
-    def _quiet(self, ctx: Context) -> dict:
+    def _quiet(self, ctx: Context) -> Recorded:
         ctx.acquire(self.params.quiet_s, keep=False)
-        return {"seconds": self.params.quiet_s}
+        return Recorded(seconds=self.params.quiet_s)
 
     def _period(self) -> np.ndarray:
         """One period of the unit-rms multisine, a value per V_Td update."""
@@ -350,7 +393,7 @@ class Excitation(Procedure[ExcitationParams]):
         ctx.rig.stream_command_torque_V(p.axis, x, step)  # ends at 0 V, however it ends
         return np.concatenate(blocks) if keep else None
 
-    def _probe(self, ctx: Context) -> dict:
+    def _probe(self, ctx: Context) -> Probe:
         """The level (V_Td rms) that moves the platform ``target_urad`` rms, cut to the ranges.
 
         The motion is the control channel's part coherent with the probe: in the gyro modes the
@@ -389,7 +432,7 @@ class Excitation(Procedure[ExcitationParams]):
                 / scale
                 / URAD
             )
-            tries.append({"V_rms": round(level, 6), "moved_urad_rms": round(moved, 4)})
+            tries.append(ProbeTry(V_rms=round(level, 6), moved_urad_rms=round(moved, 4)))
             if moved >= PROBE_ENOUGH * target or level >= dac_max or len(tries) >= PROBE_TRIES:
                 break
             level = min(level * PROBE_GROWTH, dac_max)
@@ -420,26 +463,26 @@ class Excitation(Procedure[ExcitationParams]):
         limits["V_Td DAC"] = dac_max
         by = min(limits, key=lambda k: limits[k])
         chosen = limits[by]
-        return {
-            "probe_V_rms": round(level, 6),
-            "probe_motion_urad_rms": round(moved, 4),
-            "quiet_urad_rms": round(rms_q, 4),
-            "probes": tries,
-            "target_urad_rms": round(target, 4),
-            "level_V_rms": chosen,
-            "limited_by": by,
-            "expected_motion_urad_rms": round(moved * chosen / level, 4),
-        }
+        return Probe(
+            probe_V_rms=round(level, 6),
+            probe_motion_urad_rms=round(moved, 4),
+            quiet_urad_rms=round(rms_q, 4),
+            probes=tuple(tries),
+            target_urad_rms=round(target, 4),
+            level_V_rms=chosen,
+            limited_by=by,
+            expected_motion_urad_rms=round(moved * chosen / level, 4),
+        )
 
-    def _excite(self, ctx: Context) -> dict:
-        level = float(ctx.results["probe"]["level_V_rms"])
+    def _excite(self, ctx: Context) -> Excited:
+        level = ctx.result("probe", Probe).level_V_rms
         self._inject(ctx, level, self.params.excite_s, keep=False)
-        return {"seconds": self.params.excite_s, "level_V_rms": level}
+        return Excited(seconds=self.params.excite_s, level_V_rms=level)
 
-    def _off(self, ctx: Context) -> dict:
+    def _off(self, ctx: Context) -> TorqueOff:
         ctx.rig.set_command_torque_V(self.params.axis, 0.0)
         ctx.acquire(1.0, keep=False)
-        return {"V_Td": 0.0}
+        return TorqueOff(V_Td=0.0)
 
     # ------------------------------------------------------------------ analysis
     def analyze(self, ctx: Context) -> Analysis:
@@ -485,8 +528,9 @@ class Excitation(Procedure[ExcitationParams]):
             (p.band_lo_hz, p.band_hi_hz),
         )
         values |= amplitude_labels(plat, p.axis, amplitude)
-        values["level_V_rms"] = ctx.results["probe"]["level_V_rms"]
-        values["level_limited_by"] = ctx.results["probe"]["limited_by"]
+        probe = ctx.result("probe", Probe)
+        values["level_V_rms"] = probe.level_V_rms
+        values["level_limited_by"] = probe.limited_by
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
         kg, kg_src = prior_values(

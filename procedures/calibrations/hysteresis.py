@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Annotated
+from typing import Annotated, Any
 
 from procedures.analysis.hysteresis import AC_AXES, FIGURES, analyze_file
 from procedures.paramlimits import Each, OneOf, Range, above, at_least, check_limits, sample_rate
@@ -30,7 +30,26 @@ from procedures.reports.hysteresis import (
     plot_loops,
     plot_scan,
 )
-from procedures.rigsetup import bring_to_mode3
+from procedures.rigsetup import InMode3, bring_to_mode3
+from procedures.stepresult import StepResult
+
+
+@dataclass(frozen=True)
+class Sweep(StepResult):
+    """One amplitude's sinusoidal bias: its bias amplitude (V), its time (rig s) and cycles."""
+
+    amplitude_urad: float
+    bias_amplitude_V: float
+    t_s: tuple[float, float]
+    cycles: int
+
+
+@dataclass(frozen=True)
+class BiasOff(StepResult):
+    """The autocollimator bias set back to ``bias_V`` (0)."""
+
+    bias_V: float
+
 
 #: DESIGN.md section 7, and the angle lag the analysis measured and took out
 JSON_KEYS = ("To_Nm", "eta_per_Nm", "stiffness_Nm_per_rad", "angle_lag_ms", "file")
@@ -114,7 +133,7 @@ class Hysteresis(Procedure[HysteresisParams]):
         ``resolved``; ``angle_lag_ms`` is bookkeeping."""
         return dict.fromkeys(FIGURES, (self.params.axis,))
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         p = self.params
         per = (p.settle_cycles + p.cycles) / p.frequency_hz
         # The sweep steps run again on --resume (setup=True) rather than being taken over: the
@@ -122,17 +141,27 @@ class Hysteresis(Procedure[HysteresisParams]):
         # bearing's state after an interruption is not the one the earlier steps left.
         sweeps = [
             Step(
-                f"{amp:g} urad", partial(self.sweep, amplitude_urad=amp), expected_s=per, setup=True
+                f"{amp:g} urad",
+                partial(self.sweep, amplitude_urad=amp),
+                expected_s=per,
+                setup=True,
+                result=Sweep,
             )
             for amp in p.amplitudes_urad
         ]
         return [
-            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True, result=InMode3),
             *sweeps,
-            Step("bias off", self.bias_off, expected_s=1.0 / p.frequency_hz, setup=True),
+            Step(
+                "bias off",
+                self.bias_off,
+                expected_s=1.0 / p.frequency_hz,
+                setup=True,
+                result=BiasOff,
+            ),
         ]
 
-    def sweep(self, ctx: Context, amplitude_urad: float) -> dict:
+    def sweep(self, ctx: Context, amplitude_urad: float) -> Sweep:
         """``settle_cycles + cycles`` cycles of the sinusoidal bias: theta ~ amplitude sin(w t)."""
         p = self.params
         volts_per_urad = ctx.rig.calibration.autocollimator[p.axis].control_mV_per_urad * 1e-3
@@ -147,17 +176,17 @@ class Hysteresis(Procedure[HysteresisParams]):
         ctx.rig.stream_ac_bias_V(
             p.axis, values, partial(ctx.acquire, self.update_s, keep=False, chunk_s=self.update_s)
         )
-        return {
-            "amplitude_urad": amplitude_urad,
-            "bias_amplitude_V": round(amp_V, 6),
-            "t_s": [round(t0, 4), round(ctx.time_s, 4)],
-            "cycles": p.settle_cycles + p.cycles,
-        }
+        return Sweep(
+            amplitude_urad=amplitude_urad,
+            bias_amplitude_V=round(amp_V, 6),
+            t_s=(round(t0, 4), round(ctx.time_s, 4)),
+            cycles=p.settle_cycles + p.cycles,
+        )
 
-    def bias_off(self, ctx: Context) -> dict:
+    def bias_off(self, ctx: Context) -> BiasOff:
         ctx.rig.set_ac_bias_V(self.params.axis, 0.0)
         ctx.acquire(1.0 / self.params.frequency_hz, keep=False)
-        return {"bias_V": 0.0}
+        return BiasOff(bias_V=0.0)
 
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params

@@ -70,6 +70,7 @@ from procedures.analysis.intervals import add_figure
 from procedures.analysis.stopwatch import (
     PROPORTIONAL_ONLY,
     VISCOUS_COUPLING_H_OVER_C,
+    ChannelRun,
     NoCrossing,
     channel_result,
     crossing_times,
@@ -89,7 +90,7 @@ from procedures.procedure import (
     Step,
 )
 from procedures.reports.stopwatch import markdown, plot_channel
-from procedures.rigsetup import bring_to_mode3, wait_settled
+from procedures.rigsetup import InMode3, bring_to_mode3, wait_settled
 
 #: the parameters' limits too long to read inline
 _CHANNEL = OneOf(*GYRO_CHANNELS)
@@ -194,19 +195,21 @@ class Stopwatch(Procedure[StopwatchParams]):
             return None  # an earth-rate summary without intervals (an older run): not a judged K_TO
         return (hi - lo) / 2 / kto if math.isfinite(hi - lo) else None
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         p = self.params
         per = 200.0 + p.null_s * 2 + (2 * p.repetitions + 1) * (p.hold_s + 45.0) + p.restore_s
         return [
-            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True, result=InMode3),
             *(
-                Step(f"channel {ch}", partial(self.channel, ch=ch), expected_s=per)
+                Step(
+                    f"channel {ch}", partial(self.channel, ch=ch), expected_s=per, result=ChannelRun
+                )
                 for ch in p.channels
             ),
         ]
 
     # ------------------------------------------------------------------ one channel
-    def channel(self, ctx: Context, ch: str) -> dict:
+    def channel(self, ctx: Context, ch: str) -> ChannelRun:
         p, rig = self.params, ctx.rig
         kto, source = self.kto(ctx, ch)
         kg_nom = (
@@ -219,7 +222,7 @@ class Stopwatch(Procedure[StopwatchParams]):
         if rig.caging.inhibited(ch):
             rig.set_caging_inhibit(ch, False)
         rig.set_torquer_bias_V(ch, 0.0)
-        t_caged = float((ctx.results.get("mode 3") or {}).get("t_caged_s", ctx.time_s))
+        t_caged = ctx.result("mode 3", InMode3).t_caged_s
         if ctx.time_s - t_caged < p.min_caged_s:
             ctx.acquire(p.min_caged_s - (ctx.time_s - t_caged), keep=False)
         caged_for = ctx.time_s - t_caged
@@ -258,7 +261,8 @@ class Stopwatch(Procedure[StopwatchParams]):
         lo, hi = vg0 - half, vg0 + half
         margin = 0.15 * half
         expected = p.delta_pickoff_V / (kg_nom * p.ramp_rate_urad_per_s)
-        ramps, windows = [], []
+        ramps: list[tuple[int, float, float]] = []
+        windows: list[tuple[float, float]] = []
         direction = +1
         self._ramp(
             ctx,
@@ -292,7 +296,7 @@ class Stopwatch(Procedure[StopwatchParams]):
                 raise ProcedureError(str(exc)) from None
             # the torquer step between the crossings: not the ADC filter's settling after the bias step
             dvt = float(np.nanmean(vt[(t >= t1) & (t <= t2)]) - vt_null)
-            ramps.append([direction, round(t2 - t1, 5), round(dvt, 7)])
+            ramps.append((int(direction), round(t2 - t1, 5), round(float(dvt), 7)))
             windows.append((t1, t2))
             rec.hold(ctx, ch, bias, p.hold_s)
         # back to the null position
@@ -333,26 +337,24 @@ class Stopwatch(Procedure[StopwatchParams]):
             rig.set_torquer_bias_V(ch, bias * (1 - (i + 1) / n_steps))
             ctx.acquire(p.restore_s / n_steps, keep=False)
         wait_settled(ctx, [tcol], tol_V=1e-3, min_s=30.0, window_s=30.0)
-        # a step result is one event of the run file (at most 1 KiB): its fits' figures to 7
-        # significant digits, far finer than their standard errors (at 3 repetitions, 15-digit
-        # floats made 1,030 bytes and aborted the run)
-        return {
-            "ch": ch,
-            "kto": kto,
-            "kto_from": source,
-            "kto_rel_ci95": _sig(self.kto_rel_half_width(ch, source, kto)),
-            "gain": round(gain, 6),
-            "vt_null": round(vt_null, 6),
-            "vg0": round(vg0, 5),
-            "null_slope": _sig(null_slope),
-            "caged_for_s": round(caged_for, 1),
-            "t": [round(t_open, 2), round(t_null, 2), round(t_end, 2)],
-            "dVg": p.delta_pickoff_V,
-            "ramps": ramps,
-            "fit": {k: _sig(v) for k, v in fit.items()},
-            "slope_fit": {k: _sig(v) for k, v in slope_fit.items()},
-            "partner_factor": [round(f, 7) for f in factors],
-        }
+        # a step result is one event of the run file (at most 1 KiB): ``ChannelRun.digits``
+        return ChannelRun(
+            ch=ch,
+            kto=kto,
+            kto_from=source,
+            kto_rel_ci95=self.kto_rel_half_width(ch, source, kto),
+            gain=round(gain, 6),
+            vt_null=round(vt_null, 6),
+            vg0=round(vg0, 5),
+            null_slope=float(null_slope),
+            caged_for_s=round(caged_for, 1),
+            t=(round(t_open, 2), round(t_null, 2), round(t_end, 2)),
+            dVg=p.delta_pickoff_V,
+            ramps=tuple(ramps),
+            fit={k: float(v) for k, v in fit.items()},
+            slope_fit={k: float(v) for k, v in slope_fit.items()},
+            partner_factor=tuple(round(f, 7) for f in factors),
+        )
 
     def _ramp(
         self,
@@ -387,11 +389,11 @@ class Stopwatch(Procedure[StopwatchParams]):
 
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
-        results = {ch: ctx.results[f"channel {ch}"] for ch in p.channels}
+        results = {ch: ctx.result(f"channel {ch}", ChannelRun) for ch in p.channels}
         per = {ch: channel_result(r) for ch, r in results.items()}
         cal = ctx.rig.calibration
         ms: list[Measurement] = []
-        kg_est = {ch: r.kg_estimate(results[ch].get("kto_rel_ci95")) for ch, r in per.items()}
+        kg_est = {ch: r.kg_estimate(results[ch].kto_rel_ci95) for ch, r in per.items()}
         tau_est = {ch: r.tau_estimate() for ch, r in per.items()}
         for ch, r in per.items():
             nom = cal.pickoff_scale_mV_per_urad[ch]
@@ -494,11 +496,6 @@ class _Record:
 
     def index_at(self, time_s: float) -> int:
         return int(np.searchsorted(np.concatenate(self.t), time_s))
-
-
-def _sig(x: Any, digits: int = 7) -> Any:
-    """A float to ``digits`` significant digits (anything else as it is)."""
-    return float(f"{x:.{digits}g}") if isinstance(x, float) else x
 
 
 PROCEDURE = Stopwatch

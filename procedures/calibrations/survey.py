@@ -84,7 +84,8 @@ from procedures.procedure import (
 )
 from procedures.reports import thesis
 from procedures.reports.survey import markdown, plot_dips
-from procedures.rigsetup import back_to_mode3, bring_to_mode3, enter_gyro_mode
+from procedures.rigsetup import InMode3, ModeSet, back_to_mode3, bring_to_mode3, enter_gyro_mode
+from procedures.stepresult import Recorded, Waited
 
 log = logging.getLogger(__name__)
 
@@ -257,7 +258,7 @@ class Survey(Procedure[SurveyParams]):
         lengths = [p.piece_s] * (n - 1) + [p.duration_s - p.piece_s * (n - 1)]
         return [(f"record {i + 1}/{n}", seconds) for i, seconds in enumerate(lengths)]
 
-    def plan(self) -> list[Step]:
+    def plan(self) -> list[Step[Any]]:
         # the baseline is chosen before the first step records (and again on a resume)
         self.baseline, self.baseline_note = self.find_baseline()
         p = self.params
@@ -267,29 +268,35 @@ class Survey(Procedure[SurveyParams]):
                 partial(enter_gyro_mode, mode=p.mode, settle_s=p.mode_settle_s),
                 expected_s=p.mode_settle_s,
                 setup=True,
+                result=ModeSet,
             )
         ]
-        back = [Step("back to mode 3", back_to_mode3, expected_s=1.0, setup=True)]
+        back = [Step("back to mode 3", back_to_mode3, expected_s=1.0, setup=True, result=ModeSet)]
         return [
-            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True),
-            Step("settle", self._settle, expected_s=p.settle_s, setup=True),
+            Step("mode 3", bring_to_mode3, expected_s=300.0, setup=True, result=InMode3),
+            Step("settle", self._settle, expected_s=p.settle_s, setup=True, result=Waited),
             *(gyro_mode if p.mode != 3 else []),
             *(
-                Step(name, partial(self._record, seconds=seconds), expected_s=seconds)
+                Step(
+                    name,
+                    partial(self._record, seconds=seconds),
+                    expected_s=seconds,
+                    result=Recorded,
+                )
                 for name, seconds in self.pieces()
             ),
             *(back if p.mode != 3 else []),
         ]
 
-    def _settle(self, ctx: Context) -> dict:
-        already = bool((ctx.results.get("mode 3") or {}).get("already"))
+    def _settle(self, ctx: Context) -> Waited:
+        already = ctx.result("mode 3", InMode3).already
         seconds = min(5.0, self.params.settle_s) if already else self.params.settle_s
         ctx.acquire(seconds, keep=False)
-        return {"settle_s": seconds}
+        return Waited(seconds=seconds)
 
-    def _record(self, ctx: Context, seconds: float) -> dict:
+    def _record(self, ctx: Context, seconds: float) -> Recorded:
         ctx.acquire(seconds, keep=False)  # where the samples are is the runner's record (ctx.spans)
-        return {"seconds": seconds}
+        return Recorded(seconds=seconds)
 
     # ------------------------------------------------------------------ analysis
     def analyze(self, ctx: Context) -> Analysis:

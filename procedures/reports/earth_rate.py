@@ -12,9 +12,9 @@ import numpy as np
 
 from daq.plots import new_figure, save_figure
 from drivers.calibration import GYRO_CHANNELS
-from procedures.analysis.earth_rate import ChannelFit
+from procedures.analysis.earth_rate import ChannelFit, Station
 from procedures.analysis.intervals import Estimate
-from procedures.reports.report import fmt
+from procedures.reports.procedure_report import fmt
 
 
 def plot_fits(path: Path, fits: dict[str, ChannelFit]) -> None:
@@ -40,7 +40,7 @@ def _cell(e: Estimate, digits: int = 4) -> str:
 
 def markdown(
     fits: dict[str, ChannelFit],
-    stations: list[dict],
+    stations: list[Station],
     names: Iterable[tuple[str, float, float, float]],
 ) -> str:
     """The fit table (every figure with its 95 % interval, unresolved ones marked) and the
@@ -91,8 +91,8 @@ def markdown(
     ]
     for (name, *_), s in zip(names, stations):
         lines.append(
-            f"| {name} | {fmt(s['tilt'])} | {fmt(s['spindle'])} | {s['settle_s']} | "
-            + " | ".join(f"{s['V'][c]:+.5f}" for c in GYRO_CHANNELS)
+            f"| {name} | {fmt(s.tilt)} | {fmt(s.spindle)} | {s.settle_s} | "
+            + " | ".join(f"{s.V[c]:+.5f}" for c in GYRO_CHANNELS)
             + " |"
         )
     return "\n".join(lines)

@@ -12,7 +12,7 @@ import numpy as np
 from daq.plots import new_figure, save_figure
 from daq.reader import RunFile
 from procedures.analysis.intervals import Estimate
-from procedures.analysis.stopwatch import ChannelResult
+from procedures.analysis.stopwatch import ChannelResult, ChannelRun
 
 
 def _interval(e: Estimate, fmt: str) -> str:
@@ -63,17 +63,19 @@ def markdown(
     return "\n".join(lines)
 
 
-def plot_channel(path: Path, run: Path, ch: str, r: dict) -> None:
+def plot_channel(path: Path, run: Path, ch: str, r: ChannelRun) -> None:
     """The channel's pickoff (with the two stopwatch levels) and torquer output from the loop's
     opening to the end of the ramps, read from the run file ``run``; ``r`` the step's result."""
-    t0, _, t1 = r["t"]
+    if r.t is None:
+        raise ValueError(f"channel {ch}: its result has no times to plot")
+    t0, _, t1 = r.t
     with RunFile(run) as rf:
         block = rf.slice_s(t0, t1, [f"gyro_{ch.lower()}", f"torq_{ch.lower()}"])
     fig, axes = new_figure(2, 1, figsize=(10, 6))
     data = block.data
     t = (block.start + np.arange(len(block))) / block.rate_hz
     axes[0, 0].plot(t, data[0], lw=0.5)
-    for level in (r["vg0"] - r["dVg"] / 2, r["vg0"] + r["dVg"] / 2):
+    for level in (r.vg0 - r.dVg / 2, r.vg0 + r.dVg / 2):
         axes[0, 0].axhline(level, color="k", ls="--", lw=0.8)
     axes[0, 0].set_ylabel(f"gyro_{ch.lower()} (V)")
     axes[1, 0].plot(t, data[1], lw=0.8)

@@ -12,13 +12,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from daq.reader import RunFile
 from drivers.calibration import RigCalibration
 from procedures.analysis.drift import analyze_channels, coupling_terms, reconstruct_rate
 from procedures.calibrations import catalogue
 from procedures.calibrations.drift import Drift, Params
 from procedures.procedure import merge_spans
-from procedures.resume import load_resume, steps_done
+from procedures.resume import load_resume
 from procedures.runner import run_procedure
 from tests.result_schema import assert_valid_result
 
@@ -238,9 +237,8 @@ class _Ctx:
 
 
 def _reanalysis_ctx(path: Path) -> _Ctx:
-    with RunFile(path) as rf:
-        results, spans = steps_done(path, rf.events)
-    return _Ctx(path, SimpleNamespace(calibration=RigCalibration()), results, spans)
+    done = load_resume(path, Drift, complete_ok=True)
+    return _Ctx(path, SimpleNamespace(calibration=RigCalibration()), done.results, done.spans)
 
 
 @pytest.mark.slow
@@ -377,7 +375,7 @@ def test_abort_and_resume_continue_the_record(tmp_path):
         )
         assert first.exit_code == 2 and first.status.startswith("aborted")
         assert first.steps_done == ["mode 3", "settle", "record 1/4", "record 2/4"]
-        resumed = load_resume(first.file, "drift")
+        resumed = load_resume(first.file, Drift)
         second = run_procedure(Drift(Drift.Params(**resumed.params)), rig, tmp_path, resume=resumed)
     # 600 s resolves neither figure on any channel: complete, but no pass (issue 37, item 2)
     assert second.status == "complete" and second.error is None, second.error

@@ -3,6 +3,7 @@ rigs whose values they must find by measurement (acceptance A, B)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -12,8 +13,13 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from drivers.rig import open_rig
-from procedures.analysis.earth_rate import fit_channel, platform_frame
-from procedures.analysis.stopwatch import PARTNER_TRANSIENT_BOUND, channel_result, partner_factors
+from procedures.analysis.earth_rate import Station, fit_channel, platform_frame
+from procedures.analysis.stopwatch import (
+    PARTNER_TRANSIENT_BOUND,
+    ChannelRun,
+    channel_result,
+    partner_factors,
+)
 from procedures.analysis.stopwatch import crossing_interval as _crossing_interval
 from procedures.analysis.stopwatch import restraint_fit as _restraint_fit
 from procedures.analysis.stopwatch import smooth as _smooth
@@ -47,7 +53,7 @@ def _station(
         rate = w_i + (g["d"] + g["g"] @ f) * 1e-6 - sigma / g.get("hk", 1.0)
         v[ch] = -rate / (g["kto"] * 1e-6) + (noise or {}).get(ch, 0.0)
         pv[ch] = sigma / 1e-6 * g.get("kg", 6.0) * 1e-3
-    return {"tilt": tilt, "spindle": spindle, "V": v, "pickoff_V": pv}
+    return Station(tilt=tilt, spindle=spindle, V=v, pickoff_V=pv)
 
 
 def _positions(tilts=(0.0, 90.0, 45.0), n=8):
@@ -101,7 +107,7 @@ def test_a_standing_pickoff_is_taken_out_of_the_scale_factor():
     stations = []
     for t, s in _positions():
         clean = _station(t, s, 0.1, {"XRD": {"kto": kto, "d": 0.4, "g": np.zeros(3)}})
-        rate = -clean["V"]["XRD"] * kto * 1e-6  # what the torquer would balance alone
+        rate = -clean.V["XRD"] * kto * 1e-6  # what the torquer would balance alone
         sigma = rate / (gp * hk + 1.0) * hk  # the float's share at equilibrium, rad
         stations.append(
             _station(
@@ -237,7 +243,7 @@ def test_intervals_cover_under_correlated_station_noise(errors):
     n = 200
     for _ in range(n):
         e = errors(rng, len(clean))
-        stations = [dict(s, V={"X": s["V"]["X"] + ei}) for s, ei in zip(clean, e)]
+        stations = [dataclasses.replace(s, V={"X": s.V["X"] + ei}) for s, ei in zip(clean, e)]
         f = fit_channel("X", stations, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA)
         for k, t in (("K_TO", 31.6), ("drift", 0.35), ("g_x", 0.05), ("g_y", 0.08), ("g_z", -0.04)):
             hits[k] += f.figures[k].covers(t)
@@ -310,15 +316,15 @@ def test_the_float_partners_loop_is_not_read_as_restraint():
 
 
 def test_k_g_interval_carries_the_k_to_interval():
-    r = {
-        "ch": "X",
-        "kto": 31.6,
-        "kto_from": "earth-rate",
-        "dVg": 2.0,
-        "null_slope": 0.0,
-        "ramps": [[-1, 20.0, -0.3], [1, 20.2, 0.3], [-1, 19.9, -0.3], [1, 20.1, 0.3]],
-        "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / 400.0, "k_se": 8e-5, "dof": 9},
-    }
+    r = ChannelRun(
+        ch="X",
+        kto=31.6,
+        kto_from="earth-rate",
+        dVg=2.0,
+        null_slope=0.0,
+        ramps=((-1, 20.0, -0.3), (1, 20.2, 0.3), (-1, 19.9, -0.3), (1, 20.1, 0.3)),
+        fit={"a": 0.057, "a_se": 1e-4, "k": 1 / 400.0, "k_se": 8e-5, "dof": 9},
+    )
     res = channel_result(r)
     alone, with_kto = res.kg_estimate(0.0), res.kg_estimate(0.01)
     assert alone.resolved and with_kto.resolved and alone.lo < res.kg < alone.hi
@@ -343,17 +349,17 @@ def test_a_result_without_partner_factors_carries_the_transients_bound():
     truth, kto, dvt, dvg = 7.51, 34.1, 0.6, 2.0
     dt = dvg / (truth * 1e-3 * kto * dvt)  # II C.1.a(6) at the true K_g
     bias = [-0.000320, -0.000577, -0.000228, -0.000553, -0.000255, -0.000635]
-    r = {
-        "ch": "Z",
-        "kto": kto,
-        "kto_from": "given",
-        "dVg": dvg,
-        "null_slope": 0.0,
-        "ramps": [
-            [(-1) ** (i + 1), dt / (1 + b), (-1) ** (i + 1) * dvt] for i, b in enumerate(bias)
-        ],
-        "fit": {"a": 0.26, "a_se": 1e-4, "k": 1 / 1072.0, "k_se": 1e-3, "dof": 9},
-    }
+    r = ChannelRun(
+        ch="Z",
+        kto=kto,
+        kto_from="given",
+        dVg=dvg,
+        null_slope=0.0,
+        ramps=tuple(
+            ((-1) ** (i + 1), dt / (1 + b), (-1) ** (i + 1) * dvt) for i, b in enumerate(bias)
+        ),
+        fit={"a": 0.26, "a_se": 1e-4, "k": 1 / 1072.0, "k_se": 1e-3, "dof": 9},
+    )
     res = channel_result(r)
     e = res.kg_estimate(0.0)
     assert e.resolved and e.covers(truth) and e.value < truth
@@ -361,7 +367,9 @@ def test_a_result_without_partner_factors_carries_the_transients_bound():
     assert e.half_width > PARTNER_TRANSIENT_BOUND * e.value
     # with the factors (here: what each window ran slow by) the readings are corrected and the
     # interval is the statistical one plus the correction's own bound
-    fixed = channel_result(dict(r, partner_factor=[1 + b for b in bias])).kg_estimate(0.0)
+    fixed = channel_result(
+        dataclasses.replace(r, partner_factor=tuple(1 + b for b in bias))
+    ).kg_estimate(0.0)
     assert fixed.value == pytest.approx(truth, rel=1e-9) and fixed.covers(truth)
     assert fixed.half_width < e.half_width
 
@@ -396,15 +404,15 @@ def test_partner_factor_is_the_coupled_floats_answer():
 
 def test_restraint_correction_is_x_coth_x():
     tau = 400.0
-    r = {
-        "ch": "X",
-        "kto": 31.6,
-        "kto_from": "given",
-        "dVg": 2.0,
-        "null_slope": 0.0,
-        "ramps": [[-1, 20.0, -0.3], [1, 20.0, 0.3]],
-        "fit": {"a": 0.057, "a_se": 1e-4, "k": 1 / tau, "k_se": 1e-5},
-    }
+    r = ChannelRun(
+        ch="X",
+        kto=31.6,
+        kto_from="given",
+        dVg=2.0,
+        null_slope=0.0,
+        ramps=((-1, 20.0, -0.3), (1, 20.0, 0.3)),
+        fit={"a": 0.057, "a_se": 1e-4, "k": 1 / tau, "k_se": 1e-5},
+    )
     res = channel_result(r)
     naive = 2.0 / (20.0 * 0.3 * 31.6) * 1e3
     x = 20.0 / (2 * tau)
@@ -620,7 +628,7 @@ def test_a_stopwatch_interrupted_in_any_channel_resumes_to_a_pass(
     assert first.status.startswith("aborted") and first.steps_done == ["mode 3"] + [
         f"channel {c}" for c in order[: order.index(ch)]
     ]
-    resumed = load_resume(first.file, "stopwatch")
+    resumed = load_resume(first.file, Stopwatch)
     with open_rig("sim?seed=41&watchdog=5") as rig:  # cold: the wheels spin up again
         second = run_procedure(
             Stopwatch(Stopwatch.Params(**resumed.params)), rig, tmp_path, resume=resumed

@@ -233,7 +233,7 @@ def test_an_aborted_excitation_leaves_the_rig_safe_and_resumes(tmp_path):
         with RunFile(first.file) as rf:
             assert rf.status.startswith("aborted")
         second = run_procedure(
-            Excitation(Params(**FAST)), rig, tmp_path, resume=load_resume(first.file, "excitation")
+            Excitation(Params(**FAST)), rig, tmp_path, resume=load_resume(first.file, Excitation)
         )
     assert second.exit_code == 0, second.error
     assert second.steps_resumed == ["quiet"]

@@ -576,7 +576,7 @@ def test_abort_and_resume_runs_the_whole_ladder_again(tmp_path):
         assert s1.verdict == "aborted" and s1.status.startswith("aborted")
         assert s1.steps_done == ["mode 3", "400 urad"]
         assert rig.is_safe()
-        resume = load_resume(s1.file, "hysteresis")
+        resume = load_resume(s1.file, Hysteresis)
         s2 = run_procedure(
             Hysteresis(Hysteresis.params_from(resume.params)), rig, tmp_path, resume=resume
         )

@@ -27,6 +27,7 @@ from procedures.procedure import Analysis, Step
 from procedures.progress import ANALYSING, DONE, STEPS, WRITING_REPORT, Progress, ProgressModel
 from procedures.resume import Resumed
 from procedures.runner import run_procedure
+from procedures.stepresult import Recorded
 
 FACTORS = (0.5, 1.0, 3.0)
 
@@ -149,10 +150,10 @@ class StandInAcquisition:
         return np.zeros((n, len(self.channels))) if keep else None
 
 
-def _takes(ctx, *, seconds: float) -> dict:
+def _takes(ctx, *, seconds: float) -> Recorded:
     # a few chunks per step, as a real step's acquisitions report
     ctx.acquire(seconds, keep=False, chunk_s=max(1.0, seconds / 7))
-    return {}
+    return Recorded(seconds=seconds)
 
 
 def _run_synthetic(
@@ -166,12 +167,18 @@ def _run_synthetic(
     proc = catalogue()[name]()
     real = list(proc.plan())  # the procedure's own plan, default parameters, no rig
     proc.plan = lambda: [
-        Step(s.name, partial(_takes, seconds=f * s.expected_s), s.expected_s, s.setup)
+        Step(
+            s.name,
+            partial(_takes, seconds=f * s.expected_s),
+            s.expected_s,
+            s.setup,
+            result=Recorded,
+        )
         for s, f in zip(real, factors)
     ]
     proc.analyze = lambda ctx: Analysis({}, [])
     resume = (
-        Resumed(tmp_path / "earlier.h5", name, {}, {n: {} for n in taken_over})
+        Resumed(tmp_path / "earlier.h5", name, {}, {n: Recorded(seconds=0.0) for n in taken_over})
         if taken_over
         else None
     )

@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import signal
 import threading
 import time
 from dataclasses import dataclass
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -21,6 +23,7 @@ from procedures.calibrations import catalogue
 from procedures.procedure import Analysis, Figure, Measurement, Procedure, ProcedureError, Step
 from procedures.resume import load_resume, next_free
 from procedures.runner import run_procedure
+from procedures.stepresult import StepResult
 
 pytestmark = pytest.mark.slow
 
@@ -31,6 +34,19 @@ class ToyParams:
     step_s: float = 2.0
     bias_V: float = 0.3
     limit_lo: float = -10.0
+
+
+@dataclass(frozen=True)
+class SetUp(StepResult):
+    ok: bool
+
+
+@dataclass(frozen=True)
+class DataMean(StepResult):
+    digits: ClassVar[int] = 17  # every double exactly: the tests compare the means as samples
+
+    i: int
+    mean: float
 
 
 class Toy(Procedure):
@@ -52,9 +68,14 @@ class Toy(Procedure):
 
     def plan(self):
         return [
-            Step("setup", self.setup, expected_s=1.0, setup=True),
+            Step("setup", self.setup, expected_s=1.0, setup=True, result=SetUp),
             *(
-                Step(f"data {i}", lambda c, i=i: self.data(c, i), expected_s=self.params.step_s)
+                Step(
+                    f"data {i}",
+                    lambda c, i=i: self.data(c, i),
+                    expected_s=self.params.step_s,
+                    result=DataMean,
+                )
                 for i in range(self.params.n_data_steps)
             ),
         ]
@@ -64,13 +85,13 @@ class Toy(Procedure):
         ctx.rig.set_caging_inhibit("X", True)
         ctx.rig.set_torquer_bias_V("X", self.params.bias_V)
         ctx.acquire(1.0, keep=False)
-        return {"ok": True}
+        return SetUp(ok=True)
 
     def data(self, ctx, i):
         if self.fail_in == f"data {i}":
             raise ProcedureError(f"toy failure in data {i}")
         x = ctx.acquire(self.params.step_s)
-        return {"i": i, "mean": float(np.nanmean(x[:, 0]))}
+        return DataMean(i=i, mean=float(np.nanmean(x[:, 0])))
 
     def analyze(self, ctx):
         # the samples the runner says the data steps recorded, read back from their files
@@ -78,7 +99,7 @@ class Toy(Procedure):
         for name, span in ctx.spans.items():
             with RunFile(span.file) as rf:
                 self.analysed[name] = (span, rf.read(["torq_x"], span.start, span.stop)[0])
-        means = [ctx.results[f"data {i}"]["mean"] for i in range(self.params.n_data_steps)]
+        means = [ctx.result(f"data {i}", DataMean).mean for i in range(self.params.n_data_steps)]
         m = float(np.mean(means))
         return Analysis(
             {"mean_V": m}, [Measurement("mean torquer X", m, "V", lo=self.params.limit_lo, hi=10.0)]
@@ -136,6 +157,35 @@ def _assert_aborted_and_safe(rig, s, why: str) -> None:
         assert rf.status == s.status
         assert any(e.kind == "safe" for e in rf.events)
     assert "Steps not done" in s.report.read_text()
+
+
+@dataclass(frozen=True)
+class Bloated(StepResult):
+    text: str
+
+
+class _Oversize(Toy):
+    """A Toy whose second data step returns a result too large for its event."""
+
+    def plan(self):
+        steps = super().plan()
+        steps[2] = Step("data 1", self.bloated, expected_s=self.params.step_s, result=Bloated)
+        return steps
+
+    def bloated(self, ctx):
+        ctx.acquire(self.params.step_s, keep=False)
+        return Bloated(text="x" * 2000)
+
+
+def test_an_oversize_step_result_aborts_to_the_safe_state_naming_step_size_and_limit(rig, tmp_path):
+    """Issue 40 item 2: a result that would not fit its step-done event (TEXT_BYTES) is refused
+    where it is written, naming the procedure, the step, its size and the limit; the run goes
+    through the abort teardown (rig safe, file "aborted: StepResultTooLarge: ...")."""
+    s = run_procedure(_Oversize(), rig, tmp_path)
+    _assert_aborted_and_safe(rig, s, "StepResultTooLarge")
+    m = re.search(r"toy: step 'data 1': its result is (\d+) bytes of JSON.*\(1024\)", s.error)
+    assert m and 2000 < int(m.group(1)) < 2200, s.error
+    assert s.steps_done == ["setup", "data 0"]
 
 
 def test_ctrl_c_aborts_to_the_safe_state(rig, tmp_path):
@@ -196,7 +246,7 @@ def test_operator_abort_event(rig, tmp_path):
 def test_resume_takes_over_done_data_steps_and_reruns_setup(rig, tmp_path):
     first = run_procedure(Toy(fail_in="data 2"), rig, tmp_path)
     assert first.verdict == "aborted"
-    resumed = load_resume(first.file, "toy")
+    resumed = load_resume(first.file, Toy)
     assert set(resumed.results) == {"setup", "data 0", "data 1"}
     toy = Toy(Toy.params_from(resumed.params))
     s = run_procedure(toy, rig, tmp_path, resume=resumed)
@@ -208,7 +258,8 @@ def test_resume_takes_over_done_data_steps_and_reruns_setup(rig, tmp_path):
             json.loads(e.text) for e in rf.events if e.kind == "step-done" and "resumed" in e.text
         ]
     assert [t["step"] for t in taken] == ["data 0", "data 1"]
-    assert taken[0]["result"] == resumed.results["data 0"]
+    assert DataMean.from_json(taken[0]["result"]) == resumed.results["data 0"]
+    assert isinstance(resumed.results["setup"], SetUp)
     # the aborted file is kept as it was
     with RunFile(first.file) as rf:
         assert rf.status.startswith("aborted: ")
@@ -223,7 +274,7 @@ def test_the_runner_hands_analyze_the_samples_each_data_step_recorded_across_a_r
     first = run_procedure(Toy(fail_in="data 2"), rig, tmp_path)
     assert set(first.spans) == {"data 0", "data 1"}
     toy = Toy()
-    s = run_procedure(toy, rig, tmp_path, resume=load_resume(first.file, "toy"))
+    s = run_procedure(toy, rig, tmp_path, resume=load_resume(first.file, Toy))
     assert s.verdict == "pass"
     assert set(toy.analysed) == {"data 0", "data 1", "data 2"}
     n = int(round(toy.params.step_s * toy.rate_hz))
@@ -259,9 +310,9 @@ def ctx_mean(summary, step: str) -> float:
 def test_resume_refuses_complete_or_foreign_runs(rig, tmp_path):
     s = run_procedure(Toy(ToyParams(n_data_steps=1)), rig, tmp_path)
     with pytest.raises(ProcedureError, match="complete; nothing to resume"):
-        load_resume(s.file, "toy")
+        load_resume(s.file, Toy)
     with pytest.raises(ProcedureError, match="is a 'toy' run, not 'earth-rate'"):
-        load_resume(s.file, "earth-rate")
+        load_resume(s.file, catalogue()["earth-rate"])
 
 
 class _Interrupted(Toy):
@@ -311,8 +362,8 @@ def test_a_signal_after_the_acquisition_leaves_a_true_summary_and_resume_analyse
         assert summary["report"] == str(md) and "**aborted**" in md.read_text()
     # the console's default: a complete run is refused
     with pytest.raises(ProcedureError, match="complete; nothing to resume"):
-        load_resume(s.file, "toy")
-    again = load_resume(s.file, "toy", complete_ok=True)
+        load_resume(s.file, Toy)
+    again = load_resume(s.file, Toy, complete_ok=True)
     assert again.complete and again.taken_over == []
     toy = Toy(Toy.params_from(again.params), prior=again.prior)
     s2 = run_procedure(toy, rig, tmp_path / "elsewhere", resume=again)

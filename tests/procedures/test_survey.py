@@ -281,7 +281,7 @@ def test_an_aborted_survey_resumes_with_the_pieces_already_recorded(tmp_path):
         first = run_procedure(Survey(params), rig, tmp_path, progress=listener, abort=stop)
         assert first.verdict == "aborted"
         assert first.steps_done[-2:] == ["record 1/5", "record 2/5"]
-        resumed = load_resume(first.file, "survey")
+        resumed = load_resume(first.file, Survey)
         second = run_procedure(Survey(params), rig, tmp_path, resume=resumed)
     assert second.exit_code == 0, second.error
     assert second.steps_resumed == ["record 1/5", "record 2/5"]
