@@ -8,12 +8,14 @@ gyro's) -> excitation X in Mode 3, then in Mode 4 (the closed-loop roots of Tabl
 drift (with the measured K_TO). Each leaves its HDF5 file, JSON
 summary, report and log in ``--out`` and shows its progress as ``fbs run`` does; ``out/report.md`` sets every figure
 measured beside the thesis's value and the simulated rig's own value. The demo, unlike the
-procedures, may read the sim config: only to fill that last column.
+procedures, may read the sim config: only to fill that last column. ``out/figures.json`` holds
+the same rows for a program (``bench/coverage_all.py`` reads it over many drawn rigs).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import math
 import time
@@ -35,9 +37,9 @@ THESIS = thesis.FIGURES
 
 
 def fmt(value: object) -> str:
-    """``procedures.reports.report.fmt``, imported on use: the report writer is no part of
+    """``procedures.reports.procedure_report.fmt``, imported on use: the report writer is no part of
     the parser (``fbs --version`` imports this module)."""
-    from procedures.reports.report import fmt as report_fmt
+    from procedures.reports.procedure_report import fmt as report_fmt
 
     return report_fmt(value)
 
@@ -65,6 +67,22 @@ class Row:
     def covered(self) -> bool | None:
         """Whether the interval holds the simulated truth (None: no interval or no truth)."""
         return in_interval(self.simulated, self.interval)
+
+    def as_json(self) -> dict[str, Any]:
+        """The row as ``out/figures.json`` keeps it (what a coverage audit reads)."""
+        t = self.truth
+        return {
+            "quantity": self.quantity,
+            "units": self.units,
+            "measured": self.measured,
+            "interval": None if self.interval is None else list(self.interval),
+            "resolved": self.resolved,
+            "truth": None if t is None else t.value,
+            "truth_kind": None if t is None else t.kind,
+            "truth_exact": None if t is None else t.exact,
+            "covered": self.covered,
+            "note": self.note,
+        }
 
 
 class SimTruth:
@@ -156,6 +174,8 @@ def sim_values(cfg: SimConfig) -> dict[str, Any]:
             if stiff[a] > 0
         },
         "inertia_kg_m2": {a: cfg.platform[a].inertia_kg_m2 for a in ("X", "Y")},
+        "bearing_damping_Nms": {a: linear_part(cfg.bearing[a]).damping_Nms for a in ("X", "Y")},
+        "h_over_k_s": {c: g.restraint_time_s for c, g in cfg.gyro.items()},
         "bias_instability_urad_per_s": {
             c: g.bias_instability_urad_per_s for c, g in cfg.gyro.items()
         },
@@ -268,7 +288,8 @@ def _figure(
     )
 
 
-def _rows(summaries: list[RunSummary], sim: SimTruth) -> list[Row]:
+def figure_rows(summaries: list[RunSummary], sim: SimTruth) -> list[Row]:
+    """Every figure the campaign printed, each with its interval and the rig's truth."""
     rows: list[Row] = []
     by_name: dict[str, list[RunSummary]] = {}
     for s in summaries:
@@ -295,6 +316,7 @@ def _rows(summaries: list[RunSummary], sim: SimTruth) -> list[Row]:
     for a in "xyz":
         per_channel("earth-rate", f"g_drift_{a}_urad_per_s_per_g", f"g-drift along {a}", "urad/s/g")
     per_channel("stopwatch", "K_g_mV_per_urad", "K_g", "mV/urad")
+    per_channel("stopwatch", "h_over_k_s", "float restraint time h/k", "s")
     for s in by_name.get("hysteresis", []):
         axis = s.params.get("axis", "X")
         for key, label, units in (
@@ -392,23 +414,30 @@ def _survey_rows(rows: list[Row], s: RunSummary, sim: SimTruth) -> None:
 def _excitation_rows(rows: list[Row], s: RunSummary, sim: SimTruth) -> None:
     """The excitation (Ch. V C-D): the bearing's stiffness at the test amplitude, the network,
     the closed-loop roots and the sensor's noise incoherent with V_Td."""
-    from fbs.demo_truth import dahl_equivalent_linear
+    from fbs.demo_truth import dahl_at_amplitude, dahl_equivalent_linear
 
     v = s.values
     axis, mode = s.params.get("axis", "X"), int(v.get("mode", s.params.get("mode", 3)))
     rms = float(s.params.get("target_urad", 2.0))
     moved = (v.get("excitation_amplitude_urad") or {}).get(axis)
     level = v.get("level_V_rms")
+    dahl = sim.cfg.bearing[axis].model == "dahl"
+    eq = (
+        dahl_equivalent_linear(sim.cfg, axis, float(level))
+        if dahl and mode == 3 and level
+        else None
+    )
     if "stiffness_Nm_per_rad" in v:
-        if sim.cfg.bearing[axis].model == "dahl" and mode == 3 and level:
+        if eq is not None:
             # what the run's own fit measures on this bearing at the run's own excitation level
-            eq = dahl_equivalent_linear(sim.cfg, axis, float(level))
             truth = Truth(eq.stiffness_Nm_per_rad, "offline", eq.how)
+        elif not dahl:  # a linear bearing's stiffness is its own constant at any amplitude
+            truth = param(sim.static["stiffness_Nm_per_rad"].get(axis), "the bearing's constant")
         else:
             truth = Truth(
                 sim.static["stiffness_Nm_per_rad"].get(axis),
                 "describing function",
-                "the bearing's small-motion stiffness (no Dahl bearing, or not Mode 3)",
+                "the Dahl bearing's small-motion stiffness eta To^2 (not Mode 3)",
             )
         at = f" at {fmt(moved)} urad rms" if moved is not None else f" at about {fmt(rms)} urad rms"
         rows.append(
@@ -424,6 +453,39 @@ def _excitation_rows(rows: list[Row], s: RunSummary, sim: SimTruth) -> None:
                 "small motion): amplitude-dependent, measured at the run's own level",
             )
         )
+    if "damping_Nms" in v:
+        pa = sim.cfg.platform[axis]
+        if not dahl:
+            d = pa.gyro_damping_Nms + pa.extra_damping_Nms + sim.static["bearing_damping_Nms"][axis]
+            dt = param(d, "the gyros', the extra and the bearing's viscous damping")
+        elif eq is not None:  # hysteretic friction has no viscous damping: an equivalent one
+            dt = Truth(eq.damping_Nms, "describing function", eq.how)
+        else:
+            b = sim.cfg.bearing[axis]
+            w = math.sqrt(b.eta_per_Nm * b.To_Nm**2 / pa.inertia_kg_m2)
+            _, d, how = dahl_at_amplitude(sim.cfg, axis, moved if moved else rms, w)
+            dt = Truth(pa.gyro_damping_Nms + pa.extra_damping_Nms + d, "describing function", how)
+        rows.append(
+            _figure(s, "damping_Nms", axis, f"damping {axis}{_in_mode(s)}", "N m s", None, dt)
+        )
+    net = v.get("network") or {}
+    for i in range(1, 7):
+        k = f"w{i}_rad_per_s"
+        if k + "_ci95" in net:
+            iv = net[k + "_ci95"]
+            rows.append(
+                Row(
+                    f"compensation corner w{i} {axis}{_in_mode(s)}",
+                    "rad/s",
+                    net.get(k),
+                    (v.get("network_design") or {}).get(k),
+                    param(getattr(sim.cfg.compensation, k)),
+                    "eq. 3.28 fitted in the loop",
+                    None if not iv or None in iv else (float(iv[0]), float(iv[1])),
+                    net.get(k) is not None,
+                    "eq. 3.28" if (v.get("network_design") or {}).get(k) is not None else "",
+                )
+            )
     rows.append(
         Row(
             f"compensation network vs design {axis}{_in_mode(s)}, worst 0.3-50 Hz",
@@ -597,7 +659,7 @@ def _report_header(summaries: list[RunSummary], seed: int, wall_s: float) -> lis
 def write_campaign_report(
     out: Path, summaries: list[RunSummary], sim: SimTruth, wall_s: float, seed: int
 ) -> Path:
-    rows = _rows(summaries, sim)
+    rows = figure_rows(summaries, sim)
     lines = [
         "# fbs demo: the calibration campaign on the simulated rig",
         "",
@@ -691,6 +753,7 @@ def write_campaign_report(
     ]
     path = out / "report.md"
     path.write_text("\n".join(lines))
+    (out / "figures.json").write_text(json.dumps([r.as_json() for r in rows], indent=1))
     return path
 
 
@@ -699,7 +762,8 @@ def load_summaries(folder: Path) -> list[RunSummary]:
     for writing its report again (``fbs.demo`` tests use a recorded campaign's)."""
     import json
 
-    from procedures.runner import RunSummary, Verdict
+    from procedures.procedure import Verdict
+    from procedures.runner import RunSummary
 
     order = {name: i for i, (name, _, _) in enumerate(campaign())}
     found = []
