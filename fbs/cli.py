@@ -55,7 +55,8 @@ COMMANDS: dict[str, Command] = {
     "recover": Command("fbs.inspect", ("daq.recover",)),
     "spectra": Command("fbs.spectra", ("procedures.analysis.channel_spectra", "daq.plots")),
     "run": Command(
-        "fbs.run", ("drivers.rig", "procedures.params", "procedures.calibrations.*", "fbs.progress")
+        "fbs.run",
+        ("drivers.rig", "procedures.params", "procedures.calibrations.*", "fbs.run_progress"),
     ),
     "demo": Command(
         "fbs.demo",
@@ -63,7 +64,7 @@ COMMANDS: dict[str, Command] = {
             "drivers.rig",
             "procedures.params",
             "procedures.calibrations.*",
-            "fbs.progress",
+            "fbs.run_progress",
             "simhw.plant",
         ),
     ),

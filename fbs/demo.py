@@ -209,7 +209,7 @@ def run_campaign(
 ) -> tuple[list[RunSummary], Path]:
     from daq.runfile import make_folder
     from drivers.rig import open_rig, with_param
-    from fbs.progress import run_with_progress
+    from fbs.run_progress import run_with_progress
     from procedures.calibrations import get
     from procedures.params import parse_params
     from procedures.runlog import RunLog

@@ -5,7 +5,7 @@ exactly the summary keys of DESIGN.md section 7 as one JSON object on stdout (lo
 stderr). The HDF5 file, a JSON summary, a Markdown report with PNG plots and the run's log
 (``<run>.log``, ``procedures.runlog``) land in ``--out``. On a terminal one status line shows the
 step, the fraction done and the rig and wall time left; elsewhere plain timestamped progress
-lines are logged at a modest rate (``fbs.progress``). ``fbs run NAME --help`` lists the
+lines are logged at a modest rate (``fbs.run_progress``). ``fbs run NAME --help`` lists the
 procedure's parameters (``fbs.procedure_help``), importing that procedure only then.
 
 Earlier results: a procedure that needs another's result (stopwatch needs K_TO from
@@ -57,7 +57,7 @@ def run_command(args: argparse.Namespace) -> int:
     # the rig, the procedures and the numerics load here: the parser (`fbs --version`) needs none
     from daq.runfile import make_folder
     from drivers.rig import open_rig
-    from fbs.progress import run_with_progress
+    from fbs.run_progress import run_with_progress
     from procedures.calibrations import get
     from procedures.params import find_prior, parse_params
     from procedures.procedure import ProcedureError

@@ -146,12 +146,12 @@ def test_a_defect_is_one_line_and_its_traceback_is_shown_with_v(capsys, monkeypa
 @pytest.mark.slow
 def test_a_defect_in_a_run_leaves_its_traceback_in_the_runs_log(capsys, monkeypatch, tmp_path):
     """A run has a log: the traceback goes there and the one line names it."""
-    import fbs.progress
+    import fbs.run_progress
 
     def broken(*args, **kwargs):
         raise RuntimeError("a defect in the run")
 
-    monkeypatch.setattr(fbs.progress, "run_procedure", broken)
+    monkeypatch.setattr(fbs.run_progress, "run_procedure", broken)
     code = main(["run", "stopwatch", "--rig", "sim?warm=1&watchdog=5", "--out", str(tmp_path)])
     assert code == EXIT_ERROR
     err = capsys.readouterr().err

@@ -334,7 +334,7 @@ def test_a_terminal_shows_one_updating_progress_line_and_the_log_lands_beside_th
     assert not [ln for ln in screen if STATUS.search(ln)], screen
     assert any(ln.startswith("fbs run stopwatch: fail (complete)") for ln in screen), screen
     records = [ln for ln in screen if LOG_LINE.match(ln)]
-    assert records and not [ln for ln in records if " fbs.progress: " in ln], (
+    assert records and not [ln for ln in records if " fbs.run_progress: " in ln], (
         screen
     )  # the line, not lines
 
@@ -345,7 +345,7 @@ def test_a_terminal_shows_one_updating_progress_line_and_the_log_lands_beside_th
     assert re.search(
         r" INFO fbs\.run: fbs run stopwatch --rig .* \(fbs-hil \S+, pid \d+ on ", lines[0]
     ), lines[0]
-    assert any(" fbs.progress: stopwatch: " in ln and "step 2/2" in ln for ln in lines), log
+    assert any(" fbs.run_progress: stopwatch: " in ln and "step 2/2" in ln for ln in lines), log
     assert any(" drivers.rig: rig sim?warm=1" in ln and " open: " in ln for ln in lines), (
         log
     )  # held, then written
@@ -372,7 +372,7 @@ def test_not_a_terminal_plain_progress_lines_at_a_modest_rate_verbose_only_for_t
         assert "\r" not in stderr and "\x1b" not in stderr
         lines = stderr.splitlines()
         assert lines and all(LOG_LINE.match(ln) for ln in lines), stderr
-        progress = [ln for ln in lines if " fbs.progress: stopwatch: " in ln]
+        progress = [ln for ln in lines if " fbs.run_progress: stopwatch: " in ln]
         # each step, each tenth of the run, the end: a handful, where the runner reports hundreds
         assert 2 <= len(progress) <= 2 + 11 + 1, progress
     debug = [ln for ln in r.stderr.splitlines() if " DEBUG " in ln]
@@ -399,7 +399,7 @@ def test_an_aborted_run_exits_2_and_its_log_says_so(tmp_path):
     t_end = time.monotonic() + TIMEOUT_S
     try:
         while time.monotonic() < t_end and p.poll() is None:
-            if log.exists() and " fbs.progress: stopwatch: " in log.read_text():
+            if log.exists() and " fbs.run_progress: stopwatch: " in log.read_text():
                 break
             time.sleep(0.2)
         assert p.poll() is None, p.communicate()

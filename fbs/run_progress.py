@@ -25,7 +25,7 @@ from procedures.resume import Resumed, run_file_for
 from procedures.runlog import RunLog
 from procedures.runner import RunSummary, run_procedure
 
-log = logging.getLogger("fbs.progress")
+log = logging.getLogger("fbs.run_progress")
 
 REDRAW_S = 0.2
 PLAIN_STEP = 0.1
