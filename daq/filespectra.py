@@ -8,7 +8,7 @@ samples ``k D .. k D + nperseg - 1``, ``D = nperseg - noverlap``, as ``scipy.sig
   per read, so HDF5 is called rarely; consecutive groups re-read their ``noverlap`` shared
   samples);
 * transforms each group in batches of about ``batch_bytes`` (1 MiB) of segment samples
-  with ``spectra``'s own segmentation, detrending, window and FFT;
+  with ``daq.spectral``'s own segmentation, detrending, window and FFT;
 * skips every segment holding a lost sample (NaN, written by ``RunWriter.append_missing``;
   any non-finite value counts): a gap is never spliced over, the segments on either side
   of it are simply averaged without the ones it touches;
@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_text
-from daq.spectra import (
+from daq.spectral import (
     Scaling,
     _double_one_sided,
     _scale,
@@ -54,7 +54,7 @@ class RunCsd:
     """The Welch cross-spectral matrix of some channels of a run file.
 
     ``S[f, i, j]`` is the one-sided cross-spectrum of ``channels[i]`` and ``channels[j]``
-    (``E[conj(X_i) X_j]``, ``spectra``'s convention), averaged over ``segments_used``
+    (``E[conj(X_i) X_j]``, ``daq.spectral``'s convention), averaged over ``segments_used``
     segments; ``used[k]`` says whether segment k was (False: it held lost samples).
     ``dof`` is the equivalent degrees of freedom of each autospectrum bin between DC and
     Nyquist (Welch's, for the segments actually used: ``used_segments_dof``).

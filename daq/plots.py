@@ -24,7 +24,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from daq.octave import OctaveBands, band_average_dof, octave_bands
-from daq.spectra import psd_confidence
+from daq.spectral import psd_confidence
 
 __all__ = [
     "coherence_significance",

@@ -173,7 +173,7 @@ def offline_band_rms(
     import numpy as np
     import scipy.signal
 
-    from daq.spectra import band_rms
+    from daq.spectral import band_rms
     from simhw.simulator import Simulator
 
     chans = [c for a in axes for c in (f"ac_{a.lower()}_ctl", f"gyro_{a.lower()}")]

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.ndimage
 
-from daq.spectra import n_segments, welch_csd_matrix
+from daq.spectral import n_segments, welch_csd_matrix
 from drivers.calibration import AutocollimatorConstants
 from procedures.analysis.intervals import LEVEL, Estimate, from_stderr, judged
 from procedures.analysis.lines import refine_line

@@ -102,7 +102,7 @@ def choose_nperseg(n_samples: int, fs: float, seg_s: float | None = None) -> int
                 f"{n_samples / fs:g} s at {fs:g} Hz): use shorter segments"
             )
         return int(round(seg_s * fs))
-    from daq.spectra import n_segments
+    from daq.spectral import n_segments
 
     nperseg = 2 ** max(0, round(math.log2(TARGET_SEG_S * fs)))
     if n_segments(n_samples, nperseg, nperseg // 2) < MIN_SEGMENTS:

@@ -76,7 +76,7 @@ import scipy.stats
 
 from daq.filespectra import run_csd_matrix
 from daq.reader import RunFile
-from daq.spectra import coherence, equivalent_dof
+from daq.spectral import coherence, equivalent_dof
 from drivers.calibration import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.intervals import MAX_CORRELATION, Estimate, from_stderr
 
@@ -518,13 +518,35 @@ def _residuals(
 def _fit_network_once(
     f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray, start: np.ndarray
 ) -> np.ndarray:
+    return np.asarray(_network_solution(f, H, log_se, phase_se, start).x)
+
+
+def _network_solution(
+    f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray, start: np.ndarray
+) -> scipy.optimize.OptimizeResult:
+    """The least-squares fit of eq. 3.28's logarithms, each searched within x20 of ``start``."""
+
     def resid(x: np.ndarray) -> np.ndarray:
         return _log_residual(network_response(f, _network_params(x)), H, log_se, phase_se)
 
-    lo = start - math.log(20.0)
-    hi = start + math.log(20.0)
-    sol = scipy.optimize.least_squares(resid, start, bounds=(lo, hi), x_scale=1.0, method="trf")
-    return np.asarray(sol.x)
+    lo = start - math.log(SEARCH_FACTOR)
+    hi = start + math.log(SEARCH_FACTOR)
+    return scipy.optimize.least_squares(resid, start, bounds=(lo, hi), x_scale=1.0, method="trf")
+
+
+#: a network corner is searched within this factor of its start (the quiet record's fit)
+SEARCH_FACTOR = 20.0
+
+
+def _pinned(sol: scipy.optimize.OptimizeResult) -> tuple[np.ndarray, np.ndarray]:
+    """Which parameters the fit left at the edge of its search, and the parameters' correlations
+    from the fit's Jacobian (defined where the jackknife's are not: a pinned parameter has the
+    same value in every replicate, so its replicate correlations are 0/0)."""
+    pinned = np.asarray(sol.active_mask) != 0
+    J = np.asarray(sol.jac)
+    cov = np.linalg.pinv(J.T @ J)
+    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
+    return pinned, cov / np.outer(d, d)
 
 
 def _network_params(x: np.ndarray) -> dict[str, float]:
@@ -558,7 +580,9 @@ def fit_network(
     # difference between two ADC channels would decide the fit
     f, H = resp.f[ok], resp.H[ok]
     ls, ps = np.maximum(resp.log_se[ok], SE_FLOOR), np.maximum(resp.phase_se_rad[ok], SE_FLOOR)
-    x = _fit_network_once(f, H, ls, ps, x0)
+    sol = _network_solution(f, H, ls, ps, x0)
+    x = np.asarray(sol.x)
+    pinned, corr_j = _pinned(sol)
     # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
     xb = np.array(
         [
@@ -580,6 +604,22 @@ def fit_network(
         cmax = float(c[worst]) if c.size else 0.0
         correlations[name] = cmax
         est[name] = _exp_estimate(x[k], e, cmax, other)
+        # a corner at the edge of its search is not measured, and neither is one the fit can
+        # only trade against it: its interval holds the pinned one fixed where it stopped
+        if pinned[k]:
+            est[name] = _unresolved(
+                est[name],
+                f"at the edge of the fit's search (x{SEARCH_FACTOR:g} its start): "
+                f"{lo_hz:g}-{hi_hz:g} Hz does not determine it",
+            )
+        elif pinned.any():
+            j = int(np.argmax(np.where(pinned, np.abs(corr_j[k]), -1.0)))
+            if abs(corr_j[k, j]) > MAX_CORRELATION:
+                est[name] = _unresolved(
+                    est[name],
+                    f"correlates {abs(corr_j[k, j]):.3f} with {names[j]}, which the band does "
+                    "not determine (at the edge of the fit's search)",
+                )
     # the gain alone: ln g = x0 - x1
     xg = xb[:, 0] - xb[:, 1]
     eg = from_stderr(x[0] - x[1], float(jackknife_se(xg)), dof=resp.dof)
@@ -589,6 +629,8 @@ def fit_network(
         else 0.0
     )
     est["gain"] = _exp_estimate(x[0] - x[1], eg, cg, "w1_rad_per_s")
+    if pinned[0] or pinned[1]:
+        est["gain"] = _unresolved(est["gain"], "w1 or g w1 at the edge of the fit's search")
     params = _network_params(x)
     table = response_table(
         lambda ff: network_response(ff, params),
@@ -641,12 +683,22 @@ def response_table(
     }
 
 
+def _unresolved(e: Estimate, why: str) -> Estimate:
+    return e if not e.resolved else Estimate(e.value, e.lo, e.hi, False, why)
+
+
 def _exp_estimate(x: float, e: Estimate, correlation: float, other: str) -> Estimate:
     """A positive figure fitted as its logarithm: the interval exp(lo)..exp(hi); unresolved when
-    the log interval is wider than ln 10 (a decade) or it correlates with ``other`` beyond 0.95."""
+    the log interval is wider than ln 10 (a decade), of zero width (issue 38 item 1: every
+    replicate gave the same value, so no error was measured) or it correlates with ``other``
+    beyond 0.95."""
     value, lo, hi = math.exp(x), math.exp(e.lo), math.exp(e.hi)
     if not all(math.isfinite(v) for v in (value, lo, hi)):
         return Estimate(value, lo, hi, False, "no finite interval")
+    if not e.hi > e.lo:
+        return Estimate(
+            value, lo, hi, False, "its 95 % interval has zero width: no error was measured"
+        )
     if correlation > MAX_CORRELATION:
         return Estimate(
             value, lo, hi, False, f"correlates {correlation:.3f} with {other}: only known together"

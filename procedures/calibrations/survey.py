@@ -43,7 +43,7 @@ from pathlib import Path
 from typing import Annotated, Any, Protocol
 
 from daq.plots import plot_coherence, plot_psd
-from daq.spectra import band_rms
+from daq.spectral import band_rms
 from procedures.analysis.intervals import Estimate, add_figure
 from procedures.analysis.survey import (
     AXES,

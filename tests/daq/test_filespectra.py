@@ -17,7 +17,7 @@ import pytest
 from daq.filespectra import run_csd_matrix, used_segments_dof
 from daq.reader import RunFile
 from daq.runfile import RunWriter
-from daq.spectra import equivalent_dof, n_segments, welch_csd_matrix
+from daq.spectral import equivalent_dof, n_segments, welch_csd_matrix
 
 FS = 250.0
 RTOL = 1e-12

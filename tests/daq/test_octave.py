@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from daq.octave import EDGE_RTOL, band_average_dof, octave_bands
-from daq.spectra import equivalent_dof
+from daq.spectral import equivalent_dof
 
 
 def _reference_bands(n_bins: int) -> dict[int, list[int]]:

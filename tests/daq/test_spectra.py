@@ -19,7 +19,7 @@ import scipy.stats
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from daq.spectra import (
+from daq.spectral import (
     coherence,
     coherence_pair,
     equivalent_dof,

@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from daq.spectra import psd
+from daq.spectral import psd
 from simhw.plant import CHANNELS
 
 FBS = [sys.executable, "-m", "fbs.cli"]

@@ -17,7 +17,7 @@ import threading
 import numpy as np
 import pytest
 
-from daq.spectra import band_rms, psd
+from daq.spectral import band_rms, psd
 from procedures.analysis.survey import cross_axis_coherence, find_dip, spans_csd
 from procedures.calibrations import catalogue
 from procedures.calibrations.survey import Params, Survey, pickoff_scales

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from daq.spectra import band_rms, psd
+from daq.spectral import band_rms, psd
 from simhw.params import SimConfig
 from simhw.simulator import Simulator
 

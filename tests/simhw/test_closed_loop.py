@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from daq.spectra import dip_depth_db, dip_frequency, psd
+from daq.spectral import dip_depth_db, dip_frequency, psd
 from simhw.params import SimConfig
 from simhw.plant import linearized_poles
 from simhw.simulator import Simulator

@@ -4,7 +4,7 @@ Measured and model spectra are compared band by band. A band is the mean of the 
 (Hann, 50 % overlap, a line removed per segment) whose centres fall in one 1/24-octave
 interval; low bands hold one bin, high bands hundreds. Each band's estimate is taken as
 ``S chi^2_nu / nu`` (App. A.4) with ``nu`` its equivalent degrees of freedom: the Welch EDOF
-of one bin (``daq.spectra.equivalent_dof``) times the bins in the band, divided by the
+of one bin (``daq.spectral.equivalent_dof``) times the bins in the band, divided by the
 variance inflation of summing adjacent, correlated bins (for Hann the periodograms of
 neighbouring bins correlate by 4/9, two apart by 1/36).
 """
@@ -19,7 +19,7 @@ import numpy as np
 import scipy.signal
 import scipy.sparse
 
-from daq.spectra import equivalent_dof, n_segments, psd, welch_csd_matrix
+from daq.spectral import equivalent_dof, n_segments, psd, welch_csd_matrix
 
 #: Bins per band below which a band's bins are all evaluated by the model; above, a subset.
 MODEL_POINTS_PER_BAND = 8
