@@ -41,7 +41,7 @@ URAD = 1e-6
 
 def draw_rig(rng: np.random.Generator) -> dict[str, Any]:
     """A rig's noise parameters (see the module docstring)."""
-    from simhw.params import nominal_pickoff_lines
+    from simhw.config import nominal_pickoff_lines
 
     axis = "X" if rng.random() < 0.5 else "Y"
     nea0 = {"X": 0.451, "Y": 0.506}[axis]
@@ -72,7 +72,7 @@ def draw_rig(rng: np.random.Generator) -> dict[str, Any]:
 
 
 def rig_config(d: dict[str, Any]):
-    from simhw.params import from_dict
+    from simhw.config import from_dict
 
     a = d["axis"]
     ac = {

@@ -90,7 +90,7 @@ def _logu(rng: np.random.Generator, lo: float, hi: float) -> float:
 
 def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
     """The rig of ``seed`` as TOML sections (the module docstring's distribution)."""
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
 
     nom = SimConfig()
     rng = np.random.default_rng([38, seed])
@@ -206,8 +206,8 @@ def reanalyze(rec: dict[str, Any]) -> dict[str, Any]:
     from procedures.calibrations.earth_rate import EarthRate
     from procedures.calibrations.stopwatch import Stopwatch
     from procedures.procedure import Context
+    from simhw.config import from_dict
     from simhw.datasheet import rig_calibration
-    from simhw.params import from_dict
 
     sections: dict[str, Any] = {}
     for name, kv in rec["config"].items():

@@ -68,7 +68,7 @@ def _logu(rng: np.random.Generator, lo: float, hi: float) -> float:
 
 def draw_rig(rng: np.random.Generator) -> dict[str, Any]:
     """A rig's drift-relevant parameters (the module docstring's distribution)."""
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
 
     nominal = SimConfig()
     gyro = {}
@@ -111,7 +111,7 @@ def record(
     """The eight channels (V at the ADC) of ``duration_s`` in Mode 3 after the settle, the plant
     stepped at ``internal_hz`` (see the module docstring)."""
     from procedures.analysis.drift import pickoff, torq
-    from simhw.params import from_dict
+    from simhw.config import from_dict
     from simhw.simulator import Simulator
 
     names = tuple(torq(c) for c in CHANNELS) + tuple(pickoff(c) for c in CHANNELS)

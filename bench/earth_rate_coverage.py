@@ -38,7 +38,7 @@ from typing import Any  # noqa: E402
 import numpy as np  # noqa: E402
 from coverage_pool import run_cases, toml_of  # noqa: E402
 
-from simhw.params import nominal_pickoff_lines  # noqa: E402
+from simhw.config import nominal_pickoff_lines  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CHANNELS = ("X", "Y", "Z", "XRD")

@@ -58,7 +58,7 @@ def draw(case: int, n_defaults: int) -> tuple[str, dict[str, dict[str, Any]]]:
     if case < n_defaults:
         return "X", {}
     sys.path.insert(0, str(ROOT))
-    from simhw.params import SimConfig, load_config
+    from simhw.config import SimConfig, load_config
     from simhw.plant import linearized_poles
 
     rng = np.random.default_rng([38, 2, case])
@@ -104,7 +104,7 @@ def truths(
     cfg_path: Path | None, axis: str, amplitude_urad: float | None, level_V_rms: float | None
 ) -> dict[str, float | None]:
     from fbs.demo_truth import dahl_at_amplitude, dahl_equivalent_linear
-    from simhw.params import SimConfig, load_config
+    from simhw.config import SimConfig, load_config
 
     cfg = load_config(cfg_path) if cfg_path else SimConfig()
     comp = cfg.compensation

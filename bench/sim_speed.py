@@ -39,8 +39,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from fbs.campaign_task import RANGES_V
+from simhw.config import SimConfig
 from simhw.kernel import CompiledPlant
-from simhw.params import SimConfig
 from simhw.plant import NL_DAHL, Lin, Nonlinearity, Plant, RelayState, build_plant, discretize
 
 RATE_HZ = 1000.0

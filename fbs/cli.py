@@ -102,7 +102,7 @@ def command_errors() -> tuple[type[Exception], ...]:
     """What a command reports as ``fbs CMD: error: ...`` and exit 2 (``fbs batch`` records the
     same per file): bad input, a file or a device. ``procedures.procedure.ProcedureError`` is one
     once procedures are loaded; before, none can have been raised, and this loads nothing."""
-    # simhw.params.ConfigError is a ValueError
+    # simhw.config.ConfigError is a ValueError
     errors: list[type[Exception]] = [ValueError, OSError, DriverError]
     procedure = sys.modules.get("procedures.procedure")
     if procedure is not None:

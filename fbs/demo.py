@@ -29,7 +29,7 @@ from procedures.reports import thesis
 
 if TYPE_CHECKING:  # the rig, the simulator and the procedures load when the demo runs
     from procedures.runner import RunSummary
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
 
 log = logging.getLogger(__name__)
 
@@ -213,7 +213,7 @@ def run_campaign(
     from procedures.calibrations import get
     from procedures.params import parse_params
     from procedures.runlog import RunLog
-    from simhw.params import load_config
+    from simhw.config import load_config
     from simhw.simulator import check_seed
 
     cfg = load_config(cfg_path)  # a bad config or seed is refused before anything is made

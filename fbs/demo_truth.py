@@ -30,7 +30,7 @@ if (
 ):  # numpy and the simulator load when a truth is computed (``fbs --version`` imports fbs.demo)
     import numpy as np
 
-    from simhw.params import Autocollimator, SimConfig
+    from simhw.config import Autocollimator, SimConfig
 
 #: an offline simulation is this many times the record it stands for (its own estimate's
 #: error then is half the record's, or less)

@@ -15,7 +15,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
 
 log = logging.getLogger(__name__)
 
@@ -44,7 +44,7 @@ def simulate_to_file(
     provenance)."""
     from daq import provenance
     from daq.runfile import RunWriter, check_request
-    from simhw.params import config_stamp, to_dict
+    from simhw.config import config_stamp, to_dict
     from simhw.plant import CHANNELS, TRUTH_CHANNELS
     from simhw.simulator import Simulator
 
@@ -99,7 +99,7 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
     """Simulate as asked; the object ``--json`` prints."""
     from daq.reader import RunFile
     from simhw import effects as effect_catalogue
-    from simhw.params import load_config
+    from simhw.config import load_config
 
     cfg = load_config(args.sim_config)
     applied = []

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numba
 
-from simhw.params import Bearing
+from simhw.config import Bearing
 
 
 @dataclass(frozen=True)

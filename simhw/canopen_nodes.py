@@ -41,7 +41,7 @@ from drivers.canopen_client import (
 from drivers.canopen_dac import AO_16, AO_ERROR_MODE, AO_ERROR_VALUE
 from drivers.relay import R_CLAMP, R_MODE, R_REASONS, R_SAFE, R_SELECTED, R_STATUS, R_SWITCHES
 from drivers.table import T_ACTUAL_SPINDLE, T_ACTUAL_TILT, T_MOVING, T_SPINDLE, T_TILT
-from simhw.params import AXES, GYRO_CHANNELS
+from simhw.config import AXES, GYRO_CHANNELS
 
 if TYPE_CHECKING:
     from simhw.rig_server import SimRigServer

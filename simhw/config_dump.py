@@ -1,6 +1,6 @@
-"""A sim config back to TOML: the text :func:`simhw.params.load_config` reads.
+"""A sim config back to TOML: the text :func:`simhw.config.load_config` reads.
 
-:func:`dump_config` writes every value of a :class:`~simhw.params.SimConfig` that differs from a
+:func:`dump_config` writes every value of a :class:`~simhw.config.SimConfig` that differs from a
 base (default the thesis rig, ``SimConfig()``, which is what ``load_config`` overlays a file on),
 in the layout ``from_dict`` reads: a dataclass section is a table (``[site]``), a section keyed
 by axis or channel is a table per key (``[gyro.XRD]``, ``[bearing.X]``), a list of dataclasses
@@ -9,7 +9,7 @@ list value such as ``pickoff_lines`` is a TOML array (written whole). Floats are
 ``repr`` precision, so ``from_dict(tomllib.loads(dump_config(cfg))) == cfg``.
 
 Nothing here names a field: the sections and keys come from the dataclasses themselves
-(``dataclasses.asdict``), so a field added to ``simhw.params`` is written without an edit here.
+(``dataclasses.asdict``), so a field added to ``simhw.config`` is written without an edit here.
 The standard library reads TOML (``tomllib``) but does not write it; this module is the writer.
 """
 
@@ -20,7 +20,7 @@ import numbers
 import re
 from typing import Any
 
-from simhw.params import SimConfig, to_dict
+from simhw.config import SimConfig, to_dict
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 #: TOML basic strings must escape these (tab may stay, but escaping it is as valid)

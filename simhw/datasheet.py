@@ -11,7 +11,7 @@ against another config must find those by measurement.
 from __future__ import annotations
 
 from drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
-from simhw.params import AC_AXES, AXES, SimConfig
+from simhw.config import AC_AXES, AXES, SimConfig
 
 
 def rig_calibration(cfg: SimConfig) -> RigCalibration:

@@ -29,7 +29,7 @@ import scipy.linalg
 
 from drivers.calibration import ADC_CHANNELS
 from simhw.bearing import linear_part
-from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, MODES, SimConfig
+from simhw.config import AC_AXES, AXES, GYRO_CHANNELS, MODES, SimConfig
 
 URAD = 1e-6
 #: The gyro channel each platform axis is stabilized by in modes 4 and 5.

@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from simhw.params import MODES, SimConfig
+from simhw.config import MODES, SimConfig
 from simhw.plant import NL_STOP, DiscretePlant, Lin, Nonlinearity, Plant, RelayState, build_plant
 
 #: relay states whose union of couplings the kept set is closed over

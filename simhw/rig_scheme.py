@@ -23,8 +23,8 @@ from drivers.calibration import RigCalibration
 from drivers.rig import Rig, assemble, check_keys, flag
 from drivers.runclock import RunningClock
 from drivers.table import Operator, TablePosition, terminal_operator
+from simhw.config import config_stamp, load_config
 from simhw.datasheet import rig_calibration
-from simhw.params import config_stamp, load_config
 from simhw.rig_server import SimRigServer
 from simhw.simulator import check_seed
 

@@ -27,7 +27,7 @@ import numpy as np
 from drivers.errors import DeviceLost, DeviceTimeout
 from simhw.adc_device import AdcDevice
 from simhw.can_nodes import CanNodeHost
-from simhw.params import GYRO_CHANNELS, SimConfig
+from simhw.config import GYRO_CHANNELS, SimConfig
 from simhw.simulator import Simulator
 from simhw.virtual_clock import PacedClock, VirtualClock
 

@@ -20,7 +20,7 @@ import signal
 import sys
 import threading
 
-from simhw.params import load_config
+from simhw.config import load_config
 from simhw.rig_server import SimRigServer
 
 

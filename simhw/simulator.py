@@ -19,6 +19,7 @@ import numpy as np
 import scipy.linalg
 
 from simhw import geometry
+from simhw.config import AC_AXES, AXES, GYRO_CHANNELS, SimConfig, validate
 from simhw.kernel import CompiledPlant
 from simhw.noise import (
     ExcessFlickerNoise,
@@ -29,7 +30,6 @@ from simhw.noise import (
     TelegraphJumps,
     WhiteNoise,
 )
-from simhw.params import AC_AXES, AXES, GYRO_CHANNELS, SimConfig, validate
 from simhw.plant import (
     CHANNELS,
     TRUTH_CHANNELS,

@@ -2,8 +2,9 @@
 
 An effect is one module in this package that defines ``EFFECT``, an :class:`Effect`: its
 name, its parameters with defaults and priors, and ``apply``, which returns a modified copy of
-a :class:`~simhw.params.SimConfig`. ``catalogue()`` finds every module by scanning the
-package, so adding an effect is adding a file; nothing else is edited.
+a :class:`~simhw.config.SimConfig`. ``catalogue()`` finds every module by scanning the
+package, so adding an effect is adding a file, named for the effect; nothing else is edited
+(``docs/procedures/writing.md``).
 
 For the model-gap workflow an effect may also say which parameters the spectra identify
 (``fit``; default all) and where to start looking (``guess``: given the workflow's evidence, an
@@ -25,7 +26,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from simhw.params import AXES, SimConfig
+from simhw.config import AXES, SimConfig
 
 
 @dataclass(frozen=True)
@@ -94,12 +95,18 @@ class Effect:
 
 
 def catalogue() -> dict[str, Effect]:
-    """Every effect module in this package, by name."""
+    """Every effect module in this package, by name; a module named otherwise than its effect
+    raises ``ValueError`` (``fbs gap`` names an effect, and a reader looks for its module)."""
     found: dict[str, Effect] = {}
     for info in pkgutil.iter_modules(__path__):
         module = importlib.import_module(f"{__name__}.{info.name}")
         effect = getattr(module, "EFFECT", None)
         if isinstance(effect, Effect):
+            if effect.name != info.name:
+                raise ValueError(
+                    f"{module.__file__}: its effect is named {effect.name!r}: name the module "
+                    f"for it ({effect.name}.py)"
+                )
             found[effect.name] = effect
     return dict(sorted(found.items()))
 

@@ -5,8 +5,8 @@ signals. The line is added to the axis's autocollimator control channel as recor
 lines (mains and its harmonics) are several instances of the effect.
 """
 
+from simhw.config import PickupLine
 from simhw.effects import Effect, Param
-from simhw.params import PickupLine
 
 
 def _apply(cfg, axis, freq_hz, amplitude_V):

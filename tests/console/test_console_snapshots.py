@@ -216,7 +216,7 @@ def test_procedure_aborted_screen(snap_compare, out_dir):
 @pytest.fixture
 def spectra_view():
     from fbs.simulate import simulate_to_file
-    from simhw.params import load_config
+    from simhw.config import load_config
 
     # the view names its file: a relative name keeps the screen fixed
     simulate_to_file(

@@ -310,7 +310,7 @@ async def test_a_terminal_too_small_says_so(out_dir):
 @pytest.mark.slow
 @run_async
 async def test_spin_up_shows_its_time_and_an_interlock_reason_is_said_once(out_dir):
-    from simhw.params import load_config
+    from simhw.config import load_config
 
     app = ConsoleApp(COLD, out_dir=out_dir)
     async with app.run_test(size=(80, 24)) as pilot:

@@ -24,8 +24,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from simhw.config import SimConfig
 from simhw.datasheet import rig_calibration
-from simhw.params import SimConfig
 from simhw.simulator import Simulator
 
 

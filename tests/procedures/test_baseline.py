@@ -28,7 +28,7 @@ from procedures.calibrations import catalogue, get
 from procedures.calibrations.baseline import Baseline, Params
 from procedures.procedure import Verdict
 from procedures.runner import run_procedure
-from simhw.params import load_config
+from simhw.config import load_config
 from simhw.simulator import Simulator
 from tests.result_schema import assert_valid_result
 

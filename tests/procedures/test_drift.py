@@ -199,7 +199,7 @@ def test_pickoff_noise_hides_the_gyro_arw():
 # ---------------------------------------------------------------------------- sim rig
 def _sim_gyro(key: str) -> dict[str, float]:
     """The default sim's value of a gyro parameter per channel (the truth the tests compare with)."""
-    from simhw.params import load_config
+    from simhw.config import load_config
 
     cfg = load_config(None)
     return {ch: float(getattr(cfg.gyro[ch], key)) for ch in CHANNELS}

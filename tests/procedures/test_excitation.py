@@ -21,7 +21,7 @@ from procedures.analysis.transfer import network_response
 from procedures.calibrations import catalogue
 from procedures.calibrations.excitation import Excitation, Params, excitation_signal
 from procedures.runner import run_procedure
-from simhw.params import load_config
+from simhw.config import load_config
 from simhw.plant import linearized_poles
 from tests.procedures.excitation_rigs import FAST, assert_roots_near_the_linearized, drawn_config
 from tests.result_schema import assert_valid_result
@@ -133,7 +133,7 @@ def test_excitation_on_dahl_bearings_says_k_and_d_are_describing_functions_at_it
     interval wholly above the truth from the quiet record's H1; each corner's interval now covers
     the design value, or the corner is unresolved."""
     from fbs.demo_truth import dahl_at_amplitude, dahl_equivalent_linear
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
 
     with open_rig("sim?warm=1&seed=41") as rig:
         s = run_procedure(Excitation(Params(**FAST)), rig, tmp_path)
@@ -188,7 +188,7 @@ def test_excitation_pickoff_noise_is_the_simulated_within_20_percent(tmp_path):
     """Issue 22 B: the gyro's part incoherent with V_Td, in 1-50 Hz, against the simulated
     pickoff noise there (its white level and the lines in the band), on a rig with another
     pickoff noise level than the thesis's."""
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
     from simhw.simulator import pickoff_white_psd
 
     cfg_path = tmp_path / "noisy.toml"

@@ -10,7 +10,7 @@ import pytest
 from drivers.rig import open_rig
 from procedures.calibrations.excitation import Excitation, Params
 from procedures.runner import run_procedure
-from simhw.params import load_config, nominal_pickoff_lines
+from simhw.config import load_config, nominal_pickoff_lines
 from simhw.plant import linearized_poles
 from tests.procedures.excitation_rigs import FAST, assert_roots_near_the_linearized, drawn_config
 

@@ -473,7 +473,7 @@ def sim_lag_s(axis: str, freq_hz: float = 40.0) -> float:
     """The sim's instrument lag as the lines near ``freq_hz`` see it: the instrumentation
     channel's filters (eq. 3.22) and the motor's La/Ra, phase over w (for checking only: the
     procedure never reads the simulator)."""
-    from simhw.params import SimConfig
+    from simhw.config import SimConfig
 
     cfg = SimConfig()
     ac, pl = cfg.autocollimator[axis], cfg.platform[axis]

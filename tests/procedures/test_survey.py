@@ -23,7 +23,7 @@ from procedures.calibrations import catalogue
 from procedures.calibrations.survey import Params, Survey, pickoff_scales
 from procedures.resume import load_resume
 from procedures.runner import run_procedure
-from simhw.params import SimConfig, load_config, nominal_pickoff_lines
+from simhw.config import SimConfig, load_config, nominal_pickoff_lines
 from simhw.simulator import Simulator, pickoff_white_psd
 from tests.result_schema import assert_valid_result
 

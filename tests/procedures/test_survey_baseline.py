@@ -156,7 +156,7 @@ def test_baseline_then_survey_on_one_drawn_rig_nets_the_true_platform_rms(tmp_pa
     from procedures.calibrations.baseline import Baseline
     from procedures.calibrations.baseline import Params as BaselineParams
     from procedures.runner import run_procedure
-    from simhw.params import load_config, nominal_pickoff_lines
+    from simhw.config import load_config, nominal_pickoff_lines
 
     from .test_survey import expected_values
 

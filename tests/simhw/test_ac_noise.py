@@ -11,9 +11,9 @@ import pytest
 import scipy.integrate
 import scipy.signal
 
+from simhw.config import SimConfig, from_dict
 from simhw.effects import get, nominal
 from simhw.noise import FlickerNoise, WhiteNoise
-from simhw.params import SimConfig, from_dict
 from simhw.plant import RelayState, build_plant, discretize
 from simhw.sampling import anti_alias_sos, internal_rate
 from simhw.simulator import NEA_BAND_HZ, Simulator, Sources, ac_knee, ac_white_psd

@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
 from simhw.bearing import BearingLinearPart, dahl_step, dahl_stiffness, linear_part
-from simhw.params import Bearing
+from simhw.config import Bearing
 
 FAST = settings(max_examples=100, deadline=None)
 

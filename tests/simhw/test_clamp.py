@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from daq.spectral import band_rms, psd
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.simulator import Simulator
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from daq.spectral import dip_depth_db, dip_frequency, psd
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.plant import linearized_poles
 from simhw.simulator import Simulator
 

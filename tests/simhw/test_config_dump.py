@@ -3,7 +3,7 @@
 The round trip ``from_dict(tomllib.loads(dump_config(cfg))) == cfg`` must hold for the configs
 the model-gap workflow writes (catalogue effects at any parameters of their priors, a unit's
 nuisance noise levels and pickoff lines), for any float (repr precision) and any string, and for
-every field of every section, including fields added to ``simhw.params`` later: the field test
+every field of every section, including fields added to ``simhw.config`` later: the field test
 walks the dataclasses, it names no key.
 """
 
@@ -20,8 +20,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from simhw import effects
-from simhw.config_dump import dump_config
-from simhw.params import (
+from simhw.config import (
     AC_AXES,
     AXES,
     BEARING_MODELS,
@@ -34,6 +33,7 @@ from simhw.params import (
     to_dict,
     validate,
 )
+from simhw.config_dump import dump_config
 
 FAST = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -194,7 +194,7 @@ def _sections(cfg: SimConfig) -> list[tuple[tuple[str, ...], Any]]:
 
 def _another(f: dataclasses.Field, current: Any) -> Any:
     """A value of the field's type, different from ``current`` and inside its declared range
-    where it has one (``simhw.params._f``'s metadata)."""
+    where it has one (``simhw.config._f``'s metadata)."""
     if isinstance(current, bool):
         return not current
     if isinstance(current, int):

@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from simhw import effects
+from simhw.config import AXES, SimConfig, from_dict, to_dict, validate
 from simhw.effects import Effect, catalogue, get, nominal, parse_spec
-from simhw.params import AXES, SimConfig, from_dict, to_dict, validate
 
 REQUIRED = {
     "none",

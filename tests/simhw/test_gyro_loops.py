@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import scipy.optimize
 
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.simulator import Simulator
 
 

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from simhw import params as P
+from simhw import config as P
 from simhw.bearing import dahl_stiffness
-from simhw.params import (
+from simhw.config import (
     AXES,
     GYRO_CHANNELS,
     ConfigError,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simhw import effects
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.plant import CHANNELS
 from simhw.reduction import kept
 from simhw.simulator import Simulator

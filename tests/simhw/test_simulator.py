@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.plant import CHANNELS, RelayState
 from simhw.simulator import Simulator
 from simhw.virtual_clock import PacedClock

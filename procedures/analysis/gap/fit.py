@@ -30,8 +30,8 @@ import numpy as np
 import scipy.optimize
 
 from procedures.analysis.gap.model import PARTS, ModelSpectrum, SpectralModel, knee, knee_gradient
+from simhw.config import SimConfig
 from simhw.effects import Effect, Param
-from simhw.params import SimConfig
 
 log = logging.getLogger(__name__)
 

@@ -32,7 +32,7 @@ import scipy.linalg
 import scipy.signal
 
 from procedures.analysis.gap.grid import Grid
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.plant import RelayState, build_plant, discretize
 from simhw.sampling import anti_alias_sos, internal_rate
 from simhw.simulator import Sources, ac_knee, ac_white_psd

@@ -22,7 +22,7 @@ import numpy as np
 
 from procedures.analysis.gap.grid import Grid
 from procedures.analysis.lines import LINE_NARROWNESS, MeasuredLine, refine_line
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 
 __all__ = ["LINE_NARROWNESS", "MeasuredLine", "found_pickoff_lines", "refine_line"]
 

@@ -127,7 +127,7 @@ def refined_header(res: GapResult) -> str:
         f"Noise levels fitted (scale of the data sheet's PSD): {_fmt(res.scales_after)}.",
         "The nominal model omits the gimbal-bearing torque (DESIGN.md section 8): a bearing without a",
         'named bearing_friction is model = "none" here.',
-        "Only the values that differ from the data sheet (simhw.params.SimConfig()) are written;",
+        "Only the values that differ from the data sheet (simhw.config.SimConfig()) are written;",
         "load_config overlays them on it.",
         "",
         "Use:",

@@ -55,7 +55,7 @@ from procedures.analysis.gap.steps import (
     window_difference,
 )
 from simhw import effects as catalogue
-from simhw.params import Sampling, SimConfig, load_config, to_dict
+from simhw.config import Sampling, SimConfig, load_config, to_dict
 from simhw.plant import AXIS_OF_CHANNEL, CHANNELS
 from simhw.sampling import ADC_RANGES_V
 from simhw.simulator import Simulator

@@ -9,7 +9,7 @@ import pytest
 
 from drivers.calibration import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.roots import GyroCaging, LoopParts, name_roots
-from simhw.params import SimConfig
+from simhw.config import SimConfig
 from simhw.plant import linearized_poles
 
 BAND = (2 * np.pi * 0.3, 2 * np.pi * 50.0)

@@ -16,7 +16,7 @@ pytestmark = pytest.mark.slow
 MODULE = '''
 """``gyro_pickup``: electrical pickup on the axis's gyro pickoff channel (a test's effect)."""
 from simhw.effects import Effect, Param
-from simhw.params import PickupLine
+from simhw.config import PickupLine
 
 
 def _apply(cfg, axis, freq_hz, amplitude_V):

@@ -24,7 +24,7 @@ from daq.reader import RunFile
 from fbs.cli import main
 from procedures.analysis.gap.report import REFINED_NAME, write_report
 from procedures.analysis.gap.workflow import GapResult, analyse
-from simhw.params import load_config
+from simhw.config import load_config
 
 pytestmark = pytest.mark.slow
 
