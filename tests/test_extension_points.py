@@ -175,7 +175,7 @@ def test_a_device_is_its_driver_eds_and_simulated_node_and_answers_on_the_bus(
 # ---------------------------------------------------------------------------- a channel
 #: where the guide says each ``edit=`` block goes: (the line it goes before or after, which)
 CHANNEL_ANCHORS = {
-    "drivers/calibration.py": ('    "cmd_z",\n)', "before_close"),
+    "drivers/rig_datasheet.py": ('    "cmd_z",\n)', "before_close"),
     "simhw/plant.py": ('        b.outputs[f"cmd_{a.lower()}"]', "after"),
 }
 
@@ -214,3 +214,36 @@ def test_a_channel_is_its_name_and_its_signal_and_is_recorded(tmp_path):
             data = f["channels"][name][:]
             assert f["channels"][name].attrs["units"] == "V"
             assert len(data) > 0 and np.all(np.isfinite(data)), name
+
+
+# ---------------------------------------------------------------------------- the name rule
+@pytest.mark.parametrize(
+    "rel, text, catalogue",
+    [
+        (
+            "simhw/effects/hum.py",
+            "from simhw.effects import Effect\nEFFECT = Effect('buzz', '', (), lambda c, a: c)\n",
+            "simhw.effects:catalogue",
+        ),
+        (
+            "drivers/devices/lamp.py",
+            "from drivers.devices import Device\nDEVICE = Device('light', 7, 0x17, print)\n",
+            "drivers.devices:catalogue",
+        ),
+        (
+            "simhw/devices/lamp.py",
+            "from simhw.canopen_nodes import CanopenSimNode\n"
+            "class Light(CanopenSimNode):\n    name = 'light'\nNODE = Light\n",
+            "simhw.devices:catalogue",
+        ),
+    ],
+)
+def test_a_module_named_otherwise_than_what_it_defines_is_refused(
+    tmp_path, monkeypatch, rel, text, catalogue
+):
+    """The guide's rule (each module named for what it defines; the command line and a reader
+    find it by that name) is the catalogue's, not a convention."""
+    mount(tmp_path, monkeypatch, {rel: text})
+    module, name = catalogue.split(":")
+    with pytest.raises(ValueError, match=r"name the module for it"):
+        getattr(importlib.import_module(module), name)()
