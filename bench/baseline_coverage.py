@@ -101,7 +101,7 @@ def rig_config(d: dict[str, Any]):
 
 def truths(cfg, axis: str, rate_hz: float) -> dict[str, float]:
     """The simulator's values of every figure (see the module docstring)."""
-    from drivers.calibration import AutocollimatorConstants
+    from drivers.rig_datasheet import AutocollimatorConstants
     from procedures.analysis.baseline import NEA_BAND_HZ, PICKOFF_BANDS_HZ, nea_truth
     from procedures.analysis.transfer import sensor_filter
     from simhw.simulator import Simulator, ac_white_psd
@@ -151,7 +151,7 @@ def truths(cfg, axis: str, rate_hz: float) -> dict[str, float]:
 
 
 def run_rig(i: int, seed: int, record_s: float, rate_hz: float = 1000.0) -> dict[str, Any]:
-    from drivers.calibration import AutocollimatorConstants
+    from drivers.rig_datasheet import AutocollimatorConstants
     from procedures.analysis.baseline import array_blocks, baseline_figures
     from simhw.simulator import Simulator
 

@@ -126,7 +126,7 @@ def analyse(
     d: dict[str, Any], x: dict[str, np.ndarray], duration_s: float, scales: str
 ) -> dict[str, Any]:
     """The procedure's figures of one record; ``scales`` "true" (the rig's K_TO, K_g) or "nominal"."""
-    from drivers.calibration import RigCalibration
+    from drivers.rig_datasheet import RigCalibration
     from procedures.analysis.drift import analyze_channels
     from procedures.calibrations.drift import Drift
 

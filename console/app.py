@@ -49,8 +49,8 @@ from console.state import (
     WorkerStopped,
 )
 from console.statusbar import StatusBar
-from drivers.calibration import RigCalibration
 from drivers.logrule import PROJECT_PACKAGES, ruled, set_levels
+from drivers.rig_datasheet import RigCalibration
 from drivers.setpoints import SetpointLimits
 
 if TYPE_CHECKING:

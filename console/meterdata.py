@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from console.channels import short
-from drivers.calibration import GYRO_CHANNELS, RigCalibration
+from drivers.rig_datasheet import GYRO_CHANNELS, RigCalibration
 
 
 @dataclass(frozen=True)

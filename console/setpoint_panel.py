@@ -33,8 +33,8 @@ from console.limits import (
     typed_slew,
 )
 from console.state import Snapshot
-from drivers.calibration import AXES, GYRO_CHANNELS
 from drivers.errors import SetpointRangeError
+from drivers.rig_datasheet import AXES, GYRO_CHANNELS
 from drivers.setpoints import SetpointLimits
 
 

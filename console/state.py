@@ -16,8 +16,8 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from drivers.calibration import RigCalibration
 from drivers.relay import RelayStatus
+from drivers.rig_datasheet import RigCalibration
 
 if TYPE_CHECKING:
     from procedures.runner import RunSummary

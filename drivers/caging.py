@@ -6,10 +6,10 @@ import threading
 from typing import Protocol
 
 from drivers import canopen_frames as cf
-from drivers.calibration import GYRO_CHANNELS
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
 from drivers.errors import ProtocolError, SetpointRangeError
+from drivers.rig_datasheet import GYRO_CHANNELS
 from drivers.setpoints import check_name
 
 

@@ -12,10 +12,10 @@ import logging
 import struct
 
 from drivers import canopen_frames as cf
-from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
 from drivers.errors import DeviceLost, DriverError, ProtocolError, SetpointRangeError
+from drivers.rig_datasheet import RigCalibration
 from drivers.setpoints import SetpointLimits
 
 log = logging.getLogger(__name__)

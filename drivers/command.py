@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from drivers.calibration import AXES, RigCalibration
 from drivers.can_link import CanLink
 from drivers.canopen_dac import CanopenDac
+from drivers.rig_datasheet import AXES, RigCalibration
 from drivers.setpoints import SetpointKind, SetpointLimits, check_name
 
 #: DAC outputs on the command node, in index order.

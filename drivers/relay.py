@@ -19,10 +19,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from drivers import rig_nodes as rn
-from drivers.calibration import GYRO_CHANNELS
 from drivers.can_link import CanLink
 from drivers.canopen_client import ABORT_INTERLOCK, CanopenClient
 from drivers.errors import DriverError, InterlockError, ModeNotAllowed
+from drivers.rig_datasheet import GYRO_CHANNELS
 
 log = logging.getLogger(__name__)
 

@@ -45,7 +45,6 @@ import can
 
 from drivers.adc import Adc
 from drivers.caging import CagingSwitches, CanopenCagingSwitches
-from drivers.calibration import RigCalibration
 from drivers.can_link import CanLink
 from drivers.canopen_client import CanopenClient
 from drivers.claim import RigClaim
@@ -55,6 +54,7 @@ from drivers.devices import catalogue as device_catalogue
 from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanopenRelayDriver, RelayDriver
+from drivers.rig_datasheet import RigCalibration
 from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
 from drivers.supervision import ModeSupervisor, SupervisedAdc
 from drivers.table import (

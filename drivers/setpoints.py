@@ -13,8 +13,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from enum import StrEnum
 
-from drivers.calibration import AXES, GYRO_CHANNELS, RigCalibration
 from drivers.errors import SetpointRangeError
+from drivers.rig_datasheet import AXES, GYRO_CHANNELS, RigCalibration
 
 
 class SetpointKind(StrEnum):

@@ -31,9 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.adc import Adc, AdcBlock, AdcDecorator
-from drivers.calibration import RigCalibration
 from drivers.errors import DriverError
 from drivers.faults import FaultLatch
+from drivers.rig_datasheet import RigCalibration
 
 log = logging.getLogger(__name__)
 

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from drivers.calibration import GYRO_CHANNELS, RigCalibration
 from drivers.can_link import CanLink
 from drivers.canopen_dac import CanopenDac
+from drivers.rig_datasheet import GYRO_CHANNELS, RigCalibration
 from drivers.setpoints import SetpointLimits, check_name
 
 

@@ -240,7 +240,7 @@ def _check_transfer_options(args: argparse.Namespace) -> None:
 def transfer_result(args: argparse.Namespace) -> tuple[dict[str, Any], Any, Any]:
     """The ``--json`` object of ``fbs analyze transfer``, the response and the fit."""
     from daq.reader import RunFile
-    from drivers.calibration import RigCalibration
+    from drivers.rig_datasheet import RigCalibration
     from procedures.analysis import transfer as tf
     from procedures.analysis.hysteresis import calibration_from_meta
     from procedures.analysis.intervals import finite_json

@@ -16,7 +16,7 @@ import json
 import sys
 from typing import Any
 
-from drivers.calibration import ADC_CHANNELS
+from drivers.rig_datasheet import ADC_CHANNELS
 from fbs.usage import EXIT_ERROR
 
 #: DESIGN.md section 5 names 19 channels: a recording's disk check assumes all of them unless

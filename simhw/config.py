@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from drivers.calibration import AXES, GYRO_CHANNELS
+from drivers.rig_datasheet import AXES, GYRO_CHANNELS
 
 AC_AXES = ("X", "Y")
 BEARING_MODELS = ("none", "viscous", "spring", "dahl")

@@ -1,7 +1,7 @@
 """The simulated rig's data sheet: the instrument constants a lab would know beforehand.
 
 ``rig_calibration(cfg)`` publishes, for a sim config, what a real rig's calibration file
-holds (``drivers.calibration``): site, platform inertia, motor and amplifier constants,
+holds (``drivers.rig_datasheet``): site, platform inertia, motor and amplifier constants,
 autocollimator scale factors and filters, the caging loops' design. It deliberately does *not*
 publish what the procedures measure: torquer and pickoff scale factors, drifts, bearing friction and the table's azimuth
 offset stay at their nominal (thesis) values, whatever the config says, so a procedure run
@@ -10,7 +10,7 @@ against another config must find those by measurement.
 
 from __future__ import annotations
 
-from drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
+from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants, RigCalibration
 from simhw.config import AC_AXES, AXES, SimConfig
 
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from drivers.calibration import ADC_CHANNELS
+from drivers.rig_datasheet import ADC_CHANNELS
 from simhw.bearing import linear_part
 from simhw.config import AC_AXES, AXES, GYRO_CHANNELS, MODES, SimConfig
 

@@ -19,8 +19,8 @@ from __future__ import annotations
 import can
 
 from drivers import rig_nodes as rn
-from drivers.calibration import RigCalibration
 from drivers.rig import Rig, assemble, check_keys, flag
+from drivers.rig_datasheet import RigCalibration
 from drivers.runclock import RunningClock
 from drivers.table import Operator, TablePosition, terminal_operator
 from simhw.config import config_stamp, load_config

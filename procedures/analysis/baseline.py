@@ -33,7 +33,7 @@ import numpy as np
 import scipy.ndimage
 
 from daq.spectral import n_segments, welch_csd_matrix
-from drivers.calibration import AutocollimatorConstants
+from drivers.rig_datasheet import AutocollimatorConstants
 from procedures.analysis.intervals import LEVEL, Estimate, from_stderr, judged
 from procedures.analysis.lines import refine_line
 from procedures.analysis.transfer import BlockCsd, jackknife_se, sensor_filter

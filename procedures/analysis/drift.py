@@ -37,7 +37,7 @@ from typing import Protocol
 import numpy as np
 
 from daq.reader import RunFile
-from drivers.calibration import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis import allan
 from procedures.analysis.intervals import Estimate, judged
 

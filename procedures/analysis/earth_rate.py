@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.stats
 
-from drivers.calibration import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.intervals import Estimate, judged
 from procedures.stepresult import StepResult
 

@@ -29,7 +29,7 @@ import scipy.stats
 
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunFileError
-from drivers.calibration import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
+from drivers.rig_datasheet import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
 from procedures.analysis import dahl
 from procedures.analysis.intervals import Estimate, judged
 

@@ -56,7 +56,7 @@ from typing import Any
 import numpy as np
 from numpy.polynomial import Polynomial
 
-from drivers.calibration import AutocollimatorConstants, PlatformConstants
+from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.intervals import Estimate, from_stderr
 from procedures.analysis.transfer import (
     SE_FLOOR,

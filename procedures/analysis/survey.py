@@ -61,7 +61,7 @@ import scipy.stats
 from daq.filespectra import RunCsd, run_csd_matrix
 from daq.reader import RunFile
 from daq.spectral import band_rms, coherence
-from drivers.calibration import RigCalibration
+from drivers.rig_datasheet import RigCalibration
 from procedures.analysis.intervals import LEVEL, Estimate, from_stderr, judged
 from procedures.analysis.transfer import BlockCsd, jackknife_se, unbiased_coherence
 

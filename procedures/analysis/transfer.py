@@ -63,6 +63,7 @@ References
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -77,7 +78,7 @@ import scipy.stats
 from daq.filespectra import run_csd_matrix
 from daq.reader import RunFile
 from daq.spectral import coherence, equivalent_dof
-from drivers.calibration import AutocollimatorConstants, PlatformConstants
+from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.intervals import MAX_CORRELATION, Estimate, from_stderr
 
 URAD = 1e-6
@@ -518,7 +519,22 @@ def _residuals(
 def _fit_network_once(
     f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray, start: np.ndarray
 ) -> np.ndarray:
-    return np.asarray(_network_solution(f, H, log_se, phase_se, start).x)
+    return _canonical(np.asarray(_network_solution(f, H, log_se, phase_se, start).x))[0]
+
+
+def _canonical(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The same network with its poles in order (w1 < w4 < w5 < w6) and its zeros (w2 < w3):
+    eq. 3.28's poles are interchangeable, and a fit may end with two of them swapped (w6 at 199
+    and w4 at 1148), which would print each under the other's name and mix the jackknife's
+    replicates. Returns the ordered parameters and, for each, the index it came from."""
+    g = x[0] - x[1]  # ln gain
+    perm = np.arange(len(x))
+    poles, zeros = np.array([1, 4, 5, 6]), np.array([2, 3])
+    for idx in (poles, zeros):
+        perm[idx] = idx[np.argsort(x[idx], kind="stable")]
+    out = x[perm]
+    out[0] = g + out[1]
+    return out, perm
 
 
 def _network_solution(
@@ -538,15 +554,54 @@ def _network_solution(
 SEARCH_FACTOR = 20.0
 
 
-def _pinned(sol: scipy.optimize.OptimizeResult) -> tuple[np.ndarray, np.ndarray]:
-    """Which parameters the fit left at the edge of its search, and the parameters' correlations
-    from the fit's Jacobian (defined where the jackknife's are not: a pinned parameter has the
-    same value in every replicate, so its replicate correlations are 0/0)."""
-    pinned = np.asarray(sol.active_mask) != 0
-    J = np.asarray(sol.jac)
-    cov = np.linalg.pinv(J.T @ J)
-    d = np.sqrt(np.maximum(np.diag(cov), 1e-300))
-    return pinned, cov / np.outer(d, d)
+def _profile_envelope(
+    f: np.ndarray,
+    H: np.ndarray,
+    log_se: np.ndarray,
+    phase_se: np.ndarray,
+    x: np.ndarray,
+    start: np.ndarray,
+    held: np.ndarray,
+    best_cost: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each parameter's lowest and highest (log) value over the fits, with the ``held``
+    parameters held on a grid across their search range (start / 20 .. start x 20) and the
+    others free, that the record cannot tell from the best: a profile likelihood, chi^2 within
+    its 95 % point of the best's (in units of the best fit's residual variance where that
+    exceeds the bins'). A held parameter's own range runs out to the first grid point refused."""
+    free = ~held
+    n_held = int(held.sum())
+    points = {1: 9, 2: 7}.get(n_held, 5)
+    scale = max(1.0, 2.0 * best_cost / max(2 * len(f) - len(x), 1))
+    limit = float(scipy.stats.chi2.ppf(LEVEL, n_held)) * scale
+    lo, hi = start - math.log(SEARCH_FACTOR), start + math.log(SEARCH_FACTOR)
+    grid = np.linspace(0.0, 1.0, points)
+    seen = [x.copy()]
+    kept: list[tuple[int, ...]] = []
+    for idx in itertools.product(range(points), repeat=n_held):
+        xx = x.copy()
+        xx[held] = lo[held] + grid[list(idx)] * (hi[held] - lo[held])
+
+        def resid(z: np.ndarray, xx: np.ndarray = xx) -> np.ndarray:
+            xx[free] = z
+            return _log_residual(network_response(f, _network_params(xx)), H, log_se, phase_se)
+
+        sol = scipy.optimize.least_squares(
+            resid, np.clip(x[free], lo[free], hi[free]), bounds=(lo[free], hi[free]), method="trf"
+        )
+        if 2.0 * (sol.cost - best_cost) <= limit:
+            xx[free] = sol.x
+            seen.append(xx.copy())
+            kept.append(idx)
+    arr = np.array(seen)
+    low, high = arr.min(axis=0), arr.max(axis=0)
+    if kept:
+        k = np.array(kept)
+        t0 = grid[np.maximum(k.min(axis=0) - 1, 0)]
+        t1 = grid[np.minimum(k.max(axis=0) + 1, points - 1)]
+        low[held] = np.minimum(low[held], lo[held] + t0 * (hi[held] - lo[held]))
+        high[held] = np.maximum(high[held], lo[held] + t1 * (hi[held] - lo[held]))
+    return low, high
 
 
 def _network_params(x: np.ndarray) -> dict[str, float]:
@@ -581,8 +636,14 @@ def fit_network(
     f, H = resp.f[ok], resp.H[ok]
     ls, ps = np.maximum(resp.log_se[ok], SE_FLOOR), np.maximum(resp.phase_se_rad[ok], SE_FLOOR)
     sol = _network_solution(f, H, ls, ps, x0)
-    x = np.asarray(sol.x)
-    pinned, corr_j = _pinned(sol)
+    x, perm = _canonical(np.asarray(sol.x))
+    pinned = (np.asarray(sol.active_mask) != 0)[perm]  # left at the edge of its search
+    start_x = x0[perm]  # each parameter's search is about its own start
+    start_x[0] = x0[0] - x0[1] + x0[perm[1]]
+    # corners above the band and corners the search stopped at the edge of are not measured:
+    # held across their range, what the others take with them is part of the others' intervals
+    above = np.r_[False, False, np.exp(x[2:]) > 2 * np.pi * hi_hz]
+    held = pinned | above
     # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
     xb = np.array(
         [
@@ -595,31 +656,29 @@ def fit_network(
     names = ["gain_times_w1_rad_per_s", *NETWORK_CORNERS]
     est: dict[str, Estimate] = {}
     correlations: dict[str, float] = {}
+    # a corner the band cannot fix stops at the edge of the search, where it holds the others
+    # at values they take only because of it: their intervals hold what they take with it fixed
+    # anywhere in its search range, and its own is that range
+    envelope = (
+        _profile_envelope(f, H, ls, ps, x, start_x, held, float(sol.cost)) if held.any() else None
+    )
     for k, name in enumerate(names):
         # interval on the log, reported on the value (a corner is positive)
         e = from_stderr(x[k], se[k], dof=resp.dof)
+        if envelope is not None:
+            e = Estimate(e.value, min(e.lo, envelope[0][k]), max(e.hi, envelope[1][k]), False)
         c = np.delete(np.abs(np.nan_to_num(corr[k])), k)
         worst = int(np.argmax(c)) if c.size else 0
         other = [n for i, n in enumerate(names) if i != k][worst]
         cmax = float(c[worst]) if c.size else 0.0
         correlations[name] = cmax
         est[name] = _exp_estimate(x[k], e, cmax, other)
-        # a corner at the edge of its search is not measured, and neither is one the fit can
-        # only trade against it: its interval holds the pinned one fixed where it stopped
         if pinned[k]:
             est[name] = _unresolved(
                 est[name],
                 f"at the edge of the fit's search (x{SEARCH_FACTOR:g} its start): "
                 f"{lo_hz:g}-{hi_hz:g} Hz does not determine it",
             )
-        elif pinned.any():
-            j = int(np.argmax(np.where(pinned, np.abs(corr_j[k]), -1.0)))
-            if abs(corr_j[k, j]) > MAX_CORRELATION:
-                est[name] = _unresolved(
-                    est[name],
-                    f"correlates {abs(corr_j[k, j]):.3f} with {names[j]}, which the band does "
-                    "not determine (at the edge of the fit's search)",
-                )
     # the gain alone: ln g = x0 - x1
     xg = xb[:, 0] - xb[:, 1]
     eg = from_stderr(x[0] - x[1], float(jackknife_se(xg)), dof=resp.dof)

@@ -33,7 +33,7 @@ from typing import Annotated, Any
 
 import numpy as np
 
-from drivers.calibration import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.drift import (
     ChannelDrift,
     DriftDataError,

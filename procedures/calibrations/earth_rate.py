@@ -32,7 +32,7 @@ from typing import Annotated, Any
 
 import numpy as np
 
-from drivers.calibration import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.earth_rate import G_AXES, Station, fit_earth_rate
 from procedures.analysis.intervals import add_figure
 from procedures.paramlimits import Each, Range, above, at_least, check_limits, fraction, sample_rate

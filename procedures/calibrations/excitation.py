@@ -47,7 +47,7 @@ from typing import Annotated, Any
 import numpy as np
 
 from daq.spectral import coherence, equivalent_dof, n_segments, welch_csd_matrix
-from drivers.calibration import AutocollimatorConstants, RigCalibration
+from drivers.rig_datasheet import AutocollimatorConstants, RigCalibration
 from procedures.analysis.intervals import add_figure
 from procedures.analysis.roots import ClosedLoop, GyroCaging, LoopParts, close_loop, sensor_gain
 from procedures.analysis.transfer import (

@@ -65,7 +65,7 @@ from typing import Annotated, Any
 
 import numpy as np
 
-from drivers.calibration import FLOAT_PARTNER, GYRO_CHANNELS
+from drivers.rig_datasheet import FLOAT_PARTNER, GYRO_CHANNELS
 from procedures.analysis.intervals import add_figure
 from procedures.analysis.stopwatch import (
     PROPORTIONAL_ONLY,

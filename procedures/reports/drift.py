@@ -11,7 +11,7 @@ from typing import Protocol
 import numpy as np
 
 from daq.plots import new_figure, save_figure
-from drivers.calibration import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.drift import ChannelDrift, DriftSettings
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from daq.plots import new_figure, save_figure
-from drivers.calibration import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.earth_rate import ChannelFit, Station
 from procedures.analysis.intervals import Estimate
 from procedures.reports.procedure_report import fmt

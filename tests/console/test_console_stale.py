@@ -13,8 +13,8 @@ from textual import events
 from textual.widgets import Checkbox, Input, Static
 
 from console.app import ConsoleApp
-from drivers.calibration import AXES, GYRO_CHANNELS
 from drivers.relay import MODES
+from drivers.rig_datasheet import AXES, GYRO_CHANNELS
 
 from .conftest import (
     COLD,

@@ -6,7 +6,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from drivers.calibration import RigCalibration
+from drivers.rig_datasheet import RigCalibration
 from drivers.setpoints import SetpointLimits
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "protocol.md"

@@ -13,9 +13,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from drivers.adc import AdcBlock
-from drivers.calibration import RigCalibration
 from drivers.faults import FaultLatch
 from drivers.rig import open_rig
+from drivers.rig_datasheet import RigCalibration
 from drivers.supervision import HOLD_S, ModeSupervisor, SupervisionAlarm, longest_run, watches
 
 WATCHED = [

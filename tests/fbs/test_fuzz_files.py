@@ -34,7 +34,7 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from drivers.calibration import RigCalibration
+from drivers.rig_datasheet import RigCalibration
 from fbs.cli import main
 from procedures.analysis import dahl
 

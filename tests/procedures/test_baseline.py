@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 
 from daq.reader import RunFile
-from drivers.calibration import AutocollimatorConstants
 from drivers.errors import PlatformClamped
 from drivers.rig import open_rig
+from drivers.rig_datasheet import AutocollimatorConstants
 from procedures.analysis.baseline import NEA_BAND_HZ, nea_truth
 from procedures.analysis.transfer import sensor_filter
 from procedures.calibrations import catalogue, get

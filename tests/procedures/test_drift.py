@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drivers.calibration import RigCalibration
+from drivers.rig_datasheet import RigCalibration
 from procedures.analysis.drift import analyze_channels, coupling_terms, reconstruct_rate
 from procedures.calibrations import catalogue
 from procedures.calibrations.drift import Drift, Params

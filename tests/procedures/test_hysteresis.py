@@ -26,7 +26,7 @@ import pytest
 
 from daq.reader import RunFile
 from daq.runfile import RunWriter
-from drivers.calibration import AutocollimatorConstants, PlatformConstants, RigCalibration
+from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants, RigCalibration
 from fbs import analyze
 from procedures.analysis import dahl
 from procedures.analysis.hysteresis import analyze_file, calibration_from_meta

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import procedures.runner as runner
-from drivers.calibration import RigCalibration
+from drivers.rig_datasheet import RigCalibration
 from procedures.calibrations import catalogue
 from procedures.procedure import Analysis, Step
 from procedures.progress import ANALYSING, DONE, STEPS, WRITING_REPORT, Progress, ProgressModel

@@ -26,7 +26,7 @@ import numpy as np
 from daq import provenance
 from daq.reader import LOST_SAMPLES_NOTE, RunFile, lost_samples
 from daq.runfile import RunWriter, make_folder
-from drivers.calibration import AXES
+from drivers.rig_datasheet import AXES
 from procedures.analysis.gap.fit import EffectFit, Fitter, NuisanceFit, bic_score, to_unit
 from procedures.analysis.gap.grid import (
     GapInputError,

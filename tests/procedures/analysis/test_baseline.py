@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from drivers.calibration import AutocollimatorConstants
+from drivers.rig_datasheet import AutocollimatorConstants
 from procedures.analysis.baseline import (
     NEA_BAND_HZ,
     array_blocks,

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from drivers.calibration import AutocollimatorConstants, PlatformConstants
+from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.roots import GyroCaging, LoopParts, name_roots
 from simhw.config import SimConfig
 from simhw.plant import linearized_poles

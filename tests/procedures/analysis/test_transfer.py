@@ -20,7 +20,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from daq.runfile import RunWriter
-from drivers.calibration import AutocollimatorConstants, PlatformConstants
+from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.transfer import (
     DESIGN_NETWORK,
     TransferError,
@@ -288,3 +288,30 @@ def test_jackknife_se_of_the_mean_is_the_standard_error(values):
     x = np.asarray(values)
     loo = np.array([np.delete(x, i).mean() for i in range(x.size)])
     assert jackknife_se(loo) == pytest.approx(x.std(ddof=1) / math.sqrt(x.size), rel=1e-6, abs=1e-9)
+
+
+def test_a_corner_stopped_at_the_edge_of_its_search_is_unresolved_and_every_interval_covers(
+    tmp_path,
+):
+    """Issue 38 items 1 and 3: in Mode 4 a corner far above the band (w6, 820 Hz, fitted over
+    0.3-50 Hz) stopped at the edge of its search; every replicate stopped there too, so it was
+    printed resolved with a zero-width interval, and the corners it trades against (w5 read 734
+    for 1131) were printed resolved, their intervals holding it fixed where it stopped. Here the
+    search is started so that w6 cannot reach its truth: w6 is unresolved with the range the
+    record allows, and every corner's interval, resolved or not, covers its truth."""
+    rng = np.random.default_rng(11)
+    p = dict(DESIGN_NETWORK) | {"w6_rad_per_s": 5155.0, "w5_rad_per_s": 1131.0}
+    path = network_file(tmp_path, rng, p)
+    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
+    start = dict(DESIGN_NETWORK) | {"w6_rad_per_s": 200.0}  # searched 10 .. 4000 rad/s
+    fit = fit_network(resp, 0.3, 50.0, start=start)
+    w6 = fit.estimates["w6_rad_per_s"]
+    assert not w6.resolved and w6.hi > w6.lo, w6
+    for k in ("w1_rad_per_s", "w2_rad_per_s", "w3_rad_per_s", "w4_rad_per_s", "w5_rad_per_s"):
+        e = fit.estimates[k]
+        assert e.hi > e.lo, (k, e)
+        if e.resolved:
+            assert e.lo <= p[k] <= e.hi, (k, e, p[k])
+    assert not fit.estimates["w5_rad_per_s"].resolved or (
+        fit.estimates["w5_rad_per_s"].lo <= p["w5_rad_per_s"] <= fit.estimates["w5_rad_per_s"].hi
+    )
