@@ -18,7 +18,8 @@ import re
 import shutil
 import subprocess
 import sys
-from pathlib import Path
+from collections.abc import Iterable
+from pathlib import Path, PurePosixPath
 
 import h5py
 import numpy as np
@@ -56,6 +57,15 @@ def command(text: str, out: Path) -> list[str]:
     return argv
 
 
+def names_stay_unique(files: Iterable[str]) -> None:
+    """The repository's module-name rule (``tests/test_module_names.py``) holds with the
+    added files in it: adding one needs no edit of the rule either."""
+    from tests.test_module_names import modules, name_clashes, packages, subcommand_modules
+
+    added = [PurePosixPath(f) for f in files if f.endswith(".py")]
+    assert name_clashes([*modules(packages()), *added], subcommand_modules()) == {}
+
+
 def mount(tmp: Path, monkeypatch, files: dict[str, str]) -> None:
     """Write each ``repo/path.ext`` into ``tmp`` and add its directory to the package's
     ``__path__`` (the package the path names), as if the file were in the package."""
@@ -84,6 +94,7 @@ def test_a_procedure_is_one_module_that_fbs_run_and_the_demo_find(tmp_path, monk
     text = section("A procedure")
     files = {p: body for p, (kind, body) in blocks(text).items() if kind == "file"}
     assert set(files) == checklist(text) == {"procedures/calibrations/ac_noise.py"}
+    names_stay_unique(files)
     mount(tmp_path / "src", monkeypatch, files)
 
     assert "ac_noise" in module_names() and "ac-noise" in catalogue()
@@ -110,6 +121,7 @@ def test_an_effect_is_one_module_that_fbs_simulate_injects(tmp_path, monkeypatch
     text = section("An effect")
     files = {p: body for p, (kind, body) in blocks(text).items() if kind == "file"}
     assert set(files) == checklist(text) == {"simhw/effects/pickoff_hum.py"}
+    names_stay_unique(files)
     mount(tmp_path / "src", monkeypatch, files)
 
     assert "pickoff_hum" in effects.catalogue()
@@ -157,6 +169,7 @@ def test_a_device_is_its_driver_eds_and_simulated_node_and_answers_on_the_bus(
     files = {p: body for p, (kind, body) in found.items() if kind == "file"}
     files["drivers/devices/heater.eds"] = _heater_eds(found["drivers/devices/heater.eds"][1])
     assert set(found) == set(files) == checklist(text)
+    names_stay_unique(files)
     mount(tmp_path / "src", monkeypatch, files)
 
     assert rig_nodes.node_ids()["heater"] == 6

@@ -10,7 +10,9 @@ same file name only in these patterns:
    modules it runs are named for what they are;
 3. the procedure trio: a procedure ``X`` is ``procedures/calibrations/X.py`` (its steps),
    ``procedures/analysis/X.py`` (its numerics) and ``procedures/reports/X.py`` (its report),
-   each at most once and only in those three folders.
+   each at most once and only in those three folders;
+4. the device pair: a CAN device ``X`` is ``drivers/devices/X.py`` (its driver) and
+   ``simhw/devices/X.py`` (its simulated node), ``docs/procedures/writing.md``.
 
 Anything else - two ``spectra.py`` in two layers, two ``lines.py`` in one - makes a reader ask
 which one an import means; name the new module for what it is and for its layer instead
@@ -28,6 +30,7 @@ from fbs.cli import COMMANDS
 
 ROOT = Path(__file__).resolve().parents[1]
 TRIO = ("procedures/calibrations", "procedures/analysis", "procedures/reports")
+DEVICE = ("drivers/devices", "simhw/devices")
 
 
 def packages() -> list[str]:
@@ -67,7 +70,7 @@ def name_clashes(
             and len(set(folders)) == len(folders)
             and PurePosixPath(TRIO[0], name) in ps
         )
-        if not trio:
+        if not trio and sorted(folders) != sorted(DEVICE):
             clashes[name] = [str(p) for p in ps]
     return clashes
 
@@ -99,6 +102,8 @@ def test_the_rule_refuses_a_new_duplicate_and_keeps_the_patterns():
         p("procedures/reports/survey.py"),
     ]
     assert name_clashes(allowed, subcommands) == {}
+    device = [p("drivers/devices/heater.py"), p("simhw/devices/heater.py")]
+    assert name_clashes([*allowed, *device], subcommands) == {}
     # two layers, one name
     assert name_clashes([*allowed, p("daq/spectra.py"), p("console/spectra.py")], subcommands) == {
         "spectra.py": ["daq/spectra.py", "console/spectra.py"]
