@@ -299,19 +299,29 @@ def test_a_corner_stopped_at_the_edge_of_its_search_is_unresolved_and_every_inte
     for 1131) were printed resolved, their intervals holding it fixed where it stopped. Here the
     search is started so that w6 cannot reach its truth: w6 is unresolved with the range the
     record allows, and every corner's interval, resolved or not, covers its truth."""
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(12)
     p = dict(DESIGN_NETWORK) | {"w6_rad_per_s": 5155.0, "w5_rad_per_s": 1131.0}
     path = network_file(tmp_path, rng, p)
     resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
     start = dict(DESIGN_NETWORK) | {"w6_rad_per_s": 200.0}  # searched 10 .. 4000 rad/s
-    fit = fit_network(resp, 0.3, 50.0, start=start)
+    fit = fit_network(resp, 0.5, 50.0, start=start)
     w6 = fit.estimates["w6_rad_per_s"]
     assert not w6.resolved and w6.hi > w6.lo, w6
     for k in ("w1_rad_per_s", "w2_rad_per_s", "w3_rad_per_s", "w4_rad_per_s", "w5_rad_per_s"):
         e = fit.estimates[k]
         assert e.hi > e.lo, (k, e)
-        if e.resolved:
-            assert e.lo <= p[k] <= e.hi, (k, e, p[k])
-    assert not fit.estimates["w5_rad_per_s"].resolved or (
-        fit.estimates["w5_rad_per_s"].lo <= p["w5_rad_per_s"] <= fit.estimates["w5_rad_per_s"].hi
-    )
+        assert e.lo <= p[k] <= e.hi, (k, e, p[k])  # resolved or not
+    assert w6.lo <= p["w6_rad_per_s"] <= w6.hi, w6
+
+
+def test_the_fit_names_the_poles_in_order_whatever_order_it_finds_them_in(tmp_path):
+    """Eq. 3.28's poles are interchangeable: a fit started with w6 below w4 ended with w6 at 199
+    and w4 at 1148, each printed under the other's name. They come back as w1 < w4 < w5 < w6."""
+    rng = np.random.default_rng(12)
+    p = dict(DESIGN_NETWORK) | {"w6_rad_per_s": 5155.0, "w5_rad_per_s": 1131.0}
+    path = network_file(tmp_path, rng, p)
+    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
+    fit = fit_network(resp, 0.5, 50.0, start=dict(DESIGN_NETWORK) | {"w6_rad_per_s": 200.0})
+    w = [fit.estimates[f"w{i}_rad_per_s"].value for i in (1, 4, 5, 6)]
+    assert w == sorted(w), w
+    assert fit.estimates["w2_rad_per_s"].value < fit.estimates["w3_rad_per_s"].value
