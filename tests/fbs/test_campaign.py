@@ -38,8 +38,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fbs import campaign, campaign_task
-from fbs.campaign import CampaignError, Grid, parse_grid, plan_of
+from fbs import campaign, campaign_plan, campaign_task
+from fbs.campaign_plan import CampaignError, Grid, parse_grid, plan_of
 from fbs.cli import build_parser, main
 from procedures.analysis.gap.detection import curves, wilson
 from simhw import effects
@@ -504,7 +504,7 @@ def test_any_grid_text_is_parsed_or_refused_with_a_campaign_error(text):
         g = parse_grid(text, PICKUP)
     except CampaignError:
         return
-    assert g.param in ("freq_hz", "amplitude_V") and 1 <= g.n <= campaign.MAX_GRID_POINTS
+    assert g.param in ("freq_hz", "amplitude_V") and 1 <= g.n <= campaign_plan.MAX_GRID_POINTS
     assert all(math.isfinite(x) for x in g.values)
 
 
