@@ -6,8 +6,8 @@ alarms. This module turns the runs' result lines (``fbs.campaign_task.RUN_KEYS``
 curves: per grid value the share of the runs analysed that name the effect first, with its 95 %
 Wilson score interval, and the parameter errors over the runs named right; over the null runs the
 false-alarm rate and its interval. Pure statistics on the lines: how the runs are planned and
-executed is the command line's (``fbs.campaign``), how the curves are written the report's
-(``procedures.reports.detection_curves``).
+executed is the command line's (``fbs.campaign_plan``, ``fbs.campaign``), how the curves are
+written the report's (``procedures.reports.detection_curves``).
 """
 
 from __future__ import annotations
@@ -61,6 +61,7 @@ def quantile(xs: list[float], q: float) -> float:
 
 
 def spread(xs: list[float]) -> dict[str, Any]:
+    """How many, the median and the 16th and 84th percentiles (None of each when empty)."""
     xs = sorted(xs)
     if not xs:
         return {"n": 0, "median": None, "p16": None, "p84": None}
