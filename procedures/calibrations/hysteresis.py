@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from typing import Annotated, Any
 
-from procedures.analysis.hysteresis import AC_AXES, FIGURES, analyze_file
+from procedures.analysis.hysteresis import AC_AXES, FIGURES, HysteresisResult, analyze_file
 from procedures.paramlimits import Each, OneOf, Range, above, at_least, check_limits, sample_rate
 from procedures.procedure import Analysis, Context, Figure, Measurement, Procedure, Step
 from procedures.reports.hysteresis import (
@@ -197,7 +197,6 @@ class Hysteresis(Procedure[HysteresisParams]):
             settle_cycles=p.settle_cycles,
             angle_lag_s=None if p.angle_lag_ms is None else p.angle_lag_ms * 1e-3,
         )
-        xs = [res.theta_o_bar(lp) for lp in res.loops]
         ms = []
         for key, label, unit, se, note in (
             ("To_Nm", "To", "N m", res.To_se_Nm, "running (Coulomb) friction torque, eq. 5.2; "),
@@ -243,27 +242,8 @@ class Hysteresis(Procedure[HysteresisParams]):
                 note=lag_note,
             )
         )
-        ms += [
-            Measurement(
-                "To relative standard error", res.To_se_Nm / res.To_Nm, "", hi=p.max_relative_se
-            ),
-            Measurement(
-                "eta relative standard error",
-                res.eta_se_per_Nm / res.eta_per_Nm,
-                "",
-                hi=p.max_relative_se,
-            ),
-            Measurement(
-                "fit residual rms / largest loop torque half-range",
-                res.relative_residual,
-                "",
-                hi=p.max_relative_residual,
-            ),
-            # the ladder must reach both regimes, or To and eta are not separable
-            Measurement("largest eta To theta_o (Coulomb regime)", max(xs), "", lo=2.0),
-            Measurement("smallest eta To theta_o (spring regime)", min(xs), "", hi=1.0),
-            Measurement("angle-path low-pass", res.path_cutoff_hz, "Hz"),
-        ]
+
+        ms += fit_quality(res, p)
         figures = [
             Figure(
                 "loops",
@@ -288,6 +268,40 @@ class Hysteresis(Procedure[HysteresisParams]):
             ),
         ]
         return Analysis(res.values(), ms, figures, markdown(res))
+
+
+def fit_quality(res: HysteresisResult, p: HysteresisParams) -> list[Measurement]:
+    """The fit's own checks: its figures' relative errors, its residual, and the ladder's reach
+    into both regimes (without both, To and eta are not separable)."""
+    xs = [res.theta_o_bar(lp) for lp in res.loops]
+
+    def relative_se(key: str, se: float, value: float) -> float | None:
+        # an unresolved figure has no error to judge (a zero-width fit once read "0 ... pass")
+        return se / value if res.estimates[key].resolved else None
+
+    return [
+        Measurement(
+            "To relative standard error",
+            relative_se("To_Nm", res.To_se_Nm, res.To_Nm),
+            "",
+            hi=p.max_relative_se,
+        ),
+        Measurement(
+            "eta relative standard error",
+            relative_se("eta_per_Nm", res.eta_se_per_Nm, res.eta_per_Nm),
+            "",
+            hi=p.max_relative_se,
+        ),
+        Measurement(
+            "fit residual rms / largest loop torque half-range",
+            res.relative_residual,
+            "",
+            hi=p.max_relative_residual,
+        ),
+        Measurement("largest eta To theta_o (Coulomb regime)", max(xs), "", lo=2.0),
+        Measurement("smallest eta To theta_o (spring regime)", min(xs), "", hi=1.0),
+        Measurement("angle-path low-pass", res.path_cutoff_hz, "Hz"),
+    ]
 
 
 PROCEDURE = Hysteresis

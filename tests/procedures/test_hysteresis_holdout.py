@@ -18,6 +18,7 @@ import pytest
 
 from procedures.analysis.hysteresis import analyze_file
 from procedures.analysis.intervals import judged
+from procedures.calibrations.hysteresis import HysteresisParams, fit_quality
 from tests.procedures.hysteresis_holdout import write_smooth_sweep
 from tests.procedures.test_hysteresis import cli
 
@@ -97,6 +98,11 @@ def test_no_dahl_friction_resolves_nothing(tmp_path, model, extra, capsys):
     assert all(v[k] == {"X": None} for k in KEYS) and v["resolved"] == {
         k: {"X": False} for k in KEYS
     }
+    # the procedure's checks judge no error of a figure it did not resolve (a zero-width fit
+    # once read "To relative standard error 0 ... pass" on a rig without friction)
+    quality = {m.name: m for m in fit_quality(res, HysteresisParams(axis="X"))}
+    for name in ("To relative standard error", "eta relative standard error"):
+        assert quality[name].value is None and quality[name].passed is not True, quality[name]
     capsys.readouterr()
     assert cli(["analyze", "hysteresis", str(path), "--json"]) == 1
     out = json.loads(capsys.readouterr().out)
