@@ -148,17 +148,17 @@ _KILLED_WRITER = textwrap.dedent("""
 
 def _killed_writer(path, blocks: int) -> int:
     """A writer SIGKILLed after flushing ``blocks`` blocks; returns the samples it flushed."""
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-c", _KILLED_WRITER, str(path), str(blocks)],
         stdout=subprocess.PIPE,
         text=True,
-    )
-    try:
-        assert proc.stdout is not None
-        flushed = int(proc.stdout.readline())
-    finally:
-        proc.send_signal(signal.SIGKILL)
-        proc.wait()
+    ) as proc:
+        try:
+            assert proc.stdout is not None
+            flushed = int(proc.stdout.readline())
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait()
     return flushed
 
 

@@ -46,29 +46,29 @@ def test_the_clock_is_monotonic_and_runs_with_the_wall_when_nothing_pauses():
 
 @pytest.mark.skipif(not hasattr(signal, "SIGSTOP"), reason="no SIGSTOP on this system")
 def test_a_stopped_process_leaves_its_pause_out():
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-c", _CHILD],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
         cwd=ROOT,
-    )
-    try:
-        assert p.stdout is not None and p.stdin is not None
-        assert p.stdout.readline().strip() == "ready"
-        p.stdin.write("go\n")
-        p.stdin.flush()
-        time.sleep(0.3)
-        os.kill(p.pid, signal.SIGSTOP)
-        time.sleep(2.0)  # the pause: at least this long
-        os.kill(p.pid, signal.SIGCONT)
-        time.sleep(0.3)
-        p.stdin.write("go\n")
-        p.stdin.flush()
-        wall, clock = map(float, p.stdout.readline().split())
-    finally:
-        p.kill()
-        p.wait(HANG_GUARD_S)
+    ) as p:
+        try:
+            assert p.stdout is not None and p.stdin is not None
+            assert p.stdout.readline().strip() == "ready"
+            p.stdin.write("go\n")
+            p.stdin.flush()
+            time.sleep(0.3)
+            os.kill(p.pid, signal.SIGSTOP)
+            time.sleep(2.0)  # the pause: at least this long
+            os.kill(p.pid, signal.SIGCONT)
+            time.sleep(0.3)
+            p.stdin.write("go\n")
+            p.stdin.flush()
+            wall, clock = map(float, p.stdout.readline().split())
+        finally:
+            p.kill()
+            p.wait(HANG_GUARD_S)
     left_out = wall - clock
     assert left_out >= 2.0 - RunningClock.SLACK_S - RunningClock.TICK_S, (wall, clock)
 
@@ -107,20 +107,22 @@ def test_a_recording_on_the_sim_rig_survives_the_host_pausing_it_longer_than_eve
         "--out",
         str(out),
     ]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-    try:
-        t_guard = time.monotonic() + HANG_GUARD_S
-        while not out.exists() and p.poll() is None and time.monotonic() < t_guard:
-            time.sleep(0.1)
-        assert p.poll() is None, p.communicate()
-        time.sleep(1.0)
-        os.kill(p.pid, signal.SIGSTOP)
-        time.sleep(4.0)
-        os.kill(p.pid, signal.SIGCONT)
-        _out, err = p.communicate(timeout=HANG_GUARD_S)
-    finally:
-        p.kill()
-        p.wait()
+    with subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT
+    ) as p:
+        try:
+            t_guard = time.monotonic() + HANG_GUARD_S
+            while not out.exists() and p.poll() is None and time.monotonic() < t_guard:
+                time.sleep(0.1)
+            assert p.poll() is None, p.communicate()
+            time.sleep(1.0)
+            os.kill(p.pid, signal.SIGSTOP)
+            time.sleep(4.0)
+            os.kill(p.pid, signal.SIGCONT)
+            _out, err = p.communicate(timeout=HANG_GUARD_S)
+        finally:
+            p.kill()
+            p.wait()
     assert p.returncode == 0, err
     assert "silent" not in err and "stalled" not in err and "did not answer" not in err, err
     with h5py.File(out, "r") as f:

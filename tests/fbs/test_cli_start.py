@@ -92,17 +92,17 @@ def test_the_registry_names_every_command_and_what_each_loads():
 def test_a_reader_that_leaves_early_ends_it_quietly_with_exit_2():
     """``fbs run stopwatch --help | head`` ended in a BrokenPipeError traceback, exit 1. The
     pipe's reading end is closed before the child writes: every write to it fails."""
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, "run", "stopwatch", "--help"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         cwd=ROOT,
-    )
-    assert p.stdout is not None and p.stderr is not None
-    p.stdout.close()
-    err = p.stderr.read()
-    assert p.wait(timeout=600) == EXIT_ERROR, err
+    ) as p:
+        assert p.stdout is not None and p.stderr is not None
+        p.stdout.close()
+        err = p.stderr.read()
+        assert p.wait(timeout=600) == EXIT_ERROR, err
     assert err == "", err
 
 
