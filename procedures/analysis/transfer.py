@@ -63,7 +63,6 @@ References
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -563,44 +562,47 @@ def _profile_envelope(
     start: np.ndarray,
     held: np.ndarray,
     best_cost: float,
+    points: int = 7,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Each parameter's lowest and highest (log) value over the fits, with the ``held``
-    parameters held on a grid across their search range (start / 20 .. start x 20) and the
-    others free, that the record cannot tell from the best: a profile likelihood, chi^2 within
-    its 95 % point of the best's (in units of the best fit's residual variance where that
-    exceeds the bins'). A held parameter's own range runs out to the first grid point refused."""
-    free = ~held
-    n_held = int(held.sum())
-    points = {1: 9, 2: 7}.get(n_held, 5)
+    """Each parameter's lowest and highest (log) value over the profiles of the ``held`` ones:
+    each held in turn at ``points`` values across its search range (start / 20 .. start x 20),
+    every other parameter free, and a fit kept where the record cannot tell it from the best
+    (chi^2 within its 95 % point for one parameter, in units of the best fit's residual variance
+    where that exceeds the bins'). A held parameter's own range runs out to the first grid point
+    refused on each side, and to the edge of its search when none is kept."""
     scale = max(1.0, 2.0 * best_cost / max(2 * len(f) - len(x), 1))
-    limit = float(scipy.stats.chi2.ppf(LEVEL, n_held)) * scale
+    limit = float(scipy.stats.chi2.ppf(LEVEL, 1)) * scale
     lo, hi = start - math.log(SEARCH_FACTOR), start + math.log(SEARCH_FACTOR)
     grid = np.linspace(0.0, 1.0, points)
-    seen = [x.copy()]
-    kept: list[tuple[int, ...]] = []
-    for idx in itertools.product(range(points), repeat=n_held):
-        xx = x.copy()
-        xx[held] = lo[held] + grid[list(idx)] * (hi[held] - lo[held])
+    low, high = x.copy(), x.copy()
+    for j in np.flatnonzero(held):
+        free = np.arange(len(x)) != j
+        z0 = np.clip(x[free], lo[free], hi[free])
+        kept = np.zeros(points, bool)
+        for i, t in enumerate(grid):
+            xx = x.copy()
+            xx[j] = lo[j] + t * (hi[j] - lo[j])
 
-        def resid(z: np.ndarray, xx: np.ndarray = xx) -> np.ndarray:
-            xx[free] = z
-            return _log_residual(network_response(f, _network_params(xx)), H, log_se, phase_se)
+            def resid(z: np.ndarray, xx: np.ndarray = xx, free: np.ndarray = free) -> np.ndarray:
+                xx[free] = z
+                return _log_residual(network_response(f, _network_params(xx)), H, log_se, phase_se)
 
-        sol = scipy.optimize.least_squares(
-            resid, np.clip(x[free], lo[free], hi[free]), bounds=(lo[free], hi[free]), method="trf"
-        )
-        if 2.0 * (sol.cost - best_cost) <= limit:
-            xx[free] = sol.x
-            seen.append(xx.copy())
-            kept.append(idx)
-    arr = np.array(seen)
-    low, high = arr.min(axis=0), arr.max(axis=0)
-    if kept:
-        k = np.array(kept)
-        t0 = grid[np.maximum(k.min(axis=0) - 1, 0)]
-        t1 = grid[np.minimum(k.max(axis=0) + 1, points - 1)]
-        low[held] = np.minimum(low[held], lo[held] + t0 * (hi[held] - lo[held]))
-        high[held] = np.maximum(high[held], lo[held] + t1 * (hi[held] - lo[held]))
+            # an envelope, not a figure: a looser tolerance than the fit's own (its cost matters
+            # to a few parts in a thousand of the 95 % limit)
+            sol = scipy.optimize.least_squares(
+                resid, z0, bounds=(lo[free], hi[free]), method="trf", ftol=1e-5, xtol=1e-5
+            )
+            if 2.0 * (sol.cost - best_cost) <= limit:
+                xx[free] = sol.x
+                low, high = np.minimum(low, xx), np.maximum(high, xx)
+                kept[i] = True
+        if kept.any():
+            i0, i1 = int(np.argmax(kept)), points - 1 - int(np.argmax(kept[::-1]))
+            t0, t1 = grid[max(i0 - 1, 0)], grid[min(i1 + 1, points - 1)]
+        else:  # the grid is coarser than the valley: all it says is the search's range
+            t0, t1 = 0.0, 1.0
+        low[j] = min(low[j], lo[j] + t0 * (hi[j] - lo[j]))
+        high[j] = max(high[j], lo[j] + t1 * (hi[j] - lo[j]))
     return low, high
 
 
