@@ -644,6 +644,7 @@ def fit_network(
     start_x[0] = x0[0] - x0[1] + x0[perm[1]]
     # corners above the band and corners the search stopped at the edge of are not measured:
     # held across their range, what the others take with them is part of the others' intervals
+    # (a pinned corner holds the others at values they take only because of it)
     above = np.r_[False, False, np.exp(x[2:]) > 2 * np.pi * hi_hz]
     held = pinned | above
     # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
@@ -658,9 +659,6 @@ def fit_network(
     names = ["gain_times_w1_rad_per_s", *NETWORK_CORNERS]
     est: dict[str, Estimate] = {}
     correlations: dict[str, float] = {}
-    # a corner the band cannot fix stops at the edge of the search, where it holds the others
-    # at values they take only because of it: their intervals hold what they take with it fixed
-    # anywhere in its search range, and its own is that range
     envelope = (
         _profile_envelope(f, H, ls, ps, x, start_x, held, float(sol.cost)) if held.any() else None
     )
