@@ -30,7 +30,7 @@ def _fbs(*args: str, **kw) -> list[str]:
 def test_a_sigkilled_recording_keeps_every_sample_older_than_one_second(tmp_path):
     """A: `fbs record` on the real-time rig is read live (SWMR) and killed with SIGKILL."""
     p = tmp_path / "killed.h5"
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         _fbs(
             "record",
             "--rig",
@@ -49,33 +49,33 @@ def test_a_sigkilled_recording_keeps_every_sample_older_than_one_second(tmp_path
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )
-    try:
-        seen: list[int] = []
-        deadline = time.monotonic() + 90
-        start_unix = None
-        while time.monotonic() < deadline and (len(seen) < 2 or seen[-1] < 3 * RATE):
-            time.sleep(0.2)
-            if not p.exists():
-                continue
-            try:
-                with RunFile(p) as live:  # a reader while the recording runs
-                    if not live.swmr:
-                        continue  # not yet streaming
-                    start_unix = live.meta["acquisition"]["start_unix_s"]
-                    n0 = live.n_samples
-                    time.sleep(0.6)
-                    live.refresh()  # SWMR: new flushes appear without reopening
-                    seen += [n0, live.n_samples]
-            except (OSError, KeyError):
-                continue  # created, not yet in SWMR mode
-        assert proc.poll() is None, proc.communicate()[1]
-        assert len(seen) >= 2 and seen[-1] > seen[-2], f"the live reader saw no growth: {seen}"
-        killed_at = time.time()
-        proc.send_signal(signal.SIGKILL)
-    finally:
-        proc.kill()
-        proc.wait()
+    ) as proc:
+        try:
+            seen: list[int] = []
+            deadline = time.monotonic() + 90
+            start_unix = None
+            while time.monotonic() < deadline and (len(seen) < 2 or seen[-1] < 3 * RATE):
+                time.sleep(0.2)
+                if not p.exists():
+                    continue
+                try:
+                    with RunFile(p) as live:  # a reader while the recording runs
+                        if not live.swmr:
+                            continue  # not yet streaming
+                        start_unix = live.meta["acquisition"]["start_unix_s"]
+                        n0 = live.n_samples
+                        time.sleep(0.6)
+                        live.refresh()  # SWMR: new flushes appear without reopening
+                        seen += [n0, live.n_samples]
+                except (OSError, KeyError):
+                    continue  # created, not yet in SWMR mode
+            assert proc.poll() is None, proc.communicate()[1]
+            assert len(seen) >= 2 and seen[-1] > seen[-2], f"the live reader saw no growth: {seen}"
+            killed_at = time.time()
+            proc.send_signal(signal.SIGKILL)
+        finally:
+            proc.kill()
+            proc.wait()
     assert proc.returncode == -signal.SIGKILL
     # the paced rig takes sample k no earlier than start_unix + k / RATE, so this many were
     # taken more than one second before the kill

@@ -120,19 +120,19 @@ def test_channels_cut_short_by_the_kill_are_padded_with_nan_not_truncated(tmp_pa
 
 def test_recover_refuses_while_the_writer_runs(tmp_path):
     p = tmp_path / "live.h5"
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-c", KILLED_WRITER, str(p), "wait"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-    )
-    try:
-        assert proc.stdout.readline().strip() == "flushed"
-        with pytest.raises(RunFileError, match=f"pid {proc.pid} .* is still running"):
-            recover(p)
-        assert read_superblock(p).flags != 0  # untouched
-    finally:
-        proc.communicate("go\n", timeout=30)
+    ) as proc:
+        try:
+            assert proc.stdout.readline().strip() == "flushed"
+            with pytest.raises(RunFileError, match=f"pid {proc.pid} .* is still running"):
+                recover(p)
+            assert read_superblock(p).flags != 0  # untouched
+        finally:
+            proc.communicate("go\n", timeout=30)
     assert recover(p).samples == 300
 
 
@@ -140,20 +140,20 @@ def test_not_even_force_repairs_a_file_its_writer_holds_open(tmp_path):
     """Issue 19 item 6: ``recover --force`` under a live writer destroyed its file. force is for
     a pid that only looks alive (another process got the number), not for the writer itself."""
     p = tmp_path / "live.h5"
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-c", KILLED_WRITER, str(p), "wait"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-    )
-    try:
-        assert proc.stdout.readline().strip() == "flushed"
-        before = p.read_bytes()
-        with pytest.raises(RunFileError, match="has the file open; stop it first"):
-            recover(p, force=True)
-        assert p.read_bytes() == before  # untouched
-    finally:
-        proc.communicate("go\n", timeout=30)
+    ) as proc:
+        try:
+            assert proc.stdout.readline().strip() == "flushed"
+            before = p.read_bytes()
+            with pytest.raises(RunFileError, match="has the file open; stop it first"):
+                recover(p, force=True)
+            assert p.read_bytes() == before  # untouched
+        finally:
+            proc.communicate("go\n", timeout=30)
     assert recover(p).samples == 300
 
 

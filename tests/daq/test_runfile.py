@@ -157,17 +157,17 @@ def test_a_live_reader_does_not_keep_the_status_from_being_set(tmp_path):
         "import sys, time, h5py; f = h5py.File(sys.argv[1], 'r', swmr=True); print('open', flush=True); "
         "sys.stdin.readline()"
     )
-    reader = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-c", code, str(p)],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-    )
-    try:
-        assert reader.stdout.readline().strip() == "open"
-        w.close()
-    finally:
-        reader.communicate("\n", timeout=30)
+    ) as reader:
+        try:
+            assert reader.stdout.readline().strip() == "open"
+            w.close()
+        finally:
+            reader.communicate("\n", timeout=30)
     with h5py.File(p) as f:
         assert f.attrs["status"] == "complete" and len(f["channels/b"]) == 5
 

@@ -157,9 +157,10 @@ def test_a_host_killed_mid_stream_leaves_an_adc_the_next_host_can_open():
         assert server.adc.streaming
         second_host_streams(server)
     finally:
-        if child is not None and child.poll() is None:
-            child.kill()
-            child.wait()
+        if child is not None:
+            with child:  # its pipes closed and the process reaped, however the test ended
+                if child.poll() is None:
+                    child.kill()
         server.stop()
 
 

@@ -315,39 +315,41 @@ def test_a_module_in_another_process_over_udp_multicast():
     host's link and torquer driver reach it, and its error values show when the host's
     heartbeat stops."""
     group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, __file__, "udp_multicast", group],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-    )
-    link = None
-    try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-        bus = can.Bus(interface="udp_multicast", channel=group, receive_own_messages=False)
-        link = CanLink(
-            bus,
-            ["torquer"],
-            channel=f"udp_multicast:{group}",
-            node_timeout_s=1.0,
-            reply_timeout_s=2.0,
-        )
-        link.wait_for_nodes(10.0)
-        dac = CanopenTorquerDac(link)
-        assert dac.node.identify() == 0x13
-        dac.node.clear()
-        assert dac.set_bias_V("X", 1.0) == pytest.approx(3277 * LSB)
-        assert dac.node.raw_get(0) == 3277
-        link.heartbeat_suspended = True
-        wait_for(lambda: link.faults.fault is not None, "the module's EMCY")
-        assert isinstance(link.faults.fault, NodeError) and "'torquer'" in str(link.faults.fault)
-        assert dac.node.raw_get(0) == 0  # its error value
-    finally:
-        if link is not None:
-            link.close()
-        if proc.stdin is not None:
-            proc.stdin.close()
-        proc.wait(timeout=10)
+    ) as proc:
+        link = None
+        try:
+            assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+            bus = can.Bus(interface="udp_multicast", channel=group, receive_own_messages=False)
+            link = CanLink(
+                bus,
+                ["torquer"],
+                channel=f"udp_multicast:{group}",
+                node_timeout_s=1.0,
+                reply_timeout_s=2.0,
+            )
+            link.wait_for_nodes(10.0)
+            dac = CanopenTorquerDac(link)
+            assert dac.node.identify() == 0x13
+            dac.node.clear()
+            assert dac.set_bias_V("X", 1.0) == pytest.approx(3277 * LSB)
+            assert dac.node.raw_get(0) == 3277
+            link.heartbeat_suspended = True
+            wait_for(lambda: link.faults.fault is not None, "the module's EMCY")
+            assert isinstance(link.faults.fault, NodeError) and "'torquer'" in str(
+                link.faults.fault
+            )
+            assert dac.node.raw_get(0) == 0  # its error value
+        finally:
+            if link is not None:
+                link.close()
+            if proc.stdin is not None:
+                proc.stdin.close()
+            proc.wait(timeout=10)
 
 
 if __name__ == "__main__":

@@ -225,25 +225,25 @@ def test_a_rig_held_by_another_command_is_refused_naming_it(tmp_path, monkeypatc
     monkeypatch.setenv("FBS_LOCK_DIR", str(tmp_path / "locks"))
     port = tmp_path / "ttyX"
     port.touch()
-    holder = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-c", HOLDER, str(port)],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
         env=os.environ | {"PYTHONPATH": os.getcwd()},
-    )
-    try:
-        assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
-        with pytest.raises(RigBusy) as err:
-            RigClaim(
-                "serial:///dev/ttyX?can=socketcan:can9",
-                [("adc", str(port)), ("can", "socketcan:can9")],
-            )
-        assert f"pid {holder.pid} (" in str(err.value) and "since 20" in str(err.value)
-        assert "sent nothing" in str(err.value)
-    finally:
-        holder.kill()  # SIGKILL: no clean-up of its own
-        holder.wait()
+    ) as holder:
+        try:
+            assert holder.stdout is not None and holder.stdout.readline().strip() == "held"
+            with pytest.raises(RigBusy) as err:
+                RigClaim(
+                    "serial:///dev/ttyX?can=socketcan:can9",
+                    [("adc", str(port)), ("can", "socketcan:can9")],
+                )
+            assert f"pid {holder.pid} (" in str(err.value) and "since 20" in str(err.value)
+            assert "sent nothing" in str(err.value)
+        finally:
+            holder.kill()  # SIGKILL: no clean-up of its own
+            holder.wait()
     with RigClaim("u", [("adc", str(port)), ("can", "socketcan:can9")]):
         pass  # the kernel dropped the dead holder's lock
 

@@ -38,21 +38,21 @@ def _wait_for(cond, what: str, guard_s: float = 120.0) -> None:
 @pytest.fixture
 def served_rig():
     group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [sys.executable, "-m", "simhw.serve", "--can", group, "--warm"],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
-    )
-    try:
-        assert proc.stdout is not None
-        line = proc.stdout.readline().split()
-        adc = dict(kv.split("=", 1) for kv in line)["adc"]
-        yield f"serial://{adc}?can=udp_multicast:{group}"
-    finally:
-        if proc.stdin is not None:
-            proc.stdin.close()
-        proc.wait(timeout=30)
+    ) as proc:
+        try:
+            assert proc.stdout is not None
+            line = proc.stdout.readline().split()
+            adc = dict(kv.split("=", 1) for kv in line)["adc"]
+            yield f"serial://{adc}?can=udp_multicast:{group}"
+        finally:
+            if proc.stdin is not None:
+                proc.stdin.close()
+            proc.wait(timeout=30)
 
 
 def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path):
@@ -62,35 +62,35 @@ def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path)
         tmp_path / "third.h5",
     )
     record = ["record", "--rig", served_rig, "--mode", "3", "--rate", "200", "--json"]
-    first = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, *record, "--duration", "8", "--out", str(first_out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )
-    try:
-        _wait_for(first_out.exists, "the first recording's file")
-        # the same machine: the rig claim names the holder
-        second = subprocess.run(
-            [*FBS, *record, "--duration", "2", "--out", str(second_out)],
-            capture_output=True,
-            text=True,
-            timeout=120,
-        )
-        # another machine (a lock directory of its own): the first host's heartbeat is on the bus
-        other = tmp_path / "other-host-locks"
-        other.mkdir()
-        third = subprocess.run(
-            [*FBS, *record, "--duration", "2", "--out", str(third_out)],
-            capture_output=True,
-            text=True,
-            timeout=120,
-            env=os.environ | {"FBS_LOCK_DIR": str(other)},
-        )
-        out, err = first.communicate(timeout=120)
-    finally:
-        if first.poll() is None:
-            first.kill()
+    ) as first:
+        try:
+            _wait_for(first_out.exists, "the first recording's file")
+            # the same machine: the rig claim names the holder
+            second = subprocess.run(
+                [*FBS, *record, "--duration", "2", "--out", str(second_out)],
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
+            # another machine (a lock directory of its own): the first host's heartbeat is on the bus
+            other = tmp_path / "other-host-locks"
+            other.mkdir()
+            third = subprocess.run(
+                [*FBS, *record, "--duration", "2", "--out", str(third_out)],
+                capture_output=True,
+                text=True,
+                timeout=120,
+                env=os.environ | {"FBS_LOCK_DIR": str(other)},
+            )
+            out, err = first.communicate(timeout=120)
+        finally:
+            if first.poll() is None:
+                first.kill()
     assert second.returncode == 2, second.stderr
     assert f"held by pid {first.pid}" in second.stderr and "sent nothing" in second.stderr, (
         second.stderr

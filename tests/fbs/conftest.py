@@ -62,15 +62,14 @@ class Cluster:
         self.wait_for_workers(2)
 
     def _start(self, name: str, module: str, *args: str) -> subprocess.Popen:
-        log = open(self.root / f"{name}.log", "w")
-        p = subprocess.Popen(
-            [sys.executable, "-m", module, *args],
-            stdout=log,
-            stderr=subprocess.STDOUT,
-            cwd=self.root,
-            start_new_session=True,
-        )
-        log.close()
+        with open(self.root / f"{name}.log", "w") as log:  # the child has its own copy
+            p = subprocess.Popen(
+                [sys.executable, "-m", module, *args],
+                stdout=log,
+                stderr=subprocess.STDOUT,
+                cwd=self.root,
+                start_new_session=True,
+            )
         self.procs.append(p)
         return p
 

@@ -258,13 +258,13 @@ def test_an_interrupted_batch_keeps_its_results_and_resumes(runs, local, tmp_pat
         "--out",
         str(out),
     ]
-    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        wait_for_lines(out, p)
-        p.send_signal(signal.SIGTERM)
-        _, err = p.communicate(timeout=HANG_S)
-    finally:
-        p.kill()
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as p:
+        try:
+            wait_for_lines(out, p)
+            p.send_signal(signal.SIGTERM)
+            _, err = p.communicate(timeout=HANG_S)
+        finally:
+            p.kill()
     assert p.returncode == 2 and "interrupted" in err, err
     kept = out.read_bytes()
     assert kept.endswith(b"\n")  # whole lines only
@@ -408,14 +408,14 @@ def test_c_a_worker_killed_mid_batch_loses_nothing(runs, local, cluster, tmp_pat
         "--out",
         str(out),
     ]
-    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        wait_for_lines(out, p)
-        kept = out.read_bytes()
-        cluster.kill(cluster.workers[0])  # the worker and its nanny, without warning
-        _, err = p.communicate(timeout=HANG_S)
-    finally:
-        p.kill()
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as p:
+        try:
+            wait_for_lines(out, p)
+            kept = out.read_bytes()
+            cluster.kill(cluster.workers[0])  # the worker and its nanny, without warning
+            _, err = p.communicate(timeout=HANG_S)
+        finally:
+            p.kill()
     assert p.returncode == 0, err
     assert out.read_bytes().startswith(kept[: kept.rindex(b"\n") + 1])
     assert by_file(lines_of(out)) == by_file(lines_of(local[1]))  # each file once, the same results

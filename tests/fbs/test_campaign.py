@@ -199,23 +199,23 @@ def _subset(reference: dict[tuple, dict]) -> dict[tuple, dict]:
 def test_c_a_local_worker_killed_mid_campaign_loses_nothing(reference, tmp_path):
     out = tmp_path / "campaign"
     runs = out / "runs.jsonl"
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, "campaign", *SUBSET, "--jobs", "2", "--out", str(out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )
-    try:
-        wait_for_lines(runs, p)
-        kept = runs.read_bytes()
-        workers = pool_workers(p.pid)
-        assert workers, "no pool worker found"
-        os.kill(
-            workers[0], signal.SIGKILL
-        )  # a worker this test's campaign spawned, without warning
-        _, err = p.communicate(timeout=HANG_S)
-    finally:
-        p.kill()
+    ) as p:
+        try:
+            wait_for_lines(runs, p)
+            kept = runs.read_bytes()
+            workers = pool_workers(p.pid)
+            assert workers, "no pool worker found"
+            os.kill(
+                workers[0], signal.SIGKILL
+            )  # a worker this test's campaign spawned, without warning
+            _, err = p.communicate(timeout=HANG_S)
+        finally:
+            p.kill()
     assert p.returncode == 0, err
     assert "its worker process died" in err and "submitted again" in err
     assert runs.read_bytes().startswith(kept)  # nothing finished was lost or rewritten
@@ -226,19 +226,19 @@ def test_c_a_local_worker_killed_mid_campaign_loses_nothing(reference, tmp_path)
 def test_c_a_dask_worker_killed_mid_campaign_loses_nothing(reference, cluster, tmp_path):
     out = tmp_path / "campaign"
     runs = out / "runs.jsonl"
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, "campaign", *SUBSET, "--scheduler", cluster.address, "--out", str(out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )
-    try:
-        wait_for_lines(runs, p)
-        kept = runs.read_bytes()
-        cluster.kill(cluster.workers[0])  # the worker and its nanny, without warning
-        _, err = p.communicate(timeout=HANG_S)
-    finally:
-        p.kill()
+    ) as p:
+        try:
+            wait_for_lines(runs, p)
+            kept = runs.read_bytes()
+            cluster.kill(cluster.workers[0])  # the worker and its nanny, without warning
+            _, err = p.communicate(timeout=HANG_S)
+        finally:
+            p.kill()
     assert p.returncode == 0, err
     assert runs.read_bytes().startswith(kept)
     assert by_run(lines_of(runs)) == _subset(reference)
@@ -252,13 +252,13 @@ def test_c_an_interrupted_campaign_keeps_its_runs_and_a_rerun_completes_it(refer
     # four runs one after another: when the first line is there, three are still to come, so the
     # SIGTERM lands mid-campaign however fast a run is (how many finished before it, it may vary)
     argv = [*FBS, "campaign", *SUBSET, "--jobs", "1", "--out", str(out)]
-    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        wait_for_lines(runs, p)
-        p.send_signal(signal.SIGTERM)
-        _, err = p.communicate(timeout=HANG_S)
-    finally:
-        p.kill()
+    with subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as p:
+        try:
+            wait_for_lines(runs, p)
+            p.send_signal(signal.SIGTERM)
+            _, err = p.communicate(timeout=HANG_S)
+        finally:
+            p.kill()
     assert p.returncode == 2 and "interrupted" in err, err
     kept = runs.read_bytes()
     done = kept.count(b"\n")

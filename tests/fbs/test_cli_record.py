@@ -193,7 +193,7 @@ def test_a_disk_that_fills_mid_recording_ends_it_safely_with_every_flushed_sampl
     disk = small_disk(8 << 20)
     out = disk.path / "r.h5"
     rate = 1000.0
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [
             sys.executable,
             "-m",
@@ -215,25 +215,25 @@ def test_a_disk_that_fills_mid_recording_ends_it_safely_with_every_flushed_sampl
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )
-    try:
-        seen = 0
-        for _ in range(600):  # a bound on a hang, not a deadline: ~2 min
-            if proc.poll() is not None:
-                break
-            time.sleep(0.2)
-            try:
-                with RunFile(out) as live:
-                    seen = live.n_samples if live.swmr else 0
-            except (OSError, KeyError):
-                continue
-            if seen >= rate:
-                break
-        assert seen >= rate and proc.poll() is None, proc.communicate()
-        disk.fill()
-        _, err = proc.communicate(timeout=120)
-    finally:
-        proc.kill()
+    ) as proc:
+        try:
+            seen = 0
+            for _ in range(600):  # a bound on a hang, not a deadline: ~2 min
+                if proc.poll() is not None:
+                    break
+                time.sleep(0.2)
+                try:
+                    with RunFile(out) as live:
+                        seen = live.n_samples if live.swmr else 0
+                except (OSError, KeyError):
+                    continue
+                if seen >= rate:
+                    break
+            assert seen >= rate and proc.poll() is None, proc.communicate()
+            disk.fill()
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()
     assert proc.returncode == 2 and "Traceback" not in err, err
     assert "the disk is full" in err and "Free some space or record to another disk" in err
     flushed = int(err.split("Samples 0..")[1].split(" ")[0])

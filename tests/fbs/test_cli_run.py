@@ -98,27 +98,30 @@ def test_sigint_resume_and_the_default_rig(tmp_path):
     """Ctrl-C mid-run -> exit 2, file aborted, rig safe; --resume completes it; K_TO within 0.5 %
     and (stopwatch, using that K_TO from --out) K_g within 2 % of the default rig's values."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, "run", "earth-rate", "--rig", RIG, "--out", str(tmp_path), "--json"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=env,
-    )
-    path = tmp_path / "earth-rate.h5"
-    t_end = time.monotonic() + 300
-    done = 0
-    while done < 4 and time.monotonic() < t_end and p.poll() is None:
-        time.sleep(0.5)
-        if path.exists():
-            try:
-                with RunFile(path) as rf:
-                    done = sum(e.kind == "step-done" for e in rf.events)
-            except OSError:
-                pass  # between the file's creation and its first flush
-    assert done >= 4, "the run did not get going"
-    p.send_signal(signal.SIGINT)
-    stdout, stderr = p.communicate(timeout=120)
+    ) as p:
+        try:
+            path = tmp_path / "earth-rate.h5"
+            t_end = time.monotonic() + 300
+            done = 0
+            while done < 4 and time.monotonic() < t_end and p.poll() is None:
+                time.sleep(0.5)
+                if path.exists():
+                    try:
+                        with RunFile(path) as rf:
+                            done = sum(e.kind == "step-done" for e in rf.events)
+                    except OSError:
+                        pass  # between the file's creation and its first flush
+            assert done >= 4, "the run did not get going"
+            p.send_signal(signal.SIGINT)
+            stdout, stderr = p.communicate(timeout=120)
+        finally:
+            p.kill()  # a failure above must not leave the run going
     assert p.returncode == 2, stderr
     figures = [
         "K_TO_urad_per_s_per_V",

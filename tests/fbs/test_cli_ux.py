@@ -267,29 +267,29 @@ def _run_on_a_pty(argv: list[str], columns: int = 100) -> tuple[int, str]:
     master, slave = os.openpty()
     fcntl.ioctl(slave, termios.TIOCSWINSZ, struct.pack("HHHH", 30, columns, 0, 0))
     env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")} | {"TERM": "xterm"}
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, *argv], stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, cwd=ROOT, env=env
-    )
-    os.close(slave)
-    out = b""
-    t_end = time.monotonic() + TIMEOUT_S
-    try:
-        while time.monotonic() < t_end:
-            ready, _, _ = select.select([master], [], [], 1.0)
-            if ready:
-                try:
-                    chunk = os.read(master, 65536)
-                except OSError:  # EIO: every holder of the terminal's slave side has gone
+    ) as p:
+        os.close(slave)
+        out = b""
+        t_end = time.monotonic() + TIMEOUT_S
+        try:
+            while time.monotonic() < t_end:
+                ready, _, _ = select.select([master], [], [], 1.0)
+                if ready:
+                    try:
+                        chunk = os.read(master, 65536)
+                    except OSError:  # EIO: every holder of the terminal's slave side has gone
+                        break
+                    if not chunk:
+                        break
+                    out += chunk
+                elif p.poll() is not None:
                     break
-                if not chunk:
-                    break
-                out += chunk
-            elif p.poll() is not None:
-                break
-        code = p.wait(timeout=60)
-    finally:
-        p.kill()
-        os.close(master)
+            code = p.wait(timeout=60)
+        finally:
+            p.kill()
+            os.close(master)
     return code, out.decode("utf-8", "replace")
 
 
@@ -388,25 +388,25 @@ def test_not_a_terminal_plain_progress_lines_at_a_modest_rate_verbose_only_for_t
 
 def test_an_aborted_run_exits_2_and_its_log_says_so(tmp_path):
     """Ctrl-C (SIGINT) once the run is under way: exit 2, file aborted, the log ends with it."""
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, "run", "stopwatch", "--rig", RIG, "--out", str(tmp_path)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         cwd=ROOT,
-    )
-    log = tmp_path / "stopwatch.log"
-    t_end = time.monotonic() + TIMEOUT_S
-    try:
-        while time.monotonic() < t_end and p.poll() is None:
-            if log.exists() and " fbs.run_progress: stopwatch: " in log.read_text():
-                break
-            time.sleep(0.2)
-        assert p.poll() is None, p.communicate()
-        p.send_signal(signal.SIGINT)
-        out, err = p.communicate(timeout=TIMEOUT_S)
-    finally:
-        p.kill()
+    ) as p:
+        log = tmp_path / "stopwatch.log"
+        t_end = time.monotonic() + TIMEOUT_S
+        try:
+            while time.monotonic() < t_end and p.poll() is None:
+                if log.exists() and " fbs.run_progress: stopwatch: " in log.read_text():
+                    break
+                time.sleep(0.2)
+            assert p.poll() is None, p.communicate()
+            p.send_signal(signal.SIGINT)
+            out, err = p.communicate(timeout=TIMEOUT_S)
+        finally:
+            p.kill()
     assert p.returncode == 2, err
     assert "fbs run stopwatch: aborted (aborted: interrupted)" in out
     text = log.read_text()

@@ -758,9 +758,9 @@ def test_a_fifo_a_directory_and_links_to_a_fifo_are_refused_without_hanging(tmp_
             assert code == 2 and f"fbs {cmd[0]}: error:" in err and words in err, (cmd, err)
     finally:  # a failure above must not leave the others waiting on the FIFO for ever
         for p, _cmd, _words in procs:
-            if p.poll() is None:
-                p.kill()
-                p.communicate()
+            with p:  # its pipes closed and the process reaped, however it ended
+                if p.poll() is None:
+                    p.kill()
     assert fifo.exists() and folder.is_dir()
 
 

@@ -41,20 +41,20 @@ def _signalled(args: list[str], path, sig: signal.Signals, events: int = 0) -> s
     """Start ``fbs *args`` with SIGINT ignored, send ``sig`` once ``path`` has samples (and
     ``events`` steps done), and return its stderr once it has exited 2 with the file
     "aborted: interrupted" and the rig's "safe state reached" event."""
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, *args],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
         env=dict(os.environ, PYTHONUNBUFFERED="1"),
         preexec_fn=_ignore_sigint,
-    )
-    try:
-        _wait_for_samples(p, path, events)
-        p.send_signal(sig)
-        _, stderr = p.communicate(timeout=120)
-    finally:
-        p.kill()
+    ) as p:
+        try:
+            _wait_for_samples(p, path, events)
+            p.send_signal(sig)
+            _, stderr = p.communicate(timeout=120)
+        finally:
+            p.kill()
     assert p.returncode == 2, stderr
     with RunFile(path) as rf:
         assert rf.status == "aborted: interrupted"
@@ -107,7 +107,7 @@ def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path)
     has its start-up handler (its caught-signal mask has SIGTERM), while it is loading."""
     import re as _re
 
-    proc = subprocess.Popen(
+    with subprocess.Popen(
         [
             sys.executable,
             "-m",
@@ -124,15 +124,18 @@ def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path)
         ],
         stderr=subprocess.PIPE,
         text=True,
-    )
-    status = Path(f"/proc/{proc.pid}/status")
-    t_end = time.monotonic() + 60  # a hang guard
-    while proc.poll() is None and time.monotonic() < t_end:
-        m = _re.search(r"^SigCgt:\s*([0-9a-f]+)", status.read_text(), _re.M)
-        if m and int(m.group(1), 16) >> (signal.SIGTERM - 1) & 1:
-            break
-    proc.send_signal(signal.SIGTERM)
-    _, err = proc.communicate(timeout=120)
+    ) as proc:
+        try:
+            status = Path(f"/proc/{proc.pid}/status")
+            t_end = time.monotonic() + 60  # a hang guard
+            while proc.poll() is None and time.monotonic() < t_end:
+                m = _re.search(r"^SigCgt:\s*([0-9a-f]+)", status.read_text(), _re.M)
+                if m and int(m.group(1), 16) >> (signal.SIGTERM - 1) & 1:
+                    break
+            proc.send_signal(signal.SIGTERM)
+            _, err = proc.communicate(timeout=120)
+        finally:
+            proc.kill()  # a failure above must not leave it running
     assert proc.returncode == 2 and "Traceback" not in err, err
     assert "SIGTERM while starting; nothing was done" in err or "interrupted" in err, err
 
@@ -182,23 +185,23 @@ def test_sighup_while_the_report_is_written_then_resume_writes_it(tmp_path):
     run reaches it: the run, its acquisition and analysis done and its plot drawn, waits opening
     it, in the report, until SIGHUP comes. Then exit 2 and a summary saying so; ``--resume``
     analyses the complete file again, writing the report and a true summary."""
-    p = subprocess.Popen(
+    with subprocess.Popen(
         [*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_STOPWATCH],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-    )
-    fifo = tmp_path / f".stopwatch.md.{p.pid}.tmp"
-    os.mkfifo(fifo)  # before the child has even loaded (seconds)
-    try:
-        t_end = time.monotonic() + 300  # a hang guard
-        while not (list(tmp_path.glob("stopwatch-*.png")) and _main_thread_waits(p.pid)):
-            assert p.poll() is None and time.monotonic() < t_end, p.communicate()
-            time.sleep(0.1)
-        p.send_signal(signal.SIGHUP)
-        _, stderr = p.communicate(timeout=120)
-    finally:
-        p.kill()
+    ) as p:
+        fifo = tmp_path / f".stopwatch.md.{p.pid}.tmp"
+        os.mkfifo(fifo)  # before the child has even loaded (seconds)
+        try:
+            t_end = time.monotonic() + 300  # a hang guard
+            while not (list(tmp_path.glob("stopwatch-*.png")) and _main_thread_waits(p.pid)):
+                assert p.poll() is None and time.monotonic() < t_end, p.communicate()
+                time.sleep(0.1)
+            p.send_signal(signal.SIGHUP)
+            _, stderr = p.communicate(timeout=120)
+        finally:
+            p.kill()
     assert p.returncode == 2, stderr
     assert not fifo.exists() and not (tmp_path / "stopwatch.md").exists(), stderr
     summary = json.loads((tmp_path / "stopwatch.json").read_text())
