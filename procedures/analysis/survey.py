@@ -307,35 +307,46 @@ def cross_axis_coherence(
 def coherent_platform_rms(
     blocks: BlockCsd,
     gyro_channel: str,
-    ac_channel: str,
+    ac_channels: str | Sequence[str],
     kg_V_per_urad: float,
     lo_hz: float,
     hi_hz: float,
 ) -> Estimate:
     """The platform's own rms (urad) in ``lo..hi`` Hz: the part of the gyro's spectrum coherent
-    with the autocollimator, gamma^2 S_gg (the coherent output power, eq. 4.44-4.49; Ch. V C).
+    with the autocollimators, gamma_m^2 S_gg (the coherent output power, eq. 4.44-4.49; Ch. V C;
+    with several inputs the multiple coherence, Bendat and Piersol ch. 7).
 
-    The gyro sees theta + n_g, the autocollimator theta + n_a; the pickoff noise n_g is
-    independent of both. In Mode 3 the platform moves mostly because the loop follows n_a
-    (theta = -T n_a, T the complementary sensitivity), so |S_ga|^2 / S_aa = |T|^2 S_nn = S_theta,
-    exactly; a disturbance torque moves theta in both sensors and counts too. Nothing here needs
-    the pickoff noise's level, or an open-loop baseline.
+    The gyro sees theta + n_g, each autocollimator theta + n_a; the pickoff noise n_g is
+    independent of them. In Mode 3 the platform moves because the loops follow the
+    autocollimators' noise: theta = -T n_a on one axis, exactly recovered as |S_ga|^2 / S_aa =
+    |T|^2 S_nn. But an axis also moves with the other's noise through the rig's cross-axis
+    coupling (the gyro floats' reaction): that part is not coherent with its own autocollimator,
+    and one input read the platform's rms up to 13 % low on a drawn rig. With every axis's
+    autocollimator as an input, S_ga S_aa^-1 S_ag holds all the motion the loops make; a
+    disturbance torque moves theta in both sensors and counts too. Nothing here needs the
+    pickoff noise's level, or an open-loop baseline.
 
-    gamma^2 is first freed of its bias over n averaged segments, (n gamma^2 - 1) / (n - 1), n the
-    Welch EDOF / 2: with the pickoff noise ten times the platform's power the raw estimate read
-    the rms 6-30 % high. The interval is a delete-one jackknife over the blocks (Student's t)."""
-    g, a = blocks.index(gyro_channel), blocks.index(ac_channel)
+    gamma_m^2 is first freed of its bias over n averaged segments and q inputs,
+    (n gamma^2 - q) / (n - q), n the Welch EDOF / 2 (with no coherence E[gamma_m^2] = q / n):
+    with the pickoff noise ten times the platform's power the raw estimate read the rms 6-30 %
+    high. The interval is a delete-one jackknife over the blocks (Student's t)."""
+    inputs = [ac_channels] if isinstance(ac_channels, str) else list(ac_channels)
+    g = blocks.index(gyro_channel)
+    a = [blocks.index(c) for c in inputs]
     f = blocks.f
     band = (f >= lo_hz) & (f <= hi_hz)
     df = float(f[1] - f[0])
 
     def rms(leave_out: int | None) -> float:
-        S = blocks.mean(leave_out)
-        sgg, saa = S[:, g, g].real, S[:, a, a].real
+        S = blocks.mean(leave_out)[band]
+        sgg = S[:, g, g].real
+        s_ga = S[:, g][:, a]  # (f, q): S_g,a
+        S_aa = S[:, a][:, :, a]  # (f, q, q)
         with np.errstate(divide="ignore", invalid="ignore"):
-            g2 = np.abs(S[:, g, a]) ** 2 / (sgg * saa)
-        g2u = unbiased_coherence(g2, blocks.averages(leave_out))
-        return math.sqrt(float(np.sum((g2u * sgg)[band])) * df) / kg_V_per_urad
+            x = np.linalg.solve(S_aa, s_ga.conj()[:, :, None])[:, :, 0]  # S_aa^-1 S_a,g
+            g2 = np.einsum("fq,fq->f", s_ga, x).real / sgg
+        g2u = unbiased_coherence(g2, blocks.averages(leave_out), inputs=len(a))
+        return math.sqrt(float(np.sum(g2u * sgg)) * df) / kg_V_per_urad
 
     value = rms(None)
     loo = np.array([rms(b) for b in range(blocks.n_blocks)])

@@ -398,13 +398,14 @@ def _jackknifed(
     )
 
 
-def unbiased_coherence(g2: np.ndarray, n: float) -> np.ndarray:
-    """Magnitude-squared coherence freed of its bias over ``n`` independent averages,
-    (n gamma^2 - 1) / (n - 1), clipped to 0..1: with no coherence E[gamma^2] = 1 / n (Bendat and
-    Piersol), which reads a weak coherent part high and an incoherent part low."""
-    if n <= 1:
+def unbiased_coherence(g2: np.ndarray, n: float, inputs: int = 1) -> np.ndarray:
+    """Magnitude-squared (or, over q ``inputs``, multiple) coherence freed of its bias over
+    ``n`` independent averages, (n gamma^2 - q) / (n - q), clipped to 0..1: with no coherence
+    E[gamma^2] = q / n (Bendat and Piersol), which reads a weak coherent part high and an
+    incoherent part low."""
+    if n <= inputs:
         return np.asarray(g2)
-    return np.clip(np.nan_to_num((n * np.asarray(g2) - 1.0) / (n - 1.0)), 0.0, 1.0)
+    return np.clip(np.nan_to_num((n * np.asarray(g2) - inputs) / (n - inputs)), 0.0, 1.0)
 
 
 def usable(resp: Response, lo_hz: float, hi_hz: float, min_coherence: float = 0.5) -> np.ndarray:
