@@ -25,3 +25,7 @@ def test_lines_are_short_enough_to_read_side_by_side():
     lines = [ln for f in files for ln in (root / f).read_text().splitlines()]
     long = [ln for ln in lines if len(ln) > 100]
     assert len(long) <= 0.015 * len(lines), f"{len(long)} of {len(lines)} lines over 100"
+
+
+def test_a_warning_is_a_failure_unless_named(pytestconfig):
+    assert "error" in pytestconfig.getini("filterwarnings")
