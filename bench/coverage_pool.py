@@ -20,6 +20,18 @@ def toml_of(values: dict[str, dict[str, Any]]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _die_with_parent() -> None:
+    """A pool worker ends with the bench (Linux's parent-death signal): a bench stopped by
+    SIGTERM or SIGKILL left its workers running their campaigns into the kept folders."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    except OSError:  # not Linux: the workers outlive a killed bench, as before
+        pass
+
+
 def run_cases(
     run_case: Callable[..., dict[str, Any]], cases: list[tuple], jobs: int, out: str
 ) -> list[dict[str, Any]]:
@@ -28,7 +40,9 @@ def run_cases(
     recs: list[dict[str, Any]] = []
     with (
         open(out, "w") as jf,
-        ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool,
+        ProcessPoolExecutor(
+            jobs, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
+        ) as pool,
     ):
         futs = [pool.submit(run_case, *case) for case in cases]
         for fut in as_completed(futs):
