@@ -32,7 +32,7 @@ SHORT_COLD_STOPWATCH = [
     "--param",
     "restore_s=10",
 ]
-LINE = re.compile(r"fbs\.progress: stopwatch: +(\d+) %, (.*)$")
+LINE = re.compile(r"fbs\.run_progress: stopwatch: +(\d+) %, (.*)$")
 
 
 def test_the_progress_lines_of_a_run_never_go_back_and_show_the_analysis(tmp_path):
