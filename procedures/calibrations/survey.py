@@ -333,9 +333,11 @@ class Survey(Procedure[SurveyParams]):
                 p.coherent_seg_s,
                 p.coherent_blocks,
             )
+            # every axis's autocollimator an input: an axis moves with the other's noise too
+            inputs = [ac_inst(b) for b in AXES]
             net = {
                 a: coherent_platform_rms(
-                    blocks, gyro(a), ac_inst(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz
+                    blocks, gyro(a), inputs, kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz
                 )
                 for a in AXES
             }
