@@ -72,7 +72,7 @@ from types import SimpleNamespace  # noqa: E402
 from typing import TYPE_CHECKING, Any  # noqa: E402
 
 import numpy as np  # noqa: E402
-from coverage_pool import run_cases, toml_of  # noqa: E402
+from coverage_pool import draw_plant, log_uniform, run_cases, toml_of  # noqa: E402
 
 if TYPE_CHECKING:
     from procedures.procedure import Procedure
@@ -80,12 +80,6 @@ if TYPE_CHECKING:
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 CHANNELS = ("X", "Y", "Z", "XRD")
-AXES = ("X", "Y", "Z")
-BEARINGS = ("none", "viscous", "spring", "dahl")
-
-
-def _logu(rng: np.random.Generator, lo: float, hi: float) -> float:
-    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
 def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
@@ -97,25 +91,8 @@ def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
     cfg: dict[str, dict[str, Any]] = {
         "site": {"latitude_deg": round(float(rng.uniform(-60.0, 72.0)), 3)},
         "table": {"base_azimuth_offset_deg": round(float(rng.uniform(-5.0, 5.0)), 4)},
-        "compensation": {
-            f"w{i}_rad_per_s": getattr(nom.compensation, f"w{i}_rad_per_s")
-            * float(rng.uniform(0.9, 1.15))
-            for i in range(1, 7)
-        },
     }
-    for a in AXES:
-        cfg[f"platform.{a}"] = {
-            "inertia_kg_m2": nom.platform[a].inertia_kg_m2 * float(rng.uniform(0.7, 1.4))
-        }
-        b = nom.bearing[a]
-        model = BEARINGS[int(rng.integers(len(BEARINGS)))]
-        cfg[f"bearing.{a}"] = {
-            "model": model,
-            "To_Nm": b.To_Nm * _logu(rng, 0.5, 2.0),
-            "eta_per_Nm": b.eta_per_Nm * _logu(rng, 0.5, 2.0),
-            "stiffness_Nm_per_rad": b.stiffness_Nm_per_rad * _logu(rng, 0.5, 2.0),
-            "damping_Nms": _logu(rng, 0.01, 0.2),
-        }
+    cfg |= draw_plant(rng, nom)
     nea, common = float(rng.uniform(0.6, 2.0)), round(float(rng.uniform(0.0, 0.6)), 3)
     for a in ("X", "Y"):
         cfg[f"autocollimator.{a}"] = {
@@ -138,8 +115,8 @@ def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
                 for x in "xyz"
             },
             "restraint_time_s": g.restraint_time_s * float(rng.uniform(0.85, 1.15)),
-            "arw_urad_per_sqrt_s": round(_logu(rng, 0.003, 0.5), 5),
-            "bias_instability_urad_per_s": round(_logu(rng, 0.005, 0.1), 5),
+            "arw_urad_per_sqrt_s": round(log_uniform(rng, 0.003, 0.5), 5),
+            "bias_instability_urad_per_s": round(log_uniform(rng, 0.005, 0.1), 5),
             "pickoff_noise_rms_urad": g.pickoff_noise_rms_urad * k,
             "pickoff_lines": [[f, a * k] for f, a in g.pickoff_lines],
         }

@@ -1,9 +1,10 @@
-"""What the coverage benchmarks share (``earth_rate_coverage``, ``stopwatch_coverage``): a sim
-configuration as TOML, and the cases run in a spawn pool, one JSON line each as they finish."""
+"""What the coverage benchmarks share: a sim configuration as TOML, the drawn platform
+(``draw_plant``), and the cases run in a spawn pool, one JSON line each as they finish."""
 
 from __future__ import annotations
 
 import json
+import math
 import multiprocessing
 import sys
 from collections.abc import Callable
@@ -18,6 +19,42 @@ def toml_of(values: dict[str, dict[str, Any]]) -> str:
         lines.append(f"[{section}]")
         lines += [f"{k} = {v!r}" for k, v in kv.items()]
     return "\n".join(lines) + "\n"
+
+
+def log_uniform(rng: Any, lo: float, hi: float) -> float:
+    """A number drawn log-uniformly from ``lo .. hi``."""
+    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+#: the bearing models a drawn axis may have (DESIGN section 7)
+BEARINGS = ("none", "viscous", "spring", "dahl")
+
+
+def draw_plant(rng: Any, nom: Any) -> dict[str, dict[str, Any]]:
+    """The platform part of a drawn rig as TOML sections, about the data sheet ``nom`` (a
+    ``SimConfig``): each compensation corner x0.9 .. 1.15, then per axis the inertia x0.7 .. 1.4
+    and a bearing model from ``BEARINGS`` (To, eta, stiffness log-uniform x0.5 .. 2, viscous
+    damping 0.01 .. 0.2 N m s), drawn in that order."""
+    out: dict[str, dict[str, Any]] = {
+        "compensation": {
+            f"w{i}_rad_per_s": getattr(nom.compensation, f"w{i}_rad_per_s")
+            * float(rng.uniform(0.9, 1.15))
+            for i in range(1, 7)
+        }
+    }
+    for a in ("X", "Y", "Z"):
+        out[f"platform.{a}"] = {
+            "inertia_kg_m2": nom.platform[a].inertia_kg_m2 * float(rng.uniform(0.7, 1.4))
+        }
+        b = nom.bearing[a]
+        out[f"bearing.{a}"] = {
+            "model": BEARINGS[int(rng.integers(len(BEARINGS)))],
+            "To_Nm": b.To_Nm * log_uniform(rng, 0.5, 2.0),
+            "eta_per_Nm": b.eta_per_Nm * log_uniform(rng, 0.5, 2.0),
+            "stiffness_Nm_per_rad": b.stiffness_Nm_per_rad * log_uniform(rng, 0.5, 2.0),
+            "damping_Nms": log_uniform(rng, 0.01, 0.2),
+        }
+    return out
 
 
 def _die_with_parent() -> None:

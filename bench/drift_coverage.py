@@ -42,7 +42,6 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import json  # noqa: E402
-import math  # noqa: E402
 import multiprocessing  # noqa: E402
 import statistics  # noqa: E402
 import sys  # noqa: E402
@@ -52,6 +51,7 @@ from pathlib import Path  # noqa: E402
 from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
+from coverage_pool import log_uniform  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -60,10 +60,6 @@ CHANNELS = ("X", "Y", "Z", "XRD")
 FS = 10.0
 SETTLE_S = 200.0
 FIGURES = {"arw": "arw_urad_per_sqrt_s", "bias": "bias_instability_urad_per_s"}
-
-
-def _logu(rng: np.random.Generator, lo: float, hi: float) -> float:
-    return float(math.exp(rng.uniform(math.log(lo), math.log(hi))))
 
 
 def draw_rig(rng: np.random.Generator) -> dict[str, Any]:
@@ -76,9 +72,9 @@ def draw_rig(rng: np.random.Generator) -> dict[str, Any]:
         g = nominal.gyro[c]
         k = float(rng.uniform(0.5, 2.0))
         gyro[c] = {
-            "arw_urad_per_sqrt_s": round(_logu(rng, 0.003, 0.5), 5),
-            "bias_instability_urad_per_s": round(_logu(rng, 0.005, 0.1), 5),
-            "rrw_urad_per_s_per_sqrt_s": _logu(rng, 1e-6, 1e-4),
+            "arw_urad_per_sqrt_s": round(log_uniform(rng, 0.003, 0.5), 5),
+            "bias_instability_urad_per_s": round(log_uniform(rng, 0.005, 0.1), 5),
+            "rrw_urad_per_s_per_sqrt_s": log_uniform(rng, 1e-6, 1e-4),
             "fixed_drift_urad_per_s": round(float(rng.uniform(-1.5, 1.5)), 4),
             "torquer_scale_urad_per_s_per_V": round(
                 g.torquer_scale_urad_per_s_per_V * float(rng.uniform(0.85, 1.15)), 4
