@@ -110,6 +110,12 @@ class RigCalibration:
     restraint_time_constant_s: dict[str, float] = field(
         default_factory=lambda: {"X": 424.0, "Y": 708.0, "Z": 1072.0, "XRD": 515.0}
     )
+    #: the floats' viscous cross-axis coupling h/c (s; Table 3, II C.4.d): a float partner's
+    #: rate precesses this one by (c/h) of it, so the X-Y gyro's Y pickoff reads
+    #: theta_Y - (c/h)_X theta_X (the survey and drift undo it; the stopwatch models it)
+    viscous_coupling_h_over_c: dict[str, float] = field(
+        default_factory=lambda: {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}
+    )
     #: the caging loops as designed (II C.1.a(8)): natural frequency (rad/s) and damping. In the
     #: gyro modes the autocollimator cages the float through them, inside the stabilization loop
     caging_natural_rad_per_s: dict[str, float] = field(

@@ -94,9 +94,6 @@ def crossing_interval(
     return t2 - t1
 
 
-#: the floats' viscous coupling h/c (Table 3; DESIGN.md section 3), by channel: the data sheet's,
-#: for the partner-transient model (``partner_factors``)
-VISCOUS_COUPLING_H_OVER_C = {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}
 #: caging amplifiers without integral action (the redundant channel's, II C.1.a(8)): a first-order
 #: loop of bandwidth omega_n
 PROPORTIONAL_ONLY = frozenset({"XRD"})

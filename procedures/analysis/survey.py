@@ -304,6 +304,50 @@ def cross_axis_coherence(
     return CrossCoherence((x, y), (lo_hz, hi_hz), m, null_mean, z, bool(z > CROSS_Z))
 
 
+#: how far a unit's viscous coupling h/c may lie from the data sheet's, a fraction (the
+#: stopwatch's partner model allows the same, ``PARTNER_MODEL_UNCERTAINTY``)
+H_OVER_C_TOL = 0.3
+
+
+def platform_gyro(axis: str) -> str:
+    """The X-Y gyro's reading of platform ``axis`` alone, in urad (``decoupled_gyro``)."""
+    return f"gyro_{axis.lower()}_platform"
+
+
+def decoupled_gyro(
+    kg_V_per_urad: Mapping[str, float], h_over_c: Mapping[str, float], scale: float = 1.0
+) -> dict[str, dict[str, float]]:
+    """The weights (urad per volt) that combine the X-Y gyro's two pickoffs into a reading of
+    each platform axis alone, ``{platform_gyro(axis): {pickoff: weight}}`` (II C.4.d).
+
+    The float's viscous drag couples its two input axes: sigma_Y' = f_Y - (c/h)_X sigma_X' and
+    sigma_X' = f_X + (c/h)_Y sigma_Y' (the simulator's plant, the thesis's float), so above the
+    restraint's corner (1 / (h/k), ~2e-3 rad/s) the pickoffs read
+    g_X = (theta_X + (c/h)_Y theta_Y) / (1 + (c/h)_X (c/h)_Y) and
+    g_Y = (theta_Y - (c/h)_X theta_X) / (1 + (c/h)_X (c/h)_Y), whose inverse is
+    theta_X = g_X - (c/h)_Y g_Y and theta_Y = g_Y + (c/h)_X g_X. With the data sheet's
+    (c/h)_X = 1 / 1.96 the Y pickoff alone read the platform's Y rms up to 17 % high on drawn rigs
+    (half the X motion in it). ``scale`` multiplies both c/h (the allowance's check)."""
+    cx, cy = scale / h_over_c["X"], scale / h_over_c["Y"]
+    kx, ky = kg_V_per_urad["X"], kg_V_per_urad["Y"]
+    return {
+        platform_gyro("X"): {gyro("X"): 1.0 / kx, gyro("Y"): -cy / ky},
+        platform_gyro("Y"): {gyro("Y"): 1.0 / ky, gyro("X"): cx / kx},
+    }
+
+
+def with_allowance(est: Estimate, variants: Sequence[float]) -> Estimate:
+    """``est`` with its interval widened on each side by the largest departure of ``variants``
+    (the same figure with a data-sheet constant at the ends of its tolerance) from its value."""
+    if not est.resolved and not math.isfinite(est.value):
+        return est
+    d = max((abs(v - est.value) for v in variants if math.isfinite(v)), default=0.0)
+    lo, hi = max(0.0, est.lo - d), est.hi + d
+    if not est.resolved:
+        return Estimate(est.value, lo, hi, False, est.why)
+    return judged(est.value, lo, hi)
+
+
 def coherent_platform_rms(
     blocks: BlockCsd,
     gyro_channel: str,

@@ -15,8 +15,7 @@ This module holds the parameters, the steps and the analysis that ties them toge
 
 K_TO and K_g are scales only: earlier ``earth-rate`` and ``stopwatch`` results are used when the
 procedure is given them (``prior``), else the rig's nominal data-sheet values, which the report
-says; h/k (and the viscous coupling h/c, where the rig's calibration carries it) are data-sheet
-constants.
+says; h/k and the floats' viscous coupling h/c are data-sheet constants.
 
 Steps: Mode 3 and a settle (setup, run again on ``--resume``), then the record in
 ``n_chunks`` data steps, each returning its file and time span, so an aborted overnight record
@@ -227,9 +226,8 @@ class Drift(Procedure[DriftParams]):
         kg, kg_sources = prior_values(
             self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad
         )
-        # the float's restraint and viscous coupling are data-sheet constants (Table 3); the
-        # coupling only where the rig's calibration carries it
-        h_over_c = getattr(cal, "viscous_coupling_h_over_c", None)
+        # the float's restraint and viscous coupling are data-sheet constants (Table 3)
+        h_over_c = cal.viscous_coupling_h_over_c
         _, kto_sources = self.kto_sources(ctx)
         tol = {
             ch: (

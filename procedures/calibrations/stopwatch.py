@@ -69,7 +69,6 @@ from drivers.rig_datasheet import FLOAT_PARTNER, GYRO_CHANNELS
 from procedures.analysis.intervals import add_figure
 from procedures.analysis.stopwatch import (
     PROPORTIONAL_ONLY,
-    VISCOUS_COUPLING_H_OVER_C,
     ChannelRun,
     NoCrossing,
     channel_result,
@@ -323,8 +322,8 @@ class Stopwatch(Procedure[StopwatchParams]):
             t_fit,
             (vt_fit - vt_null) * kto,
             windows,
-            h_over_c=VISCOUS_COUPLING_H_OVER_C[ch],
-            partner_h_over_c=VISCOUS_COUPLING_H_OVER_C[partner],
+            h_over_c=cal.viscous_coupling_h_over_c[ch],
+            partner_h_over_c=cal.viscous_coupling_h_over_c[partner],
             partner_wn=cal.caging_natural_rad_per_s[partner],
             partner_zeta=cal.caging_zeta[partner],
             partner_proportional=partner in PROPORTIONAL_ONLY,

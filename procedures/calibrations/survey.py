@@ -49,6 +49,7 @@ from procedures.analysis.survey import (
     AXES,
     CHANNELS,
     COHERENCE_PAIRS,
+    H_OVER_C_TOL,
     BaselineMismatch,
     BaselineNet,
     SpanError,
@@ -57,9 +58,12 @@ from procedures.analysis.survey import (
     baseline_net_rms,
     coherent_platform_rms,
     cross_axis_coherence,
+    decoupled_gyro,
     gyro,
+    platform_gyro,
     spans_csd,
     survey_spectra,
+    with_allowance,
 )
 from procedures.analysis.transfer import BlockCsd, TransferError, block_csd
 from procedures.calibrations.baseline import BaselineFileError, ClampedRecord, clamped_record
@@ -333,17 +337,30 @@ class Survey(Procedure[SurveyParams]):
                 p.coherent_seg_s,
                 p.coherent_blocks,
             )
-            # every axis's autocollimator an input: an axis moves with the other's noise too
+            # every axis's autocollimator an input: an axis moves with the other's noise too;
+            # the gyro's reading of each axis alone (the float's viscous coupling undone), with
+            # the data sheet's h/c and at the ends of its tolerance
             inputs = [ac_inst(b) for b in AXES]
+            kg = {a: kg_mv[a] * 1e-3 for a in AXES}
+            h_c = cal.viscous_coupling_h_over_c
+
+            def coherent(scale: float) -> dict[str, Estimate]:
+                dec = blocks.combined(decoupled_gyro(kg, h_c, scale))
+                return {
+                    a: coherent_platform_rms(
+                        dec, platform_gyro(a), inputs, 1.0, p.band_lo_hz, p.band_hi_hz
+                    )
+                    for a in AXES
+                }
+
+            variants = [coherent(1.0 + s) for s in (-H_OVER_C_TOL, H_OVER_C_TOL)]
             net = {
-                a: coherent_platform_rms(
-                    blocks, gyro(a), inputs, kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz
-                )
-                for a in AXES
+                a: with_allowance(e, [v[a].value for v in variants])
+                for a, e in coherent(1.0).items()
             }
         except TransferError as exc:
             raise ProcedureError(f"survey: {exc}") from None
-        base = self._baseline_net(blocks, kg_mv)
+        base = self._baseline_net(blocks, kg_mv, cal.viscous_coupling_h_over_c)
         if p.mode != 3:
             # the pickoff is in the loop: the platform follows its noise, so neither its part
             # coherent with the autocollimator nor its spectrum less the clamped one is the
@@ -538,7 +555,9 @@ class Survey(Procedure[SurveyParams]):
         )
         return Analysis(values, ms, figures, md)
 
-    def _baseline_net(self, blocks: BlockCsd, kg_mv: Mapping[str, float]) -> dict[str, BaselineNet]:
+    def _baseline_net(
+        self, blocks: BlockCsd, kg_mv: Mapping[str, float], h_c: Mapping[str, float]
+    ) -> dict[str, BaselineNet]:
         """Per axis, the platform rms net of the baseline's pickoff noise; unresolved (with why)
         where there is no baseline, or its record cannot be read or set against the survey's."""
         p, rec = self.params, self.baseline
@@ -549,20 +568,35 @@ class Survey(Procedure[SurveyParams]):
 
         if rec is None:
             return {a: none(self.baseline_note) for a in AXES}
-        have = [gyro(a) for a in AXES if gyro(a) in rec.channels]
+        missing = [gyro(a) for a in AXES if gyro(a) not in rec.channels]
+        if missing:
+            # each axis's reading takes both of the X-Y gyro's pickoffs (decoupled_gyro)
+            return {a: none(f"the baseline holds no {', '.join(missing)}") for a in AXES}
+        kg = {a: kg_mv[a] * 1e-3 for a in AXES}
         try:
             bb = block_csd(
-                [(rec.file, rec.start, rec.stop)], have, p.coherent_seg_s, p.baseline_blocks
+                [(rec.file, rec.start, rec.stop)],
+                [gyro(a) for a in AXES],
+                p.coherent_seg_s,
+                p.baseline_blocks,
             )
-            return {
-                a: (
-                    baseline_net_rms(
-                        blocks, gyro(a), bb, gyro(a), kg_mv[a] * 1e-3, p.band_lo_hz, p.band_hi_hz
+
+            def net(scale: float) -> dict[str, BaselineNet]:
+                dec = decoupled_gyro(kg, h_c, scale)
+                sb, bb_ = blocks.combined(dec), bb.combined(dec)
+                return {
+                    a: baseline_net_rms(
+                        sb, platform_gyro(a), bb_, platform_gyro(a), 1.0, p.band_lo_hz, p.band_hi_hz
                     )
-                    if gyro(a) in have
-                    else none(f"the baseline holds no {gyro(a)}")
+                    for a in AXES
+                }
+
+            variants = [net(1.0 + s) for s in (-H_OVER_C_TOL, H_OVER_C_TOL)]
+            return {
+                a: dataclasses.replace(
+                    b, estimate=with_allowance(b.estimate, [v[a].estimate.value for v in variants])
                 )
-                for a in AXES
+                for a, b in net(1.0).items()
             }
         except (TransferError, BaselineMismatch, OSError) as exc:
             log.warning("survey: the baseline %s cannot be used: %s", rec.source, exc)
