@@ -119,14 +119,17 @@ def describing_function(theta_o_bar: np.ndarray | float) -> np.ndarray | complex
     if np.any(~(x > 0)):
         raise ValueError("describing_function: theta_o_bar must be > 0")
     tm = np.asarray(peak_torque_normalized(x))
-    c = np.sqrt(1.0 - tm * tm)
+    # 1 - Tm^2 = Tm / x (eq. 5.9) exactly: 1 - Tm^2 itself is 0 in floating point once Tm
+    # rounds to 1 (x above ~1e8, deep in Coulomb friction), and Re divided by it
+    c = np.sqrt(tm / x)
     # 1/sqrt(1 - Tm^2) - 1 and ln((1 + Tm)/(1 - Tm)) - 2 Tm, both without cancellation at small x
     inv_m1 = tm * tm / (c * (1.0 + c))
     small = x < 1e-3
     # series for small x: Re -> 1 - 3x^2/2.., Im -> (8/(3 pi)) x - ..; exact formula elsewhere
     with np.errstate(divide="ignore", invalid="ignore"):
         re = np.where(small, 1.0 - 1.5 * x * x, 2.0 / (x * x) * inv_m1)
-        log_term = np.log1p(tm) - np.log1p(-tm)
+        # 1 - Tm = (1 - Tm^2) / (1 + Tm) = Tm / (x (1 + Tm)), finite where 1 - Tm rounds to 0
+        log_term = np.log1p(tm) - np.log(tm / (x * (1.0 + tm)))
         im = np.where(
             small, 8.0 / (3.0 * math.pi) * x, (4.0 / math.pi - 2.0 / (math.pi * x) * log_term) / x
         )
