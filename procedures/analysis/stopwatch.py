@@ -15,6 +15,7 @@ plot are ``procedures.reports.stopwatch``.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import ClassVar
 
@@ -22,6 +23,7 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
+from drivers.rig_datasheet import FLOAT_PARTNER
 from procedures.analysis.intervals import Estimate, from_stderr, judged
 from procedures.stepresult import StepResult
 
@@ -266,6 +268,9 @@ class ChannelResult:
         0.0  # mean (reading with / without the partner transient's factor - 1)
     )
     partner_bound: float = PARTNER_TRANSIENT_BOUND  # relative bound on what is left of it
+    #: (c/h)_a (c/h)_b of the channel's float (data sheet): the restraint fit's 1/k carries
+    #: 1 + it (``tau_estimate``)
+    coupling_carried: float = 0.0
 
     def kg_estimate(self, kto_rel_half_width: float | None) -> Estimate:
         """K_g with its 95 % interval: Student's t over the repetitions, combined in quadrature
@@ -303,7 +308,19 @@ class ChannelResult:
         k, k_se = 1.0 / self.tau_s, self.tau_se / self.tau_s**2
         ek = from_stderr(k, k_se, dof=self.restraint_dof)
         hi = 1.0 / ek.lo if ek.lo > 0 else math.inf
-        return Estimate(self.tau_s, 1.0 / ek.hi, hi, False, H_OVER_K_UNRESOLVED)
+        # the fit's 1/k is h/k (1 + (c/h)_a (c/h)_b) (the partner's loop answers through the
+        # float's viscous coupling): taken out with the data sheet's h/c, the bound spanning each
+        # h/c's tolerance (left in, the X-Y float's Y read 2-3 % high and its bound missed the
+        # truth on 3 of 18 drawn rigs)
+        tol = PARTNER_MODEL_UNCERTAINTY[0]
+        cc = self.coupling_carried
+        return Estimate(
+            self.tau_s / (1.0 + cc),
+            1.0 / ek.hi / (1.0 + (1.0 + tol) ** 2 * cc),
+            hi / (1.0 + (1.0 - tol) ** 2 * cc),
+            False,
+            H_OVER_K_UNRESOLVED,
+        )
 
 
 @dataclass(frozen=True)
@@ -336,8 +353,9 @@ class ChannelRun(StepResult):
     t: tuple[float, float, float] | None = None
 
 
-def channel_result(r: ChannelRun) -> ChannelResult:
-    """Stopwatch readings (with the restraint correction x coth x) from a channel step's result."""
+def channel_result(r: ChannelRun, h_over_c: Mapping[str, float] | None = None) -> ChannelResult:
+    """Stopwatch readings (with the restraint correction x coth x) from a channel step's result;
+    ``h_over_c`` the data sheet's viscous coupling per channel (for h/k's bound)."""
     kto = r.kto
     fit = r.fit
     k, k_se = fit["k"], fit["k_se"]
@@ -385,4 +403,5 @@ def channel_result(r: ChannelRun) -> ChannelResult:
         )
         if factors
         else PARTNER_TRANSIENT_BOUND,
+        1.0 / (h_over_c[r.ch] * h_over_c[FLOAT_PARTNER[r.ch]]) if h_over_c else 0.0,
     )

@@ -389,8 +389,8 @@ class Stopwatch(Procedure[StopwatchParams]):
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
         results = {ch: ctx.result(f"channel {ch}", ChannelRun) for ch in p.channels}
-        per = {ch: channel_result(r) for ch, r in results.items()}
         cal = ctx.rig.calibration
+        per = {ch: channel_result(r, cal.viscous_coupling_h_over_c) for ch, r in results.items()}
         ms: list[Measurement] = []
         kg_est = {ch: r.kg_estimate(results[ch].kto_rel_ci95) for ch, r in per.items()}
         tau_est = {ch: r.tau_estimate() for ch, r in per.items()}

@@ -340,6 +340,28 @@ def test_k_g_interval_carries_the_k_to_interval():
     assert not tau.resolved and tau.lo < 400.0 < tau.hi
 
 
+def test_h_over_k_takes_out_what_the_float_coupling_puts_in():
+    """Issue 38 acceptance A (``bench/coverage_all.py``): the restraint fit's 1/k is
+    h/k (1 + (c/h)_a (c/h)_b) (``test_the_float_partners_loop_is_not_read_as_restraint``); left
+    in, the X-Y float's Y channel read h/k 2-3 % high and its bound missed on 3 of 18 drawn rigs.
+    With the data sheet's h/c the value is divided by it, the bound spans h/c +-30 %."""
+    h_c = {"X": 1.96, "Y": 21.0, "Z": 35.7, "XRD": 2.43}
+    cc = 1 / (1.96 * 21.0)
+    tau = 655.0
+    r = ChannelRun(
+        ch="Y",
+        kto=33.4,
+        kto_from="earth-rate",
+        dVg=2.0,
+        ramps=((-1, 20.0, -0.3), (1, 20.2, 0.3)),
+        fit={"a": 0.057, "a_se": 1e-4, "k": 1 / (tau * (1 + cc)), "k_se": 4e-6, "dof": 9},
+    )
+    before = channel_result(r).tau_estimate()
+    assert not before.lo <= tau <= before.hi  # what the coverage harness saw
+    e = channel_result(r, h_c).tau_estimate()
+    assert not e.resolved and e.lo <= tau <= e.hi and e.value == pytest.approx(tau)
+
+
 def test_a_result_without_partner_factors_carries_the_transients_bound():
     """Issue 38 item 4: the float partner's caging transient moves every ramp the same way
     (II C.4.d), however well the repetitions agree. Readings of the noise-free thesis rig's Z
