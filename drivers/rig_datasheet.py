@@ -18,6 +18,9 @@ GYRO_CHANNELS = ("X", "Y", "Z", "XRD")
 #: the channel sharing each channel's float: two two-degree-of-freedom gyros, X-Y (spin along
 #: platform Z) and X-Z (spin along Y, channels Z and XRD); viscous float drag couples a pair (II C.4.d)
 FLOAT_PARTNER = {"X": "Y", "Y": "X", "Z": "XRD", "XRD": "Z"}
+#: how far a unit's viscous coupling h/c may lie from its data sheet's (Table 3), a fraction:
+#: what the procedures that use h/c carry in their intervals
+VISCOUS_COUPLING_TOLERANCE = 0.3
 AXES = ("X", "Y", "Z")
 EARTH_RATE_RAD_PER_S = 7.292115e-5
 #: the ADC's channels, volts (DESIGN.md section 5): autocollimator control and instrumentation,

@@ -23,7 +23,7 @@ import numpy as np
 import scipy.linalg
 import scipy.stats
 
-from drivers.rig_datasheet import FLOAT_PARTNER
+from drivers.rig_datasheet import FLOAT_PARTNER, VISCOUS_COUPLING_TOLERANCE
 from procedures.analysis.intervals import Estimate, from_stderr, judged
 from procedures.stepresult import StepResult
 
@@ -102,7 +102,7 @@ PROPORTIONAL_ONLY = frozenset({"XRD"})
 #: what the partner-transient correction may be off by: this fraction of itself (a unit's h/c
 #: against Table 3's) plus the model's residual against the simulated rig (0.02-0.03 %, measured
 #: noise-free on the thesis rig and with K_g x0.75-0.83), a bound added to each side
-PARTNER_MODEL_UNCERTAINTY = (0.3, 3e-4)
+PARTNER_MODEL_UNCERTAINTY = (VISCOUS_COUPLING_TOLERANCE, 3e-4)
 #: a result made before the correction (no ``partner_factor`` per ramp): the transient's span
 #: on drawn rigs, -0.29 % (a 250 urad ramp) .. +0.33 % (500 urad), as a bound on each side
 PARTNER_TRANSIENT_BOUND = 0.0035
@@ -312,7 +312,7 @@ class ChannelResult:
         # float's viscous coupling): taken out with the data sheet's h/c, the bound spanning each
         # h/c's tolerance (left in, the X-Y float's Y read 2-3 % high and its bound missed the
         # truth on 3 of 18 drawn rigs)
-        tol = PARTNER_MODEL_UNCERTAINTY[0]
+        tol = VISCOUS_COUPLING_TOLERANCE
         cc = self.coupling_carried
         return Estimate(
             self.tau_s / (1.0 + cc),

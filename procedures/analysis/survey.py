@@ -304,11 +304,6 @@ def cross_axis_coherence(
     return CrossCoherence((x, y), (lo_hz, hi_hz), m, null_mean, z, bool(z > CROSS_Z))
 
 
-#: how far a unit's viscous coupling h/c may lie from the data sheet's, a fraction (the
-#: stopwatch's partner model allows the same, ``PARTNER_MODEL_UNCERTAINTY``)
-H_OVER_C_TOL = 0.3
-
-
 def platform_gyro(axis: str) -> str:
     """The X-Y gyro's reading of platform ``axis`` alone, in urad (``decoupled_gyro``)."""
     return f"gyro_{axis.lower()}_platform"

@@ -44,12 +44,12 @@ from typing import Annotated, Any, Protocol
 
 from daq.plots import plot_coherence, plot_psd
 from daq.spectral import band_rms
+from drivers.rig_datasheet import VISCOUS_COUPLING_TOLERANCE
 from procedures.analysis.intervals import Estimate, add_figure
 from procedures.analysis.survey import (
     AXES,
     CHANNELS,
     COHERENCE_PAIRS,
-    H_OVER_C_TOL,
     BaselineMismatch,
     BaselineNet,
     SpanError,
@@ -353,7 +353,9 @@ class Survey(Procedure[SurveyParams]):
                     for a in AXES
                 }
 
-            variants = [coherent(1.0 + s) for s in (-H_OVER_C_TOL, H_OVER_C_TOL)]
+            variants = [
+                coherent(1.0 + s) for s in (-VISCOUS_COUPLING_TOLERANCE, VISCOUS_COUPLING_TOLERANCE)
+            ]
             net = {
                 a: with_allowance(e, [v[a].value for v in variants])
                 for a, e in coherent(1.0).items()
@@ -591,7 +593,9 @@ class Survey(Procedure[SurveyParams]):
                     for a in AXES
                 }
 
-            variants = [net(1.0 + s) for s in (-H_OVER_C_TOL, H_OVER_C_TOL)]
+            variants = [
+                net(1.0 + s) for s in (-VISCOUS_COUPLING_TOLERANCE, VISCOUS_COUPLING_TOLERANCE)
+            ]
             return {
                 a: dataclasses.replace(
                     b, estimate=with_allowance(b.estimate, [v[a].estimate.value for v in variants])
