@@ -1,8 +1,7 @@
 """The per-step loop of the simulated rig, compiled with numba.
 
 One step: evaluate the nonlinearities from the state at the step's start (writing their
-corrections into the input row), produce the outputs y = C x + D u (sampled mid-step,
-``simhw.plant.midstep_outputs``), advance
+corrections into the input row), produce the outputs y = C x + D u, advance
 x <- Ad x + Bd u. Matrices arrive in compressed form because the rig's model is block sparse
 (axes decouple in mode 3, the gyros only listen to the platform): about a third of the dense
 work. DESIGN.md section 9: a Python loop manages ~1e6 steps/s, numba ~6e7 simple steps/s.
@@ -87,9 +86,9 @@ class CompiledPlant:
             Csr.from_dense(disc.Ad),
             Csr.from_dense(disc.Bd[:, fast].T),
             disc.Bd[:, slow].copy(),
-            Csr.from_dense(disc.C),
-            Csr.from_dense(disc.D[:, fast].T),
-            disc.D[:, slow].copy(),
+            Csr.from_dense(plant.C),
+            Csr.from_dense(plant.D[:, fast].T),
+            plant.D[:, slow].copy(),
             np.array([n.kind for n in nl], np.int64),
             Csr.from_dense(zx),
             Csr.from_dense(zu),

@@ -431,52 +431,22 @@ def build_plant(cfg: SimConfig, relays: RelayState) -> Plant:
 
 @dataclass
 class DiscretePlant:
-    """Exact zero-order-hold discretization of a :class:`Plant` at step ``dt``, and the outputs
-    as sampled at the middle of each step (``midstep_outputs``)."""
+    """Exact zero-order-hold discretization of a :class:`Plant` at step ``dt``."""
 
     plant: Plant
     dt: float
     Ad: np.ndarray
     Bd: np.ndarray
-    C: np.ndarray  # y_k = C x_k + D u_k: the outputs half a step after x_k, u_k held
-    D: np.ndarray
 
 
 def discretize(plant: Plant, dt: float) -> DiscretePlant:
-    """Ad = e^(A dt), Bd = int_0^dt e^(A s) ds B, from one matrix exponential (Van Loan), and the
-    mid-step output matrices (``midstep_outputs``)."""
+    """Ad = e^(A dt), Bd = int_0^dt e^(A s) ds B, from one matrix exponential (Van Loan)."""
     nx, nu = plant.B.shape
     M = np.zeros((nx + nu, nx + nu))
     M[:nx, :nx] = plant.A * dt
     M[:nx, nx:] = plant.B * dt
     E = scipy.linalg.expm(M)
-    C, D = midstep_outputs(plant, dt)
-    return DiscretePlant(plant, dt, E[:nx, :nx], E[:nx, nx:], C, D)
-
-
-def midstep_outputs(plant: Plant, dt: float) -> tuple[np.ndarray, np.ndarray]:
-    """(C_h, D_h): the outputs at the middle of a step, y_k = C_h x_k + D_h u_k, with
-    C_h = C e^(A dt/2) and D_h = D + C int_0^(dt/2) e^(A s) ds B.
-
-    An input is held over the step (the noise sources, the DACs), so an output it reaches
-    directly (D: a gyro's pickoff noise on its pickoff) is that held value, while what the
-    plant integrates of it (the compensation network fed by the pickoff in Mode 4) responds to
-    the held value's middle. Sampled at the step's start, the two were half a step apart: in
-    Mode 4 the recorded pickoff led the network's input by 0.25 ms, which the network fit read
-    as w4 3-6 % high. At the middle they are sampled at one instant, as an ADC samples one
-    analogue voltage; every output moves by the same half step. Entries below 1e-13 of their
-    row's largest are dropped (e^(A dt/2) fills in; the kernel takes sparse rows)."""
-    nx, nu = plant.B.shape
-    M = np.zeros((nx + nu, nx + nu))
-    M[:nx, :nx] = plant.A * (dt / 2)
-    M[:nx, nx:] = plant.B * (dt / 2)
-    E = scipy.linalg.expm(M)
-    C = plant.C @ E[:nx, :nx]
-    D = plant.D + plant.C @ E[:nx, nx:]
-    for m in (C, D):
-        big = np.abs(m).max(axis=1, keepdims=True) if m.size else m
-        m[np.abs(m) < 1e-13 * big] = 0.0
-    return C, D
+    return DiscretePlant(plant, dt, E[:nx, :nx], E[:nx, nx:])
 
 
 def linearized_poles(cfg: SimConfig, mode: int = 3, axis: str | None = None) -> np.ndarray:

@@ -33,7 +33,7 @@ import scipy.signal
 
 from procedures.analysis.gap.grid import Grid
 from simhw.config import SimConfig
-from simhw.plant import RelayState, build_plant, discretize, midstep_outputs
+from simhw.plant import RelayState, build_plant, discretize
 from simhw.sampling import anti_alias_sos, internal_rate
 from simhw.simulator import Sources, ac_knee, ac_white_psd
 
@@ -322,9 +322,7 @@ class SpectralModel:
         aliases = _aliases(f_eval, fs, m)
         freqs = np.concatenate([np.nan_to_num(a, nan=0.0) for a in aliases] + [line_freqs])
         z = np.exp(2j * np.pi * freqs * dt)
-        # sampled as the simulator samples them: mid-step (simhw.plant.midstep_outputs)
-        Cm, Dm = midstep_outputs(plant, dt)
-        C, D = Cm[rows], Dm[np.ix_(rows, cols)]
+        C, D = plant.C[rows], plant.D[np.ix_(rows, cols)]
         H = zoh_response_modal(plant.A, plant.B[:, cols], C, D, dt, z)
         if H is None:  # eigenvectors too ill-conditioned: discretize and solve
             disc = discretize(plant, dt)
@@ -513,8 +511,8 @@ def step_response(
     disc = discretize(plant, dt)
     rows = [plant.outputs.index(c) for c in channels]
     b = disc.Bd[:, plant.inputs.index(input_name)]
-    d = disc.D[rows, plant.inputs.index(input_name)]
-    C = disc.C[rows]
+    d = plant.D[rows, plant.inputs.index(input_name)]
+    C = plant.C[rows]
     n = int(round(duration_s * rate_hz)) * m
     k_step = min(int(round(t_step_s * rate_hz)) * m, n)
     y = np.zeros((n, len(rows)))
