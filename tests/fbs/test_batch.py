@@ -198,17 +198,21 @@ def test_inspect_and_spectra_batches_give_what_serial_runs_give(runs, tmp_path, 
     r = fbs(
         "batch", command, *files, "--jobs", "2", "--args", " ".join(args) or "", "--out", str(out)
     )
-    assert r.returncode == 0, r.stderr
     got = by_file(lines_of(out))
     assert sorted(got) == sorted(files)
+    exits = []
     for f in files:
         s = fbs(*command.split("-"), f, "--json", *args)
-        assert s.returncode == 0, s.stderr
+        # 1: an analysis that measured none of its headline figures (a 95 s record at 50 Hz
+        # resolves no network corner on some seeds); the batch's exit is the worst of its files'
+        assert s.returncode in (0, 1), s.stderr
+        exits.append(s.returncode)
         # the same object but for when each was made (an analysis's result names its time:
         # ``without_elapsed`` left it out of the batch's)
         serial, batch = json.loads(s.stdout), dict(got[f]["result"])
         serial.pop("time", None)
         assert json.dumps(batch) == json.dumps(serial)
+    assert r.returncode == max(exits), r.stderr
     if command == "spectra":
         assert got[files[0]]["result"]["channels"]["gyro_x"]["octave_bands"] > 3
 
