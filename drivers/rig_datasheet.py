@@ -15,9 +15,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 GYRO_CHANNELS = ("X", "Y", "Z", "XRD")
-#: the channel sharing each channel's float: two two-degree-of-freedom gyros, X-Y (spin along
-#: platform Z) and X-Z (spin along Y, channels Z and XRD); viscous float drag couples a pair (II C.4.d)
-FLOAT_PARTNER = {"X": "Y", "Y": "X", "Z": "XRD", "XRD": "Z"}
+#: the two two-degree-of-freedom gyros' input-axis pairs (a, b), with (a, b, spin) right-handed
+#: (docs/simhw.md section 3): the X-Y gyro (spin along platform Z) and the X-Z gyro (spin along
+#: Y, channels Z and XRD); viscous float drag couples a pair (II C.4.d)
+GYRO_PAIRS = (("X", "Y"), ("Z", "XRD"))
+#: the channel sharing each channel's float
+FLOAT_PARTNER = {c: d for a, b in GYRO_PAIRS for c, d in ((a, b), (b, a))}
 #: how far a unit's viscous coupling h/c may lie from its data sheet's (Table 3), a fraction:
 #: what the procedures that use h/c carry in their intervals
 VISCOUS_COUPLING_TOLERANCE = 0.3

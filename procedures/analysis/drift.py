@@ -37,7 +37,7 @@ from typing import Protocol
 import numpy as np
 
 from daq.reader import RunFile
-from drivers.rig_datasheet import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS, GYRO_PAIRS
 from procedures.analysis import allan
 from procedures.analysis.intervals import Estimate, judged
 
@@ -50,9 +50,6 @@ def pickoff(ch: str) -> str:
     return f"gyro_{ch.lower()}"
 
 
-#: the two-degree-of-freedom gyros' input-axis pairs (a, b) with (a, b, spin) right-handed
-#: (docs/simhw.md section 3): the X-Y gyro and the X-Z gyro
-GYRO_PAIRS = (("X", "Y"), ("Z", "XRD"))
 #: a term is resolved only where it holds at least this share of the modelled Allan variance at
 #: the averaging time it is read (IEEE Std 952: a term is read where it dominates). Below it the
 #: fitted model's shapes, not the data, apportion the variance: over 50 default sim runs (N 0.005
@@ -264,9 +261,11 @@ def reconstruct_rate(
     return np.diff(x) * rate_hz + 0.5 * (integrand[1:] + integrand[:-1])
 
 
-def coupling_terms(channel: str, h_over_c: dict[str, float] | None) -> tuple[str | None, float]:
+def coupling_terms(channel: str, h_over_c: Mapping[str, float] | None) -> tuple[str | None, float]:
     """The other input axis of ``channel``'s gyro and the signed coupling coefficient of its
-    float rate in ``reconstruct_rate`` (0 without the rig's h/c)."""
+    float rate in ``reconstruct_rate`` (0 without the rig's h/c): sigma_a' = f_a + (c/h)_b sigma_b'
+    and sigma_b' = f_b - (c/h)_a sigma_a' (II C.4.d; the simulator's plant); the same signs undo
+    the coupling in the pickoffs (``procedures.analysis.survey.decoupled_gyro``)."""
     for a_ch, b_ch in GYRO_PAIRS:
         if h_over_c is None:
             break

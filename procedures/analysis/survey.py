@@ -48,7 +48,7 @@ that records is ``procedures.calibrations.survey``; the report's text and plots 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -62,6 +62,7 @@ from daq.filespectra import RunCsd, run_csd_matrix
 from daq.reader import RunFile
 from daq.spectral import band_rms, coherence
 from drivers.rig_datasheet import RigCalibration
+from procedures.analysis.drift import coupling_terms
 from procedures.analysis.intervals import LEVEL, Estimate, from_stderr, judged
 from procedures.analysis.transfer import BlockCsd, jackknife_se, unbiased_coherence
 
@@ -323,12 +324,28 @@ def decoupled_gyro(
     theta_X = g_X - (c/h)_Y g_Y and theta_Y = g_Y + (c/h)_X g_X. With the data sheet's
     (c/h)_X = 1 / 1.96 the Y pickoff alone read the platform's Y rms up to 17 % high on drawn rigs
     (half the X motion in it). ``scale`` multiplies both c/h (the allowance's check)."""
-    cx, cy = scale / h_over_c["X"], scale / h_over_c["Y"]
-    kx, ky = kg_V_per_urad["X"], kg_V_per_urad["Y"]
-    return {
-        platform_gyro("X"): {gyro("X"): 1.0 / kx, gyro("Y"): -cy / ky},
-        platform_gyro("Y"): {gyro("Y"): 1.0 / ky, gyro("X"): cx / kx},
-    }
+    scaled = {a: v / scale for a, v in h_over_c.items()}
+    out = {}
+    for axis in ("X", "Y"):
+        other, coupling = coupling_terms(axis, scaled)
+        assert other is not None  # X and Y share the X-Y gyro's float
+        out[platform_gyro(axis)] = {
+            gyro(axis): 1.0 / kg_V_per_urad[axis],
+            gyro(other): coupling / kg_V_per_urad[other],
+        }
+    return out
+
+
+def with_coupling_allowance(
+    nominal: Mapping[str, Estimate],
+    at_scale: Callable[[float], Mapping[str, float]],
+    tolerance: float,
+) -> dict[str, Estimate]:
+    """Each of ``nominal``'s figures (read with the data sheet's h/c) with the allowance for a
+    unit's h/c anywhere in its tolerance: ``at_scale(s)`` the figures' values with both c/h
+    multiplied by s (``decoupled_gyro``'s ``scale``), at s = 1 -+ ``tolerance``."""
+    variants = [at_scale(1.0 + s) for s in (-tolerance, tolerance)]
+    return {k: with_allowance(e, [v[k] for v in variants]) for k, e in nominal.items()}
 
 
 def with_allowance(est: Estimate, variants: Sequence[float]) -> Estimate:

@@ -63,7 +63,7 @@ from procedures.analysis.survey import (
     platform_gyro,
     spans_csd,
     survey_spectra,
-    with_allowance,
+    with_coupling_allowance,
 )
 from procedures.analysis.transfer import BlockCsd, TransferError, block_csd
 from procedures.calibrations.baseline import BaselineFileError, ClampedRecord, clamped_record
@@ -353,13 +353,11 @@ class Survey(Procedure[SurveyParams]):
                     for a in AXES
                 }
 
-            variants = [
-                coherent(1.0 + s) for s in (-VISCOUS_COUPLING_TOLERANCE, VISCOUS_COUPLING_TOLERANCE)
-            ]
-            net = {
-                a: with_allowance(e, [v[a].value for v in variants])
-                for a, e in coherent(1.0).items()
-            }
+            net = with_coupling_allowance(
+                coherent(1.0),
+                lambda s: {a: e.value for a, e in coherent(s).items()},
+                VISCOUS_COUPLING_TOLERANCE,
+            )
         except TransferError as exc:
             raise ProcedureError(f"survey: {exc}") from None
         base = self._baseline_net(blocks, kg_mv, cal.viscous_coupling_h_over_c)
@@ -593,15 +591,13 @@ class Survey(Procedure[SurveyParams]):
                     for a in AXES
                 }
 
-            variants = [
-                net(1.0 + s) for s in (-VISCOUS_COUPLING_TOLERANCE, VISCOUS_COUPLING_TOLERANCE)
-            ]
-            return {
-                a: dataclasses.replace(
-                    b, estimate=with_allowance(b.estimate, [v[a].estimate.value for v in variants])
-                )
-                for a, b in net(1.0).items()
-            }
+            nominal = net(1.0)
+            allowed = with_coupling_allowance(
+                {a: b.estimate for a, b in nominal.items()},
+                lambda s: {a: b.estimate.value for a, b in net(s).items()},
+                VISCOUS_COUPLING_TOLERANCE,
+            )
+            return {a: dataclasses.replace(b, estimate=allowed[a]) for a, b in nominal.items()}
         except (TransferError, BaselineMismatch, OSError) as exc:
             log.warning("survey: the baseline %s cannot be used: %s", rec.source, exc)
             return {a: none(f"the baseline's record cannot be used: {exc}") for a in AXES}
