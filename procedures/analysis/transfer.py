@@ -934,15 +934,9 @@ def fit_platform(
     f = resp.f[ok]
     rel = smoothed(np.hypot(resp.log_se[ok], resp.phase_se_rad[ok]))
     Z = platform_impedance(f, resp.H[ok], pc, ac, resp.target)
+    Z_blocks = [platform_impedance(f, Hb[ok], pc, ac, resp.target) for Hb in resp.H_blocks]
     x = _solve_jdk_irls(f, Z, rel)
-    xb = np.array(
-        [
-            _solve_jdk_irls(
-                f, platform_impedance(f, resp.H_blocks[b][ok], pc, ac, resp.target), rel
-            )
-            for b in range(resp.H_blocks.shape[0])
-        ]
-    )
+    xb = np.array([_solve_jdk_irls(f, Zb, rel) for Zb in Z_blocks])
     J, D, kk = (float(v) for v in x)
     res_db, res_deg, normalized = _residuals(
         platform_response(f, J, D, kk, pc, ac, resp.target),
@@ -984,7 +978,7 @@ def fit_platform(
         # which law k changes, so J's interval also holds the fit with k growing as ln f (which
         # read it 1-13 % high on the same rigs), the truth between the two.
         est["inertia_kg_m2"], note = _inertia_with_log_stiffness(
-            est["inertia_kg_m2"], f, Z, rel, resp, pc, ac, ok, normalized
+            est["inertia_kg_m2"], f, Z, Z_blocks, rel, resp.dof, normalized
         )
         notes.append(note)
     return ModelFit(
@@ -1008,28 +1002,17 @@ def _inertia_with_log_stiffness(
     e: Estimate,
     f: np.ndarray,
     Z: np.ndarray,
+    Z_blocks: Sequence[np.ndarray],
     rel: np.ndarray,
-    resp: Response,
-    pc: PlatformConstants,
-    ac: AutocollimatorConstants,
-    ok: np.ndarray,
+    dof: int,
     birge: float,
 ) -> tuple[Estimate, str]:
     """The inertia's interval widened to hold the fit whose stiffness grows as ln f (its own
-    jackknife interval, widened by the fit's Birge ratio as the first), and the note saying so."""
+    jackknife interval over the blocks' impedances ``Z_blocks``, widened by the fit's Birge ratio
+    as the first), and the note saying so."""
     x = _solve_jdk_irls(f, Z, rel, log_stiffness=True)
-    xb = np.array(
-        [
-            _solve_jdk_irls(
-                f,
-                platform_impedance(f, resp.H_blocks[b][ok], pc, ac, resp.target),
-                rel,
-                log_stiffness=True,
-            )[0]
-            for b in range(resp.H_blocks.shape[0])
-        ]
-    )
-    alt = from_stderr(float(x[0]), float(jackknife_se(xb)) * max(1.0, birge), dof=resp.dof)
+    xb = np.array([_solve_jdk_irls(f, Zb, rel, log_stiffness=True)[0] for Zb in Z_blocks])
+    alt = from_stderr(float(x[0]), float(jackknife_se(xb)) * max(1.0, birge), dof=dof)
     lo, hi = min(e.lo, alt.lo), max(e.hi, alt.hi)
     note = (
         f"the inertia's interval also holds the fit with a stiffness growing as ln f "

@@ -277,7 +277,6 @@ class Drift(Procedure[DriftParams]):
             total,
             pickoff_stats(chunks, kg),
             any(src != "nominal" for src in kg_sources.values()),
-            h_over_c is not None,
         )
         figures = [
             Figure(

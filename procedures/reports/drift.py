@@ -52,7 +52,6 @@ def markdown(
     total: int,
     pickoff: dict[str, tuple[float, float]],
     kg_measured: bool,
-    coupled: bool = False,
 ) -> str:
     nominal_note = (
         ""
@@ -71,14 +70,8 @@ def markdown(
         nominal_note,
         "**The gyro's input rate** is reconstructed from the float's equation of motion (thesis II C.1.a(8), "
         "III A): Omega_in = sigma' + sigma / (h/k) + r, sigma the pickoff angle V_g / K_g, h/k the float's "
-        "restraint time constant (data sheet, Table 3)"
-        + (
-            ", with the viscous cross-axis coupling of II C.4.d"
-            if coupled
-            else "; the viscous cross-axis coupling (II C.4.d) is left out: the rig's calibration does not carry "
-            "h/c"
-        )
-        + ". The caging loop's transfer cancels out of it; what remains of the loop is the "
+        "restraint time constant (data sheet, Table 3), with the viscous cross-axis coupling of "
+        "II C.4.d (h/c, data sheet). The caging loop's transfer cancels out of it; what remains of the loop is the "
         "pickoff's measurement noise n, as n' + n / (h/k), which no record can take apart from the rate.",
         "",
         "| channel | ARW N (urad/sqrt s), 95 % | read at tau (s) (share) | bias instability B (urad/s), 95 % | "
