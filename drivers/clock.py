@@ -24,6 +24,15 @@ class RigClock(Protocol):
     def demand(self, t: float) -> None:
         """Someone will wait for data up to rig time ``t``: a virtual clock runs to it."""
 
+    def horizon(self) -> float:
+        """The rig time a command sent now acts at: ``now()``, but on a virtual clock the
+        time someone demanded or a command was scheduled for (``at``), which the rig runs to."""
+
+    def at(self, t: float) -> None:
+        """The next command is for rig time ``t``: wait until then (hardware, a paced
+        simulation); a virtual clock does not wait, and a command sent next acts at ``t``.
+        A stream of set-points paced this way is timed by the rig, not by the host's reads."""
+
     def unix_time(self, t: float) -> float | None:
         """Wall-clock (Unix) time of rig time ``t``; None for a virtual clock. On a paced
         simulation it is the earliest time ``t`` can be reached (the rig may lag)."""
@@ -46,6 +55,12 @@ class WallClock:
 
     def demand(self, t: float) -> None:
         pass
+
+    def horizon(self) -> float:
+        return self.now()
+
+    def at(self, t: float) -> None:
+        self.sleep(t - self.now())
 
     def unix_time(self, t: float) -> float:
         return time.time() - (self.now() - t)

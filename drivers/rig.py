@@ -34,7 +34,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import partial
 from importlib.metadata import entry_points
@@ -68,6 +68,9 @@ from drivers.table import (
 from drivers.torquer import CanopenTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
+
+#: a set-point stream's reads (``Rig._stream``): about this much rig time at a time
+STREAM_READ_S = 0.1
 
 #: An event listener gets (rig time s, kind, text); the recorder writes them to /events.
 EventListener = Callable[[float, str, str], None]
@@ -206,31 +209,46 @@ class Rig:
         self.event("setpoint", f"command torque V_Td {axis} = {back:+.6f} V")
         return back
 
-    def stream_command_torque_V(self, axis: str, values_V, step: Callable[[], object]) -> int:
-        """V_Td on ``axis`` through ``values_V``, ``step()`` (the caller's acquisition) after
-        each: every value checked before it is sent and taken by the node (its SDO answer), the
-        last read back at the end (``confirm``), one event for the whole stream rather than one
-        per set-point. V_Td is set to 0 V afterwards, however the stream ends. Returns how many
-        set-points were sent."""
+    def stream_command_torque_V(
+        self,
+        axis: str,
+        values_V: Iterable[float],
+        period_s: float,
+        acquire: Callable[[float], object],
+    ) -> int:
+        """V_Td on ``axis`` through ``values_V``, one every ``period_s`` of rig time, the
+        caller's ``acquire(seconds)`` taking the samples as they go (``_stream``): every value
+        checked before it is sent and taken by the node (its SDO answer), the last read back at
+        the end (``confirm``), one event for the whole stream rather than one per set-point.
+        V_Td is set to 0 V afterwards, however the stream ends. Returns how many set-points
+        were sent."""
         return self._stream(
             f"command torque V_Td {axis}",
             partial(self.commands.put_command_torque_V, axis),
             partial(self.commands.set_command_torque_V, axis),
             values_V,
-            step,
+            period_s,
+            acquire,
         )
 
-    def stream_ac_bias_V(self, axis: str, values_V, step: Callable[[], object]) -> int:
-        """gamma_c on ``axis`` through ``values_V``, ``step()`` after each, as
-        ``stream_command_torque_V`` does V_Td (one SDO round trip per set-point instead of the
-        two of ``set_ac_bias_V``'s read-back; the last read back at the end; one event); 0 V
-        afterwards, however the stream ends. Returns how many set-points were sent."""
+    def stream_ac_bias_V(
+        self,
+        axis: str,
+        values_V: Iterable[float],
+        period_s: float,
+        acquire: Callable[[float], object],
+    ) -> int:
+        """gamma_c on ``axis`` through ``values_V``, as ``stream_command_torque_V`` does V_Td
+        (one SDO round trip per set-point instead of the two of ``set_ac_bias_V``'s read-back;
+        the last read back at the end; one event); 0 V afterwards, however the stream ends.
+        Returns how many set-points were sent."""
         return self._stream(
             f"autocollimator bias gamma_c {axis}",
             partial(self.commands.put_ac_bias_V, axis),
             partial(self.commands.set_ac_bias_V, axis),
             values_V,
-            step,
+            period_s,
+            acquire,
         )
 
     def _stream(
@@ -238,15 +256,30 @@ class Rig:
         what: str,
         put: Callable[[float], float],
         set_: Callable[[float], float],
-        values_V,
-        step: Callable[[], object],
+        values_V: Iterable[float],
+        period_s: float,
+        acquire: Callable[[float], object],
     ) -> int:
-        n = 0
+        """Set-point k at rig time t0 + k ``period_s`` (``RigClock.at``: hardware waits for it;
+        the sim rig's virtual clock schedules it and simulates the stream in blocks, one
+        physics block per read rather than per set-point), the samples taken ``STREAM_READ_S``
+        at a time, and the rest when the stream ends: in all ``period_s`` per set-point sent."""
+        if not (0 < period_s < float("inf")):
+            raise ValueError(f"{what}: set-point period {period_s!r} s must be a number > 0")
+        per_read = max(1, int(STREAM_READ_S / period_s + 1e-9))
+        t0 = self.clock.horizon()
+        n = owed = 0
         try:
             for v in values_V:
+                self.clock.at(t0 + n * period_s)
                 put(float(v))
                 n += 1
-                step()
+                owed += 1
+                if owed == per_read:
+                    acquire(owed * period_s)
+                    owed = 0
+            if owed:
+                acquire(owed * period_s)
             self.commands.confirm()
         finally:
             back = set_(0.0)

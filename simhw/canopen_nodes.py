@@ -520,7 +520,7 @@ class CanopenTorquerNode(CanopenDacNode):
     outputs = GYRO_CHANNELS
 
     def _apply(self, output: str, volts: float) -> None:
-        self.server.submit(lambda sim: sim.set_torquer_bias_V(output, volts))
+        self.server.submit(lambda sim: sim.set_torquer_bias_V(output, volts), inline=True)
 
 
 class CanopenCommandNode(CanopenDacNode):
@@ -532,9 +532,9 @@ class CanopenCommandNode(CanopenDacNode):
     def _apply(self, output: str, volts: float) -> None:
         kind, axis = output.split("_")
         if kind == "vtd":
-            self.server.submit(lambda sim: sim.set_command_torque_V(axis, volts))
+            self.server.submit(lambda sim: sim.set_command_torque_V(axis, volts), inline=True)
         else:
-            self.server.submit(lambda sim: sim.set_ac_bias_V(axis, volts))
+            self.server.submit(lambda sim: sim.set_ac_bias_V(axis, volts), inline=True)
 
 
 #: the simulated nodes that can speak CANopen, by name

@@ -103,9 +103,13 @@ class SimRigServer:
             clock=clock,
         )
         self._cond = threading.Condition()
-        #: (rig time due, fn): the demand when submitted (0: at once)
-        self._pending: list[tuple[float, Callable[[Simulator], None]]] = []
+        #: (rig time due, fn, inline): due at the demand or the horizon when submitted (0: at
+        #: once); an inline one (a set-point) may step inside a physics block
+        self._pending: list[tuple[float, Callable[[Simulator], None], bool]] = []
+        #: how far a host waits for the rig to run (virtual time: the physics runs to it)
         self._demand = 0.0
+        #: the rig time a host's next command is for (``SimClock.at``): nobody waits for it
+        self._horizon = 0.0
         self._time = self.sim.time_s
         self._null = {c: (0.0 if warm else 1.0) for c in GYRO_CHANNELS}
         self.snapshot = self._snap(None)
@@ -137,22 +141,36 @@ class SimRigServer:
         return time.monotonic() - self._wall0
 
     # ------------------------------------------------------------------ for the devices
-    def submit(self, fn: Callable[[Simulator], None]) -> None:
-        """Run ``fn(sim)`` on the physics thread at the rig time last demanded (virtual time),
-        or before the next block (paced): a command lands at a rig time that does not depend
-        on how far the physics thread happened to have got when it arrived. (A host's read
-        that finds its samples already there returns before the physics has taken up its
-        demand; "the next block" was then the one before or the one after it, by the host's
-        load.)"""
+    def submit(self, fn: Callable[[Simulator], None], *, inline: bool = False) -> None:
+        """Run ``fn(sim)`` on the physics thread at the rig time last demanded or scheduled
+        (``horizon``; virtual time), or before the next block (paced): a command lands at a
+        rig time that does not depend on how far the physics thread happened to have got when
+        it arrived. (A host's read that finds its samples already there returns before the
+        physics has taken up its demand; "the next block" was then the one before or the one
+        after it, by the host's load.) ``inline``: ``fn`` changes only the physics (a
+        set-point), so it may step inside a block (``Simulator.advance``'s events) rather
+        than end it; the ADC's own changes end a block."""
         with self._cond:
-            self._pending.append((self._demand, fn))
+            self._pending.append((max(self._demand, self._horizon), fn, inline))
             self._cond.notify_all()
 
     def demand(self, t: float) -> None:
+        """A host waits for the rig to run to ``t``: the physics runs to it."""
         with self._cond:
             if t > self._demand:
                 self._demand = t
                 self._cond.notify_all()
+
+    def schedule(self, t: float) -> None:
+        """A host's next command is for rig time ``t``; nobody waits for it, so the physics is
+        not woken: a stream of set-points then runs as one block, not one block each."""
+        with self._cond:
+            self._horizon = max(self._horizon, t)
+
+    def horizon(self) -> float:
+        """The rig time a command submitted now lands at (virtual time)."""
+        with self._cond:
+            return max(self._demand, self._horizon)
 
     @property
     def time_s(self) -> float:
@@ -195,22 +213,41 @@ class SimRigServer:
                     while k < len(self._pending) and self._samples_to(self._pending[k][0]) <= 0:
                         k += 1
                     todo, self._pending = self._pending[:k], self._pending[k:]
-                    for _, fn in todo:
+                    for _, fn, _ in todo:
                         fn(sim)
+                    events: list[tuple[int, Callable[[Simulator], None]]] = []
                     if self.paced:
                         n = max(1, round(self.paced_block_s * sim.rate_hz))
                     else:
+                        # the physics runs to the demand, and to any command but a set-point (a
+                        # host may wait for its answer: an ADC's STOP after a stream ended early,
+                        # the stream's set-points scheduled past the last read); no later
+                        # command is due before a pending one, so running to it is safe
+                        target = max(
+                            [self._demand] + [due for due, _, inline in self._pending if not inline]
+                        )
                         n = min(
-                            self._samples_to(self._demand),
+                            self._samples_to(target),
                             max(1, round(self.max_block_s * sim.rate_hz)),
                         )
-                        if self._pending:  # the block ends where the next command is due
-                            n = min(n, self._samples_to(self._pending[0][0]))
+                        # set-points due inside the block step there; any other command ends
+                        # the block where it is due. Every command due before the demand is
+                        # here: one submitted later is due at the demand or after it.
+                        for due, fn, inline in self._pending:
+                            at = self._samples_to(due)
+                            if at >= n:
+                                break
+                            if not inline:
+                                n = at  # an inline one due with it waits for the next block
+                                events = [e for e in events if e[0] < n]
+                                break
+                            events.append((at, fn))
+                        del self._pending[: len(events)]
                         if n <= 0:
                             if not todo:
                                 self._cond.wait(0.05)
                             continue
-                block = sim.advance(n)
+                block = sim.advance(n, events)
                 self.snapshot = self._snap(block)
                 self.stall_reason = "the ADC stream is not being read (device FIFO full)"
                 self.adc.on_block(block)
@@ -272,6 +309,15 @@ class SimClock:
     def demand(self, t: float) -> None:
         if self.virtual:
             self.server.demand(t)
+
+    def horizon(self) -> float:
+        return self.server.horizon() if self.virtual else self.now()
+
+    def at(self, t: float) -> None:
+        if self.virtual:
+            self.server.schedule(t)
+        else:
+            self.server.wait_time(t)
 
     def unix_time(self, t: float) -> float | None:
         return self.server.sim.clock.unix_time(t)

@@ -13,7 +13,7 @@ import dataclasses
 import logging
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -624,16 +624,34 @@ class Simulator:
         return 0.0 if self.relays.mode == 1 else 1.0
 
     # ------------------------------------------------------------------ stepping
-    def advance(self, n: int) -> Block:
-        """Simulate the next ``n`` output samples and return them as the ADC delivers them."""
+    def advance(
+        self, n: int, events: Sequence[tuple[int, Callable[[Simulator], object]]] = ()
+    ) -> Block:
+        """Simulate the next ``n`` output samples and return them as the ADC delivers them.
+
+        ``events``: (k, fn) in order of k, 0 <= k < n: ``fn(self)`` runs before output sample
+        k of the block, as between ``advance(k)`` and the rest: a set-point that steps inside
+        the block (``simhw.rig_server``: a stream of set-points simulated in one block rather
+        than one block each). The samples are those of the split run to the bit; only the
+        physics steps between events, the noise, pickup and ADC chain run once for the block.
+        ``fn`` may change the physics (set-points, relays, the table), not the ADC chain."""
         if n < 0:
             raise ValueError(f"sample count {n} must be >= 0")
+        ks = [k for k, _ in events]
+        if any(not 0 <= k < n for k in ks) or ks != sorted(ks):
+            raise ValueError(f"event samples {ks} must be ordered within 0..{n - 1}")
         t0 = self.time_s  # blocks always start on an output sample
         n_int = n * self.oversample
         chunks = []
         done = 0
+        i = 0
         while done < n_int:
+            while i < len(events) and events[i][0] * self.oversample <= done:
+                events[i][1](self)
+                i += 1
             m = n_int - done
+            if i < len(events):
+                m = min(m, events[i][0] * self.oversample - done)
             if self._spin_transient():
                 m = min(m, max(1, int(0.25 / self.dt)))
             chunks.append(self._run_internal(m))

@@ -379,18 +379,19 @@ class Excitation(Procedure[ExcitationParams]):
     def _inject(
         self, ctx: Context, volts_rms: float, seconds: float, keep: bool
     ) -> np.ndarray | None:
-        """``seconds`` of the excitation at ``volts_rms``: one V_Td set-point per ADC block."""
+        """``seconds`` of the excitation at ``volts_rms``: a V_Td set-point every ``update_s``."""
         p = self.params
         n = int(round(seconds * p.update_hz))
         x = np.resize(self._period(), n) * volts_rms  # whole periods, repeated
         blocks = []
 
-        def step() -> None:
-            got = ctx.acquire(self.update_s, keep=keep, chunk_s=self.update_s)  # type: ignore[call-overload]
+        def acquire(seconds: float) -> None:
+            got = ctx.acquire(seconds, keep=keep)  # type: ignore[call-overload]
             if keep:
                 blocks.append(got)
 
-        ctx.rig.stream_command_torque_V(p.axis, x, step)  # ends at 0 V, however it ends
+        # ends at 0 V, however it ends
+        ctx.rig.stream_command_torque_V(p.axis, x, self.update_s, acquire)
         return np.concatenate(blocks) if keep else None
 
     def _probe(self, ctx: Context) -> Probe:

@@ -173,9 +173,7 @@ class Hysteresis(Procedure[HysteresisParams]):
         values = (
             -amp_V * math.sin(2 * math.pi * (k + 0.5) / p.updates_per_cycle) for k in range(n)
         )
-        ctx.rig.stream_ac_bias_V(
-            p.axis, values, partial(ctx.acquire, self.update_s, keep=False, chunk_s=self.update_s)
-        )
+        ctx.rig.stream_ac_bias_V(p.axis, values, self.update_s, partial(ctx.acquire, keep=False))
         return Sweep(
             amplitude_urad=amplitude_urad,
             bias_amplitude_V=round(amp_V, 6),

@@ -112,6 +112,40 @@ def test_every_dac_reads_back_and_acts(rig):
     assert sim.relays.caging_inhibit == (True, False, True, False)
 
 
+def _streamed(scheduled: bool) -> np.ndarray:
+    """cmd_x and pa_x while V_Td steps every 4 ms on a fresh rig in Mode 3: the rig's own
+    stream (scheduled by the rig, read 0.1 s at a time) or each set-point followed by its read."""
+    values = 0.2 * np.sin(0.7 * np.arange(120))
+    with open_rig("sim?seed=3") as r:
+        r.set_mode(3)
+        r.wait(2.0)
+        r.adc.configure(["cmd_x", "pa_x"], 1000.0)
+        r.adc.start()
+        got = [r.adc.read(30).volts]
+        if scheduled:
+            r.stream_command_torque_V(
+                "X", values, 0.004, lambda s: got.append(r.adc.read(round(s * 1e3)).volts)
+            )
+        else:
+            for v in values:
+                r.commands.put_command_torque_V("X", float(v))
+                got.append(r.adc.read(4).volts)
+            r.set_command_torque_V("X", 0.0)
+        got.append(r.adc.read(30).volts)
+        r.adc.stop()
+        return np.concatenate(got)
+
+
+def test_a_stream_scheduled_by_the_rig_lands_where_reads_between_set_points_land_it():
+    """``Rig.stream_command_torque_V`` paces its set-points by the rig's clock and reads 0.1 s at
+    a time (the sim rig simulates the 0.1 s as one block, the set-points stepping inside it):
+    every set-point lands at the sample it lands at when a 4 ms read follows each, to the bit."""
+    scheduled, paced_by_reads = _streamed(True), _streamed(False)
+    assert scheduled.shape == paced_by_reads.shape == (30 + 480 + 30, 2)
+    assert np.ptp(scheduled[:, 0]) > 0.3  # the stream is in the record
+    assert np.array_equal(scheduled, paced_by_reads)
+
+
 def test_modes_1_2_3_4_with_spin_up_and_caging(rig):
     """Hold/select/release through 1-2-3, then 4 once the wheels are at speed and the gyros caged."""
     st = rig.relays.status()

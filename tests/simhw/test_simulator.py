@@ -27,6 +27,32 @@ def test_output_does_not_depend_on_how_the_run_is_cut_into_blocks():
     assert np.array_equal(whole, pieces)
 
 
+def test_set_points_inside_a_block_are_the_block_split_at_them():
+    """``advance(n, events)`` steps a set-point inside the block: the samples are those of the
+    run cut at every event, to the bit (the sim rig's streams rest on it)."""
+
+    def vtd(v):
+        return lambda sim: sim.set_command_torque_V("X", v)
+
+    def gc(v):
+        return lambda sim: sim.set_ac_bias_V("Y", v)
+
+    split = Simulator(rate_hz=200.0, seed=5, mode=3)
+    parts = [split.advance(3).volts]
+    for fn, k in ((vtd(0.4), 17), (gc(-0.2), 1), (vtd(-0.3), 79)):
+        fn(split)
+        parts.append(split.advance(k).volts)
+    whole = Simulator(rate_hz=200.0, seed=5, mode=3)
+    got = whole.advance(100, [(3, vtd(0.4)), (20, gc(-0.2)), (21, vtd(-0.3))]).volts
+    assert np.array_equal(got, np.concatenate(parts))
+    assert whole.vtd["X"] == -0.3 and whole.gamma_c["Y"] == -0.2
+    assert not np.array_equal(got, Simulator(rate_hz=200.0, seed=5, mode=3).advance(100).volts)
+    with pytest.raises(ValueError, match="ordered within 0..99"):
+        whole.advance(100, [(50, vtd(0.1)), (10, vtd(0.2))])
+    with pytest.raises(ValueError, match="ordered within 0..99"):
+        whole.advance(100, [(100, vtd(0.1))])
+
+
 def test_paced_clock_gives_the_same_samples_and_keeps_to_wall_time():
     import time
 
