@@ -24,6 +24,10 @@ FLOAT_PARTNER = {c: d for a, b in GYRO_PAIRS for c, d in ((a, b), (b, a))}
 #: how far a unit's viscous coupling h/c may lie from its data sheet's (Table 3), a fraction:
 #: what the procedures that use h/c carry in their intervals
 VISCOUS_COUPLING_TOLERANCE = 0.3
+#: how far a unit's pickoff scale K_g may lie from its data sheet's, a fraction: what a figure
+#: read through the data sheet's K_g carries (issue 38: units drawn x0.8-1.2 put XRD's K_TO 4 of
+#: 40 times outside an interval that took the restraint term as good to 20 %)
+PICKOFF_SCALE_TOLERANCE = 0.2
 AXES = ("X", "Y", "Z")
 EARTH_RATE_RAD_PER_S = 7.292115e-5
 #: the ADC's channels, volts (DESIGN.md section 5): autocollimator control and instrumentation,

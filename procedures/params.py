@@ -29,6 +29,24 @@ def prior_value(
     return float(nominal), "nominal"
 
 
+def prior_rel_half_width(
+    prior: Mapping[str, Mapping[str, Any]], source: str, key: str, channel: str, value: float
+) -> float | None:
+    """The relative 95 % half-width of ``value``, ``channel``'s ``key`` as ``prior_value`` gave
+    it from ``source``: the larger side of that summary's ``<key>_ci95`` about it. ``None``
+    where there is none: the data sheet's nominal value, or a summary without an interval."""
+    if source == "nominal":
+        return None
+    ci = ((prior.get(source) or {}).get(f"{key}_ci95") or {}).get(channel)
+    try:
+        lo, hi = (float(v) for v in ci or ())
+    except (TypeError, ValueError):
+        return None
+    if not (math.isfinite(hi - lo) and value):
+        return None
+    return max(abs(hi - value), abs(value - lo)) / abs(value)
+
+
 def prior_values(
     prior: Mapping[str, Mapping[str, Any]],
     procedure: str,

@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.stats
 
-from drivers.rig_datasheet import GYRO_CHANNELS
+from drivers.rig_datasheet import GYRO_CHANNELS, PICKOFF_SCALE_TOLERANCE
 from procedures.analysis.intervals import Estimate, judged
 from procedures.stepresult import StepResult
 
@@ -242,22 +242,14 @@ COLUMNS = ("P", "Q", "one", "x", "y", "z", "order")
 #: the bound on the restraint term's relative error from the data sheet's h/k (another unit of the
 #: type: the h/k of the thesis's four channels span 424-1072 s)
 RESTRAINT_UNCERTAINTY = 0.2
-#: the bound on a unit's K_g against the data sheet's, when no stopwatch result is at hand (issue
-#: 38: units drawn x0.8-1.2 put XRD's K_TO 4 of 40 times outside an interval that took the whole
-#: restraint term as good to 20 %: its K_g x0.72-0.76 of the data sheet's made the term 28 % small)
-PICKOFF_DATASHEET_UNCERTAINTY = 0.2
 
 
 def restraint_bound(pickoff_rel_uncertainty: float | None = None) -> float:
     """The restraint term sigma / (h/k), sigma = V_g / K_g, is off by the factor 1 / ((1 + e_K)
     (1 + e_h)) for relative errors e_K of K_g and e_h of h/k: at most 1 / ((1 - u_K)(1 - u_h)) - 1
-    for bounds u_K (the stopwatch's relative half-width, or ``PICKOFF_DATASHEET_UNCERTAINTY`` for
+    for bounds u_K (the stopwatch's relative half-width, or ``PICKOFF_SCALE_TOLERANCE`` for
     the data sheet's value) and u_h = ``RESTRAINT_UNCERTAINTY``."""
-    u_k = (
-        PICKOFF_DATASHEET_UNCERTAINTY
-        if pickoff_rel_uncertainty is None
-        else pickoff_rel_uncertainty
-    )
+    u_k = PICKOFF_SCALE_TOLERANCE if pickoff_rel_uncertainty is None else pickoff_rel_uncertainty
     return 1.0 / ((1.0 - min(u_k, 0.5)) * (1.0 - RESTRAINT_UNCERTAINTY)) - 1.0
 
 

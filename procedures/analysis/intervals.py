@@ -94,6 +94,25 @@ def from_stderr(
     return judged(value, value - q * se, value + q * se, correlation=correlation, with_=with_)
 
 
+def through_scale(est: Estimate, rel_half_width: float) -> Estimate:
+    """``est``, a figure read through a scale factor known to ``rel_half_width`` (95 %,
+    relative: a pickoff's K_g from the stopwatch, or the data sheet's tolerance), its interval's
+    half-width and the scale's share of the value combined in quadrature (GUM 5.1.6: the
+    relative uncertainties of a quotient add in quadrature); an unresolved figure keeps its why.
+    Without it a baseline's pickoff rms missed the truth on 9 of 80 drawn rigs, a K_g 0.2-0.4 %
+    off carrying it out of a +-0.1-0.3 % interval (issue 38)."""
+    if not (math.isfinite(est.value) and rel_half_width > 0):
+        return est
+    half = math.hypot(est.half_width, rel_half_width * abs(est.value))
+    mid = 0.5 * (est.lo + est.hi)
+    lo, hi = mid - half, mid + half
+    if est.lo >= 0:
+        lo = max(lo, 0.0)  # a figure that cannot be negative (an rms) stays so
+    if not est.resolved:
+        return Estimate(est.value, lo, hi, False, est.why)
+    return judged(est.value, lo, hi)
+
+
 def finite_json(obj: Any) -> Any:
     """``obj`` with every NaN or infinity None: strict JSON, where NaN is no number (a
     "± nan" read as a result)."""

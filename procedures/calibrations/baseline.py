@@ -32,6 +32,7 @@ import numpy as np
 
 from daq.plots import plot_psd
 from daq.reader import RunFile
+from drivers.rig_datasheet import PICKOFF_SCALE_TOLERANCE
 from procedures.analysis.baseline import (
     NEA_BAND_HZ,
     PICKOFF_BANDS_HZ,
@@ -41,10 +42,10 @@ from procedures.analysis.baseline import (
     pickoff_lines,
     psd_of,
 )
-from procedures.analysis.intervals import Estimate, add_figure
+from procedures.analysis.intervals import Estimate, add_figure, through_scale
 from procedures.analysis.transfer import TransferError, block_csd
 from procedures.paramlimits import OneOf, above, at_least, check_limits, sample_rate
-from procedures.params import prior_values
+from procedures.params import prior_rel_half_width, prior_values
 from procedures.procedure import (
     Analysis,
     Context,
@@ -266,7 +267,15 @@ class Baseline(Procedure[BaselineParams]):
             k: WhiteFlicker(figs[f"white_urad_per_rtHz.{k}"], figs[f"flicker_corner_hz.{k}"])
             for k in ("ctl", "inst")
         }
-        pick = {band: figs[f"pickoff_rms_urad.{band}"] for band in PICKOFF_BANDS_HZ}
+        # the rms in urad is the volts' over K_g: as good as K_g is (the stopwatch's interval,
+        # else the data sheet's tolerance)
+        kg_u = prior_rel_half_width(
+            self.prior, kg_src[p.axis], "K_g_mV_per_urad", p.axis, kg_mv[p.axis]
+        )
+        kg_u = PICKOFF_SCALE_TOLERANCE if kg_u is None else kg_u
+        pick = {
+            band: through_scale(figs[f"pickoff_rms_urad.{band}"], kg_u) for band in PICKOFF_BANDS_HZ
+        }
         with RunFile(file) as rf:
             x = rf.read([n["gyro"]], start, stop)[0]
         lines = pickoff_lines(

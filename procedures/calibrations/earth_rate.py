@@ -36,7 +36,7 @@ from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.earth_rate import G_AXES, Station, fit_earth_rate
 from procedures.analysis.intervals import add_figure
 from procedures.paramlimits import Each, Range, above, at_least, check_limits, fraction, sample_rate
-from procedures.params import prior_values
+from procedures.params import prior_rel_half_width, prior_values
 from procedures.procedure import Analysis, Context, Figure, Measurement, Procedure, Step
 from procedures.reports.earth_rate import markdown, plot_fits
 from procedures.rigsetup import InMode3, bring_to_mode3, mean_and_stderr, wait_settled
@@ -193,15 +193,8 @@ class EarthRate(Procedure[EarthRateParams]):
 
     def _kg_rel_half_width(self, ch: str, source: str, kg: float) -> float | None:
         """The relative 95 % half-width of the stopwatch K_g in use, ``None`` for the data
-        sheet's (then ``PICKOFF_DATASHEET_UNCERTAINTY`` bounds it)."""
-        if source == "nominal":
-            return None
-        ci = ((self.prior.get(source) or {}).get("K_g_mV_per_urad_ci95") or {}).get(ch)
-        try:
-            lo, hi = (float(v) for v in ci or ())
-        except (TypeError, ValueError):
-            return None
-        return max(abs(hi - kg), abs(kg - lo)) / kg if math.isfinite(hi - lo) and kg else None
+        sheet's (then ``PICKOFF_SCALE_TOLERANCE`` bounds it)."""
+        return prior_rel_half_width(self.prior, source, "K_g_mV_per_urad", ch, kg)
 
     def home(self, ctx: Context) -> TableAt:
         pos = ctx.rig.move_table(tilt_deg=0.0, spindle_deg=0.0)

@@ -57,7 +57,6 @@ numerics (crossing times, the restraint fit, the corrected readings) are
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
@@ -78,7 +77,7 @@ from procedures.analysis.stopwatch import (
     slope,
 )
 from procedures.paramlimits import Each, OneOf, Range, above, check_limits, fraction, sample_rate
-from procedures.params import prior_value
+from procedures.params import prior_rel_half_width, prior_value
 from procedures.procedure import (
     Analysis,
     Context,
@@ -185,14 +184,8 @@ class Stopwatch(Procedure[StopwatchParams]):
         sheet's nominal value (no measurement: K_g is then not resolved)."""
         if source == "given":
             return 0.0
-        if source == "nominal":
-            return None
-        ci = ((self.prior.get(source) or {}).get("K_TO_urad_per_s_per_V_ci95") or {}).get(ch)
-        try:
-            lo, hi = (float(v) for v in ci or ())
-        except (TypeError, ValueError):
-            return None  # an earth-rate summary without intervals (an older run): not a judged K_TO
-        return (hi - lo) / 2 / kto if math.isfinite(hi - lo) else None
+        # an earth-rate summary without intervals (an older run): not a judged K_TO
+        return prior_rel_half_width(self.prior, source, "K_TO_urad_per_s_per_V", ch, kto)
 
     def plan(self) -> list[Step[Any]]:
         p = self.params
