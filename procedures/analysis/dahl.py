@@ -884,7 +884,9 @@ def measure_lag(
     c_blocks = c_hp[blocks]
     around_c = scipy.fft.rfft(c_blocks, axis=1)
     C = around_c[:, harm]
-    Ch, A, D = (scipy.fft.rfft(hann * x[blocks], axis=1)[:, harm] for x in (c_hp, a_hp, d_hp))
+    Ch, A, D = (
+        scipy.fft.rfft(hann * x, axis=1)[:, harm] for x in (c_blocks, a_hp[blocks], d_hp[blocks])
+    )
     # the lines the command really carries: the strongest, well above its floor, above
     # LINE_MIN of its fundamental (a smooth command's numerical dust is no excitation), and
     # isolated: LINE_ISOLATION times the median of the bins 3-10 away on either side. A smooth
