@@ -5,8 +5,14 @@ them share one ``canopen.Network`` on the sim's virtual channel (``simhw.can_nod
 modules of a real rig share one bus: a frame wakes one receiving thread on the device side
 rather than one per node (five nodes each with its own network put ten thread hand-offs into
 every SDO round trip). The package gives the SDO server, the NMT
-slave, the heartbeat producer and the EMCY producer. This module adds what CiA 301 and
-CiA 401 ask of the device and LocalNode lacks:
+slave and the EMCY producer. This module adds what CiA 301 and CiA 401 ask of the device and
+LocalNode lacks:
+* a heartbeat producer whose frames leave in the order the state changed. LocalNode's is a
+  python-can cyclic task: a frame it has taken up goes out with the state of that moment, so
+  after an NMT start a frame sent at once with the new state could be followed by the task's
+  frame with the old one, and the host saw a node that "left the operational state by
+  itself" while it connected (one `make test` in a few). Here one thread sends every
+  heartbeat, with the state as it is when the frame is built, at once on a change of state;
 * the heartbeat consumer (0x1016), on the sim's deadline clock. When the host's heartbeat
   stops, the outputs go to their error values (0x6443/0x6444), EMCY 0x8130 is sent and the
   node goes pre-operational;
@@ -105,8 +111,19 @@ class CanopenSimNode:
         self._thread = threading.Thread(
             target=self._watch, name=f"sim-canopen-{self.name}", daemon=True
         )
+        # the NMT slave's heartbeat calls come here (module docstring); 0 s: no heartbeat
+        self._heartbeat_s = 0.0
+        self._heartbeat_due = threading.Event()
+        nmt = self.node.nmt
+        setattr(nmt, "start_heartbeat", self._start_heartbeat)  # noqa: B010 - as send_response
+        setattr(nmt, "stop_heartbeat", self._stop_heartbeat)  # noqa: B010
+        setattr(nmt, "update_heartbeat", self._heartbeat_due.set)  # noqa: B010
+        self._producer = threading.Thread(
+            target=self._produce, name=f"sim-canopen-{self.name}-heartbeat", daemon=True
+        )
         self.power_on()
         self._thread.start()
+        self._producer.start()
 
     # ------------------------------------------------------------------ state
     def power_on(self) -> None:
@@ -160,7 +177,7 @@ class CanopenSimNode:
     def connected(self, on: bool) -> None:
         self._connected = on
         if not on:
-            self.node.nmt.stop_heartbeat()
+            self._stop_heartbeat()
             self._last_host = self._mono()  # off the bus: its watchdog runs out
 
     # ------------------------------------------------------------------ the bus
@@ -196,14 +213,33 @@ class CanopenSimNode:
             self.node.set_data(var.index, var.subindex, var.get_data())
 
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        # the new state's heartbeat goes out at once (``_produce``): LocalNode's NMT slave
+        # subscribed first, has switched and said so
         if len(data) == 2 and data[0] == cf.NMT_START and data[1] in (0, self.node_id):
             self.latched = False  # back to work: outputs stay as they are
-            if self._connected and not self.stalled:
-                # the new state at once, besides the periodic heartbeat (LocalNode's NMT slave has
-                # already switched: it subscribed first), so the host's wait for it is short
-                self.network.send_message(
-                    0x700 + self.node_id, bytes([NMT_CODES[self.node.nmt.state]])
-                )
+
+    # ------------------------------------------------------------------ heartbeat producer
+    def _start_heartbeat(self, heartbeat_time_ms: int) -> None:
+        """0x1017 written, or the boot to pre-operational: a heartbeat now, then every period."""
+        self._heartbeat_s = heartbeat_time_ms / 1000.0
+        self._heartbeat_due.set()
+
+    def _stop_heartbeat(self) -> None:
+        self._heartbeat_s = 0.0
+        self._heartbeat_due.set()
+
+    def _produce(self) -> None:
+        """Every heartbeat from this one thread, built with the state of the moment it is sent:
+        a change of state wakes it, so the host hears the states in the order they were."""
+        while True:
+            self._heartbeat_due.wait(self._heartbeat_s or None)
+            self._heartbeat_due.clear()  # before the state is read: a later change sends again
+            if self._stop.is_set():
+                return
+            if self._heartbeat_s > 0:
+                state = NMT_CODES.get(self.node.nmt.state)
+                if state:  # 0, initialising: the NMT slave itself sent the boot-up frame
+                    self.network.send_message(0x700 + self.node_id, bytes([state]))
 
     def _on_host_heartbeat(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self._connected and len(data) == 1:
@@ -256,8 +292,9 @@ class CanopenSimNode:
         for timer in self._timers:
             timer.cancel()
             timer.join(timeout=1.0)
+        self._heartbeat_due.set()
         self._thread.join(timeout=1.0)
-        self.node.nmt.stop_heartbeat()
+        self._producer.join(timeout=1.0)
 
 
 class CanopenDacNode(CanopenSimNode):

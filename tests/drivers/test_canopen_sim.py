@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import time
 
+import can
 import canopen
 import pytest
 from canopen.objectdictionary import ODVariable
@@ -228,3 +229,26 @@ def test_a_lost_stream_is_a_protocol_error_at_confirm(rig):
     ):
         rig.torquers.confirm()
     assert isinstance(rig.faults.fault, ProtocolError)
+
+
+def test_a_node_says_its_states_in_the_order_they_changed(monkeypatch):
+    """A heartbeat frame that is slow on its way (a loaded host) still leaves before the next
+    one is built: after the host's NMT start the host never hears a node's old state after its
+    new one. (LocalNode's cyclic producer sent a frame taken up before the start after the
+    start's own frame, and a connect failed with "left the operational state by itself".)"""
+    from can.interfaces.virtual import VirtualBus
+
+    send = VirtualBus.send
+
+    def slow_heartbeat(self, msg, timeout=None):
+        if msg.arbitration_id & 0x780 == 0x700:
+            frame = can.Message(
+                arbitration_id=msg.arbitration_id, data=bytes(msg.data), is_extended_id=False
+            )
+            time.sleep(0.004)  # the frame is built; the state may change before it leaves
+            return send(self, frame, timeout)
+        return send(self, msg, timeout)
+
+    monkeypatch.setattr(VirtualBus, "send", slow_heartbeat)
+    for _ in range(4):
+        open_rig(URL + "&watchdog=1").close()  # NodeError at connect if a state came back
