@@ -111,7 +111,9 @@ class DeadlineSdoClient(SdoClient):
 class RigRemoteNode(canopen.RemoteNode):
     """A remote node whose SDO clients are ``DeadlineSdoClient`` on ``monotonic``."""
 
-    def __init__(self, node_id: int, eds: str, monotonic: Callable[[], float]) -> None:
+    def __init__(
+        self, node_id: int, eds: str | canopen.ObjectDictionary, monotonic: Callable[[], float]
+    ) -> None:
         self._monotonic = monotonic  # before the base class adds the default SDO channel
         super().__init__(node_id, eds)
 
@@ -148,7 +150,9 @@ class CanopenClient:
         self.raw_bits = raw_bits
         #: written at connect (after the heartbeat settings): error modes, error values
         self.configuration = list(configure)
-        self.node = RigRemoteNode(self.node_id, str(cf.eds_path(name)), link.monotonic)
+        self.node = RigRemoteNode(
+            self.node_id, cf.object_dictionary(name, self.node_id), link.monotonic
+        )
         self.node.sdo.RESPONSE_TIMEOUT = link.reply_timeout_s
         self.node.sdo.MAX_RETRIES = 1
         link.network.add_node(self.node)

@@ -7,9 +7,12 @@ dictionaries are in ``docs/canopen-plan.md``. The EDS file of each node is
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass
 from pathlib import Path
+
+import canopen
 
 from drivers.errors import ProtocolError
 
@@ -59,6 +62,23 @@ def eds_path(node: str) -> Path:
 
     device = catalogue().get(node)
     return device.eds if device is not None else core
+
+
+def object_dictionary(node: str, node_id: int) -> canopen.ObjectDictionary:
+    """The object dictionary of rig node ``node`` from its EDS (``eds_path``), parsed once for
+    each version of the file (path, mtime, size) and shared: parsing is configparser work, and
+    every rig opened needs ten (a host and a simulated side for each node), a third of opening
+    the simulated rig. The dictionary is the EDS's description and is only read (a node's
+    values live in its SDO server's data store or in the device); a copy for each caller cost
+    a fifth of opening the rig again."""
+    path = eds_path(node)
+    st = path.stat()
+    return _parsed_eds(str(path), st.st_mtime_ns, st.st_size, node_id)
+
+
+@functools.lru_cache(maxsize=64)
+def _parsed_eds(path: str, mtime_ns: int, size: int, node_id: int) -> canopen.ObjectDictionary:
+    return canopen.import_od(path, node_id)
 
 
 @dataclass(frozen=True)

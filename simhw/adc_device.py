@@ -79,6 +79,9 @@ class AdcDevice:
         self._hold_lines = 0  # command lines to receive before it goes on
         self._connected = True
         self._stop = threading.Event()
+        # a byte here wakes the command loop's select at disconnect (its threads are joined
+        # there: a poll period each was most of closing the rig)
+        self._wake_r, self._wake_w = os.pipe()
         self._threads = [
             threading.Thread(target=self._command_loop, name="sim-adc-commands", daemon=True),
             threading.Thread(target=self._write_loop, name="sim-adc-writer", daemon=True),
@@ -166,11 +169,13 @@ class AdcDevice:
         self._stop.set()
         with self._fifo_cond:
             self._fifo_cond.notify_all()
+        self._fifo.put(b"")  # wakes the writer
+        os.write(self._wake_w, b"x")  # wakes the command loop
         # Stop our threads before the descriptors go, so none acts on a reused fd number.
         for t in self._threads:
             if t is not threading.current_thread():
                 t.join(timeout=1.0)
-        for fd in (self.master, self._slave):
+        for fd in (self.master, self._slave, self._wake_r, self._wake_w):
             try:
                 os.close(fd)
             except OSError:
@@ -281,8 +286,8 @@ class AdcDevice:
         buf = bytearray()
         while not self._stop.is_set():
             try:
-                r, _, _ = select.select([self.master], [], [], 0.05)
-                if not r:
+                r, _, _ = select.select([self.master, self._wake_r], [], [], 0.05)
+                if self.master not in r:
                     continue
                 data = os.read(self.master, 4096)
             except (OSError, ValueError):

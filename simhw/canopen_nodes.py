@@ -56,7 +56,8 @@ log = logging.getLogger(__name__)
 
 ABORT_VALUE_RANGE = ABORT_RANGE[0]
 FULL_SCALE_V = 10.0
-NOTIFIER_CYCLE_S = 0.05
+#: the bus receive thread's poll period, s: closing the rig waits for it to notice
+NOTIFIER_CYCLE_S = 0.01
 #: the heartbeat byte of each of the package's NMT state names
 NMT_CODES = {name: code for code, name in canopen.nmt.NMT_STATES.items()}
 LSB_V = FULL_SCALE_V / 32768
@@ -81,7 +82,7 @@ class CanopenSimNode:
         self._mono = monotonic
         self.watchdog_s = watchdog_s
         self.network = network
-        self.node = canopen.LocalNode(self.node_id, str(cf.eds_path(self.name)))
+        self.node = canopen.LocalNode(self.node_id, cf.object_dictionary(self.name, self.node_id))
         self.network.add_node(self.node)
         # the SDO server behind a gate, for the fault injections
         self.network.unsubscribe(0x600 + self.node_id, self.node.sdo.on_request)
