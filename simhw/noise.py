@@ -73,6 +73,15 @@ def _gm_bank(state, a, b, xi, out_sum):
         out_sum[k] = acc
 
 
+@numba.njit(cache=True, nogil=True)
+def _add_held(out, held, pos, dec):
+    """out[k] += held[(pos + k) // dec]: slow samples held ``dec`` fine steps each, the first
+    already used for ``pos`` (the same additions, in the same order, as the indexed sum, with no
+    index array: this was a third of the whole rig's simulation)."""
+    for k in range(out.shape[0]):
+        out[k] += held[(pos + k) // dec]
+
+
 def knee_excess(f: np.ndarray | float, corner_hz: float, knee: float, slope: float) -> np.ndarray:
     """K(f) - 1 of the autocollimator's 1/f knee (``simhw.simulator.ac_knee``): with
     r = (fc/f)^slope, K = knee (1 + r) + (1 - knee) max(1, r), so K - 1 = knee r + (1 - knee)
@@ -416,10 +425,7 @@ class FlickerNoise:
                 s = np.empty(need)
                 _gm_bank(g["state"], g["a"], g["b"], xi, s)
                 g["held"] = np.concatenate([g["held"], s])
-            if dec == 1:
-                out += g["held"][:n]
-            else:
-                out += g["held"][(pos + np.arange(n)) // dec]
+            _add_held(out, g["held"], pos, dec)
             used, g["pos"] = divmod(pos + n, dec)
             g["held"] = g["held"][used:]
         return out
