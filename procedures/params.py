@@ -15,6 +15,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from drivers.rig_datasheet import PICKOFF_SCALE_TOLERANCE
 from procedures.procedure import Procedure
 
 
@@ -45,6 +46,16 @@ def prior_rel_half_width(
     if not (math.isfinite(hi - lo) and value):
         return None
     return max(abs(hi - value), abs(value - lo)) / abs(value)
+
+
+def pickoff_scale_rel_half_width(
+    prior: Mapping[str, Mapping[str, Any]], source: str, channel: str, kg: float
+) -> float:
+    """How well ``kg``, ``channel``'s K_g as ``prior_value`` gave it from ``source``, is known,
+    relative, 95 %: the stopwatch interval's half-width (``prior_rel_half_width``), else the
+    data sheet's tolerance ``PICKOFF_SCALE_TOLERANCE``."""
+    u = prior_rel_half_width(prior, source, "K_g_mV_per_urad", channel, kg)
+    return PICKOFF_SCALE_TOLERANCE if u is None else u
 
 
 def prior_values(

@@ -32,7 +32,6 @@ import numpy as np
 
 from daq.plots import plot_psd
 from daq.reader import RunFile
-from drivers.rig_datasheet import PICKOFF_SCALE_TOLERANCE
 from procedures.analysis.baseline import (
     NEA_BAND_HZ,
     PICKOFF_BANDS_HZ,
@@ -45,7 +44,7 @@ from procedures.analysis.baseline import (
 from procedures.analysis.intervals import Estimate, add_figure, through_scale
 from procedures.analysis.transfer import TransferError, block_csd
 from procedures.paramlimits import OneOf, above, at_least, check_limits, sample_rate
-from procedures.params import prior_rel_half_width, prior_values
+from procedures.params import pickoff_scale_rel_half_width, prior_values
 from procedures.procedure import (
     Analysis,
     Context,
@@ -269,10 +268,7 @@ class Baseline(Procedure[BaselineParams]):
         }
         # the rms in urad is the volts' over K_g: as good as K_g is (the stopwatch's interval,
         # else the data sheet's tolerance)
-        kg_u = prior_rel_half_width(
-            self.prior, kg_src[p.axis], "K_g_mV_per_urad", p.axis, kg_mv[p.axis]
-        )
-        kg_u = PICKOFF_SCALE_TOLERANCE if kg_u is None else kg_u
+        kg_u = pickoff_scale_rel_half_width(self.prior, kg_src[p.axis], p.axis, kg_mv[p.axis])
         pick = {
             band: through_scale(figs[f"pickoff_rms_urad.{band}"], kg_u) for band in PICKOFF_BANDS_HZ
         }

@@ -36,7 +36,7 @@ from drivers.rig_datasheet import GYRO_CHANNELS
 from procedures.analysis.earth_rate import G_AXES, Station, fit_earth_rate
 from procedures.analysis.intervals import add_figure
 from procedures.paramlimits import Each, Range, above, at_least, check_limits, fraction, sample_rate
-from procedures.params import prior_rel_half_width, prior_values
+from procedures.params import pickoff_scale_rel_half_width, prior_values
 from procedures.procedure import Analysis, Context, Figure, Measurement, Procedure, Step
 from procedures.reports.earth_rate import markdown, plot_fits
 from procedures.rigsetup import InMode3, bring_to_mode3, mean_and_stderr, wait_settled
@@ -191,11 +191,6 @@ class EarthRate(Procedure[EarthRateParams]):
             pickoff_V={c: float(m) for c, m in zip(GYRO_CHANNELS, pmean)},
         )
 
-    def _kg_rel_half_width(self, ch: str, source: str, kg: float) -> float | None:
-        """The relative 95 % half-width of the stopwatch K_g in use, ``None`` for the data
-        sheet's (then ``PICKOFF_SCALE_TOLERANCE`` bounds it)."""
-        return prior_rel_half_width(self.prior, source, "K_g_mV_per_urad", ch, kg)
-
     def home(self, ctx: Context) -> TableAt:
         pos = ctx.rig.move_table(tilt_deg=0.0, spindle_deg=0.0)
         return TableAt(tilt=pos.tilt_deg, spindle=pos.spindle_deg)
@@ -209,7 +204,10 @@ class EarthRate(Procedure[EarthRateParams]):
         kg, kg_from = prior_values(
             self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad
         )
-        kg_rel = {ch: self._kg_rel_half_width(ch, kg_from[ch], kg[ch]) for ch in GYRO_CHANNELS}
+        kg_rel: dict[str, float | None] = {
+            ch: pickoff_scale_rel_half_width(self.prior, kg_from[ch], ch, kg[ch])
+            for ch in GYRO_CHANNELS
+        }
         given = p.bias_instability_urad_per_s or 0.0
         bi, self.instability_sources = prior_values(
             self.prior,
