@@ -17,7 +17,15 @@ from collections.abc import Callable, Sequence
 import can
 import canopen
 from canopen.sdo import SdoClient
-from canopen.sdo.constants import RESPONSE_ABORTED
+from canopen.sdo.constants import (
+    ABORT_INVALID_COMMAND_SPECIFIER,
+    EXPEDITED,
+    REQUEST_DOWNLOAD,
+    RESPONSE_ABORTED,
+    RESPONSE_DOWNLOAD,
+    SDO_STRUCT,
+    SIZE_SPECIFIED,
+)
 from canopen.sdo.exceptions import SdoAbortedError, SdoCommunicationError
 
 from drivers import canopen_frames as cf
@@ -84,6 +92,20 @@ class DeadlineSdoClient(SdoClient):
         elif request[0] == 0x80:  # abort: the package leaves 0x0000:00
             request[1:4] = self._object
         super().send_request(request)
+
+    def download(self, index: int, subindex: int, data: bytes, force_segment: bool = False) -> None:
+        """The package's download; one of 1-4 bytes as its expedited download makes it (the
+        same request frame, the answer checked the same way), without the file-like streams
+        it goes through, which were a fifth of the host's share of a set-point's round trip."""
+        if force_segment or not 1 <= len(data) <= 4:
+            super().download(index, subindex, data, force_segment)
+            return
+        command = REQUEST_DOWNLOAD | EXPEDITED | SIZE_SPECIFIED | (4 - len(data)) << 2
+        request = SDO_STRUCT.pack(command, index, subindex) + bytes(data).ljust(4, b"\x00")
+        response = self.request_response(request)
+        if response[0] & 0xE0 != RESPONSE_DOWNLOAD:
+            self.abort(ABORT_INVALID_COMMAND_SPECIFIER)
+            raise SdoCommunicationError(f"Unexpected response 0x{response[0]:02X}")
 
     def read_response(self) -> bytes:
         deadline = self.monotonic() + self.RESPONSE_TIMEOUT
