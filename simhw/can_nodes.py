@@ -14,10 +14,14 @@ too loaded to schedule the node's thread).
 
 from __future__ import annotations
 
+import queue
+import threading
 import time
 from collections.abc import Callable, Collection
 from typing import TYPE_CHECKING
 
+import can
+import can.interfaces.virtual
 import canopen
 
 from drivers import canopen_frames as cf
@@ -48,11 +52,14 @@ class CanNodeHost:
         self.channel = channel
         #: every simulated node by name (tests look at their objects)
         self.nodes: dict[str, CanopenSimNode] = {}
-        #: the one network of the simulated nodes (one receiving thread for all of them)
+        #: the one network of the simulated nodes (on the virtual channel they take each
+        #: frame in the sender's thread, ``_deliver_inline``)
         self.network = canopen.Network()
         # its notifier's receive wait: the package's 1 s would hold up every close by up to that
         self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
         self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
+        if interface == "virtual":
+            _deliver_inline(self.network)
         try:
             classes = CANOPEN_NODE_CLASSES | device_nodes()
             for name in rn.node_ids():
@@ -81,3 +88,33 @@ class CanNodeHost:
         for node in self.nodes.values():
             node.close()
         self.network.disconnect()
+
+
+class _InlineDelivery(queue.Queue[can.Message]):
+    """Stands in for the simulated nodes' receive queue on the virtual channel: a frame put
+    there is handled at once, in the sending thread, one at a time (``_deliver_inline``);
+    nothing is ever queued."""
+
+    def __init__(self, listener: can.Listener) -> None:
+        super().__init__()
+        self._listener = listener
+        self._lock = threading.Lock()
+
+    def put(self, msg: can.Message, block: bool = True, timeout: float | None = None) -> None:
+        with self._lock:
+            self._listener.on_message_received(msg)
+
+
+def _deliver_inline(network: canopen.Network) -> None:
+    """The simulated nodes take each frame on the virtual channel in the thread that sent it,
+    rather than on a receiving thread of their own: the same frames in the same order, a
+    thread hand-off fewer per SDO round trip, and a frame the host sends is handled before
+    its send returns (as a real bus delivers it while the host goes on)."""
+    bus, notifier = network.bus, network.notifier
+    assert isinstance(bus, can.interfaces.virtual.VirtualBus) and notifier is not None
+    notifier.stop(NOTIFIER_CYCLE_S * 10)
+    network.notifier = None
+    inline = _InlineDelivery(network.listeners[0])
+    with can.interfaces.virtual.channels_lock:
+        bus.channel[bus.channel.index(bus.queue)] = inline
+        bus.queue = inline  # what shutdown takes off the channel

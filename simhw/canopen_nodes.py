@@ -2,11 +2,11 @@
 
 Each one is the ``canopen`` package's ``LocalNode``, built from the node's EDS file. All of
 them share one ``canopen.Network`` on the sim's virtual channel (``simhw.can_nodes``), as the
-modules of a real rig share one bus: a frame wakes one receiving thread on the device side
-rather than one per node (five nodes each with its own network put ten thread hand-offs into
-every SDO round trip). The package gives the SDO server, the NMT
-slave and the EMCY producer. This module adds what CiA 301 and CiA 401 ask of the device and
-LocalNode lacks:
+modules of a real rig share one bus; on the virtual channel a frame is handled in the
+thread that sent it (``simhw.can_nodes``: five nodes each with its own network put ten thread
+hand-offs into every SDO round trip, one network with its own receiving thread two). The
+package gives the SDO server, the NMT slave and the EMCY producer. This module adds what CiA
+301 and CiA 401 ask of the device and LocalNode lacks:
 * a heartbeat producer whose frames leave in the order the state changed. LocalNode's is a
   python-can cyclic task: a frame it has taken up goes out with the state of that moment, so
   after an NMT start a frame sent at once with the new state could be followed by the task's
@@ -56,7 +56,8 @@ log = logging.getLogger(__name__)
 
 ABORT_VALUE_RANGE = ABORT_RANGE[0]
 FULL_SCALE_V = 10.0
-#: the bus receive thread's poll period, s: closing the rig waits for it to notice
+#: the bus receive thread's poll period (a channel other than python-can's virtual one), s:
+#: closing the rig waits for it to notice
 NOTIFIER_CYCLE_S = 0.01
 #: the heartbeat byte of each of the package's NMT state names
 NMT_CODES = {name: code for code, name in canopen.nmt.NMT_STATES.items()}
@@ -185,7 +186,7 @@ class CanopenSimNode:
     def _on_sdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
         if self.reply_delay_s:
             # a host too busy to run the node's thread; the other nodes on the shared network
-            # answer meanwhile (a sleep here would hold up the whole bus's receive thread)
+            # answer meanwhile (a sleep here would hold up the sender, and with it the bus)
             timer = threading.Timer(
                 self.reply_delay_s, self._serve_sdo, (can_id, bytes(data), timestamp)
             )
