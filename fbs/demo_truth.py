@@ -339,10 +339,16 @@ def linearized_at_amplitude(
 
 
 def in_interval(value: float | None, iv: Sequence[float | None] | None) -> bool | None:
-    """Whether ``value`` lies in the closed interval ``iv`` (None where either is missing)."""
+    """Whether ``value`` lies in the closed interval ``iv`` (None where either is missing). An
+    open end (null in a summary file, infinite in memory) bounds nothing there: the hysteresis's
+    [0, inf) for a bearing without friction says the data bound nothing, and holds every truth
+    by construction; it is no 95 % interval, so it is not counted (None) either."""
     if value is None or not iv or iv[0] is None or iv[1] is None:
         return None
-    return float(iv[0]) <= value <= float(iv[1])
+    lo, hi = float(iv[0]), float(iv[1])
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return None
+    return lo <= value <= hi
 
 
 def binomial_tail(k: int, n: int, p: float = 0.05) -> float:

@@ -430,9 +430,17 @@ def _finish_report(
             log.error("%s: the report could not be written: %s", proc.name, exc)
     try:
         with _signals_held():  # a few ms: the summary is written whole, a signal acts after it
+            # strict JSON, as --json prints (a tool other than Python's json reads it too): an
+            # infinite or undefined number is null - an interval's open end, "no bound there"
             write_text_atomic(
                 out_dir / f"{stem}.json",
-                json.dumps(summary.to_json(), indent=1, default=_jsonable) + "\n",
+                json.dumps(
+                    finite_json(summary.to_json()),
+                    indent=1,
+                    default=lambda o: finite_json(_jsonable(o)),
+                    allow_nan=False,
+                )
+                + "\n",
             )
     except Exception as exc:
         log.error("%s: the summary could not be written: %s", proc.name, exc)

@@ -122,6 +122,8 @@ def finite_json(obj: Any) -> Any:
         return {k: finite_json(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
         return [finite_json(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return finite_json(obj.tolist())
     return obj
 
 

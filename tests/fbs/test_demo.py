@@ -21,7 +21,7 @@ from fbs.demo import (
     load_summaries,
     write_campaign_report,
 )
-from fbs.demo_truth import binomial_tail, dahl_equivalent_linear, max_misses
+from fbs.demo_truth import binomial_tail, dahl_equivalent_linear, in_interval, max_misses
 from procedures.procedure import Verdict
 from procedures.reports import thesis
 from procedures.runner import RunSummary
@@ -249,3 +249,14 @@ def test_amplitude_dependent_rows_take_the_bearing_at_the_test_amplitude():
 def test_max_misses_is_the_binomial_bound():
     assert max_misses(53) == 7 and binomial_tail(8, 53) <= 0.01 < binomial_tail(7, 53)
     assert math.isclose(binomial_tail(0, 10), 1.0)
+
+
+def test_an_open_ended_interval_is_not_counted_as_covering():
+    """Hysteresis on a bearing without friction gives [0, inf): the data bound nothing, and
+    such an "interval" holds every truth by construction. The report's coverage leaves it out
+    (None), in memory (inf) and read back from a summary file (null) alike; a finite interval
+    is counted either way."""
+    assert in_interval(0.0, (0.0, math.inf)) is None
+    assert in_interval(0.0, (0.0, None)) is None
+    assert in_interval(-1.0, (-math.inf, 0.0)) is None
+    assert in_interval(0.5, (0.0, 1.0)) is True and in_interval(2.0, (0.0, 1.0)) is False

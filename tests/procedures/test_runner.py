@@ -5,6 +5,7 @@ abort) leaving the rig safe and the file "aborted: <why>", and resume."""
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import signal
@@ -140,6 +141,29 @@ def test_steps_events_measurements_and_verdict(rig, tmp_path):
     assert s.report.exists() and "mean torquer X" in s.report.read_text()
     assert json.loads(s.file.with_suffix(".json").read_text())["verdict"] == "pass"
     assert s.json_values(Toy.json_keys) == {"mean_V": s.values["mean_V"], "file": str(s.file)}
+
+
+class OpenEnded(Toy):
+    """A toy whose analysis gives an interval open above and a figure it cannot define."""
+
+    def analyze(self, ctx):
+        a = super().analyze(ctx)
+        a.values |= {"mean_V_ci95": {"X": [0.0, math.inf]}, "spread_V": math.nan}
+        return a
+
+
+def test_the_summary_beside_the_run_is_strict_json_with_open_ends_null(rig, tmp_path):
+    """A summary file is read by tools other than Python's json (jq, a browser): no Infinity
+    or NaN in it. An interval's open end is null, as ``--json`` prints it."""
+    s = run_procedure(OpenEnded(), rig, tmp_path)
+    text = s.file.with_suffix(".json").read_text()
+
+    def refuse(token: str) -> None:
+        raise AssertionError(f"{token} in the summary: not JSON")
+
+    values = json.loads(text, parse_constant=refuse)["values"]
+    assert values["mean_V_ci95"] == {"X": [0.0, None]} and values["spread_V"] is None
+    assert s.values["mean_V_ci95"]["X"][1] == math.inf  # the run's own values keep it
 
 
 def test_limits_failed_gives_exit_code_1(rig, tmp_path):
