@@ -753,7 +753,11 @@ def write_campaign_report(
     ]
     path = out / "report.md"
     path.write_text("\n".join(lines))
-    (out / "figures.json").write_text(json.dumps([r.as_json() for r in rows], indent=1))
+    from procedures.analysis.intervals import finite_json  # on use: fbs --version imports this
+
+    # strict JSON for an audit's tools: an open interval end (inf) is null, as in the summaries
+    table = finite_json([r.as_json() for r in rows])
+    (out / "figures.json").write_text(json.dumps(table, indent=1, allow_nan=False))
     return path
 
 

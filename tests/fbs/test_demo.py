@@ -6,6 +6,7 @@ test reads a recorded campaign's summaries, ``tests/data/demo``, instead of runn
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import shutil
@@ -260,3 +261,27 @@ def test_an_open_ended_interval_is_not_counted_as_covering():
     assert in_interval(0.0, (0.0, None)) is None
     assert in_interval(-1.0, (-math.inf, 0.0)) is None
     assert in_interval(0.5, (0.0, 1.0)) is True and in_interval(2.0, (0.0, 1.0)) is False
+
+
+def test_the_figures_table_is_strict_json_with_open_ends_null(tmp_path):
+    """``figures.json`` (what a coverage audit reads) parses with any JSON reader: the
+    hysteresis's "interval" [0, inf) on a bearing without friction is [0, null] there, and
+    not counted as covering."""
+    run = _summary(
+        "hysteresis",
+        {
+            "To_Nm": {"X": None},
+            "stiffness_Nm_per_rad": {"X": None},
+            "stiffness_Nm_per_rad_ci95": {"X": [0.0, math.inf]},
+            "resolved": {"stiffness_Nm_per_rad": {"X": False}},
+        },
+        axis="X",
+    )
+    write_campaign_report(tmp_path, [run], SimTruth(SimConfig()), 10.0, 0)
+
+    def refuse(token: str) -> None:
+        raise AssertionError(f"{token} in figures.json: not JSON")
+
+    rows = json.loads((tmp_path / "figures.json").read_text(), parse_constant=refuse)
+    open_ended = [r for r in rows if r["interval"] and r["interval"][1] is None]
+    assert open_ended and all(r["covered"] is None for r in open_ended)
