@@ -244,13 +244,13 @@ COLUMNS = ("P", "Q", "one", "x", "y", "z", "order")
 RESTRAINT_UNCERTAINTY = 0.2
 
 
-def restraint_bound(pickoff_rel_uncertainty: float | None = None) -> float:
+def restraint_bound(pickoff_rel_uncertainty: float = PICKOFF_SCALE_TOLERANCE) -> float:
     """The restraint term sigma / (h/k), sigma = V_g / K_g, is off by the factor 1 / ((1 + e_K)
     (1 + e_h)) for relative errors e_K of K_g and e_h of h/k: at most 1 / ((1 - u_K)(1 - u_h)) - 1
-    for bounds u_K (the stopwatch's relative half-width, or ``PICKOFF_SCALE_TOLERANCE`` for
-    the data sheet's value) and u_h = ``RESTRAINT_UNCERTAINTY``."""
-    u_k = PICKOFF_SCALE_TOLERANCE if pickoff_rel_uncertainty is None else pickoff_rel_uncertainty
-    return 1.0 / ((1.0 - min(u_k, 0.5)) * (1.0 - RESTRAINT_UNCERTAINTY)) - 1.0
+    for bounds u_K (the stopwatch's relative half-width, or by default ``PICKOFF_SCALE_TOLERANCE``
+    for the data sheet's value: ``procedures.params.pickoff_scale_rel_half_width``) and u_h =
+    ``RESTRAINT_UNCERTAINTY``."""
+    return 1.0 / ((1.0 - min(pickoff_rel_uncertainty, 0.5)) * (1.0 - RESTRAINT_UNCERTAINTY)) - 1.0
 
 
 def operating_instability(rate_resid: np.ndarray) -> float:
@@ -289,7 +289,7 @@ def fit_channel(
     offset_deg: float | None = None,
     offset_sd_deg: float = 0.0,
     instability_urad_per_s: float = 0.0,
-    pickoff_rel_uncertainty: float | None = None,
+    pickoff_rel_uncertainty: float = PICKOFF_SCALE_TOLERANCE,
 ) -> ChannelFit:
     """One channel's multi-position fit from the stations (``Station``: ``tilt``, ``spindle``
     deg, the settled torquer means ``V`` and, for the restraint term, the pickoff means
@@ -456,7 +456,7 @@ def fit_earth_rate(
     restraint_s: dict[str, float] | None = None,
     pickoff_mV_per_urad: dict[str, float] | None = None,
     instability_urad_per_s: dict[str, float] | None = None,
-    pickoff_rel_uncertainty: dict[str, float | None] | None = None,
+    pickoff_rel_uncertainty: dict[str, float] | None = None,
 ) -> dict[str, ChannelFit]:
     """Every channel's fit from the stations in visiting order: the horizontal channels first
     (each profiles the base's azimuth offset), then Z at their mean offset. That offset's
@@ -475,7 +475,9 @@ def fit_earth_rate(
             offset_deg=offset,
             offset_sd_deg=offset_sd,
             instability_urad_per_s=(instability_urad_per_s or {}).get(ch) or 0.0,
-            pickoff_rel_uncertainty=(pickoff_rel_uncertainty or {}).get(ch),
+            pickoff_rel_uncertainty=(pickoff_rel_uncertainty or {}).get(
+                ch, PICKOFF_SCALE_TOLERANCE
+            ),
         )
 
     fits = {ch: one(ch, None) for ch in HORIZONTAL}

@@ -204,7 +204,7 @@ class EarthRate(Procedure[EarthRateParams]):
         kg, kg_from = prior_values(
             self.prior, "stopwatch", "K_g_mV_per_urad", GYRO_CHANNELS, cal.pickoff_scale_mV_per_urad
         )
-        kg_rel: dict[str, float | None] = {
+        kg_rel = {
             ch: pickoff_scale_rel_half_width(self.prior, kg_from[ch], ch, kg[ch])
             for ch in GYRO_CHANNELS
         }
