@@ -93,8 +93,8 @@ class CanLink:
         #: When the host cannot reach a node to make it safe, it stops its heartbeat: every
         #: node's watchdog then trips and the nodes go safe by themselves.
         self.heartbeat_suspended = False
-        # the receive thread's poll period: close waits for it to notice (a tenth of a second
-        # of every sim rig's close at 0.05 s, with the nodes' side)
+        # the receive thread's poll period: close waits for it to notice (at 0.05 s, a part
+        # of every sim rig's close)
         self._notifier = can.Notifier(bus, [self._on_message], timeout=0.01)
         self._hb_thread = threading.Thread(
             target=self._heartbeat_loop, name="can-heartbeat", daemon=True

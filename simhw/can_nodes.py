@@ -54,12 +54,16 @@ class CanNodeHost:
         self.nodes: dict[str, CanopenSimNode] = {}
         #: the one network of the simulated nodes (on the virtual channel they take each
         #: frame in the sender's thread, ``_deliver_inline``)
-        self.network = canopen.Network()
-        # its notifier's receive wait: the package's 1 s would hold up every close by up to that
-        self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
-        self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
         if interface == "virtual":
+            # no receiving thread: each frame is handled in its sender's (``_deliver_inline``)
+            bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
+            self.network = canopen.Network(bus)
             _deliver_inline(self.network)
+        else:
+            self.network = canopen.Network()
+            # its notifier's receive wait: the package's 1 s would hold up every close by that
+            self.network.NOTIFIER_CYCLE = NOTIFIER_CYCLE_S
+            self.network.connect(interface=interface, channel=channel, receive_own_messages=False)
         try:
             classes = CANOPEN_NODE_CLASSES | device_nodes()
             for name in rn.node_ids():
@@ -110,10 +114,8 @@ def _deliver_inline(network: canopen.Network) -> None:
     rather than on a receiving thread of their own: the same frames in the same order, a
     thread hand-off fewer per SDO round trip, and a frame the host sends is handled before
     its send returns (as a real bus delivers it while the host goes on)."""
-    bus, notifier = network.bus, network.notifier
-    assert isinstance(bus, can.interfaces.virtual.VirtualBus) and notifier is not None
-    notifier.stop(NOTIFIER_CYCLE_S * 10)
-    network.notifier = None
+    bus = network.bus
+    assert isinstance(bus, can.interfaces.virtual.VirtualBus) and network.notifier is None
     inline = _InlineDelivery(network.listeners[0])
     with can.interfaces.virtual.channels_lock:
         bus.channel[bus.channel.index(bus.queue)] = inline
