@@ -55,7 +55,6 @@ class CanNodeHost:
         #: the one network of the simulated nodes (on the virtual channel they take each
         #: frame in the sender's thread, ``_deliver_inline``)
         if interface == "virtual":
-            # no receiving thread: each frame is handled in its sender's (``_deliver_inline``)
             bus = can.Bus(interface="virtual", channel=channel, receive_own_messages=False)
             self.network = canopen.Network(bus)
             _deliver_inline(self.network)
