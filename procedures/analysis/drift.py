@@ -126,8 +126,8 @@ class ChannelDrift:
     def estimate(self, term: str) -> Estimate:
         """The figure ``term`` ("arw" or "bias") as a reported estimate: resolved by the
         intervals rule (``procedures.analysis.intervals.judged``) when the data show it and it
-        dominates where it is read (``MIN_SHARE_TO_RESOLVE``), else unresolved with its interval
-        (0 .. the bound the data support where the model has none of it). Where the scales used
+        dominates where it is read (``MIN_SHARE_TO_RESOLVE``), else unresolved with 0 .. its
+        one-sided 95 % upper limit (``allan.TermEstimate.upper``). Where the scales used
         are nominal (``scale_tol``), the interval is widened by their tolerance: the truth is the
         figure times K_unit / K_used (``figure_tolerance``), so lo (1 - t) .. hi (1 + t)."""
         e = self._estimate(term)
@@ -150,11 +150,12 @@ class ChannelDrift:
         if not math.isfinite(t.value):
             return Estimate(math.nan, t.lo, t.hi, False, t.why)
         if t.share < MIN_SHARE_TO_RESOLVE:
-            # the model's apportioning is no evidence of the term: 0 .. the model-free bound
+            # the model's apportioning is no evidence of the term: 0 .. its one-sided limit, or
+            # where it has none the model-free bound
             return Estimate(
                 t.value,
                 0.0,
-                max(t.bound, t.hi),
+                t.upper if math.isfinite(t.upper) else max(t.bound, t.hi),
                 False,
                 f"it holds only {100 * t.share:.0f} % of the modelled Allan variance where it is read "
                 f"(tau {t.tau_s:g} s): the model's shapes, not the data, apportion it",
@@ -165,7 +166,7 @@ class ChannelDrift:
             # less the other terms' modelled share, and where the term does not stand clear of them
             # the model's split decides it (issue 38: B [0.025, 0.081] for a true 0.019 under a large
             # N, whose white rate the fit had given B at the long taus)
-            return Estimate(t.value, 0.0, t.hi, False, e.why)
+            return Estimate(t.value, 0.0, t.upper_limit, False, e.why)
         return e
 
 
