@@ -3,6 +3,7 @@ design, and a Markdown summary setting each identified figure beside the data sh
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -60,7 +61,7 @@ def plot_response(
 
 
 def _fmt(v: Any) -> str:
-    return "-" if v is None else f"{v:.4g}"
+    return "-" if v is None or not math.isfinite(v) else f"{v:.4g}"
 
 
 def markdown(values: Mapping[str, Any], title: str) -> str:
