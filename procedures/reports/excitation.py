@@ -79,9 +79,13 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
     ]
     for k in ("gain", *NETWORK_CORNERS):
         ci = net.get(f"{k}_ci95") or [None, None]
+        iv = (
+            "not measured"
+            if _fmt(ci[0]) == _fmt(ci[1]) == "-"
+            else f"[{_fmt(ci[0])}, {_fmt(ci[1])}]"
+        )
         lines.append(
-            f"| {k} | {_fmt(net.get(k))} | [{_fmt(ci[0])}, {_fmt(ci[1])}] | {design[k]:g} | "
-            f"{net['resolved'].get(k)} |"
+            f"| {k} | {_fmt(net.get(k))} | {iv} | {design[k]:g} | {net['resolved'].get(k)} |"
         )
     for k, why in (net.get("why_unresolved") or {}).items():
         lines.append(f"\n* {k}: {why}")

@@ -23,6 +23,7 @@ from daq.runfile import RunWriter
 from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.transfer import (
     DESIGN_NETWORK,
+    SEARCH_FACTOR,
     TransferError,
     block_csd,
     file_blocks,
@@ -374,6 +375,27 @@ def test_a_corner_above_the_band_is_bounded_where_its_profile_crosses_the_limit(
         e = fit.estimates[k]
         assert e.lo <= p[k] <= e.hi, (k, e, p[k])
         assert e.hi / e.lo < 1.5, (k, e)
+
+
+def test_a_corner_the_band_does_not_see_is_not_measured_and_no_interval_passes_its_search(
+    tmp_path,
+):
+    """Issue 38 A: fitted over 0.5-10 Hz, w6 (7139 rad/s, 1136 Hz) read [61, 1.6e8] rad/s, a
+    leave-one-out spread far past the search (x1/20 .. x20 of its start) that no fit can return,
+    and counted as a 95 % interval holding its truth. A held corner's interval stays inside its
+    search, and one the record narrows nowhere in it is "not measured", with no interval."""
+    rng = np.random.default_rng(1)
+    p = draw_network(rng)
+    path = network_file(tmp_path, rng, p)
+    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
+    fit = fit_network(resp, 0.5, 10.0)
+    w6 = fit.estimates["w6_rad_per_s"]
+    assert not w6.resolved and math.isnan(w6.lo) and math.isnan(w6.hi), w6
+    assert w6.why.startswith("not measured"), w6.why
+    assert fit.values()["w6_rad_per_s"] is None
+    for k in ("w4_rad_per_s", "w5_rad_per_s"):
+        e = fit.estimates[k]
+        assert math.isnan(e.lo) or e.hi / e.lo <= SEARCH_FACTOR**2 * 1.001, (k, e)
 
 
 def test_the_fit_names_the_poles_in_order_whatever_order_it_finds_them_in(tmp_path):
