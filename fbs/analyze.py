@@ -34,11 +34,12 @@ excitation without a window (the ``excitation`` procedure's multisine: 16 s); ``
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from fbs import jsonout
 
 if TYPE_CHECKING:
     from procedures.analysis.hysteresis import HysteresisResult
@@ -116,7 +117,7 @@ def verdict_of(resolved: Any) -> str:
 
 def _aborted(args: argparse.Namespace, analysis: str, empty: dict[str, Any]) -> int:
     """Ctrl-C during an analysis with ``--json``: the object says so (exit 2)."""
-    print(json.dumps(header(analysis, args.file, "aborted", "aborted: interrupted") | empty))
+    print(jsonout.dumps(header(analysis, args.file, "aborted", "aborted: interrupted") | empty))
     print(f"fbs analyze {analysis}: interrupted", file=sys.stderr)
     return EXIT["aborted"]
 
@@ -151,7 +152,7 @@ def _hysteresis(args: argparse.Namespace) -> int:
             out = json_result(args)
         except KeyboardInterrupt:
             return _aborted(args, "hysteresis", _hysteresis_aborted(args))
-        print(json.dumps(out))
+        print(jsonout.dumps(out))
         return EXIT[out["verdict"]]
     res, written = _analyse(args)
     verdict = verdict_of(res.values()["resolved"])
@@ -363,7 +364,7 @@ def _transfer(args: argparse.Namespace) -> int:
         plot_response(png, resp=resp, fit=fit, design=None)
         out["plot"] = str(png)
     if args.json:
-        print(json.dumps(out))
+        print(jsonout.dumps(out))
         return EXIT[out["verdict"]]
     via = f" via {args.via}" if args.via else ""
     print(

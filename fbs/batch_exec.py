@@ -42,7 +42,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
-from fbs import batch_task
+from fbs import batch_task, jsonout
 from fbs.signals import ABORT_SIGNALS
 
 CLUSTER_EXTRA = "pip install 'fbs-hil[cluster]'"
@@ -322,7 +322,7 @@ class ResultsFile:
             os.ftruncate(self._fd, os.fstat(self._fd).st_size - torn_tail)
 
     def append(self, rec: dict[str, Any]) -> None:
-        data = (json.dumps(rec) + "\n").encode("utf-8")
+        data = (jsonout.dumps(rec) + "\n").encode("utf-8")
         with signals_held():
             view = memoryview(data)
             while view:

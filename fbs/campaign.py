@@ -40,14 +40,13 @@ written), or refused.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
-from fbs import batch_exec, campaign_task
+from fbs import batch_exec, campaign_task, jsonout
 from fbs.campaign_plan import RUNS_FILE, WORKFLOWS, Campaign, plan_of
 from procedures.analysis.gap.detection import curves
 from procedures.reports.detection_curves import curves_markdown, plot_curves
@@ -88,7 +87,7 @@ def _write_atomically(path: Path, text: str) -> None:
 
 
 def write_curves(c: Campaign, cv: dict[str, Any]) -> None:
-    _write_atomically(c.out / CURVES_JSON, json.dumps(cv, indent=1) + "\n")
+    _write_atomically(c.out / CURVES_JSON, jsonout.dumps(cv, indent=1) + "\n")
     _write_atomically(c.out / CURVES_MD, curves_markdown(cv))
     tmp = plot_curves(cv, c.out / f".{CURVES_PNG}.tmp.png")
     os.replace(tmp, c.out / CURVES_PNG)
@@ -223,7 +222,7 @@ def _campaign(args: argparse.Namespace) -> int:
         f"{cv['runs']} run(s), {cv['errors']} with an error; curves in {c.out}/{CURVES_MD} (.json, .png); exit {code}"
     )
     if args.json:
-        print(json.dumps(cv))
+        print(jsonout.dumps(cv))
     return code
 
 

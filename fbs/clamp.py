@@ -10,7 +10,8 @@ at zero, releasing with the command inputs at zero; a refusal says what to do (e
 from __future__ import annotations
 
 import argparse
-import json
+
+from fbs import jsonout
 
 
 def _clamp(args: argparse.Namespace) -> int:
@@ -23,7 +24,7 @@ def _clamp(args: argparse.Namespace) -> int:
             rig.unclamp()
         st = rig.relays.status()
     if args.json:
-        print(json.dumps({"clamped": st.clamped, "mode": st.mode}))
+        print(jsonout.dumps({"clamped": st.clamped, "mode": st.mode}))
     else:
         print(
             f"platform {'clamped (loops open)' if st.clamped else 'released (loops closed)'}; mode {st.mode}"

@@ -17,10 +17,11 @@ error naming the problem (exit 2).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from fbs import jsonout
 
 if TYPE_CHECKING:
     from procedures.analysis.gap.workflow import GapResult
@@ -88,7 +89,7 @@ def _gap(args: argparse.Namespace) -> int:
             out = json_result(args)
         except KeyboardInterrupt:
             print(
-                json.dumps(
+                jsonout.dumps(
                     header("gap", args.file, "aborted", "aborted: interrupted")
                     | NOTHING_FOUND
                     | {"file": str(args.file)}
@@ -96,7 +97,7 @@ def _gap(args: argparse.Namespace) -> int:
             )
             print("fbs gap: interrupted", file=sys.stderr)
             return EXIT["aborted"]
-        print(json.dumps(out))
+        print(jsonout.dumps(out))
         return EXIT[out["verdict"]]
     res = _analyse(args)
     print(

@@ -21,6 +21,8 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fbs import jsonout
+
 if TYPE_CHECKING:  # h5py, numpy and the reader load when the command runs, not with the parser
     import h5py
 
@@ -242,7 +244,7 @@ def _inspect(args: argparse.Namespace) -> int:
     from daq.contract import ContractError
 
     if args.json:  # a broken file is only the error (exit 2), stdout stays empty
-        print(json.dumps(json_result(args)))
+        print(jsonout.dumps(json_result(args)))
         return 0
     try:
         lines = describe(args.file, _max_events(args))
@@ -281,7 +283,7 @@ def _recover(args: argparse.Namespace) -> int:
     from daq.recover import recover
 
     r = recover(args.file, force=args.force)
-    print(json.dumps(recovery_json(r)) if args.json else r.summary())
+    print(jsonout.dumps(recovery_json(r)) if args.json else r.summary())
     return 0
 
 

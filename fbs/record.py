@@ -12,11 +12,11 @@ file whole, and the file's root attribute ``rig_safe_at_close`` says so.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from typing import Any
 
 from drivers.rig_datasheet import ADC_CHANNELS
+from fbs import jsonout
 from fbs.usage import EXIT_ERROR
 
 #: DESIGN.md section 5 names 19 channels: a recording's disk check assumes all of them unless
@@ -77,7 +77,7 @@ def _record(args: argparse.Namespace) -> int:
     result = json_result(args)
     unsafe = not result["rig_safe_at_close"]
     if args.json:
-        print(json.dumps(result))
+        print(jsonout.dumps(result))
     else:
         lost = (
             f", {result['lost']} samples lost in {len(result['gaps'])} gap(s)"

@@ -21,7 +21,6 @@ and report (beside it, whatever ``--out``), moving nothing on the rig.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 import math
 import os
@@ -32,6 +31,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from fbs import jsonout
 from fbs.usage import EXIT_CODES_HELP, one_line, version
 from procedures.calibrations import module_names
 from procedures.runlog import RunLog
@@ -108,7 +108,7 @@ def run_command(args: argparse.Namespace) -> int:
             extra={"progress": True},
         )
     if args.json:
-        print(json.dumps(summary.json_result(proc)))
+        print(jsonout.dumps(summary.json_result(proc)))
     else:
         made = summary.provenance
         sim = "simulated" if made.get("simulated") else "hardware"

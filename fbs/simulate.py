@@ -9,10 +9,11 @@ stays fast.
 from __future__ import annotations
 
 import argparse
-import json
 import logging
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from fbs import jsonout
 
 if TYPE_CHECKING:
     from simhw.config import SimConfig
@@ -137,7 +138,7 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
 def _simulate(args: argparse.Namespace) -> int:
     result = json_result(args)
     if args.json:
-        print(json.dumps(result))
+        print(jsonout.dumps(result))
         return 0
     print(
         f"wrote {result['file']}: mode {args.mode}, {args.duration:g} s at {args.rate:g} Hz"

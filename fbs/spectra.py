@@ -6,9 +6,10 @@ The numerics and the files written are ``procedures.analysis.channel_spectra``'s
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
+
+from fbs import jsonout
 
 if TYPE_CHECKING:
     from procedures.analysis.channel_spectra import SpectraResult
@@ -64,7 +65,7 @@ def json_result(args: argparse.Namespace) -> dict[str, Any]:
 
 def _run(args: argparse.Namespace) -> int:
     if args.json:
-        print(json.dumps(json_result(args)))
+        print(jsonout.dumps(json_result(args)))
         return 0
     result = _compute(args)
     for p in result.files:

@@ -66,3 +66,24 @@ def test_a_killed_writers_file_is_inspected_then_recovered(tmp_path, capsys):
     assert main(["inspect", str(p)]) == 0
     out = capsys.readouterr().out
     assert "SWMR" not in out and "status: aborted: not closed by its writer" in out
+
+
+def test_json_is_strict_where_a_file_holds_a_time_that_is_no_number(tmp_path, capsys):
+    """A file written by another system may carry an event at time NaN (a clock not yet set):
+    ``--json`` printed Python's bare ``NaN`` token, which RFC 8259 refuses (jq, a browser and
+    strict parsers reject the whole object). Every command's JSON now says null there
+    (``fbs.jsonout``)."""
+    import json
+
+    p = tmp_path / "r.h5"
+    with RunWriter(p, rig="other", mode=3, rate_hz=200.0, channels={"gyro_x": "V"}) as w:
+        w.append(np.zeros((100, 1)))
+        w.event(float("nan"), "note", "clock not set")
+    assert main(["inspect", str(p), "--json"]) == 0
+    text = capsys.readouterr().out
+
+    def refuse(token: str) -> None:
+        raise ValueError(f"not JSON: {token}")
+
+    out = json.loads(text, parse_constant=refuse)
+    assert [e["time_s"] for e in out["events"]] == [None]
