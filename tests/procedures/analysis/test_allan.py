@@ -265,7 +265,7 @@ def test_an_unresolved_term_is_bounded_at_its_level_not_at_the_ceiling(seed):
     ceiling: N = 0.005 under 0.6 urad of angle noise got 0 .. 0.19-0.20 (seeds 1-3), and on the
     40 drawn rigs of bench/coverage_all.py those ceilings lay 2-10x above the truth and held it
     137 times in 137. The limit is the fit's (or the read-off's at 2 level - 1): 0.058-0.097
-    here; with it the 136 rigs' unresolved N held the truth 134 times."""
+    here; with it the same rigs' unresolved N held the truth 135 times in 137."""
     _, arw, _ = _estimates(_angle_rate_flicker(seed, 0.6, 0.005, B_TRUE))
     assert 0.005 < arw.upper_limit < 0.6 * arw.bound
     assert arw.upper_limit <= arw.hi <= arw.bound
