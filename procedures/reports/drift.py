@@ -103,7 +103,9 @@ def markdown(
         "",
         "**Not resolved** means the record cannot tell the figure apart from the other terms (no share in "
         "the fitted model, nothing left after the others are taken off, or an interval wider than the "
-        "value): its value is not reported, only the interval 0 .. the bound the data support. On this "
+        "value): its value is not reported, only the interval 0 .. its one-sided 95 % upper limit (for N "
+        "the fit's: the read-off at the 90 % two-sided level, or the fitted coefficient plus 1.645 of its "
+        "standard deviation where the fit has none of it; for B the model-free bound above). On this "
         "rig the gyro's own angle random walk is usually unresolved: the differentiated pickoff noise "
         "(Allan deviation ~ 1/tau) and the bias instability's floor cover the N / sqrt(tau) line at "
         "every tau.",
