@@ -24,6 +24,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fbs import jsonout
 from fbs.demo_truth import OfflineRun, Truth, binomial_tail, in_interval, max_misses, param
 from procedures.reports import thesis
 
@@ -753,18 +754,14 @@ def write_campaign_report(
     ]
     path = out / "report.md"
     path.write_text("\n".join(lines))
-    from procedures.analysis.intervals import finite_json  # on use: fbs --version imports this
-
     # strict JSON for an audit's tools: an open interval end (inf) is null, as in the summaries
-    table = finite_json([r.as_json() for r in rows])
-    (out / "figures.json").write_text(json.dumps(table, indent=1, allow_nan=False))
+    (out / "figures.json").write_text(jsonout.dumps([r.as_json() for r in rows], indent=1))
     return path
 
 
 def load_summaries(folder: Path) -> list[RunSummary]:
     """The campaign's runs from the JSON summaries a campaign left in ``folder`` (campaign order),
     for writing its report again (``fbs.demo`` tests use a recorded campaign's)."""
-    import json
 
     from procedures.procedure import Verdict
     from procedures.runner import RunSummary

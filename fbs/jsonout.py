@@ -8,13 +8,12 @@ the summary beside every run (``procedures.runner``)."""
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 
 def dumps(obj: Any, **kwargs: Any) -> str:
     """``json.dumps`` of ``obj`` with every non-finite number ``null``; never a NaN token."""
     # on use: ``fbs --version`` imports the commands' modules, and this brings numpy
-    from procedures.analysis.intervals import finite_json
+    from procedures.analysis.intervals import finite_dumps
 
-    return json.dumps(finite_json(obj), allow_nan=False, **kwargs)
+    return finite_dumps(obj, **kwargs)

@@ -41,7 +41,7 @@ from daq.recorder import Acquisition
 from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status, make_folder
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
-from procedures.analysis.intervals import finite_json
+from procedures.analysis.intervals import finite_dumps, finite_json
 from procedures.procedure import (
     EVENT_STEP,
     EVENT_STEP_DONE,
@@ -434,13 +434,7 @@ def _finish_report(
             # infinite or undefined number is null - an interval's open end, "no bound there"
             write_text_atomic(
                 out_dir / f"{stem}.json",
-                json.dumps(
-                    finite_json(summary.to_json()),
-                    indent=1,
-                    default=lambda o: finite_json(_jsonable(o)),
-                    allow_nan=False,
-                )
-                + "\n",
+                finite_dumps(summary.to_json(), indent=1, default=_jsonable) + "\n",
             )
     except Exception as exc:
         log.error("%s: the summary could not be written: %s", proc.name, exc)

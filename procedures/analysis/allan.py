@@ -741,13 +741,14 @@ def term_estimate(
     # the other terms' modelled variance is uncertain too: its half-width added in quadrature
     # to each side of the chi-square interval
     z = float(scipy.stats.norm.ppf(0.5 + level / 2))
-    d_oth = z * model.others_sd(term, res.tau_s[i])
+    sd_oth = model.others_sd(term, res.tau_s[i])
+    d_oth = z * sd_oth
     c_val = (s2 - others) / basis[k]
     c_lo = c_val - math.hypot(s2 - lo**2, d_oth) / basis[k]
     c_hi = c_val + math.hypot(hi**2 - s2, d_oth) / basis[k]
     # the one-sided limit read there: the upper end of the two-sided interval at 2 level - 1
     _, hi1 = res.interval(i, edf[i], 2.0 * level - 1.0)
-    c_up = c_val + math.hypot(hi1**2 - s2, z1 * model.others_sd(term, res.tau_s[i])) / basis[k]
+    c_up = c_val + math.hypot(hi1**2 - s2, z1 * sd_oth) / basis[k]
     if bound_c > c_val:  # the bound caps the interval, unless this point lies above it
         c_hi, c_up = min(c_hi, bound_c), min(c_up, bound_c)
     tau = float(res.tau_s[i])

@@ -15,8 +15,9 @@ rule, so every procedure reports alike.
 
 from __future__ import annotations
 
+import json
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -125,6 +126,14 @@ def finite_json(obj: Any) -> Any:
     if isinstance(obj, np.ndarray):
         return finite_json(obj.tolist())
     return obj
+
+
+def finite_dumps(obj: Any, *, default: Callable[[Any], Any] | None = None, **kwargs: Any) -> str:
+    """``json.dumps`` of ``obj`` as strict JSON (RFC 8259): every NaN or infinity null
+    (``finite_json``), what ``default`` makes of an object too, never Python's ``NaN`` or
+    ``Infinity`` tokens (jq, a browser and other languages' parsers refuse them)."""
+    made = None if default is None else (lambda o: finite_json(default(o)))
+    return json.dumps(finite_json(obj), default=made, allow_nan=False, **kwargs)
 
 
 def add_figure(

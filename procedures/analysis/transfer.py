@@ -566,13 +566,17 @@ def _network_solution(
     def resid(x: np.ndarray) -> np.ndarray:
         return _log_residual(network_response(f, _network_params(x)), H, log_se, phase_se)
 
-    lo = start - math.log(SEARCH_FACTOR)
-    hi = start + math.log(SEARCH_FACTOR)
+    lo, hi = _search_range(start)
     return scipy.optimize.least_squares(resid, start, bounds=(lo, hi), x_scale=1.0, method="trf")
 
 
 #: a network corner is searched within this factor of its start (the quiet record's fit)
 SEARCH_FACTOR = 20.0
+
+
+def _search_range(start: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The (log) range each parameter is searched over: start / SEARCH_FACTOR .. start x it."""
+    return start - math.log(SEARCH_FACTOR), start + math.log(SEARCH_FACTOR)
 
 
 def _profile_envelope(
@@ -599,7 +603,7 @@ def _profile_envelope(
     154, by the grid's step.) Kept fits are read with their poles in order (``_canonical``)."""
     scale = max(1.0, 2.0 * best_cost / max(2 * len(f) - len(x), 1))
     limit = float(scipy.stats.chi2.ppf(LEVEL, 1)) * scale
-    lo, hi = start - math.log(SEARCH_FACTOR), start + math.log(SEARCH_FACTOR)
+    lo, hi = _search_range(start)
     low, high = x.copy(), x.copy()
     for j in map(int, np.flatnonzero(held)):
         free = np.arange(len(x)) != j
@@ -715,6 +719,7 @@ def fit_network(
     envelope = (
         _profile_envelope(f, H, ls, ps, x, start_x, held, float(sol.cost)) if held.any() else None
     )
+    s_lo, s_hi = _search_range(start_x)
     for k, name in enumerate(names):
         # interval on the log, reported on the value (a corner is positive)
         e = from_stderr(x[k], se[k], dof=resp.dof)
@@ -724,8 +729,7 @@ def fit_network(
             # no fit returns a value outside the search: a leave-one-out spread past it (w6
             # [12.6, 1.6e7] rad/s on a drawn rig, searched over 258-103,000) says only that the
             # replicates reached its edges
-            s_lo, s_hi = start_x[k] - math.log(SEARCH_FACTOR), start_x[k] + math.log(SEARCH_FACTOR)
-            e = Estimate(e.value, max(e.lo, s_lo), min(e.hi, s_hi), False)
+            e = Estimate(e.value, max(e.lo, s_lo[k]), min(e.hi, s_hi[k]), False)
         c = np.delete(np.abs(np.nan_to_num(corr[k])), k)
         worst = int(np.argmax(c)) if c.size else 0
         other = [n for i, n in enumerate(names) if i != k][worst]
