@@ -364,10 +364,15 @@ def _clone(obj: Any) -> Any:
         return {k: _clone(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return type(obj)(_clone(v) for v in obj)
-    new = copy.copy(obj)  # a section (dataclass): its scalars are shared, its containers cloned
-    for name, v in vars(obj).items():
-        if not isinstance(v, _IMMUTABLE):
-            setattr(new, name, _clone(v))
+    # a section (dataclass): its scalars shared, its containers cloned; made as copy.copy makes
+    # it (no __init__, so no validation), without copy's protocol lookups (a fit copies a
+    # config per trial)
+    if not dataclasses.is_dataclass(obj):
+        return copy.deepcopy(obj)
+    new = object.__new__(type(obj))
+    new.__dict__.update(
+        {k: v if isinstance(v, _IMMUTABLE) else _clone(v) for k, v in vars(obj).items()}
+    )
     return new
 
 

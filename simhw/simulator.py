@@ -10,6 +10,7 @@ how a run is cut into blocks.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import math
 import warnings
@@ -111,11 +112,20 @@ def ac_white_psd(
     channel (second-order filter w, zeta; eq. 3.21) shows ``nea_urad`` rms in 0.1-100 Hz
     when the noise's PSD is W K(f) (``ac_knee``: a 1/f part of that slope meeting the white
     level at ``corner_hz`` with that knee; Table 1, Fig. 32)."""
+    return (nea_urad * URAD) ** 2 / _nea_gain(
+        float(corner_hz), float(w), float(zeta), float(knee), float(slope)
+    )
+
+
+@functools.lru_cache(maxsize=1024)
+def _nea_gain(corner_hz: float, w: float, zeta: float, knee: float, slope: float) -> float:
+    """The integral of K(f) |H_ctl(f)|^2 over the NEA band (``ac_white_psd``). Kept per shape:
+    a model of the spectra builds the sources once per trial, and this integral over 4000
+    points was a third of that."""
     f = np.geomspace(*NEA_BAND_HZ, 4000)
     s = 2j * math.pi * f
     h2 = np.abs(w * w / (s * s + 2 * zeta * w * s + w * w)) ** 2
-    gain = np.trapezoid(ac_knee(f, corner_hz, knee, slope) * h2, f)
-    return (nea_urad * URAD) ** 2 / gain
+    return float(np.trapezoid(ac_knee(f, corner_hz, knee, slope) * h2, f))
 
 
 def pickoff_white_psd(rms_urad: float, lines: list) -> float:
