@@ -370,7 +370,7 @@ def _clone(obj: Any) -> Any:
     if not dataclasses.is_dataclass(obj):
         return copy.deepcopy(obj)
     new = object.__new__(type(obj))
-    new.__dict__.update(
+    vars(new).update(
         {k: v if isinstance(v, _IMMUTABLE) else _clone(v) for k, v in vars(obj).items()}
     )
     return new
