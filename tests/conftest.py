@@ -22,9 +22,9 @@ settings.load_profile("fbs")
 
 def pytest_configure(config):
     """One BLAS thread in each process of the suite, as in a batch worker (``fbs.batch_task``):
-    `make test` runs a worker per core, and OpenBLAS's own threads on a core another worker
-    holds wait for each other (a 2160x39x44 complex product of the gap model took 8 ms so, 0.8
-    ms with one thread, on a busy 2-core box). Set before the xdist workers and the `fbs`
+    `make test` runs a worker per core and one more, and OpenBLAS's own threads on a core another
+    worker holds wait for each other (a 2160x39x44 complex product of the gap model took 8 ms
+    so, 0.8 ms with one thread, on a busy 2-core box). Set before the xdist workers and the `fbs`
     processes of the tests start, and held for the libraries this process has loaded."""
     for var in BLAS_THREAD_VARS:
         os.environ.setdefault(var, "1")
@@ -32,7 +32,7 @@ def pytest_configure(config):
 
 
 def pytest_collection_modifyitems(config, items):
-    """For ``make test``'s ``pytest -n auto --dist loadfile`` (a file to a worker, so a module
+    """For ``make test``'s ``pytest -n N --dist loadfile`` (a file to a worker, so a module
     fixture is made once): the files with end-to-end runs on the sim rig (``slow``) first, so
     the long ones start at once and the short ones fill in around them, instead of one long
     file starting last and running alone. Within a file, the order is the file's."""
