@@ -158,8 +158,8 @@ def test_not_even_force_repairs_a_file_its_writer_holds_open(tmp_path):
 
 
 def test_force_repairs_a_file_whose_writer_pid_now_names_another_process(tmp_path):
-    """The writer is dead but its pid is taken (here: this test's own process, which does not
-    have the file open): force repairs it, without force it is refused."""
+    """The writer is dead but its pid is taken (here: a live process that does not have the file
+    open): force repairs it, without force it is refused."""
     p = tmp_path / "dead.h5"
     _run(KILLED_WRITER, p)
     with h5py.File(p, "r", swmr=True) as f:
@@ -168,15 +168,25 @@ def test_force_repairs_a_file_whose_writer_pid_now_names_another_process(tmp_pat
 
     writer = writer if isinstance(writer, str) else writer.decode()
     dead_pid = re.search(r"pid (\d+) on ", writer).group(1)
-    ours = str(os.getpid()).rjust(
-        len(dead_pid), "0"
-    )  # same length: the attribute is patched in place
-    if len(ours) > len(dead_pid):
-        pytest.skip(f"this process's pid {ours} is longer than the dead writer's {dead_pid}")
-    _rewrite_writer(p, writer.replace(f"pid {dead_pid} on ", f"pid {ours} on "))
-    with pytest.raises(RunFileError, match="is still running; stop it first"):
-        recover(p)
-    assert recover(p, force=True).samples == 300
+    # The attribute is patched in place, so the live pid must be no longer than the dead one
+    # (zero-padded to its length). This process's pid may not be (the pids wrapped between its
+    # start and the writer's: 31692 against 2742 once, and the test was skipped), so a process
+    # started after the writer stands in: its pid follows the writer's, and so has its length
+    # unless the two straddle a power of ten.
+    with subprocess.Popen(
+        [sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE
+    ) as other:
+        try:
+            live = next((q for q in (other.pid, os.getpid()) if len(str(q)) <= len(dead_pid)), None)
+            if live is None:
+                pytest.skip(f"no live pid as short as the dead writer's {dead_pid}")
+            taken = str(live).rjust(len(dead_pid), "0")
+            _rewrite_writer(p, writer.replace(f"pid {dead_pid} on ", f"pid {taken} on "))
+            with pytest.raises(RunFileError, match="is still running; stop it first"):
+                recover(p)
+            assert recover(p, force=True).samples == 300
+        finally:
+            other.communicate(b"", timeout=30)
 
 
 def _rewrite_writer(path, text: str) -> None:
