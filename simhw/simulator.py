@@ -121,7 +121,7 @@ def ac_white_psd(
 def _nea_gain(corner_hz: float, w: float, zeta: float, knee: float, slope: float) -> float:
     """The integral of K(f) |H_ctl(f)|^2 over the NEA band (``ac_white_psd``). Kept per shape:
     a model of the spectra builds the sources once per trial, and this integral over 4000
-    points was a third of that."""
+    points was over half of that."""
     f = np.geomspace(*NEA_BAND_HZ, 4000)
     s = 2j * math.pi * f
     h2 = np.abs(w * w / (s * s + 2 * zeta * w * s + w * w)) ** 2
