@@ -30,9 +30,10 @@ check: $(STAMP)
 # One pytest worker per core and one more (pytest-xdist), a file to a worker (its module fixtures
 # made once); the files of end-to-end runs first (tests/conftest.py). The extra worker fills what
 # the others leave idle - console tests that wait on their pilot, runs polled from outside, the
-# last files: on an idle 2-core box 3 workers took 16 min 37 s, 2 took 17 min 44 s - 18 min 50 s
-# (cores busy 91 % against 82 %), 4 took 16 min 56 s. (--dist loadgroup would spread a file's
-# tests, but xdist 3.8 cannot name groups under pytest 9: every test landed anywhere.)
+# last files: on an idle 2-core box 3 workers took 16 min 9 s - 16 min 53 s (four fresh clones),
+# 2 took 17 min 44 s - 18 min 50 s (cores busy 91 % against 82 %), 4 took 16 min 56 s.
+# (--dist loadgroup would spread a file's tests, but xdist 3.8 cannot name groups under pytest 9:
+# every test landed anywhere.)
 # The sim rig runs in virtual time: a busy machine changes how long a test takes, not its verdict.
 TEST_WORKERS ?= $(shell echo $$(( $$(nproc 2>/dev/null || echo 1) + 1 )))
 test: check
