@@ -156,9 +156,10 @@ def drift_on_the_float_urad2(cfg: SimConfig, axis: str, lo_hz: float, hi_hz: flo
     """Variance (urad^2) in ``lo..hi`` Hz of the pickoff reading that the gyro's own random drift
     (angle random walk, bias instability, rate random walk) makes: in the baseline's record the
     gyros spin, caged, on the clamped platform (Ch. V B), so the float integrates the drift rate,
-    sigma' = omega_d - sigma / (h/k) (II C.1.a), under a caging loop of 0.1 rad/s. It is the
-    gyro's signal, not the pickoff's electrical noise, but the pickoff shows it: at an ARW of
-    0.5 urad/sqrt(s) it was +91 % of the 1-50 Hz band's power at 1-2 Hz, +2.2 % of its rms.
+    sigma' = omega_d - sigma / (h/k) (II C.1.a) with the X-Y pair's viscous coupling (II C.4.d),
+    under a caging loop of 0.1 rad/s. It is the gyro's signal, not the pickoff's electrical
+    noise, but the pickoff shows it: on a drawn rig with an ARW of 0.5 urad/sqrt(s) it was 91 %
+    on top of the pickoff noise's power at 1-2 Hz, 1.6 % of the 1-50 Hz rms.
     The plant's response from the drift input to the pickoff (state space, solved per
     frequency) times the drift's PSD, integrated on a log grid."""
     import numpy as np
