@@ -54,6 +54,10 @@ class CanopenDac:
         #: sent by the host (counts), for the outputs a PDO carries but a stream does not change
         self.rpdos = self._rpdos()
         self._sent: dict[int, int] = {}
+        #: outputs known as the module has them since the last set-point by SDO or ``confirm``:
+        #: a stream's first PDO reads the others it carries again, so it never puts back a value
+        #: the module no longer has (rebooted, or tripped to its error values, meanwhile)
+        self._fresh: set[int] = set()
 
     # ------------------------------------------------------------------ scaling
     def read_scale(self) -> None:
@@ -116,20 +120,11 @@ class CanopenDac:
     def write(self, index: int, volts: float, what: str) -> float:
         """Set output ``index`` (already checked against the limits) by SDO; returns its read-back (V)."""
         counts = self.counts(index, volts)
+        self._fresh.clear()
         self.node.write(AO_16, index + 1, counts, what=f"{what} = {volts:+.6f} V ({counts} counts)")
         self._sent[index] = counts
         back = self.read(index, what)
         return check_readback(self.node, what, volts, back, self.lsb_V(index))
-
-    def put(self, index: int, volts: float, what: str) -> float:
-        """Set output ``index`` (already checked against the limits) by SDO download alone: the
-        node's answer says it took the value, one round trip instead of the two of ``write``
-        (for a stream of set-points; ``confirm`` reads them back at its end). Returns the volts
-        the counts stand for."""
-        counts = self.counts(index, volts)
-        self.node.write(AO_16, index + 1, counts, what=f"{what} = {volts:+.6f} V ({counts} counts)")
-        self._sent[index] = counts
-        return counts * self.lsb_V(index)
 
     def read(self, index: int, what: str) -> float:
         counts = self.node.read(AO_16, index + 1, what=f"read {what}")
@@ -235,8 +230,9 @@ class CanopenDac:
 
     def stream(self, index: int, volts: float, what: str) -> float:
         """Set output ``index`` (already checked against the limits) by its receive PDO: one
-        frame, unconfirmed, for a stream of set-points (a bias slew). Returns the volts the
-        counts stand for; ``confirm`` reads every streamed output back."""
+        frame, unconfirmed, for a stream of set-points (a bias slew, an excitation's V_Td, a
+        sweep's gamma_c): a quarter of an SDO download's host time, and no answer to wait for.
+        Returns the volts the counts stand for; ``confirm`` reads every streamed output back."""
         self.node.link.faults.check()
         counts = self.counts(index, volts)
         cob, mapped = next(((c, m) for c, m in self.rpdos if index in m), (0, []))
@@ -245,9 +241,11 @@ class CanopenDac:
                 f"CAN node '{self.node.name}': output {index + 1} ({what}) is on no receive PDO"
             )
         for i in mapped:  # the PDO carries its other outputs as they are
-            if i != index and i not in self._sent:
+            if i != index and i not in self._fresh:
                 self.read(i, f"output {i + 1}")
+                self._fresh.add(i)
         self._sent[index] = counts
+        self._fresh.add(index)
         data = struct.pack(f"<{len(mapped)}h", *(self._sent[i] for i in mapped))
         try:
             self.node.link.network.send_message(cob, data)
@@ -263,6 +261,7 @@ class CanopenDac:
     def confirm(self) -> None:
         """Read back, by SDO, every output a stream set: each must be what was sent (a lost
         or refused PDO is a ``ProtocolError``, latched)."""
+        self._fresh.clear()
         for index, counts in sorted(self._sent.items()):
             got = self.node.read(AO_16, index + 1, what=f"read back output {index + 1}")
             if got != counts:

@@ -27,7 +27,8 @@ class CommandDac(Protocol):
 
     def put_command_torque_V(self, axis: str, volts: float) -> float:
         """One step of a stream of V_Td set-points on ``axis`` (checked against ``limits``
-        first): taken by the node, not read back until ``confirm``; returns the volts sent."""
+        first): sent unconfirmed (a receive PDO), read back by ``confirm`` at the stream's end;
+        returns the volts sent."""
         ...
 
     def confirm(self) -> None:
@@ -36,7 +37,8 @@ class CommandDac(Protocol):
 
     def put_ac_bias_V(self, axis: str, volts: float) -> float:
         """One step of a stream of gamma_c set-points on ``axis`` (checked against ``limits``
-        first): taken by the node, not read back until ``confirm``; returns the volts sent."""
+        first): sent unconfirmed (a receive PDO), read back by ``confirm`` at the stream's end;
+        returns the volts sent."""
         ...
 
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
@@ -71,7 +73,7 @@ class CanopenCommandDac(CanopenDac):
 
     def put_command_torque_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.COMMAND_TORQUE, axis, volts)
-        return self.put(OUTPUTS.index(f"vtd_{axis}"), v, f"vtd_{axis}")
+        return self.stream(OUTPUTS.index(f"vtd_{axis}"), v, f"vtd_{axis}")
 
     def set_ac_bias_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.AC_BIAS, axis, volts)
@@ -79,7 +81,7 @@ class CanopenCommandDac(CanopenDac):
 
     def put_ac_bias_V(self, axis: str, volts: float) -> float:
         v = self.limits.command(SetpointKind.AC_BIAS, axis, volts)
-        return self.put(OUTPUTS.index(f"gc_{axis}"), v, f"gc_{axis}")
+        return self.stream(OUTPUTS.index(f"gc_{axis}"), v, f"gc_{axis}")
 
     def command_torque_V(self, axis: str) -> float:
         return self.read(OUTPUTS.index(f"vtd_{check_name('axis', axis, self.axes)}"), f"vtd_{axis}")

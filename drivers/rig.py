@@ -218,8 +218,9 @@ class Rig:
     ) -> int:
         """V_Td on ``axis`` through ``values_V``, one every ``period_s`` of rig time, the
         caller's ``acquire(seconds)`` taking the samples as they go (``_stream``): every value
-        checked before it is sent and taken by the node (its SDO answer), the last read back at
-        the end (``confirm``), one event for the whole stream rather than one per set-point.
+        checked before it is sent by the node's receive PDO, every streamed output read back at
+        the end (``confirm``; ``cmd_<axis>`` records what the platform got all along), one event
+        for the whole stream rather than one per set-point.
         V_Td is set to 0 V afterwards, however the stream ends. Returns how many set-points
         were sent."""
         return self._stream(
@@ -239,8 +240,8 @@ class Rig:
         acquire: Callable[[float], object],
     ) -> int:
         """gamma_c on ``axis`` through ``values_V``, as ``stream_command_torque_V`` does V_Td
-        (one SDO round trip per set-point instead of the two of ``set_ac_bias_V``'s read-back;
-        the last read back at the end; one event); 0 V afterwards, however the stream ends.
+        (a receive PDO per set-point instead of ``set_ac_bias_V``'s SDO download and read-back;
+        read back at the end; one event); 0 V afterwards, however the stream ends.
         Returns how many set-points were sent."""
         return self._stream(
             f"autocollimator bias gamma_c {axis}",

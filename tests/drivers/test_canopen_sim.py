@@ -220,6 +220,26 @@ def test_a_bias_slew_goes_by_receive_pdo_and_is_read_back(rig, caplog):
     assert rig.faults.fault is None
 
 
+def test_a_stream_carries_the_outputs_the_module_has_not_those_the_host_last_sent(rig):
+    """A PDO carries every output it maps. The module dropped X's 1.5 V behind the host's back
+    (its error value, a reboot, a local panel): a stream on Z must not put the 1.5 V back, so
+    its first PDO carries X as read from the module, and ``confirm`` then agrees."""
+    node = rig.emulator.nodes.nodes["torquer"]
+    rig.torquers.stream_bias_V("Z", 0.2)  # the host now knows X at 1.5 V
+    rig.torquers.confirm()
+    node.set(0x6411, 1, 0)  # X to 0 counts on the module alone
+    rig.torquers.stream_bias_V("Z", 0.3)
+    rig.torquers.stream_bias_V("Z", 0.4)
+    rig.torquers.confirm()
+    assert node.counts(1) == 0 and node.counts(3) == round(0.4 / LSB)
+    rig.torquers.set_bias_V("X", 1.0)  # an SDO set-point: the next stream reads the others again
+    node.set(0x6411, 2, round(0.5 / LSB))
+    rig.torquers.stream_bias_V("Z", 0.1)
+    rig.torquers.confirm()
+    assert [node.counts(s) for s in (1, 2, 3)] == [round(v / LSB) for v in (1.0, 0.5, 0.1)]
+    assert rig.faults.fault is None
+
+
 def test_a_lost_stream_is_a_protocol_error_at_confirm(rig):
     node = rig.emulator.nodes.nodes["torquer"]
     node.network.unsubscribe(0x203)  # RPDO1 frames are lost on the way
