@@ -146,16 +146,58 @@ def lowpass(x: np.ndarray, fs_hz: float, cutoff_hz: float, order: int = 4) -> np
             f"low-pass cutoff {cutoff_hz:g} Hz must be between 0 and half the sample rate "
             f"({0.5 * fs_hz:g} Hz)"
         )
-    sos = _butter_sos(order, cutoff_hz, fs_hz).copy()  # scipy's filter wants it writable
-    return scipy.signal.sosfiltfilt(sos, np.asarray(x, dtype=float), axis=-1)
+    sos, zi, edge = _butter_sos(order, cutoff_hz, fs_hz)
+    x = np.asarray(x, dtype=float)
+    if x.ndim != 1:
+        return scipy.signal.sosfiltfilt(sos.copy(), x, axis=-1)  # (scipy wants sos writable)
+    if x.shape[0] <= edge:
+        raise ValueError(
+            f"low-pass: {x.shape[0]} samples are too few for its {edge}-sample edge extension"
+        )
+    return _filtfilt(sos, zi, np.ascontiguousarray(x), edge)
 
 
 @functools.lru_cache(maxsize=64)
-def _butter_sos(order: int, cutoff_hz: float, fs_hz: float) -> np.ndarray:
-    """The Butterworth sections, designed once per (order, cutoff, rate): a fit filters each of
-    its model's thousands of evaluations at one cutoff, and the design cost more than the
-    filtering (1.9 of 6.6 s of a hysteresis analysis). Shared: callers take a copy."""
-    return scipy.signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
+def _butter_sos(order: int, cutoff_hz: float, fs_hz: float) -> tuple[np.ndarray, np.ndarray, int]:
+    """The Butterworth sections, their steady-state initial conditions (``sosfilt_zi``) and
+    the edge extension's length, once per (order, cutoff, rate): a fit filters each of its
+    model's thousands of evaluations at one cutoff, and the design cost more than the
+    filtering (1.9 of 6.6 s of a hysteresis analysis). Shared: read only."""
+    sos = scipy.signal.butter(order, cutoff_hz, fs=fs_hz, output="sos")
+    ntaps = 2 * len(sos) + 1 - min(int(np.sum(sos[:, 2] == 0)), int(np.sum(sos[:, 5] == 0)))
+    return sos, scipy.signal.sosfilt_zi(sos), 3 * ntaps  # sosfiltfilt's default padlen
+
+
+@numba.njit(cache=True, nogil=True)
+def _sosfilt_inplace(sos: np.ndarray, z: np.ndarray, y: np.ndarray) -> None:
+    """Second-order sections in direct form II transposed over ``y``, in place, from state
+    ``z``: scipy's ``_sosfilt`` loop, operation for operation (so the same bits)."""
+    for n in range(y.shape[0]):
+        x_cur = y[n]
+        for s in range(sos.shape[0]):
+            x_new = sos[s, 0] * x_cur + z[s, 0]
+            z[s, 0] = sos[s, 1] * x_cur - sos[s, 4] * x_new + z[s, 1]
+            z[s, 1] = sos[s, 2] * x_cur - sos[s, 5] * x_new
+            x_cur = x_new
+        y[n] = x_cur
+
+
+@numba.njit(cache=True, nogil=True)
+def _filtfilt(sos: np.ndarray, zi: np.ndarray, x: np.ndarray, edge: int) -> np.ndarray:
+    """``scipy.signal.sosfiltfilt(sos, x)`` (odd extension of ``edge`` samples each end, each
+    pass started in the steady state of its first sample) bit for bit, without its per-call
+    validation and ``sosfilt_zi`` solve: a Dahl fit filters its model 10^3-10^4 times, and
+    those took a third of the filtering (tests/procedures/analysis/test_dahl.py compares)."""
+    n = x.shape[0]
+    y = np.empty(n + 2 * edge)
+    for i in range(edge):
+        y[i] = 2.0 * x[0] - x[edge - i]
+        y[edge + n + i] = 2.0 * x[n - 1] - x[n - 2 - i]
+    y[edge : edge + n] = x
+    _sosfilt_inplace(sos, zi * y[0], y)
+    back = y[::-1].copy()
+    _sosfilt_inplace(sos, zi * back[0], back)
+    return back[edge + n - 1 : edge - 1 : -1].copy()
 
 
 def shift(x: np.ndarray, fs_hz: float, advance_s: float) -> np.ndarray:

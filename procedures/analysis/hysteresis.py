@@ -19,6 +19,7 @@ import dataclasses
 import logging
 import math
 from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,7 @@ from daq.runfile import RunFileError
 from drivers.rig_datasheet import AXES, AutocollimatorConstants, PlatformConstants, RigCalibration
 from procedures.analysis import dahl
 from procedures.analysis.intervals import Estimate, judged
+from procedures.analysis.threads import analysis_threads
 
 log = logging.getLogger(__name__)
 
@@ -872,13 +874,17 @@ def _jackknife(
             [ln[:, 0], ln[:, 1], 2 * ln[:, 0] + ln[:, 1]]
         )  # ln k = 2 ln To + ln eta
 
-    reps = np.array([chain(j, fit) for j in range(G)])  # G x (lag, ln To, ln eta)
+    # the replicates are independent fits (their compiled kernels release the GIL): side by side
+    with ThreadPoolExecutor(max_workers=max(1, min(analysis_threads(), G))) as pool:
+        # G x (lag, ln To, ln eta)
+        reps = np.array(list(pool.map(lambda j: chain(j, fit), range(G))))
+        M = len(chain.seg_a)
+        amps = list(pool.map(lambda j: chain.without_amplitude(j, fit), range(M))) if M >= 3 else []
     lnc = with_stiffness(reps[:, 1:])
     se = np.sqrt((G - 1) / G * np.sum((lnc - lnc.mean(axis=0)) ** 2, axis=0))
-    M = len(chain.seg_a)
     if M >= 3:
         ln_full = with_stiffness(np.log([[fit.To_Nm, fit.eta_per_Nm]]))[0]
-        lna = with_stiffness(np.array([chain.without_amplitude(j, fit) for j in range(M)]))
+        lna = with_stiffness(np.array(amps))
         h = np.asarray(fit.leverage, dtype=float)
         w = (
             1.0 - h

@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 import scipy.integrate
+import scipy.signal
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -423,3 +424,30 @@ def test_path_envelope_spans_the_bandwidths_the_residual_cannot_tell_apart():
     assert up[1] == pytest.approx(0.2 * 0.1)
     assert down[0] == up[0] == 0.0  # To the same everywhere
     assert all(np.allclose(side, 0.0) for side in scan.envelope(0.0))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    n=st.integers(min_value=28, max_value=3000),
+    order=st.sampled_from([1, 2, 3, 4, 6]),
+    cutoff=st.floats(min_value=0.01, max_value=0.49),
+    seed=st.integers(min_value=0, max_value=2**32 - 1),
+    scale=st.sampled_from([1e-7, 1.0, 1e4]),
+)
+def test_lowpass_is_scipys_sosfiltfilt_bit_for_bit(n, order, cutoff, seed, scale):
+    """The compiled zero-phase filter is scipy's ``sosfiltfilt`` (odd extension, steady-state
+    starts) to the last bit, on walks, noise and steps, whatever the order and cutoff."""
+    fs = 400.0
+    rng = np.random.default_rng(seed)
+    x = scale * np.cumsum(rng.standard_normal(n)) + scale * (rng.random(n) > 0.7)
+    sos = scipy.signal.butter(order, cutoff * fs, fs=fs, output="sos")
+    edge = 3 * (2 * len(sos) + 1 - min(np.sum(sos[:, 2] == 0), np.sum(sos[:, 5] == 0)))
+    if n <= edge:
+        with pytest.raises(ValueError, match="too few"):
+            dahl.lowpass(x, fs, cutoff * fs, order)
+        return
+    assert np.array_equal(dahl.lowpass(x, fs, cutoff * fs, order), scipy.signal.sosfiltfilt(sos, x))
+    two = np.vstack([x[::-1], x])  # more than one dimension: scipy's, along the last axis
+    assert np.array_equal(
+        dahl.lowpass(two, fs, cutoff * fs, order)[1], dahl.lowpass(x, fs, cutoff * fs, order)
+    )
