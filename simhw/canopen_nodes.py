@@ -211,8 +211,14 @@ class CanopenSimNode:
         """A receive PDO: its outputs, as written by SDO, in the operational state only (CiA 301)."""
         if not self._connected or self.stalled or self.node.nmt.state != "OPERATIONAL":
             return
+        store = self.node.data_store
         for var in pdo_map.map:
-            self.node.set_data(var.index, var.subindex, var.get_data())
+            data = var.get_data()
+            if store.get(var.index, {}).get(var.subindex) == data:
+                # an output the PDO carries at the value it has: nothing changes (a stream's
+                # PDO carries its other outputs as they are; four physics events became one)
+                continue
+            self.node.set_data(var.index, var.subindex, data)
 
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         # the new state's heartbeat goes out at once (``_produce``): LocalNode's NMT slave
