@@ -294,6 +294,15 @@ class Sources:
         out, self._ahead[name] = buf[:n], buf[n:]
         return out
 
+    def unread(self, name: str, samples: np.ndarray) -> None:
+        """Put ``samples``, the last taken from input ``name`` and unused, back at the front of
+        its stream: the next ``take`` gives them again."""
+        if len(samples):
+            buf = self._ahead.get(name)
+            self._ahead[name] = (
+                np.array(samples) if buf is None or not len(buf) else np.concatenate([samples, buf])
+            )
+
     def initial(self, name: str) -> float:
         """The slowly varying part of input ``name`` at t = 0 (white noise and lines count 0)."""
         if name in self._ahead:
@@ -655,6 +664,9 @@ class Simulator:
         chunks = []
         done = 0
         i = 0
+        # the noise inputs drawn for the rest of the block at once, the chunks between events
+        # served from it: (plant, its inputs, the step they start at)
+        noise: tuple[CompiledPlant, np.ndarray, int] | None = None
         while done < n_int:
             while i < len(events) and events[i][0] * self.oversample <= done:
                 events[i][1](self)
@@ -664,7 +676,11 @@ class Simulator:
                 m = min(m, events[i][0] * self.oversample - done)
             if self._spin_transient():
                 m = min(m, max(1, int(0.25 / self.dt)))
-            chunks.append(self._run_internal(m))
+            if noise is None or noise[0] is not self._compiled:
+                if noise is not None:  # another plant from here on: its draws go back
+                    self._unread(noise[0], noise[1][done - noise[2] :])
+                noise = (self._compiled, self._noise(self._compiled, n_int - done), done)
+            chunks.append(self._run_internal(m, noise[1][done - noise[2] : done - noise[2] + m]))
             done += m
             self._evolve_spin(m * self.dt)
         ny = len(self.channels)
@@ -711,13 +727,26 @@ class Simulator:
         spin = round(round(self._spin / SPIN_MODEL_STEP) * SPIN_MODEL_STEP, 6)
         self._switch(dataclasses.replace(self.relays, spin=spin))
 
-    def _run_internal(self, m: int) -> np.ndarray:
-        cp = self._compiled
-        plant = cp.disc.plant
-        fast, order = self._layout(cp)
+    def _noise(self, cp: CompiledPlant, m: int) -> np.ndarray:
+        """The next ``m`` internal steps of ``cp``'s noise inputs (its fast columns; the
+        correlated parts' columns zero)."""
+        fast, _ = self._layout(cp)
         u = np.zeros((m, len(cp.fast_cols)))
         for j, name in fast:
             u[:, j] = self.sources.take(name, m)
+        return u
+
+    def _unread(self, cp: CompiledPlant, u: np.ndarray) -> None:
+        """Give back draws ``_noise`` made for ``cp`` and no step used: each input's stream
+        continues from them, as if they had never been drawn."""
+        for j, name in self._layout(cp)[0]:
+            self.sources.unread(name, u[:, j])
+
+    def _run_internal(self, m: int, u: np.ndarray) -> np.ndarray:
+        """``m`` internal steps of the compiled plant with noise inputs ``u`` (``_noise``)."""
+        cp = self._compiled
+        plant = cp.disc.plant
+        _, order = self._layout(cp)
         y = np.empty((m, len(plant.outputs)))
         slow = self._slow_inputs()
         cp.run(self.x, u, slow, self.nl_state, y)

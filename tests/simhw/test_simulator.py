@@ -53,6 +53,23 @@ def test_set_points_inside_a_block_are_the_block_split_at_them():
         whole.advance(100, [(100, vtd(0.1))])
 
 
+def test_a_mode_change_inside_a_block_is_the_block_split_at_it():
+    """An event that switches the plant (a relay state: other noise inputs) inside a block: the
+    noise the block drew ahead for the old plant goes back to its streams, and the samples are
+    those of the run cut there, to the bit, in the blocks after it too."""
+
+    def mode(m):
+        return lambda sim: sim.set_mode(m)
+
+    split = Simulator(rate_hz=200.0, seed=4, mode=1)
+    parts = [split.advance(31).volts]
+    mode(3)(split)
+    parts += [split.advance(69).volts, split.advance(57).volts]
+    whole = Simulator(rate_hz=200.0, seed=4, mode=1)
+    got = [whole.advance(100, [(31, mode(3))]).volts, whole.advance(57).volts]
+    assert np.array_equal(np.concatenate(got), np.concatenate(parts))
+
+
 def test_paced_clock_gives_the_same_samples_and_keeps_to_wall_time():
     import time
 
@@ -165,3 +182,11 @@ def test_inputs_drawn_ahead_are_the_parts_drawn_block_by_block():
             assert np.array_equal(ahead.take(name, n), want), (name, n)
     with pytest.raises(RuntimeError, match="drawn"):
         ahead.initial("nac_X")
+    # what was taken and given back is taken again; the stream goes on after it
+    for n in (5, Sources.AHEAD + 9):
+        first = ahead.take("wrand_X", n)
+        ahead.unread("wrand_X", first[2:])
+        again = ahead.take("wrand_X", n + 3)
+        assert np.array_equal(again[: n - 2], first[2:])
+        ahead.unread("wrand_X", again)
+        assert np.array_equal(ahead.take("wrand_X", n + 3), again)
