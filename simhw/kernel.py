@@ -9,6 +9,7 @@ work. DESIGN.md section 9: a Python loop manages ~1e6 steps/s, numba ~6e7 simple
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numba
@@ -107,12 +108,38 @@ class CompiledPlant:
         y: np.ndarray,
     ) -> None:
         """Advance ``x`` over ``len(u_fast)`` steps, writing outputs to ``y`` (in place)."""
-        b_slow = self.bs @ u_slow
-        y_slow = self.ds @ u_slow
-        z_slow = self.nl_zs @ u_slow if len(u_slow) else np.zeros(len(self.nl_kind))
+        self.run_pieces(x, u_fast, [(len(u_fast), u_slow)], nl_state, y)
+
+    def run_pieces(
+        self,
+        x: np.ndarray,
+        u_fast: np.ndarray,
+        pieces: Sequence[tuple[int, np.ndarray]],
+        nl_state: np.ndarray,
+        y: np.ndarray,
+    ) -> None:
+        """``run`` over consecutive pieces of ``u_fast``, each (steps > 0, its slow inputs): a
+        stream's set-points stepping inside one call rather than a call each, the same
+        arithmetic step for step (each piece's slow terms are the products ``run`` forms)."""
+        n_nl = len(self.nl_kind)
+        b_slow = np.empty((len(pieces), self.bs.shape[0]))
+        y_slow = np.empty((len(pieces), self.ds.shape[0]))
+        z_slow = np.zeros((len(pieces), n_nl))
+        ends = np.empty(len(pieces), np.int64)
+        end = 0
+        for k, (m, u_slow) in enumerate(pieces):
+            b_slow[k] = self.bs @ u_slow
+            y_slow[k] = self.ds @ u_slow
+            if len(u_slow):
+                z_slow[k] = self.nl_zs @ u_slow
+            end += m
+            ends[k] = end
+        if end != len(u_fast):
+            raise ValueError(f"pieces of {end} steps for {len(u_fast)} noise rows")
         _run(
             x,
             u_fast,
+            ends,
             b_slow,
             y_slow,
             z_slow,
@@ -156,9 +183,10 @@ def _softsat(z: float, lim: float, ceil: float) -> float:
 def _run(
     x,
     u,
-    b_slow,
-    y_slow,
-    z_slow,
+    ends,
+    b_slows,
+    y_slows,
+    z_slows,
     ad_ptr,
     ad_idx,
     ad_val,
@@ -188,7 +216,12 @@ def _run(
     ny = y.shape[1]
     nf = u.shape[1]
     xn = np.empty(nx)
+    piece = 0
+    b_slow, y_slow, z_slow = b_slows[0], y_slows[0], z_slows[0]
     for k in range(u.shape[0]):
+        if k == ends[piece]:  # the next piece's slow inputs (a set-point stepped here)
+            piece += 1
+            b_slow, y_slow, z_slow = b_slows[piece], y_slows[piece], z_slows[piece]
         uk = u[k]
         # Nonlinear corrections, in build order (later pre-signals may use earlier ones).
         for j in range(nl_kind.shape[0]):

@@ -247,7 +247,7 @@ class SimRigServer:
                             if not todo:
                                 self._cond.wait(0.05)
                             continue
-                block = sim.advance(n, events)
+                block = sim.advance(n, events, setpoints=True)  # inline: set-points only
                 self.snapshot = self._snap(block)
                 self.stall_reason = "the ADC stream is not being read (device FIFO full)"
                 self.adc.on_block(block)

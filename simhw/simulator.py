@@ -644,7 +644,11 @@ class Simulator:
 
     # ------------------------------------------------------------------ stepping
     def advance(
-        self, n: int, events: Sequence[tuple[int, Callable[[Simulator], object]]] = ()
+        self,
+        n: int,
+        events: Sequence[tuple[int, Callable[[Simulator], object]]] = (),
+        *,
+        setpoints: bool = False,
     ) -> Block:
         """Simulate the next ``n`` output samples and return them as the ADC delivers them.
 
@@ -653,7 +657,10 @@ class Simulator:
         the block (``simhw.rig_server``: a stream of set-points simulated in one block rather
         than one block each). The samples are those of the split run to the bit; only the
         physics steps between events, the noise, pickup and ADC chain run once for the block.
-        ``fn`` may change the physics (set-points, relays, the table), not the ADC chain."""
+        ``fn`` may change the physics (set-points, relays, the table), not the ADC chain.
+        ``setpoints``: every ``fn`` only sets inputs (V_Td, gamma_c, torquer biases) and reads
+        nothing of the state, so the pieces between events run as one kernel call (the same
+        arithmetic; a fn that switched the plant, or touched the state, would not be)."""
         if n < 0:
             raise ValueError(f"sample count {n} must be >= 0")
         ks = [k for k, _ in events]
@@ -664,9 +671,20 @@ class Simulator:
         chunks = []
         done = 0
         i = 0
-        # the noise inputs drawn for the rest of the block at once, the chunks between events
+        # the noise inputs drawn for the rest of the block at once, the pieces between events
         # served from it: (plant, its inputs, the step they start at)
         noise: tuple[CompiledPlant, np.ndarray, int] | None = None
+        pieces: list[tuple[int, np.ndarray]] = []  # (steps, slow inputs) not yet run, from `at`
+        at = 0
+
+        def run_pending() -> None:
+            if pieces:
+                assert noise is not None
+                cp, u, start = noise
+                steps = sum(m for m, _ in pieces)
+                chunks.append(self._run_pieces(cp, u[at - start : at - start + steps], pieces))
+                pieces.clear()
+
         while done < n_int:
             while i < len(events) and events[i][0] * self.oversample <= done:
                 events[i][1](self)
@@ -674,15 +692,22 @@ class Simulator:
             m = n_int - done
             if i < len(events):
                 m = min(m, events[i][0] * self.oversample - done)
-            if self._spin_transient():
+            transient = self._spin_transient()
+            if transient:
                 m = min(m, max(1, int(0.25 / self.dt)))
             if noise is None or noise[0] is not self._compiled:
+                run_pending()  # on the plant they were for
                 if noise is not None:  # another plant from here on: its draws go back
                     self._unread(noise[0], noise[1][done - noise[2] :])
                 noise = (self._compiled, self._noise(self._compiled, n_int - done), done)
-            chunks.append(self._run_internal(m, noise[1][done - noise[2] : done - noise[2] + m]))
+            if not pieces:
+                at = done
+            pieces.append((m, self._slow_inputs()))
+            if not setpoints or transient:
+                run_pending()
             done += m
             self._evolve_spin(m * self.dt)
+        run_pending()
         ny = len(self.channels)
         y = np.concatenate(chunks) if chunks else np.zeros((0, len(self._outputs)))
         analog = y[:, :ny]
@@ -742,26 +767,31 @@ class Simulator:
         for j, name in self._layout(cp)[0]:
             self.sources.unread(name, u[:, j])
 
-    def _run_internal(self, m: int, u: np.ndarray) -> np.ndarray:
-        """``m`` internal steps of the compiled plant with noise inputs ``u`` (``_noise``)."""
-        cp = self._compiled
+    def _run_pieces(
+        self, cp: CompiledPlant, u: np.ndarray, pieces: list[tuple[int, np.ndarray]]
+    ) -> np.ndarray:
+        """Plant ``cp`` over the noise inputs ``u`` (``_noise``), in ``pieces`` (steps, slow
+        inputs) that follow one another: the outputs, in ``_outputs``'s order."""
         plant = cp.disc.plant
         _, order = self._layout(cp)
-        y = np.empty((m, len(plant.outputs)))
-        slow = self._slow_inputs()
-        cp.run(self.x, u, slow, self.nl_state, y)
+        y = np.empty((len(u), len(plant.outputs)))
+        cp.run_pieces(self.x, u, pieces, self.nl_state, y)
         names = tuple(plant.slow_inputs)
-        if self._last_slow is not None and self._last_slow[0] == names and m > 0:
-            # A set-point (V_Td, gamma_c, a torquer bias) steps at this chunk's first sample: the
-            # analog filter before the ADC sees a staircase there, whose sample at the edge is the
-            # mean of its two sides, as the samples of smooth signals are their values; taking the
-            # new side alone put every staircase half an internal step ahead of the smooth
-            # signals (V_Td's direct path in pa against the compensation's, eq. 3.27)
-            step = slow - self._last_slow[1]
-            if np.any(step != 0.0):
-                y[0] -= cp.ds @ (0.5 * step)
-        self._last_slow = (names, slow)
-        self.step += m
+        row = 0
+        for m, slow in pieces:
+            if self._last_slow is not None and self._last_slow[0] == names and m > 0:
+                # A set-point (V_Td, gamma_c, a torquer bias) steps at this piece's first
+                # sample: the analog filter before the ADC sees a staircase there, whose sample at
+                # the edge is the mean of its two sides, as the samples of smooth signals are
+                # their values; taking the new side alone put every staircase half an internal
+                # step ahead of the smooth signals (V_Td's direct path in pa against the
+                # compensation's, eq. 3.27)
+                step = slow - self._last_slow[1]
+                if (step != 0.0).any():
+                    y[row] -= cp.ds @ (0.5 * step)
+            self._last_slow = (names, slow)
+            row += m
+        self.step += len(u)
         return y[:, order]
 
     def _layout(self, cp: CompiledPlant) -> tuple[list[tuple[int, str]], list[int]]:

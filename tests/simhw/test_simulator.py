@@ -46,6 +46,12 @@ def test_set_points_inside_a_block_are_the_block_split_at_them():
     got = whole.advance(100, [(3, vtd(0.4)), (20, gc(-0.2)), (21, vtd(-0.3))]).volts
     assert np.array_equal(got, np.concatenate(parts))
     assert whole.vtd["X"] == -0.3 and whole.gamma_c["Y"] == -0.2
+    # set-points only (the sim rig's streams): the pieces in one kernel call, the same samples,
+    # and the block after them too
+    one = Simulator(rate_hz=200.0, seed=5, mode=3)
+    events = [(3, vtd(0.4)), (20, gc(-0.2)), (21, vtd(-0.3))]
+    assert np.array_equal(one.advance(100, events, setpoints=True).volts, got)
+    assert np.array_equal(one.advance(37).volts, whole.advance(37).volts)
     assert not np.array_equal(got, Simulator(rate_hz=200.0, seed=5, mode=3).advance(100).volts)
     with pytest.raises(ValueError, match="ordered within 0..99"):
         whole.advance(100, [(50, vtd(0.1)), (10, vtd(0.2))])
