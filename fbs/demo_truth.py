@@ -165,7 +165,8 @@ def drift_on_the_float_urad2(cfg: SimConfig, axis: str, lo_hz: float, hi_hz: flo
     import numpy as np
 
     from simhw.plant import URAD, RelayState, build_plant
-    from simhw.simulator import Simulator
+    from simhw.sampling import internal_rate
+    from simhw.simulator import Sources
 
     f = np.geomspace(lo_hz, hi_hz, 4000)
     plant = build_plant(cfg, RelayState(mode=3, clamped=True))
@@ -176,7 +177,8 @@ def drift_on_the_float_urad2(cfg: SimConfig, axis: str, lo_hz: float, hi_hz: flo
     x = np.linalg.solve(resolvent, np.broadcast_to(plant.B[:, j], (len(f), n))[..., None])[..., 0]
     volts = x @ plant.C[o] + plant.D[o, j]
     kg_V_per_rad = cfg.gyro[axis].pickoff_scale_mV_per_urad * 1e-3 / URAD
-    sources = Simulator(cfg, rate_hz=1000.0, mode=3).sources
+    # the drift's spectrum as the simulator's 1 kHz record holds it (its internal step)
+    sources = Sources(cfg, 0, internal_rate(cfg.sampling, 1000.0)[1], spectral=True)
     rate_psd = sum(sources.spectrum(f"wrand_{axis}", f).values())
     return float(np.trapezoid(np.abs(volts / kg_V_per_rad) ** 2 * rate_psd, f)) / URAD**2
 
