@@ -44,6 +44,7 @@ from typing import Any, TypeVar
 
 from fbs import batch_task, jsonout
 from fbs.signals import ABORT_SIGNALS
+from procedures.analysis.threads import usable_cores
 
 CLUSTER_EXTRA = "pip install 'fbs-hil[cluster]'"
 #: seconds to wait for the scheduler to answer (connecting, not the work)
@@ -191,10 +192,7 @@ def open_backend(jobs: int | None, scheduler: str | None) -> Backend:
 
 def default_jobs() -> int:
     """The cores this process may run on."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # not Linux
-        return max(1, os.cpu_count() or 1)
+    return usable_cores()
 
 
 def parse_jobs(text: str | None) -> int | None:

@@ -19,6 +19,11 @@ def analysis_threads() -> int:
     text = os.environ.get("OMP_NUM_THREADS", "").strip()
     if text.isdigit() and int(text) >= 1:
         return int(text)
+    return usable_cores()
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity where the OS says, else the machine's)."""
     try:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # not Linux
