@@ -28,7 +28,7 @@ import re
 import signal
 import socket
 from collections import deque
-from collections.abc import Callable, Hashable, Iterable, Iterator
+from collections.abc import Callable, Hashable, Iterable
 from concurrent.futures import (
     FIRST_COMPLETED,
     CancelledError,
@@ -38,13 +38,12 @@ from concurrent.futures import (
     wait,
 )
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, TypeVar
 
 from fbs import batch_task, jsonout
-from fbs.signals import ABORT_SIGNALS
 from procedures.analysis.threads import usable_cores
+from procedures.held_signals import signals_held
 
 CLUSTER_EXTRA = "pip install 'fbs-hil[cluster]'"
 #: seconds to wait for the scheduler to answer (connecting, not the work)
@@ -280,19 +279,6 @@ def run_tasks(
 
 
 # ---------------------------------------------------------------------------- the results file
-@contextmanager
-def signals_held() -> Iterator[None]:
-    """Abort signals wait until the block is done (a result line is written whole)."""
-    if not hasattr(signal, "pthread_sigmask"):
-        yield
-        return
-    old = signal.pthread_sigmask(signal.SIG_BLOCK, ABORT_SIGNALS)
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, old)
-
-
 class ResultsBusy(ValueError):
     """Another batch holds the results file (a ``ValueError``: refused, exit 2)."""
 

@@ -49,6 +49,7 @@ from typing import Any
 from fbs import batch_exec, campaign_task, jsonout
 from fbs.campaign_plan import RUNS_FILE, WORKFLOWS, Campaign, plan_of
 from procedures.analysis.gap.detection import curves
+from procedures.held_signals import signals_held
 from procedures.reports.detection_curves import curves_markdown, plot_curves
 
 CURVES_JSON, CURVES_MD, CURVES_PNG = "curves.json", "curves.md", "curves.png"
@@ -134,7 +135,7 @@ def _execute(c: Campaign, backend: batch_exec.Backend, results: batch_exec.Resul
         nonlocal n_done, n_err
         if exc is not None:
             rec = _lost(args_of[key], exc)
-        with batch_exec.signals_held():  # the line and the curves' view of it together
+        with signals_held():  # the line and the curves' view of it together
             results.append(rec)
             c.latest[key] = rec
         n_done += 1

@@ -25,10 +25,8 @@ import dataclasses
 import json
 import logging
 import math
-import signal
 import threading
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,6 +40,7 @@ from daq.runfile import STATUS_COMPLETE, TEXT_BYTES, RunFileError, abort_status,
 from drivers.rig import Rig
 from drivers.safety import SafeOnAbort
 from procedures.analysis.intervals import finite_dumps, finite_json
+from procedures.held_signals import signals_held
 from procedures.procedure import (
     EVENT_STEP,
     EVENT_STEP_DONE,
@@ -429,7 +428,7 @@ def _finish_report(
         except Exception as exc:  # a report that cannot be written must not hide the run's outcome
             log.error("%s: the report could not be written: %s", proc.name, exc)
     try:
-        with _signals_held():  # a few ms: the summary is written whole, a signal acts after it
+        with signals_held():  # a few ms: the summary is written whole, a signal acts after it
             # strict JSON, as --json prints (a tool other than Python's json reads it too): an
             # infinite or undefined number is null - an interval's open end, "no bound there"
             write_text_atomic(
@@ -438,31 +437,6 @@ def _finish_report(
             )
     except Exception as exc:
         log.error("%s: the summary could not be written: %s", proc.name, exc)
-
-
-@contextmanager
-def _signals_held() -> Iterator[None]:
-    """The abort signals' handlers held back in the block and run after it (its first such
-    signal), so that it is not cut short. Only the main thread runs handlers: elsewhere the
-    block just runs. (Blocking with ``pthread_sigmask`` would not do: another thread takes it.)"""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[int] = []
-    held = [getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
-    previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum)) for s in held}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            if handler is not None:  # None: not set from Python, nothing to put back
-                signal.signal(s, handler)
-        if caught:
-            handler = previous[caught[0]]
-            if callable(handler):
-                handler(caught[0], None)
-            elif handler == signal.SIG_DFL:
-                signal.raise_signal(caught[0])
 
 
 def _jsonable(obj: Any) -> Any:

@@ -21,6 +21,7 @@ from daq.reader import RunFile
 from drivers.rig import open_rig
 from fbs.signals import aborting_on_signals
 from procedures.calibrations import catalogue
+from procedures.held_signals import signals_held
 from procedures.procedure import Analysis, Figure, Measurement, Procedure, ProcedureError, Step
 from procedures.resume import load_resume, next_free
 from procedures.runner import run_procedure
@@ -407,11 +408,9 @@ def test_a_signal_after_the_acquisition_leaves_a_true_summary_and_resume_analyse
 
 def test_a_signal_while_the_summary_is_written_acts_after_it():
     """The summary is written whole: SIGHUP (here sent to itself) is held until it is."""
-    from procedures.runner import _signals_held
-
     reached = False
     with aborting_on_signals(), pytest.raises(KeyboardInterrupt):
-        with _signals_held():
+        with signals_held():
             os.kill(os.getpid(), signal.SIGHUP)
             time.sleep(0.05)  # an unheld signal raises here
             reached = True
