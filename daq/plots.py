@@ -24,6 +24,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from daq.octave import OctaveBands, band_average_dof, octave_bands
+from daq.plot_layout import place_axes
 from daq.spectral import psd_confidence
 
 __all__ = [
@@ -119,12 +120,13 @@ def new_figure(
 
 
 def save_figure(fig: Figure, path: str | Path, dpi: float = REPORT_DPI) -> Path:
-    """Write the PNG (laid out tight unless the figure has a layout engine) and free the
-    figure; returns the path."""
+    """Write the PNG and free the figure; returns the path. A figure without a layout engine
+    is laid out by ``daq.plot_layout.place_axes`` (its text measured, not its ticks laid out),
+    or by ``tight_layout`` where that cannot."""
     try:
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        if fig.get_layout_engine() is None:
+        if fig.get_layout_engine() is None and not place_axes(fig):
             fig.tight_layout()
         fig.savefig(path, dpi=dpi, format="png")
         log.debug("wrote %s", path)
@@ -134,7 +136,7 @@ def save_figure(fig: Figure, path: str | Path, dpi: float = REPORT_DPI) -> Path:
 
 
 def _new_figure() -> tuple[Figure, Axes]:
-    fig, axes = new_figure(figsize=FIGSIZE, layout="constrained")
+    fig, axes = new_figure(figsize=FIGSIZE)
     return fig, axes[0, 0]
 
 
