@@ -17,10 +17,11 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from types import FrameType
 
-#: the signals that abort a command (SIGHUP does not exist on Windows)
-ABORT_SIGNALS = tuple(
-    s for s in (getattr(signal, n, None) for n in ("SIGINT", "SIGTERM", "SIGHUP")) if s is not None
-)
+from procedures.held_signals import HELD_SIGNALS
+
+#: the signals that abort a command (SIGHUP does not exist on Windows): those a block that
+#: must not be cut short holds back (``procedures.held_signals``)
+ABORT_SIGNALS = HELD_SIGNALS
 
 
 class Signalled(KeyboardInterrupt):
