@@ -186,12 +186,7 @@ def open_backend(jobs: int | None, scheduler: str | None) -> Backend:
     """The executor asked for (``jobs`` None: one process per core available)."""
     if scheduler:
         return DaskCluster(scheduler, jobs)
-    return LocalPool(jobs if jobs is not None else default_jobs())
-
-
-def default_jobs() -> int:
-    """The cores this process may run on."""
-    return usable_cores()
+    return LocalPool(jobs if jobs is not None else usable_cores())
 
 
 def parse_jobs(text: str | None) -> int | None:
@@ -210,7 +205,7 @@ def parse_jobs(text: str | None) -> int | None:
 def local_jobs(jobs: int | None, scheduler: str | None, n_tasks: int) -> int | None:
     """The ``jobs`` to open a backend with: on a cluster as given; locally no more processes than
     tasks (default one per core)."""
-    return jobs if scheduler else min(jobs or default_jobs(), max(1, n_tasks))
+    return jobs if scheduler else min(jobs or usable_cores(), max(1, n_tasks))
 
 
 # ---------------------------------------------------------------------------- submitting and collecting
