@@ -184,6 +184,8 @@ class ProcedurePanel(Vertical, can_focus=True):
         self.running = False
         #: the unfinished run F9 continues: (procedure, file)
         self.resumable: tuple[str, Path] | None = None
+        #: the running step's line as last shown (None: the step line shows something else)
+        self._step_line: str | None = None
 
     def compose(self) -> ComposeResult:
         with Horizontal(classes="proc-row"):
@@ -268,14 +270,12 @@ class ProcedurePanel(Vertical, can_focus=True):
         self.query_one("#proc-log", EventLog).clear()
         self.query_one("#proc-result", Static).update("")
         self.query_one("#proc-bar", ProgressBar).update(progress=0)
-        self.query_one("#proc-step", Static).update(
-            f"{name}: {'resuming ' + str(resuming) if resuming else 'starting'}"
-        )
+        self._set_step(f"{name}: {'resuming ' + str(resuming) if resuming else 'starting'}")
 
     def refused(self, text: str) -> None:
         """The run did not start (the rig thread refused it): the panel is idle again."""
         self.running = False
-        self.query_one("#proc-step", Static).update(Text(f"not started: {text}", style="red"))
+        self._set_step(Text(f"not started: {text}", style="red"))
 
     def show(self, info: ProcedureInfo | None) -> None:
         if info is None:
@@ -295,7 +295,20 @@ class ProcedurePanel(Vertical, can_focus=True):
             step = f"{info.phase} (all {info.n_steps} steps done)"
         if info.aborting:
             step = "ABORTING (rig going safe) · " + step
-        self.query_one("#proc-step", Static).update(Text(step, no_wrap=True, overflow="ellipsis"))
+        if step == self._step_line:
+            return
+        # One line cut with an ellipsis, refreshed with the live state (12 a second): its height
+        # never changes, so no layout pass over the whole screen - those were most of the
+        # console's CPU during a run, and the simulated rig shares that CPU.
+        self._set_step(
+            Text(step, no_wrap=True, overflow="ellipsis"), layout=self._step_line is None
+        )
+        self._step_line = step
+
+    def _set_step(self, content: str | Text, *, layout: bool = True) -> None:
+        """Show ``content`` on the step line (a layout pass unless told it keeps its size)."""
+        self._step_line = None
+        self.query_one("#proc-step", Static).update(content, layout=layout)
 
     def log_lines(self, lines: list[str]) -> None:
         log = self.query_one("#proc-log", EventLog)
@@ -310,7 +323,7 @@ class ProcedurePanel(Vertical, can_focus=True):
         )
         self.query_one("#proc-result", Static).update(result_text(summary, plots))
         self.query_one("#proc-result-box", VerticalScroll).scroll_home(animate=False)
-        self.query_one("#proc-step", Static).update(
+        self._set_step(
             Text(
                 f"{summary.procedure}: {summary.verdict} (below)", no_wrap=True, overflow="ellipsis"
             )

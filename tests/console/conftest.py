@@ -19,12 +19,19 @@ HANG_GUARD_S = 900.0
 
 
 async def wait_for(pilot, predicate, what: str = "condition") -> None:
-    """Let the app run until ``predicate()`` holds (the rig works on its own thread)."""
+    """Let the app run until ``predicate()`` holds (the rig works on its own thread), then let
+    the screen catch up. The poll only yields to the event loop: ``pilot.pause`` queues a
+    callback on every widget and redraws the whole screen, and at 20 polls a second that took
+    more of the CPU than the simulated rig the test waits on."""
     t_end = time.monotonic() + HANG_GUARD_S
+    waited = False
     while not predicate():
         if time.monotonic() > t_end:
             raise AssertionError(f"nothing after {HANG_GUARD_S:g} s waiting for {what}: hung?")
-        await pilot.pause(0.05)
+        await asyncio.sleep(0.05)
+        waited = True
+    if waited:
+        await pilot.pause()
 
 
 async def rig_ready(pilot) -> None:
