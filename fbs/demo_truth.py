@@ -20,6 +20,7 @@ to fill the report's "simulated truth" column. A truth is of one of three kinds:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -31,6 +32,7 @@ if (
     import numpy as np
 
     from simhw.config import Autocollimator, SimConfig
+    from simhw.simulator import Simulator
 
 #: an offline simulation is this many times the record it stands for (its own estimate's
 #: error then is half the record's, or less)
@@ -317,13 +319,17 @@ def dahl_equivalent_linear(
         int(round(period_s * update_hz)), update_hz, band_hz[0], band_hz[1], signal_seed
     )
     per = int(round(rate_hz / update_hz))
+    # a period a block, each update a set-point event in it: the samples of one block per
+    # update to the bit (``Simulator.advance``), without 1,000 calls' overhead a period
+    updates = [
+        (i * per, functools.partial(_set_command, axis, float(v)))
+        for i, v in enumerate(x * level_V_rms)
+    ]
     theta, cmd = [], []
     for _ in range(periods):
-        for v in x * level_V_rms:
-            sim.set_command_torque_V(axis, float(v))
-            blk = sim.advance(per)
-            theta.append(blk.truth[f"theta_{a}"])
-            cmd.append(blk[f"cmd_{a}"])
+        blk = sim.advance(len(updates) * per, updates, setpoints=True)
+        theta.append(blk.truth[f"theta_{a}"])
+        cmd.append(blk[f"cmd_{a}"])
     th, r = np.concatenate(theta), np.concatenate(cmd)
     torque = dahl_torque(th - th.mean(), b.To_Nm, b.eta_per_Nm)
     n = int(round(period_s * rate_hz))
@@ -345,6 +351,10 @@ def dahl_equivalent_linear(
         f"V rms ({rms:.3g} urad rms), its best linear approximation fitted over "
         f"{fit_hz[0]:g}-{fit_hz[1]:g} Hz",
     )
+
+
+def _set_command(axis: str, volts: float, sim: Simulator) -> None:
+    sim.set_command_torque_V(axis, volts)
 
 
 def linearized_at_amplitude(
