@@ -15,6 +15,7 @@ and ADC) is all there.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 from collections.abc import Sequence
@@ -27,6 +28,13 @@ import numpy as np
 from simhw.config import SimConfig
 from simhw.datasheet import rig_calibration
 from simhw.simulator import Simulator
+
+#: output samples simulated a call
+BLOCK = 2000
+
+
+def _set_bias(axis: str, volts: float, sim: Simulator) -> None:
+    sim.set_ac_bias_V(axis, volts)
 
 
 def write_smooth_sweep(
@@ -89,10 +97,13 @@ def write_smooth_sweep(
         * np.sin(2 * math.pi * phase)
     )
     bias = np.concatenate([np.zeros(n_lead), bias, np.zeros(int(round(rate_hz / freq_hz)))])
+    # the bias set before every sample: set-point events in blocks, the samples of one
+    # ``advance(1)`` a sample to the bit (``Simulator.advance``) at a fraction of the calls
     out = np.empty((len(bias), len(names)))
-    for k, v in enumerate(bias):
-        sim.set_ac_bias_V(a, float(v))
-        out[k] = sim.advance(1).volts[0]
+    for k0 in range(0, len(bias), BLOCK):
+        part = bias[k0 : k0 + BLOCK]
+        events = [(i, functools.partial(_set_bias, a, float(v))) for i, v in enumerate(part)]
+        out[k0 : k0 + len(part)] = sim.advance(len(part), events, setpoints=True).volts
     path = Path(path)
     with h5py.File(path, "w", libver=("earliest", "v110")) as f:
         f.attrs["format"] = "fbs-run"
