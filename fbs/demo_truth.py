@@ -319,8 +319,8 @@ def dahl_equivalent_linear(
         int(round(period_s * update_hz)), update_hz, band_hz[0], band_hz[1], signal_seed
     )
     per = int(round(rate_hz / update_hz))
-    # a period a block, each update a set-point event in it: the samples of one block per
-    # update to the bit (``Simulator.advance``), without 1,000 calls' overhead a period
+    # a period a block, each update a set-point event in it: the same samples, to the bit, as
+    # a block per update (``Simulator.advance``), without 1,000 calls' overhead a period
     updates = [
         (i * per, functools.partial(_set_command, axis, float(v)))
         for i, v in enumerate(x * level_V_rms)

@@ -97,8 +97,8 @@ def write_smooth_sweep(
         * np.sin(2 * math.pi * phase)
     )
     bias = np.concatenate([np.zeros(n_lead), bias, np.zeros(int(round(rate_hz / freq_hz)))])
-    # the bias set before every sample: set-point events in blocks, the samples of one
-    # ``advance(1)`` a sample to the bit (``Simulator.advance``) at a fraction of the calls
+    # the bias set before every sample, as set-point events in blocks: the same samples, to
+    # the bit, as an ``advance(1)`` a sample (``Simulator.advance``), at a fraction of the calls
     out = np.empty((len(bias), len(names)))
     for k0 in range(0, len(bias), BLOCK):
         part = bias[k0 : k0 + BLOCK]
