@@ -188,7 +188,10 @@ async def test_a_refused_release_alarm_follows_the_wheels_and_goes_out_with_its_
     out_dir, tmp_path
 ):
     config = tmp_path / "fast.toml"
-    config.write_text("[gyros]\nspin_up_time_s = 6.0\n")  # the wheels reach speed in seconds
+    # The wheels reach speed in seconds of rig time, and the rig's virtual time runs on while
+    # the keys are pressed (3 s of it on an idle box, 6 s on a loaded one): the refusal must
+    # land well before the wheels are at speed, so they take 20 s.
+    config.write_text("[gyros]\nspin_up_time_s = 20.0\n")
     app = ConsoleApp(COLD + f"&config={config}", out_dir=out_dir)
     async with app.run_test(size=(100, 40)) as pilot:
         await rig_ready(pilot)
@@ -196,10 +199,18 @@ async def test_a_refused_release_alarm_follows_the_wheels_and_goes_out_with_its_
         await pilot.press("f2", "h", "2", "r")
         await wait_for(pilot, lambda: state.get().relay.mode == 2, what="mode 2")
         await pilot.press("h", "4", "r")  # refused: not at speed, not caged
-        await wait_for(
-            pilot, lambda: outcome(app, "release") is not None and state.get().alarm, what="refusal"
-        )
-        assert "gyros not at speed" in state.get().alarm
+        first_alarm: list[str] = []  # as the lamp said it first, not after the wheels moved on
+
+        def refused() -> bool:
+            alarm = state.get().alarm
+            if outcome(app, "release") is None or not alarm:
+                return False
+            first_alarm.append(alarm)
+            return True
+
+        await wait_for(pilot, refused, what="refusal")
+        assert "gyros not at speed" in outcome(app, "release").text
+        assert "gyros not at speed" in first_alarm[0]
         await wait_for(
             pilot, lambda: all(state.get().relay.at_speed.values()), what="the wheels at speed"
         )
