@@ -8,7 +8,8 @@ bearings off, ``simhw.effects.nominal``) with the effect on axis X, Mode 3, 1 kH
 channels ``ac_x_ctl``, ``ac_x_inst``, ``gyro_x``, ``pa_x`` on ADC ranges of 1, 1, 1 and 0.05 V,
 300 s unless the campaign shortens it. The same seed gives the same samples on any machine, so a
 run's result does not depend on where it ran. The record is written to the worker's temporary
-directory and removed after the analysis; the workflow is what ``fbs gap FILE --json`` runs
+scratch directory (``fbs.scratch``: one a killed worker left is removed by the next run) and
+removed after the analysis; the workflow is what ``fbs gap FILE --json`` runs
 (``analyse`` with its default options), its errors ended as that command ends them
 (``fbs.batch_task.guarded``).
 
@@ -18,11 +19,11 @@ environment (one BLAS thread, the numba cache) before numpy and numba load.
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 from typing import Any
 
 from fbs import batch_task
+from fbs.scratch import scratch_dir
 
 #: the record of docs/gap.md section 6
 MODE = 3
@@ -102,8 +103,8 @@ def _simulate_and_analyse(
 ) -> dict[str, Any]:
     from procedures.analysis.gap.workflow import analyse
 
-    with tempfile.TemporaryDirectory(prefix="fbs-campaign-") as d:
-        path = simulate_record(Path(d) / f"{effect}-{seed}.h5", effect, params, seed, duration_s)
+    with scratch_dir("fbs-campaign-") as d:
+        path = simulate_record(d / f"{effect}-{seed}.h5", effect, params, seed, duration_s)
         res = analyse(path)
         return {"json": res.to_json(), "warnings": list(res.warnings)}
 
