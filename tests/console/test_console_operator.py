@@ -78,9 +78,12 @@ async def test_the_rig_is_polled_and_shown_while_a_procedure_runs(out_dir):
         worker, rig = app.worker_, app.worker_.rig
         events: list[tuple[float, str, str]] = []
         cp = Checkpoints()
+        mode_2_at: list[float] = []  # rig time of the spin-up's start
 
         def on_event(t: float, kind: str, text: str) -> None:  # after the console's own listener
             events.append((t, kind, text))
+            if text == "mode 2":
+                mode_2_at.append(t)
             if kind == "mode":
                 cp.hold(
                     text,
@@ -106,7 +109,9 @@ async def test_the_rig_is_polled_and_shown_while_a_procedure_runs(out_dir):
 
         def after_block() -> None:  # the wheels in mid spin-up
             poll()
-            if rig.now() > 30 and "wheels" not in cp.passed:
+            # counted from mode 2, not from the rig's start: the idle rig's time runs on while
+            # a fresh worker imports the catalogue, and mode 2 may come late on a loaded box
+            if mode_2_at and rig.now() > mode_2_at[0] + 20 and "wheels" not in cp.passed:
                 wheels = rig.relays.status().spin_fraction
                 cp.hold(
                     "wheels", lambda: f"wheels {100 * wheels:.0f} %" in text_of(app, "#mode-gyros")
@@ -241,9 +246,9 @@ async def test_quit_during_a_procedure_names_it_and_its_file(out_dir):
         await pilot.press("q")
         await wait_for(pilot, lambda: isinstance(app.screen, QuitScreen), what="the question")
         asked = screen_text(app)
-        assert (
-            "the procedure stopwatch (step 2/5" in asked and str(out_dir / "stopwatch.h5") in asked
-        )
+        # step 2/5 or later: the rig's virtual time runs on while the key is handled
+        assert re.search(r"the procedure stopwatch \(step [2-5]/5", asked), asked
+        assert str(out_dir / "stopwatch.h5") in asked
         await pilot.press("n")
         await wait_for(
             pilot, lambda: not isinstance(app.screen, QuitScreen), what="the question to close"

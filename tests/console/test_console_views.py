@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 from pathlib import Path
 
 import pytest
@@ -157,14 +158,31 @@ async def test_an_aborted_run_says_how_to_resume_and_f9_resumes_it(out_dir):
     app = ConsoleApp(WARM, out_dir=out_dir)
     async with app.run_test(size=(80, 24)) as pilot:
         await rig_ready(pilot)
+        state, rig = app.worker_.state, app.worker_.rig
+        # The rig thread waits at channel Y's start until F8 is in: the rig runs in virtual
+        # time, and on a loaded box channel Y could otherwise end before the key lands.
+        pressed, held = threading.Event(), threading.Event()
+        poll = rig.adc.after_block
+
+        def after_block() -> None:
+            poll()
+            p = state.get().procedure
+            if p is not None and p.index >= 2 and not pressed.is_set():
+                held.set()
+                if not pressed.wait(60.0):  # a hang guard only
+                    raise AssertionError("F8 never pressed")
+
+        rig.adc.after_block = after_block
         await start_procedure(pilot, "stopwatch", 'channels=["X","Y"] repetitions=1')
-        state = app.worker_.state
         await wait_for(
             pilot,
             lambda: (p := state.get().procedure) is not None and p.index >= 2,
             what="channel X done",
         )
+        await wait_for(pilot, held.is_set, what="the rig held at channel Y's start")
         await pilot.press("f8")
+        pressed.set()
+        rig.adc.after_block = poll
         await wait_for(pilot, lambda: app.last_summary is not None, what="the abort")
         first = app.last_summary
         assert first.verdict == "aborted" and "channel X" in first.steps_done
@@ -327,12 +345,16 @@ async def test_spin_up_shows_its_time_and_an_interlock_reason_is_said_once(out_d
         await pilot.press("h", "2", "r")
         await wait_for(pilot, lambda: app.worker_.state.get().relay.mode == 2, what="mode 2")
         state = app.worker_.state
-        await wait_for(
-            pilot,
-            lambda: state.get().relay.spin_fraction >= 0.3 and state.get().spin_left_s is not None,
-            what="a third of the speed",
-        )
-        snap = state.get()
+        seen = []  # the snapshot as the predicate saw it: the wheels go on spinning up
+
+        def a_third() -> bool:
+            snap = state.get()
+            if snap.relay.spin_fraction >= 0.3 and snap.spin_left_s is not None:
+                seen.append(snap)
+            return bool(seen)
+
+        await wait_for(pilot, a_third, what="a third of the speed")
+        snap = seen[0]
         tau = load_config(None).gyros.spin_up_time_s / math.log(100.0)
         truth = tau * math.log((1 - snap.relay.spin_fraction) / (1 - AT_SPEED))
         assert snap.spin_left_s == pytest.approx(truth, rel=0.1, abs=5.0)
