@@ -100,6 +100,8 @@ def test_the_expedited_download_sends_the_packages_frame(data):
             else DeadlineSdoClient(0x605, 0x585, od, time.monotonic)
         )
         client.network = network
+        # the package's 0.3 s would send the request again when the notifier thread is late
+        client.RESPONSE_TIMEOUT = 30.0
         network.subscribe(0x585, client.on_response)
         try:
             client.download(0x6411, 1, data)

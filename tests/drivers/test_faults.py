@@ -43,7 +43,11 @@ def stream(rig, rate=1000.0):
     return first.stop_sample
 
 
-def wait_for(predicate, timeout_s: float = 5.0) -> bool:
+#: a hang guard, never a deadline: watchdogs count rig time, and a loaded box can be seconds late
+GUARD_S = 60.0
+
+
+def wait_for(predicate, timeout_s: float = GUARD_S) -> bool:
     t_end = time.monotonic() + timeout_s
     while time.monotonic() < t_end:
         if predicate():
@@ -52,7 +56,7 @@ def wait_for(predicate, timeout_s: float = 5.0) -> bool:
     return predicate()
 
 
-def emulated_nodes_safe(rig, timeout_s=5.0) -> bool:
+def emulated_nodes_safe(rig, timeout_s=GUARD_S) -> bool:
     """The nodes' own objects (not the host's view): mode 1, outputs zero, caging released."""
     nodes = rig.emulator.nodes.nodes
     return wait_for(
@@ -157,7 +161,7 @@ def test_pulled_adc_cable_is_device_lost_and_the_rig_goes_safe(rig):
 
 def test_adc_no_reply_is_a_device_timeout(rig):
     rig.adc.reply_timeout_s = 0.3
-    rig.emulator.inject("adc", "stall", seconds=1.0)
+    rig.emulator.inject("adc", "stall", seconds=5.0)  # far beyond the reply's 0.3 s
     with pytest.raises(DeviceTimeout, match=r"no reply to 'STAT\?' within 0\.3 s"):
         rig.adc.status()
     assert emulated_nodes_safe(rig)
@@ -202,7 +206,7 @@ def test_stalled_node_times_out_and_the_watchdogs_make_the_rig_safe(rig, name):
         DeviceTimeout, match=rf"CAN node '{name}' \(id {rn.NODES[name]}\) object 0x\w+:\d: no SDO"
     ):
         FAULTS[name](rig)
-    assert emulated_nodes_safe(rig, timeout_s=5.0)
+    assert emulated_nodes_safe(rig)
     assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)  # safe by its own watchdog
     assert rig.link.heartbeat_suspended
 
@@ -210,7 +214,7 @@ def test_stalled_node_times_out_and_the_watchdogs_make_the_rig_safe(rig, name):
 @pytest.mark.parametrize("name", list(FAULTS))
 def test_any_node_reset_is_reported_and_the_rig_goes_safe(rig, name):
     rig.emulator.inject(name, "reset")
-    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+    assert wait_for(lambda: rig.faults.fault is not None)
     assert isinstance(rig.faults.fault, NodeReset) and f"'{name}'" in str(rig.faults.fault)
     assert emulated_nodes_safe(rig)
     with pytest.raises(NodeReset):
@@ -233,7 +237,7 @@ def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
         DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"
     ):
         rig.set_torquer_bias_V("X", 0.2)
-    assert emulated_nodes_safe(rig, timeout_s=5.0)
+    assert emulated_nodes_safe(rig)
     assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)  # safe by its own watchdog
     assert rig.link.heartbeat_suspended
 
@@ -252,7 +256,7 @@ def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig, name):
 
 def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
     rig.emulator.inject("torquer", "reset")
-    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+    assert wait_for(lambda: rig.faults.fault is not None)
     assert isinstance(rig.faults.fault, NodeReset)
     assert "CAN node 'torquer' (id 3) rebooted (CANopen boot-up) and lost its set-points" in str(
         rig.faults.fault
@@ -265,7 +269,7 @@ def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
 @pytest.mark.parametrize("name", list(FAULTS))
 def test_node_error_frame_is_reported_with_its_code(rig, name):
     rig.emulator.inject(name, "error", code=0x4210)
-    assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+    assert wait_for(lambda: rig.faults.fault is not None)
     fault = rig.faults.fault
     assert isinstance(fault, NodeError) and fault.code == 0x4210 and fault.node == name
     assert "over-temperature (EMCY 0x4210" in str(fault)
@@ -286,12 +290,12 @@ def test_host_heartbeat_loss_trips_every_watchdog():
     try:
         rig.set_torquer_bias_V("Y", -1.0)
         rig.link.heartbeat_suspended = True
-        assert emulated_nodes_safe(rig, timeout_s=5.0)
+        assert emulated_nodes_safe(rig)
         nodes = rig.emulator.nodes.nodes
         assert wait_for(
             lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command"))
         )
-        assert wait_for(lambda: rig.faults.fault is not None, 3.0)
+        assert wait_for(lambda: rig.faults.fault is not None)
         assert isinstance(rig.faults.fault, (NodeError, DeviceLost))
     finally:
         rig.close()
@@ -307,7 +311,7 @@ def test_a_busy_host_does_not_fail_the_simulated_rig():
         rig.close()
     rig = open_rig(URL + "&watchdog=1")
     try:
-        rig.emulator.inject("torquer", "busy", delay_s=1.5)
+        rig.emulator.inject("torquer", "busy", delay_s=3.0)  # 3x the 1 s deadline
         with pytest.raises(DeviceTimeout, match="no SDO answer"):
             rig.set_torquer_bias_V("X", 0.2)
     finally:

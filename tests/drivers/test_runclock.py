@@ -27,8 +27,9 @@ import sys, time
 from drivers.runclock import RunningClock
 c = RunningClock()
 print("ready", flush=True)
-sys.stdin.readline()                 # the parent stops this process meanwhile
+sys.stdin.readline()
 t0w, t0c = time.monotonic(), c()
+print("started", flush=True)         # the parent stops this process after this
 sys.stdin.readline()
 print(time.monotonic() - t0w, c() - t0c, flush=True)
 """
@@ -58,7 +59,7 @@ def test_a_stopped_process_leaves_its_pause_out():
             assert p.stdout.readline().strip() == "ready"
             p.stdin.write("go\n")
             p.stdin.flush()
-            time.sleep(0.3)
+            assert p.stdout.readline().strip() == "started"  # t0 taken: the pause comes after
             os.kill(p.pid, signal.SIGSTOP)
             time.sleep(2.0)  # the pause: at least this long
             os.kill(p.pid, signal.SIGCONT)

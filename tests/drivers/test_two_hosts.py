@@ -24,6 +24,8 @@ import pytest
 pytestmark = pytest.mark.slow
 
 FBS = [sys.executable, "-m", "fbs"]
+#: the first recording's length (s; a wall-paced rig): the two refused commands start inside it
+FIRST_S = 30
 
 
 def _wait_for(cond, what: str, guard_s: float = 120.0) -> None:
@@ -63,41 +65,44 @@ def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path)
     )
     record = ["record", "--rig", served_rig, "--mode", "3", "--rate", "200", "--json"]
     with subprocess.Popen(
-        [*FBS, *record, "--duration", "8", "--out", str(first_out)],
+        [*FBS, *record, "--duration", str(FIRST_S), "--out", str(first_out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     ) as first:
         try:
             _wait_for(first_out.exists, "the first recording's file")
-            # the same machine: the rig claim names the holder
-            second = subprocess.run(
-                [*FBS, *record, "--duration", "2", "--out", str(second_out)],
-                capture_output=True,
-                text=True,
-                timeout=120,
-            )
-            # another machine (a lock directory of its own): the first host's heartbeat is on the bus
             other = tmp_path / "other-host-locks"
             other.mkdir()
-            third = subprocess.run(
-                [*FBS, *record, "--duration", "2", "--out", str(third_out)],
-                capture_output=True,
-                text=True,
-                timeout=120,
-                env=os.environ | {"FBS_LOCK_DIR": str(other)},
+            # started together, so both are refused inside the first's recording on a loaded box
+            # too (each takes seconds to start): the same machine, where the rig claim names the
+            # holder, and another machine (a lock directory of its own), which hears the first
+            # host's heartbeat on the bus
+            second, third = (
+                subprocess.Popen(
+                    [*FBS, *record, "--duration", "2", "--out", str(path)],
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.PIPE,
+                    text=True,
+                    env=env,
+                )
+                for path, env in (
+                    (second_out, None),
+                    (third_out, os.environ | {"FBS_LOCK_DIR": str(other)}),
+                )
             )
+            with second, third:
+                second_err = second.communicate(timeout=120)[1]
+                third_err = third.communicate(timeout=120)[1]
             out, err = first.communicate(timeout=120)
         finally:
             if first.poll() is None:
                 first.kill()
-    assert second.returncode == 2, second.stderr
-    assert f"held by pid {first.pid}" in second.stderr and "sent nothing" in second.stderr, (
-        second.stderr
-    )
-    assert third.returncode == 2, third.stderr
-    assert "another host is driving this bus" in third.stderr and "sent nothing" in third.stderr, (
-        third.stderr
+    assert second.returncode == 2, second_err
+    assert f"held by pid {first.pid}" in second_err and "sent nothing" in second_err, second_err
+    assert third.returncode == 2, third_err
+    assert "another host is driving this bus" in third_err and "sent nothing" in third_err, (
+        third_err
     )
     assert not second_out.exists() and not third_out.exists()
     # the first: complete, every sample, no gap, safe at its close
@@ -105,7 +110,7 @@ def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path)
     j = json.loads(out)
     assert (j["status"], j["n_samples"], j["lost"], j["gaps"], j["rig_safe_at_close"]) == (
         "complete",
-        1600,
+        FIRST_S * 200,
         0,
         [],
         True,
@@ -113,7 +118,7 @@ def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path)
     with h5py.File(first_out, "r") as f:
         assert f.attrs["status"] == "complete"
         assert all(
-            len(f["channels"][c]) == 1600 and np.all(np.isfinite(f["channels"][c][:]))
+            len(f["channels"][c]) == FIRST_S * 200 and np.all(np.isfinite(f["channels"][c][:]))
             for c in f["channels"]
         )
         kinds = [k.decode() if isinstance(k, bytes) else k for k in f["events"]["kind"][:]]
