@@ -24,6 +24,7 @@ from drivers.canopen_frames import eds_path
 from drivers.errors import NodeError, ProtocolError, SetpointRangeError
 from drivers.rig import open_rig
 from drivers.torquer import CanopenTorquerDac
+from tests.drivers.waiting import wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -102,14 +103,6 @@ class Cia401AnalogueOutputs:
         self._thread.join(timeout=1.0)
         self.node.nmt.stop_heartbeat()
         self.network.disconnect()
-
-
-def wait_for(predicate, what: str, timeout_s: float = 20.0) -> None:
-    t_end = time.monotonic() + timeout_s
-    while not predicate():
-        if time.monotonic() > t_end:
-            raise AssertionError(f"{what}: not within {timeout_s:g} s")
-        time.sleep(0.02)
 
 
 @pytest.fixture
@@ -239,7 +232,7 @@ def test_the_module_takes_its_error_values_when_the_host_heartbeat_stops(channel
         module.node.sdo[0x6443][4].raw = 0  # XRD keeps its output on error
         rig.set_torquer_bias_V("XRD", 1.5)
         rig.link.heartbeat_suspended = True
-        wait_for(lambda: module.trips, "the module's heartbeat consumer tripping")
+        wait_for(lambda: module.trips, "the module's heartbeat consumer tripping", guard_s=20.0)
         # the error values the host set up at connect (mode 1, value 0), Z's own, XRD kept
         # (the host's safe state, after the other nodes' EMCY, may zero XRD by SDO: that is the host's)
         assert module.trips[0] == {1: 0, 2: 0, 3: -1234}
@@ -251,6 +244,7 @@ def test_the_module_takes_its_error_values_when_the_host_heartbeat_stops(channel
                 for r in caplog.records
             ),
             "the host reading the module's EMCY 0x8130",
+            guard_s=20.0,
         )
         assert isinstance(rig.faults.fault, NodeError) and rig.faults.fault.code == 0x8130
     finally:
@@ -339,7 +333,7 @@ def test_a_module_in_another_process_over_udp_multicast():
             assert dac.set_bias_V("X", 1.0) == pytest.approx(3277 * LSB)
             assert dac.node.raw_get(0) == 3277
             link.heartbeat_suspended = True
-            wait_for(lambda: link.faults.fault is not None, "the module's EMCY")
+            wait_for(lambda: link.faults.fault is not None, "the module's EMCY", guard_s=20.0)
             assert isinstance(link.faults.fault, NodeError) and "'torquer'" in str(
                 link.faults.fault
             )

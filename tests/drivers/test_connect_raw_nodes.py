@@ -22,6 +22,7 @@ from drivers.claim import RigClaim
 from drivers.errors import DeviceLost, DeviceTimeout, NodeError, ProtocolError, RigBusy
 from drivers.torquer import CanopenTorquerDac
 from tests.drivers.rawnode import AO_401_OBJECTS, OPERATIONAL, STOPPED, RawNode
+from tests.drivers.waiting import wait_for
 
 TORQUER = 3
 EMCY_TRIP = 0x8130
@@ -54,17 +55,6 @@ def module_and_host(
     finally:
         link.close()
         node.close()
-
-
-def eventually(holds, guard_s: float = 30.0) -> bool:
-    """Whether ``holds()`` comes true: polled, a hang guard rather than a deadline (the node and
-    the host's notifier are threads, late on a loaded box)."""
-    t_end = time.monotonic() + guard_s
-    while not holds():
-        if time.monotonic() > t_end:
-            return False
-        time.sleep(0.01)
-    return True
 
 
 def connect(link: CanLink, dac: CanopenTorquerDac, window_s: float = 2.0) -> int:
@@ -108,7 +98,8 @@ def test_a_stale_trip_emcy_during_connect_does_not_fail_the_open(channel):
         connect(link, dac)
         assert link.faults.fault is None
         node.emcy(EMCY_TRIP)  # after the start: this session's fault
-        assert eventually(lambda: isinstance(link.faults.fault, NodeError)), link.faults.fault
+        wait_for(lambda: link.faults.fault is not None, "the EMCY latched")
+        assert isinstance(link.faults.fault, NodeError), link.faults.fault
 
 
 def test_an_emcy_that_is_not_8_bytes_latches(channel):
@@ -116,7 +107,7 @@ def test_an_emcy_that_is_not_8_bytes_latches(channel):
     with module_and_host(channel) as (node, link, dac):
         connect(link, dac)
         node.emcy(EMCY_TRIP, length=5)
-        assert eventually(lambda: link.faults.fault is not None)
+        wait_for(lambda: link.faults.fault is not None, "the short EMCY latched")
         assert isinstance(link.faults.fault, ProtocolError) and "expected 8" in str(
             link.faults.fault
         )
@@ -157,7 +148,8 @@ def test_the_hosts_abort_frame_names_the_transfers_object(channel):
                 if m.arbitration_id == 0x600 + TORQUER and m.data[0] == 0x80
             ]
 
-        assert eventually(aborts) and bytes(aborts()[-1][1:4]) == bytes([0x18, 0x10, 2])
+        wait_for(aborts, "the host's abort frame")
+        assert bytes(aborts()[-1][1:4]) == bytes([0x18, 0x10, 2])
 
 
 def swapped_xy() -> dict:
@@ -179,7 +171,7 @@ def test_a_module_whose_rpdo_swaps_x_and_y_is_mapped_per_the_eds_before_a_stream
             0x64110410,
         ]
         dac.stream_bias_V("X", 2.5)
-        assert eventually(lambda: node.objects[(0x6411, 1)][0] != 0)
+        wait_for(lambda: node.objects[(0x6411, 1)][0] != 0, "the RPDO applied")
         assert (
             node.objects[(0x6411, 1)][0] == round(2.5 / (10 / 32768))
             and node.objects[(0x6411, 2)][0] == 0

@@ -15,26 +15,18 @@ import os
 import random
 import subprocess
 import sys
-import time
 
 import h5py
 import numpy as np
 import pytest
+
+from tests.drivers.waiting import wait_for
 
 pytestmark = pytest.mark.slow
 
 FBS = [sys.executable, "-m", "fbs"]
 #: the first recording's length (s; a wall-paced rig): the two refused commands start inside it
 FIRST_S = 30
-
-
-def _wait_for(cond, what: str, guard_s: float = 120.0) -> None:
-    """Poll ``cond`` (a hang guard, not a timing assertion: the served rig runs on wall time)."""
-    t_end = time.monotonic() + guard_s
-    while not cond():
-        if time.monotonic() > t_end:
-            raise AssertionError(f"{what}: not seen within {guard_s:g} s")
-        time.sleep(0.1)
 
 
 @pytest.fixture
@@ -71,7 +63,7 @@ def test_a_second_command_refuses_and_the_first_records_on(served_rig, tmp_path)
         text=True,
     ) as first:
         try:
-            _wait_for(first_out.exists, "the first recording's file")
+            wait_for(first_out.exists, "the first recording's file", guard_s=120.0)
             other = tmp_path / "other-host-locks"
             other.mkdir()
             # started together, so both are refused inside the first's recording on a loaded box
