@@ -69,8 +69,11 @@ from drivers.torquer import CanopenTorquerDac, TorquerDac
 
 log = logging.getLogger(__name__)
 
-#: a set-point stream's reads (``Rig._stream``): about this much rig time at a time
-STREAM_READ_S = 0.1
+#: a set-point stream's reads (``Rig._stream``): about this much rig time at a time. Each read
+#: is a block request to the ADC and, on the sim rig, one physics block: at 0.1 s the requests
+#: were half a hysteresis sweep's host time. An abort is seen between reads, so on hardware
+#: this is also the stream's abort latency; the recorded samples do not depend on it.
+STREAM_READ_S = 0.5
 
 #: An event listener gets (rig time s, kind, text); the recorder writes them to /events.
 EventListener = Callable[[float, str, str], None]

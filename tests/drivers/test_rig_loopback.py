@@ -9,7 +9,7 @@ import pytest
 
 from drivers.errors import InterlockError, ModeNotAllowed, OperatorAbort, SetpointRangeError
 from drivers.relay import R_SELECTED, R_SWITCHES, SWITCH_HOLD, SWITCH_RELEASE
-from drivers.rig import open_rig
+from drivers.rig import STREAM_READ_S, open_rig
 from drivers.table import ManualTable
 
 pytestmark = pytest.mark.slow
@@ -112,10 +112,15 @@ def test_every_dac_reads_back_and_acts(rig):
     assert sim.relays.caging_inhibit == (True, False, True, False)
 
 
+#: set-points of 4 ms in the stream test: two whole reads of the stream and part of a third
+STREAM_N = int(round(2.5 * STREAM_READ_S / 0.004))
+
+
 def _streamed(scheduled: bool) -> np.ndarray:
     """cmd_x and pa_x while V_Td steps every 4 ms on a fresh rig in Mode 3: the rig's own
-    stream (scheduled by the rig, read 0.1 s at a time) or each set-point followed by its read."""
-    values = 0.2 * np.sin(0.7 * np.arange(120))
+    stream (scheduled by the rig, read ``STREAM_READ_S`` at a time: two whole reads and a part)
+    or each set-point followed by its read."""
+    values = 0.2 * np.sin(0.7 * np.arange(STREAM_N))
     with open_rig("sim?seed=3") as r:
         r.set_mode(3)
         r.wait(2.0)
@@ -137,11 +142,12 @@ def _streamed(scheduled: bool) -> np.ndarray:
 
 
 def test_a_stream_scheduled_by_the_rig_lands_where_reads_between_set_points_land_it():
-    """``Rig.stream_command_torque_V`` paces its set-points by the rig's clock and reads 0.1 s at
-    a time (the sim rig simulates the 0.1 s as one block, the set-points stepping inside it):
-    every set-point lands at the sample it lands at when a 4 ms read follows each, to the bit."""
+    """``Rig.stream_command_torque_V`` paces its set-points by the rig's clock and reads
+    ``STREAM_READ_S`` at a time (the sim rig simulates each read as one block, the set-points
+    stepping inside it): every set-point lands at the sample it lands at when a 4 ms read
+    follows each, to the bit."""
     scheduled, paced_by_reads = _streamed(True), _streamed(False)
-    assert scheduled.shape == paced_by_reads.shape == (30 + 480 + 30, 2)
+    assert scheduled.shape == paced_by_reads.shape == (30 + 4 * STREAM_N + 30, 2)
     assert np.ptp(scheduled[:, 0]) > 0.3  # the stream is in the record
     assert np.array_equal(scheduled, paced_by_reads)
 
