@@ -9,14 +9,13 @@ back from the emulated nodes themselves); lost samples are reported and the stre
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 
 from drivers import rig_nodes as rn
 from drivers.errors import DeviceLost, DeviceTimeout, NodeError, NodeReset, ProtocolError, SampleGap
 from drivers.rig import open_rig
+from tests.drivers.waiting import wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -43,30 +42,17 @@ def stream(rig, rate=1000.0):
     return first.stop_sample
 
 
-#: a hang guard, never a deadline: watchdogs count rig time, and a loaded box can be seconds late
-GUARD_S = 60.0
-
-
-def wait_for(predicate, timeout_s: float = GUARD_S) -> bool:
-    t_end = time.monotonic() + timeout_s
-    while time.monotonic() < t_end:
-        if predicate():
-            return True
-        time.sleep(0.02)
-    return predicate()
-
-
-def emulated_nodes_safe(rig, timeout_s=GUARD_S) -> bool:
+def wait_until_nodes_safe(rig) -> None:
     """The nodes' own objects (not the host's view): mode 1, outputs zero, caging released."""
     nodes = rig.emulator.nodes.nodes
-    return wait_for(
+    wait_for(
         lambda: (
             nodes["relay"].mode == 1
             and not any(nodes["torquer"].values.values())
             and not any(nodes["command"].values.values())
             and not any(nodes["caging"].inhibit.values())
         ),
-        timeout_s,
+        "the emulated nodes safe (mode 1, outputs zero, caging released)",
     )
 
 
@@ -129,7 +115,7 @@ def test_unknown_reply_is_a_protocol_error_and_the_rig_goes_safe(rig):
         ProtocolError, match=r"unexpected reply 'OK HELLO from a confused device' to 'STAT\?'"
     ):
         rig.adc.status()
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
     assert rig.is_safe()
     with pytest.raises(ProtocolError):  # latched: every later call says what went wrong
         rig.set_torquer_bias_V("X", 0.1)
@@ -144,7 +130,7 @@ def test_adc_stall_is_a_device_timeout_and_the_rig_goes_safe(rig):
     ):
         for _ in range(1000):
             rig.adc.read(100)
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
     assert isinstance(rig.faults.fault, DeviceTimeout)
 
 
@@ -154,7 +140,7 @@ def test_pulled_adc_cable_is_device_lost_and_the_rig_goes_safe(rig):
     with pytest.raises(DeviceLost, match="serial device went away"):
         for _ in range(1000):
             rig.adc.read(100)
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
     with pytest.raises(DeviceLost):
         rig.set_mode(2)
 
@@ -164,7 +150,7 @@ def test_adc_no_reply_is_a_device_timeout(rig):
     rig.emulator.inject("adc", "stall", seconds=5.0)  # far beyond the reply's 0.3 s
     with pytest.raises(DeviceTimeout, match=r"no reply to 'STAT\?' within 0\.3 s"):
         rig.adc.status()
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
 
 
 def test_gap_positions_match_the_data_the_device_sent(rig):
@@ -206,17 +192,17 @@ def test_stalled_node_times_out_and_the_watchdogs_make_the_rig_safe(rig, name):
         DeviceTimeout, match=rf"CAN node '{name}' \(id {rn.NODES[name]}\) object 0x\w+:\d: no SDO"
     ):
         FAULTS[name](rig)
-    assert emulated_nodes_safe(rig)
-    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)  # safe by its own watchdog
+    wait_until_nodes_safe(rig)
+    wait_for(lambda: rig.emulator.nodes.nodes[name].latched, f"{name} latched by its watchdog")
     assert rig.link.heartbeat_suspended
 
 
 @pytest.mark.parametrize("name", list(FAULTS))
 def test_any_node_reset_is_reported_and_the_rig_goes_safe(rig, name):
     rig.emulator.inject(name, "reset")
-    assert wait_for(lambda: rig.faults.fault is not None)
+    wait_for(lambda: rig.faults.fault is not None, "the fault latched on the host")
     assert isinstance(rig.faults.fault, NodeReset) and f"'{name}'" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
     with pytest.raises(NodeReset):
         FAULTS[name](rig)
 
@@ -228,7 +214,7 @@ def test_any_malformed_answer_is_a_protocol_error(rig, name):
         FAULTS[name](rig)
     assert isinstance(rig.faults.fault, ProtocolError)
     assert f"of node '{name}': 5 data bytes (expected 8)" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
 
 
 def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
@@ -237,31 +223,31 @@ def test_stalled_node_times_out_and_its_watchdog_makes_it_safe(rig):
         DeviceTimeout, match=r"CAN node 'torquer' \(id 3\) object 0x6411:1: no SDO answer"
     ):
         rig.set_torquer_bias_V("X", 0.2)
-    assert emulated_nodes_safe(rig)
-    assert wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched)  # safe by its own watchdog
+    wait_until_nodes_safe(rig)
+    wait_for(lambda: rig.emulator.nodes.nodes["torquer"].latched, "torquer latched by its watchdog")
     assert rig.link.heartbeat_suspended
 
 
 @pytest.mark.parametrize("name", list(FAULTS))
 def test_silent_node_is_device_lost_and_goes_safe_by_itself(rig, name):
     rig.emulator.inject(name, "disconnect")
-    assert wait_for(lambda: rig.faults.fault is not None)
+    wait_for(lambda: rig.faults.fault is not None, "the fault latched on the host")
     assert isinstance(rig.faults.fault, DeviceLost)
     assert f"CAN node '{name}' (id {rn.NODES[name]}) is silent: no heartbeat for" in str(
         rig.faults.fault
     )
-    assert wait_for(lambda: rig.emulator.nodes.nodes[name].latched)  # its own watchdog, silently
-    assert emulated_nodes_safe(rig)
+    wait_for(lambda: rig.emulator.nodes.nodes[name].latched, f"{name} latched, silently")
+    wait_until_nodes_safe(rig)
 
 
 def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
     rig.emulator.inject("torquer", "reset")
-    assert wait_for(lambda: rig.faults.fault is not None)
+    wait_for(lambda: rig.faults.fault is not None, "the fault latched on the host")
     assert isinstance(rig.faults.fault, NodeReset)
     assert "CAN node 'torquer' (id 3) rebooted (CANopen boot-up) and lost its set-points" in str(
         rig.faults.fault
     )
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
     with pytest.raises(NodeReset):
         rig.set_torquer_bias_V("X", 0.1)
 
@@ -269,11 +255,11 @@ def test_node_reset_is_reported_and_the_rig_goes_safe(rig):
 @pytest.mark.parametrize("name", list(FAULTS))
 def test_node_error_frame_is_reported_with_its_code(rig, name):
     rig.emulator.inject(name, "error", code=0x4210)
-    assert wait_for(lambda: rig.faults.fault is not None)
+    wait_for(lambda: rig.faults.fault is not None, "the fault latched on the host")
     fault = rig.faults.fault
     assert isinstance(fault, NodeError) and fault.code == 0x4210 and fault.node == name
     assert "over-temperature (EMCY 0x4210" in str(fault)
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
 
 
 def test_malformed_response_is_a_protocol_error(rig):
@@ -282,7 +268,7 @@ def test_malformed_response_is_a_protocol_error(rig):
         rig.set_torquer_bias_V("X", 0.3)
     assert isinstance(rig.faults.fault, ProtocolError)
     assert "SDO answer 0x583 of node 'torquer': 5 data bytes (expected 8)" in str(rig.faults.fault)
-    assert emulated_nodes_safe(rig)
+    wait_until_nodes_safe(rig)
 
 
 def test_host_heartbeat_loss_trips_every_watchdog():
@@ -290,12 +276,13 @@ def test_host_heartbeat_loss_trips_every_watchdog():
     try:
         rig.set_torquer_bias_V("Y", -1.0)
         rig.link.heartbeat_suspended = True
-        assert emulated_nodes_safe(rig)
+        wait_until_nodes_safe(rig)
         nodes = rig.emulator.nodes.nodes
-        assert wait_for(
-            lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command"))
+        wait_for(
+            lambda: all(nodes[n].latched for n in ("relay", "caging", "torquer", "command")),
+            "every node latched by its watchdog",
         )
-        assert wait_for(lambda: rig.faults.fault is not None)
+        wait_for(lambda: rig.faults.fault is not None, "the fault latched on the host")
         assert isinstance(rig.faults.fault, (NodeError, DeviceLost))
     finally:
         rig.close()
