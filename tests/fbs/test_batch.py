@@ -29,10 +29,10 @@ from pathlib import Path
 import pytest
 
 from fbs.cli import main
+from tests.fbs.commands import FBS
 from tests.result_schema import assert_valid_result
 
 pytestmark = pytest.mark.slow
-FBS = [sys.executable, "-m", "fbs.cli"]
 HANG_S = 180  # a hang guard, not a timing assertion
 N_FILES = 8
 GAP_ARGS = ["--axis", "X"]  # simulate writes no axis attribute

@@ -29,7 +29,6 @@ import math
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -43,8 +42,8 @@ from fbs.campaign_plan import CampaignError, parse_grid, plan_of
 from fbs.cli import build_parser, main
 from procedures.analysis.gap.detection import wilson
 from simhw import effects
+from tests.fbs.commands import FBS
 
-FBS = [sys.executable, "-m", "fbs.cli"]
 HANG_S = 900  # a hang guard for a whole campaign on a loaded machine, not a timing assertion
 DURATION = "74"
 EFFECT = ["gap", "--effect", "pickup_line", "--duration", DURATION]

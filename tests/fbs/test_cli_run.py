@@ -8,7 +8,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -19,10 +18,9 @@ from drivers.rig import open_rig
 from procedures.calibrations import catalogue
 from procedures.params import parse_params
 from procedures.runner import run_procedure
+from tests.fbs.commands import FBS, RIG
 from tests.result_schema import assert_valid_result
 
-FBS = [sys.executable, "-m", "fbs.cli"]
-RIG = "sim?warm=1&seed=5&watchdog=5"
 KTO = {"X": 31.6, "Y": 33.4, "Z": 34.1, "XRD": 32.0}
 KG = {"X": 6.03, "Y": 6.70, "Z": 7.51, "XRD": 5.74}
 #: what every --json result starts with (issue 37: what ran, how it ended, on which rig)

@@ -1,7 +1,6 @@
 """``fbs simulate`` and ``fbs demo`` through the real console script (DESIGN.md section 7)."""
 
 import subprocess
-import sys
 
 import h5py
 import numpy as np
@@ -9,8 +8,7 @@ import pytest
 
 from daq.spectral import psd
 from simhw.plant import CHANNELS
-
-FBS = [sys.executable, "-m", "fbs.cli"]
+from tests.fbs.commands import FBS
 
 
 def run(*args, cwd=None):

@@ -21,9 +21,9 @@ import pytest
 import fbs.inspect
 from fbs.cli import COMMANDS, build_parser, load, main
 from fbs.usage import EXIT_ERROR, EXIT_USAGE
+from tests.fbs.commands import FBS
 
 ROOT = Path(__file__).parents[2]
-FBS = [sys.executable, "-m", "fbs.cli"]
 #: what the parser must not load: numerics, HDF5, plots, CAN, the UI, the cluster, the plant,
 #: and this project's rig and runner (they load numpy and h5py)
 HEAVY_PACKAGES = {

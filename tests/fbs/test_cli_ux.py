@@ -24,27 +24,11 @@ from pathlib import Path
 import pytest
 
 from fbs.usage import EXIT_USAGE
+from tests.fbs.commands import FBS, RIG, SHORT_STOPWATCH
 
-FBS = [sys.executable, "-m", "fbs.cli"]
 ROOT = Path(__file__).parents[2]
 #: the machine running the suite may be heavily loaded: generous, never asserted as timing
 TIMEOUT_S = 600
-RIG = "sim?warm=1&seed=5&watchdog=5"
-#: stopwatch on one channel, one repetition, short holds: a few seconds on the sim rig
-SHORT_STOPWATCH = [
-    "--param",
-    'channels=["X"]',
-    "--param",
-    "repetitions=1",
-    "--param",
-    "min_caged_s=10",
-    "--param",
-    "hold_s=5",
-    "--param",
-    "null_s=5",
-    "--param",
-    "restore_s=10",
-]
 STAMP = r"\d{4}-\d\d-\d\d \d\d:\d\d:\d\d\.\d{3}[+-]\d{4}"  # local time, its UTC offset
 LOG_LINE = re.compile(rf"^{STAMP} (DEBUG|INFO|WARNING|ERROR|CRITICAL) [\w.]+: ")
 #: the status line as drawn: its bar, then the procedure's progress

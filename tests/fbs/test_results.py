@@ -10,7 +10,6 @@ import hashlib
 import json
 import re
 import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -21,27 +20,11 @@ from fbs.cli import main
 from procedures.calibrations import catalogue
 from procedures.procedure import Verdict
 from procedures.runner import RunSummary, headline_measurement
+from tests.fbs.commands import FBS, RIG, SHORT_STOPWATCH
 from tests.result_schema import assert_valid_result
 
-FBS = [sys.executable, "-m", "fbs.cli"]
 ROOT = Path(__file__).parents[2]
 NAN = re.compile(r"\bnan\b")
-RIG = "sim?warm=1&seed=5&watchdog=5"
-#: stopwatch on one channel, one repetition (K_g not resolved: no spread), short holds
-ONE_REPETITION = [
-    "--param",
-    'channels=["X"]',
-    "--param",
-    "repetitions=1",
-    "--param",
-    "min_caged_s=10",
-    "--param",
-    "hold_s=5",
-    "--param",
-    "null_s=5",
-    "--param",
-    "restore_s=10",
-]
 
 
 def fbs(*args: str) -> subprocess.CompletedProcess:
@@ -134,7 +117,7 @@ def test_provenance_verdict_and_every_commands_json_on_the_sim_rig(tmp_path, mon
         "--out",
         str(tmp_path),
         "--json",
-        *ONE_REPETITION,
+        *SHORT_STOPWATCH,
     )
     assert r.returncode == 1, r.stderr
     out = json.loads(r.stdout)

@@ -8,30 +8,15 @@ from __future__ import annotations
 
 import re
 import subprocess
-import sys
 
 import pytest
 
+from tests.fbs.commands import FBS, SHORT_STOPWATCH
+
 pytestmark = pytest.mark.slow
 
-FBS = [sys.executable, "-m", "fbs.cli"]
-#: one channel, one repetition, short holds: seconds; cold, so mode 3 takes rig time
-SHORT_COLD_STOPWATCH = [
-    "--rig",
-    "sim?seed=5&watchdog=5",
-    "--param",
-    'channels=["X"]',
-    "--param",
-    "repetitions=1",
-    "--param",
-    "min_caged_s=10",
-    "--param",
-    "hold_s=5",
-    "--param",
-    "null_s=5",
-    "--param",
-    "restore_s=10",
-]
+#: cold (no ``warm=1``), so mode 3 takes rig time
+SHORT_COLD_STOPWATCH = ["--rig", "sim?seed=5&watchdog=5", *SHORT_STOPWATCH]
 LINE = re.compile(r"fbs\.run_progress: stopwatch: +(\d+) %, (.*)$")
 
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 
 from daq.reader import RunFile
+from tests.fbs.commands import FBS, RIG, SHORT_STOPWATCH
 
 pytestmark = pytest.mark.slow
-FBS = [sys.executable, "-m", "fbs.cli"]
 
 
 def _ignore_sigint() -> None:
@@ -141,23 +141,7 @@ def test_a_signal_while_the_program_starts_exits_2_without_a_traceback(tmp_path)
     assert "SIGTERM while starting; nothing was done" in err or "interrupted" in err, err
 
 
-#: stopwatch on one channel, one repetition, short holds: seconds on the sim rig
-SW_RIG = ["--rig", "sim?warm=1&seed=5&watchdog=5"]
-SHORT_STOPWATCH = [
-    *SW_RIG,
-    "--param",
-    'channels=["X"]',
-    "--param",
-    "repetitions=1",
-    "--param",
-    "min_caged_s=10",
-    "--param",
-    "hold_s=5",
-    "--param",
-    "null_s=5",
-    "--param",
-    "restore_s=10",
-]
+SW_RIG = ["--rig", RIG]
 
 
 def _main_thread_waits(pid: int, quiet_s: float = 0.5) -> bool:
@@ -187,7 +171,7 @@ def test_sighup_while_the_report_is_written_then_resume_writes_it(tmp_path):
     it, in the report, until SIGHUP comes. Then exit 2 and a summary saying so; ``--resume``
     analyses the complete file again, writing the report and a true summary."""
     with subprocess.Popen(
-        [*FBS, "run", "stopwatch", "--out", str(tmp_path), *SHORT_STOPWATCH],
+        [*FBS, "run", "stopwatch", "--out", str(tmp_path), *SW_RIG, *SHORT_STOPWATCH],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
