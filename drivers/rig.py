@@ -55,7 +55,7 @@ from drivers.errors import DeviceLost, DeviceTimeout, DriverError
 from drivers.faults import FaultLatch
 from drivers.relay import SAFE_MODE, CanopenRelayDriver, RelayDriver
 from drivers.rig_datasheet import RigCalibration
-from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, SerialAdc
+from drivers.serial_adc import ADC_REPLY_TIMEOUT_S, ADC_STALL_TIMEOUT_S, QUIET_S, SerialAdc
 from drivers.supervision import ModeSupervisor, SupervisedAdc
 from drivers.table import (
     CanopenTable,
@@ -664,7 +664,10 @@ def assemble(
             dac.read_scale()
             dac.configure_rpdos()  # a stream must drive the output it is meant for
         # the ADC's own deadlines (2 s for a reply, 3 s of silence while streaming) stretch with a
-        # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them
+        # longer CAN reply deadline (the sim rig's 5 s default), never shrink below them; so does
+        # the quiet spell that gives up a frame cut short, by as much, leaving a held-back reply
+        # the ADC's own 2 s (on the sim rig the device's writer thread shares this process: a
+        # busy box held it 0.25 s mid-frame, and a good frame was reported lost)
         adc = SerialAdc(
             adc_port,
             clock=clock,
@@ -673,6 +676,7 @@ def assemble(
             monotonic=monotonic,
             reply_timeout_s=max(ADC_REPLY_TIMEOUT_S, reply_timeout_s),
             stall_timeout_s=max(ADC_STALL_TIMEOUT_S, reply_timeout_s),
+            quiet_s=QUIET_S + max(0.0, reply_timeout_s - ADC_REPLY_TIMEOUT_S),
         )
         rig = Rig(
             url=url,

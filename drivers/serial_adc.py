@@ -58,7 +58,8 @@ log = logging.getLogger(__name__)
 #: Default frame length: about 10 ms of samples; at most a second, so the stall check holds.
 FRAME_SECONDS = 0.01
 MAX_FRAME_SECONDS = 1.0
-#: No byte for this long while a frame is incomplete: the frame will not be completed.
+#: No byte for this long while a frame is incomplete: the frame will not be completed (its
+#: length field was corrupted). Kept well inside the reply deadline the held-back reply has.
 QUIET_S = 0.25
 #: Resynchronisation at connect (docs/protocol.md 1.8): the most the host discards while it
 #: waits for ``OK STOP`` (16 x the reference FIFO, a few seconds of the fastest stream), and
@@ -156,6 +157,7 @@ class SerialAdc(Adc):
         buffer_s: float = 120.0,
         resync_bytes: int = RESYNC_BYTES,
         resync_timeout_s: float = RESYNC_TIMEOUT_S,
+        quiet_s: float = QUIET_S,
         monotonic: Callable[[], float] = time.monotonic,
     ) -> None:
         self.port = port
@@ -168,6 +170,7 @@ class SerialAdc(Adc):
         self.resync_bytes = resync_bytes
         self.resync_timeout_s = resync_timeout_s
         self.stall_timeout_s = stall_timeout_s
+        self.quiet_s = quiet_s
         self.buffer_s = buffer_s
         try:
             # exclusive (flock): a second host's open fails here, before it sends a byte
@@ -235,7 +238,7 @@ class SerialAdc(Adc):
             if not data:
                 # A frame cut short (corrupted length field) would hold back what follows,
                 # such as the STOP reply, for ever: after a quiet spell, give it up.
-                if self._decoder.pending() and self._mono() - self._last_rx > QUIET_S:
+                if self._decoder.pending() and self._mono() - self._last_rx > self.quiet_s:
                     self._decoder.quiet()
                     self._dispatch()
                 continue
