@@ -10,7 +10,7 @@ FBS = [sys.executable, "-m", "fbs.cli"]
 #: the sim rig the command tests run procedures on: warm (wheels at speed), seeded
 RIG = "sim?warm=1&seed=5&watchdog=5"
 #: stopwatch parameters for one channel, one repetition, short holds: seconds on the sim rig
-#: (K_g then carries no interval: one repetition has no spread)
+#: (K_g then not resolved: one repetition has no spread)
 SHORT_STOPWATCH = [
     "--param",
     'channels=["X"]',
