@@ -73,10 +73,13 @@ def run_cases(
     run_case: Callable[..., dict[str, Any]], cases: list[tuple], jobs: int, out: str
 ) -> list[dict[str, Any]]:
     """``run_case(*case)`` for every case in a pool of ``jobs`` spawned processes; each record
-    (a dict with ``seed`` and ``verdict`` or ``error``) is appended to ``out`` as it arrives."""
+    (a dict with ``seed`` and ``verdict`` or ``error``) is appended to ``out`` as it arrives.
+
+    ``out`` is opened for appending: a campaign extended with ``--first`` into the same file
+    keeps the rigs it already holds (hours of runs), and a reader takes a seed's latest record."""
     recs: list[dict[str, Any]] = []
     with (
-        open(out, "w") as jf,
+        open(out, "a") as jf,
         ProcessPoolExecutor(
             jobs, mp_context=multiprocessing.get_context("spawn"), initializer=_die_with_parent
         ) as pool,
