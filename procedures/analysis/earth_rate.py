@@ -51,6 +51,7 @@ import numpy as np
 import scipy.stats
 
 from drivers.rig_datasheet import GYRO_CHANNELS, PICKOFF_SCALE_TOLERANCE
+from procedures.analysis.allan import FLICKER_FLOOR
 from procedures.analysis.intervals import Estimate, judged
 from procedures.stepresult import StepResult
 
@@ -278,6 +279,40 @@ def operating_instability(rate_resid: np.ndarray) -> float:
     return best
 
 
+#: the span the fixed drift stands for (s): the gyro's mean drift over about 12 days, the life of
+#: a calibration between lab checks, not the mean over the run that measured it
+DRIFT_SPAN_S = 1e6
+#: a run this long or longer is taken if the stations do not say when they were averaged (s):
+#: the shorter the run the wider its mean wanders, so a guess errs wide
+DEFAULT_RUN_S = 1000.0
+
+
+def mean_wander(run_s: float, span_s: float = DRIFT_SPAN_S) -> float:
+    """How far a run's mean drift wanders from the mean over ``span_s``, per Allan floor.
+
+    Flicker (bias-instability) drift, one-sided PSD h/f, has the same Allan variance
+    2 ln 2 h at every averaging time (IEEE Std 952 Annex C), while the mean over a run of
+    length T differs from the mean over a span S >> T by the flicker between 1/S and 1/T,
+    variance h ln(S / T): the run-to-run spread is the Allan floor times
+    sqrt(ln(S / T) / (2 ln 2)), at least the floor itself. At T = 4700 s (the default
+    earth-rate run) and S = ``DRIFT_SPAN_S`` that is 1.97. The sim rig's flicker bank (1/f
+    above 1e-5 Hz, flat below) spreads a 4720 s mean by 1.20 B = 1.81 Allan floors (300
+    records): by this formula, as much as 1/f reaching 2e-6 Hz; with the Allan floor alone the horizontal
+    channels' fixed drifts covered 91 of 99 drawn rigs (issue 38)."""
+    ratio = span_s / max(run_s, 1e-9)
+    return math.sqrt(max(math.log(ratio) / (2.0 * math.log(2.0)), 1.0)) if ratio > 1 else 1.0
+
+
+def run_span_s(stations: list[Station]) -> float:
+    """From the first station's averaging start to the last one's end (rig s), or
+    ``DEFAULT_RUN_S`` if a station does not say."""
+    if not stations or any(s.t is None for s in stations):
+        return DEFAULT_RUN_S
+    starts = [s.t[0] for s in stations if s.t is not None]
+    ends = [s.t[1] for s in stations if s.t is not None]
+    return max(max(ends) - min(starts), 1.0)
+
+
 def fit_channel(
     ch: str,
     stations: list[Station],
@@ -303,9 +338,10 @@ def fit_channel(
     (the horizontal channels'): K_TO = -cos(o)/b_P, and the offset's standard uncertainty
     ``offset_sd_deg`` enters its variance through dK_TO/do = -K_TO tan(o).
 
-    ``instability_urad_per_s``: the gyro's bias instability where known (an earlier drift run,
-    a data sheet): the fixed drift's interval then carries the run-to-run wander of a run's
-    mean drift (``operating_instability``); the restraint term's own uncertainty (data-sheet
+    ``instability_urad_per_s``: the gyro's bias instability B where known (an earlier drift run,
+    a data sheet): the fixed drift's interval carries the wander of a run's mean drift about the
+    long-term mean (``mean_wander`` times the Allan floor, the larger of 0.664 B and the
+    stations' own, ``operating_instability``); the restraint term's own uncertainty (data-sheet
     h/k and K_g of ``pickoff_rel_uncertainty``, ``restraint_bound``) is carried by K_TO's."""
     tilt = np.array([s.tilt for s in stations], float)
     spindle = np.array([s.spindle for s in stations], float)
@@ -379,8 +415,10 @@ def fit_channel(
         J[:, j] = [(fu[k] - fd[k]) / (2 * h) for k in keys]
     C = J @ fit.cov @ J.T
     # the fixed drift is not this run's drift: the gyro's random drift averaged over the run
-    # (operating instability) is added, as an error of its own (``operating_instability``)
-    op = max(operating_instability(resid * vals["K_TO"]), instability_urad_per_s)
+    # departs from its long-term mean by the flicker's wander below 1/run, added as an error of
+    # its own: the Allan floor (``operating_instability``, or the known B's) times ``mean_wander``
+    floor = max(operating_instability(resid * vals["K_TO"]), FLICKER_FLOOR * instability_urad_per_s)
+    op = floor * mean_wander(run_span_s(stations))
     C[keys.index("drift"), keys.index("drift")] += op**2
     # the restraint term is good to +-restraint_bound of itself: a bound, so a rectangular
     # distribution's standard uncertainty, a / sqrt(3) (GUM 4.3.7)
