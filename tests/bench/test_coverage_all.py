@@ -5,6 +5,8 @@ records hold. (The harness's campaigns are a benchmark, hours long: never run he
 from __future__ import annotations
 
 import importlib
+import json
+import subprocess
 import sys
 from pathlib import Path
 
@@ -98,3 +100,18 @@ def test_the_table_counts_coverage_errors_and_unresolved_per_figure(harness):
     assert "figures with an interval and an exact truth: 4, covered 2" in text
     assert "1 ended in an error" in text and "seed 2: RuntimeError: boom" in text
     assert "seed 1: K_TO X" in harness.misses(recs)
+
+
+def test_an_extended_campaign_keeps_the_records_already_in_its_out_file(tmp_path):
+    """``--first`` extends a campaign into the same ``--out``: the pool appends. It opened the
+    file for writing, and a 33-rig campaign's records were gone when 7 more rigs were added."""
+    out = tmp_path / "campaign.jsonl"
+    out.write_text(json.dumps({"seed": 1, "verdict": "kept"}) + "\n")
+    code = (
+        "import sys; sys.path.insert(0, sys.argv[1]); from coverage_pool import run_cases; "
+        "run_cases(dict, [([('seed', 2)],)], 1, sys.argv[2])"
+    )
+    subprocess.run(
+        [sys.executable, "-c", code, str(BENCH), str(out)], check=True, capture_output=True
+    )
+    assert [json.loads(line)["seed"] for line in out.read_text().splitlines()] == [1, 2]
