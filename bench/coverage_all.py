@@ -34,8 +34,10 @@ A rig costs one campaign (~4.5 min of wall time on an idle core, more on a busy 
 offline truths. The records are JSON lines, appended as rigs finish, so a run can be extended
 (``--first``) and summarised with earlier ones (``--also``), or only summarised (``--rigs 0``).
 ``--keep DIR --again`` makes the tables of the kept rigs again from their summaries (a change
-to the table or the truths needs no new runs). Usage: ``python bench/coverage_all.py [--rigs 40]
-[--first 0] [--jobs 1] [--out F.jsonl] [--keep DIR] [--again] [--also F.jsonl ...]``.
+to the table or the truths needs no new runs), ``--reanalyse earth-rate,..`` with it analyses the
+kept runs of those procedures again first (a change to their analysis needs none either).
+Usage: ``python bench/coverage_all.py [--rigs 40] [--first 0] [--jobs 1] [--out F.jsonl]
+[--keep DIR] [--again [--reanalyse PROC,..]] [--also F.jsonl ...]``.
 """
 
 from __future__ import annotations
@@ -160,14 +162,33 @@ def run_case(seed: int, keep: str | None = None) -> dict[str, Any]:
     return rec
 
 
-def rows_again(seed: int, keep: str) -> dict[str, Any]:
+def reanalyse(campaign: Path, procedures: tuple[str, ...]) -> None:
+    """Every kept run of ``procedures`` in ``campaign`` analysed again by the product's own path,
+    ``fbs run PROC --resume FILE`` (a complete run: its analysis runs again with the earlier
+    results it was made with, its summary and report are rewritten, the rig is not driven)."""
+    import subprocess
+
+    for path in sorted(campaign.glob("*.json")):
+        d = json.loads(path.read_text())
+        if not isinstance(d, dict) or d.get("procedure") not in procedures or not d.get("file"):
+            continue
+        cmd = [sys.executable, "-m", "fbs", "run", d["procedure"], "--rig", d["rig"]]
+        cmd += ["--resume", d["file"], "--out", str(campaign)]
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode not in (0, 1):  # 1: limits failed, still a result
+            raise RuntimeError(f"{' '.join(cmd)}: {done.stderr.strip().splitlines()[-1:]}")
+
+
+def rows_again(seed: int, keep: str, procedures: tuple[str, ...] = ()) -> dict[str, Any]:
     """A kept rig's figure table made again from its campaign's summaries (a change to the
-    table or the truths, not to the procedures, needs no new run)."""
+    table or the truths, not to the procedures, needs no new run); the runs of ``procedures``
+    are analysed again first (a change to their analysis needs none either, ``reanalyse``)."""
     from fbs.demo import SimTruth, figure_rows, load_summaries
     from simhw.config import load_config
 
     t0 = time.perf_counter()
     d = Path(keep) / f"rig{seed}"
+    reanalyse(d / "campaign", procedures)
     summaries = load_summaries(d / "campaign")
     rows = figure_rows(summaries, SimTruth(load_config(d / "rig.toml"), seed))
     return {
@@ -329,13 +350,21 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="make the figure tables of the rigs kept under --keep again (no new runs)",
     )
+    ap.add_argument(
+        "--reanalyse",
+        default="",
+        metavar="PROC,..",
+        help="with --again: analyse the kept runs of these procedures again first",
+    )
     args = ap.parse_args(argv)
     t0 = time.monotonic()
     recs = []
     if args.again:
         done = Path(args.keep).glob("rig*/campaign/figures.json")  # finished campaigns only
         seeds = sorted(int(p.parent.parent.name[3:]) for p in done)
-        recs = run_cases(rows_again, [(s, args.keep) for s in seeds], args.jobs, args.out)
+        procs = tuple(p for p in args.reanalyse.split(",") if p)
+        cases = [(s, args.keep, procs) for s in seeds]
+        recs = run_cases(rows_again, cases, args.jobs, args.out)
     elif args.rigs > 0:
         cases = [(s, args.keep) for s in range(args.first, args.first + args.rigs)]
         recs = run_cases(run_case, cases, args.jobs, args.out)
