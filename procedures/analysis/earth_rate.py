@@ -297,8 +297,9 @@ def mean_wander(run_s: float, span_s: float = DRIFT_SPAN_S) -> float:
     sqrt(ln(S / T) / (2 ln 2)), at least the floor itself. At T = 4700 s (the default
     earth-rate run) and S = ``DRIFT_SPAN_S`` that is 1.97. The sim rig's flicker bank (1/f
     above 1e-5 Hz, flat below) spreads a 4720 s mean by 1.20 B = 1.81 Allan floors (300
-    records): by this formula, as much as 1/f reaching 2e-6 Hz; with the Allan floor alone the horizontal
-    channels' fixed drifts covered 91 of 99 drawn rigs (issue 38)."""
+    records): by this formula, as much as 1/f reaching 2e-6 Hz. With the Allan floor alone the
+    horizontal channels' fixed drifts of 40 drawn rigs covered 111 of 120, with this 115
+    (``bench/coverage_all.py``, issue 38; docs/procedures/earth-rate.md)."""
     ratio = span_s / max(run_s, 1e-9)
     return math.sqrt(max(math.log(ratio) / (2.0 * math.log(2.0)), 1.0)) if ratio > 1 else 1.0
 
