@@ -176,7 +176,8 @@ def reanalyse(campaign: Path, procedures: tuple[str, ...]) -> None:
         cmd += ["--resume", d["file"], "--out", str(campaign)]
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode not in (0, 1):  # 1: limits failed, still a result
-            raise RuntimeError(f"{' '.join(cmd)}: {done.stderr.strip().splitlines()[-1:]}")
+            last = (done.stderr.strip().splitlines() or ["no message"])[-1]
+            raise RuntimeError(f"{' '.join(cmd)}: exit {done.returncode}: {last}")
 
 
 def rows_again(seed: int, keep: str, procedures: tuple[str, ...] = ()) -> dict[str, Any]:
