@@ -300,18 +300,16 @@ def mean_wander(run_s: float, span_s: float = DRIFT_SPAN_S) -> float:
     records): by this formula, as much as 1/f reaching 2e-6 Hz. With the Allan floor alone the
     horizontal channels' fixed drifts of 40 drawn rigs covered 111 of 120, with this 115
     (``bench/coverage_all.py``, issue 38; docs/procedures/earth-rate.md)."""
-    ratio = span_s / max(run_s, 1e-9)
-    return math.sqrt(max(math.log(ratio) / (2.0 * math.log(2.0)), 1.0)) if ratio > 1 else 1.0
+    return math.sqrt(max(math.log(span_s / max(run_s, 1e-9)) / (2.0 * math.log(2.0)), 1.0))
 
 
 def run_span_s(stations: list[Station]) -> float:
     """From the first station's averaging start to the last one's end (rig s), or
     ``DEFAULT_RUN_S`` if a station does not say."""
-    if not stations or any(s.t is None for s in stations):
+    times = [s.t for s in stations if s.t is not None]
+    if not times or len(times) < len(stations):
         return DEFAULT_RUN_S
-    starts = [s.t[0] for s in stations if s.t is not None]
-    ends = [s.t[1] for s in stations if s.t is not None]
-    return max(max(ends) - min(starts), 1.0)
+    return max(max(end for _, end in times) - min(start for start, _ in times), 1.0)
 
 
 def fit_channel(

@@ -236,21 +236,23 @@ def _flicker(rng: np.random.Generator, n: int, m: int = 16) -> np.ndarray:
     return 1e-3 * x / x.std()
 
 
+COVERAGE_TRUTH = {"kto": 31.6, "d": 0.35, "g": np.array([0.05, 0.08, -0.04])}
+
+
 def _coverage(errors, stations: list[Station], n: int = 200) -> dict[str, float]:
-    """The share of ``n`` fits whose 95 % intervals cover each truth, ``errors(rng, k)`` added
-    to the exact station means."""
+    """The share of ``n`` fits whose 95 % intervals cover each truth (``COVERAGE_TRUTH``, which
+    ``stations`` hold exactly), ``errors(rng, k)`` added to the station means."""
+    t = COVERAGE_TRUTH
+    truth = {"K_TO": t["kto"], "drift": t["d"], **{f"g_{a}": g for a, g in zip("xyz", t["g"])}}
     rng = np.random.default_rng(7)
-    hits = {k: 0 for k in ("K_TO", "drift", "g_x", "g_y", "g_z")}
+    hits = dict.fromkeys(truth, 0)
     for _ in range(n):
         e = errors(rng, len(stations))
         noisy = [dataclasses.replace(s, V={"X": s.V["X"] + ei}) for s, ei in zip(stations, e)]
         f = fit_channel("X", noisy, latitude_deg=LAT, earth_rate_rad_per_s=OMEGA)
-        for k, t in (("K_TO", 31.6), ("drift", 0.35), ("g_x", 0.05), ("g_y", 0.08), ("g_z", -0.04)):
-            hits[k] += f.figures[k].covers(t)
+        for k, v in truth.items():
+            hits[k] += f.figures[k].covers(float(v))
     return {k: h / n for k, h in hits.items()}
-
-
-COVERAGE_TRUTH = {"kto": 31.6, "d": 0.35, "g": np.array([0.05, 0.08, -0.04])}
 
 
 @pytest.mark.parametrize(
