@@ -391,7 +391,7 @@ class FlickerNoise:
 
     #: Samples are made ahead in chunks of this many steps, always on the same grid from the
     #: run's start, so the output does not depend on how callers cut the run into blocks.
-    CHUNK = 4096
+    CHUNK = 16384
 
     def take(self, n: int) -> np.ndarray:
         if not self.groups:

@@ -45,6 +45,7 @@ from drivers.adc_protocol import (
     decode_reply,
     encode_command,
     encode_frame,
+    encode_frames,
     frame_size,
 )
 from drivers.errors import ProtocolError
@@ -328,6 +329,25 @@ def test_encoded_frame_decodes_to_the_same_seq_first_sample_flags_and_codes(args
     assert (f.n_sets, f.n_channels) == codes.shape
     np.testing.assert_array_equal(f.codes, codes)
     assert decode_frame(data, expect_channels=codes.shape[1]).seq == seq
+
+
+@FAST
+@given(
+    st.integers(0, 2**32 - 1),
+    st.integers(0, 2**63),
+    st.integers(0, 0xFFFF),
+    st.integers(1, 16),
+    hnp.arrays(np.int16, st.tuples(st.integers(1, 80), st.integers(1, MAX_CHANNELS))),
+)
+@example(2**32 - 2, 0, 1, 2, np.zeros((7, 3), np.int16))  # the counter wraps inside the block
+def test_a_block_of_frames_is_its_frames_one_by_one(seq, first, flags, sets, codes):
+    """encode_frames (the device's block at once) gives the bytes encode_frame gives frame by
+    frame, the last frame short when the block does not divide."""
+    one_by_one = b"".join(
+        encode_frame(seq + i, first + i * sets, codes[k : k + sets], flags)
+        for i, k in enumerate(range(0, len(codes), sets))
+    )
+    assert encode_frames(seq, first, codes, sets, flags) == one_by_one
 
 
 def test_frame_layout_matches_the_specification_byte_for_byte():
