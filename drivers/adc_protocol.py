@@ -106,8 +106,8 @@ def encode_frames(
 ) -> bytes:
     """The bytes of consecutive frames of ``sets`` sample sets each (the last one shorter when
     ``codes`` does not divide), numbered from ``seq`` and ``first_sample``: exactly what
-    :func:`encode_frame` gives frame by frame, built as one array (a device streaming 10 ms
-    frames spent most of its host time in the per-frame packing)."""
+    :func:`encode_frame` gives frame by frame, built as one array (the sim rig's device spent a
+    fifth of its physics thread packing 10 ms frames one by one)."""
     codes = np.asarray(codes)
     n, c = codes.shape
     if not (1 <= c <= MAX_CHANNELS and 1 <= sets <= MAX_SETS):
