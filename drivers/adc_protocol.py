@@ -137,7 +137,7 @@ def encode_frames(
         a["seq"] = (seq + k) & 0xFFFFFFFF
         a["first"] = first_sample + sets * k
         a["codes"] = codes[: full * sets].reshape(full, sets, c)
-        raw = memoryview(a).cast("B")
+        raw = a.data.cast("B")
         size = rec.itemsize
         a["crc"] = [zlib.crc32(raw[i * size + 2 : (i + 1) * size - CRC_SIZE]) for i in range(full)]
         out = a.tobytes()
