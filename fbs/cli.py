@@ -10,6 +10,15 @@ Start-up: ``COMMANDS`` names each command's module. A module defines the command
 numba, h5py, Textual - inside the functions that run it, so building the parser costs no
 more than argparse: ``fbs --version``, ``--help`` and a usage error load none of it, and a
 command loads only its own (``bench/cli_start.py`` times both; a test guards the first).
+
+BLAS threads: OpenBLAS and MKL run one thread unless the environment sets them
+(``BLAS_THREADS``, set before a command loads numpy). The analyses' matrices are small (a plant
+of ~40 states, products of ~2000 x 40 x 36), where another BLAS thread costs more than it gives,
+and on a busy box its spinning threads cost far more: ``fbs gap`` on a development file took
+2.2x the wall time of one thread with two other processes running (farm-bench, 3 pairs), a
+hysteresis run on the sim rig 1.09x with the rig's own threads beside its analysis.
+``OMP_NUM_THREADS`` is left alone: it sets how many threads a jackknife fans its replicates
+over (``procedures.analysis.threads``).
 """
 
 from __future__ import annotations
@@ -30,6 +39,10 @@ from fbs.signals import aborting_on_signals
 from fbs.usage import EXIT_CODES_HELP, EXIT_ERROR, Parser, one_line, version
 
 log = logging.getLogger("fbs")
+
+#: BLAS thread counts a command runs with unless its environment sets them (OpenBLAS reads its
+#: own variable before ``OMP_NUM_THREADS``); children started by a command inherit them
+BLAS_THREADS = {"OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 @dataclass(frozen=True)
@@ -172,6 +185,8 @@ def _main(argv: list[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)  # a usage error exits 64 here
     args.argv = argv
+    for var, value in BLAS_THREADS.items():  # before the command loads numpy
+        os.environ.setdefault(var, value)
     with command_logging(args.verbose):
         try:
             # the console owns its terminal and its signals (Textual); every other command aborts alike

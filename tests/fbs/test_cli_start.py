@@ -160,3 +160,17 @@ def test_a_defect_in_a_run_leaves_its_traceback_in_the_runs_log(capsys, monkeypa
     text = log.read_text()
     assert "Traceback (most recent call last)" in text, text[-2000:]
     assert "a defect in the run" in text, text[-2000:]
+
+
+def test_a_command_runs_one_blas_thread_unless_its_environment_says():
+    """OpenBLAS's threads on a busy box made ``fbs gap`` take 2.2x the wall time of one thread
+    (``fbs.cli``'s docstring): a command sets one before it loads numpy, unless already set."""
+    r = _python("""
+        import os
+        os.environ.pop("OPENBLAS_NUM_THREADS", None)
+        os.environ["MKL_NUM_THREADS"] = "3"
+        from fbs.cli import main
+        code = main(["inspect", "/nonexistent/run.h5"])
+        print("exit", code, os.environ.get("OPENBLAS_NUM_THREADS"), os.environ["MKL_NUM_THREADS"])
+    """)
+    assert "exit 2 1 3" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
