@@ -19,12 +19,19 @@ runs just those, without the campaign's earlier procedures as their prior).
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import h5py
+from fbs.cli import BLAS_THREADS
+
+# the BLAS threads `fbs run` runs with, set before numpy loads
+for _var, _value in BLAS_THREADS.items():
+    os.environ.setdefault(_var, _value)
+
+import h5py  # noqa: E402
 
 TARGET_X_REALTIME = 50.0
 TARGET_SHARE = 0.3
