@@ -631,13 +631,11 @@ class TermEstimate:
 def mixed_edf(res: AllanResult, model: NoiseModel) -> np.ndarray:
     """Degrees of freedom of the Allan variance at every tau for the fitted mixture of noises:
     Satterthwaite's nu = (sum v_t)^2 / sum (v_t^2 / nu_t), v_t each term's modelled variance and
-    nu_t Greenhall's EDF for its noise type (a sum of independent scaled chi-squares taken as one;
-    the white-angle term's EDF stands for the flicker-angle term's too, which Greenhall's
-    computation does not cover for d = 2 beyond alpha = 2)."""
+    nu_t Greenhall's EDF for its noise type (a sum of independent scaled chi-squares taken as
+    one). The flicker-angle term takes flicker phase's (alpha = 1), 148 at tau 204.8 s of a
+    2400 s record at 10 Hz, where white phase's is 10,800."""
     v = np.column_stack([model.variance(res.tau_s, t) for t in TERMS])
-    nus = np.column_stack(
-        [res.edf_for(min(TERM_ALPHA[t], 2) if t != "flicker_angle" else 2) for t in TERMS]
-    )
+    nus = np.column_stack([res.edf_for(TERM_ALPHA[t]) for t in TERMS])
     num = v.sum(axis=1) ** 2
     den = np.sum(np.where(v > 0, v**2 / np.where(nus > 0, nus, np.inf), 0.0), axis=1)
     return np.where(den > 0, num / np.where(den > 0, den, 1.0), res.edf)
