@@ -14,9 +14,10 @@ command loads only its own (``bench/cli_start.py`` times both; a test guards the
 BLAS threads: OpenBLAS and MKL run one thread unless the environment sets them
 (``BLAS_THREADS``, set before a command loads numpy). The analyses' matrices are small (a plant
 of ~40 states, products of ~2000 x 40 x 36), where another BLAS thread costs more than it gives,
-and on a busy box its spinning threads cost far more: ``fbs gap`` on a development file took
-2.2x the wall time of one thread with two other processes running (farm-bench, 3 pairs), a
-hysteresis run on the sim rig 1.09x with the rig's own threads beside its analysis.
+and on a busy box its spinning threads cost far more. ``fbs gap`` on a development file
+(farm-bench, 3 pairs, 2 cores): idle, two threads took the same wall time as one (1.01x) and
+1.7x its CPU; with two other processes running, 2.2x its wall time. A hysteresis run on the sim
+rig, the rig's own threads beside its analysis, took 1.09x.
 ``OMP_NUM_THREADS`` is left alone: it sets how many threads a jackknife fans its replicates
 over (``procedures.analysis.threads``).
 """
