@@ -165,12 +165,18 @@ def test_a_defect_in_a_run_leaves_its_traceback_in_the_runs_log(capsys, monkeypa
 def test_a_command_runs_one_blas_thread_unless_its_environment_says():
     """OpenBLAS's threads on a busy box made ``fbs gap`` take 2.2x the wall time of one thread
     (``fbs.cli``'s docstring): a command sets one before it loads numpy, unless already set."""
+    pytest.importorskip("threadpoolctl")  # `make test` installs it (the cluster extra)
     r = _python("""
         import os
-        os.environ.pop("OPENBLAS_NUM_THREADS", None)
+        for var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"):
+            os.environ.pop(var, None)
         os.environ["MKL_NUM_THREADS"] = "3"
         from fbs.cli import main
-        code = main(["inspect", "/nonexistent/run.h5"])
+        code = main(["inspect", "/nonexistent/run.h5"])  # loads numpy, then fails
         print("exit", code, os.environ.get("OPENBLAS_NUM_THREADS"), os.environ["MKL_NUM_THREADS"])
+        from threadpoolctl import threadpool_info
+        print("openblas", [i["num_threads"] for i in threadpool_info() if i["internal_api"] == "openblas"])
     """)
-    assert "exit 2 1 3" in r.stdout, r.stdout[-2000:] + r.stderr[-2000:]
+    out = r.stdout + r.stderr[-2000:]
+    assert "exit 2 1 3" in r.stdout, out
+    assert "openblas [1]" in r.stdout, out
