@@ -175,7 +175,8 @@ def test_a_command_runs_one_blas_thread_unless_its_environment_says():
         code = main(["inspect", "/nonexistent/run.h5"])  # loads numpy, then fails
         print("exit", code, os.environ.get("OPENBLAS_NUM_THREADS"), os.environ["MKL_NUM_THREADS"])
         from threadpoolctl import threadpool_info
-        print("openblas", [i["num_threads"] for i in threadpool_info() if i["internal_api"] == "openblas"])
+        blas = [i["num_threads"] for i in threadpool_info() if i["internal_api"] == "openblas"]
+        print("openblas", blas)
     """)
     out = r.stdout + r.stderr[-2000:]
     assert "exit 2 1 3" in r.stdout, out
