@@ -83,9 +83,10 @@ def run_case(case: int, n_defaults: int) -> dict[str, Any]:
         "wall_s": time.monotonic() - wall,
     }
     for key in FIGURES:
-        lo, hi = values.get(f"{key}_ci95") or (None, None)
+        # each figure per axis (DESIGN.md section 7): {axis: value}, {axis: [lo, hi]}
+        lo, hi = (values.get(f"{key}_ci95") or {}).get(axis) or (None, None)
         resolved = ((values.get("resolved") or {}).get(key) or {}).get(axis)
-        value = s.values.get(key)
+        value = (s.values.get(key) or {}).get(axis)
         out[key] = {
             "value": value,
             "ci95": [lo, hi],

@@ -228,6 +228,38 @@ def bearing_torque(
     return torque_per_pa_Nm_per_V * np.asarray(pa_V) - viscous_Nms * omega - inertia_kg_m2 * alpha
 
 
+def driven_angle(
+    pa_V: np.ndarray,
+    fs_hz: float,
+    *,
+    torque_per_pa_Nm_per_V: float,
+    viscous_Nms: float,
+    inertia_kg_m2: float,
+    stiffness_Nm_per_rad: float,
+) -> np.ndarray:
+    """The angle (rad) the power-amplifier input drives the platform through, the bearing taken
+    as a spring of stiffness k (``bearing_torque`` solved for the angle, eq. 3.23-3.27):
+
+        theta(w) = (Kp Km / Ra) V_pa(w) / (k + j w (D + Km Kb / Ra) - I w^2)
+
+    A second view of the platform's motion, free of the autocollimator's noise: far above
+    sqrt(k / I) the inertia alone sets it and it is the platform's own motion (the drive is
+    the torque the platform really feels, noise and all); near and below it the bearing's
+    stiffness, which Dahl's model makes vary along the loop from 0 to 4 k, makes it only an
+    approximation. No mean (0 at DC); the straight line through the record's ends is taken
+    out before the transform, so its ends do not ring (as ``Advance``)."""
+    v = np.asarray(pa_V, dtype=float)
+    n = len(v)
+    k_idx = np.arange(n, dtype=float)
+    v = v - v[0] - (v[-1] - v[0]) / max(1, n - 1) * k_idx
+    nfft = scipy.fft.next_fast_len(2 * n, real=True)
+    w = 2 * math.pi * scipy.fft.rfftfreq(nfft, 1.0 / fs_hz)
+    den = stiffness_Nm_per_rad + 1j * w * viscous_Nms - inertia_kg_m2 * w * w
+    h = np.zeros(len(w), dtype=complex)
+    h[1:] = torque_per_pa_Nm_per_V / den[1:]
+    return scipy.fft.irfft(scipy.fft.rfft(v, nfft) * h, nfft)[:n]
+
+
 # ---------------------------------------------------------------------------- cycles
 @dataclass(frozen=True)
 class Segment:

@@ -286,13 +286,7 @@ def analyze_file(
         warnings.append(msg)
     ac_scale = ac.inst_mV_per_urad * 1e-3 / URAD  # V per rad
     lag_meas: dahl.LagMeasurement | None = None
-    kt, dv, inertia = plat.torque_per_pa_V, plat.viscous_Nms, plat.inertia_kg_m2
-
-    def rigid(w: np.ndarray) -> np.ndarray:
-        # angle per volt of drive of the platform as a rigid body (eq. 3.23-3.27): the
-        # bearing's small-motion stiffness is far below I w^2 at the lines used
-        return kt / (-inertia * w * w + 1j * dv * w)
-
+    rigid = rigid_response(plat)
     if angle_lag_s is None:
         try:
             lag_meas = dahl.measure_lag(
@@ -419,8 +413,9 @@ def analyze_file(
             ]
         )
         lag_choice = (np.maximum(-d, 0.0), np.maximum(d, 0.0))
+    drive_choice = _drive_choice(theta, torque, pa_a, fs_a, fc, plat, seg_a, step, cutoffs, fit)
     estimates, ses, dof, lags = _jackknife(
-        fit, chain, lag_source, scan.envelope(PATH_TOLERANCE), lag_choice
+        fit, chain, lag_source, [scan.envelope(PATH_TOLERANCE), lag_choice, drive_choice]
     )
     if fit_lag:
         G = len(lags)
@@ -507,6 +502,18 @@ def analyze_file(
 ANALYSIS_RATE_PER_FC = 80.0
 #: a fitted lag is sought within this of the data sheet's (and within 15 samples)
 FIT_LAG_RANGE_S = 0.01
+
+
+def rigid_response(plat: PlatformConstants) -> Callable[[np.ndarray], np.ndarray]:
+    """The platform's angle per volt of drive at angular frequencies w (rad/s) as a rigid body
+    (eq. 3.23-3.27): the bearing's small-motion stiffness is far below I w^2 at the command
+    lines the lag is measured at (``dahl.measure_lag``)."""
+    kt, dv, inertia = plat.torque_per_pa_V, plat.viscous_Nms, plat.inertia_kg_m2
+
+    def rigid(w: np.ndarray) -> np.ndarray:
+        return kt / (-inertia * w * w + 1j * dv * w)
+
+    return rigid
 
 
 def datasheet_lag_s(plat: PlatformConstants, ac: AutocollimatorConstants) -> float:
@@ -804,14 +811,79 @@ class _Chain:
         return math.log(f.To_Nm), math.log(f.eta_per_Nm)
 
 
+def _drive_choice(
+    theta: np.ndarray,
+    torque: np.ndarray,
+    pa: np.ndarray,
+    fs: float,
+    fc: float,
+    plat: PlatformConstants,
+    segments: list[dahl.Segment],
+    step: int,
+    cutoffs: list[float],
+    fit: dahl.DahlFit,
+) -> tuple[np.ndarray, np.ndarray]:
+    """How far (ln To, ln eta, ln eta To^2) move when the angle path's content above its
+    bandwidth is the drive's (``dahl.driven_angle``, the bearing a spring of the fitted
+    stiffness) instead of nothing: (down, up), each >= 0.
+
+    Why: the path is the instrumentation angle low-passed where the fit explains the torque
+    best, and that choice is a compromise the residual cannot see through. Above it the
+    platform really moves (the DAC's steps, its jitter), and the bearing ratchets on those
+    reversals; the low-pass drops them, which reads eta high. Higher up, the angle shows the
+    sensor's noise, reversals that are no motion at all, which reads eta low. On 16 offline
+    sim rigs with the true angle recorded (``bench/hysteresis_paths.py``) the path of least
+    residual read the stiffness +0.2 to +4.5 % high (median +0.8 %) where the true angle
+    read -0.0 to +2.3 % (+0.15 %); with the angle above the bandwidth taken from the drive
+    it read -7.5 to +0.1 % (-1.1 %), and the truth lay between the two 14 times (eta 12; To
+    once, both reading it a little high). The drive's view is noise-free but approximate (the
+    spring stands for a stiffness that runs 0 .. 4 eta To^2 along a loop), so neither path is
+    the bearing's: how far the figures move from one to the other is taken as a rectangular
+    bound, as the lag's and the bandwidth's are."""
+    cut = fit.path_cutoff_hz
+    if cut is None or not (fit.stiffness_Nm_per_rad > 0):
+        return np.zeros(3), np.zeros(3)
+    drive = dahl.driven_angle(
+        pa,
+        fs,
+        torque_per_pa_Nm_per_V=plat.torque_per_pa_V,
+        viscous_Nms=plat.viscous_Nms,
+        inertia_kg_m2=plat.inertia_kg_m2,
+        stiffness_Nm_per_rad=fit.stiffness_Nm_per_rad,
+    )
+    path = dahl.lowpass(theta, fs, cut) + drive - dahl.lowpass(drive, fs, cut)
+    try:
+        alt = dahl.fit_dahl(
+            dahl.lowpass(path, fs, max(cutoffs)),
+            torque,
+            segments,
+            fs,
+            smooth_hz=fc,
+            step=step,
+            start=(fit.To_Nm, fit.eta_per_Nm),
+        )
+    except ValueError as exc:
+        log.info("the drive's view of the angle gave no fit (%s): no bound from it", exc)
+        return np.zeros(3), np.zeros(3)
+    if alt.at_edge:
+        return np.zeros(3), np.zeros(3)
+    d = np.log(
+        [
+            alt.To_Nm / fit.To_Nm,
+            alt.eta_per_Nm / fit.eta_per_Nm,
+            alt.stiffness_Nm_per_rad / fit.stiffness_Nm_per_rad,
+        ]
+    )
+    return np.maximum(-d, 0.0), np.maximum(d, 0.0)
+
+
 def _jackknife(
     fit: dahl.DahlFit,
     chain: _Chain,
     lag_source: str,
-    path_choice: tuple[np.ndarray, np.ndarray],
-    lag_choice: tuple[np.ndarray, np.ndarray] | None = None,
+    choices: list[tuple[np.ndarray, np.ndarray]],
 ) -> tuple[dict[str, Estimate], list[float], int, np.ndarray]:
-    """To, eta and eta To^2 with 95 % intervals from three standard uncertainties (in ln):
+    """To, eta and eta To^2 with 95 % intervals from these standard uncertainties (in ln):
 
     * within amplitudes: the whole chain (the lag measured, the torque formed, the path's
       bandwidth chosen, eq. 5.2 fitted) again with the j-th kept cycle of every segment left
@@ -829,16 +901,17 @@ def _jackknife(
       leverage on that figure (``DahlFit.leverage``, its share of what the fit knows of it):
       Wu's weighted jackknife (Wu 1986, Ann. Statist. 14, eq. 2.4), sum_j (1 - h_j)
       (theta_(j) - theta)^2. With equal shares it is the plain jackknife's (M - 1) / M;
-    * the angle path's bandwidth: ``path_choice`` (down, up) in ln, how far the estimates move
-      over the bandwidths the residual cannot tell from the best (``PATH_TOLERANCE``): a bound,
-      taken as a rectangular distribution, a / sqrt(3) (GUM 4.3.7), on each side;
-    * a fitted lag's choice: ``lag_choice`` (down, up) in ln, how far the estimates move from
-      the fitted lag to the data sheet's (``analyze_file``), likewise a rectangular bound.
+    * ``choices``, each (down, up) in ln: how far the estimates move under another plausible
+      choice the data cannot rule out, a bound taken as a rectangular distribution, a / sqrt(3)
+      (GUM 4.3.7), on each side: the angle path's bandwidths the residual cannot tell from the
+      best (``PathScan.envelope``, ``PATH_TOLERANCE``); a fitted lag against the data sheet's
+      (``analyze_file``); the path's content above its bandwidth taken from the drive
+      (``_drive_choice``).
 
     The spread between amplitudes holds the cycles' noise as well as the model's departure
     (each amplitude's cycles are noisy), so the two first terms are not added: the larger is
     taken (as a Birge-ratio or random-effects analysis does: a spread between groups no larger
-    than within them reveals no error of the model). That one and the path's add in
+    than within them reveals no error of the model). That one and the choices' add in
     quadrature, and the half-width is Student's t at the Welch-Satterthwaite degrees of freedom
     (GUM G.4) times their sum. Over 180 rigs of ``bench/hysteresis_coverage.py`` this covered
     To 175 and eta 169 times (docs/procedures/hysteresis.md); three 95 % half-widths added in
@@ -898,21 +971,18 @@ def _jackknife(
             M,
         )
         se_amp = np.zeros(3)
-    down, up = path_choice
-    lag_down, lag_up = lag_choice if lag_choice is not None else (np.zeros(3), np.zeros(3))
     out: dict[str, Estimate] = {}
     for i, (key, v) in enumerate(values.items()):
         # the amplitudes' spread holds their noise too: the larger of the two, not their sum
         noise = (float(se[i]), G - 1) if se[i] >= se_amp[i] else (float(se_amp[i]), M - 1)
+        # each choice a rectangular bound on its side: a / sqrt(3) (GUM 4.3.7)
         lo, hi = (
             v
             * math.exp(
-                s
-                * _half_width(
-                    [noise, (a[i] / math.sqrt(3), math.inf), (b[i] / math.sqrt(3), math.inf)]
-                )
+                sign
+                * _half_width([noise, *((c[side][i] / math.sqrt(3), math.inf) for c in choices)])
             )
-            for s, a, b in ((-1, down, lag_down), (1, up, lag_up))
+            for sign, side in ((-1, 0), (1, 1))
         )
         # To and eta are told apart by the ladder reaching both regimes (the procedure's limits
         # on eta To theta_o, and ``_applicable``), not by their correlation: each is judged by

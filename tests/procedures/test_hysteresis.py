@@ -556,6 +556,28 @@ def test_random_bearings_acceptance_b(tmp_path, axis, To, eta):
 
 
 @pytest.mark.slow
+def test_the_intervals_hold_a_stiff_light_axis_the_path_reads_high(tmp_path):
+    """A stiff bearing on a light Y axis (a rig of ``bench/coverage_all.py``, seed 139): the
+    angle path of least residual read the stiffness +2.7 % and eta +3.5 % high, both outside
+    their intervals (the path drops the platform's motion above its bandwidth). The path with
+    that motion taken from the drive bounds it (``hysteresis._drive_choice``)."""
+    To, eta = 0.026918681612994683, 799623.0377466711
+    s, _, _ = run_on_sim(
+        tmp_path,
+        f"[bearing.Y]\nTo_Nm = {To!r}\neta_per_Nm = {eta!r}\n"
+        "[platform.Y]\ninertia_kg_m2 = 0.23841143635715306\n",
+        axis="Y",
+        seed=5,
+    )
+    assert s.status == "complete", s.error
+    truth = {"To_Nm": To, "eta_per_Nm": eta, "stiffness_Nm_per_rad": eta * To * To}
+    for key, value in truth.items():
+        assert s.values["resolved"][key] == {"Y": True}
+        lo, hi = s.values[f"{key}_ci95"]["Y"]
+        assert lo <= value <= hi, (key, value, lo, hi)
+
+
+@pytest.mark.slow
 def test_abort_and_resume_runs_the_whole_ladder_again(tmp_path):
     """An interrupted sweep is redone on --resume: the fit needs one continuous ladder."""
     import threading

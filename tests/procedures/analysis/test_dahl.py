@@ -205,6 +205,29 @@ def test_bearing_torque_removes_inertial_and_viscous_torques():
     assert np.max(np.abs(T - friction)[5:-5]) < 1e-3 * 0.01
 
 
+@pytest.mark.parametrize("k", [0.0, 450.0])
+def test_driven_angle_is_the_platforms_answer_to_its_drive(k):
+    """The angle a drive moves a spring-mass-damper through, against an ODE solver's: equal
+    above the drive's slowest content (its mean and end-to-end line are no motion it knows)."""
+    fs, I, c, kpa = 400.0, 0.3, 0.9, 6.96
+    rng = np.random.default_rng(3)
+    n = 8000
+    # a drive with content from 2 Hz up: steps of a DAC and a random part
+    pa = dahl.lowpass(rng.standard_normal(n), fs, 60.0) * 1e-3
+    pa += 2e-3 * np.floor(np.sin(2 * math.pi * 0.4 * np.arange(n) / fs) * 20) / 20
+    sys_ = scipy.signal.lti([kpa], [I, c, k] if k else [I, c, 1e-9])
+    _, theta, _ = scipy.signal.lsim(sys_, pa - pa.mean(), np.arange(n) / fs)
+    got = dahl.driven_angle(
+        pa, fs, torque_per_pa_Nm_per_V=kpa, viscous_Nms=c, inertia_kg_m2=I, stiffness_Nm_per_rad=k
+    )
+
+    def high(x):
+        return (x - dahl.lowpass(x, fs, 10.0))[1000:-1000]
+
+    err = np.std(high(got) - high(theta)) / np.std(high(theta))
+    assert err < 0.02
+
+
 def test_command_frequency_and_segments_of_a_ladder():
     _, cmd = ladder([500e-6, 100e-6, 20e-6, 5e-6], cycles=5, lead_s=3.3)
     fs = FS
