@@ -405,14 +405,7 @@ def analyze_file(
             step=step,
             start=(fit.To_Nm, fit.eta_per_Nm),
         )
-        d = np.log(
-            [
-                at_sheet.To_Nm / fit.To_Nm,
-                at_sheet.eta_per_Nm / fit.eta_per_Nm,
-                at_sheet.stiffness_Nm_per_rad / fit.stiffness_Nm_per_rad,
-            ]
-        )
-        lag_choice = (np.maximum(-d, 0.0), np.maximum(d, 0.0))
+        lag_choice = _choice(fit, at_sheet)
     drive_choice = _drive_choice(theta, torque, pa_a, fs_a, fc, plat, seg_a, step, cutoffs, fit)
     estimates, ses, dof, lags = _jackknife(
         fit, chain, lag_source, [scan.envelope(PATH_TOLERANCE), lag_choice, drive_choice]
@@ -867,6 +860,11 @@ def _drive_choice(
         return np.zeros(3), np.zeros(3)
     if alt.at_edge:
         return np.zeros(3), np.zeros(3)
+    return _choice(fit, alt)
+
+
+def _choice(fit: dahl.DahlFit, alt: dahl.DahlFit) -> tuple[np.ndarray, np.ndarray]:
+    """How far (ln To, ln eta, ln eta To^2) move from ``fit`` to ``alt``: (down, up), each >= 0."""
     d = np.log(
         [
             alt.To_Nm / fit.To_Nm,
