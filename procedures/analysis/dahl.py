@@ -246,18 +246,14 @@ def driven_angle(
     sqrt(k / I) the inertia alone sets it and it is the platform's own motion (the drive is
     the torque the platform really feels, noise and all); near and below it the bearing's
     stiffness, which Dahl's model makes vary along the loop from 0 to 4 k, makes it only an
-    approximation. No mean (0 at DC); the straight line through the record's ends is taken
-    out before the transform, so its ends do not ring (as ``Advance``)."""
-    v = np.asarray(pa_V, dtype=float)
-    n = len(v)
-    k_idx = np.arange(n, dtype=float)
-    v = v - v[0] - (v[-1] - v[0]) / max(1, n - 1) * k_idx
-    nfft = scipy.fft.next_fast_len(2 * n, real=True)
-    w = 2 * math.pi * scipy.fft.rfftfreq(nfft, 1.0 / fs_hz)
+    approximation. No mean (0 at DC); the drive's spectrum is ``Advance``'s, the straight line
+    through the record's ends taken out first, so its ends do not ring."""
+    spec = Advance(pa_V, fs_hz)
+    w = spec.w
     den = stiffness_Nm_per_rad + 1j * w * viscous_Nms - inertia_kg_m2 * w * w
     h = np.zeros(len(w), dtype=complex)
     h[1:] = torque_per_pa_Nm_per_V / den[1:]
-    return scipy.fft.irfft(scipy.fft.rfft(v, nfft) * h, nfft)[:n]
+    return scipy.fft.irfft(spec.spec * h, spec.nfft)[: spec.n]
 
 
 # ---------------------------------------------------------------------------- cycles
