@@ -18,7 +18,9 @@ import queue
 import threading
 import time
 from collections.abc import Callable, Collection
-from typing import TYPE_CHECKING
+from copy import deepcopy
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import can
 import can.interfaces.virtual
@@ -106,6 +108,63 @@ class _InlineDelivery(queue.Queue[can.Message]):
     def put(self, msg: can.Message, block: bool = True, timeout: float | None = None) -> None:
         with self._lock:
             self._listener.on_message_received(msg)
+
+    def deliver(self, msg: can.Message, timestamp: float) -> None:
+        """``put`` of a frame the sender still owns: the nodes see its own copy of the bytes
+        (``_Frame``), not python-can's copy of the whole message (``InlineVirtualBus``)."""
+        self.put(
+            cast(
+                can.Message,
+                _Frame(
+                    msg.arbitration_id,
+                    bytearray(msg.data),
+                    timestamp,
+                    msg.is_error_frame,
+                    msg.is_remote_frame,
+                ),
+            )
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class _Frame:
+    """What a CANopen listener reads of a received frame (``canopen.network.MessageListener``)."""
+
+    arbitration_id: int
+    data: bytearray
+    timestamp: float
+    is_error_frame: bool
+    is_remote_frame: bool
+
+
+class InlineVirtualBus(can.interfaces.virtual.VirtualBus):
+    """The host's end of the sim rig's virtual channel: python-can's virtual bus, but a frame
+    for the simulated nodes (taken in the sender's thread, ``_InlineDelivery``) reaches them as
+    its id, bytes and timestamp, without the deep copy of the whole message python-can makes
+    for a queue: that copy was a quarter of a streamed set-point's host time (an excitation
+    streams 250 a second). Any other receiver on the channel gets python-can's copy, as ever."""
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        # python-can's VirtualBus.send (4.x), but for the inline receivers
+        self._check_if_open()
+        timestamp = msg.timestamp if self.preserve_timestamps else time.time()
+        all_sent = True
+        for bus_queue in self.channel:
+            if bus_queue is self.queue and not self.receive_own_messages:
+                continue
+            if isinstance(bus_queue, _InlineDelivery):
+                bus_queue.deliver(msg, timestamp)
+                continue
+            msg_copy = deepcopy(msg)
+            msg_copy.timestamp = timestamp
+            msg_copy.channel = self.channel_id
+            msg_copy.is_rx = bus_queue is not self.queue
+            try:
+                bus_queue.put(msg_copy, block=True, timeout=timeout)
+            except queue.Full:
+                all_sent = False
+        if not all_sent:
+            raise can.CanOperationError("Could not send message to one or more recipients")
 
 
 def _deliver_inline(network: canopen.Network) -> None:

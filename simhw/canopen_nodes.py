@@ -98,6 +98,9 @@ class CanopenSimNode:
         for pdo_map in self.node.rpdo.map.values():
             pdo_map.add_callback(self._on_rpdo)
         self.node.rpdo.subscribe()
+        #: each RPDO's objects and where they lie in its frame: the EDS's mapping, which the
+        #: node keeps (a host's SDO write to 0x1600.. is stored, not applied)
+        self._layouts = {id(m): self._rpdo_layout(m) for m in self.node.rpdo.map.values()}
         self.network.subscribe(0, self._on_nmt)
         self.network.subscribe(cf.HOST_HEARTBEAT_COB, self._on_host_heartbeat)
         #: True from a trip of the watchdog or an error until the host's NMT start
@@ -212,13 +215,30 @@ class CanopenSimNode:
         if not self._connected or self.stalled or self.node.nmt.state != "OPERATIONAL":
             return
         store = self.node.data_store
-        for var in pdo_map.map:
-            data = var.get_data()
-            if store.get(var.index, {}).get(var.subindex) == data:
+        frame = pdo_map.data
+        for index, subindex, start, stop, var in self._layouts[id(pdo_map)]:
+            data = frame[start:stop] if var is None else var.get_data()
+            if store.get(index, {}).get(subindex) == data:
                 # an output the PDO carries at the value it has: nothing changes (a stream's
                 # PDO carries its other outputs as they are; four physics events became one)
                 continue
-            self.node.set_data(var.index, var.subindex, data)
+            self.node.set_data(index, subindex, data)
+
+    @staticmethod
+    def _rpdo_layout(
+        pdo_map: canopen.pdo.PdoMap,
+    ) -> list[tuple[int, int, int, int, canopen.pdo.PdoVariable | None]]:
+        """Where each of the PDO's objects lies in its frame, in bytes (the variable itself
+        where it is not whole bytes): ``PdoVariable.get_data`` per object per frame was a fifth
+        of a streamed set-point's time."""
+        layout: list[tuple[int, int, int, int, canopen.pdo.PdoVariable | None]] = []
+        for var in pdo_map.map:
+            offset = var.offset
+            assert offset is not None  # placed by the map's read
+            start, stop = offset // 8, (offset + var.length) // 8
+            whole = offset % 8 == 0 and var.length % 8 == 0
+            layout.append((var.index, var.subindex, start, stop, None if whole else var))
+        return layout
 
     def _on_nmt(self, can_id: int, data: bytearray, timestamp: float) -> None:
         # the new state's heartbeat goes out at once (``_produce``): LocalNode's NMT slave

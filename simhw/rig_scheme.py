@@ -16,13 +16,12 @@ bus - with ``emulator`` set to the server, for fault injection in tests::
 
 from __future__ import annotations
 
-import can
-
 from drivers import rig_nodes as rn
 from drivers.rig import Rig, assemble, check_keys, flag
 from drivers.rig_datasheet import RigCalibration
 from drivers.runclock import RunningClock
 from drivers.table import Operator, TablePosition, terminal_operator
+from simhw.can_nodes import InlineVirtualBus
 from simhw.config import config_stamp, load_config
 from simhw.datasheet import rig_calibration
 from simhw.rig_server import SimRigServer
@@ -102,7 +101,7 @@ def open_sim_rig(
         running.close()
         raise
     try:
-        bus = can.Bus(interface="virtual", channel=server.can_channel, receive_own_messages=False)
+        bus = InlineVirtualBus(channel=server.can_channel, receive_own_messages=False)
         tab: tuple
         if table == "manual":
             t = server.sim.cfg.table
