@@ -23,8 +23,12 @@ from daq.runfile import RunWriter
 from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
 from procedures.analysis.transfer import (
     DESIGN_NETWORK,
+    NETWORK_CORNERS,
     SEARCH_FACTOR,
     TransferError,
+    _log_residual,
+    _log_residual_jacobian,
+    _network_params,
     block_csd,
     file_blocks,
     fit_network,
@@ -324,6 +328,36 @@ def test_a_combined_channel_has_the_spectra_of_the_combination_recorded(tmp_path
         blocks.combined({"x": {"zz": 1.0}})
     with pytest.raises(TransferError, match="already analysed"):
         blocks.combined({"a": {"b": 1.0}})
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.floats(-1.5, 1.5), min_size=7, max_size=7),
+    st.floats(0.005, 0.2),
+    st.floats(0.005, 0.2),
+)
+def test_the_network_fits_jacobian_is_the_residuals_derivative(shift, log_se, phase_se):
+    """The fits' analytic Jacobian (eq. 3.28 in logs) against central differences of the
+    residual it belongs to, anywhere in the search range of the design network."""
+    f = np.geomspace(0.3, 100.0, 40)
+    truth = np.log(
+        [DESIGN_NETWORK["gain"] * DESIGN_NETWORK["w1_rad_per_s"]]
+        + [DESIGN_NETWORK[k] for k in NETWORK_CORNERS]
+    )
+    H = network_response(f, _network_params(truth)) * np.exp(0.05 + 0.03j)
+    ls, ps = np.full(f.size, log_se), np.full(f.size, phase_se)
+    x = truth + np.asarray(shift)
+
+    def resid(xx: np.ndarray) -> np.ndarray:
+        return _log_residual(network_response(f, _network_params(xx)), H, ls, ps)
+
+    h = 1e-6
+    numeric = np.column_stack(
+        [(resid(x + h * e) - resid(x - h * e)) / (2 * h) for e in np.eye(x.size)]
+    )
+    analytic = _log_residual_jacobian(f, x, ls, ps)
+    assert analytic.shape == numeric.shape
+    assert np.max(np.abs(analytic - numeric)) <= 1e-6 * np.max(np.abs(analytic))
 
 
 @settings(max_examples=40, deadline=None)
