@@ -594,7 +594,7 @@ def _network_solution(
 
     lo, hi = _search_range(start)
     return scipy.optimize.least_squares(
-        resid, start, jac=jac, bounds=(lo, hi), x_scale=1.0, method="trf"
+        resid, start, jac=jac, bounds=(lo, hi), x_scale="jac", method="trf"
     )
 
 
