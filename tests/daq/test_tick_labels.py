@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
-from matplotlib.ticker import LogFormatterSciNotation, ScalarFormatter
+from matplotlib.ticker import LogFormatterSciNotation, LogLocator, ScalarFormatter
 
 from daq.plots import new_figure
-from daq.tick_labels import PlainLogFormatter, plain_log_labels, unmath
+from daq.tick_labels import PlainLogFormatter, plain_log_labels, sparse_log_minors, unmath
 
 _FROM_SUPER = str.maketrans("⁰¹²³⁴⁵⁶⁷⁸⁹⁻", "0123456789-")
 
@@ -70,3 +70,20 @@ def test_log_axes_become_plain_and_a_chosen_formatter_is_left_alone():
     labels = [t.get_text() for t in a.get_xticklabels() + a.get_yticklabels()]
     assert labels and not any("$" in t for t in labels)
     assert "10⁻¹²" in labels and "10²" in labels
+
+
+def test_minor_ticks_are_2_and_5_a_decade_over_a_decade_and_a_plots_own_are_kept():
+    fig, axes = new_figure(1, 3)
+    wide, narrow, chosen = axes.flat
+    wide.loglog([0.05, 400], [1e-12, 1e-3])
+    narrow.semilogx([2.0, 9.0], [1, 2])
+    chosen.semilogx([0.1, 1000.0], [1, 2])
+    chosen.xaxis.set_minor_locator(LogLocator(subs=(3.0,)))
+    before = {ax: ax.xaxis.get_minorticklocs() for ax in (narrow, chosen)}
+    sparse_log_minors(fig)
+    minors = wide.xaxis.get_minorticklocs()
+    mant = minors / 10.0 ** np.floor(np.log10(minors) + 1e-9)
+    assert len(minors) and set(np.round(mant, 6)) <= {2.0, 5.0}
+    assert 0.2 in np.round(minors, 9) and 200.0 in np.round(minors, 9)
+    for ax, locs in before.items():  # under a decade, or the plot's own: as they were
+        assert np.array_equal(ax.xaxis.get_minorticklocs(), locs)
