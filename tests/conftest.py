@@ -55,10 +55,14 @@ def pytest_collection_modifyitems(config, items):
 #: the files with the most work (a fresh-clone run's durations): they start first, so no long one
 #: starts last and runs alone (the unit-variation fixture, 6 min, once ended a run 8 min late)
 LONGEST_FILES = (
+    "procedures/test_earth_rate_stopwatch.py",
+    "procedures/test_stopwatch_resume.py",
     "gap/test_unit_variation.py",
+    "fbs/test_campaign.py",
+    "fbs/test_batch.py",
+    "fbs/test_cli_run.py",
     "gap/test_hidden_effects.py",
     "procedures/test_excitation.py",
-    "procedures/test_earth_rate_stopwatch.py",
     "procedures/test_excitation_modes.py",
 )
 
