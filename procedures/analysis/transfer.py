@@ -562,8 +562,10 @@ def _residuals(
 
 def _fit_network_once(
     f: np.ndarray, H: np.ndarray, log_se: np.ndarray, phase_se: np.ndarray, start: np.ndarray
-) -> np.ndarray:
-    return _canonical(np.asarray(_network_solution(f, H, log_se, phase_se, start).x))[0]
+) -> tuple[np.ndarray, bool]:
+    """A replicate's fit, its poles in order, and whether it converged."""
+    sol = _network_solution(f, H, log_se, phase_se, start)
+    return _canonical(np.asarray(sol.x))[0], bool(sol.status > 0)
 
 
 def _canonical(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -594,8 +596,19 @@ def _network_solution(
 
     lo, hi = _search_range(start)
     return scipy.optimize.least_squares(
-        resid, start, jac=jac, bounds=(lo, hi), x_scale="jac", method="trf"
+        resid,
+        start,
+        jac=jac,
+        bounds=(lo, hi),
+        x_scale="jac",
+        method="trf",
+        max_nfev=NETWORK_MAX_EVALUATIONS,
     )
+
+
+#: the network fit's evaluation limit (least_squares' own default for its 7 parameters): a fit
+#: that reaches it stopped, not converged (status 0), and its figures are not a measurement
+NETWORK_MAX_EVALUATIONS = 700
 
 
 #: a network corner is searched within this factor of its start (the quiet record's fit)
@@ -743,12 +756,11 @@ def fit_network(
     above = np.r_[False, False, np.exp(x[2:]) > 2 * np.pi * hi_hz]
     held = pinned | above
     # the jackknife: the same fit to each leave-one-out estimate, with the full estimate's weights
-    xb = np.array(
-        [
-            _fit_network_once(f, resp.H_blocks[b][ok], ls, ps, x)
-            for b in range(resp.H_blocks.shape[0])
-        ]
-    )
+    replicate_fits = [
+        _fit_network_once(f, resp.H_blocks[b][ok], ls, ps, x) for b in range(resp.H_blocks.shape[0])
+    ]
+    xb = np.array([xx for xx, _ in replicate_fits])
+    stopped = sum(not done for _, done in replicate_fits)
     se = jackknife_se(xb)
     corr = np.corrcoef(xb.T) if xb.shape[0] > 2 else np.eye(len(x))
     names = ["gain_times_w1_rad_per_s", *NETWORK_CORNERS]
@@ -804,6 +816,21 @@ def fit_network(
     est["gain"] = _exp_estimate(x[0] - x[1], eg, cg, "w1_rad_per_s")
     if pinned[0] or pinned[1]:
         est["gain"] = _unresolved(est["gain"], "w1 or g w1 at the edge of the fit's search")
+    notes: list[str] = []
+    if sol.status <= 0 or stopped:
+        # a fit stopped at its evaluation limit sits wherever it stopped, and a replicate that
+        # stopped puts that into the jackknife's spread: neither is the record's answer
+        why = (
+            f"the fit stopped at its limit of {NETWORK_MAX_EVALUATIONS} evaluations, unconverged"
+            if sol.status <= 0
+            else f"{stopped} of {len(replicate_fits)} jackknife fits stopped at their limit of "
+            f"{NETWORK_MAX_EVALUATIONS} evaluations, unconverged"
+        )
+        est = {
+            k: Estimate(e.value, e.lo, e.hi, False, why if e.resolved else f"{why}; {e.why}")
+            for k, e in est.items()
+        }
+        notes.append(why)
     params = _network_params(x)
     table = response_table(
         lambda ff: network_response(ff, params),
@@ -817,6 +844,7 @@ def fit_network(
         int(ok.sum()),
         *_residuals(network_response(f, params), H, ls, ps),
         correlations,
+        notes,
         curve=lambda ff: network_response(ff, params),
         table=table,
         params=params,

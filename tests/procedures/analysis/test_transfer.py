@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 
 from daq.runfile import RunWriter
 from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
+from procedures.analysis import transfer
 from procedures.analysis.transfer import (
     DESIGN_NETWORK,
     NETWORK_CORNERS,
@@ -120,6 +121,24 @@ def test_network_fit_matches_a_drawn_network_within_1_db_and_5_deg(tmp_path, see
     # below the band the gain and the lowest pole are one figure: never reported as resolved apart
     assert not fit.estimates["gain"].resolved
     assert fit.residual_normalized < 3
+
+
+def test_a_network_fit_stopped_at_its_evaluation_limit_resolves_nothing(tmp_path, monkeypatch):
+    """A least-squares fit that ends at its evaluation limit (status 0) sits where it stopped:
+    its figures are unresolved with the reason, and the fit says so in its notes."""
+    rng = np.random.default_rng(2)
+    path = network_file(tmp_path, rng, draw_network(rng))
+    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
+    converged = fit_network(resp, 0.5, 100.0)
+    assert any(e.resolved for e in converged.estimates.values())
+    assert "notes" not in converged.values()
+    monkeypatch.setattr(transfer, "NETWORK_MAX_EVALUATIONS", 2)
+    stopped = fit_network(resp, 0.5, 100.0)
+    assert not any(e.resolved for e in stopped.estimates.values())
+    why = stopped.values()["why_unresolved"]
+    was = [k for k, e in converged.estimates.items() if e.resolved]
+    assert all("evaluations, unconverged" in why[k] for k in was), why
+    assert any("limit of 2 evaluations" in n for n in stopped.values()["notes"])
 
 
 def test_h1_intervals_cover_the_truth_in_most_bins(tmp_path):

@@ -15,8 +15,10 @@ from procedures.analysis.gap.grid import band_spectra, make_grid
 from procedures.analysis.gap.locate import departures, gap_db
 from procedures.analysis.gap.model import (
     SpectralModel,
+    coupled_states,
     frequency_response,
     hann_line_kernel,
+    linearized,
     lsb,
     quantization_psd,
     zoh_response_modal,
@@ -138,6 +140,38 @@ def test_modal_zoh_response_equals_the_discretized_plant(effect, params):
     assert H is not None, "balanced, even the Pade delay's modes are well enough conditioned"
     scale = np.abs(Hd).max(axis=(1, 2), keepdims=True)
     assert np.max(np.abs(H - Hd) / scale) < 1e-6
+
+
+@pytest.mark.parametrize("axis", ["X", "Y"])
+def test_the_states_one_axis_sees_give_its_whole_response(axis):
+    """``coupled_states``: the plant cut to the states its inputs reach and its channels see has
+    the whole plant's response at those channels; a state outside them is one whose removal
+    changes nothing (and one of each kind is found in a small system made for it)."""
+    cfg = effects.get("bearing_friction").inject(
+        effects.nominal(), axis, stiffness_Nm_per_rad=400.0, To_Nm=0.02, eta_per_Nm=1.5e6
+    )
+    plant = build_plant(linearized(cfg), RelayState(3))
+    rows = [
+        i
+        for i, c in enumerate(plant.outputs)
+        if c.endswith(axis.lower()) or f"_{axis.lower()}_" in c
+    ]
+    C, dt = plant.C[rows], 1 / 2000
+    keep = coupled_states(plant.A, plant.B, C)
+    assert 0 < len(keep) < plant.A.shape[0]  # the other axes' loops are apart
+    z = np.exp(2j * np.pi * np.array([0.3, 3.9, 47.0, 333.0, 980.0]) * dt)
+    D = plant.D[rows]
+    H = zoh_response_modal(plant.A, plant.B, C, D, dt, z)
+    Hk = zoh_response_modal(plant.A[np.ix_(keep, keep)], plant.B[keep], C[:, keep], D, dt, z)
+    assert H is not None and Hk is not None
+    scale = np.abs(H).max(axis=(1, 2), keepdims=True)
+    assert np.max(np.abs(H - Hk) / scale) < 1e-7  # the full one's rounding: ~1e-8
+    # x0 -> x1 -> y, u -> x0; x2 driven by x1 but seen by nothing; x3 seen but reached by nothing
+    A = -np.eye(4)
+    A[1, 0] = A[2, 1] = A[1, 3] = 1.0
+    B = np.array([[1.0], [0.0], [0.0], [0.0]])
+    C1 = np.array([[0.0, 1.0, 0.0, 0.0]])
+    assert coupled_states(A, B, C1).tolist() == [0, 1]
 
 
 @pytest.mark.parametrize("f0", [10.0, 117.3, 200.0, 271.71])
