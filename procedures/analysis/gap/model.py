@@ -352,11 +352,16 @@ class SpectralModel:
         C, D = plant.C[rows], plant.D[np.ix_(rows, cols)]
         keep = coupled_states(plant.A, plant.B[:, cols], C)
         A_k, B_k = plant.A[np.ix_(keep, keep)], plant.B[np.ix_(keep, cols)]
-        H = (
-            zoh_response_modal(A_k, B_k, C[:, keep], D, dt, z)
-            if len(keep)
-            else np.broadcast_to(D, (len(z), *D.shape)).astype(complex)
-        )
+        # an input that drives none of those states reaches the channels through D alone (the
+        # other axes' noise: most of the inputs)
+        live = np.flatnonzero(np.any(B_k != 0, axis=0))
+        H: np.ndarray | None = np.broadcast_to(D, (len(z), *D.shape)).astype(complex)
+        if len(live):
+            H_live = zoh_response_modal(A_k, B_k[:, live], C[:, keep], D[:, live], dt, z)
+            if H_live is not None and H is not None:
+                H[:, :, live] = H_live
+            else:
+                H = None
         if H is None:  # eigenvectors too ill-conditioned: discretize and solve
             disc = discretize(plant, dt)
             H = frequency_response(disc.Ad, disc.Bd[:, cols], C, D, z)
