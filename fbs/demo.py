@@ -527,15 +527,25 @@ def _in_mode(s: RunSummary) -> str:
 
 
 def _root_rows(rows: list[Row], s: RunSummary, sim: SimTruth, rms_urad: float) -> None:
-    """The closed-loop roots measured (Tables 5 and 6) beside the thesis's and the simulated rig's
-    linearized model's nearest root, its bearing taken at the test amplitude."""
+    """The closed-loop roots measured (Tables 5 and 6) beside the thesis's and the simulated rig's:
+    the nearest root of the axis's loop alone, linearized (``simhw.plant.linearized_poles``; a
+    Dahl bearing taken at the test amplitude by its describing function, an approximation)."""
     from fbs.demo_truth import linearized_at_amplitude
 
     cl = s.values.get("closed_loop") or {}
     if not cl:
         return
     axis, mode, th = s.params.get("axis", "X"), int(cl.get("mode", 3)), cl.get("thesis") or {}
-    lin, how = linearized_at_amplitude(sim.cfg, mode, axis, rms_urad)
+    if sim.cfg.bearing[axis].model == "dahl":
+        lin, how = linearized_at_amplitude(sim.cfg, mode, axis, rms_urad)
+        kind = "describing function"
+    else:  # a linear loop: its roots are exact at any amplitude
+        from simhw.plant import linearized_poles
+
+        lin = linearized_poles(sim.cfg, mode, axis)
+        how = f"the {sim.cfg.bearing[axis].model} bearing"
+        kind = "computed"
+    alone = " (the gyro's viscous cross-axis coupling left out)" if mode in (4, 5) else ""
     table = 5 if mode == 3 else 6
     for name, thesis_key in (("c1", "c1"), ("platform_pair", "platform_w"), ("c4", "c4")):
         r = (cl.get("roots") or {}).get(name)
@@ -551,7 +561,7 @@ def _root_rows(rows: list[Row], s: RunSummary, sim: SimTruth, rms_urad: float) -
             else ""
         )
         truth = (
-            Truth(abs(near), "describing function", "the linearized model's nearest root, " + how)
+            Truth(abs(near), kind, f"the nearest root of the axis's loop alone{alone}, {how}")
             if near
             else None
         )

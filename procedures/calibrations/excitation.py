@@ -48,8 +48,15 @@ import numpy as np
 
 from daq.spectral import coherence, equivalent_dof, n_segments, welch_csd_matrix
 from drivers.rig_datasheet import AutocollimatorConstants, RigCalibration
-from procedures.analysis.intervals import add_figure
-from procedures.analysis.roots import ClosedLoop, GyroCaging, LoopParts, close_loop, sensor_gain
+from procedures.analysis.intervals import add_figure, from_stderr, through_scale
+from procedures.analysis.roots import (
+    IN_LOOP_GAIN_ALLOWANCE,
+    ClosedLoop,
+    GyroCaging,
+    LoopParts,
+    close_loop,
+    sensor_gain,
+)
 from procedures.analysis.transfer import (
     DESIGN_NETWORK,
     NETWORK_CORNERS,
@@ -60,6 +67,7 @@ from procedures.analysis.transfer import (
     block_csd,
     fit_network,
     fit_platform,
+    jackknife_se,
     network_in_loop,
     network_response,
     periodic_blocks,
@@ -77,7 +85,7 @@ from procedures.paramlimits import (
     check_limits,
     sample_rate,
 )
-from procedures.params import prior_values
+from procedures.params import pickoff_scale_rel_half_width, prior_values
 from procedures.procedure import (
     Analysis,
     Context,
@@ -486,6 +494,21 @@ class Excitation(Procedure[ExcitationParams]):
         return TorqueOff(V_Td=0.0)
 
     # ------------------------------------------------------------------ analysis
+    def _kg(
+        self, p: ExcitationParams, cal: RigCalibration
+    ) -> tuple[dict[str, float], dict[str, str]]:
+        """The axis gyro's K_g (mV/urad): the stopwatch's where the campaign has it."""
+        return prior_values(
+            self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad
+        )
+
+    def _pickoff(self, p: ExcitationParams, cal: RigCalibration) -> tuple[float, float] | None:
+        """The stopwatch's K_g and its relative 95 % half-width, for the gyro modes' loop."""
+        kg, src = self._kg(p, cal)
+        if p.mode == 3 or src[p.axis] != "stopwatch":
+            return None
+        return kg[p.axis], pickoff_scale_rel_half_width(self.prior, "stopwatch", p.axis, kg[p.axis])
+
     def analyze(self, ctx: Context) -> Analysis:
         p = self.params
         cal = ctx.rig.calibration
@@ -516,7 +539,7 @@ class Excitation(Procedure[ExcitationParams]):
                 p.platform_hi_hz,
             )
             roots, loop_resp, net = closed_loop(
-                excited, quiet_net, plat, cal, n, self.network_input, p
+                excited, quiet_net, plat, cal, n, self.network_input, p, self._pickoff(p, cal)
             )
         except TransferError as exc:
             raise ProcedureError(f"excitation: {exc}") from None
@@ -534,9 +557,7 @@ class Excitation(Procedure[ExcitationParams]):
         values["level_limited_by"] = probe.limited_by
         values["mode"] = p.mode
         values["closed_loop"] = roots.values() | {"thesis": thesis_roots(p.mode, p.axis)}
-        kg, kg_src = prior_values(
-            self.prior, "stopwatch", "K_g_mV_per_urad", [p.axis], cal.pickoff_scale_mV_per_urad
-        )
+        kg, kg_src = self._kg(p, cal)
         ac = cal.autocollimator[p.axis]
         scales = {
             n["ac_ctl"]: ac.control_mV_per_urad * 1e-3,
@@ -593,10 +614,14 @@ def closed_loop(
     n: Mapping[str, str],
     network_input: str,
     p: ExcitationParams,
+    pickoff: tuple[float, float] | None = None,
 ) -> tuple[ClosedLoop, Response, ModelFit]:
     """The loop closed over the identified network, platform and sensor (``analysis.roots``),
     the measured sensitivity pa / V_Td it is checked against, and the network fitted inside the
-    excited loop (``net``, the quiet record's fit, is only its start)."""
+    excited loop (``net``, the quiet record's fit, is only its start). ``pickoff``: the
+    stopwatch's K_g (mV/urad) and its relative 95 % half-width; in the gyro modes the loop
+    alone's sensor, where the gain measured inside the loop carries the cross-axis coupling
+    (``roots.IN_LOOP_GAIN_ALLOWANCE``)."""
     kind = "ctl" if p.mode == 3 else "gyro"
     pc, ac = cal.platform[p.axis], cal.autocollimator[p.axis]
     lo = max(p.roots_lo_hz, excited.lowest_fit_hz)
@@ -610,7 +635,18 @@ def closed_loop(
             cal.restraint_time_constant_s[p.axis],
         )
     )
-    gain, gain_reps = sensor_gain(ratio, kind, ac, lo, p.platform_hi_hz, caging)
+    k_loop, k_loop_reps = sensor_gain(ratio, kind, ac, lo, p.platform_hi_hz, caging)
+    dof = len(k_loop_reps) - 1
+    gain, gain_reps, rel, source, check = k_loop, k_loop_reps, 0.0, "measured in the loop", None
+    if kind == "gyro":
+        # the in-loop gain is the loop alone's only to the coupling's allowance
+        rel = IN_LOOP_GAIN_ALLOWANCE
+        if pickoff is not None:
+            check = through_scale(
+                from_stderr(k_loop, float(jackknife_se(np.asarray(k_loop_reps))), dof=dof), rel
+            )
+            gain, rel, source = pickoff[0] * 1e3, pickoff[1], "stopwatch"
+            gain_reps = [gain] * len(k_loop_reps)
 
     # the network again, inside the excited loop: the quiet record's H1 is biased at the lowest
     # frequencies by the network's memory (``network_in_loop``), and c1 lives there
@@ -644,6 +680,9 @@ def closed_loop(
             (lo, p.roots_hi_hz),
             len(reps) - 1,
             gain_reps,
+            sensor_rel_half=rel,
+            sensor_from=source,
+            sensor_in_loop=check,
         ),
         sens,
         in_loop,

@@ -144,6 +144,19 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _sensor_source(cl: Mapping[str, Any]) -> str:
+    """Where the loop's sensor gain came from, in words."""
+    g = f"{cl['sensor_mV_per_urad']:.4g} mV/urad"
+    if cl.get("sensor_from") == "stopwatch":
+        q = cl.get("sensor_in_loop_mV_per_urad")
+        return f"{g}, the stopwatch's K_g" + (
+            f"; measured inside the loop through V_Td it reads {q:.4g}, the coupling in it"
+            if q is not None
+            else ""
+        )
+    return f"measured through V_Td: {g}"
+
+
 def _roots_lines(values: Mapping[str, Any]) -> list[str]:
     cl = values["closed_loop"]
     th = cl["thesis"]
@@ -154,10 +167,20 @@ def _roots_lines(values: Mapping[str, Any]) -> list[str]:
         f"## Closed-loop roots, Mode {values['mode']}, from the loop's sensitivity pa / (K_d V_Td) "
         f"(cf. Table {int(th['table'])})",
         "",
-        f"The loop closed over the parts identified above (network, platform, and the {cl['sensor']} sensor's "
-        f"gain measured through V_Td: {cl['sensor_mV_per_urad']:.4g} mV/urad). Checked against the measured "
+        f"The axis's loop alone, closed over the parts identified above (network, platform, and "
+        f"the {cl['sensor']} sensor's gain {_sensor_source(cl)}). Checked against the measured "
         f"sensitivity over {ck['band_hz'][0]:g}-{ck['band_hz'][1]:g} Hz: {ck['db_rms']:.3g} dB, "
         f"{ck['deg_rms']:.3g} deg rms ({ck['normalized']:.3g} standard errors).",
+        *(
+            [
+                "",
+                "In this gyro mode the gyro's viscous cross-axis coupling (II C.4.d) ties this loop to "
+                "the other axis's; the roots are of this loop alone, as Table 6's, and the coupled "
+                "rig's may lie a few per cent from them.",
+            ]
+            if cl["sensor"] == "gyro"
+            else []
+        ),
         "",
         "| root | measured (rad/s) | 95 % interval | zeta | 95 % interval | thesis (rad/s, zeta) |",
         "|---|---|---|---|---|---|",

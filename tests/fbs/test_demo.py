@@ -247,6 +247,27 @@ def test_amplitude_dependent_rows_take_the_bearing_at_the_test_amplitude():
     assert c4 is not None and abs(c4 - small[0]) > 0.1
 
 
+def test_a_linear_loops_roots_have_an_exact_truth_the_loop_alone():
+    """Issue 38: on a rig whose bearing is linear the closed-loop roots do not depend on the
+    amplitude, and their truth is exact and counted: the nearest root of the axis's loop alone
+    (``linearized_poles`` with the axis; in Mode 4 without the gyro's cross-axis coupling, as
+    the procedure closes it). They were all filed as describing-function approximations, kept
+    out of the coverage, with the Mode-4 pair's covered on 1 of 11 drawn linear rigs."""
+    recorded = load_summaries(RECORDED)
+    excitation = [s for s in recorded if s.procedure == "excitation"]
+    cfg = SimConfig()
+    cfg.bearing["X"].model = "spring"
+    rows = figure_rows(excitation, SimTruth(cfg, 0))
+    roots = [r for r in rows if r.quantity.startswith("closed-loop root")]
+    assert len(roots) == 6
+    for r in roots:
+        mode = 4 if "(Mode 4)" in r.quantity else 3
+        lin = linearized_poles(cfg, mode, "X")
+        assert r.truth is not None and r.truth.kind == "computed" and r.truth.exact, r
+        assert "loop alone" in r.truth.how
+        assert any(abs(abs(p) - r.simulated) < 1e-9 for p in lin), (r.quantity, r.simulated)
+
+
 def test_max_misses_is_the_binomial_bound():
     assert max_misses(53) == 7 and binomial_tail(8, 53) <= 0.01 < binomial_tail(7, 53)
     assert math.isclose(binomial_tail(0, 10), 1.0)

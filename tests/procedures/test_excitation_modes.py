@@ -16,12 +16,16 @@ from tests.procedures.excitation_rigs import FAST, assert_roots_near_the_lineari
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("k, mode, axis", [(0, 4, "X"), (1, 5, "Y")])
-def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode, axis):
+@pytest.mark.parametrize("k, mode, axis, stopwatch", [(0, 4, "X", True), (1, 5, "Y", False)])
+def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode, axis, stopwatch):
     """Issue 22 C: in the gyro-stabilized modes the closed-loop roots (Table 6: c1, the platform
     pair, c4), from the loop closed over the parts the run identifies, within 10 % of the
     linearized model of a drawn rig (spring bearings, drawn inertia, corners, pickoff scale and
-    noise). The pickoff scale is measured in the run, not taken from the data sheet."""
+    noise). The pickoff scale is never the data sheet's: the stopwatch's where the campaign
+    has it (here a stand-in, the drawn K_g to +-0.3 %), else measured in the run, where the
+    gyro's cross-axis coupling reaches it (issue 38: an allowance). Either way the platform
+    pair's interval holds the loop alone's pair (before issue 38 the in-loop gain, 1.2-1.7 %
+    off, put it outside on 4 of 12 drawn rigs)."""
     rng = np.random.default_rng(400 + k)
     nominal_inertia = {"X": 0.70, "Y": 0.25}[axis]
     while True:
@@ -41,9 +45,20 @@ def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode
         )
         if np.max(linearized_poles(load_config(cfg), mode, axis).real) < -0.05:
             break
+    kg = load_config(cfg).gyro[axis].pickoff_scale_mV_per_urad
+    prior = (
+        {
+            "stopwatch": {
+                "K_g_mV_per_urad": {axis: kg},
+                "K_g_mV_per_urad_ci95": {axis: [kg * 0.997, kg * 1.003]},
+            }
+        }
+        if stopwatch
+        else {}
+    )
     with open_rig(f"sim?warm=1&seed={60 + k}&config={cfg}") as rig:
         s = run_procedure(
-            Excitation(Params(axis=axis, mode=mode, mode_settle_s=40.0, **FAST)),
+            Excitation(Params(axis=axis, mode=mode, mode_settle_s=40.0, **FAST), prior=prior),
             rig,
             tmp_path / "out",
         )
@@ -51,7 +66,12 @@ def test_gyro_mode_closed_loop_roots_are_the_linearized_models(tmp_path, k, mode
     assert s.exit_code == 0, s.error
     cl = s.values["closed_loop"]
     assert_roots_near_the_linearized(cl, load_config(cfg), mode, axis)
-    kg = load_config(cfg).gyro[axis].pickoff_scale_mV_per_urad
     assert abs(cl["sensor_mV_per_urad"] / kg - 1) < 0.05, (cl["sensor_mV_per_urad"], kg)
+    assert cl["sensor_from"] == ("stopwatch" if stopwatch else "measured in the loop")
+    assert ("sensor_in_loop_mV_per_urad" in cl) == stopwatch
+    lin = linearized_poles(load_config(cfg), mode, axis)
+    pair = complex(*cl["roots"]["platform_pair"]["pole"])
+    lo, hi = cl["roots"]["platform_pair"]["w_rad_per_s_ci95"]
+    assert lo <= abs(lin[np.argmin(np.abs(lin - pair))]) <= hi, (lo, hi, lin)
     md = (tmp_path / "out" / "excitation.md").read_text()
     assert f"Closed-loop roots, Mode {mode}" in md and "Table 6" in md

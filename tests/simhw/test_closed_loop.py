@@ -109,18 +109,21 @@ TABLE6 = {
 @pytest.mark.parametrize("mode", [4, 5])
 @pytest.mark.parametrize("axis", ["X", "Y"])
 def test_linearized_gyro_mode_poles_beside_table6(axis, mode):
-    """Modes 4 and 5 close each loop through the gyro's float (Fig. 27): X within 11 % of
-    Table 6 (5.52, 161, 44 rad/s zeta 0.226), Y within 17 % (4.61, 134, 68.3 zeta 0.286)."""
+    """Modes 4 and 5 close each loop through the gyro's float (Fig. 27), alone as Table 6's root
+    loci do (without the gyro's cross-axis coupling): X within 12 % of Table 6 (5.57, 160.1,
+    44.45 rad/s zeta 0.231), Y within 18 % (4.66, 132.0, 69.1 zeta 0.291). Until issue 38 the
+    loop kept the coupling's factor on its float without the other loop: 5.52, 161, 44.0
+    zeta 0.226 and 4.61, 134, 68.3 zeta 0.286."""
     poles = linearized_poles(SimConfig(), mode=mode, axis=axis)
     assert np.all(poles.real < 0), f"the Mode-{mode} loop must be stable"
     t6 = TABLE6[axis]
-    tol = 0.11 if axis == "X" else 0.17
+    tol = 0.12 if axis == "X" else 0.18
     for key in ("c1", "c4"):
         assert abs(_pole(poles, t6[key], real=True)) == pytest.approx(t6[key], rel=tol)
     w_p, z_p = t6["p"]
     p = _pole(poles, w_p)
     assert abs(p) == pytest.approx(w_p, rel=tol)
-    assert -p.real / abs(p) == pytest.approx(z_p, abs=0.02)
+    assert -p.real / abs(p) == pytest.approx(z_p, abs=0.025)
     # the caging loop: natural frequency 0.1 rad/s, damping 0.7 (DESIGN.md section 3)
     cage = _pole(poles, 0.1)
     assert abs(cage) == pytest.approx(0.1, rel=0.1) and -cage.real / abs(cage) == pytest.approx(
