@@ -82,6 +82,8 @@ def markdown(values: Mapping[str, Any], title: str) -> str:
         iv = (
             "not measured"
             if _fmt(ci[0]) == _fmt(ci[1]) == "-"
+            else f">= {_fmt(ci[0])}, no upper bound"
+            if _fmt(ci[1]) == "-"
             else f"[{_fmt(ci[0])}, {_fmt(ci[1])}]"
         )
         lines.append(

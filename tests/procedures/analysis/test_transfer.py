@@ -479,3 +479,23 @@ def test_the_fit_names_the_poles_in_order_whatever_order_it_finds_them_in(tmp_pa
     w = [fit.estimates[f"w{i}_rad_per_s"].value for i in (1, 4, 5, 6)]
     assert w == sorted(w), w
     assert fit.estimates["w2_rad_per_s"].value < fit.estimates["w3_rad_per_s"].value
+
+
+def test_a_corner_bounded_on_one_side_only_has_no_bound_on_the_other(tmp_path):
+    """Issue 38 A: a held corner whose profile reaches the edge of the fit's search on one side
+    was printed with the edge as its 95 % limit (w5 [935, 24000] here): an assumption, which
+    held the truth by construction (w5 and w6 113 times in 113 on 40 drawn rigs) and was
+    counted as a covering interval. Now that end is open (no bound, null in the JSON) and the
+    why says so; the other end is the record's, and still below the truth."""
+    rng = np.random.default_rng(2)
+    p = draw_network(rng)
+    path = network_file(tmp_path, rng, p)
+    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
+    fit = fit_network(resp, 0.3, 50.0)
+    for k in ("w5_rad_per_s", "w6_rad_per_s"):
+        e = fit.estimates[k]
+        assert not e.resolved and e.hi == math.inf and 0 < e.lo < p[k], (k, e, p[k])
+        assert e.why.startswith("bounded on one side only"), e.why
+        assert fit.values()[f"{k}_ci95"][1] is None or not math.isfinite(
+            fit.values()[f"{k}_ci95"][1]
+        )
