@@ -178,7 +178,7 @@ def _roots_lines(values: Mapping[str, Any]) -> list[str]:
                 "",
                 "In this gyro mode the gyro's viscous cross-axis coupling (II C.4.d) ties this loop to "
                 "the other axis's; the roots are of this loop alone, as Table 6's, and the coupled "
-                "rig's may lie a few per cent from them.",
+                "rig's may lie several per cent from them where the two axes' pairs are close.",
             ]
             if cl["sensor"] == "gyro"
             else []
