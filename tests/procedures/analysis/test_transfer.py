@@ -103,13 +103,18 @@ def network_file(tmp_path, rng, p, seconds=160.0):
     )
 
 
-@pytest.mark.parametrize("seed", [1, 2, 3])
-def test_network_fit_matches_a_drawn_network_within_1_db_and_5_deg(tmp_path, seed):
+def drawn_network_fit(tmp_path, seed, lo_hz, hi_hz):
+    """A drawn network (``draw_network``) recorded and fitted over ``lo_hz``..``hi_hz``."""
     rng = np.random.default_rng(seed)
     p = draw_network(rng)
     path = network_file(tmp_path, rng, p)
     resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
-    fit = fit_network(resp, 0.5, 100.0)
+    return p, fit_network(resp, lo_hz, hi_hz)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_network_fit_matches_a_drawn_network_within_1_db_and_5_deg(tmp_path, seed):
+    p, fit = drawn_network_fit(tmp_path, seed, 0.5, 100.0)
     f = np.geomspace(0.3, 50, 300)
     d = fit.curve(f) / _network(f, p)
     assert np.max(np.abs(20 * np.log10(np.abs(d)))) < 1.0, p
@@ -436,11 +441,7 @@ def test_a_corner_above_the_band_is_bounded_where_its_profile_crosses_the_limit(
     7139 rad/s fitted over 0.5-100 Hz read [250, 100000] and w5 [442, 3257] - covering by the
     grid's step, not by the data (on 40 drawn rigs 154 times in 154). Bisected to where the
     profile crosses the 95 % limit, the intervals are within 1.5x and still hold the truth."""
-    rng = np.random.default_rng(seed)
-    p = draw_network(rng)
-    path = network_file(tmp_path, rng, p)
-    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
-    fit = fit_network(resp, 0.5, 100.0)
+    p, fit = drawn_network_fit(tmp_path, seed, 0.5, 100.0)
     for k in ("w5_rad_per_s", "w6_rad_per_s"):
         e = fit.estimates[k]
         assert e.lo <= p[k] <= e.hi, (k, e, p[k])
@@ -454,11 +455,7 @@ def test_a_corner_the_band_does_not_see_is_not_measured_and_no_interval_passes_i
     leave-one-out spread far past the search (x1/20 .. x20 of the design) that no fit can return,
     and counted as a 95 % interval holding its truth. A held corner's interval stays inside its
     search, and one the record narrows nowhere in it is "not measured", with no interval."""
-    rng = np.random.default_rng(1)
-    p = draw_network(rng)
-    path = network_file(tmp_path, rng, p)
-    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
-    fit = fit_network(resp, 0.5, 10.0)
+    p, fit = drawn_network_fit(tmp_path, 1, 0.5, 10.0)
     w6 = fit.estimates["w6_rad_per_s"]
     assert not w6.resolved and math.isnan(w6.lo) and math.isnan(w6.hi), w6
     assert w6.why.startswith("not measured"), w6.why
@@ -487,11 +484,7 @@ def test_a_corner_bounded_on_one_side_only_has_no_bound_on_the_other(tmp_path):
     held the truth by construction (w5 and w6 113 times in 113 on 40 drawn rigs) and was
     counted as a covering interval. Now that end is open (no bound, null in the JSON) and the
     why says so; the other end is the record's, and still below the truth."""
-    rng = np.random.default_rng(2)
-    p = draw_network(rng)
-    path = network_file(tmp_path, rng, p)
-    resp = response(file_blocks(path, ["ac_x_ctl", "pa_x"], 8.0), "ac_x_ctl", "pa_x")
-    fit = fit_network(resp, 0.3, 50.0)
+    p, fit = drawn_network_fit(tmp_path, 2, 0.3, 50.0)
     for k in ("w5_rad_per_s", "w6_rad_per_s"):
         e = fit.estimates[k]
         assert not e.resolved and e.hi == math.inf and 0 < e.lo < p[k], (k, e, p[k])
