@@ -104,11 +104,20 @@ def through_scale(est: Estimate, rel_half_width: float) -> Estimate:
     bands), a K_g 0.2-0.4 % off carrying it out of a +-0.1-0.3 % interval (issue 38)."""
     if not (math.isfinite(est.value) and rel_half_width > 0):
         return est
-    half = math.hypot(est.half_width, rel_half_width * abs(est.value))
-    mid = 0.5 * (est.lo + est.hi)
+    # a figure that cannot be negative (an rms) stays so
+    return widened(est, rel_half_width * abs(est.value), nonnegative=est.lo >= 0)
+
+
+def widened(est: Estimate, allowance: float, *, nonnegative: bool = False) -> Estimate:
+    """``est`` with a systematic ``allowance`` (95 %, absolute) added to its half-width in
+    quadrature about the interval's middle (``nonnegative``: the low end kept >= 0); an
+    unresolved figure keeps its why."""
+    if not allowance > 0:
+        return est
+    mid, half = 0.5 * (est.lo + est.hi), math.hypot(est.half_width, allowance)
     lo, hi = mid - half, mid + half
-    if est.lo >= 0:
-        lo = max(lo, 0.0)  # a figure that cannot be negative (an rms) stays so
+    if nonnegative:
+        lo = max(lo, 0.0)
     if not est.resolved:
         return Estimate(est.value, lo, hi, False, est.why)
     return judged(est.value, lo, hi)

@@ -62,7 +62,6 @@ References
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -71,7 +70,7 @@ import numpy as np
 from numpy.polynomial import Polynomial
 
 from drivers.rig_datasheet import AutocollimatorConstants, PlatformConstants
-from procedures.analysis.intervals import Estimate, from_stderr, judged, through_scale
+from procedures.analysis.intervals import Estimate, from_stderr, judged, through_scale, widened
 from procedures.analysis.transfer import (
     SE_FLOOR,
     Response,
@@ -298,6 +297,11 @@ def _wz(p: complex) -> tuple[float, float]:
     return abs(p), -p.real / abs(p)
 
 
+def _nearest_wz(root_sets: Sequence[np.ndarray], p: complex) -> np.ndarray:
+    """(natural frequency, damping) of each set's root nearest ``p``, one row a set."""
+    return np.array([_wz(rr[np.argmin(np.abs(rr - p))]) for rr in root_sets]).reshape(-1, 2)
+
+
 @dataclass
 class ClosedLoop:
     """The closed-loop roots of one axis's loop, named, with intervals, and the model's check
@@ -383,26 +387,16 @@ def close_loop(
     ]
     named: dict[str, Root] = {}
     for name, p in names.items():
-        got = np.array([_wz(rr[np.argmin(np.abs(rr - p))]) for rr in rep_roots])
-        se = jackknife_se(got)
+        se = jackknife_se(_nearest_wz(rep_roots, p))
         w, z = _wz(p)
-        shift = np.array([_wz(rr[np.argmin(np.abs(rr - p))]) for rr in moved]).reshape(-1, 2)
-        a_w, a_z = np.max(np.abs(shift - (w, z)), axis=0) if moved else (0.0, 0.0)
+        a_w, a_z = np.max(np.abs(_nearest_wz(moved, p) - (w, z)), axis=0) if moved else (0.0, 0.0)
         named[name] = Root(
             name,
             p,
-            _widened(from_stderr(w, float(se[0]), dof=dof), float(a_w)),
-            _widened(from_stderr(z, float(se[1]), dof=dof), float(a_z))
-            if abs(p.imag) > 0
-            else None,
+            widened(from_stderr(w, float(se[0]), dof=dof), float(a_w)),
+            widened(from_stderr(z, float(se[1]), dof=dof), float(a_z)) if abs(p.imag) > 0 else None,
         )
-    g = parts.sensor_V_per_rad
-    s_se = float(jackknife_se(np.asarray(sensor_replicates)))
-    sensor = (
-        through_scale(from_stderr(g, s_se, dof=dof), sensor_rel_half)
-        if s_se > 0
-        else judged(g, g * (1.0 - sensor_rel_half), g * (1.0 + sensor_rel_half))
-    )
+    sensor = sensor_estimate(parts.sensor_V_per_rad, sensor_replicates, dof, sensor_rel_half)
     # the check: the closed model against the measured sensitivity
     ok = usable(sensitivity, *band_hz)
     f = sensitivity.f[ok]
@@ -454,12 +448,13 @@ def close_loop(
     )
 
 
-def _widened(est: Estimate, allowance: float) -> Estimate:
-    """``est`` with a systematic ``allowance`` (95 %, absolute) added to its half-width in
-    quadrature; an unresolved figure keeps its why."""
-    if not allowance > 0:
-        return est
-    mid, half = 0.5 * (est.lo + est.hi), math.hypot(est.half_width, allowance)
-    if not est.resolved:
-        return Estimate(est.value, mid - half, mid + half, False, est.why)
-    return judged(est.value, mid - half, mid + half)
+def sensor_estimate(
+    gain: float, replicates: Sequence[float], dof: int, rel_half: float = 0.0
+) -> Estimate:
+    """A sensor gain with its interval: its leave-one-out replicates' jackknife (Student's t)
+    and ``rel_half`` (relative, 95 %: what the replicates do not carry) in quadrature; with
+    replicates that do not scatter (a gain from outside the run), ``rel_half`` alone."""
+    se = float(jackknife_se(np.asarray(replicates)))
+    if se > 0:
+        return through_scale(from_stderr(gain, se, dof=dof), rel_half)
+    return judged(gain, gain * (1.0 - rel_half), gain * (1.0 + rel_half))

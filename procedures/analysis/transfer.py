@@ -814,13 +814,14 @@ def fit_network(
                 "intervals include what it takes with it",
             )
             continue
-        if held[k] and (e.lo <= s_lo[k] + 1e-9 or e.hi >= s_hi[k] - 1e-9):
+        open_lo, open_hi = e.lo <= s_lo[k] + 1e-9, e.hi >= s_hi[k] - 1e-9
+        if held[k] and (open_lo or open_hi):
             # an end at the search's edge is where the profile refused nothing: the record
             # bounds it on one side only, and the edge is an assumption, not a 95 % limit (it
             # held the truth by construction: w5 and w6, 113 times in 113 on 40 drawn rigs)
-            lo = 0.0 if e.lo <= s_lo[k] + 1e-9 else math.exp(e.lo)
-            hi = math.inf if e.hi >= s_hi[k] - 1e-9 else math.exp(e.hi)
-            side = f"above {lo:.4g}" if hi == math.inf else f"below {hi:.4g}"
+            lo = 0.0 if open_lo else math.exp(e.lo)
+            hi = math.inf if open_hi else math.exp(e.hi)
+            side = f"above {lo:.4g}" if open_hi else f"below {hi:.4g}"
             est[name] = Estimate(
                 math.exp(x[k]),
                 lo,

@@ -48,13 +48,14 @@ import numpy as np
 
 from daq.spectral import coherence, equivalent_dof, n_segments, welch_csd_matrix
 from drivers.rig_datasheet import AutocollimatorConstants, RigCalibration
-from procedures.analysis.intervals import add_figure, from_stderr, through_scale
+from procedures.analysis.intervals import add_figure
 from procedures.analysis.roots import (
     IN_LOOP_GAIN_ALLOWANCE,
     ClosedLoop,
     GyroCaging,
     LoopParts,
     close_loop,
+    sensor_estimate,
     sensor_gain,
 )
 from procedures.analysis.transfer import (
@@ -67,7 +68,6 @@ from procedures.analysis.transfer import (
     block_csd,
     fit_network,
     fit_platform,
-    jackknife_se,
     network_in_loop,
     network_response,
     periodic_blocks,
@@ -642,9 +642,7 @@ def closed_loop(
         # the in-loop gain is the loop alone's only to the coupling's allowance
         rel = IN_LOOP_GAIN_ALLOWANCE
         if pickoff is not None:
-            check = through_scale(
-                from_stderr(k_loop, float(jackknife_se(np.asarray(k_loop_reps))), dof=dof), rel
-            )
+            check = sensor_estimate(k_loop, k_loop_reps, dof, rel)
             gain, rel, source = pickoff[0] * 1e3, pickoff[1], "stopwatch"
             gain_reps = [gain] * len(k_loop_reps)
 
