@@ -22,7 +22,8 @@ The distribution is wider than the one the procedures' tests draw (tests/procedu
 * per gyro channel: K_TO x0.85 .. 1.15, K_g x0.8 .. 1.2, fixed drift +-1.5 urad/s, g-drifts
   +-0.15 urad/s/g, restraint h/k x0.85 .. 1.15, ARW log-uniform 0.003 .. 0.5 urad/sqrt(s), bias
   instability log-uniform 0.005 .. 0.1 urad/s; pickoff white noise x0.5 .. 2 and each line's
-  frequency +-1 Hz and amplitude x0.5 .. 2 (DESIGN section 8's nominal unit).
+  frequency +-1 Hz and amplitude x0.5 .. 2 (DESIGN section 8's nominal unit); the float's viscous
+  coupling h/c x0.7 .. 1.3 (the data sheet's tolerance, which the procedures' intervals carry).
 
 Prints per figure (a row of the campaign's table, e.g. "K_TO Z"): n, how many carry an interval,
 covered (the interval holds the truth, resolved or not), median and max |relative error| of the
@@ -79,6 +80,7 @@ def _noise_shape(rng: np.random.Generator) -> dict[str, float]:
 
 def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
     """The rig of ``seed`` as TOML sections (the module docstring's distribution)."""
+    from drivers.rig_datasheet import VISCOUS_COUPLING_TOLERANCE
     from simhw.config import SimConfig
 
     nom = SimConfig()
@@ -125,6 +127,14 @@ def draw_rig(seed: int) -> dict[str, dict[str, Any]]:
             "pickoff_noise_rms_urad": rms,
             "pickoff_lines": lines,
         }
+    # the floats' viscous coupling h/c within the data sheet's tolerance, which the procedures
+    # carry in their intervals (``VISCOUS_COUPLING_TOLERANCE``); from a stream of its own, so
+    # the draws above are those of the rigs measured before it was drawn
+    coupling = np.random.default_rng([3840, seed, 1])
+    for ch in CHANNELS:
+        cfg[f"gyro.{ch}"]["viscous_coupling_h_over_c"] = nom.gyro[ch].viscous_coupling_h_over_c * (
+            float(coupling.uniform(1 - VISCOUS_COUPLING_TOLERANCE, 1 + VISCOUS_COUPLING_TOLERANCE))
+        )
     return cfg
 
 

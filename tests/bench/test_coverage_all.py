@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from drivers.rig_datasheet import VISCOUS_COUPLING_TOLERANCE
 from simhw.config import SimConfig, load_config
 
 BENCH = Path(__file__).resolve().parents[2] / "bench"
@@ -54,6 +55,14 @@ def test_the_drawn_rigs_are_valid_and_span_the_documented_distribution(harness, 
             assert all(
                 abs(f - f0) <= 1.0 for (f, _), (f0, _) in zip(g.pickoff_lines, g0.pickoff_lines)
             )
+    # the floats' viscous coupling over the data sheet's tolerance, which the intervals carry
+    coupling = [
+        c.gyro[ch].viscous_coupling_h_over_c / nom.gyro[ch].viscous_coupling_h_over_c
+        for c in cfgs
+        for ch in ("X", "Y", "Z", "XRD")
+    ]
+    tol = VISCOUS_COUPLING_TOLERANCE
+    assert 1 - tol <= min(coupling) < 0.8 and 1.2 < max(coupling) <= 1 + tol
     assert harness.draw_rig(7) == harness.draw_rig(7)  # a seed is one rig
 
 
