@@ -131,7 +131,8 @@ def main(argv: list[str] | None = None) -> int:
     factor = float(np.mean([r["factor"] for r in recs]))
     print(
         f"  the blocks' correlation the fit allows for (serial_variance_factor): median "
-        f"{float(np.median([r['rho'] for r in recs])):+.2f}, variance factor {factor:.3f} on average"
+        f"{float(np.median([r['rho'] for r in recs])):+.2f}, variance factor {factor:.3f} "
+        "on average"
     )
     for k, name in enumerate(CORNERS):
         print(

@@ -241,9 +241,10 @@ def periodic_blocks(
     Approach*, ch. 2). Leakage is what a Hann window does to a lightly damped resonance: the
     closed loop's amplifier input has a deep notch there, the window fills it in, and the
     damping read 25 % high. The first ``skip_periods`` of each span are the loop's transient.
-    A jackknife over these blocks is conservative, ~2.5x in the standard error: a period's error
-    at the lines is mostly its noise-driven transient, the difference of the loop's states at
-    its two ends, which telescopes in the mean (docs/procedures/excitation.md, "Intervals")."""
+    The blocks are not independent where a period's error at the lines is its noise-driven
+    transient, the difference of the loop's states at its two ends, which telescopes in the
+    mean: a jackknife taking them as independent overstated the network's errors ~2.5x, and
+    the network fit allows for it (``serial_variance_factor``)."""
     if n_blocks < 3:
         raise TransferError(f"n_blocks = {n_blocks}: a jackknife needs at least 3 blocks")
     per: list[np.ndarray] = []
@@ -376,12 +377,14 @@ def serial_variance_factor(deviations: np.ndarray) -> tuple[float, float]:
     loop's noise-driven transient, the difference of the loop's states at its two ends: the
     errors telescope in the mean (``periodic_blocks``), and the jackknife, taking the blocks as
     independent, overstates the variance by B + 1. Pooled over the series (each scaled to unit
-    mean square by its neighbours'), the lag-1 sum S1 = sum_b d_b d_(b+1) and S0 = sum_b d_b^2 have expectations
-    linear in rho with the mean's removal included (gamma_0 = 1, gamma_1 = rho, V the mean's
-    variance (B + 2 (B - 1) rho) / B^2: E S0 = B - B V, E S1 = (B - 1) rho - 2 (B V - (1 + rho)
-    / B) + (B - 1) V), so rho is solved from S1 / S0 free of the -1/B a plain lag-1 estimate of
-    B values has; then the factor is V / E[S0 / (B (B - 1))], 1 at rho = 0 and 1 / (B + 1) at
-    -0.5. rho is kept within an MA(1)'s -0.5 .. 0.5. Complex deviations count as two series.
+    mean square by its neighbours'), the lag-1 sum S1 = sum_b d_b d_(b+1) and S0 = sum_b d_b^2
+    have expectations linear in rho with the mean's removal included (gamma_0 = 1, gamma_1 =
+    rho, V the mean's variance (B + 2 (B - 1) rho) / B^2, the variance of the mean of a
+    stationary series, Brockwell and Davis, *Time Series: Theory and Methods*, sec. 7.1:
+    E S0 = B - B V, E S1 = (B - 1) rho - 2 (B V - (1 + rho) / B) + (B - 1) V), so rho is solved
+    from S1 / S0 free of the -1/B a plain lag-1 estimate of B values has; then the factor is
+    V / E[S0 / (B (B - 1))], 1 at rho = 0 and 1 / (B + 1) at -0.5. rho is kept within an
+    MA(1)'s -0.5 .. 0.5. Complex deviations count as two series.
     Any linear combination of the series (a parameter fitted to the bins) has the same rho
     where the errors telescope: its lag-1 covariance is minus half its variance."""
     d = np.asarray(deviations)

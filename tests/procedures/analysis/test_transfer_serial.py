@@ -79,13 +79,12 @@ def test_independent_blocks_keep_the_jackknife_and_telescoping_ones_divide_it_by
 
 
 def _record(path: Path, rng: np.random.Generator, periods: int) -> Path:
-    """A periodic multisine ``r`` (16 s, as the procedure's) and a noise that is not periodic make a network's input
-    ``x``; its output ``y`` is eq. 3.28 (the design's corners, the bilinear transform at FS)
-    applied causally, sample by sample, from rest: a relation without noise, so the ratio's
-    only error at the lines is each period's transient. (With 2 s periods, shorter than the
-    6.7 s pole's memory, neighbouring transients are alike, their differences hardly correlate
-    (-0.1) and the factor stays near 1: conservative, for the lags beyond the first, which an
-    MA(1) leaves out, are then negative too.)"""
+    """A periodic multisine ``r`` (16 s, as the procedure's) and a noise that is not periodic
+    make a network's input ``x``; its output ``y`` is eq. 3.28 (the design's corners, the
+    bilinear transform at FS) applied causally, sample by sample, from rest: a relation without
+    noise, so the ratio's only error at the lines is each period's transient. (With 2 s
+    periods, shorter than the 6.7 s pole's memory, neighbouring transients are alike: the
+    correlation read about -0.1 and the factor stayed near 1, the jackknife's.)"""
     n = int(16.0 * FS)
     f = np.fft.rfftfreq(n, 1 / FS)
     spec = np.where((f >= 0.5) & (f <= 60.0), np.exp(2j * np.pi * rng.random(f.size)), 0)
