@@ -61,22 +61,18 @@ def analyse(summary: dict, mode: int, divider: float) -> dict:
     span = summary["spans"]["excite"]
     where = [(span["file"], span["start"], span["stop"])]
     chans = ["cmd_x", "pa_x", "ac_x_ctl" if mode == 3 else "gyro_x"]
-    resp = T.network_in_loop(
-        T.periodic_blocks(where, chans, summary["params"]["period_s"]),
-        chans[2],
-        "pa_x",
-        "cmd_x",
-        divider,
-    )
-    lo = max(summary["params"]["roots_lo_hz"], 1.5 / summary["params"]["period_s"])
+    blocks = T.periodic_blocks(where, chans, summary["params"]["period_s"])
+    resp = T.network_in_loop(blocks, chans[2], "pa_x", "cmd_x", divider)
+    lo = max(summary["params"]["roots_lo_hz"], blocks.lowest_fit_hz)
     fit = T.fit_network(resp, lo, summary["params"]["roots_hi_hz"])
     ok = T.usable(resp, lo, summary["params"]["roots_hi_hz"])
     factor, _ = T.serial_variance_factor(np.log(resp.H_blocks[:, ok] / resp.H[ok]))
     x = np.log([fit.params[k] for k in CORNERS])
     xb = np.log([[r[k] for k in CORNERS] for r in fit.replicates])
     # each period alone: its error at the lines against the record's ratio
-    n_periods = int(T.periodic_blocks(where, chans, summary["params"]["period_s"], 3).weights.sum())
-    periods = T.periodic_blocks(where, chans, summary["params"]["period_s"], n_periods)
+    periods = T.periodic_blocks(
+        where, chans, summary["params"]["period_s"], int(blocks.weights.sum())
+    )
     S = periods.S
     num, den = S[:, :, 0, 1] - divider * S[:, :, 0, 0], S[:, :, 0, 2]
     band = (periods.f >= 1.0) & (periods.f <= 30.0)

@@ -125,9 +125,8 @@ def test_a_periodic_records_transient_errors_are_seen_and_the_network_fit_allows
     spread = np.std(logs, axis=0, ddof=1)
     se = np.sqrt(np.mean(np.square(raw), axis=0))
     # the transient at every line comes from the network's few states: the correlation, pooled
-    # over the lines, is that of a few series, read record by record between -0.5 and ~0
+    # over the lines, is that of a few series, read record by record between -0.5 and ~0, and
+    # kept above -0.5 (the truth here): conservative on average, never below the spread
     assert np.median(rhos) < -0.3
     assert np.median(se / spread) > 2.5  # the jackknife alone
-    # record by record the correlation is read from the network's few states: conservative on
-    # average (it is kept above -0.5, the truth here), never below the spread
     assert 0.7 < np.median(se * math.sqrt(np.mean(factors)) / spread) < 2.2
