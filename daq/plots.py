@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
+from matplotlib import rc_context
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
@@ -116,7 +117,8 @@ def new_figure(
     """A figure on the Agg canvas with an (nrows, ncols) array of axes; no pyplot, no GUI."""
     fig = Figure(figsize=figsize, layout=layout)
     FigureCanvasAgg(fig)
-    axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False))
+    with rc_context({"axes.titley": 1.0}):
+        axes = np.atleast_1d(fig.subplots(nrows, ncols, squeeze=False))
     return fig, axes
 
 

@@ -121,21 +121,16 @@ class CompiledPlant:
         """``run`` over consecutive pieces of ``u_fast``, each (steps > 0, its slow inputs): a
         stream's set-points stepping inside one call rather than a call each, the same
         arithmetic step for step (each piece's slow terms are the products ``run`` forms)."""
-        n_nl = len(self.nl_kind)
-        b_slow = np.empty((len(pieces), self.bs.shape[0]))
-        y_slow = np.empty((len(pieces), self.ds.shape[0]))
-        z_slow = np.zeros((len(pieces), n_nl))
-        ends = np.empty(len(pieces), np.int64)
-        end = 0
-        for k, (m, u_slow) in enumerate(pieces):
-            b_slow[k] = self.bs @ u_slow
-            y_slow[k] = self.ds @ u_slow
-            if len(u_slow):
-                z_slow[k] = self.nl_zs @ u_slow
-            end += m
-            ends[k] = end
+        slows = np.array([u_slow for _, u_slow in pieces], np.float64).reshape(
+            len(pieces), self.bs.shape[1]
+        )
+        ends = np.cumsum(np.array([m for m, _ in pieces], np.int64))
+        end = int(ends[-1]) if len(ends) else 0
         if end != len(u_fast):
             raise ValueError(f"pieces of {end} steps for {len(u_fast)} noise rows")
+        b_slow = matvec_rows(self.bs, slows)
+        y_slow = matvec_rows(self.ds, slows)
+        z_slow = matvec_rows(self.nl_zs, slows)
         _run(
             x,
             u_fast,
@@ -168,6 +163,45 @@ class CompiledPlant:
             nl_state,
             y,
         )
+
+
+@numba.njit(cache=True, nogil=True)
+def matvec_rows(M: np.ndarray, U: np.ndarray) -> np.ndarray:
+    """``M @ U[k]`` for every row k of ``U``, each summed in column order: one compiled call
+    for a stream's pieces rather than three BLAS calls a piece, and the same sums however many
+    pieces there are (a split run and a stepped one agree to the bit)."""
+    out = np.empty((U.shape[0], M.shape[0]))
+    for k in range(U.shape[0]):
+        for i in range(M.shape[0]):
+            acc = 0.0
+            for j in range(M.shape[1]):
+                acc += M[i, j] * U[k, j]
+            out[k, i] = acc
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def half_steps(
+    ds: np.ndarray, slows: np.ndarray, before: np.ndarray, rows: np.ndarray, y: np.ndarray
+) -> None:
+    """Take half of each slow input's step out of the output row where it steps: piece k's
+    slow inputs ``slows[k]`` start at row ``rows[k]`` of ``y`` after ``slows[k - 1]``
+    (``before`` for the first), and ``y[rows[k]] -= ds @ (step / 2)`` where they changed."""
+    prev = before
+    for k in range(slows.shape[0]):
+        changed = False
+        for j in range(slows.shape[1]):
+            if slows[k, j] != prev[j]:
+                changed = True
+                break
+        if changed:
+            r = rows[k]
+            for i in range(ds.shape[0]):
+                acc = 0.0
+                for j in range(ds.shape[1]):
+                    acc += ds[i, j] * (0.5 * (slows[k, j] - prev[j]))
+                y[r, i] -= acc
+        prev = slows[k]
 
 
 @numba.njit(cache=True, nogil=True)

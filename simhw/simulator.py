@@ -22,7 +22,7 @@ import scipy.linalg
 
 from simhw import geometry
 from simhw.config import AC_AXES, AXES, GYRO_CHANNELS, SimConfig, validate
-from simhw.kernel import CompiledPlant
+from simhw.kernel import CompiledPlant, half_steps
 from simhw.noise import (
     ExcessFlickerNoise,
     FlickerNoise,
@@ -390,6 +390,9 @@ class Simulator:
         self.truth = truth
         # per-block bookkeeping kept between blocks (``_table_geometry``, ``_layout``)
         self._geometry: tuple[tuple[float, ...], np.ndarray, np.ndarray] | None = None
+        self._slow_layout: (
+            tuple[Plant, tuple[float, ...], np.ndarray, list[tuple[int, int]]] | None
+        ) = None
         self._last_layout: tuple[CompiledPlant, list[tuple[int, str]], list[int]] | None = None
         self._t_base = 0.0  # time of the last rate change
         self._rate_changes = 0
@@ -562,22 +565,40 @@ class Simulator:
             self._compiled = self._compile(relays)  # same state layout in every relay state
 
     def _slow_inputs(self, plant: Plant | None = None) -> np.ndarray:
-        """The values of ``plant``'s slow inputs (default: the compiled plant's), in its order."""
+        """The values of ``plant``'s slow inputs (default: the compiled plant's), in its order.
+
+        Asked for at every set-point of a stream (250 a second), so the part a set-point cannot
+        change (the earth rate and the g-drifts on the table's geometry) is kept per plant and
+        geometry (``_slow_layout``), and only the set-points are filled in: the same values."""
+        plant = plant or self._compiled.disc.plant
         cfg = self.cfg
-        w, f = self._table_geometry(
-            (
-                cfg.table.tilt_deg,
-                cfg.table.spindle_deg,
-                cfg.table.base_azimuth_offset_deg,
-                cfg.site.latitude_deg,
-                cfg.site.earth_rate_rad_per_s,
-            )
+        key = (
+            cfg.table.tilt_deg,
+            cfg.table.spindle_deg,
+            cfg.table.base_azimuth_offset_deg,
+            cfg.site.latitude_deg,
+            cfg.site.earth_rate_rad_per_s,
         )
+        lay = self._slow_layout
+        if lay is None or lay[0] is not plant or lay[1] != key:
+            lay = self._slow_layout = (plant, key, *self._slow_parts(plant, key))
+        out = lay[2].copy()
+        setpoints = [*self.vtd.values(), *self.gamma_c.values(), *self.bias.values()]
+        for i, j in lay[3]:
+            out[i] = setpoints[j]
+        return out
+
+    def _slow_parts(
+        self, plant: Plant, key: tuple[float, float, float, float, float]
+    ) -> tuple[np.ndarray, list[tuple[int, int]]]:
+        """``plant``'s slow inputs on the geometry ``key`` with every set-point 0, and where each
+        set-point goes: (slow input, its place in ``vtd``, ``gamma_c``, ``bias`` in turn)."""
+        cfg = self.cfg
+        w, f = self._table_geometry(key)
         axis_i = {"X": 0, "Y": 1, "Z": 2, "XRD": 0}
+        setpoints = [f"vtd_{a}" for a in self.vtd] + [f"gc_{a}" for a in self.gamma_c]
+        setpoints += [f"vb_{c}" for c in self.bias]
         values = {}
-        for a in AXES:
-            values[f"vtd_{a}"] = self.vtd[a]
-            values[f"gc_{a}"] = self.gamma_c[a]
         for c in GYRO_CHANNELS:
             g = cfg.gyro[c]
             drift = (
@@ -586,9 +607,10 @@ class Simulator:
                 + g.g_drift_y_urad_per_s_per_g * f[1]
                 + g.g_drift_z_urad_per_s_per_g * f[2]
             ) * URAD
-            values[f"vb_{c}"] = self.bias[c]
             values[f"wconst_{c}"] = w[axis_i[c]] + drift
-        return np.array([values[s] for s in (plant or self._compiled.disc.plant).slow_inputs])
+        names = plant.slow_inputs
+        base = np.array([values.get(s, 0.0) for s in names])
+        return base, [(i, setpoints.index(s)) for i, s in enumerate(names) if s in setpoints]
 
     def _table_geometry(
         self, key: tuple[float, float, float, float, float]
@@ -777,20 +799,17 @@ class Simulator:
         y = np.empty((len(u), len(plant.outputs)))
         cp.run_pieces(self.x, u, pieces, self.nl_state, y)
         names = tuple(plant.slow_inputs)
-        row = 0
-        for m, slow in pieces:
-            if self._last_slow is not None and self._last_slow[0] == names and m > 0:
-                # A set-point (V_Td, gamma_c, a torquer bias) steps at this piece's first
-                # sample: the analog filter before the ADC sees a staircase there, whose sample at
-                # the edge is the mean of its two sides, as the samples of smooth signals are
-                # their values; taking the new side alone put every staircase half an internal
-                # step ahead of the smooth signals (V_Td's direct path in pa against the
-                # compensation's, eq. 3.27)
-                step = slow - self._last_slow[1]
-                if (step != 0.0).any():
-                    y[row] -= cp.ds @ (0.5 * step)
-            self._last_slow = (names, slow)
-            row += m
+        # A set-point (V_Td, gamma_c, a torquer bias) steps at a piece's first sample: the analog
+        # filter before the ADC sees a staircase there, whose sample at the edge is the mean of
+        # its two sides, as the samples of smooth signals are their values; taking the new side
+        # alone put every staircase half an internal step ahead of the smooth signals (V_Td's
+        # direct path in pa against the compensation's, eq. 3.27)
+        slows = np.array([slow for _, slow in pieces], np.float64).reshape(len(pieces), len(names))
+        same = self._last_slow is not None and self._last_slow[0] == names
+        before = self._last_slow[1] if same and self._last_slow is not None else slows[0]
+        rows = np.cumsum([0] + [m for m, _ in pieces[:-1]])
+        half_steps(cp.ds, slows, before, rows, y)
+        self._last_slow = (names, pieces[-1][1])
         self.step += len(u)
         return y[:, order]
 

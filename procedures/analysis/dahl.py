@@ -318,18 +318,39 @@ def cycle_fits(
     first-harmonic amplitude (x ~ Re(A e^{j w t}), t from sample 0) and residual rms."""
     per = fs_hz / freq_hz
     n_win = int((len(x) - start) // per)
-    bounds = start + np.rint(np.arange(n_win + 1) * per).astype(int)
-    amps = np.empty(n_win, complex)
+    bounds = start + np.rint(np.arange(n_win + 1) * per).astype(np.int64)
+    fits = np.empty((n_win, 3))
     resid = np.empty(n_win)
-    w = 2 * math.pi * freq_hz / fs_hz
-    for i in range(n_win):
+    _window_sines(
+        np.ascontiguousarray(x, dtype=float), bounds, 2 * math.pi * freq_hz / fs_hz, fits, resid
+    )
+    return bounds, fits[:, 0] + 1j * fits[:, 1], resid
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_sines(x, bounds, w, fits, resid):
+    """Least squares of ``x`` on cos(w k), -sin(w k), 1 in each window bounds[i]..bounds[i+1]
+    (k the sample index): the coefficients into ``fits[i]``, the residual rms into ``resid[i]``.
+    The normal equations, solved per window (the three columns are near orthogonal over a
+    whole period): ``find_segments`` tries 16 window grids of a record's every cycle, and a
+    least-squares call per window was a fifth of a hysteresis analysis."""
+    for i in range(len(bounds) - 1):
         a, b = bounds[i], bounds[i + 1]
-        k = np.arange(a, b)
-        M = np.column_stack([np.cos(w * k), -np.sin(w * k), np.ones(len(k))])
-        coef, *_ = np.linalg.lstsq(M, x[a:b], rcond=None)
-        amps[i] = coef[0] + 1j * coef[1]
-        resid[i] = np.sqrt(np.mean((x[a:b] - M @ coef) ** 2))
-    return bounds, amps, resid
+        g = np.zeros((3, 3))
+        r = np.zeros(3)
+        for k in range(a, b):
+            row = (math.cos(w * k), -math.sin(w * k), 1.0)
+            for p in range(3):
+                r[p] += row[p] * x[k]
+                for q in range(3):
+                    g[p, q] += row[p] * row[q]
+        coef = np.linalg.solve(g, r)
+        ss = 0.0
+        for k in range(a, b):
+            e = x[k] - (coef[0] * math.cos(w * k) - coef[1] * math.sin(w * k) + coef[2])
+            ss += e * e
+        fits[i, 0], fits[i, 1], fits[i, 2] = coef[0], coef[1], coef[2]
+        resid[i] = math.sqrt(ss / (b - a))
 
 
 def find_segments(
