@@ -134,7 +134,7 @@ def save_figure(fig: Figure, path: str | Path, dpi: float = REPORT_DPI) -> Path:
         sparse_log_minors(fig)
         if fig.get_layout_engine() is None and not place_axes(fig):
             fig.tight_layout()
-        fig.savefig(path, dpi=dpi, format="png")
+        fig.savefig(path, dpi=dpi, format="png", pil_kwargs={"compress_level": 1})
         log.debug("wrote %s", path)
         return path
     finally:

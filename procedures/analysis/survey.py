@@ -387,14 +387,14 @@ def coherent_platform_rms(
     with the pickoff noise ten times the platform's power the raw estimate read the rms 6-30 %
     high. The interval is a delete-one jackknife over the blocks (Student's t)."""
     inputs = [ac_channels] if isinstance(ac_channels, str) else list(ac_channels)
-    g = blocks.index(gyro_channel)
-    a = [blocks.index(c) for c in inputs]
     f = blocks.f
-    band = (f >= lo_hz) & (f <= hi_hz)
-    df = float(f[1] - f[0])
+    df = float(f[1] - f[0]) if len(f) > 1 else 1.0 / blocks.seg_s  # blocks may be a band already
+    # the band's bins of the channels used, once: 1 + n_blocks means follow
+    sub = blocks.subset([gyro_channel, *inputs], (f >= lo_hz) & (f <= hi_hz))
+    g, a = 0, list(range(1, 1 + len(inputs)))
 
     def rms(leave_out: int | None) -> float:
-        S = blocks.mean(leave_out)[band]
+        S = sub.mean(leave_out)
         sgg = S[:, g, g].real
         s_ga = S[:, g][:, a]  # (f, q): S_g,a
         S_aa = S[:, a][:, :, a]  # (f, q, q)

@@ -157,8 +157,20 @@ class BlockCsd:
                 raise TransferError(f"channel {name!r} is already analysed")
             for ch, w in weights.items():
                 T[len(names) + k, self.index(ch)] = w
-        S = np.einsum("ik,bfkl,jl->bfij", T, self.S, T)
+        # (T S) T^T as two batched products, not one four-index sum: a third of the time
+        S = (T @ self.S) @ T.T
         return dataclasses.replace(self, S=S, channels=(*names, *combos))
+
+    def subset(self, channels: Sequence[str], bins: np.ndarray | None = None) -> BlockCsd:
+        """These blocks on ``channels`` alone, in that order, and on the frequency bins
+        ``bins`` selects (a boolean mask; None: all): the same spectra in a smaller matrix, for
+        the many leave-one-out means of a jackknife over a band."""
+        idx = [self.index(c) for c in channels]
+        S = self.S if bins is None else self.S[:, bins]
+        f = self.f if bins is None else self.f[bins]
+        return dataclasses.replace(
+            self, f=f, S=S[:, :, idx][:, :, :, idx], channels=tuple(channels)
+        )
 
     def index(self, name: str) -> int:
         if name not in self.channels:

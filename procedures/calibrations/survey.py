@@ -344,8 +344,13 @@ class Survey(Procedure[SurveyParams]):
             kg = {a: kg_mv[a] * 1e-3 for a in AXES}
             h_c = cal.viscous_coupling_h_over_c
 
+            # the band's bins alone: each h/c scale combines the gyros afresh
+            in_band = blocks.subset(
+                blocks.channels, (blocks.f >= p.band_lo_hz) & (blocks.f <= p.band_hi_hz)
+            )
+
             def coherent(scale: float) -> dict[str, Estimate]:
-                dec = blocks.combined(decoupled_gyro(kg, h_c, scale))
+                dec = in_band.combined(decoupled_gyro(kg, h_c, scale))
                 return {
                     a: coherent_platform_rms(
                         dec, platform_gyro(a), inputs, 1.0, p.band_lo_hz, p.band_hi_hz
