@@ -47,8 +47,8 @@ class CompiledPlant:
     disc: DiscretePlant
     fast_cols: np.ndarray  # input indices that vary per step, in kernel column order
     slow_cols: np.ndarray  # input indices held over a whole block
-    ad_cols: np.ndarray  # Ad's columns, one per row (the state update runs column by column)
-    bf_cols: np.ndarray  # Bd[:, fast]'s columns, one per fast input (skipped when 0)
+    ad: Csr
+    bf_t: Csr  # Bd[:, fast] transposed: one row per fast input (skipped when 0)
     bs: np.ndarray  # Bd[:, slow]
     c: Csr
     df_t: Csr
@@ -84,8 +84,8 @@ class CompiledPlant:
             disc,
             fast,
             slow,
-            np.ascontiguousarray(disc.Ad.T),
-            np.ascontiguousarray(disc.Bd[:, fast].T),
+            Csr.from_dense(disc.Ad),
+            Csr.from_dense(disc.Bd[:, fast].T),
             disc.Bd[:, slow].copy(),
             Csr.from_dense(plant.C),
             Csr.from_dense(plant.D[:, fast].T),
@@ -138,8 +138,12 @@ class CompiledPlant:
             b_slow,
             y_slow,
             z_slow,
-            self.ad_cols,
-            self.bf_cols,
+            self.ad.ptr,
+            self.ad.idx,
+            self.ad.val,
+            self.bf_t.ptr,
+            self.bf_t.idx,
+            self.bf_t.val,
             self.c.ptr,
             self.c.idx,
             self.c.val,
@@ -217,8 +221,12 @@ def _run(
     b_slows,
     y_slows,
     z_slows,
-    ad_cols,
-    bf_cols,
+    ad_ptr,
+    ad_idx,
+    ad_val,
+    bf_ptr,
+    bf_idx,
+    bf_val,
     c_ptr,
     c_idx,
     c_val,
@@ -294,23 +302,16 @@ def _run(
             if v != 0.0:
                 for q in range(df_ptr[f], df_ptr[f + 1]):
                     y[k, df_idx[q]] += df_val[q] * v
-        # State update, a column at a time: xn = b + Ad x + Bf u, each xn[i] summed in column
-        # order as a row's dot product would be (a zero column adds nothing), but the rows
-        # side by side: the compiler runs them in vector registers. (Ad is half full in the
-        # gyro modes; row by row in compressed form the sums waited on each other.)
+        # State update.
         for i in range(nx):
-            xn[i] = b_slow[i]
-        for j in range(nx):
-            v = x[j]
-            if v != 0.0:
-                col = ad_cols[j]
-                for i in range(nx):
-                    xn[i] += col[i] * v
+            acc = b_slow[i]
+            for q in range(ad_ptr[i], ad_ptr[i + 1]):
+                acc += ad_val[q] * x[ad_idx[q]]
+            xn[i] = acc
         for f in range(nf):
             v = uk[f]
             if v != 0.0:
-                col = bf_cols[f]
-                for i in range(nx):
-                    xn[i] += col[i] * v
+                for q in range(bf_ptr[f], bf_ptr[f + 1]):
+                    xn[bf_idx[q]] += bf_val[q] * v
         for i in range(nx):
             x[i] = xn[i]
