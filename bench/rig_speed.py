@@ -5,7 +5,8 @@ on the sim rig (``open_rig("sim?...")``: real bytes over a pty and CANopen frame
 bus) and is timed: rig seconds (the rig's clock across the run) per wall second, its x real
 time. The baseline is measured in the same run: the offline simulator
 (``simhw.simulator.Simulator``, no drivers) advancing the same channels at the same rate, in
-1 s blocks, for the same rig time (at most ``BASELINE_CAP_S``), in the same process. Reported:
+1 s blocks, for the same rig time (at most ``BASELINE_CAP_S``), in the same process, the fastest
+of ``BASELINE_REPEATS`` runs. Reported:
 x real time (target >= 50) and the share of the offline speed the rig reaches (target >= 0.3).
 Both are given for the whole run and for its steps alone (the rig's part: drivers, device
 emulation and physics; the progress's phase changes to "analysing" where they end), with the
@@ -26,6 +27,7 @@ runs just those, without the campaign's earlier procedures as their prior).
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import tempfile
@@ -43,20 +45,26 @@ import h5py  # noqa: E402
 TARGET_X_REALTIME = 50.0
 TARGET_SHARE = 0.3
 BASELINE_CAP_S = 300.0
+BASELINE_REPEATS = 3
 
 
 def offline_speed(channels: list[str] | None, rate_hz: float, rig_s: float, seed: int = 0) -> float:
     """Rig seconds per wall second of the offline simulator on ``channels`` (None: the whole
-    rig) at ``rate_hz``."""
+    rig) at ``rate_hz``: the fastest of ``BASELINE_REPEATS`` runs (one short run on a shared
+    machine read anywhere from 325x to 550x for the same channels; the fastest is the speed
+    the simulator has, and the share against it is not flattered by a slow moment)."""
     from simhw.simulator import Simulator
 
     sim = Simulator(None, rate_hz=rate_hz, seed=seed, mode=3, channels=channels)
     sim.advance(int(rate_hz))  # kernels compiled, caches warm
     seconds = min(rig_s, BASELINE_CAP_S)
-    t0 = time.perf_counter()
-    for _ in sim.run(seconds, block_s=1.0):
-        pass
-    return seconds / (time.perf_counter() - t0)
+    best = math.inf
+    for _ in range(BASELINE_REPEATS):
+        t0 = time.perf_counter()
+        for _ in sim.run(seconds, block_s=1.0):
+            pass
+        best = min(best, time.perf_counter() - t0)
+    return seconds / best
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -333,7 +333,7 @@ def _window_sines(x, bounds, w, fits, resid):
     (k the sample index): the coefficients into ``fits[i]``, the residual rms into ``resid[i]``.
     The normal equations, solved per window (the three columns are near orthogonal over a
     whole period): ``find_segments`` tries 16 window grids of a record's every cycle, and a
-    least-squares call per window was a fifth of a hysteresis analysis."""
+    least-squares call per window was a sixth of a hysteresis analysis."""
     for i in range(len(bounds) - 1):
         a, b = bounds[i], bounds[i + 1]
         g = np.zeros((3, 3))
