@@ -142,7 +142,9 @@ class BlockCsd:
         w = self.weights.copy()
         if leave_out is not None:
             w[leave_out] = 0.0
-        return np.einsum("b,bfij->fij", w, self.S) / w.sum()
+        # one matrix-vector product over the flattened blocks (a jackknife asks for n + 1 means)
+        B = self.S.shape[0]
+        return (w @ self.S.reshape(B, -1)).reshape(self.S.shape[1:]) / w.sum()
 
     def combined(self, combos: Mapping[str, Mapping[str, float]]) -> BlockCsd:
         """These blocks with channels appended that are linear combinations of the present ones,
