@@ -117,10 +117,12 @@ class CompiledPlant:
         pieces: Sequence[tuple[int, np.ndarray]],
         nl_state: np.ndarray,
         y: np.ndarray,
-    ) -> None:
+    ) -> np.ndarray:
         """``run`` over consecutive pieces of ``u_fast``, each (steps > 0, its slow inputs): a
         stream's set-points stepping inside one call rather than a call each, the same
-        arithmetic step for step (each piece's slow terms are the products ``run`` forms)."""
+        arithmetic step for step (each piece's slow terms are the products ``run`` forms).
+        Returns the pieces' slow inputs stacked, one row a piece (the caller's staircase
+        correction reads them: built once a block)."""
         slows = np.array([u_slow for _, u_slow in pieces], np.float64).reshape(
             len(pieces), self.bs.shape[1]
         )
@@ -163,6 +165,7 @@ class CompiledPlant:
             nl_state,
             y,
         )
+        return slows
 
 
 @numba.njit(cache=True, nogil=True)

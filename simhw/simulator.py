@@ -797,14 +797,13 @@ class Simulator:
         plant = cp.disc.plant
         _, order = self._layout(cp)
         y = np.empty((len(u), len(plant.outputs)))
-        cp.run_pieces(self.x, u, pieces, self.nl_state, y)
+        slows = cp.run_pieces(self.x, u, pieces, self.nl_state, y)
         names = tuple(plant.slow_inputs)
         # A set-point (V_Td, gamma_c, a torquer bias) steps at a piece's first sample: the analog
         # filter before the ADC sees a staircase there, whose sample at the edge is the mean of
         # its two sides, as the samples of smooth signals are their values; taking the new side
         # alone put every staircase half an internal step ahead of the smooth signals (V_Td's
         # direct path in pa against the compensation's, eq. 3.27)
-        slows = np.array([slow for _, slow in pieces], np.float64).reshape(len(pieces), len(names))
         same = self._last_slow is not None and self._last_slow[0] == names
         before = self._last_slow[1] if same and self._last_slow is not None else slows[0]
         rows = np.cumsum([0] + [m for m, _ in pieces[:-1]])
