@@ -101,7 +101,7 @@ class _Resync:
 
     def discard(self, item: Frame | Reply | ProtocolError) -> None:
         if isinstance(item, Frame):
-            self.frames += 1
+            self.frames += item.frames
         elif isinstance(item, Reply):
             self.replies += 1
             self.last_reply = f"{'OK' if item.ok else 'ERR'} {item.verb} {item.text}".strip()[:80]
@@ -192,7 +192,7 @@ class SerialAdc(Adc):
                 f"cannot open the ADC's serial port {port}: {exc}; check the cable, "
                 f"the device path and that no other program holds the port"
             ) from exc
-        self._decoder = StreamDecoder()
+        self._decoder = StreamDecoder(merge_runs=True)  # a run of frames read as one
         self._replies: queue.Queue = queue.Queue()
         self._cmd_lock = threading.Lock()
         self._cond = threading.Condition()
@@ -347,30 +347,41 @@ class SerialAdc(Adc):
                     reason += "; the device reports a FIFO overrun"
                 self._push(SampleGap(self._next_sample, first, reason))
             self._bad_data = None
-            self._push((first, frame.codes))
+            self._push((first, frame.codes), frame.n_sets // frame.frames)
             self._next_sample = first + frame.n_sets
-            self._next_seq = (frame.seq + 1) & 0xFFFFFFFF
+            self._next_seq = (frame.seq + frame.frames) & 0xFFFFFFFF
 
-    def _push(self, item) -> None:
-        """Queue an item (caller holds _cond). A full buffer: wait (virtual clock) or overrun."""
-        if isinstance(item, tuple):
-            n = len(item[1])
-            while self._buffered + n > self._capacity and not self._closed:
-                if not self.clock.virtual or self._stopping:
-                    first = item[0]
-                    log.error("ADC host buffer full: samples %d..%d dropped", first, first + n - 1)
-                    self._merge_gap(
-                        SampleGap(
-                            first,
-                            first + n,
-                            "host buffer overrun: the application did not read the stream in time",
-                        )
+    def _push(self, item, unit: int = 0) -> None:
+        """Queue an item (caller holds _cond). A full buffer: wait (virtual clock) or overrun.
+        Samples are queued in whole ``unit`` sets (a frame's: a run of merged frames is kept
+        or dropped frame by frame, as the frames one by one would be)."""
+        if not isinstance(item, tuple):
+            self._items.append(item)
+            self._cond.notify_all()
+            return
+        first, codes = item
+        unit = unit or len(codes)
+        while len(codes):
+            room = max(0, self._capacity - self._buffered) // unit * unit
+            fit = len(codes) if self._closed else min(len(codes), room)
+            if fit:
+                self._buffered += fit
+                self._items.append((first, codes[:fit]))
+                self._cond.notify_all()
+                first, codes = first + fit, codes[fit:]
+            elif not self.clock.virtual or self._stopping:
+                n = len(codes)
+                log.error("ADC host buffer full: samples %d..%d dropped", first, first + n - 1)
+                self._merge_gap(
+                    SampleGap(
+                        first,
+                        first + n,
+                        "host buffer overrun: the application did not read the stream in time",
                     )
-                    return
+                )
+                return
+            else:
                 self._cond.wait(0.05)
-            self._buffered += n
-        self._items.append(item)
-        self._cond.notify_all()
 
     def _merge_gap(self, gap: SampleGap) -> None:
         last = self._items[-1] if self._items else None

@@ -31,6 +31,7 @@ from drivers.adc_protocol import (
     COMMANDS,
     CRC_SIZE,
     ERR_CODES,
+    FLAG_OVERRUN,
     HEADER_SIZE,
     MAX_CHANNELS,
     MAX_LINE,
@@ -972,3 +973,71 @@ def test_reply_after_a_short_frame_with_a_corrupted_length_field_is_not_held_bac
     assert "bad length" in str(items[1]) and items[2].fields["samples"] == "12"
     d.quiet()  # nothing held: nothing more to say
     assert list(d.items()) == []
+
+
+# =========================================================================== merged runs
+@st.composite
+def frame_runs(draw):
+    """Runs of frames that continue one another, broken where the device could break them: a
+    lost frame, a sample jump, a flag, another shape, a corrupted byte, a reply or garbage."""
+    parts = []
+    seq, first = draw(seqs), draw(st.integers(0, 2**40))
+    for _ in range(draw(st.integers(1, 5))):
+        n, c = draw(st.integers(1, 4)), draw(st.integers(1, 3))
+        for _ in range(draw(st.integers(1, 6))):
+            codes = draw(hnp.arrays(np.int16, (n, c), elements=int16))
+            flags = draw(st.sampled_from([0, 0, 0, 0, 0, FLAG_OVERRUN]))
+            frame = bytearray(encode_frame(seq, first, codes, flags))
+            if draw(st.integers(0, 9)) == 0:
+                frame[draw(st.integers(0, len(frame) - 1))] ^= 1 << draw(st.integers(0, 7))
+            parts.append(bytes(frame))
+            seq = (seq + draw(st.sampled_from([1, 1, 1, 1, 1, 2]))) % 2**32
+            first += n * draw(st.sampled_from([1, 1, 1, 1, 1, 2]))
+        parts.append(draw(st.sampled_from([b"", b"", b"OK STAT samples=1\n", b"\x01\x02"])))
+    return b"".join(parts)
+
+
+def _frame_by_frame(items):
+    """Merged frames cut back into the frames they stand for."""
+    for item in items:
+        if not isinstance(item, Frame) or item.frames == 1:
+            yield item
+            continue
+        n = item.n_sets // item.frames
+        for i in range(item.frames):
+            yield Frame(
+                (item.seq + i) % 2**32,
+                item.first_sample + i * n,
+                item.flags if i == 0 else 0,
+                item.codes[i * n : (i + 1) * n],
+            )
+
+
+@FUZZ
+@given(frame_runs(), st.lists(st.integers(0, 10**6), max_size=8), st.none() | st.integers(1, 3))
+def test_merged_runs_are_the_frames_one_by_one(data, cuts, expect):
+    """A decoder that merges runs gives the same frames (cut back), replies and errors, in the
+    same order, for any split of any stream, and stops where frame-by-frame decoding stops."""
+    chunks = _cut(data, cuts)
+    one = StreamDecoder(expect)
+    merged = StreamDecoder(expect, merge_runs=True)
+    want, got = [], []
+    for chunk in chunks:
+        one.feed(chunk)
+        merged.feed(chunk)
+        want.extend(one.items())
+        got.extend(merged.items())
+        assert merged.offset + merged.pos == one.offset + one.pos
+    assert [_item_key(i) for i in _frame_by_frame(got)] == [_item_key(i) for i in want]
+    assert len(got) <= len(want)
+
+
+def test_a_long_run_is_one_item():
+    """A second of 10 ms frames at 200 Hz (two sets each) is one item of 200 sets, across the
+    sequence counter's wrap."""
+    codes = np.arange(400, dtype=np.int16).reshape(200, 2)
+    d = StreamDecoder(2, 2, merge_runs=True)
+    d.feed(encode_frames(2**32 - 3, 1000, codes, 2))
+    (item,) = list(d.items())
+    assert (item.seq, item.first_sample, item.frames) == (2**32 - 3, 1000, 100)
+    assert np.array_equal(item.codes, codes)

@@ -7,10 +7,17 @@ import can
 import numpy as np
 import pytest
 
-from drivers.errors import InterlockError, ModeNotAllowed, OperatorAbort, SetpointRangeError
+from drivers.errors import (
+    InterlockError,
+    ModeNotAllowed,
+    OperatorAbort,
+    SampleGap,
+    SetpointRangeError,
+)
 from drivers.relay import R_SELECTED, R_SWITCHES, SWITCH_HOLD, SWITCH_RELEASE
 from drivers.rig import STREAM_READ_S, open_rig
 from drivers.table import ManualTable
+from tests.drivers.waiting import wait_for
 
 pytestmark = pytest.mark.slow
 
@@ -296,6 +303,30 @@ def test_bad_rig_url_is_named():
         open_rig("tcp://x")
     with pytest.raises(ValueError, match="can=<interface>:<channel>"):
         open_rig("serial:///dev/ttyUSB9")
+
+
+def test_a_full_host_buffer_keeps_whole_frames_and_reports_the_rest_lost():
+    """Paced, nobody reading: the host keeps the frames that fit its buffer, whole (the reader
+    takes a run of them as one item), reports the rest as a host overrun, and goes on after it."""
+    rig = open_rig("sim?realtime=1&warm=1")
+    try:
+        adc = rig.adc
+        while not hasattr(adc, "buffer_s"):  # the serial driver under the rig's decorators
+            adc = adc.inner
+        adc.buffer_s = 0.045  # 45 sets at 1000 Hz: 22 frames of 2 fit, the 23rd does not
+        rig.adc.configure(["gyro_x", "ac_x_ctl"], 1000.0, frame_sets=2)
+        rig.adc.start()
+        wait_for(lambda: rig.adc.status().samples > 200, "the device 0.2 s into its stream")
+        kept = rig.adc.read(45)
+        assert (kept.first_sample, len(kept)) == (0, 44)
+        with pytest.raises(SampleGap, match="host buffer overrun") as lost:
+            rig.adc.read(10)
+        assert lost.value.start == 44 and lost.value.stop % 2 == 0
+        after = rig.adc.read(10)
+        assert after.first_sample == lost.value.stop
+        rig.adc.stop()
+    finally:
+        rig.close()
 
 
 def test_paced_rig_runs_by_itself():
