@@ -7,7 +7,6 @@ nodes on the bus latch nothing.
 from __future__ import annotations
 
 import logging
-import random
 import struct
 import subprocess
 import sys
@@ -24,6 +23,7 @@ from drivers.canopen_frames import eds_path
 from drivers.errors import NodeError, ProtocolError, SetpointRangeError
 from drivers.rig import open_rig
 from drivers.torquer import CanopenTorquerDac
+from tests.drivers.multicast import lone_multicast_group
 from tests.drivers.waiting import wait_for
 
 pytestmark = pytest.mark.slow
@@ -308,13 +308,15 @@ def test_a_module_in_another_process_over_udp_multicast():
     The module above runs in a subprocess (this file as a script) on udp_multicast; the
     host's link and torquer driver reach it, and its error values show when the host's
     heartbeat stops."""
-    group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
-    with subprocess.Popen(
-        [sys.executable, __file__, "udp_multicast", group],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    ) as proc:
+    with (
+        lone_multicast_group() as group,
+        subprocess.Popen(
+            [sys.executable, __file__, "udp_multicast", group],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        ) as proc,
+    ):
         link = None
         try:
             assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"

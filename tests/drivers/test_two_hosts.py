@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import random
 import subprocess
 import sys
 
@@ -20,6 +19,7 @@ import h5py
 import numpy as np
 import pytest
 
+from tests.drivers.multicast import lone_multicast_group
 from tests.drivers.waiting import wait_for
 
 pytestmark = pytest.mark.slow
@@ -31,13 +31,15 @@ FIRST_S = 30
 
 @pytest.fixture
 def served_rig():
-    group = f"239.{random.randrange(1, 255)}.{random.randrange(1, 255)}.{random.randrange(1, 255)}"
-    with subprocess.Popen(
-        [sys.executable, "-m", "simhw.serve", "--can", group, "--warm"],
-        stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE,
-        text=True,
-    ) as proc:
+    with (
+        lone_multicast_group() as group,
+        subprocess.Popen(
+            [sys.executable, "-m", "simhw.serve", "--can", group, "--warm"],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+        ) as proc,
+    ):
         try:
             assert proc.stdout is not None
             line = proc.stdout.readline().split()
