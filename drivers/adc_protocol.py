@@ -402,9 +402,13 @@ class StreamDecoder:
         it, consumed: what frame-by-frame decoding gives, in one item. A frame that does not
         continue the run (another shape, a gap, a flag, a bad CRC) is left for ``_next``."""
         n, c = frame.codes.shape
-        k = (len(self.buf) - self.pos) // size
+        # whole frames held, no more than the u64 sample index can count on from this one (a
+        # device whose index wraps is refused frame by frame, as it must be)
+        k = min((len(self.buf) - self.pos) // size, (2**64 - 1 - frame.first_sample) // n)
+        if k <= 0:
+            return frame
         # a copy, not a view: a view would pin the bytearray, which ``feed`` resizes
-        chunk = bytes(self.buf[self.pos : self.pos + k * size])
+        chunk = self.buf[self.pos : self.pos + k * size]
         a = np.frombuffer(chunk, dtype=_record(n, c), count=k)
         step = np.arange(1, k + 1, dtype=np.uint64)
         ok = (

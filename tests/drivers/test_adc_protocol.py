@@ -979,9 +979,11 @@ def test_reply_after_a_short_frame_with_a_corrupted_length_field_is_not_held_bac
 @st.composite
 def frame_runs(draw):
     """Runs of frames that continue one another, broken where the device could break them: a
-    lost frame, a sample jump, a flag, another shape, a corrupted byte, a reply or garbage."""
+    lost frame, a sample jump, a flag, another shape, a corrupted byte, a reply or garbage; the
+    sequence counter and the sample index near their wrap (the index must not wrap)."""
     parts = []
-    seq, first = draw(seqs), draw(st.integers(0, 2**40))
+    seq = draw(st.one_of(seqs, st.integers(2**32 - 8, 2**32 - 1)))
+    first = draw(st.one_of(st.integers(0, 2**40), st.integers(2**64 - 64, 2**64 - 1)))
     for _ in range(draw(st.integers(1, 5))):
         n, c = draw(st.integers(1, 4)), draw(st.integers(1, 3))
         for _ in range(draw(st.integers(1, 6))):
@@ -992,7 +994,7 @@ def frame_runs(draw):
                 frame[draw(st.integers(0, len(frame) - 1))] ^= 1 << draw(st.integers(0, 7))
             parts.append(bytes(frame))
             seq = (seq + draw(st.sampled_from([1, 1, 1, 1, 1, 2]))) % 2**32
-            first += n * draw(st.sampled_from([1, 1, 1, 1, 1, 2]))
+            first = (first + n * draw(st.sampled_from([1, 1, 1, 1, 1, 2]))) % 2**64  # wraps
         parts.append(draw(st.sampled_from([b"", b"", b"OK STAT samples=1\n", b"\x01\x02"])))
     return b"".join(parts)
 
