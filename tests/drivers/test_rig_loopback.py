@@ -310,10 +310,9 @@ def test_a_full_host_buffer_keeps_whole_frames_and_reports_the_rest_lost():
     takes a run of them as one item), reports the rest as a host overrun, and goes on after it."""
     rig = open_rig("sim?realtime=1&warm=1")
     try:
-        adc = rig.adc
-        while not hasattr(adc, "buffer_s"):  # the serial driver under the rig's decorators
-            adc = adc.inner
-        adc.buffer_s = 0.045  # 45 sets at 1000 Hz: 22 frames of 2 fit, the 23rd does not
+        # the serial driver's setting, through the rig's decorator (``AdcDecorator.__setattr__``):
+        # 45 sets at 1000 Hz, 22 frames of 2 fit, the 23rd does not
+        rig.adc.buffer_s = 0.045
         rig.adc.configure(["gyro_x", "ac_x_ctl"], 1000.0, frame_sets=2)
         rig.adc.start()
         wait_for(lambda: rig.adc.status().samples > 200, "the device 0.2 s into its stream")
