@@ -347,20 +347,19 @@ class SerialAdc(Adc):
                     reason += "; the device reports a FIFO overrun"
                 self._push(SampleGap(self._next_sample, first, reason))
             self._bad_data = None
-            self._push((first, frame.codes), frame.n_sets // frame.frames)
+            self._push_samples(first, frame.codes, frame.n_sets // frame.frames)
             self._next_sample = first + frame.n_sets
             self._next_seq = (frame.seq + frame.frames) & 0xFFFFFFFF
 
-    def _push(self, item, unit: int = 0) -> None:
-        """Queue an item (caller holds _cond). A full buffer: wait (virtual clock) or overrun.
-        Samples are queued in whole ``unit`` sets (a frame's: a run of merged frames is kept
-        or dropped frame by frame, as the frames one by one would be)."""
-        if not isinstance(item, tuple):
-            self._items.append(item)
-            self._cond.notify_all()
-            return
-        first, codes = item
-        unit = unit or len(codes)
+    def _push(self, item: SampleGap | DriverError) -> None:
+        """Queue a gap or a fault (caller holds _cond): they take no room in the buffer."""
+        self._items.append(item)
+        self._cond.notify_all()
+
+    def _push_samples(self, first: int, codes: np.ndarray, unit: int) -> None:
+        """Queue samples from ``first`` (caller holds _cond) in whole ``unit`` sets, a frame's: a
+        run of merged frames is kept or dropped frame by frame, as the frames one by one would
+        be. A full buffer: wait (virtual clock) or overrun."""
         while len(codes):
             room = max(0, self._capacity - self._buffered) // unit * unit
             fit = len(codes) if self._closed else min(len(codes), room)
